@@ -1,0 +1,32 @@
+# Quick start: `make demo` and `make test`. Both set up .venv first (system
+# libraries too, when missing and we may install them).
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed-stamp
+
+.PHONY: demo test setup system-deps bench clean
+
+demo: $(STAMP)
+	$(VENV)/bin/facepuppet demo --out demo-out
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+setup: $(STAMP)
+
+system-deps:
+	bash .ci/system-deps
+
+$(STAMP): pyproject.toml .ci/system-deps
+	bash .ci/system-deps
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+bench: $(STAMP)
+	$(VENV)/bin/facepuppet bench render --json bench-out/render.json
+
+clean:
+	rm -rf $(VENV) build dist *.egg-info demo-out bench-out

@@ -1,0 +1,1 @@
+"""Offline training: importers and fitters that write tables for the runtime."""

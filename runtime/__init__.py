@@ -1,0 +1,1 @@
+"""Live side of facepuppet: tables, frames, sources, frame loop, renderer."""

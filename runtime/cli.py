@@ -1,0 +1,52 @@
+"""The ``facepuppet`` command.
+
+Runtime commands live in runtime modules, each with ``register(subparsers)``;
+offline commands arrive through the ``facepuppet.commands`` entry-point group
+(see pyproject.toml), so this module never imports ``offline``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from importlib.metadata import entry_points
+
+from .tables import TablesError
+
+# Runtime modules that add subcommands, in the order --help lists them.
+_COMMAND_MODULES = (
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from facepuppet import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="facepuppet",
+        description="Realtime facial puppetry: trackers in, a retargeted character out.",
+    )
+    parser.add_argument("--version", action="version", version=f"facepuppet {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in _COMMAND_MODULES:
+        importlib.import_module(f"facepuppet.runtime.{name}").register(sub)
+    for ep in entry_points(group="facepuppet.commands"):
+        ep.load()(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (TablesError, ValueError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
+        print(f"facepuppet {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"facepuppet {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

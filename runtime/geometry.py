@@ -1,0 +1,89 @@
+"""Mesh maths shared by the importer, the CPU deformation path and the renderer."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals.
+
+    Parameters
+    ----------
+    vertices : ndarray of shape (n_vertices, 3), float
+    triangles : ndarray of shape (n_triangles, 3), int, counter-clockwise seen from outside
+
+    Returns
+    -------
+    normals : ndarray of shape (n_vertices, 3), float32; zero for vertices in no triangle.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    # cross product length is twice the area: summing unnormalised face
+    # normals weights each face by its area.
+    face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n = np.zeros_like(v)
+    for corner in range(3):
+        np.add.at(n, t[:, corner], face)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return (n / np.maximum(length, 1e-30)).astype(np.float32)
+
+
+def incidence_matrix(n_vertices: int, triangles: np.ndarray) -> sp.csr_matrix:
+    """Sparse (n_vertices, n_triangles) matrix with a 1 where a vertex is a corner of a face.
+
+    ``incidence @ face_normals`` sums face normals onto vertices; it is the
+    fast form of :func:`vertex_normals` when the topology is fixed.
+    """
+    t = np.asarray(triangles, dtype=np.int64)
+    rows = t.reshape(-1)
+    cols = np.repeat(np.arange(len(t)), 3)
+    data = np.ones(len(rows), dtype=np.float32)
+    return sp.csr_matrix((data, (rows, cols)), shape=(n_vertices, len(t)))
+
+
+def bounds(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) corners of the axis-aligned box, each (3,) float64, ignoring NaN."""
+    v = np.asarray(vertices, dtype=np.float64)
+    return np.nanmin(v, axis=0), np.nanmax(v, axis=0)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) float64 of a quaternion (x, y, z, w); normalised first."""
+    x, y, z, w = np.asarray(q, dtype=np.float64) / max(np.linalg.norm(q), 1e-30)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def euler_to_quat(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """Quaternion (x, y, z, w) float64 of head yaw (about +y), pitch (about +x), roll (about +z), radians.
+
+    Applied in the order roll, then pitch, then yaw (R = Ry · Rx · Rz).
+    """
+    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
+    cp, sp_ = np.cos(pitch / 2), np.sin(pitch / 2)
+    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
+    qy = np.array([0.0, sy, 0.0, cy])
+    qx = np.array([sp_, 0.0, 0.0, cp])
+    qz = np.array([0.0, 0.0, sr, cr])
+    return quat_mul(quat_mul(qy, qx), qz)
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a·b of quaternions (x, y, z, w)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ]
+    )
