@@ -1,0 +1,256 @@
+"""The frame loop: one snapshot, one map, one draw per tick, on a clock it is given.
+
+Tick ``k`` happens at time ``t_k = k / fps`` (seconds since the source's first
+frame). Each tick takes the newest frame the source has by ``t_k`` (older ones
+are dropped and counted, never queued), maps its channels onto the rig's
+shapes with a :class:`~facepuppet.runtime.channels.ChannelMap` cached per
+channel tuple, draws, waits for the GPU, and hands the result to the sinks.
+
+The clock only paces the ticks; it never decides what is drawn. With a
+:class:`RecordedClock` (headless replay) ticks follow one another at once; with
+a :class:`WallClock` (a window) each tick waits for its real time, and a tick
+that is late is counted but still drawn at its recorded time, so the same
+recording gives the same frames either way (DESIGN.md, Determinism).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .channels import ChannelMap
+from .frames import Frame
+from .timing import StageTimer
+
+STAGES = ("snapshot", "map", "draw_submit", "gpu_finish", "sink")
+
+
+class RecordedClock:
+    """Recorded time that advances at once: ``wait_until(t)`` never sleeps."""
+
+    def __init__(self):
+        self._now = 0.0
+
+    def start(self) -> None:
+        self._now = 0.0
+
+    def now(self) -> float:
+        """Seconds since :meth:`start` on recorded time."""
+        return self._now
+
+    def wait_until(self, t: float) -> float:
+        """Advance to ``t``; returns the lateness (always 0.0)."""
+        self._now = max(self._now, t)
+        return 0.0
+
+
+class WallClock:
+    """Real time: ``wait_until(t)`` sleeps until ``t`` seconds after :meth:`start`.
+
+    Parameters
+    ----------
+    monotonic : callable returning seconds (default ``time.monotonic``)
+    sleep : callable taking seconds (default ``time.sleep``)
+    """
+
+    def __init__(self, monotonic=time.monotonic, sleep=time.sleep):
+        self._monotonic = monotonic
+        self._sleep = sleep
+        self._origin = monotonic()
+
+    def start(self) -> None:
+        self._origin = self._monotonic()
+
+    def now(self) -> float:
+        return self._monotonic() - self._origin
+
+    def wait_until(self, t: float) -> float:
+        """Sleep until ``t``; returns how late we already were (seconds, 0.0 when on time)."""
+        ahead = t - self.now()
+        if ahead > 0:
+            self._sleep(ahead)
+            return 0.0
+        return -ahead
+
+
+@dataclass
+class LoopResult:
+    """What one :meth:`FrameLoop.run` did.
+
+    Attributes
+    ----------
+    n_ticks : int, ticks drawn
+    counters : dict of str to int: ``frames_received`` (frames the source
+        delivered, stale ones included), ``stale_dropped``,
+        ``nonfinite_rejected``, ``ticks_without_new_frame``, ``late_ticks``
+    timings : dict, :meth:`StageTimer.summary` of the stages in ``STAGES``
+    timer : StageTimer, the raw durations
+    closed_by_window : bool, the window asked to close before the end
+    """
+
+    n_ticks: int
+    counters: dict[str, int]
+    timings: dict[str, dict[str, float]]
+    timer: StageTimer
+    closed_by_window: bool = False
+
+
+class FrameLoop:
+    """Drive a renderer from a frame source, tick by tick.
+
+    Parameters
+    ----------
+    character : Character, whose ``shape_names`` are the map's targets
+    renderer : FaceRenderer-like, with ``draw(weights, head_rotation,
+        head_translation)``, ``finish()`` and ``read_pixels()``
+    clock : RecordedClock or WallClock (anything with start/now/wait_until)
+    sinks : sequence of objects with ``consume(tick_index, t, weights, frame, renderer)``
+    fps : float, ticks per second of recorded time
+    log : callable taking one str; the channel-map report goes here, once per
+        distinct channel tuple
+    target : GLTarget or None; when it has a window (``headless`` False) each
+        tick polls events, stops on ``should_close()`` and swaps buffers
+    """
+
+    def __init__(self, character, renderer, clock, sinks=(), fps: float = 60.0, log=print, target=None):
+        if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
+            raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
+        self.shape_names = tuple(character.shape_names)
+        self.renderer = renderer
+        self.clock = clock
+        self.sinks = tuple(sinks)
+        self.fps = float(fps)
+        self.log = log
+        self.target = target
+        self._maps: dict[tuple[str, ...], ChannelMap] = {}
+        self._weights = np.zeros(len(self.shape_names), dtype=np.float32)
+        self._rotation: np.ndarray | None = None
+        self._translation: np.ndarray | None = None
+        self._frame: Frame | None = None
+
+    def channel_map(self, channels: tuple[str, ...], source: str = "") -> ChannelMap:
+        """The cached map for a channel tuple; built (and its report logged) on first sight."""
+        cmap = self._maps.get(channels)
+        if cmap is None:
+            cmap = self._maps[channels] = ChannelMap.build(channels, self.shape_names)
+            n_driven = len(self.shape_names) - len(cmap.undriven_target)
+            head = (f"channel map ({source or 'source'}): {len(channels)} source channels -> "
+                    f"{n_driven} of {len(self.shape_names)} rig shapes driven")
+            report = cmap.report()
+            self.log(head + ("\n" + report if report else "; every channel matched"))
+        return cmap
+
+    def run(self, source, duration: float | None = None) -> LoopResult:
+        """Tick from t = 0 to ``duration`` (default: the source's ``duration``) inclusive.
+
+        With neither, runs until the window closes.
+        """
+        if duration is None:
+            duration = getattr(source, "duration", None)
+        ticks = itertools.count() if duration is None else range(int(math.floor(duration * self.fps + 1e-9)) + 1)
+        window = self.target is not None and not getattr(self.target, "headless", True)
+        timer = StageTimer(STAGES)
+        now, add = timer.now, timer.add
+        counters = dict.fromkeys(
+            ("frames_received", "stale_dropped", "nonfinite_rejected", "ticks_without_new_frame", "late_ticks"), 0)
+        n_ticks = 0
+        closed = False
+        self.clock.start()
+        for k in ticks:
+            t = k / self.fps
+            if self.clock.wait_until(t) > 0:
+                counters["late_ticks"] += 1
+            if window:
+                self.target.poll()
+                if self.target.should_close():
+                    closed = True
+                    break
+
+            t0 = now()
+            frame, stale = source.latest(t)
+            t1 = now()
+            add("snapshot", t1 - t0)
+            if frame is None:
+                counters["ticks_without_new_frame"] += 1
+            else:
+                counters["frames_received"] += 1 + stale
+                counters["stale_dropped"] += stale
+                if not frame.is_finite():
+                    counters["nonfinite_rejected"] += 1
+                else:
+                    self._accept(frame)
+            t2 = now()
+            add("map", t2 - t1)
+
+            self.renderer.draw(self._weights, self._rotation, self._translation)
+            t3 = now()
+            add("draw_submit", t3 - t2)
+            self.renderer.finish()
+            t4 = now()
+            add("gpu_finish", t4 - t3)
+            for sink in self.sinks:
+                sink.consume(k, t, self._weights, self._frame, self.renderer)
+            add("sink", now() - t4)
+            if window:
+                self.target.swap()
+            n_ticks += 1
+        return LoopResult(n_ticks, counters, timer.summary(), timer, closed)
+
+    def _accept(self, frame: Frame) -> None:
+        """Make ``frame`` the current one: its weights mapped, its pose kept where it has one."""
+        if frame.weights is not None:
+            self.channel_map(frame.channels, frame.source).apply(frame.weights, out=self._weights)
+        if frame.head_rotation is not None:
+            self._rotation = frame.head_rotation
+        if frame.head_translation is not None:
+            self._translation = frame.head_translation
+        self._frame = frame
+
+
+class PngSink:
+    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``renderer.read_pixels()``."""
+
+    def __init__(self, out_dir):
+        self.out_dir = Path(out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.paths: list[Path] = []
+
+    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
+        from PIL import Image
+
+        path = self.out_dir / f"frame_{tick_index:05d}.png"
+        Image.fromarray(np.ascontiguousarray(renderer.read_pixels())).save(path)
+        self.paths.append(path)
+
+
+class WeightLog:
+    """Keep each tick's rig weights (for tests and offline analysis).
+
+    Attributes
+    ----------
+    array : ndarray of shape (n_ticks, n_shapes), float32
+    times : ndarray of shape (n_ticks,), float64, seconds
+    """
+
+    def __init__(self):
+        self._rows: list[np.ndarray] = []
+        self._times: list[float] = []
+
+    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
+        self._rows.append(np.array(weights, dtype=np.float32, copy=True))
+        self._times.append(t)
+
+    @property
+    def array(self) -> np.ndarray:
+        if not self._rows:
+            return np.zeros((0, 0), dtype=np.float32)
+        return np.stack(self._rows)
+
+    @property
+    def times(self) -> np.ndarray:
+        return np.asarray(self._times, dtype=np.float64)

@@ -1,0 +1,104 @@
+"""Frame sources for the frame loop: recorded frames replayed on recorded time.
+
+A source answers one question per tick, ``latest(t)``: the newest frame that
+has arrived by time ``t`` and how many older ones arrived since the last tick
+and were skipped. The loop never queues: the newest frame wins and the rest
+are counted as stale (DESIGN.md, Threads). Live sources (OSC) answer the same
+question from their own slots.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+from .frames import Frame
+from .livelinkface_csv import looks_like_llf_csv, read_llf_csv
+from .session import MAGIC, read_session
+
+
+class ReplaySource:
+    """Recorded frames delivered by recorded time.
+
+    Parameters
+    ----------
+    frames : sequence of Frame, in non-decreasing ``t`` order (at least one)
+
+    Times passed to :meth:`latest` and :meth:`done` are seconds since the first
+    frame (``frames[0].t`` is time 0), so a session recorded on a monotonic
+    clock and a CSV starting at 0 replay alike.
+    """
+
+    def __init__(self, frames):
+        self.frames = list(frames)
+        if not self.frames:
+            raise ValueError("ReplaySource: expected at least one frame, got none")
+        for i in range(1, len(self.frames)):
+            if self.frames[i].t < self.frames[i - 1].t:
+                raise ValueError(
+                    f"ReplaySource: frames must be in time order; frame {i} has t={self.frames[i].t} "
+                    f"after t={self.frames[i - 1].t}"
+                )
+        self.t0 = self.frames[0].t
+        self._times = [f.t - self.t0 for f in self.frames]
+        self._next = 0
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first frame to the last."""
+        return self._times[-1]
+
+    def latest(self, t: float) -> tuple[Frame | None, int]:
+        """(newest frame with time <= t not yet delivered, number of older ones skipped).
+
+        Returns (None, 0) when no new frame has arrived since the last call.
+        """
+        start = self._next
+        end = start
+        n = len(self._times)
+        while end < n and self._times[end] <= t:
+            end += 1
+        if end == start:
+            return None, 0
+        self._next = end
+        return self.frames[end - 1], end - start - 1
+
+    def done(self, t: float) -> bool:
+        """True when every frame has been delivered and ``t`` is at or past the last one."""
+        return self._next >= len(self._times) and t >= self._times[-1]
+
+    def rewind(self) -> None:
+        """Start again from the first frame."""
+        self._next = 0
+
+
+def open_recording(path) -> list[Frame]:
+    """Frames of a recording: a session file (by its magic) or a Live Link Face CSV (by its header).
+
+    A session whose tail was torn gives the frames before the tear (with a
+    warning from :func:`~facepuppet.runtime.session.read_session`).
+
+    Raises
+    ------
+    ValueError
+        naming the file when it is neither, or holds no frames.
+    FileNotFoundError
+        when it does not exist.
+    """
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    if head.startswith(MAGIC):
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            session = read_session(path)
+        if not session.frames:
+            raise ValueError(f"{path}: session file holds no complete frame ({session.tail_error or 'none written'})")
+        return session.frames
+    first_line = head.split(b"\n", 1)[0].decode("utf-8", errors="replace")
+    if looks_like_llf_csv(first_line):
+        return read_llf_csv(path)
+    raise ValueError(
+        f"{path}: not a recording facepuppet can replay (expected a session file starting with {MAGIC!r} "
+        f"or a Live Link Face CSV whose header has Timecode and BlendShapeCount; found {head[:24]!r})"
+    )

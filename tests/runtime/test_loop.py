@@ -1,0 +1,169 @@
+"""Frame loop logic with a fake clock and a recording stub renderer (no GL here; see test_replay.py)."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.loop import FrameLoop, RecordedClock, WallClock, WeightLog
+from facepuppet.runtime.sources import ReplaySource
+from facepuppet.runtime.timing import StageTimer
+
+RIG = SimpleNamespace(shape_names=("jawOpen", "eyeBlink_L", "eyeBlink_R", "cheekRaiser_L"))
+
+
+class StubRenderer:
+    """Records every draw call; stands in for FaceRenderer only to test the loop's logic."""
+
+    def __init__(self):
+        self.draws = []
+        self.finishes = 0
+
+    def draw(self, weights, head_rotation=None, head_translation=None):
+        self.draws.append((np.array(weights), None if head_rotation is None else np.array(head_rotation)))
+
+    def finish(self):
+        self.finishes += 1
+
+    def read_pixels(self):
+        return np.zeros((2, 2, 3), np.uint8)
+
+
+def _frame(t, jaw, blink=0.0, **kw):
+    return Frame(t=t, source="test", channels=("JawOpen", "EyeBlinkLeft", "TongueOut"),
+                 weights=[jaw, blink, 0.0], **kw)
+
+
+def test_newest_frame_wins_stale_frames_are_dropped_and_counted():
+    # 4 frames arrive between tick 1 (t=0.1) and tick 2 (t=0.2); none between ticks 2 and 3
+    frames = [_frame(0.0, 0.0), _frame(0.11, 0.1), _frame(0.13, 0.2), _frame(0.15, 0.3), _frame(0.19, 0.4),
+              _frame(0.31, 0.5)]
+    renderer, log = StubRenderer(), WeightLog()
+    loop = FrameLoop(RIG, renderer, RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None)
+    result = loop.run(ReplaySource(frames), duration=0.4)
+    assert result.n_ticks == 5  # t = 0, 0.1, 0.2, 0.3, 0.4
+    np.testing.assert_array_equal(log.times, [0.0, 0.1, 0.2, 0.3, 0.4])
+    # tick 2 shows the newest (0.4); tick 3 has no new frame and keeps it; tick 4 gets 0.5
+    np.testing.assert_allclose(log.array[:, 0], [0.0, 0.0, 0.4, 0.4, 0.5], atol=0)
+    assert result.counters["frames_received"] == 6
+    assert result.counters["stale_dropped"] == 3
+    assert result.counters["ticks_without_new_frame"] == 2
+    assert len(renderer.draws) == renderer.finishes == 5
+    assert set(result.timings) == {"snapshot", "map", "draw_submit", "gpu_finish", "sink"}
+    assert all(s["n"] == 5 for s in result.timings.values())
+
+
+def test_non_finite_frames_are_rejected_not_drawn():
+    frames = [_frame(0.0, 0.25), _frame(0.1, math.inf), _frame(0.2, 0.5, head_rotation=[0, 0, math.nan, 1]),
+              _frame(0.3, 0.75, head_rotation=[0, 0, 0, 1])]
+    renderer, log = StubRenderer(), WeightLog()
+    result = FrameLoop(RIG, renderer, RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(
+        ReplaySource(frames))
+    assert result.counters["nonfinite_rejected"] == 2
+    np.testing.assert_array_equal(log.array[:, 0], np.float32([0.25, 0.25, 0.25, 0.75]))
+    assert renderer.draws[2][1] is None and np.array_equal(renderer.draws[3][1], [0, 0, 0, 1])
+
+
+def test_channels_mapped_by_name_and_report_logged_once_per_channel_tuple():
+    other = ("jawOpen", "eyeBlinkRight")
+    frames = [_frame(0.0, 0.5, 0.25), _frame(0.1, 0.6, 0.35),
+              Frame(t=0.2, source="other", channels=other, weights=[0.9, 0.8]), _frame(0.3, 0.7, 0.45)]
+    messages = []
+    log = WeightLog()
+    FrameLoop(RIG, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=messages.append).run(
+        ReplaySource(frames))
+    assert len(messages) == 2  # one per distinct channel tuple, not per frame
+    assert "TongueOut" in messages[0] and "cheekRaiser_L" in messages[0]
+    # rig order: jawOpen, eyeBlink_L, eyeBlink_R, cheekRaiser_L
+    np.testing.assert_array_equal(log.array, np.float32([[0.5, 0.25, 0, 0], [0.6, 0.35, 0, 0],
+                                                         [0.9, 0, 0.8, 0], [0.7, 0.45, 0, 0]]))
+
+
+class FakeTime:
+    def __init__(self):
+        self.now = 100.0
+        self.slept = []
+
+    def monotonic(self):
+        return self.now
+
+    def sleep(self, dt):
+        self.slept.append(dt)
+        self.now += dt
+
+
+def test_wall_clock_sleeps_to_each_tick_and_counts_late_ones():
+    fake = FakeTime()
+
+    class SlowRenderer(StubRenderer):
+        def finish(self):
+            super().finish()
+            fake.now += 0.15 if len(self.draws) == 2 else 0.01  # the 2nd tick overruns
+
+    frames = [_frame(i / 10, 0.1 * i) for i in range(5)]
+    clock = WallClock(monotonic=fake.monotonic, sleep=fake.sleep)
+    log = WeightLog()
+    result = FrameLoop(RIG, SlowRenderer(), clock, sinks=[log], fps=10.0, log=lambda s: None).run(
+        ReplaySource(frames))
+    assert result.counters["late_ticks"] == 1
+    # late or not, each tick shows the recording at its own recorded time
+    np.testing.assert_allclose(log.array[:, 0], [0, 0.1, 0.2, 0.3, 0.4], rtol=1e-6)
+    assert fake.slept[0] == pytest.approx(0.09)
+
+
+def test_window_target_is_polled_swapped_and_can_close():
+    class Window:
+        headless = False
+
+        def __init__(self):
+            self.polls = self.swaps = 0
+
+        def poll(self):
+            self.polls += 1
+
+        def should_close(self):
+            return self.polls > 3
+
+        def swap(self):
+            self.swaps += 1
+
+    win = Window()
+    result = FrameLoop(RIG, StubRenderer(), RecordedClock(), fps=10.0, log=lambda s: None, target=win).run(
+        ReplaySource([_frame(0.1 * i, 0.0) for i in range(10)]))
+    assert result.closed_by_window and result.n_ticks == 3 and win.swaps == 3
+
+
+def test_replay_source_latest_and_done():
+    src = ReplaySource([_frame(5.0, 0.1), _frame(5.5, 0.2), _frame(6.0, 0.3)])  # rebased to t = 0
+    assert src.duration == 1.0
+    assert src.latest(-0.1) == (None, 0)
+    f, stale = src.latest(0.75)
+    assert f.weights[0] == np.float32(0.2) and stale == 1
+    assert not src.done(0.9)
+    assert src.latest(0.9) == (None, 0)
+    f, stale = src.latest(1.0)
+    assert f.weights[0] == np.float32(0.3) and stale == 0 and src.done(1.0)
+    with pytest.raises(ValueError, match="time order"):
+        ReplaySource([_frame(1.0, 0), _frame(0.5, 0)])
+    with pytest.raises(ValueError, match="at least one frame"):
+        ReplaySource([])
+
+
+def test_stage_timer_summary():
+    ticks = iter(range(100))
+    timer = StageTimer(["a", "b"], clock=lambda: next(ticks) * 0.001)
+    for ms in range(1, 101):
+        timer.add("a", ms / 1000)
+    with timer.measure("b"):
+        pass
+    s = timer.summary()
+    assert s["a"]["n"] == 100 and s["a"]["max_ms"] == pytest.approx(100)
+    assert s["a"]["p50_ms"] == pytest.approx(50.5) and s["a"]["p99_ms"] == pytest.approx(99.01)
+    assert s["b"]["p50_ms"] == pytest.approx(1.0)
+    assert timer.table().splitlines()[0].split()[:2] == ["stage", "n"]
+    with pytest.raises(ValueError, match="fps"):
+        FrameLoop(RIG, StubRenderer(), RecordedClock(), fps=0)
