@@ -2,6 +2,69 @@
 
 from __future__ import annotations
 
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from facepuppet.runtime.character import MATERIAL_KINDS
+
 
 def register(subparsers) -> None:
     """Add the offline commands to the ``facepuppet`` parser."""
+    p = subparsers.add_parser(
+        "import-rig",
+        help="blendshape rig (neutral OBJ + folder of shape OBJs) -> character table",
+        description="Import a neutral OBJ and a folder of OBJ shapes with the same vertex order "
+        "as a character table (.npz): triangulated mesh, materials, sparse float32 deltas.",
+    )
+    p.add_argument("neutral", type=Path, help="neutral mesh OBJ")
+    p.add_argument("shapes_dir", type=Path, help="folder of shape OBJs (the neutral is skipped if inside)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="character table to write (.npz)")
+    p.add_argument("--units", choices=("cm", "mm", "m"), default="cm", help="units of the OBJ files (default cm)")
+    p.add_argument("--name", help="character name (default: the neutral's folder name)")
+    p.add_argument(
+        "--tolerance", type=float, default=1e-5, help="smallest stored vertex displacement, in units (default 1e-5)"
+    )
+    p.add_argument("--landmarks", type=Path, help="ICT vertex_indices.json (default: the one beside the neutral)")
+    p.set_defaults(func=_import_rig)
+
+
+def _import_rig(args: argparse.Namespace) -> int:
+    from .rig_import import import_rig
+
+    start = time.perf_counter()
+    tty = sys.stderr.isatty()
+
+    def progress(i: int, n: int, name: str) -> None:
+        line = f"[{i}/{n}] {name}"
+        print(f"\r{line:<60}" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+
+    character = import_rig(
+        args.neutral,
+        args.shapes_dir,
+        tolerance=args.tolerance,
+        name=args.name,
+        units=args.units,
+        landmarks=args.landmarks,
+        progress=progress,
+    )
+    if tty:
+        print(file=sys.stderr)
+    out = character.save(args.output)
+    seconds = time.perf_counter() - start
+    metrics = character.metadata["metrics"]
+    kind_names = {code: kind for kind, code in MATERIAL_KINDS.items()}
+    kinds = ", ".join(
+        f"{m} ({kind_names[int(p[2])]})" for m, p in zip(character.material_names, character.material_params)
+    )
+    stored, dense = metrics["stored_deltas"], metrics["dense_deltas"]
+    print(
+        f"{out}: character '{character.name}', {character.n_vertices} vertices, "
+        f"{len(character.triangles)} triangles, {character.units}\n"
+        f"  materials ({len(character.material_names)}): {kinds}\n"
+        f"  shapes: {character.n_shapes}; stored deltas {stored} of {dense} dense "
+        f"({100.0 * stored / max(dense, 1):.1f}%)\n"
+        f"  file {out.stat().st_size / 1e6:.2f} MB, {seconds:.2f} s"
+    )
+    return 0
