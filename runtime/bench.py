@@ -1,0 +1,113 @@
+"""``facepuppet bench NAME --json OUT.json [options]``: a registry of benchmarks.
+
+A benchmark is a function ``func(args) -> dict`` (JSON-serialisable results)
+registered with :func:`register_bench`, optionally with ``add_arguments(parser)``
+for its own options. Runtime benchmarks live in the modules listed in
+``_BENCH_MODULES``; other packages register through the ``facepuppet.benches``
+entry-point group (each entry point is called with :func:`register_bench`).
+Benchmarks are code, not timed tests: they print medians and write JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import platform
+import resource
+import sys
+import time
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Callable
+
+# Runtime modules that register benchmarks when imported.
+_BENCH_MODULES = ("bench_render",)
+
+
+@dataclass(frozen=True)
+class Bench:
+    name: str
+    func: Callable[[argparse.Namespace], dict]
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None] | None = None
+
+
+_REGISTRY: dict[str, Bench] = {}
+_LOADED = False
+
+
+def register_bench(name: str, func, help: str, add_arguments=None) -> None:
+    """Add a benchmark; ``func(args)`` returns a dict written as JSON."""
+    if name in _REGISTRY and _REGISTRY[name].func is not func:
+        raise ValueError(f"benchmark {name!r} is registered twice")
+    _REGISTRY[name] = Bench(name, func, help, add_arguments)
+
+
+def benches() -> dict[str, Bench]:
+    """Every registered benchmark, loading the known modules and entry points once."""
+    global _LOADED
+    if not _LOADED:
+        _LOADED = True
+        for module in _BENCH_MODULES:
+            importlib.import_module(f"{__package__}.{module}")
+        for ep in entry_points(group="facepuppet.benches"):
+            ep.load()(register_bench)
+    return dict(_REGISTRY)
+
+
+def machine_info() -> dict:
+    """CPU count, platform and Python version of this machine."""
+    return {
+        "cpu_count": os.cpu_count(),
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "python": sys.version.split()[0],
+    }
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process so far, MiB (Linux reports KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def run(args: argparse.Namespace) -> int:
+    registry = benches()
+    if not args.name or args.name not in registry:
+        lines = [f"  {b.name:<12} {b.help}" for b in registry.values()]
+        if args.name:
+            print(f"facepuppet bench: no benchmark named {args.name!r}; known:", file=sys.stderr)
+            print("\n".join(lines), file=sys.stderr)
+            return 2
+        print("benchmarks:\n" + "\n".join(lines))
+        return 0
+    bench = registry[args.name]
+    parser = argparse.ArgumentParser(prog=f"facepuppet bench {bench.name}", description=bench.help)
+    parser.add_argument("--json", metavar="OUT.json", help="write the results as JSON here")
+    if bench.add_arguments:
+        bench.add_arguments(parser)
+    options = parser.parse_args(args.options)
+    started = time.time()
+    results = bench.func(options)
+    report = {
+        "bench": bench.name,
+        "started_unix": started,
+        "seconds": time.time() - started,
+        "machine": machine_info(),
+        "results": results,
+    }
+    if options.json:
+        Path(options.json).write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
+        print(f"wrote {options.json}")
+    return 0
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "bench", help="run a benchmark (render, ...) and write its numbers as JSON", add_help=True
+    )
+    parser.add_argument("name", nargs="?", help="benchmark name; leave out to list them")
+    parser.add_argument("options", nargs=argparse.REMAINDER, help="the benchmark's own options (--json OUT.json ...)")
+    parser.set_defaults(func=run)

@@ -1,0 +1,138 @@
+"""``facepuppet bench render``: frames/s and CPU cost per frame of both deformation paths.
+
+Per path (gpu, cpu) and per frame:
+
+* prepare: the CPU work before the draw call (active weight list and uniform
+  upload, or NumPy deformation and vertex upload),
+* draw: issuing the draw call and waiting for it (``ctx.finish()``),
+* readback: reading the frame back (what ``--headless --out`` pays).
+
+The weights are a deterministic synthetic performance: sinusoids of
+different periods on ~10 channels, the rest at zero.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from .bench import peak_rss_mb, register_bench
+
+
+def synthetic_performance(n_frames: int, n_shapes: int, n_active: int = 10, fps: float = 60.0) -> np.ndarray:
+    """Weights of shape (n_frames, n_shapes), float32, in [0, 1]: sinusoids on ``n_active`` channels."""
+    t = np.arange(n_frames)[:, None] / fps
+    channels = np.unique(np.linspace(0, n_shapes - 1, min(n_active, n_shapes)).astype(int))
+    periods = 0.7 + 0.37 * np.arange(len(channels))  # seconds, all different
+    phases = 0.9 * np.arange(len(channels))
+    w = np.zeros((n_frames, n_shapes), dtype=np.float32)
+    w[:, channels] = 0.5 + 0.5 * np.sin(2 * np.pi * t / periods + phases)
+    return w
+
+
+def _stats(ms: list[float]) -> dict:
+    a = np.asarray(ms)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "mean": float(a.mean())}
+
+
+def measure_path(renderer, weights: np.ndarray, warmup: int = 5) -> dict:
+    """Time ``renderer`` over the weight sequence; returns per-stage ms statistics and frames/s."""
+    prepare, draw, readback = [], [], []
+    for w in weights[:warmup]:
+        renderer.draw(w)
+        renderer.finish()
+    start = time.perf_counter()
+    for w in weights:
+        t0 = time.perf_counter()
+        renderer.prepare(w)
+        t1 = time.perf_counter()
+        renderer.submit()
+        renderer.finish()
+        t2 = time.perf_counter()
+        renderer.read_pixels()
+        t3 = time.perf_counter()
+        prepare.append((t1 - t0) * 1e3)
+        draw.append((t2 - t1) * 1e3)
+        readback.append((t3 - t2) * 1e3)
+    total = time.perf_counter() - start
+    render_s = (sum(prepare) + sum(draw)) / 1e3
+    return {
+        "frames": len(weights),
+        "frames_per_s": len(weights) / render_s,
+        "frames_per_s_with_readback": len(weights) / total,
+        "cpu_prepare_ms": _stats(prepare),
+        "draw_finish_ms": _stats(draw),
+        "readback_ms": _stats(readback),
+        "peak_rss_mb": peak_rss_mb(),
+    }
+
+
+def bench_render(args: argparse.Namespace) -> dict:
+    from .character import Character
+    from .gl_context import create_context
+    from .renderer import FaceRenderer
+
+    character = Character.load(args.character)
+    weights = synthetic_performance(args.frames, character.n_shapes)
+    target = create_context(headless=True)
+    ctx = target.ctx
+    results = {
+        "character": str(args.character),
+        "n_vertices": character.n_vertices,
+        "n_triangles": int(len(character.triangles)),
+        "n_shapes": character.n_shapes,
+        "width": args.width,
+        "height": args.height,
+        "gl_renderer": ctx.info.get("GL_RENDERER"),
+        "gl_version": ctx.info.get("GL_VERSION"),
+        "paths": {},
+    }
+    try:
+        for path in ("gpu", "cpu"):
+            renderer = FaceRenderer(ctx, character, args.width, args.height, path=path)
+            results["paths"][path] = measure_path(renderer, weights)
+            renderer.close()
+        reports = []
+        renderer = FaceRenderer(ctx, character, args.width, args.height, path="auto", log=reports.append)
+        results["auto_choice"] = renderer.path
+        results["auto_report"] = renderer.path_report
+        renderer.close()
+        results["gl_error"] = ctx.error
+    finally:
+        target.close()
+    _print_table(results)
+    return results
+
+
+def _print_table(r: dict) -> None:
+    print(
+        f"render bench: {r['character']} ({r['n_vertices']} vertices, {r['n_triangles']} triangles, "
+        f"{r['n_shapes']} shapes) at {r['width']}x{r['height']} on {r['gl_renderer']}"
+    )
+    print(f"{'path':<5} {'fps':>7} {'fps+read':>9} {'cpu med':>8} {'cpu p99':>8} {'draw med':>9} "
+          f"{'draw p99':>9} {'read med':>9} {'rss MB':>7}")
+    for path, p in r["paths"].items():
+        print(
+            f"{path:<5} {p['frames_per_s']:7.1f} {p['frames_per_s_with_readback']:9.1f} "
+            f"{p['cpu_prepare_ms']['median']:8.3f} {p['cpu_prepare_ms']['p99']:8.3f} "
+            f"{p['draw_finish_ms']['median']:9.2f} {p['draw_finish_ms']['p99']:9.2f} "
+            f"{p['readback_ms']['median']:9.2f} {p['peak_rss_mb']:7.0f}"
+        )
+    print(r["auto_report"])
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("-c", "--character", required=True, help="character tables file (.npz), e.g. the ICT head")
+    parser.add_argument("--frames", type=int, default=120, help="frames per path (120)")
+    parser.add_argument("--width", type=int, default=1280)
+    parser.add_argument("--height", type=int, default=720)
+
+
+register_bench(
+    "render",
+    bench_render,
+    "frames/s and CPU ms per frame of the gpu and cpu deformation paths (headless)",
+    _add_arguments,
+)

@@ -1,0 +1,74 @@
+"""``facepuppet contact-sheet``: every expression shape at weight 1, labelled, in one PNG."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from .character import Character
+from .images import contact_sheet, save_png
+
+
+def parse_cell(text: str) -> tuple[int, int]:
+    """``"320x320"`` -> (320, 320); argparse type."""
+    try:
+        w, h = (int(p) for p in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 320x320, got {text!r}") from None
+    if w <= 0 or h <= 0:
+        raise argparse.ArgumentTypeError(f"cell size must be positive, got {text!r}")
+    return w, h
+
+
+def render_shapes(ctx, character: Character, cell=(320, 320), path: str = "auto", log=print):
+    """Neutral, then each shape at weight 1.
+
+    Returns
+    -------
+    list of (label, ndarray of shape (cell_h, cell_w, 3), uint8)
+    """
+    from .renderer import FaceRenderer
+
+    renderer = FaceRenderer(ctx, character, cell[0], cell[1], path=path, log=log)
+    try:
+        frames = []
+        weights = np.zeros(character.n_shapes, dtype=np.float32)
+        renderer.draw(weights)
+        frames.append(("neutral", renderer.read_pixels()))
+        for s, name in enumerate(character.shape_names):
+            weights[:] = 0.0
+            weights[s] = 1.0
+            renderer.draw(weights)
+            frames.append((name, renderer.read_pixels()))
+        return frames
+    finally:
+        renderer.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    from .gl_context import create_context
+
+    character = Character.load(args.character)
+    target = create_context(headless=True)
+    try:
+        frames = render_shapes(target.ctx, character, args.cell, args.path)
+    finally:
+        target.close()
+    columns = args.columns or max(1, math.ceil(math.sqrt(len(frames) * 16 / 9 * args.cell[1] / args.cell[0])))
+    out = save_png(args.output, contact_sheet(frames, columns))
+    print(f"wrote {out}: {len(frames)} cells ({character.n_shapes} shapes + neutral), {columns} columns")
+    return 0
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "contact-sheet", help="render every expression shape at weight 1 into one labelled PNG grid"
+    )
+    parser.add_argument("character", help="character tables file (.npz)")
+    parser.add_argument("-o", "--output", required=True, help="PNG file to write")
+    parser.add_argument("--cell", type=parse_cell, default=(320, 320), help="cell size WIDTHxHEIGHT (320x320)")
+    parser.add_argument("--columns", type=int, default=0, help="grid columns (default: about 16:9)")
+    parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    parser.set_defaults(func=run)

@@ -1,0 +1,333 @@
+"""Draw a character from blendshape weights and a head pose.
+
+Two deformation paths give the same picture:
+
+* ``gpu``: every shape's position and normal deltas sit in float textures;
+  per frame only the active (shape, weight) pairs are uploaded as uniforms
+  (a few hundred bytes) and the vertex shader sums them.
+* ``cpu``: :class:`~facepuppet.runtime.deform.CpuDeformer` sums the same
+  deltas with NumPy and the result is written into the vertex buffer.
+
+On a real GPU the first wins by far. On Mesa's software rasteriser the vertex
+shader is emulated and the CPU path can be faster, so with ``path="auto"`` the
+renderer times both at construction and keeps the faster, saying which.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import moderngl
+import numpy as np
+
+from .camera import frame_bounds, model_matrix
+from .character import MATERIAL_KINDS, Character
+from .deform import CpuDeformer, check_weights
+from .geometry import bounds, vertex_normals
+from .shader_loader import load_program
+
+DELTA_TEXTURE_WIDTH = 4096
+MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights
+PATHS = ("auto", "gpu", "cpu")
+_HIDDEN = MATERIAL_KINDS["hidden"]
+_TWO_SIDED = (MATERIAL_KINDS["lashes"],)
+
+
+def realistic_weights(n_shapes: int, n_active: int = 10) -> np.ndarray:
+    """A plausible frame: ``n_active`` shapes spread over the set at weights 0.2..0.8, float32."""
+    w = np.zeros(n_shapes, dtype=np.float32)
+    active = np.unique(np.linspace(0, n_shapes - 1, min(n_active, n_shapes)).astype(int))
+    w[active] = np.linspace(0.2, 0.8, len(active), dtype=np.float32)
+    return w
+
+
+def vertex_materials(character: Character) -> np.ndarray:
+    """Per-vertex (kind, specular, shininess) from the first triangle using each vertex.
+
+    Returns
+    -------
+    ndarray of shape (n_vertices, 3), float32; vertices in no triangle get skin.
+    """
+    params = character.material_params
+    per_tri = np.stack(
+        [params[:, 2], params[:, 0], params[:, 1]], axis=1
+    )[character.triangle_material]
+    out = np.tile(np.array([MATERIAL_KINDS["skin"], 0.1, 16.0], np.float32), (character.n_vertices, 1))
+    tris = character.triangles.astype(np.int64)
+    # Reverse order so the first triangle that names a vertex is the last write.
+    out[tris[::-1].reshape(-1)] = np.repeat(per_tri[::-1], 3, axis=0)
+    return out.astype(np.float32)
+
+
+def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
+    """Triangles not of kind ``hidden``, one-sided kinds first.
+
+    Returns
+    -------
+    triangles : ndarray of shape (m, 3), uint32
+    n_one_sided : int, the first ``n_one_sided`` rows may be back-face culled;
+        the rest (thin cards such as lashes) are seen from both sides.
+    """
+    kinds = character.material_params[:, 2].round().astype(int)[character.triangle_material]
+    one_sided = character.triangles[(kinds != _HIDDEN) & ~np.isin(kinds, _TWO_SIDED)]
+    two_sided = character.triangles[np.isin(kinds, _TWO_SIDED)]
+    tris = np.ascontiguousarray(np.vstack([one_sided, two_sided]), dtype=np.uint32)
+    return tris, len(one_sided)
+
+
+class FaceRenderer:
+    """Renders a character into an offscreen framebuffer (or a window's).
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    character : Character
+    width, height : int, pixels
+    path : {"auto", "gpu", "cpu"}, deformation path; "auto" measures both and keeps the faster
+    target_fbo : moderngl.Framebuffer or None; None renders offscreen (read back with read_pixels)
+    background : tuple of 3 float, display RGB 0..1
+    log : callable(str), receives the one-line path report
+    cull_back_faces : bool
+        Cull back faces of closed, consistently wound surfaces (about half the
+        triangles of a head; a large saving on a software rasteriser). Thin
+        cards (lashes) are always drawn two-sided, and lighting is two-sided.
+
+    Attributes
+    ----------
+    path : str, "gpu" or "cpu"
+    path_report : str
+    """
+
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        character: Character,
+        width: int = 1280,
+        height: int = 720,
+        path: str = "auto",
+        target_fbo=None,
+        background=(0.16, 0.17, 0.19),
+        log: Callable[[str], None] = print,
+        cull_back_faces: bool = True,
+    ):
+        if path not in PATHS:
+            raise ValueError(f"path: expected one of {PATHS}, got {path!r}")
+        if width <= 0 or height <= 0:
+            raise ValueError(f"width, height: expected positive pixels, got {width}x{height}")
+        self.ctx = ctx
+        self.character = character
+        self.width, self.height = int(width), int(height)
+        self.background = tuple(float(c) for c in background)
+        self.cull_back_faces = bool(cull_back_faces)
+        self._own_fbo = target_fbo is None
+        # Bound again on close, so that no deleted framebuffer stays bound.
+        self._previous_fbo = ctx.fbo or ctx.detect_framebuffer(0)
+        if target_fbo is None:
+            self._color = ctx.renderbuffer((self.width, self.height), 4)
+            self._depth = ctx.depth_renderbuffer((self.width, self.height))
+            self.fbo = ctx.framebuffer(self._color, self._depth)
+        else:
+            self.fbo = target_fbo
+        self._setup_camera()
+        self._setup_buffers()
+        self._gpu = self._cpu = None
+        if path in ("auto", "gpu"):
+            self._gpu = self._setup_gpu()
+        if path in ("auto", "cpu"):
+            self._cpu = self._setup_cpu()
+        self._pose = np.eye(4, dtype=np.float32)
+        if path == "auto":
+            self.path, self.path_report = self._choose_path()
+            log(self.path_report)
+        else:
+            self.path = path
+            self.path_report = f"deformation path: {path} (asked for)"
+
+    # -- construction ------------------------------------------------------
+    def _setup_camera(self) -> None:
+        c = self.character
+        kinds = c.material_params[:, 2].round().astype(int)
+        tris = c.triangles[kinds[c.triangle_material] != _HIDDEN]
+        used = np.unique(tris) if len(tris) else np.arange(c.n_vertices)
+        lo, hi = bounds(c.vertices[used])
+        self.camera = frame_bounds(lo, hi, self.width / self.height)
+
+    def _setup_buffers(self) -> None:
+        c, ctx = self.character, self.ctx
+        attrs = np.hstack([c.vertex_color, vertex_materials(c)]).astype(np.float32)
+        self._attr_vbo = ctx.buffer(attrs.tobytes())
+        tris, n_one_sided = visible_triangles(c)
+        self._ibo = ctx.buffer(tris.tobytes())
+        self.n_indices = len(tris) * 3
+        self.n_one_sided_indices = n_one_sided * 3 if self.cull_back_faces else 0
+
+    def _setup_gpu(self) -> dict:
+        c, ctx = self.character, self.ctx
+        n = c.n_vertices
+        max_active = max(1, min(c.n_shapes, MAX_ACTIVE_LIMIT))
+        prog = load_program(
+            ctx,
+            "face.glsl",
+            {
+                "GPU_DEFORM": 1,
+                "MAX_ACTIVE": max_active,
+                "N_VERTICES": n,
+                "DELTA_TEXTURE_WIDTH": DELTA_TEXTURE_WIDTH,
+            },
+        )
+        rows = max(1, -(-(c.n_shapes * n) // DELTA_TEXTURE_WIDTH))
+        textures = []
+        for src in (c.delta_positions, c.delta_normals):
+            texels = np.zeros((rows * DELTA_TEXTURE_WIDTH, 3), dtype=np.float32)
+            for s in range(c.n_shapes):
+                sl = c.shape_slice(s)
+                texels[s * n + c.delta_indices[sl].astype(np.int64)] = src[sl]
+            tex = ctx.texture((DELTA_TEXTURE_WIDTH, rows), 3, texels.tobytes(), dtype="f4")
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            textures.append(tex)
+        rest = np.hstack([c.vertices, vertex_normals(c.vertices, c.triangles)]).astype(np.float32)
+        vbo = ctx.buffer(rest.tobytes())
+        vao = self._vao(prog, vbo)
+        prog["u_delta_positions"].value = 0
+        prog["u_delta_normals"].value = 1
+        return {
+            "prog": prog,
+            "vao": vao,
+            "vbo": vbo,
+            "textures": textures,
+            "max_active": max_active,
+            "shapes": np.zeros(max_active, dtype=np.int32),
+            "weights": np.zeros(max_active, dtype=np.float32),
+        }
+
+    def _setup_cpu(self) -> dict:
+        deformer = CpuDeformer(self.character)
+        prog = load_program(self.ctx, "face.glsl")
+        vbo = self.ctx.buffer(deformer.rest.tobytes(), dynamic=True)
+        return {"prog": prog, "vao": self._vao(prog, vbo), "vbo": vbo, "deformer": deformer}
+
+    def _vao(self, prog, vbo):
+        return self.ctx.vertex_array(
+            prog,
+            [(vbo, "3f 3f", "in_position", "in_normal"), (self._attr_vbo, "3f 3f", "in_color", "in_material")],
+            index_buffer=self._ibo,
+            index_element_size=4,
+        )
+
+    def _choose_path(self, warmup: int = 2, frames: int = 8) -> tuple[str, str]:
+        """Time both paths (draw + finish per frame) and return (faster, report line)."""
+        weights = realistic_weights(self.character.n_shapes)
+        medians = {}
+        for path in ("gpu", "cpu"):
+            self.path = path
+            times = []
+            for i in range(warmup + frames):
+                t0 = time.perf_counter()
+                self.draw(weights)
+                self.finish()
+                if i >= warmup:
+                    times.append(time.perf_counter() - t0)
+            medians[path] = float(np.median(times)) * 1e3
+        best = min(medians, key=medians.get)
+        other = "cpu" if best == "gpu" else "gpu"
+        report = (
+            f"deformation path: {best} ({best} {medians[best]:.1f} ms, {other} {medians[other]:.1f} ms "
+            f"median per frame over {frames} frames at {self.width}x{self.height})"
+        )
+        return best, report
+
+    # -- per frame ---------------------------------------------------------
+    def prepare(self, weights, head_rotation=None, head_translation=None) -> None:
+        """The CPU side of a frame: pose, active weights or CPU deformation, uploads."""
+        w = check_weights(weights, self.character.n_shapes)
+        self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
+        if self.path == "gpu":
+            self._upload_active(w)
+        else:
+            cpu = self._cpu
+            out = cpu["deformer"].deform_into(w)
+            cpu["vbo"].orphan()
+            cpu["vbo"].write(out)
+
+    def _upload_active(self, w: np.ndarray) -> None:
+        gpu = self._gpu
+        active = np.flatnonzero(w)
+        if len(active) > gpu["max_active"]:
+            keep = np.argsort(-np.abs(w[active]), kind="stable")[: gpu["max_active"]]
+            active = np.sort(active[keep])
+        count = len(active)
+        gpu["shapes"][:count] = active
+        gpu["weights"][:count] = w[active]
+        prog = gpu["prog"]
+        prog["u_active_count"].value = count
+        if count:
+            prog["u_active_shape"].write(gpu["shapes"].tobytes())
+            prog["u_active_weight"].write(gpu["weights"].tobytes())
+
+    def submit(self) -> None:
+        """Issue the draw call for the prepared frame (never waits for the GPU)."""
+        state = self._gpu if self.path == "gpu" else self._cpu
+        prog = state["prog"]
+        prog["u_model"].write(self._pose.T.tobytes())
+        prog["u_view_projection"].write(self.camera.view_projection.T.tobytes())
+        prog["u_eye"].value = tuple(float(x) for x in self.camera.eye)
+        if self.path == "gpu":
+            for unit, tex in enumerate(state["textures"]):
+                tex.use(unit)
+        self.fbo.use()
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.fbo.clear(*self.background, 1.0, depth=1.0)
+        culled = self.n_one_sided_indices
+        if culled:
+            self.ctx.front_face = "ccw"
+            self.ctx.enable(moderngl.CULL_FACE)
+            state["vao"].render(moderngl.TRIANGLES, vertices=culled)
+        self.ctx.disable(moderngl.CULL_FACE)
+        if self.n_indices > culled:
+            state["vao"].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
+
+    def draw(self, weights, head_rotation=None, head_translation=None) -> None:
+        """Render one frame.
+
+        Parameters
+        ----------
+        weights : ndarray of shape (n_shapes,), float32, in character shape order
+        head_rotation : array_like of shape (4,), quaternion (x, y, z, w) about character.pivot, or None
+        head_translation : array_like of shape (3,), character units, or None
+        """
+        self.prepare(weights, head_rotation, head_translation)
+        self.submit()
+
+    def finish(self) -> None:
+        """Wait until the GPU has finished the submitted frames."""
+        self.ctx.finish()
+
+    def read_pixels(self) -> np.ndarray:
+        """The last frame as ndarray of shape (height, width, 3), uint8, top row first."""
+        data = self.fbo.read(viewport=(0, 0, self.width, self.height), components=3, alignment=1)
+        return np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, 3)[::-1].copy()
+
+    def project(self, points, head_rotation=None, head_translation=None) -> np.ndarray:
+        """Pixel coordinates (x right, y down) of character-space points, (n, 2) float64."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        m = self.camera.view_projection @ model_matrix(head_rotation, head_translation, self.character.pivot)
+        clip = np.c_[p, np.ones(len(p))] @ m.T.astype(np.float64)
+        ndc = clip[:, :2] / clip[:, 3:4]
+        return np.c_[(ndc[:, 0] + 1) / 2 * self.width, (1 - ndc[:, 1]) / 2 * self.height]
+
+    def close(self) -> None:
+        """Release every GL object this renderer made."""
+        for state in (self._gpu, self._cpu):
+            if state:
+                for key in ("vao", "prog", "vbo"):
+                    state[key].release()
+                for tex in state.get("textures", ()):
+                    tex.release()
+        self._attr_vbo.release()
+        self._ibo.release()
+        if self._own_fbo:
+            self._previous_fbo.use()
+            self.fbo.release()
+            self._color.release()
+            self._depth.release()

@@ -1,0 +1,80 @@
+"""Small characters built in code for renderer, deformation and contact-sheet tests."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.geometry import vertex_normals
+
+
+def uv_sphere(n_lat: int = 24, n_lon: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """Unit sphere: vertices (n, 3) float32, counter-clockwise outward triangles (m, 3) uint32."""
+    lat = np.linspace(0, np.pi, n_lat + 1)
+    lon = np.linspace(0, 2 * np.pi, n_lon, endpoint=False)
+    la, lo = np.meshgrid(lat, lon, indexing="ij")
+    v = np.stack([np.sin(la) * np.sin(lo), np.cos(la), np.sin(la) * np.cos(lo)], axis=-1).reshape(-1, 3)
+    tris = []
+    for i in range(n_lat):
+        for j in range(n_lon):
+            a, b = i * n_lon + j, i * n_lon + (j + 1) % n_lon
+            c, d = a + n_lon, b + n_lon
+            tris += [(a, c, d), (a, d, b)]
+    tris = np.array(tris, dtype=np.uint32)
+    # drop degenerate pole triangles (repeated pole vertices)
+    area = np.linalg.norm(np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]]), axis=1)
+    return v.astype(np.float32), tris[area > 1e-9]
+
+
+def sphere_character(with_hidden: bool = True) -> Character:
+    """A unit-sphere "head" with shapes jawOpen (lower half drops) and puff (widens), an "eye" cap
+    and, optionally, a hidden quad in front of the face that must never be drawn."""
+    v, tris = uv_sphere()
+    mats = np.zeros(len(tris), dtype=np.uint16)
+    centroid = v[tris].mean(axis=1)
+    mats[(centroid[:, 2] > 0.8) & (centroid[:, 1] > 0.25) & (np.abs(centroid[:, 0]) > 0.1)] = 1  # eyes
+    color = np.tile(np.array([0.6, 0.4, 0.3], np.float32), (len(v), 1))
+    names = ["skin", "eye"]
+    params = [[0.15, 20, MATERIAL_KINDS["skin"], 0], [0.9, 80, MATERIAL_KINDS["eye"], 0]]
+    if with_hidden:
+        base = len(v)
+        quad = np.array([[-0.8, -0.8, 1.5], [0.8, -0.8, 1.5], [0.8, 0.8, 1.5], [-0.8, 0.8, 1.5]], np.float32)
+        v = np.vstack([v, quad])
+        color = np.vstack([color, np.ones((4, 3), np.float32)])
+        tris = np.vstack([tris, np.array([[0, 1, 2], [0, 2, 3]], np.uint32) + base])
+        mats = np.concatenate([mats, np.full(2, 2, np.uint16)])
+        names.append("occluder")
+        params.append([0, 1, MATERIAL_KINDS["hidden"], 0])
+    jaw = np.zeros_like(v)
+    lower = v[:, 1] < -0.1
+    jaw[lower, 1] = -0.4 * (-v[lower, 1])
+    jaw[len(v) - 4 * with_hidden:] = 0
+    puff = np.zeros_like(v)
+    puff[: len(v) - 4 * with_hidden, 0] = 0.25 * v[: len(v) - 4 * with_hidden, 0]
+    return make_character(v, tris, mats, color, names, params, {"jawOpen": jaw, "puff": puff})
+
+
+def make_character(v, tris, mats, color, material_names, params, shapes: dict) -> Character:
+    """A Character whose normal deltas are those of the shapes at weight 1."""
+    dense = np.stack(list(shapes.values())).astype(np.float32)
+    n0 = vertex_normals(v, tris)
+    dense_n = np.stack([vertex_normals(v + d, tris) - n0 for d in dense])
+    # A vertex that stays put can still turn (its neighbours moved): keep both in one index set.
+    offsets, indices, both = sparse_deltas(np.concatenate([dense, dense_n], axis=2), tolerance=1e-7)
+    positions, normals = np.ascontiguousarray(both[:, :3]), np.ascontiguousarray(both[:, 3:])
+    return Character(
+        name="sphere",
+        units="cm",
+        vertices=np.asarray(v, np.float32),
+        triangles=np.asarray(tris, np.uint32),
+        triangle_material=np.asarray(mats, np.uint16),
+        vertex_color=np.asarray(color, np.float32),
+        material_names=tuple(material_names),
+        material_params=np.asarray(params, np.float32),
+        pivot=np.zeros(3, np.float32),
+        shape_names=tuple(shapes),
+        delta_offsets=offsets,
+        delta_indices=indices,
+        delta_positions=positions,
+        delta_normals=normals,
+    )

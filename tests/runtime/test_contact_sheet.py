@@ -1,0 +1,58 @@
+"""Contact sheet: PNG writing, grid layout and the contact-sheet command end to end."""
+
+from __future__ import annotations
+
+import argparse
+import numpy as np
+import pytest
+from PIL import Image
+from small_characters import sphere_character
+
+from facepuppet.runtime import contact_sheet
+from facepuppet.runtime.images import LABEL_HEIGHT, contact_sheet as make_sheet, save_png
+
+
+def parse(module, argv):
+    parser = argparse.ArgumentParser()
+    module.register(parser.add_subparsers())
+    return parser.parse_args(argv)
+
+
+def test_save_png_round_trips(tmp_path):
+    rgb = np.random.default_rng(0).integers(0, 256, (7, 5, 3), dtype=np.uint8)
+    path = save_png(tmp_path / "f.png", rgb)
+    np.testing.assert_array_equal(np.asarray(Image.open(path)), rgb)
+    with pytest.raises(ValueError, match=r"expected an \(h, w, 3\) uint8 RGB array, got \(7, 5\) float64"):
+        save_png(tmp_path / "g.png", np.zeros((7, 5)))
+
+
+def test_grid_size_and_labels_drawn():
+    cells = [(f"s{i}", np.full((20, 30, 3), 40 * i, np.uint8)) for i in range(5)]
+    sheet = make_sheet(cells, columns=2)
+    assert sheet.shape == (3 * (20 + LABEL_HEIGHT), 2 * 30, 3)
+    np.testing.assert_array_equal(sheet[20 + LABEL_HEIGHT : 40 + LABEL_HEIGHT, 30:60], cells[3][1])
+    label_band = sheet[20 : 20 + LABEL_HEIGHT, 0:30]
+    assert (label_band.max(axis=2) > 150).any()  # some label text pixels
+    with pytest.raises(ValueError, match="is 10x20, expected 30x20"):
+        make_sheet(cells + [("odd", np.zeros((20, 10, 3), np.uint8))], columns=2)
+    with pytest.raises(ValueError, match="at least one"):
+        make_sheet([], columns=2)
+
+
+def test_contact_sheet_command_writes_the_grid(tmp_path, capsys):
+    character_path = sphere_character().save(tmp_path / "sphere.npz")
+    out = tmp_path / "sheet.png"
+    args = parse(contact_sheet, ["contact-sheet", str(character_path), "-o", str(out), "--cell", "64x48", "--columns", "2", "--path", "gpu"])
+    assert args.func(args) == 0
+    sheet = np.asarray(Image.open(out))
+    # neutral + 2 shapes = 3 cells in 2 columns -> 2 rows
+    assert sheet.shape == (2 * (48 + LABEL_HEIGHT), 2 * 64, 3)
+    assert "3 cells" in capsys.readouterr().out
+    # the jawOpen cell differs from the neutral cell
+    neutral, jaw = sheet[:48, :64].astype(int), sheet[:48, 64:128].astype(int)
+    assert np.abs(neutral - jaw).sum(axis=2).max() > 50
+
+
+def test_cell_option_is_validated():
+    with pytest.raises(SystemExit):
+        parse(contact_sheet, ["contact-sheet", "x.npz", "-o", "y.png", "--cell", "big"])

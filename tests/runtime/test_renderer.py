@@ -1,0 +1,153 @@
+"""FaceRenderer on a real EGL context: deformation, pose, materials, both paths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from small_characters import sphere_character
+
+from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.gl_context import GLUnavailable, create_context
+from facepuppet.runtime.renderer import FaceRenderer, realistic_weights
+
+W, H = 160, 120
+
+
+def render(ctx, character, weights, path="cpu", size=(W, H), **pose):
+    r = FaceRenderer(ctx, character, *size, path=path)
+    try:
+        r.draw(np.asarray(weights, np.float32), **pose)
+        r.finish()
+        image = r.read_pixels()
+        assert ctx.error == "GL_NO_ERROR"
+        return image, r.project
+    finally:
+        r.close()
+
+
+def changed(a, b, threshold=24):
+    return np.abs(a.astype(int) - b.astype(int)).sum(axis=2) > threshold
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return sphere_character()
+
+
+def test_frame_is_rgb_top_row_first_with_background_in_corners(egl_ctx, sphere):
+    image, _ = render(egl_ctx, sphere, [0, 0])
+    assert image.shape == (H, W, 3) and image.dtype == np.uint8
+    np.testing.assert_allclose(image[0, 0], np.round(np.array([0.16, 0.17, 0.19]) * 255), atol=1)
+    # the sphere is framed: centre pixel is lit skin, not background
+    assert changed(image[H // 2 : H // 2 + 1, W // 2 : W // 2 + 1], image[:1, :1]).all()
+
+
+@pytest.mark.parametrize("path", ["gpu", "cpu"])
+def test_jaw_open_changes_the_lower_face_only(egl_ctx, sphere, path):
+    closed, project = render(egl_ctx, sphere, [0, 0], path)
+    opened, _ = render(egl_ctx, sphere, [1, 0], path)
+    diff = changed(closed, opened)
+    equator = int(project([[0, -0.1, 1]])[0, 1])  # the shape moves vertices below y = -0.1
+    assert diff[equator + 2 :].sum() > 200
+    assert diff[: equator - 8].sum() == 0
+
+
+@pytest.mark.parametrize("path", ["gpu", "cpu"])
+def test_ict_jaw_open_changes_the_mouth_not_the_forehead(egl_ctx, ict_character, path):
+    c = ict_character
+    w = np.zeros(c.n_shapes, np.float32)
+    closed, project = render(egl_ctx, c, w, path, size=(320, 320))
+    w[c.shape_names.index("jawOpen")] = 1.0
+    opened, _ = render(egl_ctx, c, w, path, size=(320, 320))
+    diff = changed(closed, opened)
+    sl = c.shape_slice(c.shape_names.index("jawOpen"))
+    big = c.delta_indices[sl][np.linalg.norm(c.delta_positions[sl], axis=1) > 1.0]
+    xy = project(c.vertices[big])
+    x0, y0 = np.floor(xy.min(axis=0)).astype(int)
+    x1, y1 = np.ceil(xy.max(axis=0)).astype(int)
+    assert diff[y0 : y1 + 1, x0 : x1 + 1].sum() > 300
+    # forehead: front skin above the eyes
+    forehead = c.vertices[(c.vertices[:, 1] > 8) & (c.vertices[:, 2] > 8)]
+    fxy = project(forehead)
+    fx0, fy0 = np.floor(fxy.min(axis=0)).astype(int)
+    fx1, fy1 = np.ceil(fxy.max(axis=0)).astype(int)
+    assert fy1 < y0  # the regions are apart
+    assert diff[fy0 : fy1 + 1, fx0 : fx1 + 1].sum() == 0
+
+
+def test_gpu_and_cpu_paths_give_the_same_picture(egl_ctx, sphere):
+    for weights in ([0.0, 0.0], [0.6, 0.4], [1.0, 1.0]):
+        gpu, _ = render(egl_ctx, sphere, weights, "gpu")
+        cpu, _ = render(egl_ctx, sphere, weights, "cpu")
+        assert np.abs(gpu.astype(int) - cpu.astype(int)).mean() < 0.05
+        assert changed(gpu, cpu, threshold=30).sum() <= 3
+
+
+def test_gpu_and_cpu_paths_agree_on_ict(egl_ctx, ict_character):
+    w = realistic_weights(ict_character.n_shapes)
+    gpu, _ = render(egl_ctx, ict_character, w, "gpu", size=(256, 256))
+    cpu, _ = render(egl_ctx, ict_character, w, "cpu", size=(256, 256))
+    assert np.abs(gpu.astype(int) - cpu.astype(int)).mean() < 0.1
+
+
+def test_head_rotation_and_translation_move_the_image(egl_ctx, sphere):
+    still, project = render(egl_ctx, sphere, [0, 0])
+    turned, _ = render(egl_ctx, sphere, [0, 0], head_rotation=euler_to_quat(0.6, 0.0, 0.0))
+    moved, _ = render(egl_ctx, sphere, [0, 0], head_translation=(0.3, 0.0, 0.0))
+    assert changed(still, turned).sum() > 100  # the eyes swing round
+    # translation +x (character's left) moves the silhouette right in the picture
+    cols = lambda img: np.flatnonzero(changed(img, np.broadcast_to(img[:1, :1], img.shape)).any(axis=0))
+    assert cols(moved)[0] > cols(still)[0] and cols(moved)[-1] > cols(still)[-1]
+
+
+def test_hidden_material_is_not_drawn(egl_ctx):
+    with_hidden, _ = render(egl_ctx, sphere_character(with_hidden=True), [0, 0])
+    without, _ = render(egl_ctx, sphere_character(with_hidden=False), [0, 0])
+    # the hidden quad sits in front of the face; drawn, it would cover it.
+    np.testing.assert_array_equal(with_hidden, without)
+
+
+def test_eye_material_is_shaded_differently_from_skin(egl_ctx, sphere):
+    image, project = render(egl_ctx, sphere, [0, 0], size=(320, 240))
+    eye = sphere.vertices[np.unique(sphere.triangles[sphere.triangle_material == 1])]
+    ex, ey = project(eye.mean(axis=0, keepdims=True))[0].astype(int)
+    sx, sy = project([[0.0, -0.3, 0.95]])[0].astype(int)
+    assert abs(int(image[ey, ex].sum()) - int(image[sy, sx].sum())) > 20
+
+
+def test_auto_path_measures_both_and_reports_once(egl_ctx, sphere):
+    lines = []
+    r = FaceRenderer(egl_ctx, sphere, W, H, path="auto", log=lines.append)
+    try:
+        assert r.path in ("gpu", "cpu")
+        assert len(lines) == 1 and lines[0] == r.path_report
+        assert lines[0].startswith(f"deformation path: {r.path} (") and "gpu" in lines[0] and "cpu" in lines[0]
+    finally:
+        r.close()
+    assert egl_ctx.error == "GL_NO_ERROR"
+
+
+def test_bad_arguments_are_refused(egl_ctx, sphere):
+    with pytest.raises(ValueError, match="path: expected one of"):
+        FaceRenderer(egl_ctx, sphere, W, H, path="fast")
+    r = FaceRenderer(egl_ctx, sphere, W, H, path="gpu")
+    try:
+        with pytest.raises(ValueError, match=r"weights: expected shape \(2,\)"):
+            r.draw(np.zeros(5, np.float32))
+    finally:
+        r.close()
+
+
+def test_window_without_display_raises_and_headless_works(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(GLUnavailable, match="--headless"):
+        create_context(headless=False)
+    try:
+        target = create_context(headless=None)
+    except GLUnavailable as exc:
+        pytest.skip(f"no EGL here: {exc}")
+    assert target.headless and target.window is None and not target.should_close()
+    target.swap()
+    target.poll()
+    target.close()
