@@ -146,13 +146,14 @@ class FrameLoop:
         return cmap
 
     def run(self, source, duration: float | None = None) -> LoopResult:
-        """Tick from t = 0 to ``duration`` (default: the source's ``duration``) inclusive.
+        """Tick from t = 0 until the first tick at or after ``duration`` (default: the source's ``duration``).
 
         With neither, runs until the window closes.
         """
         if duration is None:
             duration = getattr(source, "duration", None)
-        ticks = itertools.count() if duration is None else range(int(math.floor(duration * self.fps + 1e-9)) + 1)
+        # the last tick is the first at or after ``duration``, so the last recorded frame is shown
+        ticks = itertools.count() if duration is None else range(max(0, math.ceil(duration * self.fps - 1e-6)) + 1)
         window = self.target is not None and not getattr(self.target, "headless", True)
         timer = StageTimer(STAGES)
         now, add = timer.now, timer.add

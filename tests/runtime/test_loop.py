@@ -167,3 +167,11 @@ def test_stage_timer_summary():
     assert timer.table().splitlines()[0].split()[:2] == ["stage", "n"]
     with pytest.raises(ValueError, match="fps"):
         FrameLoop(RIG, StubRenderer(), RecordedClock(), fps=0)
+
+
+def test_default_duration_reaches_the_last_frame():
+    frames = [_frame(0.0, 0.1), _frame(0.1, 0.2), _frame(0.25, 0.3)]  # the last falls between ticks
+    src, log = ReplaySource(frames), WeightLog()
+    result = FrameLoop(RIG, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(src)
+    assert result.n_ticks == 4 and result.counters["frames_received"] == 3 and src.done(0.3)
+    assert log.array[-1, 0] == np.float32(0.3)
