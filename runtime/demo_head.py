@@ -161,7 +161,7 @@ def _sided_shapes(head: _Head, side: float) -> dict:
 
     shapes = {
         "eyeBlink": _lids(head, side, lambda a: up(a, False) - np.radians(3), lambda a: up(a, False) + 0.15 * opening(a)),
-        "eyeWide": _lids(head, side, lambda a: up(a, True) + np.radians(16) * np.cos(np.clip(a / parts.LID_CORNER, -1, 1) * np.pi / 2)),
+        "eyeWide": _lids(head, side, lambda a: up(a, True) + np.radians(22) * np.cos(np.clip(a / parts.LID_CORNER, -1, 1) * np.pi / 2)),
         "eyeSquint": _lids(head, side, lambda a: up(a, True) - 0.15 * opening(a), lambda a: up(a, False) + 0.4 * opening(a))
         + _skin_field(head, gauss(sx, y, 3.4, -1.0, 1.4, 0.9)[:, None] * vec(0.0, 0.35, 0.15)),
         "eyeLookUp": _eye_turn(head, side, pitch=np.radians(24))

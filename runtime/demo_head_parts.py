@@ -315,7 +315,7 @@ def eyelid(side: float, upper: bool, n_alpha: int = 29, n_s: int = 9) -> Part:
 # -- mouth ------------------------------------------------------------------
 def teeth(upper: bool, lip_z: float, slit_y: float) -> Part:
     """A row of teeth on a horizontal arc behind the lips; params ``gap``."""
-    radius, span = 2.9, np.radians(50)
+    radius, span = (2.9, np.radians(48)) if upper else (2.5, np.radians(44))
     ang = np.linspace(-span, span, 41)
     heights = np.array([-0.2, -0.1, 0.4, 1.0]) if upper else np.array([0.05, -0.05, -0.4, -0.7])
     front_z = lip_z - (0.42 if upper else 0.6)
@@ -351,9 +351,9 @@ def mouth_bag(skin_part: Part) -> Part:
     # depth behind the rim, half-heights above / below, width scale; the last ring closes the bag
     rings = np.array([
         [0.0, 0.0, 0.0, 1.0],
-        [0.3, 0.55, 0.4, 1.0],
-        [0.9, 1.3, 1.0, 0.98],
-        [1.8, 1.55, 1.3, 0.9],
+        [0.3, 0.55, 0.4, 0.94],
+        [0.9, 1.3, 1.0, 0.92],
+        [1.8, 1.55, 1.3, 0.86],
         [3.0, 1.25, 1.1, 0.7],
         [3.8, 0.5, 0.45, 0.3],
     ])
