@@ -76,6 +76,37 @@ def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
     return tris, len(one_sided)
 
 
+def gpu_defines(character: Character) -> dict:
+    """The #defines of face.glsl's GPU deformation variant for ``character``."""
+    return {
+        "GPU_DEFORM": 1,
+        "MAX_ACTIVE": max(1, min(character.n_shapes, MAX_ACTIVE_LIMIT)),
+        "N_VERTICES": character.n_vertices,
+        "DELTA_TEXTURE_WIDTH": DELTA_TEXTURE_WIDTH,
+    }
+
+
+def delta_textures(ctx: moderngl.Context, character: Character) -> list:
+    """Position and normal deltas as two RGB32F textures of width DELTA_TEXTURE_WIDTH.
+
+    Texel ``shape * n_vertices + vertex`` holds that shape's delta of that
+    vertex (zero where the shape does not move it). Returns [positions, normals].
+    """
+    c = character
+    n = c.n_vertices
+    rows = max(1, -(-(c.n_shapes * n) // DELTA_TEXTURE_WIDTH))
+    textures = []
+    for src in (c.delta_positions, c.delta_normals):
+        texels = np.zeros((rows * DELTA_TEXTURE_WIDTH, 3), dtype=np.float32)
+        for s in range(c.n_shapes):
+            sl = c.shape_slice(s)
+            texels[s * n + c.delta_indices[sl].astype(np.int64)] = src[sl]
+        tex = ctx.texture((DELTA_TEXTURE_WIDTH, rows), 3, texels.tobytes(), dtype="f4")
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        textures.append(tex)
+    return textures
+
+
 class FaceRenderer:
     """Renders a character into an offscreen framebuffer (or a window's).
 
@@ -164,28 +195,10 @@ class FaceRenderer:
 
     def _setup_gpu(self) -> dict:
         c, ctx = self.character, self.ctx
-        n = c.n_vertices
-        max_active = max(1, min(c.n_shapes, MAX_ACTIVE_LIMIT))
-        prog = load_program(
-            ctx,
-            "face.glsl",
-            {
-                "GPU_DEFORM": 1,
-                "MAX_ACTIVE": max_active,
-                "N_VERTICES": n,
-                "DELTA_TEXTURE_WIDTH": DELTA_TEXTURE_WIDTH,
-            },
-        )
-        rows = max(1, -(-(c.n_shapes * n) // DELTA_TEXTURE_WIDTH))
-        textures = []
-        for src in (c.delta_positions, c.delta_normals):
-            texels = np.zeros((rows * DELTA_TEXTURE_WIDTH, 3), dtype=np.float32)
-            for s in range(c.n_shapes):
-                sl = c.shape_slice(s)
-                texels[s * n + c.delta_indices[sl].astype(np.int64)] = src[sl]
-            tex = ctx.texture((DELTA_TEXTURE_WIDTH, rows), 3, texels.tobytes(), dtype="f4")
-            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            textures.append(tex)
+        defines = gpu_defines(c)
+        max_active = defines["MAX_ACTIVE"]
+        prog = load_program(ctx, "face.glsl", defines)
+        textures = delta_textures(ctx, c)
         rest = np.hstack([c.vertices, vertex_normals(c.vertices, c.triangles)]).astype(np.float32)
         vbo = ctx.buffer(rest.tobytes())
         vao = self._vao(prog, vbo)
@@ -285,7 +298,11 @@ class FaceRenderer:
             state["vao"].render(moderngl.TRIANGLES, vertices=culled)
         self.ctx.disable(moderngl.CULL_FACE)
         if self.n_indices > culled:
+            # Thin two-sided cards (lashes) last, blended over the finished surfaces.
+            self.ctx.enable(moderngl.BLEND)
+            self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
             state["vao"].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
+            self.ctx.disable(moderngl.BLEND)
 
     def draw(self, weights, head_rotation=None, head_translation=None) -> None:
         """Render one frame.

@@ -53,7 +53,9 @@ void main() {
     vec3 n = normalize(v_normal);
     // Two-sided lighting: open meshes (mouth socket, eyelids) show their back faces.
     if (dot(n, v) < 0.0) n = -n;
-    vec3 color = shade(v_color, int(v_material.x + 0.5), v_material.y, v_material.z, n, v);
-    f_color = vec4(to_display(color), 1.0);
+    int kind = int(v_material.x + 0.5);
+    vec3 color = shade(v_color, kind, v_material.y, v_material.z, n, v);
+    // Lash cards are untextured strips: drawn last, half see-through, they read as a lash line.
+    f_color = vec4(to_display(color), kind == KIND_LASHES ? LASH_OPACITY : 1.0);
 }
 #endif

@@ -8,6 +8,7 @@ const int KIND_TEETH = 2;
 const int KIND_MOUTH = 3;
 const int KIND_LASHES = 4;
 const int KIND_LIPS = 6;
+const float LASH_OPACITY = 0.55;
 
 // Directions point towards the lights, in world space (camera looks along -z).
 const vec3 KEY_DIR = vec3(0.45, 0.55, 0.70);

@@ -151,3 +151,58 @@ def test_window_without_display_raises_and_headless_works(monkeypatch):
     target.swap()
     target.poll()
     target.close()
+
+
+def gpu_deformed(ctx, character, weights):
+    """Deformed positions and normals read back from face.glsl's vertex shader (transform feedback)."""
+    from facepuppet.runtime.deform import CpuDeformer
+    from facepuppet.runtime.renderer import delta_textures, gpu_defines
+    from facepuppet.runtime.shader_loader import load_program
+
+    prog = load_program(ctx, "face.glsl", gpu_defines(character), varyings=("v_world", "v_normal"))
+    textures = delta_textures(ctx, character)
+    for unit, tex in enumerate(textures):
+        tex.use(unit)
+    prog["u_delta_positions"].value, prog["u_delta_normals"].value = 0, 1
+    active = np.flatnonzero(weights)
+    shapes = np.zeros(gpu_defines(character)["MAX_ACTIVE"], np.int32)
+    values = np.zeros(len(shapes), np.float32)
+    shapes[: len(active)], values[: len(active)] = active, weights[active]
+    prog["u_active_count"].value = len(active)
+    prog["u_active_shape"].write(shapes.tobytes())
+    prog["u_active_weight"].write(values.tobytes())
+    prog["u_model"].write(np.eye(4, dtype=np.float32).tobytes())
+    n = character.n_vertices
+    rest = ctx.buffer(CpuDeformer(character).rest.tobytes())
+    out = ctx.buffer(reserve=n * 6 * 4)
+    # colour and material inputs are not captured, so the linker drops them
+    vao = ctx.vertex_array(prog, [(rest, "3f 3f", "in_position", "in_normal")])
+    previous = ctx.fbo or ctx.detect_framebuffer(0)
+    fbo = ctx.simple_framebuffer((1, 1))  # a complete framebuffer bound, though nothing is drawn
+    fbo.use()
+    vao.transform(out, moderngl_points(), vertices=n)
+    result = np.frombuffer(out.read(), np.float32).reshape(n, 6)
+    assert ctx.error == "GL_NO_ERROR"
+    previous.use()
+    for obj in [vao, rest, out, prog, fbo, *textures]:
+        obj.release()
+    return result[:, :3], result[:, 3:]
+
+
+def moderngl_points():
+    import moderngl
+
+    return moderngl.POINTS
+
+
+@pytest.mark.parametrize("which", ["sphere", "ict"])
+def test_vertex_shader_deforms_like_the_cpu_deformer(egl_ctx, request, which):
+    from facepuppet.runtime.deform import CpuDeformer
+
+    c = sphere_character() if which == "sphere" else request.getfixturevalue("ict_character")
+    w = realistic_weights(c.n_shapes) if which == "ict" else np.array([0.7, -0.2], np.float32)
+    gpu_pos, gpu_nrm = gpu_deformed(egl_ctx, c, w)
+    cpu_pos, cpu_nrm = CpuDeformer(c).deform(w)
+    np.testing.assert_allclose(gpu_pos, cpu_pos, atol=2e-5 * max(1.0, float(np.abs(cpu_pos).max())))
+    used = np.unique(c.triangles)
+    np.testing.assert_allclose(gpu_nrm[used], cpu_nrm[used], atol=1e-5)
