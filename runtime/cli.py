@@ -16,6 +16,10 @@ from .tables import TablesError
 
 # Runtime modules that add subcommands, in the order --help lists them.
 _COMMAND_MODULES = (
+    "demo",
+    "replay",
+    "contact_sheet",
+    "bench",
 )
 
 
