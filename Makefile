@@ -22,11 +22,15 @@ $(STAMP): pyproject.toml .ci/system-deps
 	bash .ci/system-deps
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[offline,test]'
 	touch $(STAMP)
 
+# Benchmarks on the real ICT head from ../shared/data (imported first).
+ICT := ../shared/data/ict-facekit
 bench: $(STAMP)
-	$(VENV)/bin/facepuppet bench render --json bench-out/render.json
+	mkdir -p bench-out
+	test -f bench-out/ict.npz || $(VENV)/bin/facepuppet import-rig $(ICT)/generic_neutral_mesh.obj $(ICT) -o bench-out/ict.npz
+	$(VENV)/bin/facepuppet bench render -c bench-out/ict.npz --json bench-out/render.json
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info demo-out bench-out

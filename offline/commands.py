@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import sys
 import time
 from pathlib import Path
@@ -10,8 +12,33 @@ from pathlib import Path
 from facepuppet.runtime.character import MATERIAL_KINDS
 
 
+# Offline modules with their own ``register(subparsers)``. Entries for work in
+# progress may not exist yet; a module that exists but fails to import raises.
+_COMMAND_MODULES = ("actor_commands", "elastic_commands", "gesture_commands", "kpls_commands")
+# Offline modules with ``register_benches(register_bench)``, same rule.
+_BENCH_MODULES = ("bench_shin", "bench_elastic", "bench_gestures", "bench_kpls")
+
+
+def _existing(names):
+    for name in names:
+        if importlib.util.find_spec(f"{__package__}.{name}") is not None:
+            yield importlib.import_module(f"{__package__}.{name}")
+
+
+def register_benches(register_bench) -> None:
+    """Entry point of the ``facepuppet.benches`` group: add the offline benchmarks."""
+    for module in _existing(_BENCH_MODULES):
+        module.register_benches(register_bench)
+
+
 def register(subparsers) -> None:
     """Add the offline commands to the ``facepuppet`` parser."""
+    _register_import_rig(subparsers)
+    for module in _existing(_COMMAND_MODULES):
+        module.register(subparsers)
+
+
+def _register_import_rig(subparsers) -> None:
     p = subparsers.add_parser(
         "import-rig",
         help="blendshape rig (neutral OBJ + folder of shape OBJs) -> character table",

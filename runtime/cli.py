@@ -9,13 +9,17 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import sys
 from importlib.metadata import entry_points
 
 from .tables import TablesError
 
-# Runtime modules that add subcommands, in the order --help lists them.
+# Runtime modules that add subcommands, in the order --help lists them. An
+# entry for work in progress may not exist yet and is skipped; a module that
+# exists but fails to import raises.
 _COMMAND_MODULES = (
+    "run",
     "demo",
     "replay",
     "contact_sheet",
@@ -33,6 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"facepuppet {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in _COMMAND_MODULES:
+        if importlib.util.find_spec(f"facepuppet.runtime.{name}") is None:
+            continue
         importlib.import_module(f"facepuppet.runtime.{name}").register(sub)
     for ep in entry_points(group="facepuppet.commands"):
         ep.load()(sub)
