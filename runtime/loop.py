@@ -20,6 +20,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -78,6 +79,23 @@ class WallClock:
         return -ahead
 
 
+class Retarget(Protocol):
+    """A stage that turns an input frame into the rig's weights.
+
+    Attributes
+    ----------
+    target_names : tuple of n_shapes str, the character's shape names in order
+
+    ``apply(frame)`` returns ndarray of shape (n_shapes,), float32, or None to
+    keep the previous weights (e.g. a frame without the data it needs). It runs
+    on the frame-loop thread once per accepted frame and must stay cheap.
+    """
+
+    target_names: tuple[str, ...]
+
+    def apply(self, frame: Frame) -> np.ndarray | None: ...
+
+
 @dataclass
 class LoopResult:
     """What one :meth:`FrameLoop.run` did.
@@ -115,9 +133,13 @@ class FrameLoop:
         distinct channel tuple
     target : GLTarget or None; when it has a window (``headless`` False) each
         tick polls events, stops on ``should_close()`` and swaps buffers
+    retarget : Retarget or None; when given it turns each accepted frame into
+        the rig's weights instead of the name-based channel map (a marker
+        solver, a kernel-PLS retarget, ...)
     """
 
-    def __init__(self, character, renderer, clock, sinks=(), fps: float = 60.0, log=print, target=None):
+    def __init__(self, character, renderer, clock, sinks=(), fps: float = 60.0, log=print, target=None,
+                 retarget: "Retarget | None" = None):
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
         self.shape_names = tuple(character.shape_names)
@@ -127,6 +149,11 @@ class FrameLoop:
         self.fps = float(fps)
         self.log = log
         self.target = target
+        self.retarget = retarget
+        if retarget is not None and tuple(retarget.target_names) != self.shape_names:
+            raise ValueError(
+                f"FrameLoop retarget: its targets {tuple(retarget.target_names)[:4]}... are not the "
+                f"character's {len(self.shape_names)} shapes in order")
         self._maps: dict[tuple[str, ...], ChannelMap] = {}
         self._weights = np.zeros(len(self.shape_names), dtype=np.float32)
         self._rotation: np.ndarray | None = None
@@ -204,7 +231,11 @@ class FrameLoop:
 
     def _accept(self, frame: Frame) -> None:
         """Make ``frame`` the current one: its weights mapped, its pose kept where it has one."""
-        if frame.weights is not None:
+        if self.retarget is not None:
+            weights = self.retarget.apply(frame)
+            if weights is not None:
+                self._weights[:] = weights
+        elif frame.weights is not None:
             self.channel_map(frame.channels, frame.source).apply(frame.weights, out=self._weights)
         if frame.head_rotation is not None:
             self._rotation = frame.head_rotation

@@ -175,3 +175,35 @@ def test_default_duration_reaches_the_last_frame():
     result = FrameLoop(RIG, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(src)
     assert result.n_ticks == 4 and result.counters["frames_received"] == 3 and src.done(0.3)
     assert log.array[-1, 0] == np.float32(0.3)
+
+
+def test_a_retarget_stage_replaces_the_channel_map():
+    """A Retarget turns frames into weights; frames it declines keep the previous weights."""
+
+    class Halve:
+        target_names = ("a", "b")
+
+        def apply(self, frame):
+            if frame.weights is None:
+                return None
+            return np.asarray(frame.weights[:2], np.float32) * 0.5
+
+    class Char:
+        shape_names = ("a", "b")
+
+    class NullRenderer:
+        def draw(self, weights, rotation, translation):
+            pass
+
+        def finish(self):
+            pass
+
+    frames = [Frame(t=0.0, channels=("x", "y"), weights=[1.0, 0.4]), Frame(t=0.1)]
+    log = WeightLog()
+    FrameLoop(Char(), NullRenderer(), RecordedClock(), sinks=[log], fps=10, log=lambda s: None,
+              retarget=Halve()).run(ReplaySource(frames), duration=0.2)
+    np.testing.assert_allclose(log.array, [[0.5, 0.2], [0.5, 0.2], [0.5, 0.2]])
+    with pytest.raises(ValueError, match="retarget"):
+        class Wrong(Halve):
+            target_names = ("b", "a")
+        FrameLoop(Char(), NullRenderer(), RecordedClock(), retarget=Wrong())
