@@ -22,7 +22,8 @@ def parse_cell(text: str) -> tuple[int, int]:
     return w, h
 
 
-def render_shapes(ctx, character: Character, cell=(320, 320), path: str = "auto", log=print):
+def render_shapes(ctx, character: Character, cell=(320, 320), path: str = "auto", log=print,
+                  framing: str = "face"):
     """Neutral, then each shape at weight 1.
 
     Returns
@@ -31,7 +32,7 @@ def render_shapes(ctx, character: Character, cell=(320, 320), path: str = "auto"
     """
     from .renderer import FaceRenderer
 
-    renderer = FaceRenderer(ctx, character, cell[0], cell[1], path=path, log=log)
+    renderer = FaceRenderer(ctx, character, cell[0], cell[1], path=path, log=log, framing=framing)
     try:
         frames = []
         weights = np.zeros(character.n_shapes, dtype=np.float32)
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     character = Character.load(args.character)
     target = create_context(headless=True)
     try:
-        frames = render_shapes(target.ctx, character, args.cell, args.path)
+        frames = render_shapes(target.ctx, character, args.cell, args.path, framing=args.framing)
     finally:
         target.close()
     columns = args.columns or max(1, math.ceil(math.sqrt(len(frames) * 16 / 9 * args.cell[1] / args.cell[0])))
@@ -71,4 +72,6 @@ def register(subparsers) -> None:
     parser.add_argument("--cell", type=parse_cell, default=(320, 320), help="cell size WIDTHxHEIGHT (320x320)")
     parser.add_argument("--columns", type=int, default=0, help="grid columns (default: about 16:9)")
     parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    parser.add_argument("--framing", choices=("face", "head"), default="face",
+                        help="fit the camera to what the expressions move (face, default) or to the whole head")
     parser.set_defaults(func=run)

@@ -30,6 +30,8 @@ from .shader_loader import load_program
 DELTA_TEXTURE_WIDTH = 4096
 MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights
 PATHS = ("auto", "gpu", "cpu")
+# "head": the camera fits every drawn vertex; "face": only what expressions move (contact sheets).
+FRAMINGS = ("head", "face")
 _HIDDEN = MATERIAL_KINDS["hidden"]
 _TWO_SIDED = (MATERIAL_KINDS["lashes"],)
 
@@ -58,6 +60,17 @@ def vertex_materials(character: Character) -> np.ndarray:
     # Reverse order so the first triangle that names a vertex is the last write.
     out[tris[::-1].reshape(-1)] = np.repeat(per_tri[::-1], 3, axis=0)
     return out.astype(np.float32)
+
+
+def moving_vertices(character: Character, fraction: float = 0.05) -> np.ndarray:
+    """Indices of the vertices some shape moves by more than ``fraction`` of the largest displacement.
+
+    Their bounds are the expressive part of the face: the ``"face"`` framing.
+    """
+    lengths = np.linalg.norm(character.delta_positions, axis=1)
+    if not len(lengths):
+        return np.arange(character.n_vertices)
+    return np.unique(character.delta_indices[lengths > fraction * lengths.max()])
 
 
 def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
@@ -123,6 +136,8 @@ class FaceRenderer:
         Cull back faces of closed, consistently wound surfaces (about half the
         triangles of a head; a large saving on a software rasteriser). Thin
         cards (lashes) are always drawn two-sided, and lighting is two-sided.
+    framing : str, "head" (fit every drawn vertex) or "face" (fit the vertices
+        the expressions move, so a contact sheet shows them large)
 
     Attributes
     ----------
@@ -141,7 +156,11 @@ class FaceRenderer:
         background=(0.16, 0.17, 0.19),
         log: Callable[[str], None] = print,
         cull_back_faces: bool = True,
+        framing: str = "head",
     ):
+        if framing not in FRAMINGS:
+            raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
+        self.framing = framing
         if path not in PATHS:
             raise ValueError(f"path: expected one of {PATHS}, got {path!r}")
         if width <= 0 or height <= 0:
@@ -181,6 +200,8 @@ class FaceRenderer:
         kinds = c.material_params[:, 2].round().astype(int)
         tris = c.triangles[kinds[c.triangle_material] != _HIDDEN]
         used = np.unique(tris) if len(tris) else np.arange(c.n_vertices)
+        if self.framing == "face":
+            used = np.intersect1d(used, moving_vertices(c)) if c.n_shapes else used
         lo, hi = bounds(c.vertices[used])
         self.camera = frame_bounds(lo, hi, self.width / self.height)
 

@@ -56,3 +56,18 @@ def test_contact_sheet_command_writes_the_grid(tmp_path, capsys):
 def test_cell_option_is_validated():
     with pytest.raises(SystemExit):
         parse(contact_sheet, ["contact-sheet", "x.npz", "-o", "y.png", "--cell", "big"])
+
+
+
+def test_face_framing_shows_the_face_larger_than_head_framing(egl_ctx, ict_character):
+    """ICT's neck and shoulders make head framing much wider than the face."""
+    from facepuppet.runtime.renderer import FaceRenderer
+
+    covered = {}
+    for framing in ("head", "face"):
+        r = FaceRenderer(egl_ctx, ict_character, 160, 160, path="cpu", log=lambda s: None, framing=framing)
+        r.draw(np.zeros(ict_character.n_shapes, np.float32))
+        image = r.read_pixels().astype(int)
+        r.close()
+        covered[framing] = (np.abs(image - image[0, 0]).sum(axis=2) > 30).mean()
+    assert covered["face"] > 1.3 * covered["head"]
