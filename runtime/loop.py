@@ -15,7 +15,6 @@ recording gives the same frames either way (DESIGN.md, Determinism).
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from dataclasses import dataclass
@@ -96,6 +95,29 @@ class Retarget(Protocol):
     def apply(self, frame: Frame) -> np.ndarray | None: ...
 
 
+class TickInfo:
+    """What one tick did, handed to the ``on_tick`` hooks (one object, reused every tick).
+
+    Attributes
+    ----------
+    k : int, tick index
+    t : float, tick time (s)
+    raw : Frame or None, the new frame the snapshot returned this tick (before the pipeline)
+    frame : Frame or None, the frame on screen (after the pipeline)
+    weights : ndarray of shape (n_shapes,), float32, the rig weights drawn (the loop's buffer: copy to keep)
+    rotation, translation : ndarray or None, the head pose drawn
+    stamps : tuple of 5 floats on the loop's timer clock (``time.perf_counter``, which is the
+        monotonic clock on Linux): snapshot start, snapshot end, map end, draw submitted, GPU finished
+    """
+
+    __slots__ = ("k", "t", "raw", "frame", "weights", "rotation", "translation", "stamps")
+
+    def __init__(self):
+        self.k, self.t, self.raw, self.frame, self.weights = 0, 0.0, None, None, None
+        self.rotation = self.translation = None
+        self.stamps = (0.0,) * 5
+
+
 @dataclass
 class LoopResult:
     """What one :meth:`FrameLoop.run` did.
@@ -105,7 +127,8 @@ class LoopResult:
     n_ticks : int, ticks drawn
     counters : dict of str to int: ``frames_received`` (frames the source
         delivered, stale ones included), ``stale_dropped``,
-        ``nonfinite_rejected``, ``ticks_without_new_frame``, ``late_ticks``
+        ``nonfinite_rejected``, ``ticks_without_new_frame``, ``late_ticks``,
+        ``skipped_ticks`` (late ticks skipped with ``catch_up``)
     timings : dict, :meth:`StageTimer.summary` of the stages in ``STAGES``
     timer : StageTimer, the raw durations
     closed_by_window : bool, the window asked to close before the end
@@ -136,10 +159,21 @@ class FrameLoop:
     retarget : Retarget or None; when given it turns each accepted frame into
         the rig's weights instead of the name-based channel map (a marker
         solver, a kernel-PLS retarget, ...)
+    pipeline : callable ``(frame or None, t) -> Frame or None`` or None; live
+        processing between snapshot and map (filtering, calibration, tracking
+        loss, see :class:`~facepuppet.runtime.pipeline.LivePipeline`). It is
+        called every tick with the new finite frame (None when there is none)
+        and its result, when not None, is the frame drawn.
+    on_tick : sequence of callables taking a :class:`TickInfo`, called after
+        the sinks on every tick (live stats, OSC output)
+    stop : callable returning bool or None; checked before each tick, True ends the run
+    catch_up : bool; a tick later than one period skips the ticks it missed
+        (live runs: never fall behind real time) instead of drawing each one
     """
 
     def __init__(self, character, renderer, clock, sinks=(), fps: float = 60.0, log=print, target=None,
-                 retarget: "Retarget | None" = None):
+                 retarget: "Retarget | None" = None, pipeline=None, on_tick=(), stop=None,
+                 catch_up: bool = False):
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
         self.shape_names = tuple(character.shape_names)
@@ -150,6 +184,11 @@ class FrameLoop:
         self.log = log
         self.target = target
         self.retarget = retarget
+        self.pipeline = pipeline
+        self.on_tick = tuple(on_tick)
+        self.stop = stop
+        self.catch_up = bool(catch_up)
+        self.counters: dict[str, int] = {}
         if retarget is not None and tuple(retarget.target_names) != self.shape_names:
             raise ValueError(
                 f"FrameLoop retarget: its targets {tuple(retarget.target_names)[:4]}... are not the "
@@ -180,19 +219,32 @@ class FrameLoop:
         if duration is None:
             duration = getattr(source, "duration", None)
         # the last tick is the first at or after ``duration``, so the last recorded frame is shown
-        ticks = itertools.count() if duration is None else range(max(0, math.ceil(duration * self.fps - 1e-6)) + 1)
+        last = math.inf if duration is None else max(0, math.ceil(duration * self.fps - 1e-6))
         window = self.target is not None and not getattr(self.target, "headless", True)
         timer = StageTimer(STAGES)
         now, add = timer.now, timer.add
-        counters = dict.fromkeys(
-            ("frames_received", "stale_dropped", "nonfinite_rejected", "ticks_without_new_frame", "late_ticks"), 0)
+        counters = self.counters  # updated in place: hooks may hold it
+        counters.clear()
+        counters.update(dict.fromkeys(
+            ("frames_received", "stale_dropped", "nonfinite_rejected", "ticks_without_new_frame", "late_ticks",
+             "skipped_ticks"), 0))
+        info = TickInfo()
         n_ticks = 0
         closed = False
         self.clock.start()
-        for k in ticks:
+        k = 0
+        while k <= last:
+            if self.stop is not None and self.stop():
+                break
             t = k / self.fps
-            if self.clock.wait_until(t) > 0:
+            late = self.clock.wait_until(t)
+            if late > 0:
                 counters["late_ticks"] += 1
+                if self.catch_up and late * self.fps >= 1.0:
+                    skip = min(int(late * self.fps), last - k)
+                    counters["skipped_ticks"] += skip
+                    k += skip
+                    t = k / self.fps
             if window:
                 self.target.poll()
                 if self.target.should_close():
@@ -203,6 +255,7 @@ class FrameLoop:
             frame, stale = source.latest(t)
             t1 = now()
             add("snapshot", t1 - t0)
+            raw = frame
             if frame is None:
                 counters["ticks_without_new_frame"] += 1
             else:
@@ -210,8 +263,11 @@ class FrameLoop:
                 counters["stale_dropped"] += stale
                 if not frame.is_finite():
                     counters["nonfinite_rejected"] += 1
-                else:
-                    self._accept(frame)
+                    frame = None
+            if self.pipeline is not None:
+                frame = self.pipeline(frame, t)
+            if frame is not None:
+                self._accept(frame)
             t2 = now()
             add("map", t2 - t1)
 
@@ -223,10 +279,17 @@ class FrameLoop:
             add("gpu_finish", t4 - t3)
             for sink in self.sinks:
                 sink.consume(k, t, self._weights, self._frame, self.renderer)
+            if self.on_tick:
+                info.k, info.t, info.raw, info.frame, info.weights = k, t, raw, self._frame, self._weights
+                info.rotation, info.translation = self._rotation, self._translation
+                info.stamps = (t0, t1, t2, t3, t4)
+                for hook in self.on_tick:
+                    hook(info)
             add("sink", now() - t4)
             if window:
                 self.target.swap()
             n_ticks += 1
+            k += 1
         return LoopResult(n_ticks, counters, timer.summary(), timer, closed)
 
     def _accept(self, frame: Frame) -> None:

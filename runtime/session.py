@@ -21,13 +21,15 @@ FRAME     2     ``t f64, t_sender f64, number i64, layout id u32, flags u8``,
                 order: weights f32[n_channels], head rotation f32[4] (x, y, z,
                 w), head translation f32[3], audio level f32 (dBFS), markers
                 f32[n_markers * 3]
-PACKET    3     reserved: raw input packet + receive time (live recording)
-AUDIO     4     reserved: audio levels (live recording)
+PACKET    3     live recording: ``b"P1"``, receive time f64 (monotonic s),
+                input kind length u16, input kind UTF-8, then the datagram's
+                raw bytes
+AUDIO     4     live recording: ``b"A1"``, tick time f64 (s), level f32 (dBFS)
 ========  ====  ==============================================================
 
-A reader skips the reserved kinds it does not decode (their length is in the
-record header), so older readers keep working when they appear; any other
-unknown code is corruption.
+A reader skips PACKET/AUDIO records it cannot decode (older readers skip them
+all; their length is in the record header) and counts them in
+``Session.skipped``; any other unknown code is corruption.
 
 Crash safety: :class:`SessionWriter` writes each record with one ``os.write``
 on an unbuffered descriptor opened with ``O_APPEND``, so a ``kill -9`` can at
@@ -56,6 +58,8 @@ MAGIC = b"FPSESS\x00\x01"
 
 _RECORD_HEAD = struct.Struct("<IIB")  # payload length, crc32 of payload, kind
 _FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
+_PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
+_AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
 _MAX_PAYLOAD = 1 << 30  # a length above this is corruption, not data
 
 
@@ -65,8 +69,8 @@ class RecordKind(enum.IntEnum):
     HEADER = 0
     LAYOUT = 1
     FRAME = 2
-    PACKET = 3  # reserved for live recording: raw bytes + receive time
-    AUDIO = 4  # reserved for live recording: audio levels
+    PACKET = 3  # live recording: raw bytes + receive time + input kind
+    AUDIO = 4  # live recording: audio levels
 
 
 _RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO})
@@ -208,6 +212,47 @@ def encode_frame(frame: Frame, layout_id: int) -> bytes:
     return head + b"".join(parts)
 
 
+@dataclass(frozen=True)
+class Packet:
+    """One received datagram of a live recording.
+
+    Attributes
+    ----------
+    t : float, receive time, seconds on the monotonic clock
+    kind : str, the input kind that decoded it ("vmc", "livelinkface", ...)
+    data : bytes, the datagram as received
+    """
+
+    t: float
+    kind: str
+    data: bytes
+
+
+def encode_packet(t: float, kind: str, data: bytes) -> bytes:
+    """PACKET payload (see the module docstring)."""
+    name = kind.encode("utf-8")
+    return _PACKET_HEAD.pack(b"P1", t, len(name)) + name + bytes(data)
+
+
+def encode_audio(t: float, level_db: float) -> bytes:
+    """AUDIO payload (see the module docstring)."""
+    return _AUDIO.pack(b"A1", t, level_db)
+
+
+def _decode_packet(payload: bytes) -> Packet | None:
+    if len(payload) < _PACKET_HEAD.size or payload[:2] != b"P1":
+        return None
+    _, t, n = _PACKET_HEAD.unpack_from(payload)
+    end = _PACKET_HEAD.size + n
+    if end > len(payload):
+        return None
+    try:
+        kind = payload[_PACKET_HEAD.size:end].decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    return Packet(t, kind, bytes(payload[end:]))
+
+
 def _decode_frame(payload: bytes, layouts: dict[int, _Layout]) -> Frame:
     """Frame from a FRAME payload; ValueError when it does not fit its layout."""
     if len(payload) < _FRAME_HEAD.size:
@@ -280,7 +325,9 @@ class Session:
     complete : bool, False when reading stopped before the end of the file
     n_records : int, complete records read (header, layouts, frames, reserved kinds)
     tail_error : str, why and at which byte offset reading stopped ("" when complete)
-    skipped : dict of str to int, records of reserved kinds this reader does not decode
+    skipped : dict of str to int, PACKET/AUDIO records this reader could not decode
+    packets : list of Packet, the received datagrams of a live recording, in file order
+    audio_levels : list of (t, level_db) float pairs, the audio levels of a live recording
     """
 
     path: Path
@@ -290,6 +337,8 @@ class Session:
     n_records: int
     tail_error: str = ""
     skipped: dict[str, int] = field(default_factory=dict)
+    packets: list[Packet] = field(default_factory=list)
+    audio_levels: list[tuple[float, float]] = field(default_factory=list)
 
 
 def read_session(path) -> Session:
@@ -361,6 +410,11 @@ def _apply_record(session: Session, layouts: dict[int, _Layout], kind: int, payl
         layouts[layout_id] = layout
     elif kind == RecordKind.FRAME:
         session.frames.append(_decode_frame(payload, layouts))
+    elif kind == RecordKind.PACKET and (packet := _decode_packet(payload)) is not None:
+        session.packets.append(packet)
+    elif kind == RecordKind.AUDIO and len(payload) == _AUDIO.size and payload[:2] == b"A1":
+        _, t, level = _AUDIO.unpack(payload)
+        session.audio_levels.append((t, level))
     elif kind in _RESERVED_KINDS:
         name = RecordKind(kind).name.lower()
         session.skipped[name] = session.skipped.get(name, 0) + 1

@@ -1,0 +1,220 @@
+"""Audio level (dBFS) from the microphone or a WAV file, for the gesture layer and the stats.
+
+The level of a block of samples is its RMS in dB relative to full scale
+(``20 log10(rms)``; a full-scale sine reads -3.01 dBFS), floored at
+``floor_db``, then smoothed with separate attack and release time constants
+in the dB domain: a rising level follows with time constant ``attack_s``, a
+falling one with ``release_s`` (``level += (1 - exp(-block_s / tau)) * (new - level)``).
+
+* :class:`MicLevel` opens an input stream with sounddevice; its callback
+  (PortAudio's thread) writes the smoothed level into a preallocated slot and
+  never allocates a Python object per block beyond NumPy scalars, never blocks.
+* :class:`WavLevel` stands in for the microphone (``--audio-file``): the level
+  at tick time ``t`` is computed from the samples between the previous tick and
+  ``t``, so it plays on the frame clock and a replay gives the same levels.
+
+A missing device or PortAudio raises :class:`AudioUnavailable` with a message
+that says what to do; the live run logs it and goes on without audio.
+"""
+
+from __future__ import annotations
+
+import math
+import wave
+from pathlib import Path
+
+import numpy as np
+
+
+class AudioUnavailable(RuntimeError):
+    """No audio input could be opened; the message says why."""
+
+
+class LevelMeter:
+    """RMS dBFS of sample blocks with a noise floor and attack/release smoothing.
+
+    Parameters
+    ----------
+    sample_rate : float, Hz
+    attack_s : float, seconds, time constant of a rising level (> 0)
+    release_s : float, seconds, time constant of a falling level (> 0)
+    floor_db : float, dBFS, the level of silence (and the start value)
+    """
+
+    def __init__(self, sample_rate: float, attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0):
+        for name, v in (("sample_rate", sample_rate), ("attack_s", attack_s), ("release_s", release_s)):
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"LevelMeter {name}: expected a positive number, got {v!r}")
+        self.sample_rate = float(sample_rate)
+        self.attack_s = float(attack_s)
+        self.release_s = float(release_s)
+        self.floor_db = float(floor_db)
+        self.level_db = self.floor_db
+
+    def block_db(self, samples: np.ndarray) -> float:
+        """Unsmoothed level of one block: RMS in dBFS, at least ``floor_db``.
+
+        samples : ndarray of shape (n,) or (n, channels), float in [-1, 1]; channels are averaged
+        """
+        x = np.asarray(samples, dtype=np.float64)
+        if x.ndim == 2:
+            x = x.mean(axis=1)
+        if x.size == 0:
+            return self.floor_db
+        ms = float(np.dot(x, x)) / x.size
+        if not (ms > 0 and math.isfinite(ms)):
+            return self.floor_db
+        return max(10.0 * math.log10(ms), self.floor_db)  # 20 log10(rms)
+
+    def process(self, samples: np.ndarray) -> float:
+        """Smoothed level (dBFS) after one more block; a block of 0 samples leaves it as it is."""
+        n = len(samples)
+        if n == 0:
+            return self.level_db
+        new = self.block_db(samples)
+        tau = self.attack_s if new > self.level_db else self.release_s
+        self.level_db += (1.0 - math.exp(-n / self.sample_rate / tau)) * (new - self.level_db)
+        return self.level_db
+
+
+def read_wav(path) -> tuple[np.ndarray, int]:
+    """Samples of a WAV file as float64 in [-1, 1], shape (n,) (channels averaged), and the rate (Hz).
+
+    int16, int32, uint8 and float32/64 files are read (scipy.io.wavfile).
+
+    Raises
+    ------
+    ValueError
+        naming the file when it is not a WAV file scipy can read.
+    """
+    from scipy.io import wavfile
+
+    path = Path(path)
+    try:
+        rate, data = wavfile.read(path)
+    except (ValueError, wave.Error, EOFError) as exc:
+        raise ValueError(f"{path}: not a readable WAV file ({exc})") from None
+    if data.dtype.kind == "f":
+        x = data.astype(np.float64)
+    elif data.dtype == np.uint8:
+        x = (data.astype(np.float64) - 128.0) / 128.0
+    elif data.dtype.kind == "i":
+        x = data.astype(np.float64) / float(-np.iinfo(data.dtype).min)
+    else:
+        raise ValueError(f"{path}: WAV sample type {data.dtype} is not supported (expected int16/int32/uint8/float)")
+    if x.ndim == 2:
+        x = x.mean(axis=1)
+    return x, int(rate)
+
+
+class WavLevel:
+    """The level of a WAV file played on the frame clock.
+
+    Parameters
+    ----------
+    path : str or Path, a WAV file (mono or stereo, int or float samples)
+    attack_s, release_s, floor_db : see :class:`LevelMeter`
+    loop : bool, start again at the end (default False: silence after the end)
+
+    ``level(t)`` gives the level after the samples in ``[t_prev, t)``, where
+    ``t_prev`` is the time of the previous call (tick times, seconds from 0).
+    """
+
+    def __init__(self, path, attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0,
+                 loop: bool = False):
+        self.path = Path(path)
+        self.samples, self.sample_rate = read_wav(self.path)
+        self.meter = LevelMeter(self.sample_rate, attack_s, release_s, floor_db)
+        self.loop = loop
+        self._pos = 0
+
+    @property
+    def duration(self) -> float:
+        return len(self.samples) / self.sample_rate
+
+    def level(self, t: float) -> float:
+        """Smoothed level (dBFS) at tick time ``t`` (s); times must not go back."""
+        end = int(round(t * self.sample_rate))
+        if end <= self._pos:
+            return self.meter.level_db
+        n = len(self.samples)
+        if self.loop and n:
+            block = self.samples[np.arange(self._pos, end) % n]
+        else:
+            block = self.samples[min(self._pos, n):min(end, n)]
+            if end - self._pos > len(block):  # past the end: silence
+                block = np.concatenate([block, np.zeros(end - self._pos - len(block))])
+        self._pos = end
+        return self.meter.process(block)
+
+    def close(self) -> None:
+        pass
+
+
+class MicLevel:
+    """The microphone's level, measured in sounddevice's callback.
+
+    Parameters
+    ----------
+    device : int, str or None, sounddevice input device (None: the default)
+    sample_rate : float or None, Hz (None: the device's default)
+    block_s : float, seconds per callback block
+    attack_s, release_s, floor_db : see :class:`LevelMeter`
+
+    Raises
+    ------
+    AudioUnavailable
+        when sounddevice or PortAudio is missing, the device does not exist,
+        or the stream cannot be opened.
+    """
+
+    def __init__(self, device=None, sample_rate: float | None = None, block_s: float = 0.01,
+                 attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0):
+        try:
+            import sounddevice as sd
+        except (ImportError, OSError) as exc:  # OSError: the PortAudio library is missing
+            raise AudioUnavailable(f"no audio: sounddevice/PortAudio is not available ({exc}); "
+                                   "install PortAudio (apt-get install libportaudio2) or use --audio-file") from None
+        try:
+            info = sd.query_devices(device, "input")
+            rate = float(sample_rate or info["default_samplerate"])
+            self.meter = LevelMeter(rate, attack_s, release_s, floor_db)
+            self._slot = np.full(1, floor_db)  # written by the callback, read by the frame loop
+            self.status_errors = 0
+            self.stream = sd.InputStream(device=device, channels=1, samplerate=rate,
+                                         blocksize=max(1, int(rate * block_s)), callback=self._callback)
+            self.stream.start()
+        except (ValueError, sd.PortAudioError, OSError) as exc:
+            name = "the default input device" if device is None else f"input device {device!r}"
+            raise AudioUnavailable(f"no audio: could not open {name} ({exc}); "
+                                   "list devices with `python -m sounddevice`, or use --audio-file") from None
+        self.device_name = str(info.get("name", device))
+
+    def _callback(self, indata, frames, time_info, status) -> None:
+        if status:
+            self.status_errors += 1
+        self._slot[0] = self.meter.process(indata[:, 0])
+
+    def level(self, t: float | None = None) -> float:
+        """The latest smoothed level (dBFS); ``t`` is ignored (the microphone is live)."""
+        return float(self._slot[0])
+
+    def close(self) -> None:
+        self.stream.stop()
+        self.stream.close()
+
+
+def open_audio(device=None, wav=None, log=print, **meter):
+    """The audio level source the run asked for, or None (with a logged message) when none can be had.
+
+    ``wav`` (a path) wins over ``device``; ``device`` may be "" / None for the default input.
+    """
+    if wav is not None:
+        return WavLevel(wav, **meter)
+    try:
+        if isinstance(device, str) and device.strip().isdigit():
+            device = int(device)
+        return MicLevel(device=device or None, **meter)
+    except AudioUnavailable as exc:
+        log(f"{exc}; the run goes on without audio")
+        return None

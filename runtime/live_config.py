@@ -1,0 +1,203 @@
+"""The live run's small TOML config: filtering per region, gain and clamp per channel, tracking loss.
+
+Every key is optional; what is left out keeps its default. Example::
+
+    [filter.eyes]            # eyeBlink*, eyeLook*, eyeSquint*, eyeWide*: light smoothing
+    min_cutoff = 3.0         # Hz
+    beta = 1.5               # Hz per (weight / s)
+    d_cutoff = 1.0           # Hz
+    [filter.mouth]           # mouth*, jaw*, tongue*, cheek*: heavier
+    min_cutoff = 1.2
+    [filter.head]            # head rotation (quaternion components) and translation
+    min_cutoff = 1.0
+    beta = 0.5
+
+    [tracking_loss]
+    timeout_s = 0.5          # no frame for this long: ease to neutral
+    ease_out_s = 0.6         # ...over this long
+    ease_in_s = 0.25         # frames are back: blend from where we are to live over this long
+
+    [calibration]
+    capture_s = 0.5          # --calibrate / OSC /facepuppet/calibrate / key C: neutral = mean of this window
+
+    [channels.jawOpen]       # any spelling of a channel name (JawOpen, jawOpen, ...)
+    gain = 1.3
+    clamp = [0.0, 1.0]
+
+Regions are ``eyes``, ``brows``, ``mouth``, ``other`` (weights) and ``head``
+(pose). Errors (:class:`LiveConfigError`) name the file, the key, the type
+or range expected and what was found; unknown keys are errors too (a typo
+must not pass silently).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from .channels import canonical
+
+REGIONS = ("eyes", "brows", "mouth", "other", "head")
+
+
+class LiveConfigError(ValueError):
+    """A config file that cannot be used: the message names the file, the key and the problem."""
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """One Euro settings of one region (Hz, Hz per unit/s, Hz)."""
+
+    min_cutoff: float
+    beta: float
+    d_cutoff: float = 1.0
+
+
+@dataclass(frozen=True)
+class ChannelSettings:
+    """Per-channel gain (applied after offset removal) and clamp [low, high]."""
+
+    gain: float = 1.0
+    clamp: tuple[float, float] = (0.0, 1.0)
+
+
+DEFAULT_FILTERS = {
+    "eyes": FilterSettings(min_cutoff=3.0, beta=1.5),  # blinks must stay crisp
+    "brows": FilterSettings(min_cutoff=2.0, beta=0.7),
+    "mouth": FilterSettings(min_cutoff=1.2, beta=0.4),  # steadier, lip jitter shows most
+    "other": FilterSettings(min_cutoff=1.5, beta=0.5),
+    "head": FilterSettings(min_cutoff=1.0, beta=0.5),
+}
+
+
+@dataclass(frozen=True)
+class LiveConfig:
+    """Settings of the live pipeline (see the module docstring for the file format).
+
+    Attributes
+    ----------
+    filters : dict of region -> FilterSettings
+    channels : dict of canonical channel key -> ChannelSettings
+    default_channel : ChannelSettings, for channels not listed
+    timeout_s, ease_out_s, ease_in_s : float, seconds (tracking loss)
+    capture_s : float, seconds of frames averaged into the neutral pose
+    path : str, the file it came from ("" for defaults)
+    """
+
+    filters: dict = field(default_factory=lambda: dict(DEFAULT_FILTERS))
+    channels: dict = field(default_factory=dict)
+    default_channel: ChannelSettings = ChannelSettings()
+    timeout_s: float = 0.5
+    ease_out_s: float = 0.6
+    ease_in_s: float = 0.25
+    capture_s: float = 0.5
+    path: str = ""
+
+    def channel(self, name: str) -> ChannelSettings:
+        """Settings of a channel by any spelling of its name."""
+        return self.channels.get(canonical(name), self.default_channel)
+
+
+def region_of(name: str) -> str:
+    """Filter region of a weight channel: ``eyes``, ``brows``, ``mouth`` or ``other``."""
+    key = canonical(name)
+    if key.startswith("eye"):
+        return "eyes"
+    if key.startswith("brow"):
+        return "brows"
+    if key.startswith(("mouth", "jaw", "tongue", "cheek", "lip")):
+        return "mouth"
+    return "other"
+
+
+def _number(where: str, key: str, value, positive: bool = False, non_negative: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise LiveConfigError(f"{where}: key '{key}': expected a finite number, got {value!r} "
+                              f"({type(value).__name__})")
+    if positive and value <= 0:
+        raise LiveConfigError(f"{where}: key '{key}': expected a number > 0, got {value!r}")
+    if non_negative and value < 0:
+        raise LiveConfigError(f"{where}: key '{key}': expected a number >= 0, got {value!r}")
+    return float(value)
+
+
+def _table(where: str, key: str, value, allowed: tuple[str, ...] | None) -> dict:
+    if not isinstance(value, dict):
+        raise LiveConfigError(f"{where}: key '{key}': expected a table, got {value!r} ({type(value).__name__})")
+    if allowed is not None:
+        unknown = sorted(set(value) - set(allowed))
+        if unknown:
+            raise LiveConfigError(f"{where}: key '{key}.{unknown[0]}': unknown key; expected one of "
+                                  f"{', '.join(allowed)}")
+    return value
+
+
+def _channel(where: str, key: str, value: dict, base: ChannelSettings) -> ChannelSettings:
+    _table(where, key, value, ("gain", "clamp"))
+    gain = _number(where, f"{key}.gain", value["gain"]) if "gain" in value else base.gain
+    clamp = base.clamp
+    if "clamp" in value:
+        c = value["clamp"]
+        if not isinstance(c, list) or len(c) != 2:
+            raise LiveConfigError(f"{where}: key '{key}.clamp': expected an array of two numbers [low, high], "
+                                  f"got {c!r} ({type(c).__name__})")
+        lo, hi = (_number(where, f"{key}.clamp", v) for v in c)
+        if lo > hi:
+            raise LiveConfigError(f"{where}: key '{key}.clamp': expected low <= high, got [{lo}, {hi}]")
+        clamp = (lo, hi)
+    return ChannelSettings(gain, clamp)
+
+
+def parse_live_config(data: dict, where: str = "<config>") -> LiveConfig:
+    """LiveConfig from an already parsed TOML document; ``where`` names it in errors."""
+    _table(where, "<top>", data, ("filter", "tracking_loss", "calibration", "channels", "default_channel"))
+    cfg = LiveConfig(path=where)
+    filters = dict(DEFAULT_FILTERS)
+    for region, values in _table(where, "filter", data.get("filter", {}), REGIONS).items():
+        key = f"filter.{region}"
+        _table(where, key, values, ("min_cutoff", "beta", "d_cutoff"))
+        base = filters[region]
+        filters[region] = FilterSettings(
+            min_cutoff=_number(where, f"{key}.min_cutoff", values.get("min_cutoff", base.min_cutoff), positive=True),
+            beta=_number(where, f"{key}.beta", values.get("beta", base.beta), non_negative=True),
+            d_cutoff=_number(where, f"{key}.d_cutoff", values.get("d_cutoff", base.d_cutoff), positive=True),
+        )
+    loss = _table(where, "tracking_loss", data.get("tracking_loss", {}), ("timeout_s", "ease_out_s", "ease_in_s"))
+    calib = _table(where, "calibration", data.get("calibration", {}), ("capture_s",))
+    default_channel = cfg.default_channel
+    if "default_channel" in data:
+        default_channel = _channel(where, "default_channel", data["default_channel"], default_channel)
+    channels = {}
+    for name, values in _table(where, "channels", data.get("channels", {}), None).items():
+        channels[canonical(name)] = _channel(where, f"channels.{name}", values, default_channel)
+    return replace(
+        cfg,
+        filters=filters,
+        channels=channels,
+        default_channel=default_channel,
+        timeout_s=_number(where, "tracking_loss.timeout_s", loss.get("timeout_s", cfg.timeout_s), positive=True),
+        ease_out_s=_number(where, "tracking_loss.ease_out_s", loss.get("ease_out_s", cfg.ease_out_s), positive=True),
+        ease_in_s=_number(where, "tracking_loss.ease_in_s", loss.get("ease_in_s", cfg.ease_in_s), positive=True),
+        capture_s=_number(where, "calibration.capture_s", calib.get("capture_s", cfg.capture_s), positive=True),
+    )
+
+
+def load_live_config(path) -> LiveConfig:
+    """Read and check a TOML config file.
+
+    Raises
+    ------
+    LiveConfigError
+        naming the file and key (bad TOML, wrong type, out of range, unknown key).
+    FileNotFoundError
+        when the file does not exist.
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise LiveConfigError(f"{path}: not valid TOML: {exc}") from None
+    return parse_live_config(data, str(path))

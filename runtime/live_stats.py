@@ -1,0 +1,119 @@
+"""``--stats``: packet counters and per-stage latency of a live run, once a second and at exit.
+
+Stages of a frame, all on the monotonic clock (``Frame.t`` is set by the UDP
+thread when the datagram arrives; the loop's stamps are ``time.perf_counter``,
+which is the same clock on Linux; elsewhere the offset is measured once):
+
+=================  =============================================================
+stage              from -> to
+=================  =============================================================
+``receive_snap``   datagram received -> the frame loop's snapshot took it
+``solve_map``      snapshot -> pipeline (filter, calibrate, ease) and map/solve done
+``draw_submit``    map done -> draw call submitted
+``gpu_finish``     submitted -> the GPU finished (``ctx.finish()``)
+``end_to_end``     datagram received -> GPU finished
+=================  =============================================================
+
+Only ticks that took a new frame are measured (a held frame has no receive).
+Samples go into a fixed ring (no growth in long runs); the per-second line
+covers the last second, the final report the whole ring.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+STAGES = ("receive_snap", "solve_map", "draw_submit", "gpu_finish", "end_to_end")
+
+
+class LiveStats:
+    """Collect and print live counters and latencies.
+
+    Parameters
+    ----------
+    counters : dict of group name -> dict of str to int, read live (e.g.
+        ``{"udp": source.counters, "input": adapter.counters, "loop": loop.counters}``)
+    log : callable taking one str
+    interval_s : float, seconds between the periodic lines (0 or None: only at exit)
+    capacity : int, latency samples kept (ring)
+    clock : callable, monotonic seconds (for the periodic timing)
+    """
+
+    def __init__(self, counters: dict, log=print, interval_s: float | None = 1.0, capacity: int = 1 << 17,
+                 clock=time.monotonic):
+        self.counters = counters
+        self.log = log
+        self.interval_s = interval_s
+        self.clock = clock
+        self._samples = np.zeros((len(STAGES), capacity))
+        self._n = 0  # total samples ever written
+        self._window_start = 0
+        self._next_report = clock() + (interval_s or 0)
+        same = time.get_clock_info("perf_counter").implementation == time.get_clock_info("monotonic").implementation
+        self._offset = 0.0 if same else time.monotonic() - time.perf_counter()
+        self.ticks = 0
+
+    def on_tick(self, info) -> None:
+        """FrameLoop ``on_tick`` hook."""
+        self.ticks += 1
+        if info.raw is not None:
+            t0, t1, t2, t3, t4 = info.stamps
+            received = info.raw.t - self._offset
+            i = self._n % self._samples.shape[1]
+            s = self._samples
+            s[0, i] = t1 - received
+            s[1, i] = t2 - t1
+            s[2, i] = t3 - t2
+            s[3, i] = t4 - t3
+            s[4, i] = t4 - received
+            self._n += 1
+        if self.interval_s and self.clock() >= self._next_report:
+            self._next_report += self.interval_s
+            self.log(self.line(self.latency(since=self._window_start), "last 1 s"))
+            self._window_start = self._n
+
+    def latency(self, since: int = 0) -> dict:
+        """Per stage ``{"n", "p50_ms", "p99_ms", "max_ms"}`` over samples ``since`` .. now (ring-limited)."""
+        cap = self._samples.shape[1]
+        start = max(since, self._n - cap)
+        idx = np.arange(start, self._n) % cap
+        out = {}
+        for j, name in enumerate(STAGES):
+            a = self._samples[j, idx] * 1e3
+            if a.size:
+                p50, p99 = np.percentile(a, [50, 99])
+                out[name] = {"n": int(a.size), "p50_ms": float(p50), "p99_ms": float(p99), "max_ms": float(a.max())}
+            else:
+                out[name] = {"n": 0, "p50_ms": float("nan"), "p99_ms": float("nan"), "max_ms": float("nan")}
+        return out
+
+    def samples_ms(self, stage: str) -> np.ndarray:
+        """Every kept sample of ``stage`` in ms, oldest first: ndarray of shape (n,), float64."""
+        cap = self._samples.shape[1]
+        idx = np.arange(max(0, self._n - cap), self._n) % cap
+        return self._samples[STAGES.index(stage), idx] * 1e3
+
+    def counter_snapshot(self) -> dict:
+        return {group: dict(values) for group, values in self.counters.items()}
+
+    def line(self, latency: dict, label: str) -> str:
+        groups = []
+        for group, values in self.counters.items():
+            shown = " ".join(f"{k}={v}" for k, v in values.items() if v or k in ("received", "frames_received"))
+            if shown:
+                groups.append(f"{group}: {shown}")
+        lat = " ".join(f"{name} {v['p50_ms']:.2f}/{v['p99_ms']:.2f}" for name, v in latency.items() if v["n"])
+        return (f"stats ({label}): " + " | ".join(groups)
+                + (f" || latency ms p50/p99 (n={latency['end_to_end']['n']}): {lat}" if lat else ""))
+
+    def summary(self) -> dict:
+        """Counters and latency over the whole run (JSON-serialisable)."""
+        return {"ticks": self.ticks, "counters": self.counter_snapshot(), "latency_ms": self.latency()}
+
+    def final(self) -> None:
+        """Print the whole-run line and the JSON summary (at exit)."""
+        self.log(self.line(self.latency(), "whole run"))
+        self.log("stats json: " + json.dumps(self.summary(), sort_keys=True))

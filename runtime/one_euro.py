@@ -1,0 +1,113 @@
+"""The One Euro filter (Casiez, Roussel & Vogel, CHI 2012), vectorised over channels.
+
+A first-order low-pass filter whose cutoff rises with the signal's speed, so
+jitter is removed when the signal moves slowly and lag stays small when it
+moves fast. Symbols of the paper and their names here:
+
+==============  =====================  =========================================
+paper           code                   meaning
+==============  =====================  =========================================
+X_i, X̂_i        ``x``, ``x_hat``       raw and filtered value
+Ẋ_i, dX̂_i       ``dx``, ``dx_hat``     raw and filtered derivative (units / s)
+T_e             ``dt``                 sampling period (s)
+f_cmin          ``min_cutoff``         cutoff at zero speed (Hz)
+β               ``beta``               speed coefficient (Hz per unit/s)
+f_cd            ``d_cutoff``           cutoff of the derivative filter (Hz)
+α               ``alpha``              smoothing factor 1 / (1 + τ / T_e),
+                                       τ = 1 / (2π f_c)
+==============  =====================  =========================================
+
+Each channel may have its own settings (the per-region settings of the live
+pipeline: eyes light, mouth heavier). A NaN input means "no sample for this
+channel": its output is NaN and its state is left as it was.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def smoothing_factor(cutoff, dt):
+    """α = 1 / (1 + τ / T_e) with τ = 1 / (2π f_c) (Casiez et al. 2012, eq. 1 and §4)."""
+    tau = 1.0 / (2.0 * np.pi * cutoff)
+    return 1.0 / (1.0 + tau / dt)
+
+
+def _settings(value, n: int, name: str) -> np.ndarray:
+    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,)).copy()
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0) or (name != "beta" and np.any(arr <= 0)):
+        raise ValueError(f"OneEuroFilter {name}: expected {'non-negative' if name == 'beta' else 'positive'} "
+                         f"finite values, got {value!r}")
+    return arr
+
+
+class OneEuroFilter:
+    """One Euro filters for ``n`` channels at once.
+
+    Parameters
+    ----------
+    n : int, number of channels
+    min_cutoff : float or ndarray of shape (n,), Hz, > 0
+    beta : float or ndarray of shape (n,), Hz per (unit / s), >= 0
+    d_cutoff : float or ndarray of shape (n,), Hz, > 0 (default 1 Hz, as in the paper)
+
+    ``filter(x, dt)`` returns the filtered values, float64 (n,). The first
+    finite sample of a channel passes through unchanged and starts its state.
+    """
+
+    def __init__(self, n: int, min_cutoff=1.0, beta=0.0, d_cutoff=1.0):
+        if not (isinstance(n, (int, np.integer)) and n >= 0):
+            raise ValueError(f"OneEuroFilter n: expected a non-negative int, got {n!r}")
+        self.n = int(n)
+        self.min_cutoff = _settings(min_cutoff, self.n, "min_cutoff")
+        self.beta = _settings(beta, self.n, "beta")
+        self.d_cutoff = _settings(d_cutoff, self.n, "d_cutoff")
+        self.x_hat = np.full(self.n, np.nan)
+        self.dx_hat = np.zeros(self.n)
+        self._out = np.empty(self.n)
+
+    def reset(self) -> None:
+        """Forget every channel's state: the next sample of each passes through."""
+        self.x_hat.fill(np.nan)
+        self.dx_hat.fill(0.0)
+
+    def filter(self, x, dt: float) -> np.ndarray:
+        """Filter one sample per channel.
+
+        Parameters
+        ----------
+        x : ndarray of shape (n,), any float dtype; NaN where a channel has no sample
+        dt : float, seconds since the previous sample (> 0; a non-positive or
+            non-finite ``dt`` is treated as 1 ms so a repeated timestamp cannot
+            divide by zero)
+
+        Returns
+        -------
+        ndarray of shape (n,), float64, owned by the filter (copy it to keep it)
+        """
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (self.n,):
+            raise ValueError(f"OneEuroFilter.filter x: expected shape ({self.n},), got {x.shape}")
+        if not (math.isfinite(dt) and dt > 0):
+            dt = 1e-3
+        present = np.isfinite(x)
+        new = present & np.isnan(self.x_hat)
+        old = present & ~new
+        out = self._out
+        out.fill(np.nan)
+        if new.any():
+            self.x_hat[new] = x[new]
+            self.dx_hat[new] = 0.0
+            out[new] = x[new]
+        if old.any():
+            xo, prev = x[old], self.x_hat[old]
+            dx = (xo - prev) / dt
+            dx_hat = self.dx_hat[old] + smoothing_factor(self.d_cutoff[old], dt) * (dx - self.dx_hat[old])
+            cutoff = self.min_cutoff[old] + self.beta[old] * np.abs(dx_hat)  # f_c = f_cmin + β|dX̂|
+            x_hat = prev + smoothing_factor(cutoff, dt) * (xo - prev)  # X̂ = α X + (1 - α) X̂_prev
+            self.dx_hat[old] = dx_hat
+            self.x_hat[old] = x_hat
+            out[old] = x_hat
+        return out

@@ -1,0 +1,274 @@
+"""Per-frame processing of live input between the snapshot and the draw.
+
+For each accepted frame, in this order:
+
+1. **Reject** a frame with an infinite weight or a non-finite head pose
+   (counted in ``counters["nonfinite_rejected"]``; NaN weights mean "not
+   sent" and pass).
+2. **Filter**: a One Euro filter per weight channel with its region's settings
+   (eyes light, mouth heavier, see :mod:`~facepuppet.runtime.live_config`),
+   and one for the head (quaternion components, kept in one hemisphere and
+   renormalised; translation). ``dt`` is the difference of receive times.
+3. **Calibrate**: subtract the neutral pose (weights and translation; the
+   rotation is taken relative to the neutral rotation). The neutral is the mean
+   of the raw frames over ``capture_s`` seconds after :meth:`request_calibration`
+   (``--calibrate`` at start, the OSC message ``/facepuppet/calibrate``, or the
+   key C in a window).
+4. **Gain and clamp** per channel.
+5. **Tracking loss**: with no frame for ``timeout_s`` the output eases to
+   neutral over ``ease_out_s`` (smoothstep) instead of freezing; when frames
+   return, the output blends from wherever it was to the live value over
+   ``ease_in_s``, so no tick jumps by more than the live motion plus
+   ``|live - held| * max slope of the ramp * tick``.
+
+Times ``t`` are the frame loop's tick times (seconds), so a replay on recorded
+time gives the same output as the live run it came from.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .frames import Frame
+from .geometry import quat_mul
+from .live_config import LiveConfig, region_of
+from .one_euro import OneEuroFilter
+
+_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def smoothstep(x: float) -> float:
+    """3x² - 2x³ on [0, 1] (0 below, 1 above): a ramp with zero slope at both ends, max slope 1.5."""
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def nlerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+    """Normalised linear interpolation of quaternions (x, y, z, w), shortest way round."""
+    if float(np.dot(a, b)) < 0:
+        b = -b
+    q = (1.0 - s) * a + s * b
+    return q / max(float(np.linalg.norm(q)), 1e-12)
+
+
+def _conj(q: np.ndarray) -> np.ndarray:
+    return np.array([-q[0], -q[1], -q[2], q[3]])
+
+
+class _ChannelState:
+    """Filters, neutral and limits for one tuple of channel names."""
+
+    def __init__(self, channels: tuple[str, ...], config: LiveConfig):
+        n = len(channels)
+        regions = [region_of(c) for c in channels]
+        settings = [config.filters[r] for r in regions]
+        self.weights = OneEuroFilter(n, [s.min_cutoff for s in settings], [s.beta for s in settings],
+                                     [s.d_cutoff for s in settings])
+        head = config.filters["head"]
+        self.rotation = OneEuroFilter(4, head.min_cutoff, head.beta, head.d_cutoff)
+        self.translation = OneEuroFilter(3, head.min_cutoff, head.beta, head.d_cutoff)
+        per = [config.channel(c) for c in channels]
+        self.gain = np.array([p.gain for p in per])
+        self.low = np.array([p.clamp[0] for p in per])
+        self.high = np.array([p.clamp[1] for p in per])
+        self.neutral_out = np.clip(np.zeros(n), self.low, self.high)
+        self.last_q: np.ndarray | None = None
+
+    def reset_filters(self) -> None:
+        self.weights.reset()
+        self.rotation.reset()
+        self.translation.reset()
+        self.last_q = None
+
+
+class LivePipeline:
+    """Filtering, calibration, gain/clamp and tracking-loss easing of live frames.
+
+    Parameters
+    ----------
+    config : LiveConfig
+    audio_level : callable taking the tick time (s) and returning dBFS (NaN for
+        none), or None; its value is stamped on the frames this emits
+    log : callable taking one str
+
+    Call it once per tick as ``pipeline(frame, t)`` (the frame loop's
+    ``pipeline`` hook): ``frame`` is the newest new frame or None; the return
+    value is the frame to draw, or None to keep what is on screen.
+
+    Attributes
+    ----------
+    counters : dict of str to int: ``nonfinite_rejected``, ``tracking_lost``
+        (times the input went quiet past the timeout), ``calibrations``
+    state : str, ``waiting`` (no frame yet), ``live``, ``lost``, ``returning``
+    neutral_weights : ndarray of shape (n_channels,), float64, or None before calibration
+    """
+
+    def __init__(self, config: LiveConfig | None = None, audio_level=None, log=print):
+        self.config = config or LiveConfig()
+        self.audio_level = audio_level
+        self.log = log
+        self.counters = {"nonfinite_rejected": 0, "tracking_lost": 0, "calibrations": 0}
+        self.state = "waiting"
+        self._channels: tuple[str, ...] | None = None
+        self._cs: _ChannelState | None = None
+        self._last_frame: Frame | None = None  # last accepted input frame
+        self._last_tick = -math.inf  # tick time of the last accepted input frame
+        self._live: tuple | None = None  # (weights, rotation, translation) of the last input, processed
+        self._out: tuple | None = None  # what was last emitted
+        self._held: tuple | None = None  # start of the current ease (out or in)
+        self._ease_start = 0.0
+        self._lost_done = False
+        self.neutral_weights: np.ndarray | None = None
+        self._neutral_rot = _IDENTITY.copy()
+        self._neutral_trans: np.ndarray | None = None
+        self._calib_pending = False
+        self._capture: dict | None = None
+
+    def request_calibration(self) -> None:
+        """Capture the neutral from the next ``capture_s`` seconds of frames (safe from any thread)."""
+        self._calib_pending = True
+
+    @property
+    def calibrating(self) -> bool:
+        return self._calib_pending or self._capture is not None
+
+    def __call__(self, frame: Frame | None, t: float) -> Frame | None:
+        if frame is not None and not frame.is_finite():
+            self.counters["nonfinite_rejected"] += 1
+            frame = None
+        if frame is None:
+            return self._quiet(t)
+        if frame.channels != self._channels:
+            self._channels = frame.channels
+            self._cs = _ChannelState(frame.channels or (), self.config)
+            self.neutral_weights = None
+        dt = frame.t - self._last_frame.t if self._last_frame is not None else math.nan
+        self._capture_step(frame, t)
+        live = self._process(frame, dt)
+        self._last_frame, self._last_tick, self._live = frame, t, live
+        if self.state in ("lost", "returning"):
+            if self.state == "lost":
+                self.state, self._held, self._ease_start = "returning", self._out, t
+            s = smoothstep((t - self._ease_start) / self.config.ease_in_s)
+            out = self._blend(self._held, live, s)
+            if s >= 1.0:
+                self.state = "live"
+        else:
+            self.state = "live"
+            out = live
+        return self._emit(out, t)
+
+    # -- stages -------------------------------------------------------------------------------------
+
+    def _process(self, frame: Frame, dt: float) -> tuple:
+        cs = self._cs
+        weights = None
+        if frame.weights is not None:
+            w = cs.weights.filter(frame.weights, dt)
+            if self.neutral_weights is not None:
+                w = w - self.neutral_weights
+            weights = np.clip(w * cs.gain, cs.low, cs.high)  # NaN (not sent) stays NaN
+        rotation = None
+        if frame.head_rotation is not None:
+            q = frame.head_rotation.astype(np.float64)
+            if cs.last_q is not None and float(np.dot(q, cs.last_q)) < 0:
+                q = -q  # q and -q are one rotation: keep the filter on one hemisphere
+            cs.last_q = q
+            q = cs.rotation.filter(q, dt)
+            q = q / max(float(np.linalg.norm(q)), 1e-12)
+            rotation = quat_mul(_conj(self._neutral_rot), q)
+        translation = None
+        if frame.head_translation is not None:
+            translation = cs.translation.filter(frame.head_translation, dt).copy()
+            if self._neutral_trans is not None:
+                translation -= self._neutral_trans
+        return weights, rotation, translation
+
+    def _capture_step(self, frame: Frame, t: float) -> None:
+        """Accumulate raw frames for the neutral; finish after ``capture_s`` seconds of tick time."""
+        if self._calib_pending:
+            self._calib_pending = False
+            n = len(frame.channels or ())
+            self._capture = {"t0": t, "n": 0, "w": np.zeros(n), "wn": np.zeros(n), "q": np.zeros(4),
+                             "tr": np.zeros(3), "ntr": 0, "channels": frame.channels}
+            self.log(f"calibration: capturing the neutral pose for {self.config.capture_s:g} s; hold still")
+        c = self._capture
+        if c is None:
+            return
+        if frame.channels != c["channels"]:
+            self._capture = None
+            self.log("calibration: the input's channels changed during capture; calibration abandoned")
+            return
+        if frame.weights is not None:
+            finite = np.isfinite(frame.weights)
+            c["w"][finite] += frame.weights[finite]
+            c["wn"][finite] += 1
+        if frame.head_rotation is not None:
+            q = frame.head_rotation.astype(np.float64)
+            c["q"] += q if float(np.dot(q, c["q"])) >= 0 else -q
+        if frame.head_translation is not None:
+            c["tr"] += frame.head_translation
+            c["ntr"] += 1
+        c["n"] += 1
+        if t - c["t0"] >= self.config.capture_s:
+            self.neutral_weights = np.where(c["wn"] > 0, c["w"] / np.maximum(c["wn"], 1), 0.0)
+            norm = float(np.linalg.norm(c["q"]))
+            self._neutral_rot = c["q"] / norm if norm > 0 else _IDENTITY.copy()
+            self._neutral_trans = c["tr"] / c["ntr"] if c["ntr"] else None
+            self._capture = None
+            self.counters["calibrations"] += 1
+            self.log(f"calibration: neutral captured from {c['n']} frames")
+
+    def _quiet(self, t: float) -> Frame | None:
+        """A tick without a usable new frame: hold, keep blending in, or ease out to neutral."""
+        if self.state == "waiting":
+            return None
+        idle = t - self._last_tick
+        if idle <= self.config.timeout_s:
+            if self.state == "returning":
+                s = smoothstep((t - self._ease_start) / self.config.ease_in_s)
+                if s >= 1.0:
+                    self.state = "live"
+                return self._emit(self._blend(self._held, self._live, s), t)
+            return None
+        if self.state != "lost":
+            self.state, self._held, self._lost_done = "lost", self._out, False
+            self.counters["tracking_lost"] += 1
+            self._cs.reset_filters()  # frames that come back start the filters afresh
+        if self._lost_done:
+            return None
+        e = smoothstep((idle - self.config.timeout_s) / self.config.ease_out_s)
+        self._lost_done = e >= 1.0
+        return self._emit(self._blend(self._held, self._neutral(), e), t)
+
+    def _neutral(self) -> tuple:
+        weights = None if self._channels is None or self._last_frame.weights is None else self._cs.neutral_out
+        translation = np.zeros(3) if self._neutral_trans is not None else None  # uncalibrated: hold it
+        return weights, _IDENTITY, translation
+
+    @staticmethod
+    def _blend(a: tuple, b: tuple, s: float) -> tuple:
+        """(1 - s) a + s b per part; a part missing on one side takes the other's; NaN counts as 0."""
+        out = []
+        for i, (x, y) in enumerate(zip(a, b)):
+            if x is None or y is None:
+                out.append(y if x is None else x)
+            elif i == 1:
+                out.append(nlerp(x, y, s))
+            else:
+                x, y = np.nan_to_num(x), np.nan_to_num(y)
+                out.append(x + s * (y - x))
+        return tuple(out)
+
+    def _emit(self, out: tuple, t: float) -> Frame:
+        self._out = out
+        src = self._last_frame
+        weights, rotation, translation = out
+        return Frame(
+            t=src.t, source=src.source, channels=src.channels if weights is not None else None,
+            weights=weights, head_rotation=rotation, head_translation=translation,
+            audio_level=self.audio_level(t) if self.audio_level is not None else math.nan,
+            t_sender=src.t_sender, number=src.number,
+        )

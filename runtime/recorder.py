@@ -1,0 +1,96 @@
+"""``--record FILE``: every received datagram and the audio levels, appended to a session file.
+
+The UDP receive thread calls :meth:`PacketRecorder.put` for each accepted
+datagram; ``put`` only appends a tuple to a bounded deque (never blocks, never
+raises: when the writer falls behind by ``capacity`` records the record is
+dropped and counted). A writer thread takes them off and appends one PACKET
+record each to a :class:`~facepuppet.runtime.session.SessionWriter` (one
+``os.write`` per record, so a ``kill -9`` loses at most the record being
+written). Replaying the file re-decodes the packets with a fresh adapter of the
+recorded input kind (:func:`~facepuppet.runtime.sources.open_recording`),
+which gives back the frame stream the live run saw.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+
+from .session import RecordKind, SessionWriter, encode_audio, encode_packet
+
+
+class PacketRecorder:
+    """Record datagrams and audio levels without blocking their producers.
+
+    Parameters
+    ----------
+    path : str or Path, the session file to create (refuses to overwrite unless ``overwrite``)
+    kind : str, the input kind of the packets (stored in each PACKET record)
+    info : dict, JSON-serialisable facts for the header (character, listen address, ...)
+    capacity : int, records that may wait for the writer before new ones are dropped
+    fsync_every_s : float or None, see :class:`SessionWriter`
+
+    Attributes
+    ----------
+    counters : dict: ``packets_recorded``, ``audio_recorded``, ``record_dropped`` (queue full)
+    """
+
+    def __init__(self, path, kind: str, info: dict | None = None, capacity: int = 8192,
+                 fsync_every_s: float | None = 1.0, overwrite: bool = False):
+        self.kind = kind
+        self.capacity = int(capacity)
+        self.writer = SessionWriter(path, info={"recording": "live packets", "input": kind, **(info or {})},
+                                    fsync_every_s=fsync_every_s, overwrite=overwrite)
+        self.path = self.writer.path
+        self.counters = {"packets_recorded": 0, "audio_recorded": 0, "record_dropped": 0}
+        self._queue: collections.deque = collections.deque()
+        self._wake = threading.Event()
+        self._stopping = False
+        self._thread = threading.Thread(target=self._drain, name="facepuppet-recorder", daemon=True)
+        self._thread.start()
+
+    def put(self, data: bytes, t_receive: float, sender=None) -> None:
+        """Queue one datagram (receive thread; an ``on_packet`` callback). Never blocks."""
+        if len(self._queue) >= self.capacity:
+            self.counters["record_dropped"] += 1
+            return
+        self._queue.append((RecordKind.PACKET, t_receive, data))  # deque.append is atomic
+        self._wake.set()
+
+    def put_audio(self, t: float, level_db: float) -> None:
+        """Queue one audio level (frame-loop thread). Never blocks."""
+        if len(self._queue) >= self.capacity:
+            self.counters["record_dropped"] += 1
+            return
+        self._queue.append((RecordKind.AUDIO, t, level_db))
+        self._wake.set()
+
+    def _drain(self) -> None:
+        q, write = self._queue, self.writer.write_record
+        while True:
+            self._wake.wait(0.05)
+            self._wake.clear()
+            while q:
+                kind, t, value = q.popleft()
+                if kind == RecordKind.PACKET:
+                    write(kind, encode_packet(t, self.kind, value))
+                    self.counters["packets_recorded"] += 1
+                else:
+                    write(kind, encode_audio(t, value))
+                    self.counters["audio_recorded"] += 1
+            if self._stopping and not q:
+                return
+
+    def close(self) -> None:
+        """Write what is queued, fsync and close the file."""
+        if self._thread.is_alive():
+            self._stopping = True
+            self._wake.set()
+            self._thread.join()
+        self.writer.close()
+
+    def __enter__(self) -> "PacketRecorder":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,282 @@
+"""``facepuppet run``: drive a character live from a tracker over UDP.
+
+One UDP socket and receive thread (:class:`~facepuppet.runtime.udp_source.UdpSource`)
+decode the input kind's datagrams into frames; the frame loop ticks on the
+wall clock at ``--fps``, takes the newest frame each tick (older ones are
+dropped and counted, never queued), runs the live pipeline (filter, calibrate,
+gain/clamp, tracking-loss easing; :mod:`~facepuppet.runtime.pipeline`), maps
+it onto the rig and draws. Around that loop:
+
+* ``--record FILE``: every accepted datagram (raw bytes, receive time, input
+  kind) and the audio level of each tick go to a session file
+  (:mod:`~facepuppet.runtime.recorder`); ``facepuppet replay FILE`` re-decodes it.
+* ``--audio [DEVICE]`` / ``--audio-file WAV``: the audio level (dBFS) on every
+  drawn frame; no device is a message, not an error.
+* ``--vmc-out HOST:PORT``: the rig weights and head pose as VMC, every tick.
+* ``--stats``: counters and per-stage latency once a second and at exit.
+* Calibration (neutral capture over ``capture_s`` = 0.5 s by default): at the
+  start with ``--calibrate``, whenever the OSC message ``/facepuppet/calibrate``
+  arrives on the listening port (any arguments; detected before the adapter,
+  which counts it as an unknown address), or with the key C in a window.
+
+It listens on 127.0.0.1 unless ``--listen`` names another address; ``--allow``
+keeps only the listed sender IPs. ``--duration`` stops it by itself; Ctrl-C
+stops it cleanly; either way the final stats are printed.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import signal
+import sys
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .character import Character
+from .live_config import LiveConfig, load_live_config
+from .live_stats import LiveStats
+from .loop import FrameLoop, LoopResult, PngSink, WallClock, WeightLog
+from .pipeline import LivePipeline
+from .replay import parse_size
+from .vmc_out import parse_host_port
+
+CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
+
+
+def register(subparsers) -> None:
+    from .input_kinds import INPUT_KINDS
+
+    p = subparsers.add_parser(
+        "run", help="drive a character live from a tracker over UDP (VMC, Face Cap, FaceOSC, markers, Live Link Face)",
+        description="Drive a character live from OSC / UDP tracker input on this machine.")
+    p.add_argument("-c", "--character", type=Path, required=True, help="character .npz")
+    p.add_argument("--input", required=True, choices=tuple(INPUT_KINDS), help="tracker protocol")
+    p.add_argument("--listen", metavar="HOST:PORT", default=None,
+                   help="address to listen on (default 127.0.0.1 on the input's default port); "
+                        "an address other than loopback must be named here explicitly")
+    p.add_argument("--allow", metavar="IP[,IP...]", default=None, help="accept packets only from these senders")
+    p.add_argument("--config", type=Path, default=None, help="TOML config: filters, gain/clamp, tracking loss")
+    p.add_argument("--calibrate", action="store_true", help="capture the neutral pose from the first 0.5 s of frames")
+    p.add_argument("--audio", nargs="?", const="", default=None, metavar="DEVICE",
+                   help="measure the microphone level (default input device, or DEVICE by name or number)")
+    p.add_argument("--audio-file", type=Path, default=None, metavar="WAV", help="a WAV file as the audio input")
+    p.add_argument("--record", type=Path, default=None, metavar="FILE", help="record packets and audio levels")
+    p.add_argument("--vmc-out", default=None, metavar="HOST:PORT", help="send the rig weights and head as VMC")
+    p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
+    p.add_argument("--headless", action="store_true", help="render offscreen through EGL (no window)")
+    p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
+    p.add_argument("--dump-weights", type=Path, default=None, metavar="FILE.npy",
+                   help="save the rig weights of every tick, (n_ticks, n_shapes) float32, at exit")
+    p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
+    p.add_argument("--fps", type=float, default=60.0, help="ticks per second (default 60)")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    p.set_defaults(func=run_command)
+
+
+def parse_allow(text: str | None) -> set[str] | None:
+    """Sender IPs of ``--allow`` ("10.0.0.2,10.0.0.3"), or None; ValueError on a bad address."""
+    if text is None:
+        return None
+    allow = set()
+    for part in text.split(","):
+        try:
+            allow.add(str(ipaddress.ip_address(part.strip())))
+        except ValueError:
+            raise ValueError(f"--allow: expected comma-separated IP addresses, got {part.strip()!r}") from None
+    return allow
+
+
+@dataclass
+class LiveRunResult:
+    """What one live run did: the loop result, the stats, the per-tick weights and the parts' counters."""
+
+    loop: LoopResult
+    stats: LiveStats
+    weights: WeightLog
+    counters: dict
+    path: str
+    address: tuple
+
+
+class _Packets:
+    """The UDP thread's ``on_packet``: spot the calibrate message, hand the datagram to the recorder."""
+
+    def __init__(self, pipeline: LivePipeline, recorder=None):
+        self.pipeline = pipeline
+        self.put = recorder.put if recorder is not None else None
+
+    def __call__(self, data: bytes, t: float, sender) -> None:
+        if CALIBRATE_ADDRESS in data:
+            self.pipeline.request_calibration()
+        if self.put is not None:
+            self.put(data, t, sender)
+
+
+def run_live(args, log=print, stop_event: threading.Event | None = None, on_ready=None) -> LiveRunResult:
+    """Run a live session from parsed ``args`` (see :func:`register`) and return what it did.
+
+    ``stop_event`` set from another thread ends the run at the next tick;
+    ``on_ready(address)`` is called once the socket is bound, before the first tick.
+
+    Raises
+    ------
+    ValueError, FileNotFoundError
+        for bad options or files (named); OSError when the address cannot be bound;
+        GLUnavailable when no OpenGL context can be made.
+    """
+    from .audio_level import open_audio
+    from .gl_context import create_context
+    from .input_kinds import make_adapter
+    from .recorder import PacketRecorder
+    from .renderer import FaceRenderer
+    from .udp_source import UdpSource
+    from .vmc_out import VmcSender
+
+    width, height = parse_size(args.size)
+    if not (args.fps > 0):
+        raise ValueError(f"--fps: expected a positive number, got {args.fps}")
+    if args.duration is not None and not (args.duration > 0):
+        raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
+    adapter = make_adapter(args.input)
+    host, port = ("127.0.0.1", adapter.default_port) if args.listen is None else parse_host_port(args.listen, "--listen")
+    allow = parse_allow(args.allow)
+    vmc_out = parse_host_port(args.vmc_out) if args.vmc_out else None
+    config = load_live_config(args.config) if args.config is not None else LiveConfig()
+    character = Character.load(args.character)
+
+    stop_event = stop_event or threading.Event()
+    parts: list = []  # things to close, in reverse order
+    try:
+        audio = None
+        if args.audio is not None or args.audio_file is not None:
+            audio = open_audio(device=args.audio, wav=args.audio_file, log=log)
+            if audio is not None:
+                parts.append(audio)
+        recorder = None
+        if args.record is not None:
+            recorder = PacketRecorder(args.record, args.input, info={
+                "character": str(args.character), "listen": f"{host}:{port}", "fps": args.fps})
+            parts.append(recorder)
+        pipeline = LivePipeline(config, audio_level=audio.level if audio is not None else None, log=log)
+        if args.calibrate:
+            pipeline.request_calibration()
+        source = UdpSource(adapter, host=host, port=port, allow=allow, on_packet=_Packets(pipeline, recorder))
+        source.start()
+        parts.append(source)
+        log(f"run: listening for {args.input} on {source.address[0]}:{source.address[1]}"
+            + (f" (only from {', '.join(sorted(allow))})" if allow else ""))
+
+        target = create_context(headless=True if args.headless else None, width=width, height=height,
+                                title=f"facepuppet run ({args.input})")
+        parts.append(target)
+        screen = None if target.headless else target.ctx.screen
+        renderer = FaceRenderer(target.ctx, character, width, height, path=args.path, target_fbo=screen, log=log)
+        parts.append(renderer)
+        if not target.headless:
+            _bind_calibrate_key(target, pipeline)
+
+        weights = WeightLog()
+        sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
+        counters = {"udp": source.counters, "pipeline": pipeline.counters}
+        stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
+        hooks = [stats.on_tick]
+        if vmc_out is not None:
+            sender = VmcSender(vmc_out[0], vmc_out[1], character.shape_names)
+            parts.append(sender)
+            hooks.append(sender.on_tick)
+            counters["vmc_out"] = sender.counters
+        if recorder is not None:
+            counters["record"] = recorder.counters
+            if audio is not None:
+                hooks.append(lambda info: recorder.put_audio(info.t, audio.level(info.t)))
+        loop = FrameLoop(character, renderer, WallClock(), sinks=sinks, fps=args.fps, log=log, target=target,
+                         pipeline=pipeline, on_tick=hooks, stop=stop_event.is_set, catch_up=True)
+        counters["loop"] = loop.counters
+        stats.counters = _LiveCounters(source, counters)
+        if on_ready is not None:
+            on_ready(source.address)
+        with _sigint_sets(stop_event):
+            result = loop.run(source, duration=args.duration)
+        counters["loop"] = result.counters
+        return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address)
+    finally:
+        for part in reversed(parts):
+            for name in ("stop", "close"):
+                if hasattr(part, name):
+                    getattr(part, name)()
+                    break
+
+
+class _LiveCounters(dict):
+    """The stats' counter groups, with ``udp`` read afresh each time (UdpSource merges on access)."""
+
+    def __init__(self, source, groups: dict):
+        super().__init__(groups)
+        self._source = source
+
+    def items(self):
+        self["udp"] = self._source.counters
+        return super().items()
+
+
+class _sigint_sets:
+    """Within the block (main thread only), Ctrl-C sets ``event`` instead of raising."""
+
+    def __init__(self, event: threading.Event):
+        self.event = event
+        self.previous = None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, lambda *_: self.event.set())
+        return self
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+
+
+def _bind_calibrate_key(target, pipeline: LivePipeline) -> None:
+    import glfw
+
+    def on_key(window, key, scancode, action, mods):
+        if key == glfw.KEY_C and action == glfw.PRESS:
+            pipeline.request_calibration()
+
+    glfw.set_key_callback(target.window, on_key)
+
+
+def run_command(args, log=print) -> int:
+    """The ``run`` command: returns the exit code."""
+    from .gl_context import GLUnavailable
+
+    try:
+        result = run_live(args, log=log)
+    except GLUnavailable as exc:
+        print(f"facepuppet run: error: {exc}", file=sys.stderr)
+        return 3
+    except OSError as exc:
+        if isinstance(exc, (FileNotFoundError, PermissionError)):
+            raise
+        print(f"facepuppet run: error: {exc}", file=sys.stderr)
+        return 2
+    loop = result.loop
+    c = loop.counters
+    log(f"run: {loop.n_ticks} ticks at {args.fps:g} fps, {result.path} path; frames received "
+        f"{c['frames_received']}, stale dropped {c['stale_dropped']}, non-finite rejected "
+        f"{c['nonfinite_rejected'] + result.counters['pipeline']['nonfinite_rejected']}, late ticks "
+        f"{c['late_ticks']} (skipped {c['skipped_ticks']})" + (" (window closed)" if loop.closed_by_window else ""))
+    if args.stats:
+        result.stats.final()
+    if args.dump_weights is not None:
+        np.save(args.dump_weights, result.weights.array)
+        log(f"run: wrote the weights of {loop.n_ticks} ticks to {args.dump_weights}")
+    if args.out is not None:
+        log(f"run: wrote {loop.n_ticks} PNGs to {args.out}")
+    if args.record is not None:
+        log(f"run: recorded to {args.record}")
+    return 0
