@@ -7,6 +7,9 @@ Two deformation paths give the same picture:
   (a few hundred bytes) and the vertex shader sums them.
 * ``cpu``: :class:`~facepuppet.runtime.deform.CpuDeformer` sums the same
   deltas with NumPy and the result is written into the vertex buffer.
+* ``elastic`` (only when asked, with an elastic table): the vertex shader
+  spreads control-point displacements with a compact basis
+  (:mod:`~facepuppet.runtime.elastic_renderer`, Yano & Harada 2009).
 
 On a real GPU the first wins by far. On Mesa's software rasteriser the vertex
 shader is emulated and the CPU path can be faster, so with ``path="auto"`` the
@@ -24,12 +27,13 @@ import numpy as np
 from .camera import frame_bounds, model_matrix
 from .character import MATERIAL_KINDS, Character
 from .deform import CpuDeformer, check_weights
+from .elastic_renderer import check_model, setup_elastic, upload_controls
 from .geometry import bounds, vertex_normals
 from .shader_loader import load_program
 
 DELTA_TEXTURE_WIDTH = 4096
 MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights
-PATHS = ("auto", "gpu", "cpu")
+PATHS = ("auto", "gpu", "cpu", "elastic")
 # "head": the camera fits every drawn vertex; "face": only what expressions move (contact sheets).
 FRAMINGS = ("head", "face")
 _HIDDEN = MATERIAL_KINDS["hidden"]
@@ -128,7 +132,7 @@ class FaceRenderer:
     ctx : moderngl.Context
     character : Character
     width, height : int, pixels
-    path : {"auto", "gpu", "cpu"}, deformation path; "auto" measures both and keeps the faster
+    path : {"auto", "gpu", "cpu", "elastic"}, deformation path; "auto" measures gpu and cpu and keeps the faster
     target_fbo : moderngl.Framebuffer or None; None renders offscreen (read back with read_pixels)
     background : tuple of 3 float, display RGB 0..1
     log : callable(str), receives the one-line path report
@@ -138,6 +142,7 @@ class FaceRenderer:
         cards (lashes) are always drawn two-sided, and lighting is two-sided.
     framing : str, "head" (fit every drawn vertex) or "face" (fit the vertices
         the expressions move, so a contact sheet shows them large)
+    elastic : ElasticModel or None, compact basis and parameters; required for (and only used by) "elastic"
 
     Attributes
     ----------
@@ -157,6 +162,7 @@ class FaceRenderer:
         log: Callable[[str], None] = print,
         cull_back_faces: bool = True,
         framing: str = "head",
+        elastic=None,
     ):
         if framing not in FRAMINGS:
             raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
@@ -181,7 +187,11 @@ class FaceRenderer:
             self.fbo = target_fbo
         self._setup_camera()
         self._setup_buffers()
-        self._gpu = self._cpu = None
+        self._gpu = self._cpu = self._elastic = None
+        if path == "elastic":
+            if elastic is None:
+                raise ValueError("elastic: path 'elastic' needs an ElasticModel (elastic=...)")
+            self._elastic = setup_elastic(ctx, character, check_model(character, elastic), self._vao)
         if path in ("auto", "gpu"):
             self._gpu = self._setup_gpu()
         if path in ("auto", "cpu"):
@@ -281,11 +291,20 @@ class FaceRenderer:
         self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
         if self.path == "gpu":
             self._upload_active(w)
+        elif self.path == "elastic":
+            upload_controls(self._elastic, self._elastic["model"].blend(w))  # Yano & Harada eq. 7
         else:
             cpu = self._cpu
             out = cpu["deformer"].deform_into(w)
             cpu["vbo"].orphan()
             cpu["vbo"].write(out)
+
+    def prepare_controls(self, controls, head_rotation=None, head_translation=None) -> None:
+        """The CPU side of an elastic frame from control displacements, (n_controls, 3) float32."""
+        if self.path != "elastic":
+            raise ValueError(f"prepare_controls: only the 'elastic' path takes control displacements (path is {self.path!r})")
+        self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
+        upload_controls(self._elastic, controls)
 
     def _upload_active(self, w: np.ndarray) -> None:
         gpu = self._gpu
@@ -304,12 +323,12 @@ class FaceRenderer:
 
     def submit(self) -> None:
         """Issue the draw call for the prepared frame (never waits for the GPU)."""
-        state = self._gpu if self.path == "gpu" else self._cpu
+        state = {"gpu": self._gpu, "cpu": self._cpu, "elastic": self._elastic}[self.path]
         prog = state["prog"]
         prog["u_model"].write(self._pose.T.tobytes())
         prog["u_view_projection"].write(self.camera.view_projection.T.tobytes())
         prog["u_eye"].value = tuple(float(x) for x in self.camera.eye)
-        if self.path == "gpu":
+        if self.path in ("gpu", "elastic"):
             for unit, tex in enumerate(state["textures"]):
                 tex.use(unit)
         self.fbo.use()
@@ -359,7 +378,7 @@ class FaceRenderer:
 
     def close(self) -> None:
         """Release every GL object this renderer made."""
-        for state in (self._gpu, self._cpu):
+        for state in (self._gpu, self._cpu, self._elastic):
             if state:
                 for key in ("vao", "prog", "vbo"):
                     state[key].release()

@@ -6,6 +6,9 @@
 #ifdef GPU_DEFORM
 #include "blendshapes.glsl"
 #endif
+#ifdef ELASTIC_DEFORM
+#include "elastic.glsl"
+#endif
 
 in vec3 in_position;   // neutral (GPU path) or already deformed (CPU path), character units
 in vec3 in_normal;     // neutral or deformed, not necessarily unit length
@@ -25,6 +28,9 @@ void main() {
     vec3 normal = in_normal;
 #ifdef GPU_DEFORM
     apply_blendshapes(gl_VertexID, position, normal);
+#endif
+#ifdef ELASTIC_DEFORM
+    apply_elastic(gl_VertexID, position, normal);
 #endif
     vec4 world = u_model * vec4(position, 1.0);
     v_world = world.xyz;

@@ -1,0 +1,171 @@
+"""The elastic character tables (Yano & Harada 2009) and their CPU evaluation.
+
+An ``elastic`` tables file goes with a character of the same vertex count. It
+holds the compact basis (k control points per vertex, their weights and the
+surface gradients of their basis functions), the expression parameters of
+every shape (eq. 6, fitted offline) and the muscles (§6) as control
+displacements per unit contraction. Per frame:
+
+    U = Σ_s w_s P_s + Σ_m c_m Q_m          (eq. 7 blending; muscles, §6)
+    x_v = x0_v + Σ_j b_vj u_{i_vj}        (eq. 5, k terms)
+    n_v ≈ n0_v - Σ_j g_vj (n0_v · u_{i_vj})  (first-order normal change)
+
+Symbols → code names: P_s ``params[s]``, Q_m ``muscle_params[m]``,
+w ``weights``, c ``contractions``, b ``basis_weights``, i ``basis_indices``,
+g ``basis_gradients``, U ``controls``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from .tables import Section, TableSchema, TablesError, _check_channels, _resolve_dims, load_tables, register_schema, save_tables
+
+MUSCLE_KINDS = {"linear": 0, "sphincter": 1}
+
+ELASTIC_SCHEMA = register_schema(
+    TableSchema(
+        kind="elastic",
+        sections={
+            "basis_indices": Section("uint16", ("n_vertices", "k"), "control index per kept weight"),
+            "basis_weights": Section("float32", ("n_vertices", "k"), "basis function value b_i(x_v)"),
+            "basis_gradients": Section("float32", ("n_vertices", "k", 3), "surface gradient of b_i at x_v"),
+            "control_vertices": Section("int64", ("n_controls",), "vertex index of each control point"),
+            "control_positions": Section("float32", ("n_controls", 3), "neutral control-point positions"),
+            "params": Section("float32", ("n_shapes", "n_controls", 3), "expression parameters, eq. 6"),
+            "muscle_params": Section("float32", ("n_muscles", "n_controls", 3), "control displacement per unit contraction"),
+            "muscle_kinds": Section("uint8", ("n_muscles",), "0 linear, 1 sphincter"),
+            "muscle_points": Section("float32", ("n_muscles", 2, 3), "linear: attachment, insertion; sphincter: centre, (lx, ly, 0)"),
+            "muscle_ranges": Section("float32", ("n_muscles", 4), "linear: Rs, Rf, Ω (rad), strength; sphincter: lx, ly, strength, 0"),
+        },
+        channels=("shapes", "controls", "muscles"),
+        channel_dims={"shapes": "n_shapes", "controls": "n_controls", "muscles": "n_muscles"},
+    )
+)
+
+
+@dataclass(frozen=True, eq=False)
+class ElasticModel:
+    """A loaded, validated elastic table (see the module docstring for the symbols).
+
+    Attributes
+    ----------
+    arrays : dict of the schema's sections
+    shape_names, control_names, muscle_names : tuple of str
+    units : str
+    metadata : dict with settings and metrics
+    """
+
+    arrays: Mapping[str, np.ndarray]
+    shape_names: tuple
+    control_names: tuple
+    muscle_names: tuple = ()
+    units: str = "cm"
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        dims = _resolve_dims(ELASTIC_SCHEMA, self.arrays, None)
+        _check_channels(ELASTIC_SCHEMA, self._channels(), dims, None)
+        for name, arr in self.arrays.items():
+            if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+                raise TablesError(None, name, "contains NaN or infinity")
+        if dims["n_controls"] and int(self.arrays["basis_indices"].max(initial=0)) >= dims["n_controls"]:
+            raise TablesError(None, "basis_indices", f"control index out of range for {dims['n_controls']} controls")
+
+    def _channels(self) -> dict:
+        return {"shapes": list(self.shape_names), "controls": list(self.control_names), "muscles": list(self.muscle_names)}
+
+    # -- sizes -------------------------------------------------------------
+    @property
+    def n_vertices(self) -> int:
+        return self.arrays["basis_weights"].shape[0]
+
+    @property
+    def k(self) -> int:
+        return self.arrays["basis_weights"].shape[1]
+
+    @property
+    def n_controls(self) -> int:
+        return len(self.control_names)
+
+    @property
+    def channel_names(self) -> tuple:
+        """Input channels: the shapes, then the muscles (``--input`` names)."""
+        return tuple(self.shape_names) + tuple(self.muscle_names)
+
+    # -- per frame ---------------------------------------------------------
+    def blend(self, weights) -> np.ndarray:
+        """Control displacements of blended expressions, U = Σ_s w_s P_s (eq. 7), (n_c, 3) float32."""
+        w = np.asarray(weights, np.float32)
+        if w.shape != (len(self.shape_names),):
+            raise ValueError(f"weights: expected shape ({len(self.shape_names)},) in elastic shape order, got {w.shape}")
+        return np.tensordot(w, self.arrays["params"], axes=1)  # Yano & Harada eq. 7
+
+    def contract(self, contractions) -> np.ndarray:
+        """Control displacements of muscle contractions, Σ_m c_m Q_m (§6), (n_c, 3) float32."""
+        c = np.asarray(contractions, np.float32)
+        if c.shape != (len(self.muscle_names),):
+            raise ValueError(f"contractions: expected shape ({len(self.muscle_names)},) in muscle order, got {c.shape}")
+        return np.tensordot(c, self.arrays["muscle_params"], axes=1)
+
+    def controls(self, values) -> np.ndarray:
+        """Control displacements from one vector of all channels (shapes then muscles), (n_c, 3) float32."""
+        v = np.asarray(values, np.float32)
+        n_s = len(self.shape_names)
+        if v.shape != (len(self.channel_names),):
+            raise ValueError(f"values: expected shape ({len(self.channel_names)},) (shapes then muscles), got {v.shape}")
+        return self.blend(v[:n_s]) + self.contract(v[n_s:])
+
+    def deform(self, controls, rest_positions, rest_normals) -> tuple[np.ndarray, np.ndarray]:
+        """CPU reference of the vertex shader: positions and unit normals, (n, 3) float32 each."""
+        u = np.asarray(controls, np.float32)
+        if u.shape != (self.n_controls, 3):
+            raise ValueError(f"controls: expected shape ({self.n_controls}, 3), got {u.shape}")
+        a = self.arrays
+        picked = u[a["basis_indices"].astype(np.int64)]  # (n, k, 3)
+        n0 = np.asarray(rest_normals, np.float32)
+        n0 = n0 / np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-12)
+        positions = np.asarray(rest_positions, np.float32) + np.einsum("vk,vkc->vc", a["basis_weights"], picked)  # eq. 5
+        along = np.einsum("vc,vkc->vk", n0, picked)
+        normals = n0 - np.einsum("vk,vkc->vc", along, a["basis_gradients"])
+        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+        return positions.astype(np.float32), normals.astype(np.float32)
+
+    # -- tables ------------------------------------------------------------
+    def save(self, path: str | os.PathLike) -> Path:
+        meta = dict(self.metadata)
+        return save_tables(
+            path, "elastic", dict(self.arrays), units=self.units, channels=self._channels(),
+            settings=meta.get("settings", {}), input_hash=meta.get("input_hash", ""), metrics=meta.get("metrics", {}),
+        )
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "ElasticModel":
+        t = load_tables(path, kind="elastic")
+        try:
+            return cls(
+                arrays=dict(t.arrays),
+                shape_names=tuple(t.channels["shapes"]),
+                control_names=tuple(t.channels["controls"]),
+                muscle_names=tuple(t.channels["muscles"]),
+                units=t.units,
+                metadata={"settings": dict(t.settings), "metrics": dict(t.metrics),
+                          "input_hash": t.manifest.get("input_hash", "")},
+            )
+        except TablesError as exc:
+            raise TablesError(path, exc.field, exc.problem) from None
+
+
+def no_muscles(n_controls: int) -> dict:
+    """The muscle sections for a table without muscles."""
+    return {
+        "muscle_params": np.zeros((0, n_controls, 3), np.float32),
+        "muscle_kinds": np.zeros(0, np.uint8),
+        "muscle_points": np.zeros((0, 2, 3), np.float32),
+        "muscle_ranges": np.zeros((0, 4), np.float32),
+    }

@@ -1,0 +1,84 @@
+"""The renderer's ``elastic`` deformation path: control points spread by the compact basis on the GPU.
+
+The compact basis (k control indices, weights and normal gradients per
+vertex) lives in two float textures made once; per frame only the control
+displacements, n_controls × 3 floats, are uploaded as a uniform array and
+``shaders/elastic.glsl`` does the rest (Yano & Harada eq. 5).
+"""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from .character import Character
+from .elastic import ElasticModel
+from .geometry import vertex_normals
+from .shader_loader import load_program
+
+ELASTIC_TEXTURE_WIDTH = 4096
+
+
+def elastic_defines(model: ElasticModel) -> dict:
+    """The #defines of face.glsl's elastic variant."""
+    return {
+        "ELASTIC_DEFORM": 1,
+        "K": model.k,
+        "N_CONTROLS": max(1, model.n_controls),
+        "ELASTIC_TEXTURE_WIDTH": ELASTIC_TEXTURE_WIDTH,
+    }
+
+
+def basis_textures(ctx: moderngl.Context, model: ElasticModel) -> list:
+    """[basis (RGBA32F: gradient xyz, weight), index (R32F)], texel vertex * k + j."""
+    a = model.arrays
+    count = model.n_vertices * model.k
+    rows = max(1, -(-count // ELASTIC_TEXTURE_WIDTH))
+    basis = np.zeros((rows * ELASTIC_TEXTURE_WIDTH, 4), np.float32)
+    basis[:count, :3] = a["basis_gradients"].reshape(-1, 3)
+    basis[:count, 3] = a["basis_weights"].reshape(-1)
+    index = np.zeros(rows * ELASTIC_TEXTURE_WIDTH, np.float32)
+    index[:count] = a["basis_indices"].reshape(-1)
+    textures = [
+        ctx.texture((ELASTIC_TEXTURE_WIDTH, rows), 4, basis.tobytes(), dtype="f4"),
+        ctx.texture((ELASTIC_TEXTURE_WIDTH, rows), 1, index.tobytes(), dtype="f4"),
+    ]
+    for tex in textures:
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    return textures
+
+
+def check_model(character: Character, model: ElasticModel) -> ElasticModel:
+    """ValueError unless ``model`` was made for ``character``'s mesh."""
+    if not isinstance(model, ElasticModel):
+        raise ValueError(f"elastic: expected an ElasticModel for path 'elastic', got {type(model).__name__}")
+    if model.n_vertices != character.n_vertices:
+        raise ValueError(
+            f"elastic: table has {model.n_vertices} vertices, character {character.name!r} has {character.n_vertices}"
+        )
+    if tuple(model.shape_names) != tuple(character.shape_names):
+        raise ValueError("elastic: the table's shapes must be the character's, in its order (weights are shared)")
+    return model
+
+
+def setup_elastic(ctx: moderngl.Context, character: Character, model: ElasticModel, make_vao) -> dict:
+    """GL objects of the elastic path: program, rest vertex buffer, VAO, basis textures.
+
+    ``make_vao(prog, vbo)`` is the renderer's VAO builder (same attribute layout as its other paths).
+    """
+    prog = load_program(ctx, "face.glsl", elastic_defines(model))
+    rest = np.hstack([character.vertices, vertex_normals(character.vertices, character.triangles)]).astype(np.float32)
+    vbo = ctx.buffer(rest.tobytes())
+    prog["u_basis"].value = 0
+    prog["u_basis_index"].value = 1
+    return {"prog": prog, "vao": make_vao(prog, vbo), "vbo": vbo, "textures": basis_textures(ctx, model), "model": model}
+
+
+def upload_controls(state: dict, controls) -> None:
+    """Write the frame's control displacements, (n_controls, 3) float32, into the uniform array."""
+    model = state["model"]
+    u = np.ascontiguousarray(controls, dtype=np.float32)
+    if u.shape != (model.n_controls, 3):
+        raise ValueError(f"controls: expected shape ({model.n_controls}, 3), got {u.shape}")
+    if model.n_controls:
+        state["prog"]["u_controls"].write(u.tobytes())
