@@ -1,0 +1,385 @@
+"""The actor tables and the per-frame marker solve (Shin & Lee 2009, §5 eq 2 and §6.1 eq 5).
+
+Paper symbols -> code names:
+
+    s                actuation parameters                 s           (K,)
+    x_i(s)           marker i in head coordinates         evaluate(s) (n_markers, 3)
+    a, b, c          cubic coefficients                   actor.cubic[0|1|2]   (3, K, n_markers, 3)
+    p_i              observed / dragged marker positions  observed    (n_markers, 3), NaN = not given
+    w_i              per-marker weights                   weights     (n_markers,)
+
+Eq 2: x_i(s) = x_i^0 + sum_k a_ik s_k^3 + b_ik s_k^2 + c_ik s_k.
+Eq 5: s* = argmin_s sum_i w_i ||x_i(s) - p_i||^2 (+ damping towards the
+previous frame and towards neutral), solved with Levenberg-Marquardt on the
+analytic Jacobian dx_i/ds_k = 3 a_ik s_k^2 + 2 b_ik s_k + c_ik, bounded by
+projection onto [s_lower, s_upper], warm-started, at most ``iterations``
+steps per frame.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from scipy.linalg.lapack import dposv as _spd_solve
+
+from .tables import Section, TableSchema, TablesError, hash_inputs, load_tables, register_schema, save_tables
+
+ACTOR_SCHEMA = register_schema(TableSchema(
+    kind="actor",
+    sections={
+        "neutral": Section("float32", ("n_markers", 3), "marker positions at s = 0, head coordinates"),
+        "cubic": Section("float32", (3, "n_actuations", "n_markers", 3), "a, b, c of eq 2"),
+        "linear": Section("float32", ("n_actuations", "n_markers", 3), "linear ICA model (comparison)", True),
+        "unmixing": Section("float32", ("n_actuations", "n_classes"), "ICA unmixing, normalised"),
+        "class_axes": Section("float32", ("n_classes", 3), "class axes on the unit sphere"),
+        "class_marker": Section("int32", ("n_classes",), "marker of each class"),
+        "head_markers": Section("int32", ("n_head",), "rigid head marker indices"),
+        "s_lower": Section("float32", ("n_actuations",), "solver lower bounds"),
+        "s_upper": Section("float32", ("n_actuations",), "solver upper bounds"),
+    },
+    channels=("markers", "actuations"),
+    channel_dims={"markers": "n_markers", "actuations": "n_actuations"},
+))
+
+PAIR_SCHEMA = register_schema(TableSchema(
+    kind="actor_pair",
+    sections={
+        "cubic": Section("float32", (3, "n_actuations", "n_shapes"), "a, b, c: s -> character weights"),
+        "marker_vertices": Section("int32", ("n_markers",), "character vertex of each actor marker"),
+        "similarity": Section("float32", (4, 4), "actor head coords -> character coords"),
+        "s_lower": Section("float32", ("n_actuations",), "actor bounds"),
+        "s_upper": Section("float32", ("n_actuations",), "actor bounds"),
+    },
+    channels=("markers", "actuations", "shapes"),
+    channel_dims={"markers": "n_markers", "actuations": "n_actuations", "shapes": "n_shapes"},
+))
+
+
+def _f32(a) -> np.ndarray:
+    out = np.ascontiguousarray(a, dtype=np.float32)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Actor:
+    """An actor's deformation model, validated against the ``actor`` schema when built.
+
+    Attributes
+    ----------
+    names : tuple of n_markers str
+    units : str, the capture's units
+    neutral : ndarray of shape (n_markers, 3), float32, units, head coordinates
+    cubic : ndarray of shape (3, K, n_markers, 3), float32, units ([a, b, c] of eq 2)
+    unmixing : ndarray of shape (K, n_classes), float32
+    class_axes : ndarray of shape (n_classes, 3), float32
+    class_marker : ndarray of shape (n_classes,), int32
+    head_markers : ndarray of shape (n_head,), int32
+    s_lower, s_upper : ndarray of shape (K,), float32
+    linear : ndarray of shape (K, n_markers, 3), float32, or None
+    metadata : dict with "settings", "metrics", "input_hash"
+    """
+
+    names: tuple[str, ...]
+    units: str
+    neutral: np.ndarray
+    cubic: np.ndarray
+    unmixing: np.ndarray
+    class_axes: np.ndarray
+    class_marker: np.ndarray
+    head_markers: np.ndarray
+    s_lower: np.ndarray
+    s_upper: np.ndarray
+    linear: np.ndarray | None = None
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("neutral", "cubic", "unmixing", "class_axes", "s_lower", "s_upper", "linear"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _f32(getattr(self, name)))
+        for name in ("class_marker", "head_markers"):
+            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), dtype=np.int32))
+        object.__setattr__(self, "names", tuple(self.names))
+        from .tables import _check_channels, _resolve_dims
+
+        dims = _resolve_dims(ACTOR_SCHEMA, self._arrays(), None)
+        _check_channels(ACTOR_SCHEMA, self._channels(), dims, None)
+        if np.any(self.s_lower > 0) or np.any(self.s_upper < 0):
+            raise TablesError(None, "s_lower/s_upper", "bounds must contain s = 0 (the neutral)")
+
+    @property
+    def n_markers(self) -> int:
+        return len(self.names)
+
+    @property
+    def n_actuations(self) -> int:
+        return self.cubic.shape[1]
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        arrays = {name: getattr(self, name) for name in ACTOR_SCHEMA.sections if getattr(self, name) is not None}
+        return arrays
+
+    def _channels(self) -> dict[str, list[str]]:
+        return {"markers": list(self.names), "actuations": [f"s{k + 1:02d}" for k in range(self.n_actuations)]}
+
+    def save(self, path: str | os.PathLike) -> Path:
+        meta = dict(self.metadata)
+        return save_tables(path, "actor", self._arrays(), units=self.units, channels=self._channels(),
+                           settings=meta.get("settings", {}), metrics=meta.get("metrics", {}),
+                           input_hash=meta.get("input_hash", "") or hash_inputs(self.cubic))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Actor":
+        t = load_tables(path, "actor")
+        return cls(names=tuple(t.channels["markers"]), units=t.units,
+                   **{name: np.array(t[name]) for name in ACTOR_SCHEMA.sections if name in t.arrays},
+                   metadata={"settings": dict(t.settings), "metrics": dict(t.metrics),
+                             "input_hash": t.manifest.get("input_hash", "")})
+
+    def evaluate(self, s) -> np.ndarray:
+        """Markers x(s) (eq 2): ndarray of shape (n_markers, 3), float64, units, head coordinates."""
+        s = np.asarray(s, dtype=np.float64)
+        if s.shape != (self.n_actuations,):
+            raise ValueError(f"Actor.evaluate: s must have shape ({self.n_actuations},), got {s.shape}")
+        c = self.cubic.reshape(3, self.n_actuations, -1).astype(np.float64)
+        x = (s ** 3) @ c[0] + (s ** 2) @ c[1] + s @ c[2]           # Shin & Lee eq. 2
+        return self.neutral + x.reshape(-1, 3)
+
+
+class MarkerSolver:
+    """Solve s from any subset of markers (eq 5) by bounded, warm-started Levenberg-Marquardt.
+
+    Parameters
+    ----------
+    actor : Actor
+    iterations : int, the fixed budget of LM steps per :meth:`solve` (accepted or not)
+    damping : float, weight of ||s - s_previous||^2 (temporal smoothness, warm start)
+    prior : float, weight of ||s||^2 (pull towards neutral where markers say nothing)
+    tolerance : float, stop early when the largest step is below this (actuation units)
+    cost_tolerance : float, stop early when an accepted step lowers the cost by less than this fraction
+
+    The cost is in squared capture units; ``damping`` and ``prior`` are
+    scaled by the mean squared column norm of the linear term, so their
+    defaults do not depend on units or marker count.
+    """
+
+    def __init__(self, actor: Actor, iterations: int = 8, damping: float = 1e-3, prior: float = 1e-4,
+                 tolerance: float = 2e-3, cost_tolerance: float = 1e-2):
+        if not (isinstance(iterations, int) and iterations >= 1):
+            raise ValueError(f"MarkerSolver iterations: expected an int >= 1, got {iterations!r}")
+        self.actor = actor
+        self.iterations = iterations
+        self.tolerance = tolerance
+        self.cost_tolerance = cost_tolerance
+        k = actor.n_actuations
+        self._m = actor.cubic.astype(np.float64).reshape(3 * k, -1)   # rows [a; b; c], (3K, 3m)
+        self._neutral = actor.neutral.astype(np.float64).ravel()
+        self._lo = actor.s_lower.astype(np.float64)
+        self._hi = actor.s_upper.astype(np.float64)
+        unit = float(np.mean(np.sum(self._m[2 * k:] ** 2, axis=1))) or 1.0
+        self.damping = damping * unit
+        self.prior = prior * unit
+        self._jsel = np.zeros((k, 3 * k))
+        rows = np.arange(k)
+        self._idx3 = rows * 3 * k + rows                             # diagonal of the a-block
+        self._idx2 = rows * 3 * k + k + rows                         # diagonal of the b-block
+        self._jsel.reshape(-1)[rows * 3 * k + 2 * k + rows] = 1.0   # c-block: identity
+        self.s = np.zeros(k)
+        self.last_iterations = 0
+        self.last_cost = float("nan")
+        self._cache_key: bytes | None = None
+        self._cache = None
+
+    def reset(self) -> None:
+        """Forget the warm start (s = neutral)."""
+        self.s = np.zeros(self.actor.n_actuations)
+
+    def _gram(self, present: np.ndarray, w: np.ndarray | None):
+        """M_sub W M_sub^T (3K, 3K) and the weighted M_sub for one marker subset, cached.
+
+        Because x(s) is linear in phi(s) = [s^3, s^2, s], the Gauss-Newton
+        quantities of eq. 5 reduce to (3K, 3K) products with this Gram matrix,
+        whatever the number of markers.
+        """
+        key = present.tobytes() + (b"" if w is None else w.tobytes())
+        if key != self._cache_key:
+            cols = np.repeat(present, 3)
+            m = self._m[:, cols]
+            mw = m if w is None else m * np.repeat(w[present], 3)
+            self._cache = (mw @ m.T, mw, self._neutral[cols], cols)
+            self._cache_key = key
+        return self._cache
+
+    def solve(self, observed, weights=None, s0=None, iterations: int | None = None) -> np.ndarray:
+        """Actuations s (K,), float64, that best explain the observed markers.
+
+        Parameters
+        ----------
+        observed : ndarray of shape (n_markers, 3), float, units, head coordinates; NaN rows = missing
+        weights : ndarray of shape (n_markers,), float >= 0, or None for 1
+        s0 : ndarray of shape (K,) to start from (default: the previous solution)
+        iterations : override of the per-frame budget
+
+        No marker at all returns the previous solution unchanged.
+        """
+        obs = np.asarray(observed, dtype=np.float64)
+        if obs.shape != (self.actor.n_markers, 3):
+            raise ValueError(f"MarkerSolver.solve: observed must be ({self.actor.n_markers}, 3), got {obs.shape}")
+        present = ~np.isnan(obs).any(axis=1)
+        w = None
+        if weights is not None:
+            w = np.asarray(weights, dtype=np.float64)
+            if w.shape != (self.actor.n_markers,) or not (np.isfinite(w).all() and (w >= 0).all()):
+                raise ValueError(f"MarkerSolver.solve: weights must be ({self.actor.n_markers},) finite >= 0")
+            present &= w > 0
+        if not present.any():
+            self.last_iterations = 0
+            return self.s.copy()
+        gram, mw, x0, cols = self._gram(present, w)
+        target = obs.ravel()[cols] - x0                          # p_i - x_i^0
+        mt = mw @ target                                         # M W p, (3K,)
+        tt = float(target @ (target if w is None else target * np.repeat(w[present], 3)))
+        s_prev = self.s if s0 is None else np.clip(np.asarray(s0, dtype=np.float64), self._lo, self._hi)
+        lam, mu, k = self.damping, self.prior, len(s_prev)
+        mt2 = 2.0 * mt
+        jsel, jflat = self._jsel, self._jsel.reshape(-1)         # J^T = jsel @ [da; db; dc] blocks
+        i3, i2 = self._idx3, self._idx2
+
+        def cost_at(s):
+            s2 = s * s
+            phi = np.concatenate((s2 * s, s2, s))
+            gphi = gram @ phi
+            d = s - s_prev
+            # eq. 5: sum_i w_i ||x_i(s) - p_i||^2 = phi'G phi - 2 phi'M W p + p'W p, plus damping/prior
+            return float(phi @ (gphi - mt2)) + tt + lam * float(d @ d) + mu * float(s @ s), gphi, s2
+
+        s = s_prev.copy()
+        cost, gphi, s2 = cost_at(s)
+        budget = self.iterations if iterations is None else iterations
+        nu, used = 1e-3, 0
+        while used < budget:
+            used += 1
+            jflat[i3] = 3.0 * s2                                     # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
+            jflat[i2] = 2.0 * s
+            jg = jsel @ gram
+            h = jg @ jsel.T                                          # J^T W J
+            g = jsel @ (gphi - mt) + lam * (s - s_prev) + mu * s     # J^T W r + damping + prior
+            h.flat[::k + 1] = (h.flat[::k + 1] + lam + mu) * (1.0 + nu)   # Marquardt scaling
+            step = _spd_solve(h, g)[1]
+            s_new = np.minimum(np.maximum(s - step, self._lo), self._hi)  # bounded by projection
+            moved = float(np.max(np.abs(s_new - s)))
+            if moved < self.tolerance:                               # converged: take the tiny step
+                s = s_new
+                break
+            new_cost, new_gphi, new_s2 = cost_at(s_new)
+            if new_cost <= cost:
+                gain = cost - new_cost
+                s, cost, gphi, s2 = s_new, new_cost, new_gphi, new_s2
+                nu = max(nu * 0.3, 1e-7)
+                if gain <= self.cost_tolerance * (cost + 1e-300):      # converged: cost barely moves
+                    break
+            else:
+                nu *= 10.0
+        self.s = s
+        self.last_iterations = used
+        self.last_cost = max(cost, 0.0)
+        return s.copy()
+
+    def solve_constraints(self, constraints: Sequence[tuple[int, Sequence[float]]], pins: Sequence[int] = (),
+                          pin_weight: float = 10.0, iterations: int = 30) -> np.ndarray:
+        """Direct manipulation: drag markers to targets while pinned markers stay where they are.
+
+        Parameters
+        ----------
+        constraints : sequence of (marker_index, (x, y, z) target in head coordinates, units)
+        pins : marker indices held at their current position x_i(s_current)
+        pin_weight : weight of a pin relative to a dragged point
+        iterations : LM budget for this edit
+
+        Returns s (K,), float64; also kept as the warm start of the next call.
+        """
+        n = self.actor.n_markers
+        observed = np.full((n, 3), np.nan)
+        weights = np.zeros(n)
+        current = self.actor.evaluate(self.s)
+        for i in pins:
+            if not 0 <= int(i) < n:
+                raise ValueError(f"solve_constraints: pin index {i} out of range 0..{n - 1}")
+            observed[int(i)] = current[int(i)]
+            weights[int(i)] = pin_weight
+        for i, target in constraints:
+            if not 0 <= int(i) < n:
+                raise ValueError(f"solve_constraints: constraint marker {i} out of range 0..{n - 1}")
+            t = np.asarray(target, dtype=np.float64)
+            if t.shape != (3,) or not np.isfinite(t).all():
+                raise ValueError(f"solve_constraints: target of marker {i} must be 3 finite numbers, got {target!r}")
+            observed[int(i)] = t
+            weights[int(i)] = 1.0
+        return self.solve(observed, weights, iterations=iterations)
+
+
+@dataclass(frozen=True, eq=False)
+class ActorPair:
+    """Actuations -> a character's blendshape weights (Shin & Lee §6.2), from an ``actor_pair`` table.
+
+    Attributes
+    ----------
+    cubic : ndarray of shape (3, K, n_shapes), float32
+    shape_names : tuple of n_shapes str
+    marker_names : tuple of n_markers str
+    marker_vertices : ndarray of shape (n_markers,), int32
+    similarity : ndarray of shape (4, 4), float32, actor head coordinates -> character coordinates
+    s_lower, s_upper : ndarray of shape (K,), float32
+    metadata : dict
+    """
+
+    cubic: np.ndarray
+    shape_names: tuple[str, ...]
+    marker_names: tuple[str, ...]
+    marker_vertices: np.ndarray
+    similarity: np.ndarray
+    s_lower: np.ndarray
+    s_upper: np.ndarray
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("cubic", "similarity", "s_lower", "s_upper"):
+            object.__setattr__(self, name, _f32(getattr(self, name)))
+        object.__setattr__(self, "marker_vertices", np.ascontiguousarray(self.marker_vertices, dtype=np.int32))
+        from .tables import _check_channels, _resolve_dims
+
+        dims = _resolve_dims(PAIR_SCHEMA, self._arrays(), None)
+        _check_channels(PAIR_SCHEMA, self._channels(), dims, None)
+        object.__setattr__(self, "_flat", self.cubic.astype(np.float64).reshape(-1, self.cubic.shape[2]))
+
+    def _arrays(self):
+        return {name: getattr(self, name) for name in PAIR_SCHEMA.sections}
+
+    def _channels(self):
+        k = self.cubic.shape[1]
+        return {"markers": list(self.marker_names), "actuations": [f"s{i + 1:02d}" for i in range(k)],
+                "shapes": list(self.shape_names)}
+
+    def save(self, path: str | os.PathLike) -> Path:
+        meta = dict(self.metadata)
+        return save_tables(path, "actor_pair", self._arrays(), channels=self._channels(),
+                           settings=meta.get("settings", {}), metrics=meta.get("metrics", {}),
+                           input_hash=meta.get("input_hash", ""))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "ActorPair":
+        t = load_tables(path, "actor_pair")
+        return cls(shape_names=tuple(t.channels["shapes"]), marker_names=tuple(t.channels["markers"]),
+                   **{name: np.array(t[name]) for name in PAIR_SCHEMA.sections},
+                   metadata={"settings": dict(t.settings), "metrics": dict(t.metrics)})
+
+    def weights(self, s) -> np.ndarray:
+        """Character weights w(s) (n_shapes,), float32, clipped to [0, 1] (cubic of eq 2 on weights)."""
+        s = np.asarray(s, dtype=np.float64)
+        w = np.concatenate([s ** 3, s ** 2, s]) @ self._flat        # Shin & Lee eq. 2, §6.2 target
+        return np.clip(w, 0.0, 1.0).astype(np.float32)
