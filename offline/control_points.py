@@ -53,7 +53,7 @@ MEDIAPIPE_ANCHORS = {"eye_R": (33, 133), "eye_L": (362, 263), "nose_tip": (1,), 
                      "mouth_corner_L": (291,)}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ControlPoints:
     """An ordered set of named control-point vertices, validated when built.
 

@@ -1,0 +1,104 @@
+"""Elastic tables: round trip, eq. 7 blending, and the GPU elastic path against the NumPy reference."""
+
+import numpy as np
+import pytest
+
+from facepuppet.runtime.elastic import ElasticModel, no_muscles
+from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.tables import TablesError
+from tests.runtime.small_characters import sphere_character
+
+
+def random_model(character, n_controls=6, k=4, seed=0) -> ElasticModel:
+    rng = np.random.default_rng(seed)
+    n = character.n_vertices
+    arrays = {
+        "basis_indices": rng.integers(0, n_controls, (n, k)).astype(np.uint16),
+        "basis_weights": rng.uniform(0, 0.5, (n, k)).astype(np.float32),
+        "basis_gradients": (0.2 * rng.standard_normal((n, k, 3))).astype(np.float32),
+        "control_vertices": np.arange(n_controls, dtype=np.int64),
+        "control_positions": character.vertices[:n_controls].copy(),
+        "params": (0.1 * rng.standard_normal((character.n_shapes, n_controls, 3))).astype(np.float32),
+        **no_muscles(n_controls),
+    }
+    return ElasticModel(arrays, tuple(character.shape_names), tuple(f"c{i}" for i in range(n_controls)))
+
+
+def test_round_trip_and_blending(tmp_path):
+    c = sphere_character(with_hidden=False)
+    model = random_model(c)
+    loaded = ElasticModel.load(model.save(tmp_path / "e.npz"))
+    w = np.array([0.3, -0.7], np.float32)
+    expected = 0.3 * model.arrays["params"][0] - 0.7 * model.arrays["params"][1]
+    np.testing.assert_allclose(loaded.blend(w), expected, atol=1e-6)  # eq. 7
+    with pytest.raises(ValueError, match=r"weights: expected shape \(2,\)"):
+        loaded.blend(np.zeros(3))
+
+
+def test_bad_index_is_refused():
+    c = sphere_character(with_hidden=False)
+    model = random_model(c)
+    arrays = dict(model.arrays)
+    arrays["basis_indices"] = arrays["basis_indices"] + 10
+    with pytest.raises(TablesError, match="basis_indices: control index out of range"):
+        ElasticModel(arrays, model.shape_names, model.control_names)
+
+
+def gpu_elastic(ctx, character, model, controls):
+    """Deformed positions and normals read back from face.glsl's elastic variant (transform feedback)."""
+    from facepuppet.runtime.elastic_renderer import basis_textures, elastic_defines
+    from facepuppet.runtime.shader_loader import load_program
+    import moderngl
+
+    prog = load_program(ctx, "face.glsl", elastic_defines(model), varyings=("v_world", "v_normal"))
+    textures = basis_textures(ctx, model)
+    for unit, tex in enumerate(textures):
+        tex.use(unit)
+    prog["u_basis"].value, prog["u_basis_index"].value = 0, 1
+    prog["u_controls"].write(np.ascontiguousarray(controls, np.float32).tobytes())
+    prog["u_model"].write(np.eye(4, dtype=np.float32).tobytes())
+    n = character.n_vertices
+    rest = np.hstack([character.vertices, vertex_normals(character.vertices, character.triangles)]).astype(np.float32)
+    vbo = ctx.buffer(rest.tobytes())
+    out = ctx.buffer(reserve=n * 6 * 4)
+    vao = ctx.vertex_array(prog, [(vbo, "3f 3f", "in_position", "in_normal")])
+    previous = ctx.fbo or ctx.detect_framebuffer(0)
+    fbo = ctx.simple_framebuffer((1, 1))
+    fbo.use()
+    vao.transform(out, moderngl.POINTS, vertices=n)
+    result = np.frombuffer(out.read(), np.float32).reshape(n, 6)
+    assert ctx.error == "GL_NO_ERROR"
+    previous.use()
+    for obj in [vao, vbo, out, prog, fbo, *textures]:
+        obj.release()
+    return result[:, :3], result[:, 3:]
+
+
+def test_gpu_elastic_path_matches_numpy(egl_ctx):
+    c = sphere_character(with_hidden=False)
+    model = random_model(c)
+    controls = model.blend(np.array([0.8, 0.4], np.float32))
+    gpu_pos, gpu_nrm = gpu_elastic(egl_ctx, c, model, controls)
+    cpu_pos, cpu_nrm = model.deform(controls, c.vertices, vertex_normals(c.vertices, c.triangles))
+    assert np.abs(cpu_pos - c.vertices).max() > 0.01  # the test moves something
+    np.testing.assert_allclose(gpu_pos, cpu_pos, atol=1e-5)
+    np.testing.assert_allclose(gpu_nrm, cpu_nrm, atol=1e-4)
+
+
+def test_renderer_elastic_path_draws_and_checks_its_table(egl_ctx):
+    from facepuppet.runtime.renderer import FaceRenderer
+
+    c = sphere_character(with_hidden=False)
+    model = random_model(c)
+    r = FaceRenderer(egl_ctx, c, 64, 48, path="elastic", elastic=model, log=lambda s: None)
+    r.draw(np.zeros(2, np.float32))
+    still = r.read_pixels()
+    r.draw(np.array([1.0, 1.0], np.float32))
+    moved = r.read_pixels()
+    r.prepare_controls(np.zeros((model.n_controls, 3), np.float32))
+    r.submit()
+    assert (r.read_pixels() == still).all() and (moved != still).any()
+    assert egl_ctx.error == "GL_NO_ERROR"
+    r.close()
+    with pytest.raises(ValueError, match="path 'elastic' needs an ElasticModel"):
+        FaceRenderer(egl_ctx, c, 64, 48, path="elastic", log=lambda s: None)
