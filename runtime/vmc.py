@@ -1,0 +1,247 @@
+"""VMC protocol input (VSeeFace, Warudo, VNyan, ...): OSC to ARKit-channel frames.
+
+Facts from PROTOCOLS.md §1. Addresses handled:
+
+==========================  ================================  ==================================
+address                     args (extra ones ignored)         effect
+==========================  ================================  ==================================
+``/VMC/Ext/Blend/Val``      ``s name, f value``               accumulated until Apply
+``/VMC/Ext/Blend/Apply``    none                              emits one Frame of the values since
+                                                              the last Apply (NaN where not sent)
+``/VMC/Ext/Bone/Pos``       ``s name, f px py pz qx qy qz qw``  bone ``Head``: kept, attached to
+                                                              every later frame; other bones ignored
+``/VMC/Ext/Root/Pos``       ``s name, f px py pz qx qy qz qw``  kept in :attr:`VmcAdapter.root_position`
+                                                              / :attr:`root_rotation`
+``/VMC/Ext/OK``             ``i loaded [i calibState calibMode  kept in :attr:`VmcAdapter.status`
+                            [i trackingStatus]]``
+``/VMC/Ext/T``              ``f time``                        ``t_sender`` of later frames
+==========================  ================================  ==================================
+
+Any other address is ignored and counted as ``unknown_address`` (receiver
+rules: discard what you do not need). Too few arguments or a wrong type: the
+message is dropped and counted as ``malformed``.
+
+**Names.** Blend names are case-sensitive (``Joy`` is a VRM0 preset, ``joy``
+is nothing). A name is looked up first among the VRM0 and VRM1 presets
+(:data:`PRESETS`, a fixed approximation in ARKit channels), then as a perfect
+sync name: any spelling that :func:`~facepuppet.runtime.channels.canonical`
+brings to one of the 52 ARKit names (``JawOpen`` -> ``jawOpen``). Names that
+match neither (``Neutral``, custom clips) are counted as ``unmapped_name``.
+Within one frame a perfect-sync value wins over preset-derived values for the
+same channel; several presets on one channel combine by maximum (a VRM1 sender
+also sends the VRM0 names, so ``Joy`` and ``happy`` arrive together).
+
+**Non-finite values.** A NaN/inf blend value poisons the frame being
+accumulated: at Apply it is dropped and counted once as ``nonfinite``. A bone or
+root pose with a non-finite value is ignored (the previous pose is kept) and
+counted as ``nonfinite``.
+
+**Axes.** VMC poses are Unity's: left-handed, y up, avatar facing +z, x to the
+avatar's right. Ours are right-handed with x to the character's left, so a
+position (x, y, z) becomes (-x, y, z) and a rotation (x, y, z, w) becomes
+(x, -y, -z, w) (the mirror x -> -x). Bone poses are local (to the parent bone).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .channels import ARKIT_NAMES, canonical
+from .frames import Frame
+from .osc_decode import OscAdapter, all_finite, as_float, floats
+
+_INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
+
+
+def _both(base: str, gain: float = 1.0) -> tuple[tuple[str, float], ...]:
+    return ((base + "Left", gain), (base + "Right", gain))
+
+
+_BLINK = _both("eyeBlink")
+_A = (("jawOpen", 1.0),)
+_I = _both("mouthStretch", 0.6) + (("jawOpen", 0.15),)
+_U = (("mouthPucker", 1.0),)
+_E = _both("mouthStretch", 0.4) + (("jawOpen", 0.3),)
+_O = (("mouthFunnel", 1.0), ("jawOpen", 0.2))
+_JOY = _both("mouthSmile")
+_ANGRY = _both("browDown")
+_SORROW = _both("mouthFrown") + (("browInnerUp", 1.0),)
+_FUN = _both("mouthSmile", 0.5)
+_SURPRISED = _both("eyeWide") + (("browInnerUp", 1.0), ("jawOpen", 0.3))
+_LOOK_UP = _both("eyeLookUp")
+_LOOK_DOWN = _both("eyeLookDown")
+# LookLeft: the character looks to its own left: left eye out, right eye in.
+_LOOK_LEFT = (("eyeLookOutLeft", 1.0), ("eyeLookInRight", 1.0))
+_LOOK_RIGHT = (("eyeLookInLeft", 1.0), ("eyeLookOutRight", 1.0))
+
+#: VRM0 and VRM1 preset name -> ((ARKit channel, gain), ...); value * gain drives the channel.
+PRESETS: dict[str, tuple[tuple[str, float], ...]] = {
+    # VRM0 (PROTOCOLS.md §1)
+    "A": _A, "I": _I, "U": _U, "E": _E, "O": _O,
+    "Blink": _BLINK, "Blink_L": (("eyeBlinkLeft", 1.0),), "Blink_R": (("eyeBlinkRight", 1.0),),
+    "Joy": _JOY, "Angry": _ANGRY, "Sorrow": _SORROW, "Fun": _FUN,
+    "LookUp": _LOOK_UP, "LookDown": _LOOK_DOWN, "LookLeft": _LOOK_LEFT, "LookRight": _LOOK_RIGHT,
+    # VRM1
+    "aa": _A, "ih": _I, "ou": _U, "ee": _E, "oh": _O,
+    "blink": _BLINK, "blinkLeft": (("eyeBlinkLeft", 1.0),), "blinkRight": (("eyeBlinkRight", 1.0),),
+    "happy": _JOY, "angry": _ANGRY, "sad": _SORROW, "relaxed": _FUN, "surprised": _SURPRISED,
+    "lookUp": _LOOK_UP, "lookDown": _LOOK_DOWN, "lookLeft": _LOOK_LEFT, "lookRight": _LOOK_RIGHT,
+}
+
+_CACHE_LIMIT = 1024  # name lookups remembered (bounded: a hostile sender can invent names)
+
+
+def unity_to_ours(position, rotation) -> tuple[np.ndarray, np.ndarray]:
+    """Unity (left-handed, x right) position/rotation (x, y, z, w) in our axes (x left); float32."""
+    px, py, pz = position
+    qx, qy, qz, qw = rotation
+    return (np.array([-px, py, pz], dtype=np.float32),
+            np.array([qx, -qy, -qz, qw], dtype=np.float32))
+
+
+class VmcAdapter(OscAdapter):
+    """VMC Marionette side: blend values, head bone, root pose, status.
+
+    Frames carry the 52 ARKit channels (``channels`` = ``ARKIT_NAMES``),
+    NaN where nothing was sent since the last Apply; the last head bone pose
+    as ``head_rotation``/``head_translation`` (None until one came); the
+    last ``/VMC/Ext/T`` as ``t_sender``.
+
+    Attributes
+    ----------
+    root_position : ndarray of shape (3,), float32, our axes, sender units (m); or None
+    root_rotation : ndarray of shape (4,), float32, (x, y, z, w); or None
+    status : dict of str -> int, from ``/VMC/Ext/OK`` (loaded, calib_state, calib_mode, tracking)
+    """
+
+    kind = "vmc"
+    default_port = 39539
+
+    def __init__(self):
+        super().__init__()
+        self.counters["unmapped_name"] = 0
+        self._direct = [math.nan] * len(ARKIT_NAMES)
+        self._preset = [math.nan] * len(ARKIT_NAMES)
+        self._poisoned = False
+        self._lookup: dict[str, tuple[bool, tuple[tuple[int, float], ...]]] = {}
+        self.head_translation: np.ndarray | None = None
+        self.head_rotation: np.ndarray | None = None
+        self.root_position: np.ndarray | None = None
+        self.root_rotation: np.ndarray | None = None
+        self.status: dict[str, int] = {}
+        self.t_sender = math.nan
+
+    def _message(self, address: str, params: list, t: float) -> None:
+        if address == "/VMC/Ext/Blend/Val":
+            self._blend_val(params)
+        elif address == "/VMC/Ext/Blend/Apply":
+            self._emit(self._apply(t))
+        elif address == "/VMC/Ext/Bone/Pos":
+            self._pose(params, root=False)
+        elif address == "/VMC/Ext/Root/Pos":
+            self._pose(params, root=True)
+        elif address == "/VMC/Ext/OK":
+            self._ok(params)
+        elif address == "/VMC/Ext/T":
+            value = floats(params, 0, 1)
+            if value is None:
+                self._count("malformed")
+            elif math.isfinite(value[0]):
+                self.t_sender = value[0]
+            else:
+                self._count("nonfinite")
+        else:
+            self._count("unknown_address")
+
+    def _resolve(self, name: str) -> tuple[bool, tuple[tuple[int, float], ...]]:
+        """(is perfect sync, ((channel index, gain), ...)) of a blend name; empty when unmapped."""
+        hit = self._lookup.get(name)
+        if hit is not None:
+            return hit
+        if name in PRESETS:
+            hit = (False, tuple((_INDEX[c], g) for c, g in PRESETS[name]))
+        else:
+            key = canonical(name)
+            hit = (True, ((_INDEX[key], 1.0),)) if key in _INDEX else (False, ())
+        if len(self._lookup) < _CACHE_LIMIT:
+            self._lookup[name] = hit
+        return hit
+
+    def _blend_val(self, params: list) -> None:
+        if len(params) < 2 or type(params[0]) is not str:
+            self._count("malformed")
+            return
+        value = as_float(params[1])
+        if value is None:
+            self._count("malformed")
+            return
+        direct, targets = self._resolve(params[0])
+        if not targets:
+            self._count("unmapped_name")
+            return
+        if not math.isfinite(value):
+            self._poisoned = True
+            return
+        if direct:
+            self._direct[targets[0][0]] = value
+            return
+        preset = self._preset
+        for index, gain in targets:
+            v = value * gain
+            current = preset[index]
+            if current != current or v > current:  # NaN (unset) or smaller
+                preset[index] = v
+
+    def _apply(self, t: float) -> Frame | None:
+        direct, preset = self._direct, self._preset
+        poisoned = self._poisoned
+        weights = np.array(direct, dtype=np.float32)
+        missing = np.isnan(weights)
+        if missing.any():
+            weights[missing] = np.array(preset, dtype=np.float32)[missing]
+        n = len(direct)
+        self._direct = [math.nan] * n
+        self._preset = [math.nan] * n
+        self._poisoned = False
+        if poisoned:
+            self._count("nonfinite")
+            return None
+        return Frame(
+            t=t, source=self.kind, channels=ARKIT_NAMES, weights=weights,
+            head_rotation=self.head_rotation, head_translation=self.head_translation,
+            t_sender=self.t_sender,
+        )
+
+    def _pose(self, params: list, root: bool) -> None:
+        if not params or type(params[0]) is not str:
+            self._count("malformed")
+            return
+        values = floats(params, 1, 7)
+        if values is None:
+            self._count("malformed")
+            return
+        name = params[0]
+        if not root and name != "Head":
+            return  # a bone we do not drive
+        if not all_finite(values):
+            self._count("nonfinite")
+            return
+        position, rotation = unity_to_ours(values[:3], values[3:])
+        norm = float(np.linalg.norm(rotation))
+        if norm < 1e-6:  # not a rotation: keep the previous pose
+            self._count("malformed")
+            return
+        rotation /= norm
+        if root:
+            self.root_position, self.root_rotation = position, rotation
+        else:
+            self.head_translation, self.head_rotation = position, rotation
+
+    def _ok(self, params: list) -> None:
+        if not params or any(type(p) is not int for p in params[:4]):
+            self._count("malformed")
+            return
+        keys = ("loaded", "calib_state", "calib_mode", "tracking")
+        self.status = dict(zip(keys, params[:4]))

@@ -1,0 +1,230 @@
+"""VMC adapter fed with crafted datagrams (no sockets): values, names, poses, counters."""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+
+from facepuppet.runtime.channels import ARKIT_NAMES
+from facepuppet.runtime.vmc import PRESETS, VmcAdapter
+
+VAL, APPLY = "/VMC/Ext/Blend/Val", "/VMC/Ext/Blend/Apply"
+I = {name: i for i, name in enumerate(ARKIT_NAMES)}
+
+
+def msg(address, *args):
+    b = OscMessageBuilder(address)
+    for a in args:
+        if isinstance(a, tuple):
+            b.add_arg(*a)
+        else:
+            b.add_arg(a)
+    return b.build()
+
+
+def bundle(*messages):
+    b = OscBundleBuilder(IMMEDIATELY)
+    for m in messages:
+        b.add_content(m)
+    return b.build().dgram
+
+
+def blend(*pairs):
+    """One bundle: Val per (name, value), then Apply."""
+    return bundle(*(msg(VAL, n, v) for n, v in pairs), msg(APPLY))
+
+
+def counts(adapter, **expected):
+    """Counters, with every counter not named expected to be 0."""
+    want = {k: 0 for k in adapter.counters}
+    want.update(expected)
+    assert adapter.counters == want
+
+
+def test_val_then_apply_gives_jaw_open_and_nan_elsewhere():
+    a = VmcAdapter()
+    f = a.handle(blend(("JawOpen", 0.7)), 3.5)
+    assert f.channels == ARKIT_NAMES and f.source == "vmc" and f.t == 3.5
+    assert f.weights[I["jawOpen"]] == pytest.approx(0.7)
+    assert np.isnan(np.delete(f.weights, I["jawOpen"])).all()
+    assert f.head_rotation is None and math.isnan(f.t_sender)
+    counts(a, datagrams=1, frames=1)
+
+
+def test_values_take_effect_at_apply_in_separate_datagrams():
+    a = VmcAdapter()
+    assert a.handle(msg(VAL, "JawOpen", 0.3).dgram, 1.0) is None
+    assert a.handle(msg(VAL, "MouthFunnel", 0.4).dgram, 1.1) is None
+    f = a.handle(msg(APPLY).dgram, 1.2)
+    assert f.weights[I["jawOpen"]] == pytest.approx(0.3)
+    assert f.weights[I["mouthFunnel"]] == pytest.approx(0.4)
+    g = a.handle(blend(("EyeBlinkLeft", 1.0)), 2.0)  # a new frame starts empty
+    assert np.isnan(g.weights[I["jawOpen"]]) and g.weights[I["eyeBlinkLeft"]] == 1.0
+    counts(a, datagrams=4, frames=2)
+
+
+@pytest.mark.parametrize("name, expected", [
+    ("Blink", {"eyeBlinkLeft": 0.8, "eyeBlinkRight": 0.8}),
+    ("blink", {"eyeBlinkLeft": 0.8, "eyeBlinkRight": 0.8}),
+    ("Blink_L", {"eyeBlinkLeft": 0.8}),
+    ("blinkRight", {"eyeBlinkRight": 0.8}),
+    ("A", {"jawOpen": 0.8}),
+    ("aa", {"jawOpen": 0.8}),
+    ("O", {"mouthFunnel": 0.8, "jawOpen": 0.16}),
+    ("ou", {"mouthPucker": 0.8}),
+    ("I", {"mouthStretchLeft": 0.48, "mouthStretchRight": 0.48, "jawOpen": 0.12}),
+    ("ee", {"mouthStretchLeft": 0.32, "mouthStretchRight": 0.32, "jawOpen": 0.24}),
+    ("Joy", {"mouthSmileLeft": 0.8, "mouthSmileRight": 0.8}),
+    ("happy", {"mouthSmileLeft": 0.8, "mouthSmileRight": 0.8}),
+    ("Angry", {"browDownLeft": 0.8, "browDownRight": 0.8}),
+    ("sad", {"mouthFrownLeft": 0.8, "mouthFrownRight": 0.8, "browInnerUp": 0.8}),
+    ("Fun", {"mouthSmileLeft": 0.4, "mouthSmileRight": 0.4}),
+    ("surprised", {"eyeWideLeft": 0.8, "eyeWideRight": 0.8, "browInnerUp": 0.8, "jawOpen": 0.24}),
+    ("LookUp", {"eyeLookUpLeft": 0.8, "eyeLookUpRight": 0.8}),
+    ("lookLeft", {"eyeLookOutLeft": 0.8, "eyeLookInRight": 0.8}),
+    ("LookRight", {"eyeLookInLeft": 0.8, "eyeLookOutRight": 0.8}),
+    ("EyeBlinkLeft", {"eyeBlinkLeft": 0.8}),
+    ("TongueOut", {"tongueOut": 0.8}),
+])
+def test_presets_and_perfect_sync_names_map_to_arkit(name, expected):
+    f = VmcAdapter().handle(blend((name, 0.8)), 0.0)
+    got = {ARKIT_NAMES[i]: float(v) for i, v in enumerate(f.weights) if not np.isnan(v)}
+    assert got == pytest.approx(expected)
+
+
+def test_every_preset_targets_arkit_channels():
+    for name, targets in PRESETS.items():
+        assert targets and all(c in I for c, _ in targets), name
+
+
+def test_names_are_case_sensitive_and_unmapped_names_are_counted():
+    a = VmcAdapter()
+    f = a.handle(blend(("joy", 1.0), ("JOY", 1.0), ("Neutral", 1.0), ("まばたき", 1.0)), 0.0)
+    assert np.isnan(f.weights).all()
+    counts(a, datagrams=1, frames=1, unmapped_name=4)
+
+
+def test_perfect_sync_wins_over_presets_and_presets_combine_by_max():
+    for pairs in ((("A", 1.0), ("JawOpen", 0.2)), (("JawOpen", 0.2), ("A", 1.0))):
+        f = VmcAdapter().handle(blend(*pairs), 0.0)
+        assert f.weights[I["jawOpen"]] == pytest.approx(0.2)
+    f = VmcAdapter().handle(blend(("Joy", 0.3), ("happy", 0.6), ("Fun", 1.0)), 0.0)
+    assert f.weights[I["mouthSmileLeft"]] == pytest.approx(0.6)
+
+
+def test_head_bone_is_converted_kept_and_attached_other_bones_ignored():
+    a = VmcAdapter()
+    s = math.sqrt(0.5)
+    pose = bundle(msg("/VMC/Ext/Bone/Pos", "Head", 0.1, 1.5, 0.2, 0.0, s, 0.0, s),
+                  msg("/VMC/Ext/Bone/Pos", "LeftHand", 9.0, 9.0, 9.0, 0.0, 0.0, 0.0, 1.0))
+    assert a.handle(pose, 1.0) is None
+    f = a.handle(blend(("JawOpen", 0.1)), 1.1)
+    np.testing.assert_allclose(f.head_translation, [-0.1, 1.5, 0.2], rtol=1e-6)
+    np.testing.assert_allclose(f.head_rotation, [0.0, -s, 0.0, s], rtol=1e-6)  # Unity -> ours: x mirrored
+    g = a.handle(blend(("JawOpen", 0.2)), 1.2)
+    np.testing.assert_array_equal(g.head_rotation, f.head_rotation)
+    counts(a, datagrams=3, frames=2)
+
+
+def test_root_ok_and_time_are_kept_extra_args_ignored():
+    a = VmcAdapter()
+    root = msg("/VMC/Ext/Root/Pos", "root", 1.0, 0.0, 2.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0)
+    a.handle(bundle(root, msg("/VMC/Ext/OK", 1, 3, 0, 1, 99), msg("/VMC/Ext/T", 12.5)), 0.0)
+    np.testing.assert_allclose(a.root_position, [-1.0, 0.0, 2.0])
+    np.testing.assert_allclose(a.root_rotation, [0.0, 0.0, 0.0, 1.0])
+    assert a.status == {"loaded": 1, "calib_state": 3, "calib_mode": 0, "tracking": 1}
+    f = a.handle(blend(("JawOpen", 0.5)), 0.1)
+    assert f.t_sender == 12.5
+    extra = a.handle(bundle(msg(VAL, "JawOpen", 0.6, "surplus", 7), msg(APPLY, 1)), 0.2)
+    assert extra.weights[I["jawOpen"]] == pytest.approx(0.6)
+    counts(a, datagrams=3, frames=2)
+
+
+def test_integer_values_are_accepted_as_floats():
+    f = VmcAdapter().handle(blend(("JawOpen", 1)), 0.0)
+    assert f.weights[I["jawOpen"]] == 1.0
+
+
+@pytest.mark.parametrize("message", [
+    msg(VAL, 0.5, 0.5),                      # name is not a string
+    msg(VAL, "JawOpen"),                     # value missing
+    msg(VAL, "JawOpen", "0.5"),              # value is a string
+    msg(VAL, "JawOpen", True),               # value is a boolean
+    msg(VAL),                                # no arguments
+    msg("/VMC/Ext/Bone/Pos", "Head", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),  # 6 floats, 7 needed
+    msg("/VMC/Ext/Bone/Pos", "Head", 0.0, 0.0, "x", 0.0, 0.0, 0.0, 1.0),
+    msg("/VMC/Ext/Bone/Pos", "Head", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),  # zero quaternion
+    msg("/VMC/Ext/Bone/Pos", 3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0),
+    msg("/VMC/Ext/Root/Pos", "root", 0.0),
+    msg("/VMC/Ext/OK", 1.0),
+    msg("/VMC/Ext/OK"),
+    msg("/VMC/Ext/T", "now"),
+])
+def test_wrong_types_and_too_few_arguments_are_malformed(message):
+    a = VmcAdapter()
+    a.handle(bundle(msg("/VMC/Ext/Bone/Pos", "Head", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)), 0.0)
+    assert a.handle(message.dgram, 1.0) is None
+    f = a.handle(blend(("JawOpen", 0.25)), 2.0)  # still works, pose unchanged
+    assert f.weights[I["jawOpen"]] == pytest.approx(0.25)
+    np.testing.assert_array_equal(f.head_rotation, [0, 0, 0, 1])
+    counts(a, datagrams=3, frames=1, malformed=1)
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_nonfinite_value_rejects_the_frame(bad):
+    a = VmcAdapter()
+    assert a.handle(blend(("JawOpen", 0.5), ("MouthFunnel", bad)), 0.0) is None
+    head = msg("/VMC/Ext/Bone/Pos", "Head", 0.0, 0.0, 0.0, 0.0, 0.0, bad, 1.0)
+    assert a.handle(head.dgram, 0.5) is None
+    f = a.handle(blend(("MouthFunnel", 0.1)), 1.0)
+    assert f.weights[I["mouthFunnel"]] == pytest.approx(0.1) and np.isnan(f.weights[I["jawOpen"]])
+    assert f.head_rotation is None
+    counts(a, datagrams=3, frames=1, nonfinite=2)
+
+
+def test_unknown_addresses_are_ignored_and_counted():
+    a = VmcAdapter()
+    f = a.handle(bundle(msg("/VMC/Ext/Cam", "Camera", 0.0), msg("/VMC/Ext/Set/Period", 1, 1, 1, 1, 1, 1),
+                        msg("/something/else"), msg(VAL, "JawOpen", 0.4), msg(APPLY)), 0.0)
+    assert f.weights[I["jawOpen"]] == pytest.approx(0.4)
+    counts(a, datagrams=1, frames=1, unknown_address=3)
+
+
+@pytest.mark.parametrize("data", [
+    b"",
+    b"/VMC",                                       # unterminated address
+    b"/VMC/Ext/Blend/Val\x00\x00,sf\x00JawOpen\x00",  # float missing
+    b"/VMC/Ext/Blend/Val\x00\x00sf\x00\x00",       # type tags without ","
+    b"#bundle\x00\x00\x00",                        # truncated time tag
+    b"#bundle\x00" + bytes(8) + struct.pack(">i", -4),  # negative element size
+    b"#bundle\x00" + bytes(8) + struct.pack(">i", 400) + b"/VMC",  # element past the end
+    b"\xff\xfe garbage",
+])
+def test_unparseable_datagrams_are_counted_as_malformed(data):
+    a = VmcAdapter()
+    assert a.handle(data, 0.0) is None
+    counts(a, datagrams=1, malformed=1)
+
+
+def test_truncations_of_a_valid_bundle_never_raise():
+    a = VmcAdapter()
+    data = blend(("JawOpen", 0.5), ("Joy", 1.0))
+    boundaries, pos = [16], 16  # a cut at an element boundary leaves a shorter valid bundle
+    while pos < len(data):
+        pos += 4 + struct.unpack_from(">i", data, pos)[0]
+        boundaries.append(pos)
+    assert boundaries[-1] == len(data) and len(boundaries) == 4
+    for n in range(len(data)):
+        assert a.handle(data[:n], float(n)) is None  # no Apply survives a cut
+    counts(a, datagrams=len(data), malformed=len(data) - 3)
+
+
+def test_oversized_datagram_is_counted():
+    a = VmcAdapter()
+    assert a.handle(b"/" + bytes(70000), 0.0) is None
+    counts(a, datagrams=1, oversized=1)
