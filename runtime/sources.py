@@ -72,8 +72,35 @@ class ReplaySource:
         self._next = 0
 
 
+def frames_from_packets(packets) -> list[Frame]:
+    """The frames a live run decoded from its packets, decoded again.
+
+    Each packet goes, in recorded order and with its recorded receive time,
+    through a fresh adapter of its input kind
+    (:func:`~facepuppet.runtime.input_kinds.make_adapter`), as the UDP thread
+    did live; adapters are deterministic, so the frames are the live ones.
+
+    packets : sequence of :class:`~facepuppet.runtime.session.Packet`
+    """
+    from .input_kinds import make_adapter
+
+    adapters: dict = {}
+    frames = []
+    for packet in packets:
+        adapter = adapters.get(packet.kind)
+        if adapter is None:
+            adapter = adapters[packet.kind] = make_adapter(packet.kind)
+        frame = adapter.handle(packet.data, packet.t)
+        if frame is not None:
+            frames.append(frame)
+    return frames
+
+
 def open_recording(path) -> list[Frame]:
     """Frames of a recording: a session file (by its magic) or a Live Link Face CSV (by its header).
+
+    A live recording (PACKET records, ``run --record``) gives the frames its
+    packets decode to (:func:`frames_from_packets`).
 
     A session whose tail was torn gives the frames before the tear (with a
     warning from :func:`~facepuppet.runtime.session.read_session`).
@@ -92,6 +119,11 @@ def open_recording(path) -> list[Frame]:
         with warnings.catch_warnings():
             warnings.simplefilter("always")
             session = read_session(path)
+        if not session.frames and session.packets:
+            frames = frames_from_packets(session.packets)
+            if frames:
+                return frames
+            raise ValueError(f"{path}: the recorded packets decode to no frame")
         if not session.frames:
             raise ValueError(f"{path}: session file holds no complete frame ({session.tail_error or 'none written'})")
         return session.frames
