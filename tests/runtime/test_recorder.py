@@ -1,0 +1,164 @@
+"""Packet recording: round trip, never blocking, crash safety (kill -9), and replay = the live frame stream."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import warnings
+
+import numpy as np
+import pytest
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+from small_characters import sphere_character
+
+from facepuppet.runtime.input_kinds import make_adapter
+from facepuppet.runtime.recorder import PacketRecorder
+from facepuppet.runtime.session import read_session
+from facepuppet.runtime.sources import open_recording
+from facepuppet.runtime.udp_source import UdpSource
+
+
+def vmc_bundle(jaw: float, blink: float, yaw: float = 0.0) -> bytes:
+    b = OscBundleBuilder(IMMEDIATELY)
+    for name, value in (("JawOpen", jaw), ("EyeBlinkLeft", blink)):
+        m = OscMessageBuilder("/VMC/Ext/Blend/Val")
+        m.add_arg(name, "s")
+        m.add_arg(value, "f")
+        b.add_content(m.build())
+    m = OscMessageBuilder("/VMC/Ext/Bone/Pos")
+    m.add_arg("Head", "s")
+    for v in (0.0, 0.1, 0.0, 0.0, np.sin(yaw / 2), 0.0, np.cos(yaw / 2)):
+        m.add_arg(float(v), "f")
+    b.add_content(m.build())
+    b.add_content(OscMessageBuilder("/VMC/Ext/Blend/Apply").build())
+    return b.build().dgram
+
+
+def test_packets_and_audio_levels_round_trip(tmp_path):
+    path = tmp_path / "rec.fps"
+    packets = [(vmc_bundle(0.1 * k, 0.5), 100.0 + k / 60) for k in range(20)]
+    with PacketRecorder(path, "vmc", info={"test": True}) as rec:
+        for data, t in packets:
+            rec.put(data, t, ("127.0.0.1", 5000))
+        rec.put_audio(0.5, -20.0)
+    s = read_session(path)
+    assert s.complete and s.header["info"]["input"] == "vmc" and s.header["info"]["test"] is True
+    assert [(p.data, p.t, p.kind) for p in s.packets] == [(d, t, "vmc") for d, t in packets]
+    assert s.audio_levels == [(0.5, -20.0)]
+    assert rec.counters == {"packets_recorded": 20, "audio_recorded": 1, "record_dropped": 0}
+
+
+def test_a_full_queue_drops_and_counts_instead_of_blocking(tmp_path):
+    rec = PacketRecorder(tmp_path / "rec.fps", "vmc", capacity=4)
+    gate = threading.Event()
+    write = rec.writer.write_record
+    rec.writer.write_record = lambda kind, payload: (gate.wait(), write(kind, payload))  # a stalled disk
+    started = time.monotonic()
+    for k in range(50):
+        rec.put(b"x" * 10, float(k))
+    assert time.monotonic() - started < 5.0  # (a hang guard, not a timing claim)
+    dropped = rec.counters["record_dropped"]
+    assert 50 - 4 - 1 <= dropped <= 50 - 4
+    gate.set()
+    rec.close()
+    assert rec.counters["packets_recorded"] + dropped == 50
+    assert len(read_session(rec.path).packets) == 50 - dropped
+
+
+def test_replaying_a_recording_reproduces_the_live_frame_stream(tmp_path):
+    """Frames the live UDP thread decoded == frames re-decoded from the recording, one for one."""
+    live_frames = []
+
+    class Capturing:
+        def __init__(self, adapter):
+            self.adapter, self.kind, self.default_port = adapter, adapter.kind, adapter.default_port
+            self.counters = adapter.counters
+
+        def handle(self, data, t):
+            frame = self.adapter.handle(data, t)
+            if frame is not None:
+                live_frames.append(frame)
+            return frame
+
+    path = tmp_path / "live.fps"
+    rng = np.random.default_rng(7)
+    sent = [vmc_bundle(float(j), float(b), float(y)) for j, b, y in rng.random((150, 3))]
+    with PacketRecorder(path, "vmc") as rec:
+        source = UdpSource(Capturing(make_adapter("vmc")), host="127.0.0.1", port=0, on_packet=rec.put).start()
+        try:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+                for data in sent:
+                    out.sendto(data, source.address)
+                    out.sendto(b"\x00garbage", source.address)  # recorded too, decodes to nothing
+                    time.sleep(0.001)
+            deadline = time.monotonic() + 5
+            while source.counters["packets"] < 2 * len(sent) and time.monotonic() < deadline:
+                time.sleep(0.01)
+        finally:
+            source.stop()
+    assert len(live_frames) == len(sent)  # loopback, paced: nothing lost
+    replayed = open_recording(path)
+    assert len(replayed) == len(live_frames)
+    for a, b in zip(live_frames, replayed):
+        assert a.t == b.t and a.channels == b.channels and a.source == b.source
+        np.testing.assert_array_equal(a.weights, b.weights)
+        np.testing.assert_array_equal(a.head_rotation, b.head_rotation)
+        np.testing.assert_array_equal(a.head_translation, b.head_translation)
+    assert read_session(path).skipped == {}
+
+
+def test_kill_9_mid_record_leaves_a_file_that_replays_up_to_the_last_complete_record(tmp_path):
+    character = tmp_path / "sphere.npz"
+    sphere_character().save(character)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    path = tmp_path / "crash.fps"
+    proc = subprocess.Popen(
+        [sys.executable, "-u", "-m", "facepuppet.runtime.cli", "run", "-c", str(character), "--input", "vmc",
+         "--listen", f"127.0.0.1:{port}", "--headless", "--size", "64x48", "--record", str(path),
+         "--duration", "60"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert "listening for vmc on 127.0.0.1" in line, line
+        sent = 0
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline:
+                out.sendto(vmc_bundle(sent % 100 / 100, 0.5), ("127.0.0.1", port))
+                sent += 1
+                time.sleep(0.002)
+                if sent >= 200 and path.stat().st_size > 50_000:
+                    break
+            os.kill(proc.pid, signal.SIGKILL)  # mid-stream: the sender is still going
+            for _ in range(20):
+                out.sendto(vmc_bundle(0.0, 0.0), ("127.0.0.1", port))
+    finally:
+        proc.kill()
+        proc.wait(timeout=10)
+    assert proc.returncode == -signal.SIGKILL
+    session = read_session(path)  # every complete record; a torn last one would be reported
+    assert 100 <= len(session.packets) <= sent
+    frames = open_recording(path)
+    assert len(frames) == len(session.packets)
+    jaw = frames[0].channels.index("jawOpen")
+    np.testing.assert_allclose([f.weights[jaw] for f in frames[:100]], np.arange(100) / 100, atol=1e-6)
+
+    # a tear inside the last record (a write cut short): everything before it still replays
+    data = path.read_bytes()
+    torn = tmp_path / "torn.fps"
+    torn.write_bytes(data[:-7])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        partial = read_session(torn)
+    assert not partial.complete and "torn record" in partial.tail_error and caught
+    assert len(partial.packets) == len(session.packets) - 1
+    with pytest.warns(UserWarning, match="torn record"):
+        assert len(open_recording(torn)) == len(frames) - 1
