@@ -1,0 +1,51 @@
+"""Registry of live input kinds: the ``--input KIND`` name -> its adapter class.
+
+=============  =====================================  ============  =========================
+kind           adapter                                default port  protocol
+=============  =====================================  ============  =========================
+vmc            :class:`.vmc.VmcAdapter`               39539         VMC over OSC (§1)
+facecap        :class:`.facecap.FaceCapAdapter`       9000          Face Cap OSC (§3)
+faceosc        :class:`.faceosc.FaceOscAdapter`       8338          FaceOSC (§4)
+markers        :class:`.markers_osc.MarkersAdapter`   9763          /facepuppet/markers OSC
+livelinkface   :class:`.livelinkface_udp.LiveLinkFaceAdapter`  11111  binary UDP (§5)
+=============  =====================================  ============  =========================
+
+(§ = PROTOCOLS.md sections.) Every adapter has ``kind``, ``default_port``,
+``counters`` and ``handle(data, t_receive) -> Frame | None``, which never raises.
+"""
+
+from __future__ import annotations
+
+from .faceosc import FaceOscAdapter
+from .facecap import FaceCapAdapter
+from .livelinkface_udp import LiveLinkFaceAdapter
+from .markers_osc import MarkersAdapter
+from .vmc import VmcAdapter
+
+INPUT_KINDS: dict[str, type] = {
+    "vmc": VmcAdapter,
+    "facecap": FaceCapAdapter,
+    "faceosc": FaceOscAdapter,
+    "markers": MarkersAdapter,
+    "livelinkface": LiveLinkFaceAdapter,
+}
+
+
+def make_adapter(kind: str):
+    """A new adapter for input kind ``kind``.
+
+    Raises
+    ------
+    ValueError
+        when ``kind`` is not one of :data:`INPUT_KINDS`, listing them.
+    """
+    try:
+        cls = INPUT_KINDS[kind]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown input kind {kind!r}; expected one of: {', '.join(INPUT_KINDS)}") from None
+    return cls()
+
+
+def default_port(kind: str) -> int:
+    """The default UDP port of input kind ``kind`` (ValueError when unknown)."""
+    return make_adapter(kind).default_port

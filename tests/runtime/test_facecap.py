@@ -1,0 +1,136 @@
+"""Face Cap adapter fed with crafted datagrams: index order, head pose, eyes, frame rule, counters."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+
+from facepuppet.runtime.channels import ARKIT_NAMES
+from facepuppet.runtime.facecap import FACECAP_ORDER, FaceCapAdapter
+
+I = {name: i for i, name in enumerate(ARKIT_NAMES)}
+
+
+def msg(address, *args):
+    b = OscMessageBuilder(address)
+    for a in args:
+        b.add_arg(a)
+    return b.build()
+
+
+def bundle(*messages):
+    b = OscBundleBuilder(IMMEDIATELY)
+    for m in messages:
+        b.add_content(m)
+    return b.build().dgram
+
+
+def counts(adapter, **expected):
+    want = {k: 0 for k in adapter.counters}
+    want.update(expected)
+    assert adapter.counters == want
+
+
+def test_index_24_is_jaw_open_in_face_cap_order():
+    a = FaceCapAdapter()
+    f = a.handle(bundle(msg("/W", 24, 0.5)), 1.0)
+    assert f.weights[I["jawOpen"]] == 0.5 and f.source == "facecap"
+    assert np.isnan(np.delete(f.weights, I["jawOpen"])).all()
+    counts(a, datagrams=1, frames=1)
+
+
+def test_face_cap_order_is_a_permutation_of_arkit_and_not_arkit_order():
+    assert sorted(FACECAP_ORDER) == sorted(ARKIT_NAMES) and FACECAP_ORDER != ARKIT_NAMES
+    spot = {0: "browInnerUp", 13: "eyeBlinkLeft", 19: "cheekPuff", 36: "mouthClose", 51: "tongueOut"}
+    assert {i: FACECAP_ORDER[i] for i in spot} == spot
+    f = FaceCapAdapter().handle(bundle(*(msg("/W", i, i / 100) for i in range(52))), 0.0)
+    for i, name in enumerate(FACECAP_ORDER):
+        assert f.weights[I[name]] == pytest.approx(i / 100)
+
+
+def test_head_rotation_degrees_quaternion_and_translation():
+    a = FaceCapAdapter()
+    f = a.handle(bundle(msg("/HR", 0.0, 90.0, 0.0), msg("/HT", 1.0, 2.0, 3.0)), 0.0)
+    s = math.sqrt(0.5)
+    np.testing.assert_allclose(f.head_rotation, [0, s, 0, s], atol=1e-6)  # 90° about +y
+    np.testing.assert_allclose(f.head_translation, [1, 2, 3])
+    g = a.handle(bundle(msg("/HR", 10.0, 0.0, 0.0), msg("/HRQ", 0.0, 0.0, 2.0, 2.0)), 1.0)
+    np.testing.assert_allclose(g.head_rotation, [0, 0, s, s], atol=1e-6)  # HRQ wins, normalised
+    np.testing.assert_allclose(g.head_translation, [1, 2, 3])  # persists
+    counts(a, datagrams=2, frames=2)
+
+
+def test_eye_rotations_drive_eye_look_and_w_values_win():
+    a = FaceCapAdapter()
+    f = a.handle(bundle(msg("/ELR", 15.0, 0.0), msg("/ERR", 0.0, 15.0)), 0.0)
+    assert f.weights[I["eyeLookDownLeft"]] == pytest.approx(0.5) and f.weights[I["eyeLookUpLeft"]] == 0
+    assert f.weights[I["eyeLookInRight"]] == pytest.approx(0.5) and f.weights[I["eyeLookOutRight"]] == 0
+    g = a.handle(bundle(msg("/ELR", -90.0, 0.0), msg("/W", 7, 0.25)), 1.0)  # index 7: eyeLookDownLeft
+    assert g.weights[I["eyeLookDownLeft"]] == 0.25 and g.weights[I["eyeLookUpLeft"]] == 1.0  # clamped
+
+
+def test_unbundled_frames_end_on_ht_or_on_a_repeated_index():
+    a = FaceCapAdapter()
+    assert a.handle(msg("/W", 24, 0.5).dgram, 1.00) is None
+    assert a.handle(msg("/W", 37, 0.2).dgram, 1.01) is None
+    f = a.handle(msg("/HT", 0.0, 0.0, 1.0).dgram, 1.02)
+    assert f.weights[I["jawOpen"]] == 0.5 and f.weights[I["mouthSmileLeft"]] == pytest.approx(0.2)
+    assert a.handle(msg("/W", 24, 0.6).dgram, 1.03) is None
+    g = a.handle(msg("/W", 24, 0.7).dgram, 1.04)  # index 24 again: the frame holding 0.6 is complete
+    assert g.weights[I["jawOpen"]] == pytest.approx(0.6) and g.t == 1.04
+    h = a.handle(msg("/HT", 0.0, 0.0, 1.0).dgram, 1.05)
+    assert h.weights[I["jawOpen"]] == pytest.approx(0.7)
+    counts(a, datagrams=6, frames=3)
+
+
+def test_at_most_one_frame_per_receive_time():
+    a = FaceCapAdapter()
+    assert a.handle(bundle(msg("/W", 24, 0.5)), 2.0) is not None
+    assert a.handle(bundle(msg("/W", 25, 0.3)), 2.0) is None  # same time: carried to the next frame
+    f = a.handle(bundle(msg("/W", 24, 0.1)), 2.1)
+    assert f.weights[I["jawForward"]] == pytest.approx(0.3) and f.weights[I["jawOpen"]] == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("message", [
+    msg("/W", 24.0, 0.5),       # index is a float
+    msg("/W", "24", 0.5),
+    msg("/W", 24),              # value missing
+    msg("/W", 52, 0.5),         # index out of range
+    msg("/W", -1, 0.5),
+    msg("/W", 24, "half"),
+    msg("/HR", 0.0, 0.0),       # too few
+    msg("/HT", "x", 0.0, 0.0),
+    msg("/HRQ", 0.0, 0.0, 0.0, 0.0),  # not a rotation
+    msg("/ELR", 1.0),
+    msg("/ERR"),
+])
+def test_wrong_types_and_counts_are_malformed(message):
+    a = FaceCapAdapter()
+    assert a.handle(bundle(message), 0.0) is None
+    f = a.handle(bundle(msg("/W", 24, 0.5), msg("/W", 24, 0.25, "extra", 3)), 1.0)  # extras ignored
+    assert f.weights[I["jawOpen"]] == 0.25
+    counts(a, datagrams=2, frames=1, malformed=1)
+
+
+@pytest.mark.parametrize("message", [msg("/W", 24, math.nan), msg("/HT", math.inf, 0.0, 0.0),
+                                     msg("/HR", 0.0, -math.inf, 0.0), msg("/ELR", math.nan, 0.0)])
+def test_nonfinite_value_rejects_its_frame(message):
+    a = FaceCapAdapter()
+    assert a.handle(bundle(msg("/W", 25, 0.5), message), 0.0) is None
+    f = a.handle(bundle(msg("/W", 24, 0.5)), 1.0)
+    assert np.isnan(f.weights[I["jawForward"]]) and f.head_translation is None and f.head_rotation is None
+    counts(a, datagrams=2, frames=1, nonfinite=1)
+
+
+def test_unknown_addresses_truncated_and_empty_datagrams():
+    a = FaceCapAdapter()
+    assert a.handle(bundle(msg("/Blend", 1, 0.5), msg("/w", 24, 0.5)), 0.0) is None
+    assert a.handle(b"", 0.1) is None
+    data = msg("/W", 24, 0.5).dgram
+    for n in range(1, len(data)):
+        assert a.handle(data[:n], 0.2 + n) is None
+    counts(a, datagrams=len(data) + 1, unknown_address=2, malformed=len(data))
