@@ -1,0 +1,163 @@
+"""``facepuppet run`` end to end over real UDP on 127.0.0.1: python-osc and liblo's oscsend drive the face."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import socket
+import subprocess
+import threading
+import time
+import wave
+
+import numpy as np
+import pytest
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+from pythonosc.udp_client import SimpleUDPClient
+from small_characters import sphere_character
+
+from facepuppet.runtime.cli import main
+from facepuppet.runtime.pipeline import LivePipeline
+from facepuppet.runtime.run import CALIBRATE_ADDRESS, _Packets
+from facepuppet.runtime.session import read_session
+from facepuppet.runtime.sources import open_recording
+
+FAST_CONFIG = """
+[filter.mouth]
+min_cutoff = 200.0   # next to no smoothing: the test reads the sent values back
+[tracking_loss]
+timeout_s = 30.0     # the senders' gaps must not count as tracking loss here
+"""
+
+
+@pytest.fixture(scope="module")
+def character(tmp_path_factory):
+    path = tmp_path_factory.mktemp("run") / "sphere.npz"
+    sphere_character().save(path)
+    return path
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def python_osc_jaw(client: SimpleUDPClient, jaw: float) -> None:
+    b = OscBundleBuilder(IMMEDIATELY)
+    m = OscMessageBuilder("/VMC/Ext/Blend/Val")
+    m.add_arg("JawOpen", "s")
+    m.add_arg(jaw, "f")
+    b.add_content(m.build())
+    b.add_content(OscMessageBuilder("/VMC/Ext/Blend/Apply").build())
+    client.send(b.build())
+
+
+def test_run_end_to_end_python_osc_then_oscsend(character, tmp_path, capsys):
+    oscsend = shutil.which("oscsend")
+    if oscsend is None:
+        pytest.skip("liblo's oscsend is not installed (Debian package liblo-tools; `make setup` installs it)")
+    port = free_udp_port()
+    config = tmp_path / "live.toml"
+    config.write_text(FAST_CONFIG)
+    done = threading.Event()
+    counts = {"python_osc": 0, "oscsend": 0}
+
+    def senders():
+        client = SimpleUDPClient("127.0.0.1", port)
+        end = time.monotonic() + 0.9
+        while time.monotonic() < end and not done.is_set():  # phase 1: python-osc bundles, jaw 0.7
+            python_osc_jaw(client, 0.7)
+            counts["python_osc"] += 1
+            time.sleep(0.01)
+        while not done.is_set():  # phase 2: liblo, separate Val and Apply datagrams, jaw 0.25
+            for args in (["/VMC/Ext/Blend/Val", "sf", "JawOpen", "0.25"], ["/VMC/Ext/Blend/Apply"]):
+                subprocess.run([oscsend, "127.0.0.1", str(port), *args], check=True, timeout=10)
+                counts["oscsend"] += 1
+            if counts["oscsend"] >= 400:
+                break
+
+    thread = threading.Thread(target=senders, daemon=True)
+    weights_path, record = tmp_path / "w.npy", tmp_path / "live.fps"
+    thread.start()
+    try:
+        code = main(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{port}", "--headless",
+                     "--duration", "2.0", "--size", "160x120", "--config", str(config), "--stats",
+                     "--dump-weights", str(weights_path), "--record", str(record),
+                     "--audio", "no-such-microphone-4242"])
+    finally:
+        done.set()
+        thread.join(timeout=30)
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "no audio" in out and "no-such-microphone-4242" in out  # and the run went on
+    stats = json.loads(next(line for line in out.splitlines() if line.startswith("stats json: "))[12:])
+    udp = stats["counters"]["udp"]
+    assert udp["packets"] >= 10 and udp["malformed"] == 0 and udp["filtered_sender"] == 0
+    assert stats["latency_ms"]["end_to_end"]["n"] > 0
+    assert counts["python_osc"] > 0 and counts["oscsend"] >= 2
+    w = np.load(weights_path)
+    assert w.shape[1] == 2 and len(w) > 30
+    jaw = w[:, 0]
+    assert np.any(np.abs(jaw - 0.7) < 1e-3), "python-osc's value was never drawn"
+    assert jaw[-1] == pytest.approx(0.25, abs=1e-3), "oscsend's value is not the last drawn"
+    np.testing.assert_array_equal(w[:, 1], 0.0)  # puff: no VMC channel drives it
+    frames = open_recording(record)  # the recording replays to the values that were sent
+    values = {round(float(f.weights[f.channels.index("jawOpen")]), 4) for f in frames}
+    assert values == {0.7, 0.25}
+    assert len(read_session(record).packets) == udp["packets"]
+
+
+def test_audio_file_levels_are_recorded_per_tick(character, tmp_path, capsys):
+    rate = 48000
+    samples = 0.5 * np.sin(2 * np.pi * 600 * np.arange(rate) / rate)
+    wav = tmp_path / "tone.wav"
+    with wave.open(str(wav), "wb") as f:
+        f.setnchannels(1)
+        f.setsampwidth(2)
+        f.setframerate(rate)
+        f.writeframes((samples * 32767).astype("<i2").tobytes())
+    record = tmp_path / "audio.fps"
+    code = main(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{free_udp_port()}",
+                 "--headless", "--duration", "0.5", "--size", "64x48", "--audio-file", str(wav),
+                 "--record", str(record)])
+    assert code == 0, capsys.readouterr().out
+    levels = read_session(record).audio_levels
+    assert len(levels) >= 5
+    assert levels[-1][1] == pytest.approx(20 * math.log10(0.5 / math.sqrt(2)), abs=0.1)
+    assert all(t1 > t0 for (t0, _), (t1, _) in zip(levels, levels[1:]))
+
+
+def test_calibrate_message_on_the_input_port_requests_calibration():
+    pipeline = LivePipeline(log=lambda s: None)
+    packets = _Packets(pipeline)
+    packets(b"/VMC/Ext/Blend/Apply\x00\x00\x00\x00,\x00\x00\x00", 1.0, ("127.0.0.1", 1))
+    assert not pipeline.calibrating
+    m = OscMessageBuilder("/facepuppet/calibrate").build().dgram
+    assert m.startswith(CALIBRATE_ADDRESS)
+    packets(m, 2.0, ("127.0.0.1", 1))
+    assert pipeline.calibrating
+
+
+@pytest.mark.parametrize("option, value, match", [
+    ("--listen", "nowhere", "--listen: expected HOST:PORT"),
+    ("--allow", "10.0.0.300", "--allow: expected comma-separated IP addresses, got '10.0.0.300'"),
+    ("--vmc-out", "127.0.0.1", "--vmc-out: expected HOST:PORT"),
+    ("--fps", "0", "--fps: expected a positive number"),
+])
+def test_bad_options_exit_2_with_a_message(character, capsys, option, value, match):
+    code = main(["run", "-c", str(character), "--input", "vmc", "--headless", "--duration", "0.1", option, value])
+    assert code == 2
+    assert match in capsys.readouterr().err
+
+
+def test_busy_port_is_a_message_not_a_traceback(character, capsys):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        port = busy.getsockname()[1]
+        code = main(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{port}",
+                     "--headless", "--duration", "0.1"])
+    assert code == 2
+    assert f"127.0.0.1:{port}" in capsys.readouterr().err
