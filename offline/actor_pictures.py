@@ -1,0 +1,77 @@
+"""Pictures of a trained actor: the K actuations at s = 1, and the actuation signals of a take (Pillow)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.images import contact_sheet, save_png
+
+_BG, _NEUTRAL, _MOVED, _LINK = (250, 250, 248), (150, 150, 150), (200, 40, 30), (60, 90, 200)
+
+
+def _view(points: np.ndarray, lo: np.ndarray, span: float, size: int) -> np.ndarray:
+    """Front view (x to the image's right as seen from the front, so the subject's left on the right), pixels."""
+    margin = 0.08 * size
+    scale = (size - 2 * margin) / span
+    return np.c_[margin + (points[:, 0] - lo[0]) * scale, size - margin - (points[:, 1] - lo[1]) * scale]
+
+
+def actuation_images(actor: Actor, size: int = 220, strength: float = 1.0) -> list[tuple[str, np.ndarray]]:
+    """One front-view figure per actuation: neutral markers (grey) and x(s = strength e_k) (red)."""
+    neutral = actor.neutral.astype(np.float64)
+    poses = [actor.evaluate(np.eye(actor.n_actuations)[k] * strength) for k in range(actor.n_actuations)]
+    every = np.vstack([neutral, *poses])
+    lo, hi = every.min(axis=0), every.max(axis=0)
+    span = float(max(hi[0] - lo[0], hi[1] - lo[1], 1e-9))
+    lo = (lo + hi) / 2 - span / 2
+    base = _view(neutral, lo, span, size)
+    out = []
+    for k, pose in enumerate(poses):
+        img = Image.new("RGB", (size, size), _BG)
+        draw = ImageDraw.Draw(img)
+        moved = _view(pose, lo, span, size)
+        for (x0, y0), (x1, y1) in zip(base, moved):
+            draw.line([(x0, y0), (x1, y1)], fill=_LINK, width=2)
+            draw.ellipse([x0 - 2, y0 - 2, x0 + 2, y0 + 2], fill=_NEUTRAL)
+            draw.ellipse([x1 - 3, y1 - 3, x1 + 3, y1 + 3], fill=_MOVED)
+        largest = float(np.max(np.linalg.norm(pose - neutral, axis=1)))
+        out.append((f"s{k + 1:02d}=1  max {largest:.2f} {actor.units}", np.asarray(img)))
+    return out
+
+
+def actuation_sheet(actor: Actor, path: str | os.PathLike, columns: int = 5) -> Path:
+    """Contact sheet of the K actuations at s = 1 as marker figures; returns the PNG path."""
+    return save_png(path, contact_sheet(actuation_images(actor), columns))
+
+
+def signal_plot(s: np.ndarray, rate: float, path: str | os.PathLike, width: int = 1200, lane: int = 48) -> Path:
+    """Each actuation's signal over the take as one lane (0 and 1 marked), drawn with Pillow lines.
+
+    s : ndarray of shape (n_frames, K), float; rate : frames per second
+    """
+    s = np.asarray(s, dtype=np.float64)
+    n, k = s.shape
+    left, top = 40, 10
+    img = Image.new("RGB", (width, top + k * lane + 24), _BG)
+    draw = ImageDraw.Draw(img)
+    x = left + np.arange(n) * (width - left - 10) / max(n - 1, 1)
+    lo, hi = min(-0.2, float(s.min())), max(1.2, float(s.max()))
+    for j in range(k):
+        y0 = top + j * lane
+        to_y = lambda v: y0 + lane - 4 - (v - lo) / (hi - lo) * (lane - 8)  # noqa: E731
+        for level, colour in ((0.0, (180, 180, 180)), (1.0, (220, 200, 200))):
+            draw.line([(left, to_y(level)), (width - 10, to_y(level))], fill=colour)
+        draw.text((4, y0 + lane / 2 - 6), f"s{j + 1:02d}", fill=(30, 30, 30))
+        draw.line(list(zip(x.tolist(), to_y(s[:, j]).tolist())), fill=_LINK, width=1)
+    seconds = n / rate
+    for tick in np.arange(0, seconds + 1e-9, 5.0 if seconds > 20 else 1.0):
+        xt = left + tick * rate * (width - left - 10) / max(n - 1, 1)
+        draw.text((xt, top + k * lane + 6), f"{tick:.0f}s", fill=(30, 30, 30))
+    path = Path(path)
+    img.save(path, format="PNG")
+    return path
