@@ -48,7 +48,7 @@ import numpy as np
 from .channels import ARKIT_NAMES
 from .frames import Frame
 from .geometry import quat_mul
-from .osc_decode import OscAdapter, all_finite, as_float, floats
+from .osc_decode import OscAdapter, all_finite, as_float, finite32, floats
 
 #: Face Cap's blendshape index order (PROTOCOLS.md §3).
 FACECAP_ORDER: tuple[str, ...] = (
@@ -130,8 +130,8 @@ class FaceCapAdapter(OscAdapter):
         elif address == "/HRQ":
             v = self._vector(params, 4)
             if v is not None:
-                norm = math.sqrt(sum(c * c for c in v))
-                if norm < 1e-6:
+                norm = math.hypot(*v)
+                if not 1e-6 < norm < 1e30:
                     self._count("malformed")
                 else:
                     self._quat = np.array(v) / norm
@@ -167,7 +167,7 @@ class FaceCapAdapter(OscAdapter):
         if self._seen[index] and not self._is_bundle:
             self._emit(self._complete(t))  # the index came again: a new frame has begun
         self._seen[index] = True
-        if not math.isfinite(value):
+        if not finite32(value):
             self._poisoned = True
             return
         self._weights[_TO_ARKIT[index]] = value

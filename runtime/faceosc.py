@@ -27,7 +27,9 @@ jaw and nostrils; up for eye openness) and slowly
 tens of seconds; two-sided gestures (mouth width, eyebrows) use a symmetric
 ``TAU_MID`` = 10 s. The first value seen is the neutral. The weight is the
 distance from the neutral over a fixed span (:data:`SPANS`, typical FaceOSC
-travel from rest to full expression), clamped to [0, 1]. Time is the frames'
+travel from rest to full expression), clamped to [0, 1]. A value more than
+``RESET_SPANS`` spans from the neutral (a tracking glitch, another face)
+restarts the neutral there. Time is the frames'
 receive time, so a replay reproduces the live weights.
 
 **Sides and axes.** ofxFaceTracker's left/right are image sides: its left eye
@@ -53,6 +55,7 @@ from .osc_decode import OscAdapter, all_finite, floats
 TAU_REST = 0.5
 TAU_ACTIVE = 20.0
 TAU_MID = 10.0
+RESET_SPANS = 10.0  # a jump this many spans from the neutral restarts it (glitch or new person)
 #: Gesture -> span (FaceOSC units) from neutral to weight 1.
 SPANS: dict[str, float] = {
     "mouth_height": 4.0, "jaw": 4.0, "mouth_width": 2.0, "eyebrow_left": 1.0, "eyebrow_right": 1.0,
@@ -82,13 +85,14 @@ class RunningNeutral:
     rest : "low", "high" or "mid", the side the gesture rests on
     """
 
-    def __init__(self, rest: str):
+    def __init__(self, rest: str, span: float):
         self.rest = rest
+        self.span = span
         self.value = math.nan
 
     def update(self, x: float, dt: float) -> float:
         """New neutral after value ``x`` arrived ``dt`` seconds after the previous one."""
-        if math.isnan(self.value):
+        if math.isnan(self.value) or abs(x - self.value) > RESET_SPANS * self.span:
             self.value = x
             return x
         if self.rest == "mid":
@@ -118,7 +122,7 @@ class FaceOscAdapter(OscAdapter):
     def __init__(self, mirrored: bool = False):
         super().__init__()
         self.mirrored = mirrored
-        self._neutral = {key: RunningNeutral(rest) for key, rest in _GESTURES.values()}
+        self._neutral = {key: RunningNeutral(rest, SPANS[key]) for key, rest in _GESTURES.values()}
         self._last_t = math.nan
         self.pose_position: tuple[float, float] | None = None
         self.pose_scale = math.nan

@@ -161,7 +161,7 @@ def _message(data: bytes, start: int, end: int) -> tuple[str, list] | None:
                 return None
             append(fixed.unpack_from(data, pos)[0])
             pos += fixed.size
-        elif tag == "s" or tag == "S":
+        elif tag == "s":
             zero = find(b"\x00", pos, end)
             after = pos + ((zero - pos) // 4 + 1) * 4
             if zero < 0 or after > end:
@@ -208,9 +208,17 @@ def floats(params: list, start: int, n: int) -> list[float] | None:
     return out
 
 
+FLOAT32_MAX = 3.4028234663852886e38
+
+
+def finite32(value: float) -> bool:
+    """True when ``value`` is finite and fits float32 (a double beyond it would become inf)."""
+    return abs(value) <= FLOAT32_MAX
+
+
 def all_finite(values) -> bool:
-    """True when no value is NaN or infinite."""
-    return all(math.isfinite(v) for v in values)
+    """True when every value is finite and fits float32."""
+    return all(abs(v) <= FLOAT32_MAX for v in values)
 
 
 class OscAdapter:

@@ -50,7 +50,7 @@ import numpy as np
 
 from .channels import ARKIT_NAMES, canonical
 from .frames import Frame
-from .osc_decode import OscAdapter, all_finite, as_float, floats
+from .osc_decode import OscAdapter, all_finite, as_float, finite32, floats
 
 _INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 
@@ -181,7 +181,7 @@ class VmcAdapter(OscAdapter):
         if not targets:
             self._count("unmapped_name")
             return
-        if not math.isfinite(value):
+        if not finite32(value):
             self._poisoned = True
             return
         if direct:
@@ -228,12 +228,11 @@ class VmcAdapter(OscAdapter):
         if not all_finite(values):
             self._count("nonfinite")
             return
-        position, rotation = unity_to_ours(values[:3], values[3:])
-        norm = float(np.linalg.norm(rotation))
-        if norm < 1e-6:  # not a rotation: keep the previous pose
+        norm = math.hypot(*values[3:])
+        if not 1e-6 < norm < 1e30:  # not a rotation: keep the previous pose
             self._count("malformed")
             return
-        rotation /= norm
+        position, rotation = unity_to_ours(values[:3], [q / norm for q in values[3:]])
         if root:
             self.root_position, self.root_rotation = position, rotation
         else:

@@ -10,7 +10,7 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.faceosc import SPANS, TAU_ACTIVE, FaceOscAdapter
+from facepuppet.runtime.faceosc import RESET_SPANS, SPANS, TAU_ACTIVE, FaceOscAdapter
 from facepuppet.runtime.geometry import euler_to_quat
 
 I = {name: i for i, name in enumerate(ARKIT_NAMES)}
@@ -81,6 +81,16 @@ def test_running_neutral_fades_a_held_expression_and_follows_rest_fast():
     a.handle(frame_bundle(mouth__height=0.5), 30.0)  # closes below the old rest: neutral follows fast
     back = a.handle(frame_bundle(mouth__height=0.5 + 0.25 * SPANS["mouth_height"]), 32.0)
     assert w(back, "jawOpen") == pytest.approx(0.25, abs=0.03)
+
+
+def test_a_glitch_far_from_the_neutral_restarts_it():
+    a = FaceOscAdapter()
+    a.handle(frame_bundle(), 0.0)
+    glitch = 1.0 + 2 * RESET_SPANS * SPANS["mouth_height"]
+    assert w(a.handle(frame_bundle(mouth__height=glitch), 0.01), "jawOpen") == 0  # new neutral there
+    a.handle(frame_bundle(mouth__height=1.0), 0.02)  # back: far again, restarts at the true rest
+    f = a.handle(frame_bundle(mouth__height=1.0 + 0.5 * SPANS["mouth_height"]), 0.03)
+    assert w(f, "jawOpen") == pytest.approx(0.5, abs=0.01)
 
 
 def test_found_zero_gives_all_nan_weights():

@@ -175,7 +175,7 @@ def test_wrong_types_and_too_few_arguments_are_malformed(message):
     counts(a, datagrams=3, frames=1, malformed=1)
 
 
-@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, (1e300, "d")])  # a double past float32
 def test_nonfinite_value_rejects_the_frame(bad):
     a = VmcAdapter()
     assert a.handle(blend(("JawOpen", 0.5), ("MouthFunnel", bad)), 0.0) is None

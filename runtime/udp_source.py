@@ -1,0 +1,178 @@
+"""A live frame source: one UDP socket, one receive thread, one adapter, one slot.
+
+The receive thread (a daemon) reads datagrams with a plain socket, stamps each
+with ``clock()`` at once, drops senders outside ``allow`` (counted), hands the
+bytes to ``on_packet`` (a recorder; must not block) and to the adapter, and
+puts a completed frame in a slot: one tuple assignment ``(sequence, frame)``,
+atomic under the GIL, so the frame loop never waits on a lock and nothing is
+queued. :meth:`UdpSource.latest` answers like
+:meth:`~facepuppet.runtime.sources.ReplaySource.latest`: the newest frame not
+yet taken and how many completed frames were overwritten since the last call.
+
+The thread never raises: anything escaping the adapter or ``on_packet`` is
+counted as ``internal_error`` (the last one is kept in :attr:`UdpSource.last_error`)
+and the thread goes on.
+
+Which address to bind is the caller's choice (the ``run`` command defaults to
+127.0.0.1 and binds elsewhere only when asked); port 0 picks a free port.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+from .frames import Frame
+
+RECV_BUFFER = 65536
+POLL_TIMEOUT_S = 0.05  # how often the thread looks at the stop flag while idle
+SOCKET_BUFFER = 1 << 20  # kernel receive buffer asked for (bursts)
+
+
+class UdpSource:
+    """Frames from UDP datagrams decoded by ``adapter``.
+
+    Parameters
+    ----------
+    adapter : object with ``kind``, ``default_port``, ``counters`` and
+        ``handle(data, t_receive) -> Frame | None`` (see :mod:`.input_kinds`)
+    host : str, address to bind
+    port : int or None, None for the adapter's default port, 0 for any free port
+    allow : set of str or None, sender IP addresses accepted (None: all)
+    on_packet : callable(data bytes, t_receive float, sender (host, port)) or None
+    clock : callable() -> float seconds, the receive-time clock
+    """
+
+    def __init__(self, adapter, host: str = "127.0.0.1", port: int | None = None,
+                 allow: set[str] | None = None, on_packet=None, clock=time.monotonic):
+        self.adapter = adapter
+        self.host = host
+        self.port = adapter.default_port if port is None else int(port)
+        self.allow = None if allow is None else frozenset(allow)
+        self.on_packet = on_packet
+        self.clock = clock
+        self.last_error: BaseException | None = None
+        self._own = {"packets": 0, "filtered_sender": 0, "internal_error": 0}
+        self._stale_dropped = 0
+        self._slot: tuple[int, Frame | None] = (0, None)
+        self._taken = 0
+        self._sock: socket.socket | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) actually bound; the requested ones before :meth:`start`."""
+        if self._sock is None:
+            return self.host, self.port
+        host, port = self._sock.getsockname()[:2]
+        return host, port
+
+    def start(self) -> "UdpSource":
+        """Bind and start the receive thread.
+
+        Raises
+        ------
+        OSError
+            naming host:port when the address cannot be bound (e.g. the port is busy).
+        """
+        if self._thread is not None:
+            raise RuntimeError("UdpSource.start: already started")
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER)
+        except OSError:
+            pass  # a smaller kernel buffer only means more drops in bursts
+        try:
+            sock.bind((self.host, self.port))
+        except OSError as exc:
+            sock.close()
+            raise OSError(exc.errno, f"cannot listen for {self.adapter.kind} input on "
+                                     f"{self.host}:{self.port}: {exc.strerror or exc} "
+                                     f"(is another program using this port?)") from exc
+        sock.settimeout(POLL_TIMEOUT_S)
+        self._sock = sock
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=f"udp-{self.adapter.kind}", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop the thread (within about POLL_TIMEOUT_S) and close the socket."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def __enter__(self) -> "UdpSource":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        sock, stop, own = self._sock, self._stop, self._own
+        allow, on_packet, handle, clock = self.allow, self.on_packet, self.adapter.handle, self.clock
+        while not stop.is_set():
+            try:
+                data, sender = sock.recvfrom(RECV_BUFFER)
+            except (socket.timeout, BlockingIOError, InterruptedError):
+                continue
+            except OSError as exc:  # socket closed under us or a transient error (e.g. ICMP)
+                if stop.is_set():
+                    break
+                own["internal_error"] += 1
+                self.last_error = exc
+                continue
+            t = clock()
+            try:
+                own["packets"] += 1
+                if allow is not None and sender[0] not in allow:
+                    own["filtered_sender"] += 1
+                    continue
+                if on_packet is not None:
+                    on_packet(data, t, sender)
+                frame = handle(data, t)
+                if frame is not None:
+                    self._slot = (self._slot[0] + 1, frame)
+            except Exception as exc:  # nothing escapes the thread
+                own["internal_error"] += 1
+                self.last_error = exc
+
+    def latest(self, t: float | None = None) -> tuple[Frame | None, int]:
+        """(newest frame not yet taken or None, frames overwritten unseen since the last call).
+
+        ``t`` is accepted for the source interface and ignored: a live frame
+        is there when it has arrived.
+        """
+        sequence, frame = self._slot
+        if sequence == self._taken:
+            return None, 0
+        stale = sequence - self._taken - 1
+        self._taken = sequence
+        self._stale_dropped += stale
+        return frame, stale
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Adapter counters merged with packets, filtered_sender, internal_error, stale_dropped.
+
+        ``internal_error`` is the sum of the adapter's and the thread's.
+        """
+        for _ in range(3):
+            try:
+                merged = dict(self.adapter.counters)
+                break
+            except RuntimeError:  # the adapter added a key while we copied
+                continue
+        else:
+            merged = {}
+        for name, value in self._own.items():
+            merged[name] = merged.get(name, 0) + value
+        merged["stale_dropped"] = self._stale_dropped
+        return merged
