@@ -1,0 +1,139 @@
+"""Speech intensity (Ju & Lee 2008, §5.1 input): a WAV file -> dB per animation frame, normalised per speaker.
+
+Frame *i* belongs to audio time *i* / fps (the FACEGOOD curves' convention):
+its level is the RMS of a Hann window of ``window_s`` seconds centred there,
+in dB relative to full scale (``20 log10(rms)``), floored at ``floor_db``.
+The speaker normalisation is a z-score over the voiced frames (level above
+the floor + 1 dB): ``s(t) = (dB(t) - mean_voiced) / std_voiced``, silence at
+:data:`~facepuppet.runtime.gestures.SILENCE_Z`.
+
+Symbols: s(t) -> ``intensity`` (normalised), dB(t) -> ``level_db``.
+
+Inputs are checked at the door: mono int16/int32/uint8/float WAV at any rate
+(resampled to ``rate`` Hz with :func:`scipy.signal.resample_poly`); stereo is
+refused unless ``stereo="mix"``; NaN or infinite samples are refused;
+all-silent audio gives floor levels (and a warning from the normaliser).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+from scipy.io import wavfile
+from scipy.signal import resample_poly
+
+from facepuppet.runtime.gestures import SILENCE_Z
+
+DEFAULT_RATE = 16000
+FLOOR_DB = -60.0
+
+
+class SpeechInputError(ValueError):
+    """A speech WAV that cannot be used; the message names the file and says why."""
+
+
+def read_speech(path, rate: int = DEFAULT_RATE, stereo: str = "refuse") -> np.ndarray:
+    """Mono float64 samples in [-1, 1] of ``path`` at ``rate`` Hz.
+
+    Parameters
+    ----------
+    path : WAV file
+    rate : int, Hz, the rate to return (another rate is resampled, polyphase)
+    stereo : "refuse" (SpeechInputError) or "mix" (average the channels)
+
+    Returns
+    -------
+    samples : ndarray of shape (n,), float64
+    """
+    path = Path(path)
+    try:
+        file_rate, data = wavfile.read(path)
+    except (ValueError, OSError, EOFError) as exc:
+        raise SpeechInputError(f"{path}: not a readable WAV file ({exc})") from None
+    if data.dtype.kind == "f":
+        x = data.astype(np.float64)
+    elif data.dtype == np.uint8:
+        x = (data.astype(np.float64) - 128.0) / 128.0
+    elif data.dtype.kind == "i":
+        x = data.astype(np.float64) / float(-np.iinfo(data.dtype).min)
+    else:
+        raise SpeechInputError(f"{path}: sample type {data.dtype} not supported (expected int16/int32/uint8/float)")
+    if x.ndim == 2:
+        if stereo != "mix":
+            raise SpeechInputError(f"{path}: expected a mono WAV, found {x.shape[1]} channels "
+                                   f"(convert it to mono, or pass stereo='mix' / --stereo mix to average them)")
+        x = x.mean(axis=1)
+    if not np.isfinite(x).all():
+        bad = int(np.count_nonzero(~np.isfinite(x)))
+        raise SpeechInputError(f"{path}: {bad} samples are NaN or infinite; expected finite audio")
+    if file_rate != rate:
+        f = Fraction(int(rate), int(file_rate))
+        x = resample_poly(x, f.numerator, f.denominator)
+    return x
+
+
+def level_db(samples: np.ndarray, rate: int, fps: float, window_s: float = 2.0 / 30.0,
+             floor_db: float = FLOOR_DB, n_frames: int | None = None) -> np.ndarray:
+    """RMS level in dBFS of a Hann window centred on each frame time i / fps.
+
+    Parameters
+    ----------
+    samples : ndarray of shape (n,), float, in [-1, 1]
+    rate : int, Hz
+    fps : float, animation frames per second
+    n_frames : int or None, default floor(duration * fps)
+
+    Returns
+    -------
+    level_db : ndarray of shape (n_frames,), float64, dBFS, >= floor_db
+    """
+    samples = np.asarray(samples, np.float64)
+    if samples.ndim != 1:
+        raise ValueError(f"samples: expected shape (n,), got {samples.shape}")
+    if not np.isfinite(samples).all():
+        raise ValueError("samples: expected finite values, found NaN or infinity")
+    n = int(math.floor(len(samples) / rate * fps)) if n_frames is None else int(n_frames)
+    half = max(1, int(round(window_s * rate / 2)))
+    win = np.hanning(2 * half + 1)
+    win /= win.sum()
+    padded = np.pad(samples ** 2, half)
+    centres = np.round(np.arange(n) * rate / fps).astype(np.int64)
+    power = np.convolve(padded, win[::-1], mode="valid")  # power[c] = Σ w x²[c-half .. c+half]
+    p = power[np.clip(centres, 0, len(power) - 1)]
+    return np.maximum(10.0 * np.log10(np.maximum(p, 1e-30)), floor_db)  # dBFS of the RMS
+
+
+def speaker_stats(level: np.ndarray, floor_db: float = FLOOR_DB) -> tuple[float, float]:
+    """(mean, std) in dB of the voiced frames (above floor + 1 dB); (floor, 1) when all are silent."""
+    voiced = level[level > floor_db + 1.0]
+    if len(voiced) < 2:
+        warnings.warn("speech intensity: no voiced frames (all silence); intensity is the floor throughout",
+                      RuntimeWarning, stacklevel=2)
+        return float(floor_db), 1.0
+    return float(voiced.mean()), float(max(voiced.std(), 1.0))
+
+
+def normalise(level: np.ndarray, mean_db: float, std_db: float, floor_db: float = FLOOR_DB) -> np.ndarray:
+    """Per-speaker z-score of dB levels; silence (<= floor + 1 dB) at SILENCE_Z."""
+    z = np.maximum((level - mean_db) / std_db, SILENCE_Z)
+    return np.where(level > floor_db + 1.0, z, SILENCE_Z)
+
+
+def speech_intensity(path, fps: float = 30.0, rate: int = DEFAULT_RATE, stereo: str = "refuse",
+                     n_frames: int | None = None):
+    """WAV -> (level_db, intensity, (mean_db, std_db)) at ``fps`` frames per second.
+
+    Returns
+    -------
+    level_db : ndarray of shape (n_frames,), float64, dBFS
+    intensity : ndarray of shape (n_frames,), float64, per-speaker z-score s(t)
+    stats : (mean_db, std_db) of the voiced frames
+    """
+    x = read_speech(path, rate=rate, stereo=stereo)
+    level = level_db(x, rate, fps, n_frames=n_frames)
+    stats = speaker_stats(level)
+    return level, normalise(level, *stats), stats
