@@ -67,11 +67,13 @@ class OneEuroFilter:
         self.x_hat = np.full(self.n, np.nan)
         self.dx_hat = np.zeros(self.n)
         self._out = np.empty(self.n)
+        self._ready = self.n == 0  # every channel has state
 
     def reset(self) -> None:
         """Forget every channel's state: the next sample of each passes through."""
         self.x_hat.fill(np.nan)
         self.dx_hat.fill(0.0)
+        self._ready = self.n == 0
 
     def filter(self, x, dt: float) -> np.ndarray:
         """Filter one sample per channel.
@@ -92,22 +94,28 @@ class OneEuroFilter:
             raise ValueError(f"OneEuroFilter.filter x: expected shape ({self.n},), got {x.shape}")
         if not (math.isfinite(dt) and dt > 0):
             dt = 1e-3
+        x_hat, dx_hat = self.x_hat, self.dx_hat
         present = np.isfinite(x)
-        new = present & np.isnan(self.x_hat)
-        old = present & ~new
+        if present.all() and self._ready:  # the usual case: no masks, no temporaries kept
+            dx = (x - x_hat) / dt
+            dx_hat += smoothing_factor(self.d_cutoff, dt) * (dx - dx_hat)
+            cutoff = self.min_cutoff + self.beta * np.abs(dx_hat)  # f_c = f_cmin + β|dX̂|
+            x_hat += smoothing_factor(cutoff, dt) * (x - x_hat)  # X̂ = α X + (1 - α) X̂_prev
+            np.copyto(self._out, x_hat)
+            return self._out
+        # channels without a sample keep their state; a channel's first sample starts it
+        first = present & np.isnan(x_hat)
+        np.copyto(x_hat, x, where=first)
+        np.copyto(dx_hat, 0.0, where=first)
+        step = present & ~first
+        xs = np.where(step, x, x_hat)  # where no step: x = x̂, so the update below is a no-op there...
+        dx = (xs - x_hat) / dt
+        new_dx_hat = dx_hat + smoothing_factor(self.d_cutoff, dt) * (dx - dx_hat)
+        np.copyto(dx_hat, new_dx_hat, where=step)  # ...except for dX̂, which is kept explicitly
+        cutoff = self.min_cutoff + self.beta * np.abs(dx_hat)
+        np.copyto(x_hat, x_hat + smoothing_factor(cutoff, dt) * (xs - x_hat), where=step)
+        self._ready = not np.isnan(x_hat).any()
         out = self._out
         out.fill(np.nan)
-        if new.any():
-            self.x_hat[new] = x[new]
-            self.dx_hat[new] = 0.0
-            out[new] = x[new]
-        if old.any():
-            xo, prev = x[old], self.x_hat[old]
-            dx = (xo - prev) / dt
-            dx_hat = self.dx_hat[old] + smoothing_factor(self.d_cutoff[old], dt) * (dx - self.dx_hat[old])
-            cutoff = self.min_cutoff[old] + self.beta[old] * np.abs(dx_hat)  # f_c = f_cmin + β|dX̂|
-            x_hat = prev + smoothing_factor(cutoff, dt) * (xo - prev)  # X̂ = α X + (1 - α) X̂_prev
-            self.dx_hat[old] = dx_hat
-            self.x_hat[old] = x_hat
-            out[old] = x_hat
+        np.copyto(out, x_hat, where=present)
         return out

@@ -116,11 +116,13 @@ class _Packets:
             self.put(data, t, sender)
 
 
-def run_live(args, log=print, stop_event: threading.Event | None = None, on_ready=None) -> LiveRunResult:
+def run_live(args, log=print, stop_event: threading.Event | None = None, on_ready=None,
+             hooks=()) -> LiveRunResult:
     """Run a live session from parsed ``args`` (see :func:`register`) and return what it did.
 
     ``stop_event`` set from another thread ends the run at the next tick;
-    ``on_ready(address)`` is called once the socket is bound, before the first tick.
+    ``on_ready(address)`` is called once the socket is bound, before the first tick;
+    ``hooks`` are extra FrameLoop ``on_tick`` callables (benchmarks).
 
     Raises
     ------
@@ -183,7 +185,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
         counters = {"udp": source.counters, "pipeline": pipeline.counters}
         stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
-        hooks = [stats.on_tick]
+        hooks = [stats.on_tick, *hooks]
         if vmc_out is not None:
             sender = VmcSender(vmc_out[0], vmc_out[1], character.shape_names)
             parts.append(sender)

@@ -1,0 +1,215 @@
+"""``facepuppet bench latency``: tracker-to-pixels latency of a headless live run over loopback.
+
+A separate sender *process* streams VMC frames (every ARKit channel in
+PascalCase plus the Head bone, split into bundles under 1,500 bytes with
+Apply last, i.e. what :class:`~facepuppet.runtime.vmc_out.VmcSender` sends)
+at ``--rate`` Hz for ``--seconds`` to a headless ``run`` in this process,
+rendering the character at ``--size``. Reported:
+
+* receive -> GPU finished latency of each drawn frame (p50 / p99 / max, ms),
+  and the per-stage split (:mod:`~facepuppet.runtime.live_stats`);
+* the CPU stages of the frame loop (snapshot, pipeline + map) p99;
+* frames sent, datagrams received, frames dropped as stale (the newest wins),
+  UDP losses (sent - received);
+* with ``--flood``: ``--flood-factor`` x the rate for ``--flood-seconds``;
+  latency of the newest frame per second and resident memory (RSS) sampled
+  every second, which must stay flat.
+
+Run the sender alone with ``python -m facepuppet.runtime.bench_latency --send HOST PORT RATE SECONDS``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from types import SimpleNamespace
+
+import numpy as np
+
+from .bench import peak_rss_mb, register_bench
+
+_PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2**20 if hasattr(os, "sysconf") else 4096 / 2**20
+
+
+def rss_mb() -> float:
+    """Current resident memory of this process, MiB (Linux /proc; peak RSS elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * _PAGE_MB
+    except OSError:
+        return peak_rss_mb()
+
+
+def send(host: str, port: int, rate: float, seconds: float) -> int:
+    """Stream VMC frames at ``rate`` Hz for ``seconds``; returns the number of frames sent."""
+    from .channels import ARKIT_NAMES
+    from .geometry import euler_to_quat
+    from .vmc_out import VmcSender
+
+    sender = VmcSender(host, port, ARKIT_NAMES)
+    n = len(ARKIT_NAMES)
+    phases = np.arange(n) * 0.37
+    start = time.monotonic()
+    k = 0
+    while True:
+        t = k / rate
+        if t >= seconds:
+            break
+        ahead = start + t - time.monotonic()
+        if ahead > 0:
+            time.sleep(ahead)
+        weights = 0.5 + 0.5 * np.sin(2 * np.pi * 0.7 * t + phases)
+        sender.send(weights, euler_to_quat(0.2 * math.sin(t), 0.1 * math.sin(1.3 * t), 0.0), (0.0, 0.0, 0.0))
+        k += 1
+    sender.close()
+    return k
+
+
+def _phase(args, rate: float, seconds: float, log) -> dict:
+    """One sender process at ``rate`` for ``seconds`` against one headless live run."""
+    from .run import run_live
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    # the run stops shortly after the sender process ends (its start-up time varies with load);
+    # the duration is only a safety net
+    run_args = SimpleNamespace(
+        character=args.character, input="vmc", listen=f"127.0.0.1:{port}", allow=None, config=None,
+        calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False, headless=True,
+        out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path)
+    stop = threading.Event()
+    sender_out: list[str] = []
+    procs = []
+    rss: list[tuple[float, float]] = []
+    newest: list[float] = []  # end-to-end ms of each drawn new frame (for per-second maxima)
+    t_start = [0.0]
+
+    def on_ready(address):
+        t_start[0] = time.monotonic()
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "facepuppet.runtime.bench_latency", "--send", "127.0.0.1", str(address[1]),
+             repr(rate), repr(seconds)], stdout=subprocess.PIPE, text=True))
+
+        def wait_for_sender():
+            sender_out.append(procs[0].communicate()[0])
+            time.sleep(0.3)  # let the last datagrams be drawn
+            stop.set()
+
+        threading.Thread(target=wait_for_sender, daemon=True).start()
+
+    next_rss = [0.0]
+
+    def sample(info):
+        now = time.monotonic()
+        if now >= next_rss[0]:
+            rss.append((now - t_start[0], rss_mb()))
+            next_rss[0] = now + 1.0
+        if info.raw is not None:
+            newest.append((now - t_start[0], (info.stamps[4] - info.raw.t) * 1e3))
+
+    try:
+        result = run_live(run_args, log=log, stop_event=stop, on_ready=on_ready, hooks=[sample])
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait()
+    frames_sent = int(sender_out[0].strip().splitlines()[-1]) if sender_out and sender_out[0].strip() else -1
+    stats = result.stats
+    e2e = stats.samples_ms("end_to_end")
+    udp = result.counters["udp"]
+    timings = result.loop.timings
+    per_second = {}
+    for t, ms in newest:
+        per_second[int(t)] = max(per_second.get(int(t), 0.0), ms)
+    return {
+        "rate_hz": rate,
+        "seconds": seconds,
+        "frames_sent": frames_sent,
+        "datagrams_sent": frames_sent * 3,
+        "datagrams_received": udp["packets"],
+        "udp_lost": frames_sent * 3 - udp["packets"],
+        "frames_decoded": udp.get("frames", None),
+        "frames_drawn": int(e2e.size),
+        "stale_dropped": result.loop.counters["stale_dropped"],
+        "late_ticks": result.loop.counters["late_ticks"],
+        "skipped_ticks": result.loop.counters["skipped_ticks"],
+        "end_to_end_ms": _percentiles(e2e),
+        "stages_ms": stats.latency(),
+        "cpu_stage_p99_ms": {"snapshot": timings["snapshot"]["p99_ms"], "pipeline_map": timings["map"]["p99_ms"],
+                             "draw_submit": timings["draw_submit"]["p99_ms"]},
+        "cpu_before_draw_p99_ms": float(np.percentile(
+            result.loop.timer.samples("snapshot") + result.loop.timer.samples("map"), 99) * 1e3),
+        "newest_frame_max_ms_per_second": [per_second[k] for k in sorted(per_second)],
+        "rss_mb_per_second": [round(m, 1) for _, m in rss],
+        "render_path": result.path,
+    }
+
+
+def _percentiles(ms: np.ndarray) -> dict:
+    if ms.size == 0:
+        return {"n": 0}
+    p50, p99 = np.percentile(ms, [50, 99])
+    return {"n": int(ms.size), "p50": float(p50), "p99": float(p99), "max": float(ms.max())}
+
+
+def bench_latency(args: argparse.Namespace) -> dict:
+    log = print if args.verbose else (lambda s: None)
+    results = {"character": str(args.character), "size": args.size, "fps": args.fps}
+    results["nominal"] = _phase(args, args.rate, args.seconds, log)
+    _print("nominal", results["nominal"])
+    if args.flood:
+        results["flood"] = _phase(args, args.rate * args.flood_factor, args.flood_seconds, log)
+        _print("flood", results["flood"])
+        rss = results["flood"]["rss_mb_per_second"]
+        if len(rss) > 2:
+            results["flood"]["rss_growth_mb"] = rss[-1] - rss[1]
+    return results
+
+
+def _print(name: str, r: dict) -> None:
+    e = r["end_to_end_ms"]
+    print(f"latency bench [{name}]: {r['frames_sent']} frames at {r['rate_hz']:g} Hz for {r['seconds']:g} s; "
+          f"datagrams received {r['datagrams_received']}/{r['datagrams_sent']}, stale dropped {r['stale_dropped']}, "
+          f"frames drawn {r['frames_drawn']} ({r['render_path']} path)")
+    print(f"  receive -> GPU finished ms: p50 {e.get('p50', math.nan):.2f}  p99 {e.get('p99', math.nan):.2f}  "
+          f"max {e.get('max', math.nan):.2f}; CPU before draw p99 {r['cpu_before_draw_p99_ms']:.3f} ms "
+          f"(snapshot {r['cpu_stage_p99_ms']['snapshot']:.3f}, pipeline+map {r['cpu_stage_p99_ms']['pipeline_map']:.3f})")
+    rss = r["rss_mb_per_second"]
+    if rss:
+        print(f"  RSS MiB first/last/max: {rss[0]:.1f}/{rss[-1]:.1f}/{max(rss):.1f}")
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("-c", "--character", required=True, help="character .npz (the ICT head for the issue's numbers)")
+    parser.add_argument("--rate", type=float, default=120.0, help="frames per second sent (120)")
+    parser.add_argument("--seconds", type=float, default=30.0, help="seconds of sending (30)")
+    parser.add_argument("--size", default="640x480", help="render size (640x480)")
+    parser.add_argument("--fps", type=float, default=60.0, help="frame loop ticks per second (60)")
+    parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    parser.add_argument("--flood", action="store_true", help="then flood: --flood-factor x the rate")
+    parser.add_argument("--flood-factor", type=float, default=10.0, help="flood rate multiple (10)")
+    parser.add_argument("--flood-seconds", type=float, default=60.0, help="seconds of flooding (60)")
+    parser.add_argument("--verbose", action="store_true", help="show the run's own log")
+
+
+register_bench(
+    "latency",
+    bench_latency,
+    "receive -> frame-finished latency of a headless live run fed by a VMC sender process (optional flood)",
+    _add_arguments,
+)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 6 and sys.argv[1] == "--send":
+        print(send(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])), flush=True)
+    else:
+        print("usage: python -m facepuppet.runtime.bench_latency --send HOST PORT RATE SECONDS", file=sys.stderr)
+        raise SystemExit(2)
