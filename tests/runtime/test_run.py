@@ -67,11 +67,13 @@ def test_run_end_to_end_python_osc_then_oscsend(character, tmp_path, capsys):
 
     def senders():
         client = SimpleUDPClient("127.0.0.1", port)
-        end = time.monotonic() + 0.9
-        while time.monotonic() < end and not done.is_set():  # phase 1: python-osc bundles, jaw 0.7
+        end = time.monotonic() + 60  # phase 1: python-osc bundles, jaw 0.7, until the loop has drawn a while
+        while time.monotonic() < end and not done.is_set():
             python_osc_jaw(client, 0.7)
             counts["python_osc"] += 1
             time.sleep(0.01)
+            if pngs.is_dir() and len(list(pngs.glob("frame_*.png"))) >= 10:
+                end = min(end, time.monotonic() + 0.3)
         while not done.is_set():  # phase 2: liblo, separate Val and Apply datagrams, jaw 0.25
             for args in (["/VMC/Ext/Blend/Val", "sf", "JawOpen", "0.25"], ["/VMC/Ext/Blend/Apply"]):
                 subprocess.run([oscsend, "127.0.0.1", str(port), *args], check=True, timeout=10)
@@ -80,12 +82,12 @@ def test_run_end_to_end_python_osc_then_oscsend(character, tmp_path, capsys):
                 break
 
     thread = threading.Thread(target=senders, daemon=True)
-    weights_path, record = tmp_path / "w.npy", tmp_path / "live.fps"
+    weights_path, record, pngs = tmp_path / "w.npy", tmp_path / "live.fps", tmp_path / "png"
     thread.start()
     try:
         code = main(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{port}", "--headless",
                      "--duration", "2.0", "--size", "160x120", "--config", str(config), "--stats",
-                     "--dump-weights", str(weights_path), "--record", str(record),
+                     "--dump-weights", str(weights_path), "--record", str(record), "--out", str(pngs),
                      "--audio", "no-such-microphone-4242"])
     finally:
         done.set()
@@ -99,7 +101,7 @@ def test_run_end_to_end_python_osc_then_oscsend(character, tmp_path, capsys):
     assert stats["latency_ms"]["end_to_end"]["n"] > 0
     assert counts["python_osc"] > 0 and counts["oscsend"] >= 2
     w = np.load(weights_path)
-    assert w.shape[1] == 2 and len(w) > 30
+    assert w.shape[1] == 2 and len(w) > 30 and len(list(pngs.glob("frame_*.png"))) == len(w)
     jaw = w[:, 0]
     assert np.any(np.abs(jaw - 0.7) < 1e-3), "python-osc's value was never drawn"
     assert jaw[-1] == pytest.approx(0.25, abs=1e-3), "oscsend's value is not the last drawn"
