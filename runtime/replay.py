@@ -44,6 +44,9 @@ def register(subparsers) -> None:
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     p.add_argument("--duration", type=float, default=None, help="seconds to play (default: the whole recording)")
     p.add_argument("--stats", action="store_true", help="also print the counters and timings as one JSON line")
+    p.add_argument("--retarget", type=Path, default=None,
+                   help="retarget tables (.npz, e.g. from fit-retarget) mapping the source channels to the "
+                        "character's shapes, instead of matching channel names")
     p.set_defaults(func=run_replay)
 
 
@@ -56,6 +59,16 @@ def run_replay(args, log=print) -> int:
     if not (args.fps > 0):
         raise ValueError(f"--fps: expected a positive number, got {args.fps}")
     character = Character.load(args.character)
+    retarget = None
+    if getattr(args, "retarget", None) is not None:
+        from .kpls_retarget import KplsRetarget
+
+        retarget = KplsRetarget.load(args.retarget)
+        if retarget.target_names != tuple(character.shape_names):
+            raise ValueError(f"--retarget {args.retarget}: its target shapes ({len(retarget.target_names)}) "
+                             f"are not the shapes of {args.character} ({len(character.shape_names)}) in order")
+        log(f"replay: retarget {args.retarget} ({retarget.kernel} kernel, {len(retarget.source_names)} source "
+            f"shapes -> {len(retarget.target_names)} character shapes)")
     source = ReplaySource(open_recording(args.session))
     log(f"replay: {args.session} ({len(source.frames)} frames, {source.duration:.2f} s) "
         f"on {args.character} ({len(character.shape_names)} shapes)")
@@ -71,7 +84,8 @@ def run_replay(args, log=print) -> int:
         renderer = FaceRenderer(target.ctx, character, width, height, path=args.path, target_fbo=screen, log=log)
         sinks = [PngSink(args.out)] if args.out is not None else []
         clock = RecordedClock() if target.headless else WallClock()
-        loop = FrameLoop(character, renderer, clock, sinks=sinks, fps=args.fps, log=log, target=target)
+        loop = FrameLoop(character, renderer, clock, sinks=sinks, fps=args.fps, log=log, target=target,
+                         retarget=retarget)
         result = loop.run(source, duration=args.duration)
     finally:
         if renderer is not None:

@@ -1,0 +1,94 @@
+"""``facepuppet bench kpls``: cyclic retarget accuracy of every method, fit/predict times, runtime per frame.
+
+A Live Link Face take drives the ICT head (source); it is retargeted to the
+ICT head itself (the identity cycle), a stylised ICT head and the procedural
+demo head, and back (:mod:`.cyclic_eval`). The exported runtime stage
+(:mod:`facepuppet.runtime.kpls_retarget`) is timed per frame on the same take.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _add_arguments(parser) -> None:
+    parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
+                        help="data kit folder (default ../shared/data beside the repository)")
+    parser.add_argument("--take", default="livelinkface_myslate_3.csv", help="tracker CSV under DATA/tracker")
+    parser.add_argument("--frames", type=int, default=0, help="use only the first N frames (0: all)")
+    parser.add_argument("--mixes", type=int, default=300, help="random mixed pairs per direction")
+    parser.add_argument("--plot", type=Path, default=Path("kpls_cyclic.png"), help="bar plot PNG to write")
+
+
+def _runtime_timing(source, target, frames, log) -> dict:
+    from facepuppet.runtime.kpls_retarget import KplsRetarget
+
+    from .kpls import KernelPLS
+    from .kpls_commands import to_runtime
+    from .retarget_pairs import training_pairs
+
+    pairs = training_pairs(source, target)
+    model = KernelPLS(kernel="rbf").fit(pairs.X, pairs.Y)
+    stage = to_runtime(model, pairs, source, target)
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        stage = KplsRetarget.load(stage.save(Path(tmp) / "retarget.npz"))
+    frames = [f for f in frames if f.weights is not None]
+    stage.apply(frames[0])  # builds the channel map once
+    times = []
+    for _ in range(3):
+        for f in frames:
+            t0 = time.perf_counter()
+            stage.apply(f)
+            times.append(time.perf_counter() - t0)
+    us = 1e6 * np.asarray(times)
+    result = {"n_train": int(len(pairs.X)), "n_features": int(pairs.X.shape[1]), "n_target": target.n_shapes,
+              "n_components": int(model.n_components_), "per_frame_us_median": float(np.median(us)),
+              "per_frame_us_p99": float(np.percentile(us, 99)), "n_calls": len(us)}
+    log(f"runtime stage (ICT -> {target.name}, rbf, {result['n_train']} training pairs, "
+        f"{result['n_features']} features): per frame median {result['per_frame_us_median']:.1f} us, "
+        f"p99 {result['per_frame_us_p99']:.1f} us")
+    return result
+
+
+def run_bench(args, log=print) -> dict:
+    from facepuppet.runtime.demo_head import build_demo_character
+    from facepuppet.runtime.livelinkface_csv import read_llf_csv
+
+    from .cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights, stylise
+    from .rig_import import import_rig
+
+    ict_dir = args.data / "ict-facekit"
+    take = args.data / "tracker" / args.take
+    for path in (ict_dir, take):
+        if not path.exists():
+            raise ValueError(f"bench kpls: {path} not found; pass --data DIR holding ict-facekit/ and tracker/")
+    t0 = time.perf_counter()
+    ict = import_rig(ict_dir / "generic_neutral_mesh.obj", ict_dir)
+    targets = {"ICT (identity)": ict, "ICT stylised": stylise(ict), "demo head": build_demo_character()}
+    frames = read_llf_csv(take)
+    motion = motion_weights(frames, ict)
+    if args.frames > 0:
+        motion = motion[: args.frames]
+    log(f"bench kpls: {take.name}, {len(motion)} frames driving the ICT head; targets: {', '.join(targets)} "
+        f"(setup {time.perf_counter() - t0:.1f} s)")
+    rows = evaluate(ict, targets, motion, n_mixes=args.mixes, log=log)
+    table = format_table(rows, ict.units)
+    log(table)
+    plot = bar_plot(rows, args.plot, ict.units)
+    log(f"bar plot: {plot}")
+    runtime = _runtime_timing(ict, targets["demo head"], frames, log)
+    return {"take": take.name, "n_frames": int(len(motion)), "units": ict.units, "rows": rows,
+            "improvement_percent_of_kpls_rbf": improvements(rows), "table": table, "plot": str(plot),
+            "runtime_stage": runtime}
+
+
+def register_benches(register_bench) -> None:
+    register_bench("kpls", run_bench, "kernel-PLS retargeting: cyclic error per method, fit/predict "
+                   "times, runtime stage per frame", _add_arguments)

@@ -1,0 +1,87 @@
+"""Kernel PLS (Ouzounis et al.): non-linear recovery, linear-kernel equivalence, deflation, input checks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sklearn.cross_decomposition import PLSRegression
+
+from facepuppet.offline.kpls import KernelPLS, kernel_matrix, nipals, centre_gram
+
+
+def _nonlinear(n, seed):
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-1, 1, size=(n, 3))
+    Y = np.stack([np.sin(2.5 * X[:, 0]) + X[:, 1] ** 2, X[:, 0] * X[:, 2] + np.cos(2 * X[:, 1])], 1)
+    return X, Y
+
+
+def test_rbf_kpls_recovers_a_nonlinear_map_better_than_linear_pls():
+    X, Y = _nonlinear(160, 0)
+    Xt, Yt = _nonlinear(200, 1)
+    kpls = KernelPLS(kernel="rbf").fit(X, Y)
+    mse_k = np.mean((kpls.predict(Xt) - Yt) ** 2)
+    mse_l = np.mean((PLSRegression(n_components=3, scale=False).fit(X, Y).predict(Xt) - Yt) ** 2)
+    assert mse_k < 0.1 * mse_l, (mse_k, mse_l)
+    assert mse_k < 0.01 * np.var(Yt)
+    assert 1 <= kpls.n_components_ <= kpls.max_components and kpls.n_components_ in kpls.cv_errors_
+    assert kpls.cv_errors_[kpls.n_components_] == min(kpls.cv_errors_.values())
+
+
+@pytest.mark.parametrize("p", [1, 2, 4, 6])
+def test_linear_kernel_matches_ordinary_pls(p):
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(50, 6)) @ rng.normal(size=(6, 6))
+    Y = X @ rng.normal(size=(6, 3)) + 0.2 * rng.normal(size=(50, 3))
+    Xt = rng.normal(size=(20, 6))
+    ours = KernelPLS(n_components=p, kernel="linear", tol=1e-13, max_iter=20000).fit(X, Y)
+    ref = PLSRegression(n_components=p, scale=False, tol=1e-14, max_iter=20000).fit(X, Y)
+    np.testing.assert_allclose(ours.predict(Xt), ref.predict(Xt), rtol=1e-6, atol=1e-6)
+    # the X scores span the same space as ordinary PLS's
+    t_ref = ref.x_scores_ / np.linalg.norm(ref.x_scores_, axis=0)
+    np.testing.assert_allclose(np.abs(ours.x_scores_.T @ t_ref), np.eye(p), atol=1e-6)
+
+
+def test_gram_deflation_gives_orthonormal_scores():
+    X, Y = _nonlinear(60, 4)
+    Kc, _, _ = centre_gram(kernel_matrix(X, X, "rbf", 1.0, 0, 0))
+    T, U = nipals(Kc, Y - Y.mean(0), 8)
+    np.testing.assert_allclose(T.T @ T, np.eye(8), atol=1e-8)
+    np.testing.assert_allclose(np.linalg.norm(U, axis=0), 1.0)
+
+
+def test_kernels_match_a_loop_reference():
+    rng = np.random.default_rng(5)
+    A, B = rng.normal(size=(4, 3)), rng.normal(size=(5, 3))
+    for kernel, f in [("rbf", lambda a, b: np.exp(-0.7 * ((a - b) ** 2).sum())),
+                      ("poly", lambda a, b: (0.7 * a @ b + 1.5) ** 3),
+                      ("linear", lambda a, b: a @ b)]:
+        ref = np.array([[f(a, b) for b in B] for a in A])
+        np.testing.assert_allclose(kernel_matrix(A, B, kernel, 0.7, 1.5, 3), ref, rtol=1e-12)
+
+
+def test_test_kernel_is_centred_like_the_training_gram():
+    X, Y = _nonlinear(40, 6)
+    m = KernelPLS(n_components=3, kernel="poly").fit(X, Y)
+    Kc, _, _ = centre_gram(kernel_matrix(X, X, "poly", m.gamma_, m.coef0, m.degree))
+    np.testing.assert_allclose(m.centred_kernel(X), Kc, atol=1e-10)
+
+
+def test_bad_inputs_get_clear_errors():
+    X, Y = _nonlinear(20, 7)
+    with pytest.raises(ValueError, match="unequal numbers of pairs: X has 20 rows, Y has 19"):
+        KernelPLS(2).fit(X, Y[:19])
+    Xn = X.copy()
+    Xn[3, 1] = np.nan
+    with pytest.raises(ValueError, match="X contains NaN"):
+        KernelPLS(2).fit(Xn, Y)
+    with pytest.raises(ValueError, match="single pair"):
+        KernelPLS(1).fit(X[:1], Y[:1])
+    with pytest.raises(ValueError, match="too many components: n_components=20 but 20 pairs allow at most 19"):
+        KernelPLS(20).fit(X, Y)
+    with pytest.raises(ValueError, match="kernel must be one of"):
+        KernelPLS(2, kernel="sigmoid").fit(X, Y)
+    with pytest.raises(ValueError, match="not fitted yet"):
+        KernelPLS(2).predict(X)
+    with pytest.raises(ValueError, match="X has 2 features, the model was fitted on 3"):
+        KernelPLS(2).fit(X, Y).predict(X[:, :2])

@@ -1,0 +1,32 @@
+"""Baselines share the estimator interface and fit what they should."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facepuppet.offline.retarget_baselines import (FeaturePointRBF, KernelRidgeRetarget, LinearPLS,
+                                                   LinearRetarget, PCARBFRetarget)
+
+ALL = [FeaturePointRBF, LinearRetarget, LinearPLS, KernelRidgeRetarget, PCARBFRetarget]
+
+
+@pytest.mark.parametrize("cls", ALL)
+def test_baselines_fit_a_smooth_map_and_refuse_bad_use(cls):
+    rng = np.random.default_rng(0)
+    W = rng.uniform(0, 1, size=(120, 4))
+    F = rng.normal(size=(4, 9))  # 9 "feature" numbers spanning 4 dimensions, like rig displacements
+    X, Y = W @ F, W @ rng.normal(size=(4, 3))
+    model = cls().fit(X, Y)
+    assert model.fit(X, Y) is model
+    Wt = rng.uniform(0.1, 0.9, size=(30, 4))
+    Yt_pred = model.predict(Wt @ F)
+    assert Yt_pred.shape == (30, 3)
+    Yt = Wt @ np.linalg.lstsq(W, Y, rcond=None)[0]
+    assert np.sqrt(np.mean((Yt_pred - Yt) ** 2)) < 0.05 * Y.std()
+    with pytest.raises(ValueError, match="not fitted yet"):
+        cls().predict(X)
+    with pytest.raises(ValueError, match="unequal numbers of pairs"):
+        cls().fit(X, Y[:-1])
+    with pytest.raises(ValueError, match="features, fitted on 9"):
+        model.predict(X[:, :5])
