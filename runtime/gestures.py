@@ -458,3 +458,36 @@ class GestureLayer:
             names = tuple(channels) + tuple(self._face_names[j] for j in extra)
             hit = self._maps[channels] = (names, np.array(idx_t, np.int64), np.array(idx_s, np.int64), extra)
         return hit
+
+
+class VoiceOnlySource:
+    """A tracker source that never delivers a frame (``--input audio``): the face comes from the voice.
+
+    Has the parts of a live source the run command uses (``start``, ``stop``, ``latest``,
+    ``counters``, ``address``, ``duration``).
+    """
+
+    address = ("voice", 0)
+
+    def __init__(self, duration: float | None = None):
+        self.duration = duration
+        self.counters: dict = {}
+
+    def start(self) -> None:
+        pass
+
+    def stop(self) -> None:
+        pass
+
+    def latest(self, t: float):
+        return None, 0
+
+
+def gesture_layer(path, inner=None, level=None, voice_only: bool = False, seed: int = 0, log=print) -> GestureLayer:
+    """A :class:`GestureLayer` over ``inner`` from the gesture tables at ``path`` (the run command's ``--gestures``)."""
+    db = load_gesture_db(path)
+    synth = GestureSynth(db, seed=seed)
+    fps = float(db.settings.get("fps", 30.0))
+    log(f"gestures: {path} ({len(db['intensity'])} reference frames at {fps:g} fps, groups "
+        f"{', '.join(synth.groups)}), {'voice only' if voice_only else 'added to the tracked face'}")
+    return GestureLayer(synth, fps=fps, mode="voice" if voice_only else "add", level=level, inner=inner)

@@ -53,7 +53,8 @@ def register(subparsers) -> None:
         "run", help="drive a character live from a tracker over UDP (VMC, Face Cap, FaceOSC, markers, Live Link Face)",
         description="Drive a character live from OSC / UDP tracker input on this machine.")
     p.add_argument("-c", "--character", type=Path, required=True, help="character .npz")
-    p.add_argument("--input", required=True, choices=tuple(INPUT_KINDS), help="tracker protocol")
+    p.add_argument("--input", required=True, choices=tuple(INPUT_KINDS) + ("audio",),
+                   help="tracker protocol, or 'audio': no tracker, the face from the voice (needs --gestures)")
     p.add_argument("--listen", metavar="HOST:PORT", default=None,
                    help="address to listen on (default 127.0.0.1 on the input's default port); "
                         "an address other than loopback must be named here explicitly")
@@ -63,6 +64,9 @@ def register(subparsers) -> None:
     p.add_argument("--audio", nargs="?", const="", default=None, metavar="DEVICE",
                    help="measure the microphone level (default input device, or DEVICE by name or number)")
     p.add_argument("--audio-file", type=Path, default=None, metavar="WAV", help="a WAV file as the audio input")
+    p.add_argument("--gestures", type=Path, default=None, metavar="GESTURES.npz",
+                   help="gesture tables (build-gestures): add voice-driven blinks, brows and head motion")
+    p.add_argument("--gesture-seed", type=int, default=0, help="seed of the gesture synthesis (default 0)")
     p.add_argument("--record", type=Path, default=None, metavar="FILE", help="record packets and audio levels")
     p.add_argument("--vmc-out", default=None, metavar="HOST:PORT", help="send the rig weights and head as VMC")
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
@@ -143,8 +147,12 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         raise ValueError(f"--fps: expected a positive number, got {args.fps}")
     if args.duration is not None and not (args.duration > 0):
         raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
-    adapter = make_adapter(args.input)
-    host, port = ("127.0.0.1", adapter.default_port) if args.listen is None else parse_host_port(args.listen, "--listen")
+    voice_only = args.input == "audio"
+    if voice_only and (getattr(args, "gestures", None) is None or (args.audio is None and args.audio_file is None)):
+        raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
+    adapter = None if voice_only else make_adapter(args.input)
+    host, port = ("127.0.0.1", adapter.default_port if adapter else 0) if args.listen is None else \
+        parse_host_port(args.listen, "--listen")
     allow = parse_allow(args.allow)
     vmc_out = parse_host_port(args.vmc_out) if args.vmc_out else None
     config = load_live_config(args.config) if args.config is not None else LiveConfig()
@@ -166,7 +174,16 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         pipeline = LivePipeline(config, audio_level=audio.level if audio is not None else None, log=log)
         if args.calibrate:
             pipeline.request_calibration()
-        source = UdpSource(adapter, host=host, port=port, allow=allow, on_packet=_Packets(pipeline, recorder))
+        frame_pipeline = pipeline
+        if getattr(args, "gestures", None) is not None:
+            from .gestures import VoiceOnlySource, gesture_layer
+
+            frame_pipeline = gesture_layer(args.gestures, inner=pipeline, voice_only=voice_only, log=log,
+                                           level=audio.level if audio is not None else None, seed=args.gesture_seed)
+        if voice_only:
+            source = VoiceOnlySource(getattr(audio, "duration", None))
+        else:
+            source = UdpSource(adapter, host=host, port=port, allow=allow, on_packet=_Packets(pipeline, recorder))
         source.start()
         parts.append(source)
         log(f"run: listening for {args.input} on {source.address[0]}:{source.address[1]}"
@@ -196,7 +213,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
             if audio is not None:
                 hooks.append(lambda info: recorder.put_audio(info.t, audio.level(info.t)))
         loop = FrameLoop(character, renderer, WallClock(), sinks=sinks, fps=args.fps, log=log, target=target,
-                         pipeline=pipeline, on_tick=hooks, stop=stop_event.is_set, catch_up=True)
+                         pipeline=frame_pipeline, on_tick=hooks, stop=stop_event.is_set, catch_up=True)
         counters["loop"] = loop.counters
         stats.counters = _LiveCounters(source, counters)
         if on_ready is not None:

@@ -1,0 +1,145 @@
+"""``facepuppet bench gestures``: synthesised gestures against the reference and a Perlin-noise baseline.
+
+The database is built from the first 80 % of the speech take (plus the Live
+Link Face and marker takes); the last 20 % of its speech is held out and
+drives the synthesis. Statistics, synthesised and noise versus reference
+(goal: within 20 %): blink rate (eyeBlinkLeft rising through 0.5, per minute),
+lag-5-frame autocorrelation per stochastic channel (mean), correlation between
+gesture energy (|frame-to-frame change| summed over the stochastic channels)
+and speech intensity, and for the lips the correlation of jawOpen with
+intensity on the held-out part. Also synthesis speed and database size.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+_DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def _add_arguments(parser) -> None:
+    parser.add_argument("--data", type=Path, default=_DEFAULT_DATA, help="the data kit (default ../shared/data)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--blend-frames", type=int, default=600, help="frames for the blend-solver comparison")
+
+
+def blink_rate(blink: np.ndarray, fps: float) -> float:
+    up = np.count_nonzero((blink[1:] >= 0.5) & (blink[:-1] < 0.5))
+    return 60.0 * up / (len(blink) / fps)
+
+
+def autocorr(x: np.ndarray, lag: int = 5) -> float:
+    vals = []
+    for c in x.T:
+        c = c - c.mean()
+        if c.std() > 1e-6:
+            vals.append(float(np.dot(c[:-lag], c[lag:]) / np.dot(c, c)))
+    return float(np.mean(vals)) if vals else 0.0
+
+
+def energy_corr(x: np.ndarray, intensity: np.ndarray) -> float:
+    e = np.abs(np.diff(x, axis=0)).sum(1)
+    s = intensity[1:]
+    return float(np.corrcoef(e, s)[0, 1]) if e.std() > 0 and s.std() > 0 else 0.0
+
+
+def perlin(n: int, d: int, period: float, rng) -> np.ndarray:
+    """1-D gradient (Perlin) noise, (n, d), one lattice point every ``period`` frames."""
+    grads = rng.uniform(-1, 1, size=(int(n / period) + 2, d))
+    x = np.arange(n) / period
+    i = x.astype(int)
+    f = (x - i)[:, None]
+    fade = f * f * f * (f * (f * 6 - 15) + 10)
+    return (1 - fade) * grads[i] * f + fade * grads[i + 1] * (f - 1)
+
+
+def _stats(x, blink, intensity, fps):
+    return {"blink_per_min": blink_rate(blink, fps), "autocorr_lag5": autocorr(x),
+            "energy_intensity_corr": energy_corr(x, intensity)}
+
+
+def _ratio(a, ref):
+    return {k: (a[k] / ref[k] if abs(ref[k]) > 1e-9 else None) for k in ref}
+
+
+def run_bench(args) -> dict:
+    from facepuppet.runtime.gestures import GestureSynth, SpeakerNormaliser, load_gesture_db
+
+    from .blend_weights import BlendWeights, choose_basis
+    from .gesture_db import build_gesture_db, read_llf_take
+    from .speech_intensity import speech_intensity
+
+    d = Path(args.data)
+    speech = (d / "speech/facegood_1114_3_15.wav", d / "speech/facegood_1114_3_15_blendshapes.csv",
+              d / "speech/facegood_to_arkit.csv")
+    llf = [d / "tracker/livelinkface_alex_rom_3.csv", d / "tracker/livelinkface_myslate_3.csv"]
+    markers = [d / "markers/animface_jaw.c3d", d / "markers/animface_cheeks.c3d"]
+    fps = 30.0
+    level, z_all, stats = speech_intensity(speech[0], fps=fps, n_frames=1472)
+    cut = int(0.8 * len(level))
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        path, takes = build_gesture_db(Path(tmp) / "g.npz", speech, llf, markers, fps=fps,
+                                       speech_frames=slice(0, cut), seed=args.seed)
+        build_s = time.perf_counter() - t0
+        size = path.stat().st_size
+        db = load_gesture_db(path)
+    t0 = time.perf_counter()
+    synth = GestureSynth(db, seed=args.seed, normaliser=SpeakerNormaliser(*stats, rate=0.0))
+    index_s = time.perf_counter() - t0
+    held = level[cut:]
+    reps = max(1, int(np.ceil(1800 / len(held))))  # ~1 minute of speech: the held-out part, repeated
+    drive = np.tile(held, reps)
+    out = np.zeros((len(drive), len(synth.out_names)), np.float32)
+    steps = np.zeros(len(drive))
+    for i, v in enumerate(drive):
+        s0 = time.perf_counter()
+        out[i] = synth.step(float(v))
+        steps[i] = time.perf_counter() - s0
+    names = list(synth.out_names)
+    z_drive = np.tile(z_all[cut:], reps)
+    # reference: the stochastic channels of the Live Link Face takes, with their (proxy) intensity
+    ref_take = read_llf_take(llf[0], z_all[:cut], fps)
+    stoch = [n for n in names if n.startswith(("brow", "eye", "cheek", "nose"))]
+    ref_x = np.column_stack([ref_take.columns[n] for n in stoch])
+    syn_x = out[:, [names.index(n) for n in stoch]]
+    blink = "eyeBlinkLeft"
+    ref = _stats(ref_x, ref_take.columns[blink], ref_take.intensity, fps)
+    syn = _stats(syn_x, out[:, names.index(blink)], z_drive, fps)
+    rng = np.random.default_rng(args.seed)
+    noise = perlin(len(drive), len(stoch), 15.0, rng)
+    noise = ref_x.mean(0) + (noise - noise.mean(0)) / np.maximum(noise.std(0), 1e-9) * ref_x.std(0)
+    noi = _stats(noise, noise[:, stoch.index(blink)], z_drive, fps)
+    jaw_ref = float(np.corrcoef(db["features"][:cut, list(db.channels["features"]).index("jawOpen")],
+                                z_all[:cut])[0, 1])
+    jaw_syn = float(np.corrcoef(out[:, names.index("jawOpen")], z_drive)[0, 1])
+    # blend solvers (§4.1): error and speed on the first frames of the range-of-motion take
+    x = np.column_stack([ref_take.columns[n] for n in stoch])[:args.blend_frames]
+    basis = choose_basis(x, 6)
+    blend = {}
+    for method in ("lsq", "knn"):
+        t0 = time.perf_counter()
+        fit = BlendWeights(basis, method=method).fit(x)
+        blend[method] = {"rms_error": fit.error_, "ms_per_frame": 1e3 * (time.perf_counter() - t0) / len(x)}
+    seconds = steps.sum()
+    return {
+        "reference": ref, "synthesised": syn, "perlin_noise": noi,
+        "synth_over_reference": _ratio(syn, ref), "noise_over_reference": _ratio(noi, ref),
+        "jawopen_intensity_corr": {"reference_train": jaw_ref, "synthesised_heldout": jaw_syn},
+        "speed": {"frames": len(drive), "realtime_factor": len(drive) / fps / seconds,
+                  "step_us_median": float(np.median(steps) * 1e6), "step_us_p99": float(np.percentile(steps, 99) * 1e6),
+                  "index_build_s": index_s, "db_build_s": build_s},
+        "database": {"bytes": size, "frames": int(len(db["intensity"])), "takes": list(db.channels["takes"]),
+                     "features": len(db.channels["features"])},
+        "blend_solvers": blend,
+        "held_out_speech_s": len(held) / fps,
+    }
+
+
+def register_benches(register_bench) -> None:
+    register_bench("gestures", run_bench, "Ju & Lee gestures: synthesised vs reference vs Perlin noise, speed, size",
+                   _add_arguments)

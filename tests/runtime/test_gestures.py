@@ -1,0 +1,103 @@
+"""Gesture layer: exact reproduction, determinism, voice-only jaw, the layer over tracked frames, tables."""
+
+import math
+
+import numpy as np
+import pytest
+
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.gestures import GROUPS, GestureLayer, GestureSynth, load_gesture_db
+from facepuppet.runtime.tables import TablesError, save_tables
+
+
+def small_db(path, n_takes=2, n=300, seed=0):
+    """A synthetic gesture_db: lips follow the intensity (jawOpen = loudness), random-walk gestures."""
+    rng = np.random.default_rng(seed)
+    names = ["jawOpen", "mood_0", "mood_1", "browInnerUp", "eyeBlinkLeft", "cheekPuff", "headYaw"]
+    group = [GROUPS.index(g) for g in ("lips", "mood", "mood", "brows", "eyes", "rest", "head")]
+    N = n_takes * n
+    t = np.arange(N)
+    intensity = np.where(np.sin(t / 13.0) > 0, np.sin(t / 5.0) + rng.normal(0, 0.1, N), -3.0)
+    F = np.zeros((N, len(names)))
+    F[:, 0] = np.clip((intensity + 3.0) / 4.0, 0, 1)
+    F[:, 1:] = np.cumsum(rng.normal(0, 0.05, (N, len(names) - 1)), 0)
+    basis = np.zeros((2, len(names)))
+    basis[0, 3], basis[1, 4] = 0.3, 0.2
+    arrays = {
+        "intensity": intensity.astype(np.float32), "features": F.astype(np.float32),
+        "feature_group": np.array(group, np.int32), "feature_scale": F.std(0).astype(np.float32),
+        "blend_basis": basis.astype(np.float32), "frame_take": np.repeat(np.arange(n_takes), n).astype(np.int32),
+        "available": np.ones((N, 6), bool),
+    }
+    save_tables(path, "gesture_db", arrays, channels={"features": names, "takes": [f"take{i}" for i in range(n_takes)],
+                                                      "groups": list(GROUPS)}, settings={"fps": 30.0})
+    return load_gesture_db(path)
+
+
+@pytest.fixture(scope="module")
+def db(tmp_path_factory):
+    return small_db(tmp_path_factory.mktemp("g") / "g.npz")
+
+
+def test_reproduces_reference_with_sigma_zero_and_one_candidate(db):
+    synth = GestureSynth(db, seed=0, sigma=0.0, n_candidates=1)
+    start = 40
+    synth.reset(start=start)
+    ref = np.asarray(db["features"])
+    jaw = synth.out_names.index("jawOpen")
+    for i in range(start + 1, 290):
+        out = synth.step_normalised(float(db["intensity"][i]))
+        assert synth.picks == {g: i for g in synth.groups}
+        assert out[jaw] == ref[i, 0]
+
+
+def test_same_seed_same_tracks_other_seed_differs(db):
+    level = -30 + 12 * np.sin(np.arange(200) / 4.0)
+    runs = []
+    for seed in (5, 5, 6):
+        synth = GestureSynth(db, seed=seed, sigma=0.5, n_candidates=4)
+        runs.append(np.array([synth.step(float(v)).copy() for v in level]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert not np.array_equal(runs[0], runs[2])
+
+
+def test_voice_only_opens_jaw_when_loud_and_closes_it_in_silence(db):
+    synth = GestureSynth(db, seed=1)
+    layer = GestureLayer(synth, fps=30.0, mode="voice", level=lambda t: -15.0 if 1.0 <= t < 2.0 else math.nan)
+    jaw = {}
+    for k in range(90):
+        f = layer(None, k / 30.0)
+        jaw[k] = float(f.weights[f.channels.index("jawOpen")])
+    loud = np.mean([jaw[k] for k in range(45, 60)])
+    silent = np.mean([jaw[k] for k in range(75, 90)])
+    assert loud > 0.6 and silent < 0.05, (loud, silent)
+
+
+def test_layer_adds_residuals_and_fills_lost_channels(db):
+    synth = GestureSynth(db, seed=2)
+    layer = GestureLayer(synth, fps=30.0, mode="add")
+    tracked = Frame(0.0, source="llf", channels=("BrowInnerUp", "JawOpen"), weights=[0.5, np.nan],
+                    audio_level=-20.0)
+    out = layer(tracked, 0.0)
+    add = dict(zip(synth.out_names, synth.additions - synth.mood_part))
+    assert out.channels[:2] == ("BrowInnerUp", "JawOpen")
+    assert out.weights[0] == pytest.approx(0.5 + add["browInnerUp"], abs=1e-6)
+    assert out.weights[1] == pytest.approx(synth.additions[synth.out_names.index("jawOpen")], abs=1e-6)
+    assert "eyeBlinkLeft" in out.channels and out.head_rotation is not None
+
+
+def test_style_restricts_a_group_to_one_take(db):
+    synth = GestureSynth(db, seed=3, style={"brows": "take1"}, sigma=0.5, n_candidates=4)
+    for v in -30 + 10 * np.sin(np.arange(150) / 3.0):
+        synth.step(float(v))
+        assert db["frame_take"][synth.picks["brows"]] == 1
+    with pytest.raises(ValueError, match="style"):
+        GestureSynth(db, style={"brows": "nope"})
+
+
+def test_loading_refuses_a_table_with_bad_take_indices(tmp_path, db):
+    arrays = {k: np.array(v) for k, v in db.arrays.items()}
+    arrays["frame_take"][0] = 7
+    save_tables(tmp_path / "bad.npz", "gesture_db", arrays, channels=dict(db.channels))
+    with pytest.raises(TablesError, match="frame_take"):
+        load_gesture_db(tmp_path / "bad.npz")
