@@ -1,0 +1,127 @@
+"""Training pairs, the cyclic error (eq. 11), fit-retarget and the runtime stage against the offline model."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pytest
+
+from kpls_characters import SHAPES, bump_character
+from facepuppet.offline.cyclic_eval import cyclic_error, evaluate, format_table, bar_plot, improvements, stylise
+from facepuppet.offline.kpls import KernelPLS
+from facepuppet.offline.kpls_commands import register, to_runtime
+from facepuppet.offline.retarget_pairs import (farthest_points, feature_matrix, feature_points, match_matrix,
+                                               read_pairing, training_pairs)
+from facepuppet.offline.retarget_baselines import LinearRetarget
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.kpls_retarget import KplsRetarget
+
+SIDED = tuple(n.replace("Left", "_L").replace("Right", "_R") for n in SHAPES)
+
+
+def test_feature_matrix_matches_dense_deltas_and_points_spread():
+    c = bump_character()
+    pts = feature_points(c, 20)
+    assert len(set(pts.tolist())) == 20
+    F = feature_matrix(c, pts)
+    dense = c.dense_deltas()[:, pts].reshape(c.n_shapes, -1).T
+    np.testing.assert_allclose(F, dense, atol=1e-7)
+    # farthest-point sampling: the second point is the farthest from the first
+    p = np.random.default_rng(0).normal(size=(50, 3))
+    i = farthest_points(p, 2)
+    assert i[1] == np.argmax(np.linalg.norm(p - p[i[0]], axis=1))
+
+
+def test_shapes_pair_by_canonical_name_or_by_file(tmp_path):
+    M = match_matrix(SHAPES, SIDED)
+    assert M[SIDED.index("eyeBlink_L"), SHAPES.index("eyeBlinkLeft")] == 1 and M.sum() == len(SHAPES)
+    f = tmp_path / "pairs.txt"
+    f.write_text("# source,target\njawOpen, mouthPucker\n\nEyeBlinkLeft,eyeBlink_R\n")
+    M = match_matrix(SHAPES, SIDED, read_pairing(f))
+    assert M[SIDED.index("mouthPucker"), 0] == 1 and M[SIDED.index("eyeBlink_R"), SHAPES.index("eyeBlinkLeft")] == 1
+    f.write_text("jawOpen\n")
+    with pytest.raises(ValueError, match="pairs.txt:1: expected 'source_name,target_name'"):
+        read_pairing(f)
+    with pytest.raises(ValueError, match="source shape 'nope' is not among"):
+        match_matrix(SHAPES, SIDED, [("nope", "jawOpen")])
+
+
+def test_pairs_have_their_own_feature_counts():
+    a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), names=SIDED, seed=1)
+    pairs = training_pairs(a, b, n_mixes=40, k_source=15, k_target=11)
+    assert pairs.X.shape == (1 + 8 + 40, 45) and pairs.Y.shape == (49, 8)
+    assert len(pairs.target_points) == 11
+    np.testing.assert_allclose(pairs.X, pairs.source_weights @ pairs.source_features.T)
+    np.testing.assert_array_equal(pairs.X[0], 0)
+
+
+def test_identical_characters_cycle_to_zero_error():
+    c = bump_character()
+    motion = np.random.default_rng(2).uniform(0, 1, size=(40, 8)) * (np.random.default_rng(3).random((40, 8)) < 0.5)
+    methods = {"KPLS linear": lambda: KernelPLS(n_components=8, kernel="linear"), "linear": LinearRetarget}
+    rows = evaluate(c, {"same": c}, motion, methods=methods, n_mixes=60, k_source=15, k_target=15)
+    scale = cyclic_error(c, motion, np.zeros_like(motion))
+    for r in rows:
+        assert r["e_d"] < 1e-6 * scale, r
+    # the cycle error itself: zero for the same weights, the mean vertex distance otherwise
+    assert cyclic_error(c, motion, motion) == 0.0
+    one = np.zeros((1, 8))
+    one[0, 0] = 1.0
+    moved = np.linalg.norm(c.dense_deltas()[0], axis=1)
+    region = np.flatnonzero(np.linalg.norm(c.dense_deltas(), axis=2).max(0) > 0)
+    assert cyclic_error(c, one, np.zeros((1, 8))) == pytest.approx(moved[region].mean(), rel=1e-5)
+
+
+def test_other_morphology_cycle_table_and_plot(tmp_path):
+    a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), amplitude=1.5, names=SIDED, seed=1)
+    motion = np.random.default_rng(4).uniform(0, 0.8, size=(30, 8))
+    methods = {"KPLS rbf": lambda: KernelPLS(kernel="rbf", max_components=15), "linear": LinearRetarget}
+    rows = evaluate(a, {"other": b}, motion, methods=methods, n_mixes=80, k_source=15, k_target=12)
+    scale = cyclic_error(a, motion, np.zeros_like(motion))
+    assert all(0 <= r["e_d"] < 0.2 * scale for r in rows)
+    imp = improvements(rows)["other"]["linear"]
+    errs = {r["method"]: r["e_d"] for r in rows}
+    assert imp == pytest.approx(100 * (errs["linear"] - errs["KPLS rbf"]) / errs["linear"])
+    assert "KPLS rbf" in format_table(rows, "cm")
+    png = bar_plot(rows, tmp_path / "bars.png", "cm")
+    from PIL import Image
+
+    assert Image.open(png).size == (960, 480)
+
+
+def test_stylise_warps_neutral_and_shapes_consistently():
+    c = bump_character()
+    s = stylise(c, eye_scale=1.0, jaw_stretch=0.0, taper=0.0)  # identity warp
+    np.testing.assert_allclose(s.vertices, c.vertices, atol=1e-6)
+    np.testing.assert_allclose(s.dense_deltas(), c.dense_deltas(), atol=1e-6)
+    s = stylise(c)
+    assert not np.allclose(s.vertices, c.vertices) and s.shape_names == c.shape_names
+
+
+def test_fit_retarget_command_and_runtime_stage_agree_with_the_offline_model(tmp_path):
+    a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), names=SIDED, seed=1)
+    a.save(tmp_path / "a.npz")
+    b.save(tmp_path / "b.npz")
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(["fit-retarget", str(tmp_path / "a.npz"), str(tmp_path / "b.npz"), "-o",
+                              str(tmp_path / "r.npz"), "--kernel", "poly", "--components", "6",
+                              "--source-points", "15", "--target-points", "12", "--mixes", "60"])
+    logs = []
+    assert args.func(args, log=logs.append) == 0 and "6 components" in logs[0]
+    stage = KplsRetarget.load(tmp_path / "r.npz")
+    assert stage.target_names == b.shape_names and stage.kernel == "poly"
+    # the same model offline
+    pairs = training_pairs(a, b, n_mixes=60, k_source=15, k_target=12)
+    model = KernelPLS(n_components=6, kernel="poly").fit(pairs.X, pairs.Y)
+    W = np.random.default_rng(5).uniform(0, 1, size=(20, 8))
+    offline = model.predict(W @ pairs.source_features.T)
+    online = np.stack([stage.apply(Frame(t=0.0, channels=a.shape_names, weights=w)) for w in W])
+    np.testing.assert_allclose(online, offline, rtol=0, atol=1e-3)  # float32 tables: 0.1 % of a full weight
+    # and the in-memory stage (before the tables file) predicts the same
+    mem = to_runtime(model, pairs, a, b)
+    np.testing.assert_allclose(np.stack([mem.predict_weights(w) for w in W]), offline, rtol=0,
+                               atol=1e-3)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["fit-retarget", "a", "b", "-o", "r", "--components", "0"])
