@@ -218,8 +218,15 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         stats.counters = _LiveCounters(source, counters)
         if on_ready is not None:
             on_ready(source.address)
-        with _sigint_sets(stop_event):
-            result = loop.run(source, duration=args.duration)
+        # The receive thread gives the GIL back on every recvfrom and must win it back from the busy
+        # frame loop each time: a short switch interval keeps it from waiting 5 ms per datagram.
+        switch = sys.getswitchinterval()
+        sys.setswitchinterval(min(switch, 0.0005))
+        try:
+            with _sigint_sets(stop_event):
+                result = loop.run(source, duration=args.duration)
+        finally:
+            sys.setswitchinterval(switch)
         counters["loop"] = result.counters
         return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address)
     finally:
