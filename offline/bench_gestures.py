@@ -24,6 +24,7 @@ _DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 def _add_arguments(parser) -> None:
     parser.add_argument("--data", type=Path, default=_DEFAULT_DATA, help="the data kit (default ../shared/data)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--sigma", type=float, default=None, help="σ of the candidate draw (default: the synth's)")
     parser.add_argument("--blend-frames", type=int, default=600, help="frames for the blend-solver comparison")
 
 
@@ -89,7 +90,8 @@ def run_bench(args) -> dict:
         size = path.stat().st_size
         db = load_gesture_db(path)
     t0 = time.perf_counter()
-    synth = GestureSynth(db, seed=args.seed, normaliser=SpeakerNormaliser(*stats, rate=0.0))
+    extra = {} if args.sigma is None else {"sigma": args.sigma}
+    synth = GestureSynth(db, seed=args.seed, normaliser=SpeakerNormaliser(*stats, rate=0.0), **extra)
     index_s = time.perf_counter() - t0
     held = level[cut:]
     reps = max(1, int(np.ceil(1800 / len(held))))  # ~1 minute of speech: the held-out part, repeated
