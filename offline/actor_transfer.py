@@ -130,7 +130,7 @@ def training_pairs(actor: Actor, n_random: int = 400, levels: int = 8, seed: int
     """
     rng = np.random.default_rng(seed)
     k = actor.n_actuations
-    hi = np.maximum(actor.s_upper.astype(np.float64), 0.0)
+    hi = np.clip(actor.s_upper.astype(np.float64), 0.0, 1.0)      # s = 1: a strong actuation
     alone = [np.eye(k)[j] * hi[j] * t for j in range(k) for t in np.linspace(0, 1, levels + 1)[1:]]
     mixes = rng.uniform(0, 1, (n_random, k)) * (rng.uniform(size=(n_random, k)) < 3.0 / k) * hi
     s = np.vstack([np.zeros(k), np.asarray(alone), mixes])
@@ -140,7 +140,7 @@ def training_pairs(actor: Actor, n_random: int = 400, levels: int = 8, seed: int
 
 
 def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = None, disp: np.ndarray | None = None,
-                   override: dict[int, int] | None = None, max_frames: int = 600, ridge: float = 1e-3) -> ActorPair:
+                   override: dict[int, int] | None = None, max_frames: int = 600, ridge: float = 1e-4) -> ActorPair:
     """Cubic tables s -> character weights from the actor's training frames.
 
     Parameters

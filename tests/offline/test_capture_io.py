@@ -1,0 +1,89 @@
+"""Capture readers and writers: round trips, gaps, units, malformed files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import need_shared
+from facepuppet.offline.capture_io import (Capture, CaptureError, fill_gaps, read_capture, write_c3d, write_csv,
+                                           write_trc)
+
+
+def _capture(units="mm") -> Capture:
+    rng = np.random.default_rng(3)
+    m = rng.normal(size=(30, 5, 3)).astype(np.float32) * 10
+    m[4:7, 1] = np.nan          # short gap: filled on read
+    m[10:25, 2] = np.nan        # long gap: reported
+    return Capture(m, ("a", "b", "c_long", "d", "e"), 120.0, units)
+
+
+@pytest.mark.parametrize("writer", [write_trc, write_c3d, write_csv])
+def test_round_trip_keeps_markers_names_rate_units_and_gaps(tmp_path, writer):
+    cap = _capture("mm")
+    path = writer(tmp_path / f"take.{writer.__name__[6:]}", cap)
+    back = read_capture(path, max_gap=5)
+    assert back.names == cap.names and back.rate == pytest.approx(120.0) and back.units == "mm"
+    present = ~np.isnan(cap.markers)
+    np.testing.assert_allclose(back.markers[present], cap.markers[present], atol=1e-5)
+    assert back.gaps == (("c_long", 10, 15),) and back.filled == 3
+    # the short gap is a straight line between its neighbours
+    np.testing.assert_allclose(back.markers[5, 1], (cap.markers[3, 1] + cap.markers[7, 1]) / 2, atol=1e-4)
+
+
+def test_fill_gaps_leaves_edges_and_long_gaps():
+    m = np.zeros((10, 1, 3), np.float32)
+    m[:, 0, 0] = np.arange(10)
+    m[0, 0] = np.nan
+    m[4:6, 0] = np.nan
+    filled, gaps, n = fill_gaps(m, ["x"], max_gap=2)
+    assert n == 2 and gaps == [("x", 0, 1)]
+    np.testing.assert_allclose(filled[4:6, 0, 0], [4, 5])
+
+
+def test_malformed_trc_line_is_named(tmp_path):
+    path = write_trc(tmp_path / "bad.trc", _capture())
+    lines = path.read_text().splitlines()
+    cells = lines[8].split("\t")
+    cells[4] = "1.2.3"
+    lines[8] = "\t".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(CaptureError, match=r"bad\.trc: line 9, field 5: expected a number, found '1\.2\.3'"):
+        read_capture(path)
+
+
+def test_trc_units_and_marker_count_checked(tmp_path):
+    path = write_trc(tmp_path / "u.trc", _capture())
+    text = path.read_text().splitlines()
+    text[2] = text[2].replace("\tmm\t", "\tinches\t")
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(CaptureError, match="units must be one of"):
+        read_capture(path)
+
+
+def test_nan_only_marker_is_refused(tmp_path):
+    cap = _capture()
+    m = np.array(cap.markers)
+    m[:, 3] = np.nan
+    path = write_csv(tmp_path / "empty.csv", Capture(m, cap.names, 120.0, "mm"))
+    with pytest.raises(CaptureError, match=r"marker 'd': has no sample in any frame"):
+        read_capture(path)
+
+
+def test_csv_without_units_and_damaged_c3d(tmp_path):
+    path = tmp_path / "nounits.csv"
+    path.write_text("frame,time,a_x,a_y,a_z\n1,0.0,1,2,3\n")
+    with pytest.raises(CaptureError, match="no '# units: cm' line"):
+        read_capture(path)
+    bad = tmp_path / "bad.c3d"
+    bad.write_bytes(b"\x02P" + b"\x00" * 100)
+    with pytest.raises(CaptureError, match=r"bad\.c3d: file: not a readable C3D file"):
+        read_capture(bad)
+
+
+def test_real_takes_trc_and_c3d_agree():
+    trc = read_capture(need_shared("markers", "animface_jaw.trc"))
+    c3d = read_capture(need_shared("markers", "animface_jaw.c3d"))
+    assert trc.markers.shape == (1590, 41, 3) and trc.units == c3d.units == "cm" and trc.rate == 60.0
+    assert trc.names == c3d.names and trc.names[0] == "ForeHead_M"
+    np.testing.assert_allclose(trc.markers, c3d.markers, atol=1e-5)
