@@ -199,7 +199,7 @@ def format_table(rows: list[dict], units: str = "", reference: str = REFERENCE) 
     methods = list(dict.fromkeys(r["method"] for r in rows))
     errs = {(r["target"], r["method"]): r["e_d"] for r in rows}
     imp = improvements(rows, reference)
-    width = max(16, *(len(t) + 2 for t in targets))
+    width = max(20, *(len(t) + 2 for t in targets))
     lines = [f"cyclic error e_d ({units}); in brackets: improvement of {reference} over the method",
              f"{'method':<20}" + "".join(f"{t:>{width}}" for t in targets)]
     for m in methods:
