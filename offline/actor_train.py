@@ -37,11 +37,13 @@ class ActorModel:
     handover_power : float, sharpness of the hand-over between classes
     random_state : int, FastICA seed
     report_ks : tuple of int, the K values of the reconstruction report
+    threads : int or None, BLAS threads during the fit (default 1: these matrices are small, and
+        threaded BLAS on them is slower, badly so on a busy machine); None leaves BLAS alone
     """
 
     def __init__(self, k: int = 13, head_markers: Sequence[str] | None = None, neutral_frame: int | None = None,
                  bandwidth: float = 0.5, handover_power: float = 4.0, random_state: int = 0,
-                 report_ks: tuple[int, ...] = (1, 2, 4, 8, 13, 20, 30)):
+                 report_ks: tuple[int, ...] = (1, 2, 4, 8, 13, 20, 30), threads: int | None = 1):
         self.k = k
         self.head_markers = head_markers
         self.neutral_frame = neutral_frame
@@ -49,9 +51,18 @@ class ActorModel:
         self.handover_power = handover_power
         self.random_state = random_state
         self.report_ks = report_ks
+        self.threads = threads
 
     def fit(self, capture: Capture, progress: Progress | None = None) -> "ActorModel":
         """Learn the actor from ``capture`` (any units; head motion is removed first)."""
+        if self.threads is None:
+            return self._fit(capture, progress)
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=self.threads, user_api="blas"):
+            return self._fit(capture, progress)
+
+    def _fit(self, capture: Capture, progress: Progress | None) -> "ActorModel":
         say = progress or (lambda stage, fraction, message: None)
         if not isinstance(capture, Capture):
             raise TypeError(f"ActorModel.fit: expected a Capture, got {type(capture).__name__}")
