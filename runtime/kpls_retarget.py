@@ -11,8 +11,9 @@ nothing but NumPy and evaluates eq. 10 for one frame:
 Symbols and names: F ``source_features``; X ``train_inputs``; B (the paper's
 U (TᵀKU)⁻¹TᵀY) ``dual_coef``; k̄ ``kernel_col_mean``; k̿
 ``kernel_grand_mean``; ȳ ``target_mean``. The centring is folded into two
-constant vectors when loaded, so a frame costs one (n, d) matrix-vector
-product, one exp (rbf), one (n,) @ (n, m) product and a few vector ops.
+constant vectors when loaded, so a frame costs one (n, n_source) matrix-vector
+product, one exp (rbf), one (n,) @ (n, m) product and a few vector ops; the feature
+matrix F is folded into the training inputs (X F) when loaded, so weights go in directly.
 
 The stage implements the frame loop's ``Retarget`` protocol: ``target_names``
 (the target character's shapes in order) and ``apply(frame) -> weights``.
@@ -109,6 +110,10 @@ class KplsRetarget:
         set_(self, "_offset", c.astype(np.float32))
         set_(self, "_train_sq", (self.train_inputs.astype(np.float64) ** 2).sum(1).astype(np.float32))
         set_(self, "_code", KERNEL_CODES[self.kernel])
+        # x = F w folded into the training side: X x = (X F) w and ‖x‖² = wᵀ (FᵀF) w
+        F64 = self.source_features.astype(np.float64)
+        set_(self, "_train_by_source", (self.train_inputs.astype(np.float64) @ F64).astype(np.float32))
+        set_(self, "_source_gram", (F64.T @ F64).astype(np.float32))
         set_(self, "_maps", {})
 
     # -- tables ------------------------------------------------------------
@@ -160,28 +165,31 @@ class KplsRetarget:
     # -- per frame ---------------------------------------------------------
     def predict_features(self, x: np.ndarray) -> np.ndarray:
         """Target weights (n_target,) float32 from source feature displacements x (n_features,)."""
-        X = self.train_inputs
+        x = np.asarray(x, np.float32)
+        return self._predict(self.train_inputs @ x, float(x @ x))
+
+    def predict_weights(self, source_weights: np.ndarray) -> np.ndarray:
+        """Target weights (n_target,) float32 from source-character weights (n_source,)."""
+        w = np.asarray(source_weights, np.float32)
+        return self._predict(self._train_by_source @ w, float(w @ self._source_gram @ w))
+
+    def _predict(self, k: np.ndarray, x_sq: float) -> np.ndarray:
+        """Eq. 10 from the inner products k_i = X_i·x (modified in place) and ‖x‖²."""
         if self._code == 1:  # rbf: exp(−γ (‖x‖² + ‖X_i‖² − 2 X_i·x))
-            k = X @ x
             k *= -2.0
             k += self._train_sq
-            k += float(x @ x)
+            k += x_sq
             np.maximum(k, 0.0, out=k)
             k *= -self.gamma
             np.exp(k, out=k)
-        elif self._code == 2:
-            k = (X @ x) * self.gamma + self.coef0
+        elif self._code == 2:  # poly: (γ X_i·x + coef0)^degree
+            k *= self.gamma
+            k += self.coef0
             k **= self.degree
-        else:
-            k = X @ x
         y = k @ self.dual_coef  # Ouzounis eq. 10, one kernel row
         y -= k.mean() * self._coef_sum  # Ouzounis eq. 8, centring of the test row
         y += self._offset
         return y
-
-    def predict_weights(self, source_weights: np.ndarray) -> np.ndarray:
-        """Target weights (n_target,) float32 from source-character weights (n_source,)."""
-        return self.predict_features(self.source_features @ np.asarray(source_weights, np.float32))
 
     def source_map(self, channels: tuple[str, ...]) -> ChannelMap:
         """The cached map from a frame's channel names onto the source character's shapes."""
