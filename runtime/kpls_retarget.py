@@ -191,15 +191,32 @@ class KplsRetarget:
         y += self._offset
         return y
 
+    def _folded(self, channels: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """(X F M, Mᵀ FᵀF M) for a channel tuple, M its :class:`ChannelMap` matrix; cached."""
+        folded = self._maps.get(channels)
+        if folded is None:
+            M = self.source_map(channels).matrix.astype(np.float64)
+            folded = self._maps[channels] = (
+                (self._train_by_source.astype(np.float64) @ M).astype(np.float32),
+                (M.T @ self._source_gram.astype(np.float64) @ M).astype(np.float32),
+            )
+        return folded
+
     def source_map(self, channels: tuple[str, ...]) -> ChannelMap:
-        """The cached map from a frame's channel names onto the source character's shapes."""
-        cmap = self._maps.get(channels)
-        if cmap is None:
-            cmap = self._maps[channels] = ChannelMap.build(channels, self.source_names)
-        return cmap
+        """The map from a frame's channel names onto the source character's shapes."""
+        return ChannelMap.build(channels, self.source_names)
 
     def apply(self, frame: Frame) -> np.ndarray | None:
-        """Target weights (n_target,) float32 for a frame with weights; None for a frame without."""
+        """Target weights (n_target,) float32 for a frame with weights; None for a frame without.
+
+        Channels are matched to the source shapes by name (NaN, a missing
+        weight, counts as 0), with the channel map folded into the kernel's
+        input product once per distinct channel tuple.
+        """
         if frame.weights is None:
             return None
-        return self.predict_weights(self.source_map(frame.channels).apply(frame.weights))
+        by_channel, gram = self._folded(frame.channels)
+        v = frame.weights
+        if np.isnan(v).any():
+            v = np.where(np.isnan(v), np.float32(0.0), v)
+        return self._predict(by_channel @ v, float(v @ gram @ v))
