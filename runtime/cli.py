@@ -20,6 +20,7 @@ from .tables import TablesError
 # exists but fails to import raises.
 _COMMAND_MODULES = (
     "run",
+    "manipulate",
     "demo",
     "replay",
     "contact_sheet",
