@@ -114,8 +114,11 @@ def class_axes(disp: np.ndarray, bandwidth: float = DEFAULT_BANDWIDTH, peak_orde
         dirs = disp[peaks, i] / mag[peaks, i, None]             # peak directions on the unit sphere
         if method == "sklearn":
             from sklearn.cluster import MeanShift
+            from threadpoolctl import threadpool_limits
 
-            labels = MeanShift(bandwidth=bandwidth).fit(dirs).labels_
+            # one thread: on a few dozen points the thread pools' start-up costs ~0.5 s a call on a busy machine
+            with threadpool_limits(limits=1):
+                labels = MeanShift(bandwidth=bandwidth).fit(dirs).labels_
         else:
             labels = mean_shift(dirs, bandwidth)[1]
         for label in np.unique(labels):

@@ -96,11 +96,13 @@ def test_numpy_mean_shift_matches_scikit_learn():
 def test_class_axes_sklearn_and_numpy_agree(trained):
     """The vectorised mean-shift finds the same classes as scikit-learn's on almost every marker."""
     cap, truth, model = trained
-    disp = model.stabilised_.markers[:600] - model.actor_.neutral
+    # every other marker (2 head, 18 moving) of 600 frames: the same take, half the mean-shift calls
+    disp = (model.stabilised_.markers[:600] - model.actor_.neutral)[:, ::2]
     a1, m1 = class_axes(disp)
     a2, m2 = class_axes(disp, method="sklearn")
     markers = np.union1d(m1, m2)
     same = [i for i in markers if (m1 == i).sum() == (m2 == i).sum()]
+    assert len(markers) >= 12 and len(a1) >= len(markers) + 5          # several markers with several classes
     assert len(same) >= 0.8 * len(markers), (len(same), len(markers))
     for i in same:
         d = np.abs(a1[m1 == i] @ a2[m2 == i].T)
