@@ -27,6 +27,7 @@ from facepuppet.runtime.elastic import ElasticModel, no_muscles
 
 from .elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
 from .muscles import default_muscles, muscle_sections
+from .rigid_parts import rigid_labels
 
 MOVED_FRACTION = 0.01
 
@@ -109,10 +110,14 @@ def target_fixed_mask(vertices, points, fixed_ratio):
 
 
 def build_model(vertices, triangles, points, params, shape_names, *, k=DEFAULT_K,
-                fixed_ratio=DEFAULT_FIXED_RATIO, units="cm", with_muscles=True, basis=None, metrics=None):
+                fixed_ratio=DEFAULT_FIXED_RATIO, units="cm", with_muscles=True, basis=None, metrics=None,
+                deltas=None):
     """An ElasticModel from a mesh, its control points and expression parameters (n_shapes, n_c, 3).
 
-    Returns (model, basis); ``basis`` may be passed in when already fitted.
+    Handle-free pieces below the mouth (lower teeth, tongue) become the rigid
+    jaw part (:mod:`.rigid_parts`), chosen from ``deltas`` (n_shapes, n, 3)
+    when given, else by the inner-lip midline. Returns (model, basis);
+    ``basis`` may be passed in when already fitted.
     """
     v = np.asarray(vertices, np.float64)
     if basis is None:
@@ -120,6 +125,7 @@ def build_model(vertices, triangles, points, params, shape_names, *, k=DEFAULT_K
                                       points.names)
     positions = v[points.vertices]
     muscles = default_muscles(positions, points) if with_muscles else []
+    labels, anchors = rigid_labels(v, points, basis.detached_mask_, params, deltas)
     arrays = {
         "basis_indices": basis.compact_indices_,
         "basis_weights": basis.compact_weights_,
@@ -128,6 +134,8 @@ def build_model(vertices, triangles, points, params, shape_names, *, k=DEFAULT_K
         "control_positions": positions.astype(np.float32),
         "params": np.asarray(params, np.float32).reshape(len(shape_names), len(points.names), 3),
         **(muscle_sections(muscles, positions) if muscles else no_muscles(len(points.names))),
+        "rigid_labels": labels,
+        "rigid_anchors": anchors,
     }
     model = ElasticModel(
         arrays=arrays, shape_names=tuple(shape_names), control_names=tuple(points.names),
@@ -174,5 +182,22 @@ def fit_character(character, points, *, k=DEFAULT_K, fixed_ratio=DEFAULT_FIXED_R
     }
     model, _ = build_model(v, character.triangles, points, compact.params_, character.shape_names, k=k,
                            fixed_ratio=fixed_ratio, units=character.units, with_muscles=with_muscles,
-                           basis=basis, metrics={k_: report[k_] for k_ in report if k_ != "shapes"})
+                           basis=basis, metrics={k_: report[k_] for k_ in report if k_ != "shapes"}, deltas=deltas)
+    report.update(rigid_report(model, character, deltas))
+    model.metadata["metrics"].update({k_: report[k_] for k_ in ("rigid_vertices", "rigid_jaw_open_cm")})
     return model, basis, report
+
+
+def rigid_report(model, character, deltas) -> dict:
+    """Rigid-part size and, where the character has ``jawOpen``, the RMS error (cm) of the rigid
+    vertices there: with the rigid jaw and as if held fixed."""
+    on = model.arrays["rigid_labels"] >= 0
+    out = {"rigid_vertices": int(on.sum()), "rigid_jaw_open_cm": None, "rigid_jaw_open_fixed_cm": None}
+    if on.any() and "jawOpen" in character.shape_names:
+        s = character.shape_names.index("jawOpen")
+        rest = character.vertices
+        pos, _ = model.deform(model.arrays["params"][s], rest, np.tile([0, 0, 1.0], (len(rest), 1)))
+        err = np.linalg.norm(pos[on] - rest[on] - deltas[s][on], axis=1)
+        out["rigid_jaw_open_cm"] = float(np.sqrt(np.mean(err**2)))
+        out["rigid_jaw_open_fixed_cm"] = float(np.sqrt(np.mean((deltas[s][on] ** 2).sum(1))))
+    return out

@@ -9,6 +9,11 @@ displacements per unit contraction. Per frame:
     U = Σ_s w_s P_s + Σ_m c_m Q_m          (eq. 7 blending; muscles, §6)
     x_v = x0_v + Σ_j b_vj u_{i_vj}        (eq. 5, k terms)
     n_v ≈ n0_v - Σ_j g_vj (n0_v · u_{i_vj})  (first-order normal change)
+    x_v = R_p x0_v + t_p, n_v = R_p n0_v      (vertex of rigid part p, e.g. the lower teeth)
+
+Rigid parts (optional sections): handle-free pieces that follow a rigid
+transform (R_p, t_p) fitted per frame (Kabsch) to the displaced anchor
+controls of part p, e.g. the lower teeth and tongue to the chin and jaw.
 
 Symbols → code names: P_s ``params[s]``, Q_m ``muscle_params[m]``,
 w ``weights``, c ``contractions``, b ``basis_weights``, i ``basis_indices``,
@@ -24,6 +29,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .rigid import kabsch
 from .tables import Section, TableSchema, TablesError, _check_channels, _resolve_dims, load_tables, register_schema, save_tables
 
 MUSCLE_KINDS = {"linear": 0, "sphincter": 1}
@@ -42,6 +48,9 @@ ELASTIC_SCHEMA = register_schema(
             "muscle_kinds": Section("uint8", ("n_muscles",), "0 linear, 1 sphincter"),
             "muscle_points": Section("float32", ("n_muscles", 2, 3), "linear: attachment, insertion; sphincter: centre, (lx, ly, 0)"),
             "muscle_ranges": Section("float32", ("n_muscles", 4), "linear: Rs, Rf, Ω (rad), strength; sphincter: lx, ly, strength, 0"),
+            "rigid_labels": Section("int16", ("n_vertices",), "rigid part of each vertex, -1 for none", optional=True),
+            "rigid_anchors": Section("uint8", ("n_rigid", "n_controls"), "controls each part's transform is fitted to",
+                                     optional=True),
         },
         channels=("shapes", "controls", "muscles"),
         channel_dims={"shapes": "n_shapes", "controls": "n_controls", "muscles": "n_muscles"},
@@ -76,6 +85,14 @@ class ElasticModel:
                 raise TablesError(None, name, "contains NaN or infinity")
         if dims["n_controls"] and int(self.arrays["basis_indices"].max(initial=0)) >= dims["n_controls"]:
             raise TablesError(None, "basis_indices", f"control index out of range for {dims['n_controls']} controls")
+        if ("rigid_labels" in self.arrays) != ("rigid_anchors" in self.arrays):
+            raise TablesError(None, "rigid_labels", "rigid_labels and rigid_anchors come together")
+        if "rigid_labels" in self.arrays:
+            labels, anchors = self.arrays["rigid_labels"], self.arrays["rigid_anchors"]
+            if len(labels) and not (-1 <= labels.min() and labels.max() < len(anchors)):
+                raise TablesError(None, "rigid_labels", f"part index out of range -1..{len(anchors) - 1}")
+            if len(anchors) and (anchors.sum(axis=1) < 3).any():
+                raise TablesError(None, "rigid_anchors", "each rigid part needs at least 3 anchor controls")
 
     def _channels(self) -> dict:
         return {"shapes": list(self.shape_names), "controls": list(self.control_names), "muscles": list(self.muscle_names)}
@@ -92,6 +109,10 @@ class ElasticModel:
     @property
     def n_controls(self) -> int:
         return len(self.control_names)
+
+    @property
+    def n_rigid(self) -> int:
+        return len(self.arrays["rigid_anchors"]) if "rigid_anchors" in self.arrays else 0
 
     @property
     def channel_names(self) -> tuple:
@@ -121,6 +142,17 @@ class ElasticModel:
             raise ValueError(f"values: expected shape ({len(self.channel_names)},) (shapes then muscles), got {v.shape}")
         return self.blend(v[:n_s]) + self.contract(v[n_s:])
 
+    def rigid_transforms(self, controls) -> np.ndarray:
+        """Per rigid part, [R | t] fitted (Kabsch) to its displaced anchor controls, (n_rigid, 3, 4) float32."""
+        u = np.asarray(controls, np.float32)
+        out = np.zeros((self.n_rigid, 3, 4), np.float32)
+        rest = self.arrays["control_positions"]
+        for p, anchors in enumerate(self.arrays.get("rigid_anchors", ())):
+            a = anchors.astype(bool)
+            r, t = kabsch(rest[a] + u[a], rest[a])  # x' = R x + t moves the rest anchors onto the displaced ones
+            out[p, :, :3], out[p, :, 3] = r, t
+        return out
+
     def deform(self, controls, rest_positions, rest_normals) -> tuple[np.ndarray, np.ndarray]:
         """CPU reference of the vertex shader: positions and unit normals, (n, 3) float32 each."""
         u = np.asarray(controls, np.float32)
@@ -133,6 +165,13 @@ class ElasticModel:
         positions = np.asarray(rest_positions, np.float32) + np.einsum("vk,vkc->vc", a["basis_weights"], picked)  # eq. 5
         along = np.einsum("vc,vkc->vk", n0, picked)
         normals = n0 - np.einsum("vk,vkc->vc", along, a["basis_gradients"])
+        if self.n_rigid:
+            labels = a["rigid_labels"]
+            x0 = np.asarray(rest_positions, np.float32)
+            for p, m in enumerate(self.rigid_transforms(u)):
+                on = labels == p
+                positions[on] = x0[on] @ m[:, :3].T + m[:, 3]
+                normals[on] = n0[on] @ m[:, :3].T
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         return positions.astype(np.float32), normals.astype(np.float32)
 

@@ -2,7 +2,8 @@
 
 The compact basis (k control indices, weights and normal gradients per
 vertex) lives in two float textures made once; per frame only the control
-displacements, n_controls × 3 floats, are uploaded as a uniform array and
+displacements, n_controls × 3 floats, are uploaded as a uniform array (and,
+for rigid parts such as the lower teeth, one 3 × 4 transform per part) and
 ``shaders/elastic.glsl`` does the rest (Yano & Harada eq. 5).
 """
 
@@ -26,11 +27,13 @@ def elastic_defines(model: ElasticModel) -> dict:
         "K": model.k,
         "N_CONTROLS": max(1, model.n_controls),
         "ELASTIC_TEXTURE_WIDTH": ELASTIC_TEXTURE_WIDTH,
+        "N_RIGID": model.n_rigid,
     }
 
 
 def basis_textures(ctx: moderngl.Context, model: ElasticModel) -> list:
-    """[basis (RGBA32F: gradient xyz, weight), index (R32F)], texel vertex * k + j."""
+    """[basis (RGBA32F: gradient xyz, weight), index (R32F)], texel vertex * k + j;
+    then, with rigid parts, [part + 1 (R32F, 0 for none)], texel vertex."""
     a = model.arrays
     count = model.n_vertices * model.k
     rows = max(1, -(-count // ELASTIC_TEXTURE_WIDTH))
@@ -43,6 +46,11 @@ def basis_textures(ctx: moderngl.Context, model: ElasticModel) -> list:
         ctx.texture((ELASTIC_TEXTURE_WIDTH, rows), 4, basis.tobytes(), dtype="f4"),
         ctx.texture((ELASTIC_TEXTURE_WIDTH, rows), 1, index.tobytes(), dtype="f4"),
     ]
+    if model.n_rigid:
+        label_rows = max(1, -(-model.n_vertices // ELASTIC_TEXTURE_WIDTH))
+        labels = np.zeros(label_rows * ELASTIC_TEXTURE_WIDTH, np.float32)
+        labels[: model.n_vertices] = a["rigid_labels"].astype(np.float32) + 1.0
+        textures.append(ctx.texture((ELASTIC_TEXTURE_WIDTH, label_rows), 1, labels.tobytes(), dtype="f4"))
     for tex in textures:
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
     return textures
@@ -71,6 +79,8 @@ def setup_elastic(ctx: moderngl.Context, character: Character, model: ElasticMod
     vbo = ctx.buffer(rest.tobytes())
     prog["u_basis"].value = 0
     prog["u_basis_index"].value = 1
+    if model.n_rigid:
+        prog["u_rigid_label"].value = 2
     return {"prog": prog, "vao": make_vao(prog, vbo), "vbo": vbo, "textures": basis_textures(ctx, model), "model": model}
 
 
@@ -82,3 +92,5 @@ def upload_controls(state: dict, controls) -> None:
         raise ValueError(f"controls: expected shape ({model.n_controls}, 3), got {u.shape}")
     if model.n_controls:
         state["prog"]["u_controls"].write(u.tobytes())
+    if model.n_rigid:  # rows of [R | t] per rigid part, fitted to the anchors on the CPU
+        state["prog"]["u_rigid"].write(np.ascontiguousarray(model.rigid_transforms(u)).tobytes())
