@@ -19,6 +19,7 @@ from .control_points import (
 from .elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K
 from .elastic_params import build_model, fit_character
 from .laplacian import components
+from .lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
 
 
 # Anchor groups (control_points.ANCHOR_NAMES) by control-point name.
@@ -104,6 +105,10 @@ def _fit(args: argparse.Namespace) -> int:
 def _clone(args: argparse.Namespace) -> int:
     source = ElasticModel.load(args.elastic)
     target = load_target(str(args.target))
+    slit = None
+    if target.n_vertices == 468 and args.target.suffix.lower() == ".obj":  # the MediaPipe face: open its lip line
+        slit = MEDIAPIPE_INNER_LIPS
+        target = mesh_character(target.vertices, cut_lip_line(target.triangles, *slit), target.name, target.units)
     names = tuple(source.control_names)
     src_points = ControlPoints(names, source.arrays["control_vertices"])
     if args.correspondences and args.correspondences.exists():
@@ -119,6 +124,7 @@ def _clone(args: argparse.Namespace) -> int:
         src_anchor = np.stack([src_pos[[src_points.index(n) for n in POINT_ANCHORS[a]]].mean(0) for a in ANCHOR_NAMES])
         points = propose_control_points(src_pos, src_anchor, target.vertices, anchor_positions(target.vertices, anchors),
                                         main_front(target), names)
+        points = fix_inner_lips(points, target.vertices, target.triangles, main_front(target), slit)
         if args.correspondences:
             write_control_points(args.correspondences, points)
             print(f"{args.correspondences}: proposed correspondences written (check them)")

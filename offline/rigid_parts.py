@@ -65,12 +65,12 @@ def rigid_labels(vertices, points: ControlPoints, detached_mask, params=None, de
 
     Returns
     -------
-    labels : ndarray of shape (n,), int16, part index or -1 (elastic or fixed)
+    labels : ndarray of shape (n,), int32, part index or -1 (elastic or fixed)
     anchors : ndarray of shape (n_parts, n_c), uint8, 1 for the controls a part's transform is fitted to
     """
     v = np.asarray(vertices, np.float64)
     detached = np.asarray(detached_mask, bool)
-    labels = np.full(len(v), -1, np.int16)
+    labels = np.full(len(v), -1, np.int32)
     mask = jaw_anchor_mask(points)
     if mask is None or not detached.any():
         return labels, np.zeros((0, len(points.names)), np.uint8)

@@ -48,7 +48,7 @@ ELASTIC_SCHEMA = register_schema(
             "muscle_kinds": Section("uint8", ("n_muscles",), "0 linear, 1 sphincter"),
             "muscle_points": Section("float32", ("n_muscles", 2, 3), "linear: attachment, insertion; sphincter: centre, (lx, ly, 0)"),
             "muscle_ranges": Section("float32", ("n_muscles", 4), "linear: Rs, Rf, Ω (rad), strength; sphincter: lx, ly, strength, 0"),
-            "rigid_labels": Section("int16", ("n_vertices",), "rigid part of each vertex, -1 for none", optional=True),
+            "rigid_labels": Section("int32", ("n_vertices",), "rigid part of each vertex, -1 for none", optional=True),
             "rigid_anchors": Section("uint8", ("n_rigid", "n_controls"), "controls each part's transform is fitted to",
                                      optional=True),
         },

@@ -113,7 +113,7 @@ def rigid_model(character, seed=1) -> ElasticModel:
     arrays = dict(model.arrays)
     upper = character.vertices[:, 1] > 0
     arrays["basis_weights"] = np.where(upper[:, None], 0, arrays["basis_weights"]).astype(np.float32)
-    arrays["rigid_labels"] = np.where(upper, 0, -1).astype(np.int16)
+    arrays["rigid_labels"] = np.where(upper, 0, -1).astype(np.int32)
     arrays["rigid_anchors"] = np.array([[1, 1, 1, 1, 0, 0]], np.uint8)
     arrays["control_positions"] = np.random.default_rng(seed).uniform(-1, 1, (6, 3)).astype(np.float32)
     return ElasticModel(arrays, model.shape_names, model.control_names)
