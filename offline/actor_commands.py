@@ -34,6 +34,8 @@ def register(subparsers) -> None:
     r.add_argument("-o", "--output", type=Path, required=True, help="actor-pair table to write (.npz)")
     r.add_argument("--markers-to-mesh", type=Path, metavar="OVERRIDE.json",
                    help='JSON {"marker name": vertex index} overriding the nearest-vertex choice')
+    r.add_argument("--pictures", type=Path, metavar="DIR",
+                   help="write face_actuations.png (the K actuations at s=1 on the character's face) here")
     r.set_defaults(func=_retarget_actor)
 
 
@@ -90,4 +92,9 @@ def _retarget_actor(args: argparse.Namespace) -> int:
           f"{m['overrides']} overrides\n"
           f"  weights fit: {m['frames']} parameter-shape pairs, marker RMS {m['marker_fit_rms']:.3f} "
           f"{character.units}, cubic weight RMS {m['weight_fit_rms']:.3f}")
+    if args.pictures:
+        from .actor_pictures import face_actuation_sheet
+
+        args.pictures.mkdir(parents=True, exist_ok=True)
+        print(f"pictures: {face_actuation_sheet(pair, character, args.pictures / 'face_actuations.png')}")
     return 0

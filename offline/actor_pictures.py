@@ -75,3 +75,65 @@ def signal_plot(s: np.ndarray, rate: float, path: str | os.PathLike, width: int 
     path = Path(path)
     img.save(path, format="PNG")
     return path
+
+
+def face_actuation_images(pair, character, ctx, size: tuple[int, int] = (320, 320), strength: float = 1.0,
+                          path: str = "auto") -> list[tuple[str, np.ndarray]]:
+    """Each actuation at s = ``strength`` e_k, transferred to ``character`` through ``pair`` and rendered.
+
+    Parameters
+    ----------
+    pair : ActorPair, for ``character``
+    character : Character
+    ctx : moderngl.Context (a standalone EGL context will do)
+    size : (width, height), pixels of each cell
+
+    Returns [(label, ndarray of shape (height, width, 3), uint8)], the neutral first; each label names
+    the actuation and its two largest weights.
+    """
+    from facepuppet.runtime.renderer import FaceRenderer
+
+    k = pair.cubic.shape[1]
+    zoom = 2                                      # render larger, then crop to the marked region of the face
+    renderer = FaceRenderer(ctx, character, size[0] * zoom, size[1] * zoom, path=path, framing="face",
+                            log=lambda line: None)
+    box = _marker_box(renderer.project(character.vertices[pair.marker_vertices]), renderer.width,
+                      renderer.height, size[0] / size[1])
+    try:
+        out = []
+        for j in range(-1, k):
+            s = np.zeros(k) if j < 0 else np.eye(k)[j] * strength
+            w = pair.weights(s)
+            renderer.draw(w)
+            renderer.finish()
+            top = [i for i in np.argsort(-w)[:2] if w[i] > 0.05]
+            names = ", ".join(f"{character.shape_names[i]} {w[i]:.2f}" for i in top) or "no weight > 0.05"
+            cell = Image.fromarray(renderer.read_pixels()).crop(box).resize(size, Image.LANCZOS)
+            out.append(("neutral" if j < 0 else f"s{j + 1:02d}={strength:g}: {names}", np.asarray(cell)))
+    finally:
+        renderer.close()
+    return out
+
+
+def _marker_box(pixels: np.ndarray, width: int, height: int, aspect: float, margin: float = 0.25):
+    """(left, top, right, bottom) pixels: the markers' bounding box grown by ``margin``, of the given aspect."""
+    lo, hi = pixels.min(axis=0), pixels.max(axis=0)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2 * (1 + margin)
+    half = np.maximum(half, [half[1] * aspect, half[0] / aspect])
+    half = np.minimum(half, [width / 2, height / 2])
+    centre = np.clip(centre, half, [width - half[0], height - half[1]])
+    return tuple(int(round(v)) for v in (*(centre - half), *(centre + half)))
+
+
+def face_actuation_sheet(pair, character, path: str | os.PathLike, columns: int = 5, ctx=None) -> Path:
+    """Contact sheet of the neutral and the K actuations at s = 1 on the character's face; returns the PNG path."""
+    own = ctx is None
+    if own:
+        import moderngl
+
+        ctx = moderngl.create_standalone_context(backend="egl", require=330)
+    try:
+        return save_png(path, contact_sheet(face_actuation_images(pair, character, ctx), columns))
+    finally:
+        if own:
+            ctx.release()

@@ -162,6 +162,7 @@ class MarkerSolver:
     prior : float, weight of ||s||^2 (pull towards neutral where markers say nothing)
     tolerance : float, stop early when the largest step is below this (actuation units)
     cost_tolerance : float, stop early when an accepted step lowers the cost by less than this fraction
+    bounds : (lower, upper) arrays of shape (K,) within the actor's bounds, or None for the actor's
 
     The cost is in squared capture units; ``damping`` and ``prior`` are
     scaled by the mean squared column norm of the linear term, so their
@@ -169,7 +170,7 @@ class MarkerSolver:
     """
 
     def __init__(self, actor: Actor, iterations: int = 8, damping: float = 1e-3, prior: float = 1e-4,
-                 tolerance: float = 2e-3, cost_tolerance: float = 1e-2):
+                 tolerance: float = 2e-3, cost_tolerance: float = 1e-2, bounds=None):
         if not (isinstance(iterations, int) and iterations >= 1):
             raise ValueError(f"MarkerSolver iterations: expected an int >= 1, got {iterations!r}")
         self.actor = actor
@@ -181,6 +182,11 @@ class MarkerSolver:
         self._neutral = actor.neutral.astype(np.float64).ravel()
         self._lo = actor.s_lower.astype(np.float64)
         self._hi = actor.s_upper.astype(np.float64)
+        if bounds is not None:
+            lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+            if lo.shape != (k,) or hi.shape != (k,) or np.any(lo > 0) or np.any(hi < 0):
+                raise ValueError(f"MarkerSolver bounds: expected (lower, upper) of shape ({k},) around s = 0")
+            self._lo, self._hi = np.maximum(lo, self._lo), np.minimum(hi, self._hi)
         unit = float(np.mean(np.sum(self._m[2 * k:] ** 2, axis=1))) or 1.0
         self.damping = damping * unit
         self.prior = prior * unit
@@ -290,15 +296,21 @@ class MarkerSolver:
         self.last_cost = max(cost, 0.0)
         return s.copy()
 
-    def solve_constraints(self, constraints: Sequence[tuple[int, Sequence[float]]], pins: Sequence[int] = (),
-                          pin_weight: float = 10.0, iterations: int = 30) -> np.ndarray:
+    def solve_constraints(self, constraints: Sequence[tuple[int, Sequence[float]]],
+                          pins: Sequence[int] | Mapping[int, Sequence[float]] = (),
+                          pin_weight: float = 10.0, hold: float = 0.0, hold_at=None,
+                          iterations: int = 30) -> np.ndarray:
         """Direct manipulation: drag markers to targets while pinned markers stay where they are.
 
         Parameters
         ----------
         constraints : sequence of (marker_index, (x, y, z) target in head coordinates, units)
-        pins : marker indices held at their current position x_i(s_current)
+        pins : marker indices held at their current position x_i(s_current), or a mapping
+            {marker index: (x, y, z) position to hold, head coordinates, units}
         pin_weight : weight of a pin relative to a dragged point
+        hold : weight of every other marker at its current position x_i(s_current) (or at ``hold_at``):
+            with hold > 0 the face changes as little as it can while the dragged points move
+        hold_at : ndarray of shape (n_markers, 3), head coordinates, units, or None (current positions)
         iterations : LM budget for this edit
 
         Returns s (K,), float64; also kept as the warm start of the next call.
@@ -306,11 +318,18 @@ class MarkerSolver:
         n = self.actor.n_markers
         observed = np.full((n, 3), np.nan)
         weights = np.zeros(n)
+        held = pins.items() if isinstance(pins, Mapping) else [(i, None) for i in pins]
         current = self.actor.evaluate(self.s)
-        for i in pins:
+        if hold > 0:
+            observed[:] = current if hold_at is None else np.asarray(hold_at, dtype=np.float64).reshape(n, 3)
+            weights[:] = hold
+        for i, position in held:
             if not 0 <= int(i) < n:
                 raise ValueError(f"solve_constraints: pin index {i} out of range 0..{n - 1}")
-            observed[int(i)] = current[int(i)]
+            p = current[int(i)] if position is None else np.asarray(position, dtype=np.float64)
+            if p.shape != (3,) or not np.isfinite(p).all():
+                raise ValueError(f"solve_constraints: pin of marker {i} must be 3 finite numbers, got {position!r}")
+            observed[int(i)] = p
             weights[int(i)] = pin_weight
         for i, target in constraints:
             if not 0 <= int(i) < n:

@@ -91,3 +91,27 @@ def test_override_file_is_checked(tmp_path):
         read_override(path, actor.names, character.n_vertices)
     path.write_text(json.dumps({"m0": 30}))
     assert read_override(path, actor.names, character.n_vertices) == {0: 30}
+
+
+def test_retarget_actor_command_draws_the_actuations_on_the_face(tmp_path, capsys):
+    import argparse
+
+    from PIL import Image
+
+    from facepuppet.offline import actor_commands
+
+    character = grid_face()
+    actor, _ = actor_on(character)
+    parser = argparse.ArgumentParser()
+    actor_commands.register(parser.add_subparsers())
+    args = parser.parse_args(["retarget-actor", str(actor.save(tmp_path / "actor.npz")),
+                              str(character.save(tmp_path / "face.npz")), "-o", str(tmp_path / "pair.npz"),
+                              "--pictures", str(tmp_path / "pics")])
+    assert args.func(args) == 0
+    assert "face_actuations.png" in capsys.readouterr().out
+    sheet = np.asarray(Image.open(tmp_path / "pics" / "face_actuations.png").convert("RGB")).astype(int)
+    cell_w, cell_h = 320, 320 + 18                          # neutral, s01, s02 in one row, labels underneath
+    assert sheet.shape == (cell_h, 5 * cell_w, 3)                # 5 columns
+    neutral, jaw, puff = (sheet[:320, c * cell_w:(c + 1) * cell_w] for c in range(3))
+    assert np.abs(jaw - neutral).mean() > 2                 # the jaw drops visibly
+    assert np.abs(puff - neutral).max() > 3                 # the puff (towards the camera) changes the shading
