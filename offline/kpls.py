@@ -33,6 +33,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 KERNELS = ("rbf", "poly", "linear")
 
@@ -95,46 +96,48 @@ def centre_gram(K: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def nipals(Kc: np.ndarray, Yc: np.ndarray, n_components: int, tol: float = 1e-6,
-           max_iter: int = 2000) -> tuple[np.ndarray, np.ndarray]:
-    """Scores T, U of shape (n, n_components) by kernel NIPALS with Gram deflation.
+           max_iter: int = 2000, solver: str = "eigh",
+           exhausted: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
+    """Scores T, U of shape (n, p) by kernel NIPALS with Gram deflation, p <= n_components.
+
+    The inner loop of eqs. 3–7 is a power iteration: one pass maps c to
+    (Yᵀ K Y) c up to scale, so its fixed point is the dominant eigenvector of
+    the small symmetric matrix Yᵀ K Y (m × m). ``solver="eigh"`` takes that
+    fixed point directly (exact, and immune to the slow convergence of the
+    iteration when the two largest eigenvalues nearly tie); ``solver="power"``
+    iterates eqs. 3–7 as written and warns when it stops before ``tol``.
+    Components stop early (fewer than ``n_components`` columns come back) once
+    the deflated Yᵀ K Y holds less than ``exhausted`` of its first value:
+    what is left is rounding noise, whose directions are arbitrary.
 
     Parameters
     ----------
     Kc : ndarray of shape (n, n), centred Gram matrix
     Yc : ndarray of shape (n, m), centred outputs
     """
+    if solver not in ("eigh", "power"):
+        raise ValueError(f"nipals: solver must be 'eigh' or 'power', got {solver!r}")
     n = len(Kc)
     K, Y = Kc.copy(), Yc.copy()
     T = np.zeros((n, n_components))
     U = np.zeros((n, n_components))
     KY = K @ Y
+    first = None
     for a in range(n_components):
         small = Y.T @ KY  # Yᵀ K Y, (m, m): eqs. 3–7 iterate c ← Yᵀ K Y c up to scale
-        c = Y[int(np.argmax(np.abs(Y).sum(1)))].copy()  # u = Y c starts on the largest output row
-        if not np.any(c):
-            c = np.ones(Y.shape[1])
-        c /= np.linalg.norm(c)
-        for it in range(max_iter):
-            # Ouzounis eqs. 3–7 folded: t = K u / ‖K u‖ with u = Y c (eqs. 3, 4, 6), then c = Yᵀ t (eq. 5);
-            # only the direction of c matters, so one step is c ← (Yᵀ K Y) c / ‖·‖
-            c_new = small @ c
-            norm = np.linalg.norm(c_new)
-            if norm == 0.0:
-                raise ValueError(f"KernelPLS: component {a + 1} has a zero score; the Gram matrix is "
-                                 f"exhausted (use fewer components)")
-            c_new /= norm
-            done = np.linalg.norm(c_new - c) < tol
-            c = c_new
-            if done:
-                break
+        small = 0.5 * (small + small.T)
+        if solver == "eigh":
+            vals, vecs = np.linalg.eigh(small)
+            top, c = float(vals[-1]), vecs[:, -1]
         else:
-            warnings.warn(f"KernelPLS: NIPALS did not converge in {max_iter} iterations for "
-                          f"component {a + 1}", RuntimeWarning, stacklevel=3)
+            c, top = _power_iteration(small, Y, tol, max_iter, a)
+        first = top if first is None else first
+        if not first > 0 or top <= exhausted * first:
+            return T[:, :a], U[:, :a]
         t = KY @ c  # Ouzounis eq. 3: t = Φ Φᵀ u = K u, u = Y c
         norm = np.linalg.norm(t)
         if norm == 0.0:
-            raise ValueError(f"KernelPLS: component {a + 1} has a zero score; the Gram matrix is "
-                             f"exhausted (use fewer components)")
+            return T[:, :a], U[:, :a]
         t /= norm  # Ouzounis eq. 4: t ← t / ‖t‖
         c = Y.T @ t  # Ouzounis eq. 5: c = Yᵀ t
         u = Y @ c  # Ouzounis eq. 6: u = Y c
@@ -151,6 +154,31 @@ def nipals(Kc: np.ndarray, Yc: np.ndarray, n_components: int, tol: float = 1e-6,
         KY -= np.outer(Kt, tY)
         KY -= np.outer(t, t @ KY)
     return T, U
+
+
+def _power_iteration(small: np.ndarray, Y: np.ndarray, tol: float, max_iter: int,
+                     a: int) -> tuple[np.ndarray, float]:
+    """Eqs. 3–7 iterated: dominant eigenvector c of ``small`` = Yᵀ K Y and its Rayleigh quotient."""
+    c = Y[int(np.argmax(np.abs(Y).sum(1)))].copy()  # u = Y c starts on the largest output row
+    if not np.any(c):
+        c = np.ones(Y.shape[1])
+    c /= np.linalg.norm(c)
+    for _ in range(max_iter):
+        # Ouzounis eqs. 3–7 folded: t = K u / ‖K u‖ with u = Y c (eqs. 3, 4, 6), then c = Yᵀ t (eq. 5);
+        # only the direction of c matters, so one step is c ← (Yᵀ K Y) c / ‖·‖
+        c_new = small @ c
+        norm = np.linalg.norm(c_new)
+        if norm == 0.0:
+            return c, 0.0
+        c_new /= norm
+        done = np.linalg.norm(c_new - c) < tol
+        c = c_new
+        if done:
+            break
+    else:
+        warnings.warn(f"KernelPLS: NIPALS did not converge in {max_iter} iterations for "
+                      f"component {a + 1}", RuntimeWarning, stacklevel=4)
+    return c, float(c @ small @ c)
 
 
 def dual_coefficients(Kc: np.ndarray, Yc: np.ndarray, T: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -171,9 +199,13 @@ class KernelPLS:
         training inputs (rbf) or 1 / n_features (poly)
     degree : int, poly kernel degree
     coef0 : float, poly kernel offset
-    max_components : int, upper bound searched by "auto"
+    max_components : int or None, upper bound searched by "auto"; None: every
+        count the cross-validation folds allow (n_pairs − fold size − 1), less
+        once the deflated Gram matrix is exhausted
     cv_folds : int, folds for "auto"
-    tol, max_iter : NIPALS convergence settings
+    tol, max_iter : convergence settings of ``solver="power"``
+    solver : "eigh" (the NIPALS fixed point of eqs. 3–7 taken directly) or
+        "power" (eqs. 3–7 iterated), see :func:`nipals`
     random_state : int, seed of the cross-validation split
     gamma_scales : tuple of float; with "auto" components, an rbf kernel and no
         given gamma, the widths 1 / median squared distance times each scale
@@ -193,9 +225,9 @@ class KernelPLS:
     """
 
     def __init__(self, n_components="auto", kernel: str = "rbf", gamma: float | None = None,
-                 degree: int = 2, coef0: float = 1.0, max_components: int = 60, cv_folds: int = 5,
-                 tol: float = 1e-6, max_iter: int = 2000, random_state: int = 0,
-                 gamma_scales: tuple = (1.0, 0.1, 0.01)):
+                 degree: int = 2, coef0: float = 1.0, max_components: int | None = None,
+                 cv_folds: int = 5, tol: float = 1e-6, max_iter: int = 2000, random_state: int = 0,
+                 gamma_scales: tuple = (1.0, 0.1, 0.01), solver: str = "eigh"):
         self.n_components = n_components
         self.kernel = kernel
         self.gamma = gamma
@@ -207,6 +239,7 @@ class KernelPLS:
         self.max_iter = max_iter
         self.random_state = random_state
         self.gamma_scales = gamma_scales
+        self.solver = solver
 
     # -- fitting -----------------------------------------------------------
     def _check_settings(self, n: int) -> None:
@@ -258,42 +291,57 @@ class KernelPLS:
         K = self._gram(X, X)
         Kc, self.kernel_col_mean_, self.kernel_grand_mean_ = centre_gram(K)
         Yc = Y - self.y_mean_
-        self.x_scores_, self.y_scores_ = nipals(Kc, Yc, p, self.tol, self.max_iter)
+        T, U = nipals(Kc, Yc, p, self.tol, self.max_iter, self.solver)
+        if T.shape[1] < p:
+            raise ValueError(f"KernelPLS: too many components: the Gram matrix is exhausted after "
+                             f"{T.shape[1]} of the {p} components asked for (use fewer components)")
+        self.x_scores_, self.y_scores_ = T, U
         self.dual_coef_ = dual_coefficients(Kc, Yc, self.x_scores_, self.y_scores_)
         self.n_components_ = p
         return self
 
     def _cross_validate(self, K: np.ndarray, Y: np.ndarray) -> dict[int, float]:
-        """Mean squared error per component count over ``cv_folds`` folds (one NIPALS per fold)."""
+        """Mean squared error per component count over ``cv_folds`` folds (one NIPALS per fold).
+
+        Counts a fold could not reach (its Gram matrix exhausted earlier) get an infinite error.
+        """
         n = len(K)
         folds = np.array_split(np.random.default_rng(self.random_state).permutation(n),
                                min(self.cv_folds, n))
-        p_max = max(1, min(self.max_components, n - len(folds[0]) - 1))
+        p_max = n - len(folds[0]) - 1
+        if self.max_components is not None:
+            p_max = min(int(self.max_components), p_max)
+        p_max = max(1, p_max)
         sse = np.zeros(p_max)
         for test in folds:
             train = np.setdiff1d(np.arange(n), test)
-            Ktr = K[np.ix_(train, train)]
-            Kc, col_mean, grand = centre_gram(Ktr)
+            Kc, col_mean, grand = centre_gram(K[np.ix_(train, train)])
             y_mean = Y[train].mean(0)
             Yc = Y[train] - y_mean
             Kt = K[np.ix_(test, train)]
             Ktc = Kt - col_mean[None, :] - Kt.mean(1)[:, None] + grand
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                try:
-                    T, U = nipals(Kc, Yc, p_max, self.tol, self.max_iter)
-                except ValueError:
-                    T = U = None
-            if T is None:
+                T, U = nipals(Kc, Yc, p_max, self.tol, self.max_iter, self.solver)
+            q = T.shape[1]
+            sse[q:] = np.inf
+            if q == 0:
+                continue
+            # Tᵀ K U is upper triangular (Gram deflation, eq. 9), so the leading p × p block of its
+            # inverse is the inverse of its leading block, and eq. 10 with the first p components is
+            # a running sum: Ŷ_p = Σ_{j<p} (K_tc U R⁻¹)_{:, j} (Tᵀ Y)_j
+            R = np.triu(T.T @ Kc @ U)
+            try:
+                Rinv = solve_triangular(R, np.eye(q))
+            except (np.linalg.LinAlgError, ValueError):
                 sse[:] = np.inf
                 continue
-            TKU, TY, KtU = T.T @ Kc @ U, T.T @ Yc, Ktc @ U
-            for p in range(1, p_max + 1):
-                try:  # Ouzounis eq. 10 with the first p components
-                    pred = KtU[:, :p] @ np.linalg.solve(TKU[:p, :p], TY[:p]) + y_mean
-                    sse[p - 1] += ((pred - Y[test]) ** 2).sum()
-                except np.linalg.LinAlgError:
-                    sse[p - 1] = np.inf
+            A, TY = Ktc @ U @ Rinv, T.T @ Yc
+            pred = np.broadcast_to(y_mean, Y[test].shape).copy()
+            for p in range(q):
+                pred += np.outer(A[:, p], TY[p])  # Ouzounis eq. 10 with the first p + 1 components
+                sse[p] += ((pred - Y[test]) ** 2).sum()
+        sse[~np.isfinite(sse)] = np.inf
         return {p: float(sse[p - 1] / Y.size) for p in range(1, p_max + 1)}
 
     # -- prediction --------------------------------------------------------

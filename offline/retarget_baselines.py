@@ -1,16 +1,19 @@
 """Baseline retargeting regressors behind the :class:`~facepuppet.offline.kpls.KernelPLS` interface.
 
 Each maps source expressions X (n, n_features), here feature-point
-displacements, to target expressions Y (n, n_outputs), here blendshape
-weights, learnt from paired examples; ``fit(X, Y)`` returns self, learned
-state ends in ``_``, ``predict`` refuses to run unfitted.
+displacements, to target expressions Y (n, n_outputs) (target feature-point
+displacements or blendshape weights), learnt from paired examples;
+``fit(X, Y)`` returns self, learned state ends in ``_``, ``predict`` refuses
+to run unfitted. The spatial method of Dutreve et al. learns nothing from the
+pairs (only from the two neutral faces); it lives in :mod:`.dutreve_rbf`.
 
 ===========================  ===================================================
 class                        method
 ===========================  ===================================================
-:class:`FeaturePointRBF`     RBF interpolation over feature points (Dutreve et
-                             al.): an exact thin-plate-spline RBF network
-                             through the training pairs
+:class:`PairRBF`             scattered-data RBF interpolation over the training
+                             pairs in expression space (an exact thin-plate
+                             spline network through the pairs; not Dutreve's
+                             spatial warp, see :mod:`.dutreve_rbf`)
 :class:`LinearRetarget`      ordinary least squares (minimum-norm), the linear
                              baseline
 :class:`LinearPLS`           linear PLS (scikit-learn ``PLSRegression``)
@@ -48,8 +51,8 @@ class _Regressor:
         return self._predict(X)
 
 
-class FeaturePointRBF(_Regressor):
-    """RBF network through the training pairs on feature points (Dutreve et al.).
+class PairRBF(_Regressor):
+    """RBF network through the training pairs in expression space (x ↦ y interpolated exactly).
 
     Parameters
     ----------

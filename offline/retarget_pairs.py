@@ -153,6 +153,29 @@ class TrainingPairs:
     matched: np.ndarray
 
 
+def pair_weights(n_shapes: int, matched, n_mixes: int = 300, max_mix: int = 6, seed: int = 0) -> np.ndarray:
+    """Source weights of the training expressions, (1 + len(matched) + n_mixes, n_shapes) float64.
+
+    The neutral, each matched shape at weight 1, and ``n_mixes`` random mixes
+    of 2..``max_mix`` matched shapes with weights uniform in [0.05, 1).
+    """
+    matched = np.asarray(matched, dtype=np.int64)
+    if len(matched) < 2:
+        raise ValueError(f"pair_weights: needs at least 2 matched shapes, got {len(matched)}")
+    rng = np.random.default_rng(seed)
+    rows = [np.zeros(n_shapes)]
+    for s in matched:
+        w = np.zeros(n_shapes)
+        w[s] = 1.0
+        rows.append(w)
+    for _ in range(n_mixes):
+        w = np.zeros(n_shapes)
+        pick = rng.choice(matched, size=int(rng.integers(2, min(max_mix, len(matched)) + 1)), replace=False)
+        w[pick] = rng.uniform(0.05, 1.0, size=len(pick))
+        rows.append(w)
+    return np.stack(rows)
+
+
 def training_pairs(source, target, source_points=None, target_points=None, pairing=None,
                    n_mixes: int = 300, max_mix: int = 6, seed: int = 0, k_source: int = 45,
                    k_target: int = 37) -> TrainingPairs:
@@ -164,18 +187,7 @@ def training_pairs(source, target, source_points=None, target_points=None, pairi
     if len(matched) < 2:
         raise ValueError(f"training_pairs: only {len(matched)} shapes of {source.name!r} match a shape of "
                          f"{target.name!r}; give a pairing file")
-    rng = np.random.default_rng(seed)
-    rows = [np.zeros(source.n_shapes)]
-    for s in matched:
-        w = np.zeros(source.n_shapes)
-        w[s] = 1.0
-        rows.append(w)
-    for _ in range(n_mixes):
-        w = np.zeros(source.n_shapes)
-        pick = rng.choice(matched, size=int(rng.integers(2, max_mix + 1)), replace=False)
-        w[pick] = rng.uniform(0.05, 1.0, size=len(pick))
-        rows.append(w)
-    W = np.stack(rows)
+    W = pair_weights(source.n_shapes, matched, n_mixes, max_mix, seed)
     F = feature_matrix(source, sp)
     return TrainingPairs(X=W @ F.T, Y=W @ M.T, source_weights=W, source_features=F,
                          source_points=sp, target_points=tp, matched=matched)

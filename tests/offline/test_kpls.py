@@ -24,8 +24,37 @@ def test_rbf_kpls_recovers_a_nonlinear_map_better_than_linear_pls():
     mse_l = np.mean((PLSRegression(n_components=3, scale=False).fit(X, Y).predict(Xt) - Yt) ** 2)
     assert mse_k < 0.1 * mse_l, (mse_k, mse_l)
     assert mse_k < 0.01 * np.var(Yt)
-    assert 1 <= kpls.n_components_ <= kpls.max_components and kpls.n_components_ in kpls.cv_errors_
+    assert kpls.n_components_ in kpls.cv_errors_
     assert kpls.cv_errors_[kpls.n_components_] == min(kpls.cv_errors_.values())
+    # the search range is wide enough that the chosen count is not its upper end
+    assert 1 <= kpls.n_components_ < max(kpls.cv_errors_)
+
+
+def test_cv_running_sum_matches_a_refit_per_count():
+    X, Y = _nonlinear(60, 8)
+    m = KernelPLS(kernel="rbf", gamma=0.5, max_components=12, cv_folds=3).fit(X, Y)
+    folds = np.array_split(np.random.default_rng(0).permutation(60), 3)
+    for p in (1, 5, 12):
+        sse = 0.0
+        for test in folds:
+            train = np.setdiff1d(np.arange(60), test)
+            ref = KernelPLS(n_components=p, kernel="rbf", gamma=0.5).fit(X[train], Y[train])
+            sse += ((ref.predict(X[test]) - Y[test]) ** 2).sum()
+        assert m.cv_errors_[p] == pytest.approx(sse / Y.size, rel=1e-8)
+
+
+def test_eigh_solver_is_the_fixed_point_of_the_nipals_iteration():
+    X, Y = _nonlinear(50, 9)
+    Kc, _, _ = centre_gram(kernel_matrix(X, X, "rbf", 1.0, 0, 0))
+    T1, U1 = nipals(Kc, Y - Y.mean(0), 4, solver="eigh")
+    T2, U2 = nipals(Kc, Y - Y.mean(0), 4, tol=1e-14, max_iter=100000, solver="power")
+    np.testing.assert_allclose(np.abs(T1.T @ T2), np.eye(4), atol=1e-6)
+    # an exhausted Gram matrix stops the components instead of returning noise
+    Xl = np.random.default_rng(1).normal(size=(30, 2))
+    Kl, _, _ = centre_gram(kernel_matrix(Xl, Xl, "linear", 0, 0, 0))
+    assert nipals(Kl, Xl @ np.ones((2, 3)), 10)[0].shape == (30, 2)
+    with pytest.raises(ValueError, match="exhausted after 2 of the 5 components"):
+        KernelPLS(5, kernel="linear").fit(Xl, Xl @ np.ones((2, 3)))
 
 
 @pytest.mark.parametrize("p", [1, 2, 4, 6])

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from kpls_characters import SHAPES, bump_character
-from facepuppet.offline.cyclic_eval import cyclic_error, evaluate, format_table, bar_plot, improvements, stylise
+from facepuppet.offline.cyclic_eval import DUTREVE, cyclic_error, evaluate, format_table, bar_plot, improvements
+from facepuppet.offline.retarget_targets import ExaggeratedRigTarget, LinearRigTarget, stylise
 from facepuppet.offline.kpls import KernelPLS
 from facepuppet.offline.kpls_commands import register, to_runtime
 from facepuppet.offline.retarget_pairs import (farthest_points, feature_matrix, feature_points, match_matrix,
@@ -60,10 +61,13 @@ def test_identical_characters_cycle_to_zero_error():
     c = bump_character()
     motion = np.random.default_rng(2).uniform(0, 1, size=(40, 8)) * (np.random.default_rng(3).random((40, 8)) < 0.5)
     methods = {"KPLS linear": lambda: KernelPLS(n_components=8, kernel="linear"), "linear": LinearRetarget}
-    rows = evaluate(c, {"same": c}, motion, methods=methods, n_mixes=60, k_source=15, k_target=15)
+    rows = evaluate(c, {"same": LinearRigTarget(c, c, k=15)}, motion, methods=methods, n_mixes=60, k_source=15)
     scale = cyclic_error(c, motion, np.zeros_like(motion))
     for r in rows:
-        assert r["e_d"] < 1e-6 * scale, r
+        if r["method"] == DUTREVE:  # same face, same points: the warp is the identity, the transfer exact
+            assert r["e_target"] < 1e-6, r
+        else:
+            assert r["e_d"] < 1e-6 * scale and r["e_target"] < 1e-6, r
     # the cycle error itself: zero for the same weights, the mean vertex distance otherwise
     assert cyclic_error(c, motion, motion) == 0.0
     one = np.zeros((1, 8))
@@ -76,18 +80,64 @@ def test_identical_characters_cycle_to_zero_error():
 def test_other_morphology_cycle_table_and_plot(tmp_path):
     a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), amplitude=1.5, names=SIDED, seed=1)
     motion = np.random.default_rng(4).uniform(0, 0.8, size=(30, 8))
-    methods = {"KPLS rbf": lambda: KernelPLS(kernel="rbf", max_components=15), "linear": LinearRetarget}
-    rows = evaluate(a, {"other": b}, motion, methods=methods, n_mixes=80, k_source=15, k_target=12)
+    methods = {"KPLS rbf": lambda: KernelPLS(kernel="rbf"), "linear": LinearRetarget}
+    targets = {"other": LinearRigTarget(a, b, k=12), "exaggerated": ExaggeratedRigTarget(a, b, k=12)}
+    rows = evaluate(a, targets, motion, methods=methods, n_mixes=80, k_source=15)
     scale = cyclic_error(a, motion, np.zeros_like(motion))
-    assert all(0 <= r["e_d"] < 0.2 * scale for r in rows)
+    assert all(0 <= r["e_d"] < (scale if r["method"] == DUTREVE else 0.2 * scale) for r in rows)
+    assert {r["method"] for r in rows} == {"KPLS rbf", "linear", DUTREVE}
     imp = improvements(rows)["other"]["linear"]
-    errs = {r["method"]: r["e_d"] for r in rows}
+    errs = {r["method"]: r["e_d"] for r in rows if r["target"] == "other"}
     assert imp == pytest.approx(100 * (errs["linear"] - errs["KPLS rbf"]) / errs["linear"])
     assert "KPLS rbf" in format_table(rows, "cm")
     png = bar_plot(rows, tmp_path / "bars.png", "cm")
     from PIL import Image
 
     assert Image.open(png).size == (960, 480)
+
+
+class _ArcTarget:
+    """One target feature point swinging on an arc: angle from jawOpen (to 270°), radius from the left smile.
+
+    Neither weight is a linear function of the target's point, so no linear map inverts the
+    correspondence, while the map is smooth and one-to-one.
+    """
+
+    linear = False
+    matched = np.array([0, 1])
+    points = np.array([0])
+
+    def __init__(self, character):
+        self.character, self.n_source = character, character.n_shapes
+        self.neutral_points = character.vertices[:1].astype(np.float64)
+
+    def features(self, W):
+        angle, radius = 1.5 * np.pi * W[:, 0], 1.0 + W[:, 1]
+        return np.stack([radius * np.sin(angle), radius * (1 - np.cos(angle)), 0 * angle], 1)
+
+
+def test_kpls_rbf_beats_linear_regression_on_a_nonlinear_correspondence():
+    a = bump_character()
+    motion = np.zeros((50, 8))
+    motion[:, :2] = np.random.default_rng(4).uniform(0.1, 0.9, size=(50, 2))
+    methods = {"KPLS rbf": lambda: KernelPLS(kernel="rbf"), "linear": LinearRetarget}
+    rows = evaluate(a, {"arc": _ArcTarget(a)}, motion, methods=methods, n_mixes=120, k_source=15, dutreve=False)
+    err = {r["method"]: r for r in rows}
+    assert err["KPLS rbf"]["e_d"] < 0.5 * err["linear"]["e_d"], rows
+    assert err["KPLS rbf"]["e_target"] < 0.1 * err["linear"]["e_target"], rows
+
+
+def test_linear_methods_cycle_a_monotone_exaggeration_almost_exactly():
+    """Why eq. 11 favours linear maps: a backward regression from many non-linear target features
+    recovers the source weights linearly, so the cycle closes although the forward map is wrong."""
+    a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), names=SIDED, seed=1)
+    motion = np.random.default_rng(6).uniform(0, 0.8, size=(30, 8))
+    rows = evaluate(a, {"x": ExaggeratedRigTarget(a, b, k=12)}, motion, methods={"linear": LinearRetarget},
+                    n_mixes=80, k_source=15, dutreve=False)
+    scale = cyclic_error(a, motion, np.zeros_like(motion))
+    assert rows[0]["e_d"] < 0.01 * scale
+    true = ExaggeratedRigTarget(a, b, k=12).features(motion).reshape(30, -1, 3)
+    assert rows[0]["e_target"] > 0.02 * np.linalg.norm(true, axis=2).mean()
 
 
 def test_stylise_warps_neutral_and_shapes_consistently():
