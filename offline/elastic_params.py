@@ -96,9 +96,10 @@ def storage_bytes(n_vertices: int, n_shapes: int, n_controls: int, k: int) -> di
     """Bytes of the compact elastic tables versus dense float32 position deltas (the ratio of §7).
 
     Compact: per vertex k uint16 indices, k float32 weights and k float32
-    3-vectors (normal gradients); per shape n_c × 3 float32 parameters.
+    3-vectors (normal gradients) and one int32 rigid-part label; per shape
+    n_c × 3 float32 parameters.
     """
-    compact = n_vertices * k * (2 + 4 + 12) + n_shapes * n_controls * 3 * 4
+    compact = n_vertices * (k * (2 + 4 + 12) + 4) + n_shapes * n_controls * 3 * 4
     dense = n_shapes * n_vertices * 3 * 4
     return {"compact_bytes": compact, "dense_bytes": dense, "ratio": dense / compact}
 
