@@ -42,7 +42,7 @@ def register(subparsers) -> None:
     s.add_argument("-o", "--output", type=Path, required=True, help="session file to write (.fps)")
     s.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     s.add_argument("--style", default="", help="palette: GROUP=TAKE pairs, e.g. brows=take1,head=take2")
-    s.add_argument("--sigma", type=float, default=0.05, help="σ of the candidate draw (default 0.05)")
+    s.add_argument("--sigma", type=float, default=0.01, help="σ of the candidate draw (default 0.01)")
     s.add_argument("--candidates", type=int, default=3, help="candidates drawn from (default 3)")
     s.add_argument("--history", type=int, default=10, help="history h in frames (default 10)")
     s.add_argument("--stereo", choices=("refuse", "mix"), default="refuse", help="stereo WAV: refuse or mix")
@@ -62,7 +62,7 @@ def parse_style(text: str) -> dict[str, str]:
     return style
 
 
-def synthesize(database, speech, seed: int = 0, style=None, sigma: float = 0.05, n_candidates: int = 3,
+def synthesize(database, speech, seed: int = 0, style=None, sigma: float = 0.01, n_candidates: int = 3,
                history: int = 10, stereo: str = "refuse"):
     """Synthesised tracks for a WAV; returns (synth, level_db (n,), tracks (n, n_out) float32, seconds)."""
     from facepuppet.runtime.gestures import GestureSynth, SpeakerNormaliser, load_gesture_db
@@ -71,9 +71,9 @@ def synthesize(database, speech, seed: int = 0, style=None, sigma: float = 0.05,
 
     db = load_gesture_db(database)
     fps = float(db.settings.get("fps", 30.0))
-    level, _, (mean_db, std_db) = speech_intensity(speech, fps=fps, stereo=stereo)
+    level, _, (mean_db, std_db, gate_db) = speech_intensity(speech, fps=fps, stereo=stereo)
     synth = GestureSynth(db, seed=seed, style=style, sigma=sigma, n_candidates=n_candidates, history=history,
-                         normaliser=SpeakerNormaliser(mean_db, std_db, rate=0.0))
+                         normaliser=SpeakerNormaliser(mean_db, std_db, gate_db, rate=0.0))
     tracks = np.zeros((len(level), len(synth.out_names)), np.float32)
     start = time.perf_counter()
     for i, v in enumerate(level):

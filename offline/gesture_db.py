@@ -209,7 +209,8 @@ def build_gesture_db(out, speech: tuple, llf=(), markers=(), fps: float = 30.0, 
     settings = {
         "fps": fps, "n_basis": n_basis, "epsilon": epsilon, "window": window, "blend_method": method,
         "speaker_mean_db": sp.speaker_stats[0], "speaker_std_db": sp.speaker_stats[1],
-        "alpha": dict(alpha or {"lips": 0.9, "mood": 0.5, "brows": 0.5, "eyes": 0.3, "rest": 0.5, "head": 0.5}),
+        "speaker_gate_db": sp.speaker_stats[2],
+        "alpha": dict(alpha or {"lips": 0.9, "mood": 0.1, "brows": 0.1, "eyes": 0.1, "rest": 0.1, "head": 0.1}),
         "sources": {t.name: t.source for t in takes},
         "pairing": "lips: measured speech; mood/brows/eyes/rest: proxy intensity from the take's jawOpen; "
                    "head: proxy from the markers' chin-nose distance (quantile-mapped onto the speech take)",

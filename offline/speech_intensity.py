@@ -3,9 +3,17 @@
 Frame *i* belongs to audio time *i* / fps (the FACEGOOD curves' convention):
 its level is the RMS of a Hann window of ``window_s`` seconds centred there,
 in dB relative to full scale (``20 log10(rms)``), floored at ``floor_db``.
-The speaker normalisation is a z-score over the voiced frames (level above
-the floor + 1 dB): ``s(t) = (dB(t) - mean_voiced) / std_voiced``, silence at
-:data:`~facepuppet.runtime.gestures.SILENCE_Z`.
+The speaker normalisation is a z-score over the voiced frames:
+``s(t) = (dB(t) - mean_voiced) / std_voiced``, silence at
+:data:`~facepuppet.runtime.gestures.SILENCE_Z`. Voiced means above a noise
+gate derived from the speaker's own level distribution: the 10th percentile
+of the frame levels estimates the noise floor (a take with at least 10 %
+pauses), and the gate sits ``GATE_MARGIN_DB`` (6 dB) above it, capped at
+``GATE_BELOW_PEAKS_DB`` (20 dB) under the 90th percentile (the speech peaks)
+for a take with no pauses, and never below the absolute floor + 1 dB. E.g. the CMU ARCTIC
+utterance has -46..-52 dBFS of room noise before and after the words (10th
+percentile -49.4 dBFS, gate -43.4 dBFS): those frames are silence, so the
+lips close there.
 
 Symbols: s(t) -> ``intensity`` (normalised), dB(t) -> ``level_db``.
 
@@ -30,6 +38,9 @@ from facepuppet.runtime.gestures import SILENCE_Z
 
 DEFAULT_RATE = 16000
 FLOOR_DB = -60.0
+GATE_PERCENTILE = 10.0
+GATE_MARGIN_DB = 6.0
+GATE_BELOW_PEAKS_DB = 20.0
 
 
 class SpeechInputError(ValueError):
@@ -107,31 +118,44 @@ def level_db(samples: np.ndarray, rate: int, fps: float, window_s: float = 2.0 /
     return np.maximum(10.0 * np.log10(np.maximum(p, 1e-30)), floor_db)  # dBFS of the RMS
 
 
-def speaker_stats(level: np.ndarray, floor_db: float = FLOOR_DB) -> tuple[float, float]:
-    """(mean, std) in dB of the voiced frames (above floor + 1 dB); (floor, 1) when all are silent."""
-    voiced = level[level > floor_db + 1.0]
+def noise_gate(level: np.ndarray, floor_db: float = FLOOR_DB) -> float:
+    """Noise gate in dBFS from the speaker's level distribution (see the module docstring)."""
+    level = np.asarray(level, np.float64)
+    noise = float(np.percentile(level, GATE_PERCENTILE))
+    gate = min(noise + GATE_MARGIN_DB, float(np.percentile(level, 90.0)) - GATE_BELOW_PEAKS_DB)
+    return max(gate, floor_db + 1.0)
+
+
+def speaker_stats(level: np.ndarray, floor_db: float = FLOOR_DB) -> tuple[float, float, float]:
+    """(mean, std, gate) in dB: the noise gate and the statistics of the voiced frames (above the gate).
+
+    All silent (fewer than 2 voiced frames): (floor, 1, floor + 1) and a RuntimeWarning.
+    """
+    level = np.asarray(level, np.float64)
+    gate = noise_gate(level, floor_db) if len(level) else floor_db + 1.0
+    voiced = level[level > gate]
     if len(voiced) < 2:
         warnings.warn("speech intensity: no voiced frames (all silence); intensity is the floor throughout",
                       RuntimeWarning, stacklevel=2)
-        return float(floor_db), 1.0
-    return float(voiced.mean()), float(max(voiced.std(), 1.0))
+        return float(floor_db), 1.0, floor_db + 1.0
+    return float(voiced.mean()), float(max(voiced.std(), 1.0)), gate
 
 
-def normalise(level: np.ndarray, mean_db: float, std_db: float, floor_db: float = FLOOR_DB) -> np.ndarray:
-    """Per-speaker z-score of dB levels; silence (<= floor + 1 dB) at SILENCE_Z."""
+def normalise(level: np.ndarray, mean_db: float, std_db: float, gate_db: float = FLOOR_DB + 1.0) -> np.ndarray:
+    """Per-speaker z-score of dB levels; at or below the gate: SILENCE_Z."""
     z = np.maximum((level - mean_db) / std_db, SILENCE_Z)
-    return np.where(level > floor_db + 1.0, z, SILENCE_Z)
+    return np.where(level > gate_db, z, SILENCE_Z)
 
 
 def speech_intensity(path, fps: float = 30.0, rate: int = DEFAULT_RATE, stereo: str = "refuse",
                      n_frames: int | None = None):
-    """WAV -> (level_db, intensity, (mean_db, std_db)) at ``fps`` frames per second.
+    """WAV -> (level_db, intensity, (mean_db, std_db, gate_db)) at ``fps`` frames per second.
 
     Returns
     -------
     level_db : ndarray of shape (n_frames,), float64, dBFS
     intensity : ndarray of shape (n_frames,), float64, per-speaker z-score s(t)
-    stats : (mean_db, std_db) of the voiced frames
+    stats : (mean_db, std_db) of the voiced frames and the noise gate gate_db, dBFS
     """
     x = read_speech(path, rate=rate, stereo=stereo)
     level = level_db(x, rate, fps, n_frames=n_frames)

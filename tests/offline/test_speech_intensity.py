@@ -17,7 +17,7 @@ def tone(rate, seconds=2.0, amp=0.5):
 
 def test_int16_level_in_dbfs_and_silence_at_floor(tmp_path):
     wavfile.write(tmp_path / "a.wav", 16000, (tone(16000) * 32767).astype(np.int16))
-    level, z, (mean, std) = speech_intensity(tmp_path / "a.wav", fps=30)
+    level, z, (mean, std, gate) = speech_intensity(tmp_path / "a.wav", fps=30)
     assert len(level) == 60
     assert level[45] == pytest.approx(20 * np.log10(0.5 / np.sqrt(2)), abs=0.1)  # sine RMS
     assert level[10] == FLOOR_DB and z[10] == SILENCE_Z
@@ -60,3 +60,16 @@ def test_real_speech_is_loud_in_the_middle_and_quiet_at_the_ends():
     level, z, _ = speech_intensity(path, fps=30)
     assert len(level) == 120
     assert np.median(level[30:90]) > np.median(level[:8]) + 20
+
+
+def test_room_noise_before_the_words_is_gated_to_silence(tmp_path):
+    rate = 16000
+    rng = np.random.default_rng(0)
+    x = rng.normal(0, 10 ** (-48 / 20), 3 * rate)            # -48 dBFS room noise throughout
+    x[rate:2 * rate] += 0.3 * np.sin(np.arange(rate) / rate * 2 * np.pi * 220)
+    wavfile.write(tmp_path / "n.wav", rate, x.astype(np.float32))
+    level, z, (mean, std, gate) = speech_intensity(tmp_path / "n.wav", fps=30)
+    assert -49 < level[10] < -46 and level[45] > -20
+    assert -45 < gate < -40                                   # 10th percentile (~-48) + 6 dB
+    assert (z[:25] == SILENCE_Z).all() and (z[35:55] > SILENCE_Z).all()
+    assert mean == pytest.approx(np.mean(level[level > gate]))

@@ -101,3 +101,56 @@ def test_loading_refuses_a_table_with_bad_take_indices(tmp_path, db):
     save_tables(tmp_path / "bad.npz", "gesture_db", arrays, channels=dict(db.channels))
     with pytest.raises(TablesError, match="frame_take"):
         load_gesture_db(tmp_path / "bad.npz")
+
+
+def slow_distance(synth, k, i, speech, history, mood_prev):
+    """§5.1 distance of reference frame i for group k, by loops over the h preceding frames."""
+    h, a = synth.h, synth._alpha[k]
+    d = sum(a / h * (speech[-1 - l] - synth._intensity[i - l]) ** 2 for l in range(h))
+    d += sum((1 - a) / h * np.sum((history[-l] - synth._desc[i - l, k]) ** 2) for l in range(1, h + 1))
+    if synth._km >= 0:
+        d += synth._beta[k] * np.sum((mood_prev - synth._moodf[i - 1]) ** 2)
+    return d
+
+
+def test_step_distance_matches_the_slow_definition_and_the_successor_has_no_continuity_cost(db):
+    synth = GestureSynth(db, seed=4, sigma=0.0, n_candidates=1)
+    rng = np.random.default_rng(0)
+    speech = list(synth._intensity[synth._pick[0] + np.arange(-synth.h + 1, 1)])  # reset's speech history
+    hist = {k: [synth._desc[synth._pick[k] + l, k] for l in range(-synth.h + 1, 1)] for k in range(len(synth.groups))}
+    for a in rng.normal(0, 1.5, 40):
+        prev = synth._pick.copy()
+        mood_prev = synth._moodf[prev[synth._km]]
+        speech.append(a)
+        b = synth._bin(a)
+        synth.step_normalised(float(a))
+        for k in range(len(synth.groups)):
+            cand = [c for c in list(synth._T_raw[k, prev[k]]) + list(synth._T_raw[k, len(synth._intensity) + b])
+                    if c < len(synth._intensity)]
+            d = [slow_distance(synth, k, c, speech, hist[k], mood_prev) for c in cand]
+            if cand[0] == prev[k] + 1:  # the natural successor continues perfectly: speech (+ mood) term only
+                d[0] = slow_distance(synth, k, cand[0], speech, [synth._desc[cand[0] - l, k] for l in
+                                                                 range(synth.h, 0, -1)], mood_prev)
+            best = int(np.argmin(d))
+            assert synth._pick[k] == cand[best] or d[cand.index(synth._pick[k])] <= d[best] + 1e-4  # float32
+            hist[k].append(synth._desc[synth._pick[k], k])
+
+
+def test_picks_run_through_consecutive_reference_frames(db):
+    synth = GestureSynth(db, seed=0)
+    for v in -30 + 12 * np.sin(np.arange(600) / 9.0):
+        synth.step(float(v))
+    runs = synth.run_lengths
+    # the continuity-led groups jump rarely; the lips (α = 0.9) follow the noisy synthetic speech instead
+    assert min(runs[g] for g in ("brows", "eyes", "rest", "head")) > 3.0, runs
+
+
+def test_bad_settings_and_bad_start_are_refused(db):
+    with pytest.raises(ValueError, match="sigma >= 0"):
+        GestureSynth(db, sigma=-1.0)
+    with pytest.raises(ValueError, match="variance"):
+        GestureSynth(db, variance=0.0)
+    synth = GestureSynth(db)
+    with pytest.raises(ValueError, match="not a valid start"):
+        synth.reset(start=0)
+    assert np.isfinite(synth.step(math.nan)).all()  # NaN level: silence, not an error

@@ -1,0 +1,449 @@
+"""Two-level Markov-random-field synthesis of gesture tracks from speech intensity (Ju & Lee 2008, §5.1).
+
+The reference database (kind ``gesture_db``, written offline by
+``facepuppet build-gestures``) holds reference tracks at the animation rate:
+per frame the normalised speech intensity, the lips P(t), the mood blend
+weights c(t), the regional residual features D_j(t) (brows, eyes, the rest)
+and the head pose. :class:`GestureSynth` generates new tracks for a new voice,
+one frame per :meth:`GestureSynth.step`. Each feature group picks, per frame,
+a reference frame i by the §5.1 distance over the h preceding frames
+
+    dist(i) = α/h Σ_{l=0}^{h-1} (s(t-l) - s_ref(i-l))²                  speech match
+            + (1-α)/h Σ_{l=1}^{h} |x(t-l) - x_ref(i-l)|²                continuity
+            + β |c(t-1) - c_ref(i)|²                                     level 2 only
+
+and draws among the ``n_candidates`` best with probability ∝ exp(-dist / σ).
+
+* Continuity is measured in the group's feature space itself: the features,
+  divided by their reference std, rotated onto their principal axes and kept
+  up to ``variance`` (default 95 %) of the group's variance (a rotation keeps
+  distances, so this is the full-dimensional distance up to the dropped 5 %).
+* The natural successor (the reference frame after the last pick, same take)
+  has zero continuity cost by definition: consecutive reference frames are a
+  perfect continuation. So picks form runs of consecutive reference frames
+  and jump only where another frame's history matches the synthesised one
+  well enough to win the draw; :attr:`GestureSynth.run_lengths` measures it.
+* Two levels: level 1 is lips and mood (what the voice drives directly);
+  level-2 groups (brows, eyes, rest, head) are conditioned on level 1 through
+  the β term: the mood c of the level-1 pick made at the previous step
+  (mood is a 41-frame-windowed, slow track, so one frame of lag is harmless
+  and keeps the step to one vectorised pass). A group whose reference takes
+  have no mood (the head from the marker takes) gets β = 0.
+
+Paper symbols -> code names
+---------------------------
+==============  ==================================================
+t               ``self._t`` (frames synthesised so far)
+s(t)            normalised speech intensity, ``a`` / ``self._a_hist``
+P(t)            group ``lips`` (absolute ARKit lip/jaw weights)
+c(t)            group ``mood`` (blend weights; expression ``c @ blend_basis``)
+D_j(t)          groups ``brows``, ``eyes``, ``rest`` (residuals), ``head``
+x(t)            a group's features in its principal axes, ``self._desc``
+h               ``history`` (default 10 frames)
+α               ``alpha`` (speech weight), per group
+β               ``beta`` (level-2 weight of the level-1 mood match)
+σ               ``sigma``
+2-4 candidates  ``n_candidates``
+==============  ==================================================
+
+Indexing (why the step is < 0.1 ms): the full distance is evaluated only on a
+small candidate set per group, precomputed per reference frame p (the last
+pick): the successor p+1 and the ``n_neighbours`` frames whose continuity
+windows are nearest to p+1's (exact, brute force at construction), plus
+``n_speech`` frames from the bin of the current intensity. The weighted
+windows of every frame are one preallocated matrix, so a step is one gather,
+one squared difference and one small matrix product for all groups at once.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .tables import Section, TableSchema, TablesError, load_tables, register_schema
+
+GROUPS = ("lips", "mood", "brows", "eyes", "rest", "head")
+LEVEL1 = ("lips", "mood")
+HEAD_FEATURES = ("headYaw", "headPitch", "headRoll", "headX", "headY", "headZ")
+SILENCE_Z = -3.0  # normalised intensity of silence (floor)
+N_BINS = 24       # intensity bins of the speech candidates, over [SILENCE_Z, -SILENCE_Z]
+
+GESTURE_DB_SCHEMA = register_schema(TableSchema(
+    kind="gesture_db",
+    sections={
+        "intensity": Section("float32", ("n_frames",), "speech intensity s(t), per-speaker z-score of dB"),
+        "features": Section("float32", ("n_frames", "n_features"), "P(t), c(t), D_j(t), head per frame"),
+        "feature_group": Section("int32", ("n_features",), "group id of each feature (index into GROUPS)"),
+        "feature_scale": Section("float32", ("n_features",), "per-feature std, for the distances"),
+        "blend_basis": Section("float32", ("n_basis", "n_features"), "whole-face expressions B (§4.1)"),
+        "frame_take": Section("int32", ("n_frames",), "take index of each frame"),
+        "available": Section("bool", ("n_frames", 6), "whether the frame's take provides each group"),
+    },
+    channels=("features", "takes", "groups"),
+    channel_dims={"features": "n_features"},
+))
+
+
+def load_gesture_db(path):
+    """Load and check a ``gesture_db`` tables file; TablesError naming the field otherwise."""
+    db = load_tables(path, kind="gesture_db")
+    if list(db.channels["groups"]) != list(GROUPS):
+        raise TablesError(path, "channels.groups", f"expected {list(GROUPS)}, found {db.channels['groups']}")
+    n_takes = len(db.channels["takes"])
+    take = db["frame_take"]
+    if take.size and (take.min() < 0 or take.max() >= n_takes):
+        raise TablesError(path, "frame_take", f"expected take indices in [0, {n_takes}), found "
+                                              f"{take.min()}..{take.max()}")
+    groups = db["feature_group"]
+    if groups.size and (groups.min() < 0 or groups.max() >= len(GROUPS)):
+        raise TablesError(path, "feature_group", f"expected group ids in [0, {len(GROUPS)})")
+    return db
+
+
+class SpeakerNormaliser:
+    """dBFS -> per-speaker z-score with a noise gate, running statistics of voiced frames.
+
+    Parameters
+    ----------
+    mean_db, std_db : float, dBFS, starting estimate of the speaker's voiced level
+    gate_db : float, dBFS; at or below it (or NaN: not measured) the frame is silence (SILENCE_Z).
+        Offline it is derived from the speaker's level distribution (10th percentile + a margin,
+        see ``facepuppet.offline.speech_intensity.speaker_stats``)
+    rate : float, weight of a new voiced frame in the running mean/variance (0: frozen)
+    """
+
+    def __init__(self, mean_db: float = -30.0, std_db: float = 8.0, gate_db: float = -60.0,
+                 rate: float = 0.002):
+        self.mean_db, self.var_db, self.gate_db, self.rate = float(mean_db), float(std_db) ** 2, gate_db, rate
+
+    def __call__(self, level_db: float) -> float:
+        if not (level_db > self.gate_db):  # NaN, or below the noise gate: silence
+            return SILENCE_Z
+        if self.rate > 0:
+            d = level_db - self.mean_db
+            self.mean_db += self.rate * d
+            self.var_db += self.rate * (d * d - self.var_db)
+        return max(SILENCE_Z, (level_db - self.mean_db) / math.sqrt(max(self.var_db, 1.0)))
+
+
+def _principal_axes(x: np.ndarray, ok: np.ndarray, variance: float, max_dims: int) -> np.ndarray:
+    """x (n, d) centred on its ``ok`` rows and projected on the fewest axes holding ``variance``."""
+    xc = x - x[ok].mean(0)
+    _, sv, vt = np.linalg.svd(xc[ok], full_matrices=False)
+    frac = np.cumsum(sv ** 2) / max(float(np.sum(sv ** 2)), 1e-30)
+    r = min(int(np.searchsorted(frac, variance - 1e-12)) + 1, max_dims, len(sv))
+    return xc @ vt[:r].T
+
+
+def _nearest(windows: np.ndarray, rows: np.ndarray, k: int, exclude: int, chunk: int = 512) -> np.ndarray:
+    """Row indices (frames ``rows``) of the ``k`` nearest windows to each window, frames >= ``exclude`` apart.
+
+    windows : (len(rows), D) float, one per frame of ``rows``; exact squared Euclidean; -1 pads.
+    """
+    w = windows.astype(np.float32)
+    sq = np.einsum("ij,ij->i", w, w)
+    out = np.zeros((len(rows), k), np.int64)
+    for s in range(0, len(rows), chunk):
+        d = sq[s:s + chunk, None] + sq[None, :] - 2.0 * (w[s:s + chunk] @ w.T)
+        near = np.abs(rows[s:s + chunk, None] - rows[None, :]) < exclude  # no jump within the own run
+        d[near] = np.inf
+        kk = min(k, len(rows) - 1)
+        part = np.argpartition(d, kk - 1, axis=1)[:, :kk] if kk > 0 else np.zeros((len(d), 0), np.int64)
+        order = np.take_along_axis(d, part, 1).argsort(1, kind="stable")
+        best = np.take_along_axis(part, order, 1)
+        best_d = np.take_along_axis(d, best, 1)
+        out[s:s + chunk] = -1
+        out[s:s + chunk, :kk] = np.where(np.isfinite(best_d), rows[best], -1)
+    return out
+
+
+class GestureSynth:
+    """Frame-by-frame two-level MRF synthesis of gesture tracks from speech intensity (Ju & Lee §5.1).
+
+    Parameters
+    ----------
+    db : Tables of kind ``gesture_db`` (see :func:`load_gesture_db`)
+    seed : int, seed of the candidate draws; same seed + same input = same output
+    style : dict group -> take name, restricts a group to one take (a palette of styles)
+    history : int, h, frames of history in the distance
+    alpha : float or dict group -> float, weight α of speech match against continuity
+    beta : float, level-2 weight of the match to level 1's mood (0: the levels are independent)
+    sigma : float, σ of exp(-dist / σ); 0 picks the best candidate
+    n_candidates : int, how many of the best candidates are drawn from (2-4 in the paper)
+    n_neighbours, n_speech : int, jump candidates per frame by continuity, and per intensity bin
+    variance : float in (0, 1], share of each group's variance kept by the continuity features
+    normaliser : SpeakerNormaliser or None (default: one from the db's speaker stats and gate)
+    """
+
+    def __init__(self, db, seed: int = 0, style=None, history: int = 10, alpha=None, beta: float = 0.5,
+                 sigma: float = 0.01, n_candidates: int = 3, n_neighbours: int = 8, n_speech: int = 6,
+                 variance: float = 0.95, max_dims: int = 8, normaliser: SpeakerNormaliser | None = None):
+        if history < 1 or n_candidates < 1 or sigma < 0 or not 0 < variance <= 1 or beta < 0:
+            raise ValueError(f"GestureSynth: expected history >= 1, n_candidates >= 1, sigma >= 0, beta >= 0, "
+                             f"0 < variance <= 1; got {history}, {n_candidates}, {sigma}, {beta}, {variance}")
+        self.h, self.sigma, self.n_candidates, self.seed = history, float(sigma), n_candidates, seed
+        self.names = tuple(db.channels["features"])
+        self.takes = tuple(db.channels["takes"])
+        feats = np.asarray(db["features"], np.float64)
+        self._feats = np.asarray(db["features"], np.float32)
+        self._intensity = np.asarray(db["intensity"], np.float64)
+        self._basis = np.asarray(db["blend_basis"], np.float32)
+        group_of = np.asarray(db["feature_group"])
+        scale = np.maximum(np.asarray(db["feature_scale"], np.float64), 1e-6)
+        take = np.asarray(db["frame_take"])
+        avail = np.asarray(db["available"])
+        settings = db.settings
+        alpha = settings.get("alpha", {}) if alpha is None else alpha
+        style = dict(style or {})
+        for g, take_name in style.items():
+            if g not in GROUPS or take_name not in self.takes:
+                raise ValueError(f"style: expected group in {GROUPS} and take in {self.takes}, got {g}={take_name}")
+        self.normaliser = normaliser or SpeakerNormaliser(
+            settings.get("speaker_mean_db", -30.0), settings.get("speaker_std_db", 8.0),
+            settings.get("speaker_gate_db", -60.0))
+        n, h = len(take), history
+        start = np.r_[True, take[1:] != take[:-1]]
+        pos = np.arange(n) - np.maximum.accumulate(np.where(start, np.arange(n), 0))  # frames since take start
+        last = np.r_[take[1:] != take[:-1], True]
+        self.groups = [g for gi, g in enumerate(GROUPS) if (group_of == gi).any() and avail[:, gi].any()]
+        G = len(self.groups)
+        self._gidx = np.arange(G)
+        self._cols = [np.flatnonzero(group_of == GROUPS.index(g)) for g in self.groups]
+        self._alpha = np.array([float(alpha.get(g, 0.9 if g in LEVEL1 else 0.5)) if isinstance(alpha, dict)
+                                else float(alpha) for g in self.groups])
+        self._valid = np.zeros((G, n), bool)
+        descs = []
+        for k, g in enumerate(self.groups):
+            ok = avail[:, GROUPS.index(g)] & (pos >= h)
+            if g in style:
+                ok &= take == self.takes.index(style[g])
+            if not ok.any():
+                raise ValueError(f"GestureSynth: group {g!r} has no reference frame with {h} frames of history"
+                                 + (f" in take {style[g]!r}" if g in style else ""))
+            self._valid[k] = ok
+            descs.append(_principal_axes(feats[:, self._cols[k]] / scale[self._cols[k]], ok, variance, max_dims))
+        self.dims = {g: d.shape[1] for g, d in zip(self.groups, descs)}
+        R = max(self.dims.values())
+        self._desc = np.zeros((n, G, R))
+        for k, d in enumerate(descs):
+            self._desc[:, k, :d.shape[1]] = d
+        # level-2 conditioning features: the normalised mood c(i) (zeros where a take has no mood)
+        self._km = self.groups.index("mood") if "mood" in self.groups else -1
+        if self._km >= 0:
+            mc = self._cols[self._km]
+            self._moodf = np.where(avail[:, [GROUPS.index("mood")]], feats[:, mc] / scale[mc], 0.0)
+        else:
+            self._moodf = np.zeros((n, 0))
+        has_mood = avail[:, GROUPS.index("mood")]
+        self._beta = np.array([beta if (g not in LEVEL1 and self._km >= 0 and has_mood[self._valid[k]].all())
+                               else 0.0 for k, g in enumerate(self.groups)])
+        self._build_candidates(n_neighbours, n_speech, last)
+        self._prepare_windows()
+        self.out_names = self._output_names()
+        self.additions = np.zeros(len(self.out_names), np.float32)
+        self.mood_part = np.zeros(len(self.out_names), np.float32)
+        self.reset()
+
+    def _build_candidates(self, n_neighbours: int, n_speech: int, last: np.ndarray) -> None:
+        """Candidate rows per group: for last pick p, [p+1, nearest windows to p+1's]; per intensity bin, frames."""
+        G, n, h = len(self.groups), len(last), self.h
+        K = n_neighbours + 1
+        T = np.full((G, n + N_BINS, max(K, n_speech)), n, np.int64)  # frame n: the sentinel (never wins)
+        bins = self._bin(self._intensity)
+        for k in range(G):
+            valid = np.flatnonzero(self._valid[k])
+            win = self._desc[np.clip(valid[:, None] + np.arange(-h + 1, 1), 0, n - 1), k].reshape(len(valid), -1)
+            near = _nearest(win, valid, n_neighbours, exclude=h)  # windows x(i-h+1 .. i) like p+1's history
+            row_of = np.full(n, -1)
+            row_of[valid] = np.arange(len(valid))
+            succ = np.where(~last[:-1] & self._valid[k, 1:], np.arange(1, n), -1)
+            succ = np.r_[succ, -1]
+            for p in range(n):
+                s = succ[p]
+                if s >= 0:
+                    T[k, p, 0] = s
+                    jumps = near[row_of[p]] + 1 if row_of[p] >= 0 else near[row_of[s]]  # j: x(j-h..j-1) ≈ x(p-h+1..p)
+                else:  # end of a take (or invalid frame): only jumps, to frames whose history is like p's
+                    anchor = p if row_of[p] >= 0 else valid[0]
+                    jumps = near[row_of[anchor]] + 1
+                jumps = jumps[(jumps > 0) & (jumps < n)]
+                jumps = jumps[self._valid[k, jumps] & (jumps != s)][:K - 1]
+                T[k, p, 1:1 + len(jumps)] = jumps
+            filled = np.unique(bins[valid])
+            for b in range(N_BINS):  # an empty bin takes the frames of the nearest filled bin
+                members = valid[bins[valid] == filled[np.argmin(np.abs(filled - b))]]
+                pick = members[np.unique(np.linspace(0, len(members) - 1, n_speech).round().astype(int))]
+                T[k, n + b, :len(pick)] = pick
+        self._T_raw = T
+
+    @staticmethod
+    def _bin(a):
+        return np.clip(((np.asarray(a) - SILENCE_Z) / (-2 * SILENCE_Z) * N_BINS).astype(int), 0, N_BINS - 1)
+
+    def _prepare_windows(self) -> None:
+        """Flat tables for the step: one row per (group, frame) holding its weighted history window.
+
+        Row ``g (n + 1) + i`` is [√(α/h) s_ref(i-h+1 .. i), √β c_ref(i-1), √((1-α)/h) x_ref(i-h .. i-1)]
+        (the mood term compares with the level-1 pick of the step before, so with frame i - 1), so that the
+        squared distance to the query row, split into its speech+mood and continuity columns, gives §5.1;
+        row ``g (n + 1) + n`` is a sentinel far from everything.
+        """
+        G, n, h = len(self.groups), len(self._intensity), self.h
+        R, Cm = self._desc.shape[2], self._moodf.shape[1]
+        idx = np.arange(n)
+        S = self._intensity[np.clip(idx[:, None] + np.arange(-h + 1, 1), 0, n - 1)]        # (n, h)
+        win = self._desc[np.clip(idx[:, None] + np.arange(-h, 0), 0, n - 1)]               # (n, h, G, R)
+        M_prev = self._moodf[np.clip(idx - 1, 0, n - 1)]                                    # (n, Cm)
+        self._wa, self._wc = np.sqrt(self._alpha / h), np.sqrt((1.0 - self._alpha) / h)
+        self._wm = np.sqrt(self._beta)
+        D = h + Cm + h * R
+        X = np.full((G, n + 1, D), 1e3)
+        for k in range(G):
+            X[k, :n, :h] = self._wa[k] * S
+            X[k, :n, h:h + Cm] = self._wm[k] * M_prev
+            X[k, :n, h + Cm:] = self._wc[k] * win[:, :, k, :].reshape(n, -1)
+        self._X = X.reshape(G * (n + 1), D).astype(np.float32)
+        self._c0 = h + Cm                                   # first continuity column
+        self._query = np.zeros((G, D), np.float32)
+        K = self._T_raw.shape[2]
+        self._M = M = 2 * K
+        self._T = self._T_raw.reshape(-1, K)
+        self._rows = np.zeros(2 * G, np.int64)
+        self._goff_T = self._gidx * (n + N_BINS)
+        self._goff_X = np.repeat(self._gidx * (n + 1), M)
+        self._grep = np.repeat(self._gidx, M)
+        self._row_off = (self._gidx * M)[:, None]
+        self._m = min(self.n_candidates, M)
+        self._n = n
+        self._bin_scale = N_BINS / (-2 * SILENCE_Z)
+        self._wa_col = self._wa[:, None].astype(np.float32)
+        self._wm_col = self._wm[:, None].astype(np.float32)
+        self._moodf = self._moodf.astype(np.float32)
+        # the continuity features pre-weighted, flat by (frame, group): the history ring holds these
+        self._desc_w = (self._desc * self._wc[None, :, None]).reshape(n * G, -1).astype(np.float32)
+
+    def _output_names(self) -> tuple[str, ...]:
+        """Output channels; sets the flat gather (``_out_group``, ``_out_cols``) and ``_mood``."""
+        names: list[str] = []
+        out_group, out_cols = [], []
+        for k, g in enumerate(self.groups):
+            if g == "mood":
+                continue
+            names += [self.names[c] for c in self._cols[k]]
+            out_group += [k] * len(self._cols[k])
+            out_cols += list(self._cols[k])
+        self._mood = None
+        if "mood" in self.groups:
+            used = np.flatnonzero(np.abs(self._basis).sum(0) > 0)
+            for c in used:
+                if self.names[c] not in names:  # a mood-only channel: no residual feature, gather a zero
+                    names.append(self.names[c])
+                    out_group.append(self.groups.index("mood"))
+                    out_cols.append(-1)
+            dst = np.array([names.index(self.names[c]) for c in used], np.int64)
+            self._mood = (self.groups.index("mood"), used, dst)
+            self._basis_out = np.zeros((len(self._basis), len(names)), np.float32)
+            self._basis_out[:, dst] = self._basis[:, used]
+        self._n_feat = self._feats.shape[1] + 1
+        self._feats_flat = np.concatenate([self._feats, np.zeros((len(self._feats), 1), np.float32)], 1).ravel()
+        self._out_group = np.array(out_group, np.int64)
+        self._out_cols = np.where(np.array(out_cols, np.int64) < 0, self._n_feat - 1, out_cols).astype(np.int64)
+        return tuple(names)
+
+    def reset(self, start: int | None = None) -> None:
+        """Restart the sequence: each group at reference frame ``start`` (default: a seeded random valid frame).
+
+        The synthesised history is filled from the reference frames before the
+        start, and the speech history with the reference intensity there.
+        """
+        self.rng = np.random.Generator(np.random.PCG64(self.seed))
+        G, h = len(self.groups), self.h
+        picks = []
+        for k in range(G):
+            valid = np.flatnonzero(self._valid[k])
+            p = int(start) if start is not None else int(valid[self.rng.integers(len(valid))])
+            if not 0 <= p < len(self._intensity) or not self._valid[k, p]:
+                raise ValueError(f"reset: frame {p} is not a valid start for group {self.groups[k]!r} "
+                                 f"(needs {h} frames of history in its take)")
+            picks.append(p)
+        self._pick = np.array(picks, np.int64)
+        # ring buffers of length 2h, written twice so that [pos : pos + h] is the history in order
+        self._z_hist = np.zeros((G, 2 * h, self._desc.shape[2]), np.float32)
+        self._a_hist = np.zeros(2 * h, np.float32)
+        for i, l in enumerate(range(-h + 1, 1)):
+            self._z_hist[:, i] = self._z_hist[:, i + h] = self._desc_w.take((self._pick + l) * G + self._gidx, 0)
+            self._a_hist[i] = self._a_hist[i + h] = self._intensity[self._pick[0] + l]
+        self._apos = self._zpos = 0
+        self._t = 0
+        self._jumps = np.zeros(G, np.int64)
+        self._emit()
+
+    def step(self, audio_db: float) -> np.ndarray:
+        """Advance one animation frame with the voice level ``audio_db`` (dBFS, NaN = silence).
+
+        Returns
+        -------
+        additions : ndarray of shape (len(out_names),), float32, named by ``out_names``; reused between calls
+        """
+        return self.step_normalised(self.normaliser(audio_db))
+
+    def step_normalised(self, a: float) -> np.ndarray:
+        """:meth:`step` for an already normalised intensity ``a`` (z-score)."""
+        h, G, c0 = self.h, len(self.groups), self._c0
+        ap = self._apos
+        self._a_hist[ap] = self._a_hist[ap + h] = a
+        ap = self._apos = (ap + 1) % h
+        q, zp = self._query, self._zpos
+        np.multiply(self._a_hist[ap:ap + h], self._wa_col, out=q[:, :h])                    # s(t-h+1 .. t)
+        if self._km >= 0:
+            np.multiply(self._moodf[self._pick[self._km]], self._wm_col, out=q[:, h:c0])    # c(t-1), level 1
+        q[:, c0:] = self._z_hist[:, zp:zp + h].reshape(G, -1)                               # x(t-h .. t-1)
+        b = min(max(int((a - SILENCE_Z) * self._bin_scale), 0), N_BINS - 1)
+        rows = self._rows
+        np.add(self._goff_T, self._pick, out=rows[0::2])  # successor + continuity neighbours of the last pick
+        np.add(self._goff_T, self._n + b, out=rows[1::2])  # frames of the current intensity's bin
+        cand = self._T.take(rows, 0).ravel()     # (G * M,) frame indices, grouped by group
+        diff = self._X.take(cand + self._goff_X, 0).reshape(G, self._M, -1)
+        diff -= q[:, None, :]
+        diff *= diff
+        # §5.1: α/h Σ (s - s_ref)² + β |c - c_ref|² + (1-α)/h Σ |x - x_ref|², the successor without continuity
+        dist = diff.sum(2)
+        dist[:, 0] -= diff[:, 0, c0:].sum(1)
+        m = self._m
+        order = dist.argsort(1, kind="stable")[:, :m] + self._row_off
+        if self.sigma > 0 and m > 1:
+            best = dist.take(order)
+            w = np.exp((best[:, :1] - best) / self.sigma)  # §5.1: P(candidate) ∝ exp(-dist / σ)
+            c = w.cumsum(1)
+            choice = (c < self.rng.random(G)[:, None] * c[:, -1:]).sum(1)
+            pick = cand.take(order.take(self._gidx * m + np.minimum(choice, m - 1)))
+        else:
+            pick = cand.take(order[:, 0])
+        self._jumps += pick != self._pick + 1
+        self._pick = pick
+        self._z_hist[:, zp] = self._z_hist[:, zp + h] = self._desc_w.take(pick * G + self._gidx, 0)
+        self._zpos = (zp + 1) % h
+        self._t += 1
+        return self._emit()
+
+    def _emit(self) -> np.ndarray:
+        """Write the picked frames' features (and the mood expression c·B) into ``additions``."""
+        out = self.additions
+        np.take(self._feats_flat, self._pick.take(self._out_group) * self._n_feat + self._out_cols, out=out)
+        if self._mood is not None:
+            k, used, dst = self._mood
+            c = self._feats_flat.take(self._pick[k] * self._n_feat + self._cols[k])
+            np.matmul(c, self._basis_out, out=self.mood_part)  # §4.1: blend expression c·B
+            out += self.mood_part
+        return out
+
+    @property
+    def picks(self) -> dict[str, int]:
+        """The reference frame each group shows now."""
+        return {g: int(p) for g, p in zip(self.groups, self._pick)}
+
+    @property
+    def run_lengths(self) -> dict[str, float]:
+        """Mean run of consecutive reference frames per group since :meth:`reset` (frames per jump)."""
+        return {g: self._t / max(int(j), 1) for g, j in zip(self.groups, self._jumps)}
