@@ -30,19 +30,38 @@ def _solve_times(actor, markers: np.ndarray, n_given: int | None, seed: int = 0)
         keep = np.full(actor.n_markers, False)
         keep[given] = True
         obs = np.where(keep[None, :, None], obs, np.nan)
-    times, iters = np.empty(len(obs)), np.empty(len(obs))
+    times, cpu, iters = np.empty(len(obs)), np.empty(len(obs)), np.empty(len(obs))
     for rep in range(2):                                        # first pass warms caches
         solver.reset()
         for f in range(len(obs)):
-            t0 = time.perf_counter()
+            c0, t0 = time.thread_time(), time.perf_counter()
             solver.solve(obs[f])
-            times[f] = time.perf_counter() - t0
+            times[f], cpu[f] = time.perf_counter() - t0, time.thread_time() - c0
             iters[f] = solver.last_iterations
-    ms = times * 1e3
+    ms, cpu_ms = times * 1e3, cpu * 1e3
+    # wall time includes waiting for a core on a busy machine; thread CPU time does not
     return {"markers_given": int(actor.n_markers if n_given is None else len(given)),
             "median_ms": float(np.median(ms)), "p99_ms": float(np.percentile(ms, 99)),
-            "max_ms": float(ms.max()), "mean_iterations": float(iters.mean()),
+            "max_ms": float(ms.max()), "cpu_median_ms": float(np.median(cpu_ms)),
+            "cpu_p99_ms": float(np.percentile(cpu_ms, 99)), "mean_iterations": float(iters.mean()),
             "iteration_budget": solver.iterations, "frames": int(len(obs))}
+
+
+def machine_load() -> dict:
+    """The 1-minute load average, the core count and the time of one tiny NumPy operation (µs).
+
+    Solve times are a few dozen such operations, so the last number says how
+    busy the machine was while they were measured.
+    """
+    import os
+
+    x = np.zeros(13)
+    c0 = time.thread_time()
+    for _ in range(20000):
+        x * 2.0
+    op_us = (time.thread_time() - c0) / 20000 * 1e6
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return {"loadavg_1min": load, "cores": os.cpu_count(), "numpy_op_us": op_us}
 
 
 def _train(capture, k: int, **settings) -> tuple[object, dict]:
@@ -55,14 +74,16 @@ def _train(capture, k: int, **settings) -> tuple[object, dict]:
     return model, {"frames": m["n_frames"], "markers": m["n_markers"], "k": k, "classes": m["n_classes"],
                    "preprocess_s": m["preprocess_s"], "ica_s": m["ica_s"], "fit_s": m["fit_s"],
                    "train_s": m["train_s"], "holdout_linear_rms": m["holdout"]["linear_rms"],
-                   "holdout_cubic_rms": m["holdout"]["cubic_rms"], "units": model.actor_.units}
+                   "holdout_cubic_rms": m["holdout"]["cubic_rms"],
+                   "holdout_cubic_ridge_rms": m["holdout"]["cubic_ridge_rms"], "ridge_ab": m["holdout"]["ridge_ab"],
+                   "units": model.actor_.units}
 
 
 def run(args) -> dict:
     from .capture_io import read_capture
     from .synthetic_capture import synthetic_capture
 
-    results: dict = {"solve": {}, "training": {}}
+    results: dict = {"solve": {}, "training": {}, "machine_before": machine_load()}
     cap, _ = synthetic_capture(n_frames=3500, n_markers=68, k=13, seed=0)
     model, row = _train(cap, 13, head_markers=["M00", "M01", "M02", "M03"])
     results["training"]["synthetic_68x3500"] = row
@@ -81,12 +102,19 @@ def run(args) -> dict:
         results["training"][take] = row
         print(f"{take}: train {row['train_s']:.2f} s (preprocess {row['preprocess_s']:.2f}, ICA {row['ica_s']:.2f}, "
               f"cubic {row['fit_s']:.2f}); held-out RMS linear {row['holdout_linear_rms']:.4f} vs cubic "
-              f"{row['holdout_cubic_rms']:.4f} {row['units']}")
+              f"{row['holdout_cubic_rms']:.4f}, cubic + a,b ridge {row['ridge_ab']:g} "
+              f"{row['holdout_cubic_ridge_rms']:.4f} {row['units']}")
         results["solve"][take] = [_solve_times(model.actor_, model.stabilised_.markers, n) for n in (None, 5, 1)]
+    results["machine_after"] = machine_load()
     for name, rows in results["solve"].items():
         for r in rows:
             print(f"solve {name}, {r['markers_given']:>2} markers: median {r['median_ms']:.3f} ms, p99 "
-                  f"{r['p99_ms']:.3f} ms, max {r['max_ms']:.3f} ms, {r['mean_iterations']:.2f} iterations")
+                  f"{r['p99_ms']:.3f} ms, max {r['max_ms']:.3f} ms (CPU median {r['cpu_median_ms']:.3f}, p99 "
+                  f"{r['cpu_p99_ms']:.3f} ms), {r['mean_iterations']:.2f} iterations (goal: median < 0.1, p99 < 0.5)")
+    for when in ("machine_before", "machine_after"):
+        m = results[when]
+        print(f"{when}: load average {m['loadavg_1min']:.2f} on {m['cores']} cores, one tiny NumPy op "
+              f"{m['numpy_op_us']:.2f} us")
     return results
 
 

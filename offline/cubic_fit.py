@@ -27,14 +27,22 @@ def design(s: np.ndarray, degree: int = 3) -> np.ndarray:
     return np.concatenate([s ** 3, s ** 2, s], axis=1)          # Shin & Lee eq. 2 terms
 
 
-def _solve(phi: np.ndarray, y: np.ndarray, ridge: float) -> np.ndarray:
-    """Least squares (ridge-stabilised normal equations), all columns of ``y`` at once (eq. 4)."""
+RIDGE_AB_STRENGTHS = (0.0, 1e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0)   # candidates for the a, b ridge
+
+
+def _solve(phi: np.ndarray, y: np.ndarray, ridge: float, penalty: np.ndarray | None = None) -> np.ndarray:
+    """Least squares (ridge-stabilised normal equations), all columns of ``y`` at once (eq. 4).
+
+    ``penalty`` (n_terms,) adds a per-term Tikhonov weight, relative to the mean diagonal like ``ridge``.
+    """
     gram = phi.T @ phi
-    gram[np.diag_indices_from(gram)] += ridge * max(float(np.trace(gram)) / len(gram), 1e-12)
+    scale = max(float(np.trace(gram)) / len(gram), 1e-12)
+    gram[np.diag_indices_from(gram)] += ridge * scale + (0.0 if penalty is None else penalty * scale)
     return np.linalg.solve(gram, phi.T @ y)                     # Shin & Lee eq. 4
 
 
-def fit_polynomial(s: np.ndarray, y: np.ndarray, degree: int = 3, ridge: float = 1e-8) -> np.ndarray:
+def fit_polynomial(s: np.ndarray, y: np.ndarray, degree: int = 3, ridge: float = 1e-8,
+                   ridge_ab: float = 0.0) -> np.ndarray:
     """Fit x_j(s) for every output column of ``y``; NaN targets are left out of their column's fit.
 
     Parameters
@@ -43,6 +51,8 @@ def fit_polynomial(s: np.ndarray, y: np.ndarray, degree: int = 3, ridge: float =
     y : ndarray of shape (n_frames, n_out), float, NaN = missing sample
     degree : 3 (cubic, eqs 2-4) or 1 (linear model, for comparison)
     ridge : float, Tikhonov weight relative to the mean diagonal of Phi^T Phi
+    ridge_ab : float, extra weight on the cubic and quadratic terms only (a, b; degree 3): shrinks the
+        cubic towards the linear model where the data do not support the curvature
 
     Returns
     -------
@@ -50,6 +60,8 @@ def fit_polynomial(s: np.ndarray, y: np.ndarray, degree: int = 3, ridge: float =
     """
     if degree not in (1, 3):
         raise ValueError(f"degree: expected 1 or 3, got {degree!r}")
+    if not ridge_ab >= 0:
+        raise ValueError(f"ridge_ab: expected a number >= 0, got {ridge_ab!r}")
     s = np.asarray(s, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     if s.ndim != 2 or y.ndim != 2 or len(s) != len(y):
@@ -58,15 +70,17 @@ def fit_polynomial(s: np.ndarray, y: np.ndarray, degree: int = 3, ridge: float =
         raise ValueError("fit_polynomial: s contains NaN or infinity")
     phi = design(s, degree)
     n_terms = phi.shape[1]
+    k = s.shape[1]
+    penalty = np.r_[np.full(2 * k, ridge_ab), np.zeros(k)] if degree == 3 and ridge_ab > 0 else None
     out = np.zeros((n_terms, y.shape[1]))
     missing = np.isnan(y)
     full = ~missing.any(axis=0)
     if full.any():
-        out[:, full] = _solve(phi, y[:, full], ridge)
+        out[:, full] = _solve(phi, y[:, full], ridge, penalty)
     for j in np.flatnonzero(~full):                             # columns with gaps: their own rows
         rows = ~missing[:, j]
         if rows.sum() >= n_terms:
-            out[:, j] = _solve(phi[rows], y[rows, j:j + 1], ridge)[:, 0]
+            out[:, j] = _solve(phi[rows], y[rows, j:j + 1], ridge, penalty)[:, 0]
     return out.reshape(degree if degree == 3 else 1, s.shape[1], y.shape[1])
 
 
@@ -89,18 +103,39 @@ def holdout_split(n_frames: int, fraction: float = 0.2, blocks: int = 10) -> tup
     return ~test, test
 
 
-def holdout_errors(s: np.ndarray, y: np.ndarray, n_points: int, fraction: float = 0.2) -> dict:
-    """Held-out RMS point error of the linear model against the cubic one.
+def point_rms(coef: np.ndarray, s: np.ndarray, y: np.ndarray, n_points: int) -> float:
+    """RMS 3-D point distance between :func:`evaluate` and ``y`` (n_frames, n_points*3), NaN points left out."""
+    err = evaluate(coef, s) - y
+    d2 = np.nansum(err.reshape(len(err), n_points, 3) ** 2, axis=2)
+    valid = ~np.isnan(y).reshape(len(err), n_points, 3).any(axis=2)
+    return float(np.sqrt(d2[valid].mean())) if valid.any() else float("nan")
 
-    s : ndarray of shape (n_frames, K); y : ndarray of shape (n_frames, n_points*3), units, NaN = missing
-    Returns {"linear_rms", "cubic_rms", "n_train", "n_test"}; RMS of the 3-D point distance, units.
+
+def choose_ridge_ab(s: np.ndarray, y: np.ndarray, n_points: int, strengths=RIDGE_AB_STRENGTHS,
+                    fraction: float = 0.2) -> tuple[float, list[dict]]:
+    """The ``ridge_ab`` of least held-out error on a split of the given frames (:func:`holdout_split`).
+
+    Returns (strength, [{"ridge_ab", "rms"}, ...]) with the RMS point error (units) of each candidate.
     """
     train, test = holdout_split(len(s), fraction)
-    result = {"n_train": int(train.sum()), "n_test": int(test.sum())}
-    for name, degree in (("linear_rms", 1), ("cubic_rms", 3)):
-        coef = fit_polynomial(s[train], y[train], degree)
-        err = evaluate(coef, s[test]) - y[test]
-        d2 = np.nansum(err.reshape(len(err), n_points, 3) ** 2, axis=2)
-        valid = ~np.isnan(y[test]).reshape(len(err), n_points, 3).any(axis=2)
-        result[name] = float(np.sqrt(d2[valid].mean())) if valid.any() else float("nan")
-    return result
+    table = [{"ridge_ab": float(r), "rms": point_rms(fit_polynomial(s[train], y[train], 3, ridge_ab=r),
+                                                     s[test], y[test], n_points)} for r in strengths]
+    best = min(table, key=lambda row: row["rms"])
+    return best["ridge_ab"], table
+
+
+def holdout_errors(s: np.ndarray, y: np.ndarray, n_points: int, fraction: float = 0.2) -> dict:
+    """Held-out RMS point error of the linear model, the plain cubic and the cubic with a chosen a, b ridge.
+
+    s : ndarray of shape (n_frames, K); y : ndarray of shape (n_frames, n_points*3), units, NaN = missing
+    The ridge strength is chosen on an inner split of the training frames only, so the held-out
+    frames judge it fairly. Returns {"linear_rms", "cubic_rms", "cubic_ridge_rms", "ridge_ab",
+    "n_train", "n_test"}; RMS of the 3-D point distance, units.
+    """
+    train, test = holdout_split(len(s), fraction)
+    ridge_ab, _ = choose_ridge_ab(s[train], y[train], n_points, fraction=fraction)
+    return {"n_train": int(train.sum()), "n_test": int(test.sum()), "ridge_ab": ridge_ab,
+            "linear_rms": point_rms(fit_polynomial(s[train], y[train], 1), s[test], y[test], n_points),
+            "cubic_rms": point_rms(fit_polynomial(s[train], y[train], 3), s[test], y[test], n_points),
+            "cubic_ridge_rms": point_rms(fit_polynomial(s[train], y[train], 3, ridge_ab=ridge_ab), s[test],
+                                         y[test], n_points)}

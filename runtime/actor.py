@@ -190,11 +190,16 @@ class MarkerSolver:
         unit = float(np.mean(np.sum(self._m[2 * k:] ** 2, axis=1))) or 1.0
         self.damping = damping * unit
         self.prior = prior * unit
+        # J^T (K, 3K) = [diag(3 s^2) | diag(2 s) | I]: its block diagonals are strided views, written in place
         self._jsel = np.zeros((k, 3 * k))
-        rows = np.arange(k)
-        self._idx3 = rows * 3 * k + rows                             # diagonal of the a-block
-        self._idx2 = rows * 3 * k + k + rows                         # diagonal of the b-block
-        self._jsel.reshape(-1)[rows * 3 * k + 2 * k + rows] = 1.0   # c-block: identity
+        flat = self._jsel.reshape(-1)
+        self._diag3 = flat[0::3 * k + 1]                             # diagonal of the a-block (a view)
+        self._diag2 = flat[k::3 * k + 1]                             # diagonal of the b-block (a view)
+        flat[2 * k::3 * k + 1] = 1.0                                 # c-block: identity
+        self._jg = np.empty((k, 3 * k))                              # preallocated per-iteration buffers
+        self._h = np.empty((k, k))
+        self._hdiag = self._h.reshape(-1)[::k + 1]
+        self._phi = np.empty(3 * k)
         self.s = np.zeros(k)
         self.last_iterations = 0
         self.last_cost = float("nan")
@@ -251,41 +256,50 @@ class MarkerSolver:
         mt = mw @ target                                         # M W p, (3K,)
         tt = float(target @ (target if w is None else target * np.repeat(w[present], 3)))
         s_prev = self.s if s0 is None else np.clip(np.asarray(s0, dtype=np.float64), self._lo, self._hi)
-        lam, mu, k = self.damping, self.prior, len(s_prev)
+        lam, mu, lo, hi = self.damping, self.prior, self._lo, self._hi
         mt2 = 2.0 * mt
-        jsel, jflat = self._jsel, self._jsel.reshape(-1)         # J^T = jsel @ [da; db; dc] blocks
-        i3, i2 = self._idx3, self._idx2
+        lam_prev = lam * s_prev
+        jsel, jt, jg, h, hdiag, phi = self._jsel, self._jsel.T, self._jg, self._h, self._hdiag, self._phi
+        d3, d2, k = self._diag3, self._diag2, len(s_prev)
+        a_part, b_part, c_part = phi[:k], phi[k:2 * k], phi[2 * k:]
 
         def cost_at(s):
-            s2 = s * s
-            phi = np.concatenate((s2 * s, s2, s))
+            # eq. 5: sum_i w_i ||x_i(s) - p_i||^2 = phi'G phi - 2 phi'M W p + p'W p, plus damping/prior
+            np.multiply(s, s, out=b_part)
+            np.multiply(b_part, s, out=a_part)
+            c_part[:] = s
             gphi = gram @ phi
             d = s - s_prev
-            # eq. 5: sum_i w_i ||x_i(s) - p_i||^2 = phi'G phi - 2 phi'M W p + p'W p, plus damping/prior
-            return float(phi @ (gphi - mt2)) + tt + lam * float(d @ d) + mu * float(s @ s), gphi, s2
+            return float(phi @ (gphi - mt2)) + tt + lam * float(d @ d) + mu * float(s @ s), gphi
 
         s = s_prev.copy()
-        cost, gphi, s2 = cost_at(s)
+        cost, gphi = cost_at(s)
         budget = self.iterations if iterations is None else iterations
         nu, used = 1e-3, 0
         while used < budget:
             used += 1
-            jflat[i3] = 3.0 * s2                                     # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
-            jflat[i2] = 2.0 * s
-            jg = jsel @ gram
-            h = jg @ jsel.T                                          # J^T W J
-            g = jsel @ (gphi - mt) + lam * (s - s_prev) + mu * s     # J^T W r + damping + prior
-            h.flat[::k + 1] = (h.flat[::k + 1] + lam + mu) * (1.0 + nu)   # Marquardt scaling
-            step = _spd_solve(h, g)[1]
-            s_new = np.minimum(np.maximum(s - step, self._lo), self._hi)  # bounded by projection
-            moved = float(np.max(np.abs(s_new - s)))
-            if moved < self.tolerance:                               # converged: take the tiny step
+            np.multiply(s, s, out=d3)                                # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
+            d3 *= 3.0
+            np.multiply(s, 2.0, out=d2)
+            np.matmul(jsel, gram, out=jg)
+            np.matmul(jg, jt, out=h)                                 # J^T W J
+            g = jsel @ (gphi - mt)                                   # J^T W r
+            g += (lam + mu) * s
+            g -= lam_prev                                            # + damping + prior
+            hdiag += lam + mu
+            hdiag *= 1.0 + nu                                        # Marquardt scaling
+            step = _spd_solve(h.T, g, overwrite_a=1, overwrite_b=1)[1]   # h is symmetric: h.T is its Fortran view
+            s_new = s - step
+            np.maximum(s_new, lo, out=s_new)                         # bounded by projection
+            np.minimum(s_new, hi, out=s_new)
+            delta = s_new - s
+            if max(delta.max(), -delta.min()) < self.tolerance:      # converged: take the tiny step
                 s = s_new
                 break
-            new_cost, new_gphi, new_s2 = cost_at(s_new)
+            new_cost, new_gphi = cost_at(s_new)
             if new_cost <= cost:
                 gain = cost - new_cost
-                s, cost, gphi, s2 = s_new, new_cost, new_gphi, new_s2
+                s, cost, gphi = s_new, new_cost, new_gphi
                 nu = max(nu * 0.3, 1e-7)
                 if gain <= self.cost_tolerance * (cost + 1e-300):      # converged: cost barely moves
                     break

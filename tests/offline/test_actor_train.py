@@ -135,3 +135,26 @@ def test_train_actor_command_writes_tables_and_pictures(tmp_path, capsys):
     sheet = np.asarray(Image.open(tmp_path / "pics" / "actuations.png"))
     assert sheet.shape[2] == 3 and sheet.std() > 5           # figures were drawn, not a blank image
     assert Image.open(tmp_path / "pics" / "signals.png").size[0] == 1200
+
+
+def test_ridge_on_cubic_terms_shrinks_towards_linear_and_is_chosen_by_held_out_error():
+    from facepuppet.offline.cubic_fit import choose_ridge_ab, holdout_errors
+
+    rng = np.random.default_rng(3)
+    s = rng.uniform(0.0, 1.0, (300, 3))
+    c = rng.normal(size=(3, 4 * 3))
+    linear_truth = s @ c
+    np.testing.assert_allclose(fit_polynomial(s, linear_truth, 3, ridge_ab=1e6)[2], fit_polynomial(s, linear_truth, 1)[0],
+                               atol=1e-3)
+    assert np.abs(fit_polynomial(s, linear_truth, 3, ridge_ab=1e6)[:2]).max() < 1e-3
+    # a linear truth under heavy noise: the curvature is noise, so a ridge wins on held-out frames
+    noisy = linear_truth + rng.normal(scale=1.0, size=linear_truth.shape)
+    chosen, table = choose_ridge_ab(s, noisy, 4)
+    assert chosen > 0 and len(table) == 7
+    # a strongly cubic truth with little noise: no (or a tiny) ridge, and the cubic beats the linear model
+    coef = rng.normal(size=(3, 3, 12)) * 2.0
+    cubic_truth = evaluate(coef, s) + rng.normal(scale=0.01, size=linear_truth.shape)
+    chosen, _ = choose_ridge_ab(s, cubic_truth, 4)
+    assert chosen <= 1e-2
+    h = holdout_errors(s, cubic_truth, 4)
+    assert h["cubic_ridge_rms"] < 0.2 * h["linear_rms"] and h["cubic_ridge_rms"] <= 1.05 * h["cubic_rms"]
