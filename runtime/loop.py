@@ -211,15 +211,23 @@ class FrameLoop:
             self.log(head + ("\n" + report if report else "; every channel matched"))
         return cmap
 
-    def run(self, source, duration: float | None = None) -> LoopResult:
+    def run(self, source, duration: float | None = None, ticks=None) -> LoopResult:
         """Tick from t = 0 until the first tick at or after ``duration`` (default: the source's ``duration``).
 
-        With neither, runs until the window closes.
+        With neither, runs until the window closes. ``ticks``, a sequence of
+        increasing tick indices, draws exactly those ticks (``t = k / fps``)
+        instead, ignoring ``duration`` and ``catch_up``: a replay ticking as a
+        recorded live run did.
         """
         if duration is None:
             duration = getattr(source, "duration", None)
         # the last tick is the first at or after ``duration``, so the last recorded frame is shown
         last = math.inf if duration is None else max(0, math.ceil(duration * self.fps - 1e-6))
+        schedule = None if ticks is None else [int(k) for k in ticks]
+        if schedule is not None:
+            if any(b <= a for a, b in zip(schedule, schedule[1:])) or (schedule and schedule[0] < 0):
+                raise ValueError("FrameLoop.run ticks: expected increasing non-negative tick indices")
+            last = len(schedule) - 1
         window = self.target is not None and not getattr(self.target, "headless", True)
         timer = StageTimer(STAGES)
         now, add = timer.now, timer.add
@@ -232,15 +240,17 @@ class FrameLoop:
         n_ticks = 0
         closed = False
         self.clock.start()
-        k = 0
-        while k <= last:
+        k = i = 0
+        while (k if schedule is None else i) <= last:
             if self.stop is not None and self.stop():
                 break
+            if schedule is not None:
+                k, i = schedule[i], i + 1
             t = k / self.fps
             late = self.clock.wait_until(t)
             if late > 0:
                 counters["late_ticks"] += 1
-                if self.catch_up and late * self.fps >= 1.0:
+                if self.catch_up and schedule is None and late * self.fps >= 1.0:
                     skip = min(int(late * self.fps), last - k)
                     counters["skipped_ticks"] += skip
                     k += skip

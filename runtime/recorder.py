@@ -16,7 +16,7 @@ from __future__ import annotations
 import collections
 import threading
 
-from .session import RecordKind, SessionWriter, encode_audio, encode_packet
+from .session import RecordKind, SessionWriter, encode_audio, encode_packet, encode_tick
 
 
 class PacketRecorder:
@@ -32,7 +32,7 @@ class PacketRecorder:
 
     Attributes
     ----------
-    counters : dict: ``packets_recorded``, ``audio_recorded``, ``record_dropped`` (queue full)
+    counters : dict: ``packets_recorded``, ``audio_recorded``, ``ticks_recorded``, ``record_dropped`` (queue full)
     """
 
     def __init__(self, path, kind: str, info: dict | None = None, capacity: int = 8192,
@@ -42,7 +42,7 @@ class PacketRecorder:
         self.writer = SessionWriter(path, info={"recording": "live packets", "input": kind, **(info or {})},
                                     fsync_every_s=fsync_every_s, overwrite=overwrite)
         self.path = self.writer.path
-        self.counters = {"packets_recorded": 0, "audio_recorded": 0, "record_dropped": 0}
+        self.counters = {"packets_recorded": 0, "audio_recorded": 0, "ticks_recorded": 0, "record_dropped": 0}
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
         self._stopping = False
@@ -65,6 +65,14 @@ class PacketRecorder:
         self._queue.append((RecordKind.AUDIO, t, level_db))
         self._wake.set()
 
+    def put_tick(self, k: int, t: float, frames: int, t_clock: float) -> None:
+        """Queue one TICK record (frame-loop thread; see :class:`~.session.Tick`). Never blocks."""
+        if len(self._queue) >= self.capacity:
+            self.counters["record_dropped"] += 1
+            return
+        self._queue.append((RecordKind.TICK, t, (k, frames, t_clock)))
+        self._wake.set()
+
     def _drain(self) -> None:
         q, write = self._queue, self.writer.write_record
         while True:
@@ -75,6 +83,9 @@ class PacketRecorder:
                 if kind == RecordKind.PACKET:
                     write(kind, encode_packet(t, self.kind, value))
                     self.counters["packets_recorded"] += 1
+                elif kind == RecordKind.TICK:
+                    write(kind, encode_tick(value[0], t, value[1], value[2]))
+                    self.counters["ticks_recorded"] += 1
                 else:
                     write(kind, encode_audio(t, value))
                     self.counters["audio_recorded"] += 1

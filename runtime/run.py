@@ -14,6 +14,11 @@ it onto the rig and draws. Around that loop:
   drawn frame; no device is a message, not an error.
 * ``--vmc-out HOST:PORT``: the rig weights and head pose as VMC, every tick.
 * ``--stats``: counters and per-stage latency once a second and at exit.
+* Parameter spaces (:mod:`~facepuppet.runtime.run_stages`): ``--input markers``
+  with ``--actor``/``--pair`` (marker solve, Shin & Lee), ``--retarget`` (kernel
+  PLS), ``--elastic`` (elastic path; muscles as input channels).
+* With ``--record``, one TICK record per drawn tick (which frame it took and
+  when), so ``replay`` with the same options draws the same weights.
 * Calibration (neutral capture over ``capture_s`` = 0.5 s by default): at the
   start with ``--calibrate``, whenever the OSC message ``/facepuppet/calibrate``
   arrives on the listening port (any arguments; detected before the adapter,
@@ -32,6 +37,7 @@ import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -41,6 +47,7 @@ from .live_stats import LiveStats
 from .loop import FrameLoop, LoopResult, PngSink, WallClock, WeightLog
 from .pipeline import LivePipeline
 from .replay import parse_size
+from .run_stages import add_stage_arguments, build_stages, make_input_adapter
 from .vmc_out import parse_host_port
 
 CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
@@ -78,6 +85,7 @@ def register(subparsers) -> None:
     p.add_argument("--fps", type=float, default=60.0, help="ticks per second (default 60)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    add_stage_arguments(p)
     p.set_defaults(func=run_command)
 
 
@@ -136,9 +144,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
     """
     from .audio_level import open_audio
     from .gl_context import create_context
-    from .input_kinds import make_adapter
     from .recorder import PacketRecorder
-    from .renderer import FaceRenderer
     from .udp_source import UdpSource
     from .vmc_out import VmcSender
 
@@ -150,13 +156,14 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
     voice_only = args.input == "audio"
     if voice_only and (getattr(args, "gestures", None) is None or (args.audio is None and args.audio_file is None)):
         raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
-    adapter = None if voice_only else make_adapter(args.input)
+    character = Character.load(args.character)
+    stages = build_stages(args, character, None if voice_only else args.input, log=log)
+    adapter = None if voice_only else make_input_adapter(args.input, stages.extra_names, log=log)
     host, port = ("127.0.0.1", adapter.default_port if adapter else 0) if args.listen is None else \
         parse_host_port(args.listen, "--listen")
     allow = parse_allow(args.allow)
     vmc_out = parse_host_port(args.vmc_out) if args.vmc_out else None
     config = load_live_config(args.config) if args.config is not None else LiveConfig()
-    character = Character.load(args.character)
 
     stop_event = stop_event or threading.Event()
     parts: list = []  # things to close, in reverse order
@@ -169,7 +176,9 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         recorder = None
         if args.record is not None:
             recorder = PacketRecorder(args.record, args.input, info={
-                "character": str(args.character), "listen": f"{host}:{port}", "fps": args.fps})
+                "character": str(args.character), "listen": f"{host}:{port}", "fps": args.fps,
+                "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
+                            for name in ("config", "calibrate", "actor", "pair", "retarget", "elastic", "gestures")}})
             parts.append(recorder)
         pipeline = LivePipeline(config, audio_level=audio.level if audio is not None else None, log=log)
         if args.calibrate:
@@ -180,6 +189,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
 
             frame_pipeline = gesture_layer(args.gestures, inner=pipeline, voice_only=voice_only, log=log,
                                            level=audio.level if audio is not None else None, seed=args.gesture_seed)
+        frame_pipeline = stages.pipeline(frame_pipeline)  # a markers solve goes first
         if voice_only:
             source = VoiceOnlySource(getattr(audio, "duration", None))
         else:
@@ -193,7 +203,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
                                 title=f"facepuppet run ({args.input})")
         parts.append(target)
         screen = None if target.headless else target.ctx.screen
-        renderer = FaceRenderer(target.ctx, character, width, height, path=args.path, target_fbo=screen, log=log)
+        renderer = stages.renderer(target.ctx, character, width, height, args.path, screen, log)
         parts.append(renderer)
         if not target.headless:
             _bind_calibrate_key(target, pipeline)
@@ -204,7 +214,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
         hooks = [stats.on_tick, *hooks]
         if vmc_out is not None:
-            sender = VmcSender(vmc_out[0], vmc_out[1], character.shape_names)
+            sender = VmcSender(vmc_out[0], vmc_out[1], stages.names)
             parts.append(sender)
             hooks.append(sender.on_tick)
             counters["vmc_out"] = sender.counters
@@ -212,7 +222,10 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
             counters["record"] = recorder.counters
             if audio is not None:
                 hooks.append(lambda info: recorder.put_audio(info.t, audio.level(info.t)))
-        loop = FrameLoop(character, renderer, WallClock(), sinks=sinks, fps=args.fps, log=log, target=target,
+            if hasattr(source, "frames_taken"):  # which frame each tick drew, for a faithful replay
+                hooks.append(lambda info: recorder.put_tick(info.k, info.t, source.frames_taken, info.stamps[0]))
+        loop = FrameLoop(SimpleNamespace(shape_names=stages.names), renderer, WallClock(), sinks=sinks,
+                         fps=args.fps, log=log, target=target, retarget=stages.retarget,
                          pipeline=frame_pipeline, on_tick=hooks, stop=stop_event.is_set, catch_up=True)
         counters["loop"] = loop.counters
         stats.counters = _LiveCounters(source, counters)

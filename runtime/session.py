@@ -25,9 +25,14 @@ PACKET    3     live recording: ``b"P1"``, receive time f64 (monotonic s),
                 input kind length u16, input kind UTF-8, then the datagram's
                 raw bytes
 AUDIO     4     live recording: ``b"A1"``, tick time f64 (s), level f32 (dBFS)
+TICK      5     live recording: ``b"K1"``, tick index i64, tick time f64 (s
+                since the loop started), frames i64 (frames the source had
+                completed when the tick took its snapshot), snapshot time f64
+                (monotonic s, the packets' clock); lets a replay tick as the
+                live run did (same frames at the same tick times)
 ========  ====  ==============================================================
 
-A reader skips PACKET/AUDIO records it cannot decode (older readers skip them
+A reader skips PACKET/AUDIO/TICK records it cannot decode (older readers skip them
 all; their length is in the record header) and counts them in
 ``Session.skipped``; any other unknown code is corruption.
 
@@ -60,6 +65,7 @@ _RECORD_HEAD = struct.Struct("<IIB")  # payload length, crc32 of payload, kind
 _FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
 _PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
 _AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
+_TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames completed, snapshot time
 _MAX_PAYLOAD = 1 << 30  # a length above this is corruption, not data
 
 
@@ -71,9 +77,10 @@ class RecordKind(enum.IntEnum):
     FRAME = 2
     PACKET = 3  # live recording: raw bytes + receive time + input kind
     AUDIO = 4  # live recording: audio levels
+    TICK = 5  # live recording: which frame each tick took, and when
 
 
-_RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO})
+_RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK})
 
 
 class FrameFlags(enum.IntFlag):
@@ -239,6 +246,29 @@ def encode_audio(t: float, level_db: float) -> bytes:
     return _AUDIO.pack(b"A1", t, level_db)
 
 
+@dataclass(frozen=True)
+class Tick:
+    """One drawn tick of a live recording.
+
+    Attributes
+    ----------
+    k : int, tick index (t = k / fps)
+    t : float, tick time, seconds since the frame loop started
+    frames : int, frames the live source had completed when this tick took its snapshot
+    t_clock : float, the snapshot's time on the monotonic clock (the packets' receive clock)
+    """
+
+    k: int
+    t: float
+    frames: int
+    t_clock: float
+
+
+def encode_tick(k: int, t: float, frames: int, t_clock: float) -> bytes:
+    """TICK payload (see the module docstring)."""
+    return _TICK.pack(b"K1", int(k), float(t), int(frames), float(t_clock))
+
+
 def _decode_packet(payload: bytes) -> Packet | None:
     if len(payload) < _PACKET_HEAD.size or payload[:2] != b"P1":
         return None
@@ -328,6 +358,7 @@ class Session:
     skipped : dict of str to int, PACKET/AUDIO records this reader could not decode
     packets : list of Packet, the received datagrams of a live recording, in file order
     audio_levels : list of (t, level_db) float pairs, the audio levels of a live recording
+    ticks : list of Tick, the drawn ticks of a live recording (recordings made since TICK existed)
     """
 
     path: Path
@@ -339,6 +370,7 @@ class Session:
     skipped: dict[str, int] = field(default_factory=dict)
     packets: list[Packet] = field(default_factory=list)
     audio_levels: list[tuple[float, float]] = field(default_factory=list)
+    ticks: list[Tick] = field(default_factory=list)
 
 
 def read_session(path) -> Session:
@@ -415,6 +447,9 @@ def _apply_record(session: Session, layouts: dict[int, _Layout], kind: int, payl
     elif kind == RecordKind.AUDIO and len(payload) == _AUDIO.size and payload[:2] == b"A1":
         _, t, level = _AUDIO.unpack(payload)
         session.audio_levels.append((t, level))
+    elif kind == RecordKind.TICK and len(payload) == _TICK.size and payload[:2] == b"K1":
+        _, k, t, frames, t_clock = _TICK.unpack(payload)
+        session.ticks.append(Tick(k, t, frames, t_clock))
     elif kind in _RESERVED_KINDS:
         name = RecordKind(kind).name.lower()
         session.skipped[name] = session.skipped.get(name, 0) + 1

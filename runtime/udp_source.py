@@ -13,6 +13,11 @@ The thread never raises: anything escaping the adapter or ``on_packet`` is
 counted as ``internal_error`` (the last one is kept in :attr:`UdpSource.last_error`)
 and the thread goes on.
 
+The socket asks for a large kernel receive buffer (``SOCKET_BUFFER``, 4 MiB;
+Linux grants at most ``net.core.rmem_max``, doubled for its bookkeeping, and
+the grant is in ``counters["rcvbuf_bytes"]``): the thread drains the socket only
+when it holds the GIL, and whatever arrives meanwhile must wait in the kernel.
+
 Which address to bind is the caller's choice (the ``run`` command defaults to
 127.0.0.1 and binds elsewhere only when asked); port 0 picks a free port.
 """
@@ -27,7 +32,7 @@ from .frames import Frame
 
 RECV_BUFFER = 65536
 POLL_TIMEOUT_S = 0.05  # how often the thread looks at the stop flag while idle
-SOCKET_BUFFER = 1 << 20  # kernel receive buffer asked for (bursts)
+SOCKET_BUFFER = 4 << 20  # kernel receive buffer asked for: holds what arrives while a draw runs
 
 
 class UdpSource:
@@ -54,6 +59,7 @@ class UdpSource:
         self.clock = clock
         self.last_error: BaseException | None = None
         self._own = {"packets": 0, "filtered_sender": 0, "internal_error": 0}
+        self.rcvbuf_bytes = 0  # kernel receive buffer granted (getsockopt), 0 before start
         self._stale_dropped = 0
         self._slot: tuple[int, Frame | None] = (0, None)
         self._taken = 0
@@ -85,6 +91,7 @@ class UdpSource:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER)
         except OSError:
             pass  # a smaller kernel buffer only means more drops in bursts
+        self.rcvbuf_bytes = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
         try:
             sock.bind((self.host, self.port))
         except OSError as exc:
@@ -144,6 +151,11 @@ class UdpSource:
                 own["internal_error"] += 1
                 self.last_error = exc
 
+    @property
+    def frames_taken(self) -> int:
+        """Frames completed up to the newest one :meth:`latest` handed out (0 before any)."""
+        return self._taken
+
     def latest(self, t: float | None = None) -> tuple[Frame | None, int]:
         """(newest frame not yet taken or None, frames overwritten unseen since the last call).
 
@@ -160,7 +172,7 @@ class UdpSource:
 
     @property
     def counters(self) -> dict[str, int]:
-        """Adapter counters merged with packets, filtered_sender, internal_error, stale_dropped.
+        """Adapter counters merged with packets, filtered_sender, internal_error, stale_dropped, rcvbuf_bytes.
 
         ``internal_error`` is the sum of the adapter's and the thread's.
         """
@@ -175,4 +187,5 @@ class UdpSource:
         for name, value in self._own.items():
             merged[name] = merged.get(name, 0) + value
         merged["stale_dropped"] = self._stale_dropped
+        merged["rcvbuf_bytes"] = self.rcvbuf_bytes
         return merged

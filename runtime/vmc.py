@@ -104,7 +104,9 @@ def unity_to_ours(position, rotation) -> tuple[np.ndarray, np.ndarray]:
 class VmcAdapter(OscAdapter):
     """VMC Marionette side: blend values, head bone, root pose, status.
 
-    Frames carry the 52 ARKit channels (``channels`` = ``ARKIT_NAMES``),
+    Frames carry the 52 ARKit channels (``channels`` = ``ARKIT_NAMES``, then
+    ``extra_names`` when given: channels matched by exact name, such as an
+    elastic character's muscles),
     NaN where nothing was sent since the last Apply; the last head bone pose
     as ``head_rotation``/``head_translation`` (None until one came); the
     last ``/VMC/Ext/T`` as ``t_sender``.
@@ -119,11 +121,15 @@ class VmcAdapter(OscAdapter):
     kind = "vmc"
     default_port = 39539
 
-    def __init__(self):
+    def __init__(self, extra_names=()):
         super().__init__()
         self.counters["unmapped_name"] = 0
-        self._direct = [math.nan] * len(ARKIT_NAMES)
-        self._preset = [math.nan] * len(ARKIT_NAMES)
+        # extra channels after the 52 ARKit ones, matched by exact name (e.g. an elastic character's muscles)
+        extra = tuple(n for n in dict.fromkeys(str(n) for n in extra_names) if n not in ARKIT_NAMES)
+        self.channels = ARKIT_NAMES + extra
+        self._extra = {name: len(ARKIT_NAMES) + i for i, name in enumerate(extra)}
+        self._direct = [math.nan] * len(self.channels)
+        self._preset = [math.nan] * len(self.channels)
         self._poisoned = False
         self._lookup: dict[str, tuple[bool, tuple[tuple[int, float], ...]]] = {}
         self.head_translation: np.ndarray | None = None
@@ -160,7 +166,9 @@ class VmcAdapter(OscAdapter):
         hit = self._lookup.get(name)
         if hit is not None:
             return hit
-        if name in PRESETS:
+        if name in self._extra:
+            hit = (True, ((self._extra[name], 1.0),))
+        elif name in PRESETS:
             hit = (False, tuple((_INDEX[c], g) for c, g in PRESETS[name]))
         else:
             key = canonical(name)
@@ -209,7 +217,7 @@ class VmcAdapter(OscAdapter):
             self._count("nonfinite")
             return None
         return Frame(
-            t=t, source=self.kind, channels=ARKIT_NAMES, weights=weights,
+            t=t, source=self.kind, channels=self.channels, weights=weights,
             head_rotation=self.head_rotation, head_translation=self.head_translation,
             t_sender=self.t_sender,
         )

@@ -1,0 +1,281 @@
+"""``run``/``replay`` parameter spaces end to end over real UDP on 127.0.0.1.
+
+Markers -> actor solve -> pair table; kernel-PLS retarget; elastic characters driven by
+muscle channels; and a live recording replayed tick for tick to the live run's weights.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+from pythonosc.udp_client import SimpleUDPClient
+
+from facepuppet.runtime import replay, run
+from facepuppet.runtime.actor_retarget import ActorRetarget
+from facepuppet.runtime.elastic import ElasticModel
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.kpls_retarget import KplsRetarget
+from facepuppet.runtime.session import read_session
+from tests.runtime.small_characters import sphere_character
+from tests.runtime.test_elastic import random_model
+
+NO_SMOOTHING = "\n".join(f"[filter.{r}]\nmin_cutoff = 500.0\nbeta = 0.0" for r in ("eyes", "brows", "mouth", "other",
+                                                                                  "head")) + \
+    "\n[tracking_loss]\ntimeout_s = 30.0\n"
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers()
+    run.register(sub)
+    replay.register(sub)
+    return p
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def live(argv, send, tmp_path):
+    """Run ``run`` with ``argv`` (plus --listen, --headless); ``send(client, stop)`` runs once the socket is bound."""
+    port = free_udp_port()
+    args = parser().parse_args(["run", *argv, "--listen", f"127.0.0.1:{port}", "--headless", "--size", "48x40"])
+    stop = threading.Event()
+    threads = []
+
+    def on_ready(address):
+        t = threading.Thread(target=send, args=(SimpleUDPClient("127.0.0.1", port), stop), daemon=True)
+        t.start()
+        threads.append(t)
+
+    logs: list[str] = []
+    try:
+        result = run.run_live(args, log=logs.append, on_ready=on_ready)
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(timeout=10)
+    return result, logs
+
+
+def vmc(client, values: dict) -> None:
+    b = OscBundleBuilder(IMMEDIATELY)
+    for name, value in values.items():
+        m = OscMessageBuilder("/VMC/Ext/Blend/Val")
+        m.add_arg(name, "s")
+        m.add_arg(float(value), "f")
+        b.add_content(m.build())
+    b.add_content(OscMessageBuilder("/VMC/Ext/Blend/Apply").build())
+    client.send(b.build())
+
+
+# -- markers: actor solve and pair table ----------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def actor_files(tmp_path_factory):
+    from facepuppet.offline.actor_train import train_actor
+    from facepuppet.offline.actor_transfer import retarget_actor
+    from facepuppet.offline.synthetic_capture import synthetic_capture
+    from tests.offline.test_actor_transfer import grid_face
+
+    tmp = tmp_path_factory.mktemp("actor")
+    cap, truth = synthetic_capture(n_frames=600, n_markers=20, k=3, seed=4)
+    actor = train_actor(cap, k=3, head_markers=["M00", "M01", "M02", "M03"]).actor_
+    character = grid_face()
+    pair = retarget_actor(actor, character)
+    paths = {"actor": actor.save(tmp / "actor.npz"), "pair": pair.save(tmp / "pair.npz"),
+             "character": character.save(tmp / "grid.npz")}
+    return paths, cap, truth, actor, pair
+
+
+def test_markers_over_udp_are_solved_and_mapped_through_the_pair(actor_files, tmp_path):
+    paths, cap, truth, actor, pair = actor_files
+    probe = ActorRetarget(actor, pair)  # a near-neutral frame and the one opening the jaw most
+    w_all = np.array([probe.apply(Frame(t=0.0, markers=m.astype(np.float32), marker_names=cap.names))
+                      for m in cap.markers])
+    poses = [cap.markers[i].astype(np.float32) for i in (np.argmin(w_all.sum(axis=1)), np.argmax(w_all[:, 0]))]
+    expected = []
+    for pose in poses:  # the same frame over and over: the warm-started solve settles where the live one does
+        stage = ActorRetarget(actor, pair)
+        frame = Frame(t=0.0, markers=pose, marker_names=cap.names)
+        for _ in range(40):
+            w = stage.apply(frame)
+        expected.append(w)
+    assert np.abs(expected[0] - expected[1]).max() > 0.05  # two distinguishable expressions
+
+    def send(client, stop):
+        layout = OscMessageBuilder("/facepuppet/markers/layout")
+        layout.add_arg(1)
+        for name in cap.names:
+            layout.add_arg(name, "s")
+        start, n = time.monotonic(), 0
+        while not stop.is_set():
+            if n % 20 == 0:
+                client.send(layout.build())
+            pose = poses[0] if time.monotonic() - start < 0.8 else poses[1]
+            m = OscMessageBuilder("/facepuppet/markers/frame")
+            m.add_arg(1)
+            m.add_arg(n)
+            m.add_arg(time.time(), "d")
+            m.add_arg(pose.astype("<f4").tobytes(), "b")
+            client.send(m.build())
+            n += 1
+            time.sleep(0.01)
+
+    config = tmp_path / "fast.toml"
+    config.write_text(NO_SMOOTHING)
+    dump = tmp_path / "w.npy"
+    result, logs = live(["-c", str(paths["character"]), "--input", "markers", "--actor", str(paths["actor"]),
+                         "--pair", str(paths["pair"]), "--duration", "1.8", "--config", str(config),
+                         "--dump-weights", str(dump)], send, tmp_path)
+    w = result.weights.array
+    assert any("actor:" in line and "K=3" in line for line in logs)
+    assert result.counters["udp"]["malformed"] == 0 and result.loop.counters["frames_received"] > 20
+    assert np.abs(w - expected[0]).max(axis=1).min() < 1e-3, "the first pose was never drawn"
+    np.testing.assert_allclose(w[-1], expected[1], atol=1e-3)
+
+
+def test_markers_need_an_actor_and_a_pair_that_fit(actor_files, tmp_path):
+    paths, *_ = actor_files
+    safe = ["--headless", "--duration", "0.2", "--listen", f"127.0.0.1:{free_udp_port()}"]  # should one not raise
+    base = ["run", "-c", str(paths["character"]), "--input", "markers", *safe]
+    with pytest.raises(ValueError, match="--input markers: needs --actor ACTOR.npz and --pair PAIR.npz"):
+        run.run_live(parser().parse_args(base), log=lambda s: None)
+    with pytest.raises(ValueError, match="--actor and --pair go together"):
+        run.run_live(parser().parse_args(base + ["--actor", str(paths["actor"])]), log=lambda s: None)
+    other = dataclasses.replace(sphere_character(), shape_names=("jawOpen", "smile"))
+    sphere = other.save(tmp_path / "sphere.npz")
+    args = parser().parse_args(["run", "-c", str(sphere), "--input", "markers", *safe,
+                                "--actor", str(paths["actor"]), "--pair", str(paths["pair"])])
+    with pytest.raises(ValueError, match="--pair .*pair.npz: its shapes \\(2\\) are not the shapes of the character"):
+        run.run_live(args, log=lambda s: None)
+
+
+# -- kernel PLS ----------------------------------------------------------------------------------------------------
+
+def test_kpls_retarget_in_the_live_run(tmp_path):
+    from tests.runtime.test_kpls_retarget import _stage
+
+    character = sphere_character()
+    char_path = character.save(tmp_path / "sphere.npz")
+    stage = _stage(target=character.shape_names, source=("jawOpen", "mouthSmileLeft"))
+    stage.save(tmp_path / "r.npz")
+    loaded = KplsRetarget.load(tmp_path / "r.npz")
+    expected = loaded.predict_weights([0.6, 0.3])
+    assert np.abs(expected - loaded.predict_weights([0.0, 0.0])).max() > 0.01
+
+    def send(client, stop):
+        while not stop.is_set():
+            vmc(client, {"JawOpen": 0.6, "MouthSmileLeft": 0.3})
+            time.sleep(0.01)
+
+    config = tmp_path / "fast.toml"
+    config.write_text(NO_SMOOTHING)
+    result, logs = live(["-c", str(char_path), "--input", "vmc", "--retarget", str(tmp_path / "r.npz"),
+                         "--duration", "1.0", "--config", str(config)], send, tmp_path)
+    assert any(line.startswith("retarget:") and "rbf kernel" in line for line in logs)
+    np.testing.assert_allclose(result.weights.array[-1], expected, atol=1e-4)
+
+
+# -- elastic characters and muscles -------------------------------------------------------------------------------
+
+def elastic_with_muscle(character, name="zygomaticMajorL") -> ElasticModel:
+    model = random_model(character)
+    arrays = dict(model.arrays)
+    n_c = model.n_controls
+    rng = np.random.default_rng(3)
+    arrays.update(muscle_params=(0.3 * rng.standard_normal((1, n_c, 3))).astype(np.float32),
+                  muscle_kinds=np.zeros(1, np.uint8), muscle_points=np.zeros((1, 2, 3), np.float32),
+                  muscle_ranges=np.array([[0.5, 1.0, 0.5, 1.0]], np.float32))
+    return ElasticModel(arrays, model.shape_names, model.control_names, (name,))
+
+
+def test_elastic_character_driven_by_a_muscle_channel_over_vmc(tmp_path):
+    character = sphere_character(with_hidden=False)
+    char_path = character.save(tmp_path / "sphere.npz")
+    elastic_with_muscle(character).save(tmp_path / "e.npz")
+
+    def send(client, stop):
+        start = time.monotonic()
+        while not stop.is_set():
+            vmc(client, {"zygomaticMajorL": 0.0 if time.monotonic() - start < 0.6 else 0.8})
+            time.sleep(0.01)
+
+    config = tmp_path / "fast.toml"
+    config.write_text(NO_SMOOTHING)
+    pngs = tmp_path / "png"
+    result, logs = live(["-c", str(char_path), "--input", "vmc", "--elastic", str(tmp_path / "e.npz"),
+                         "--duration", "1.4", "--config", str(config), "--out", str(pngs)], send, tmp_path)
+    assert result.path == "elastic" and any("1 muscles: zygomaticMajorL" in line for line in logs)
+    w = result.weights.array
+    assert w.shape[1] == 3  # jawOpen, puff, then the muscle
+    assert w[-1, 2] == pytest.approx(0.8, abs=1e-4)
+    np.testing.assert_array_equal(w[:, :2], 0.0)
+    relaxed = int(np.flatnonzero((np.abs(w[:, 2]) < 1e-6))[-1])
+    from PIL import Image
+
+    still = np.asarray(Image.open(pngs / f"frame_{relaxed:05d}.png"))
+    pulled = np.asarray(Image.open(pngs / f"frame_{len(w) - 1:05d}.png"))
+    assert (still != pulled).any(), "the contraction did not move the image"
+    assert result.counters["udp"]["unmapped_name"] == 0
+
+
+def test_elastic_table_must_fit_the_character(tmp_path):
+    character = sphere_character(with_hidden=False)
+    elastic_with_muscle(character).save(tmp_path / "e.npz")
+    other = sphere_character(with_hidden=True).save(tmp_path / "other.npz")
+    args = parser().parse_args(["run", "-c", str(other), "--input", "vmc", "--headless", "--duration", "0.2",
+                                "--listen", f"127.0.0.1:{free_udp_port()}", "--elastic", str(tmp_path / "e.npz")])
+    with pytest.raises(ValueError, match="--elastic .*e.npz: made for \\d+ vertices"):
+        run.run_live(args, log=lambda s: None)
+
+
+# -- a live recording replayed tick for tick -----------------------------------------------------------------------
+
+def test_replay_of_a_live_recording_draws_the_live_weights(tmp_path):
+    character = sphere_character()
+    char_path = character.save(tmp_path / "sphere.npz")
+    config = tmp_path / "live.toml"  # real smoothing and a tracking-loss timeout that the gap below trips
+    config.write_text("[filter.mouth]\nmin_cutoff = 2.0\nbeta = 0.5\n"
+                      "[tracking_loss]\ntimeout_s = 0.15\nease_out_s = 0.1\nease_in_s = 0.1\n")
+
+    def send(client, stop):
+        start = time.monotonic()
+        while not stop.is_set():
+            age = time.monotonic() - start
+            if not 0.7 < age < 1.0:  # a 0.3 s gap: tracking loss, then blend back
+                vmc(client, {"JawOpen": 0.5 + 0.4 * np.sin(7 * age), "EyeBlinkLeft": 0.3})
+            time.sleep(0.008)
+
+    record, live_w, replay_w = tmp_path / "take.fps", tmp_path / "live.npy", tmp_path / "replay.npy"
+    live_args = ["-c", str(char_path), "--input", "vmc", "--duration", "1.6", "--config", str(config),
+                 "--calibrate", "--record", str(record), "--dump-weights", str(live_w)]
+    result, _ = live(live_args, send, tmp_path)
+    np.save(live_w, result.weights.array)
+    session = read_session(record)
+    assert len(session.ticks) == result.loop.n_ticks and result.counters["record"]["record_dropped"] == 0
+    assert result.counters["pipeline"]["tracking_lost"] >= 1 and result.counters["pipeline"]["calibrations"] == 1
+
+    logs: list[str] = []
+    args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
+                                "--config", str(config), "--calibrate", "--dump-weights", str(replay_w)])
+    assert replay.run_replay(args, log=logs.append) == 0
+    assert any("tick for tick" in line for line in logs)
+    live_weights, replayed = np.load(live_w), np.load(replay_w)
+    assert live_weights.shape == replayed.shape and np.abs(live_weights[:, 0]).max() > 0.1
+    np.testing.assert_array_equal(replayed, live_weights)
+
+    raw = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
+                               "--dump-weights", str(replay_w)])
+    assert replay.run_replay(raw, log=logs.append) == 0
+    assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # without the pipeline: the raw frames
