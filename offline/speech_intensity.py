@@ -17,7 +17,8 @@ lips close there.
 
 Symbols: s(t) -> ``intensity`` (normalised), dB(t) -> ``level_db``.
 
-Inputs are checked at the door: mono int16/int32/uint8/float WAV at any rate
+Inputs are checked at the door (decoding by the runtime's
+:func:`~facepuppet.runtime.audio_level.read_wav`): mono int16/int32/uint8/float WAV at any rate
 (resampled to ``rate`` Hz with :func:`scipy.signal.resample_poly`); stereo is
 refused unless ``stereo="mix"``; NaN or infinite samples are refused;
 all-silent audio gives floor levels (and a warning from the normaliser).
@@ -28,12 +29,11 @@ from __future__ import annotations
 import math
 import warnings
 from fractions import Fraction
-from pathlib import Path
 
 import numpy as np
-from scipy.io import wavfile
 from scipy.signal import resample_poly
 
+from facepuppet.runtime.audio_level import read_wav
 from facepuppet.runtime.gestures import SILENCE_Z
 
 DEFAULT_RATE = 16000
@@ -60,27 +60,14 @@ def read_speech(path, rate: int = DEFAULT_RATE, stereo: str = "refuse") -> np.nd
     -------
     samples : ndarray of shape (n,), float64
     """
-    path = Path(path)
+    if stereo not in ("refuse", "mix"):
+        raise ValueError(f"stereo: expected 'refuse' or 'mix', got {stereo!r}")
     try:
-        file_rate, data = wavfile.read(path)
-    except (ValueError, OSError, EOFError) as exc:
+        x, file_rate = read_wav(path, stereo=stereo, finite=True)
+    except OSError as exc:
         raise SpeechInputError(f"{path}: not a readable WAV file ({exc})") from None
-    if data.dtype.kind == "f":
-        x = data.astype(np.float64)
-    elif data.dtype == np.uint8:
-        x = (data.astype(np.float64) - 128.0) / 128.0
-    elif data.dtype.kind == "i":
-        x = data.astype(np.float64) / float(-np.iinfo(data.dtype).min)
-    else:
-        raise SpeechInputError(f"{path}: sample type {data.dtype} not supported (expected int16/int32/uint8/float)")
-    if x.ndim == 2:
-        if stereo != "mix":
-            raise SpeechInputError(f"{path}: expected a mono WAV, found {x.shape[1]} channels "
-                                   f"(convert it to mono, or pass stereo='mix' / --stereo mix to average them)")
-        x = x.mean(axis=1)
-    if not np.isfinite(x).all():
-        bad = int(np.count_nonzero(~np.isfinite(x)))
-        raise SpeechInputError(f"{path}: {bad} samples are NaN or infinite; expected finite audio")
+    except ValueError as exc:  # the runtime reader's message names the file and the problem
+        raise SpeechInputError(str(exc)) from None
     if file_rate != rate:
         f = Fraction(int(rate), int(file_rate))
         x = resample_poly(x, f.numerator, f.denominator)

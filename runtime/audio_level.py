@@ -77,18 +77,28 @@ class LevelMeter:
         return self.level_db
 
 
-def read_wav(path) -> tuple[np.ndarray, int]:
-    """Samples of a WAV file as float64 in [-1, 1], shape (n,) (channels averaged), and the rate (Hz).
+def read_wav(path, stereo: str = "mix", finite: bool = False) -> tuple[np.ndarray, int]:
+    """Samples of a WAV file as float64 in [-1, 1], shape (n,), and the rate (Hz).
 
-    int16, int32, uint8 and float32/64 files are read (scipy.io.wavfile).
+    int16, int32, uint8 and float32/64 files are read (scipy.io.wavfile); integer
+    samples are divided by the type's magnitude (uint8 centred on 128).
+
+    Parameters
+    ----------
+    path : str or Path, a WAV file
+    stereo : "mix" (average the channels) or "refuse" (ValueError for more than one channel)
+    finite : bool, refuse NaN or infinite samples (ValueError) instead of passing them on
 
     Raises
     ------
     ValueError
-        naming the file when it is not a WAV file scipy can read.
+        naming the file when it is not a WAV file scipy can read, has an unsupported sample
+        type, has several channels with ``stereo="refuse"``, or non-finite samples with ``finite``.
     """
     from scipy.io import wavfile
 
+    if stereo not in ("mix", "refuse"):
+        raise ValueError(f"read_wav stereo: expected 'mix' or 'refuse', got {stereo!r}")
     path = Path(path)
     try:
         rate, data = wavfile.read(path)
@@ -103,7 +113,13 @@ def read_wav(path) -> tuple[np.ndarray, int]:
     else:
         raise ValueError(f"{path}: WAV sample type {data.dtype} is not supported (expected int16/int32/uint8/float)")
     if x.ndim == 2:
+        if stereo == "refuse" and x.shape[1] > 1:
+            raise ValueError(f"{path}: expected a mono WAV, found {x.shape[1]} channels "
+                             f"(convert it to mono, or pass stereo='mix' / --stereo mix to average them)")
         x = x.mean(axis=1)
+    if finite and not np.isfinite(x).all():
+        bad = int(np.count_nonzero(~np.isfinite(x)))
+        raise ValueError(f"{path}: {bad} samples are NaN or infinite; expected finite audio")
     return x, int(rate)
 
 

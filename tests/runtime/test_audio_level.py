@@ -90,3 +90,24 @@ def test_missing_device_gives_a_message_and_no_audio():
     assert open_audio(device="no such microphone 4242", log=messages.append) is None
     assert len(messages) == 1 and "no audio" in messages[0] and "goes on without audio" in messages[0]
     assert "no such microphone 4242" in messages[0]
+
+
+def test_read_wav_refuses_stereo_and_non_finite_samples_when_asked(tmp_path):
+    from facepuppet.runtime.audio_level import read_wav
+
+    s = sine(0.25, 0.1).astype(np.float32)
+    stereo = tmp_path / "st.wav"
+    wavfile.write(stereo, RATE, np.stack([s, -s], axis=1))
+    x, rate = read_wav(stereo)
+    assert rate == RATE and x.shape == s.shape and np.abs(x).max() < 1e-7  # mixed: the channels cancel
+    with pytest.raises(ValueError, match="st.wav: expected a mono WAV, found 2 channels"):
+        read_wav(stereo, stereo="refuse")
+    s[10] = np.nan
+    bad = tmp_path / "nan.wav"
+    wavfile.write(bad, RATE, s)
+    assert np.isnan(read_wav(bad)[0][10])
+    with pytest.raises(ValueError, match="nan.wav: 1 samples are NaN"):
+        read_wav(bad, finite=True)
+    u8 = tmp_path / "u8.wav"
+    wavfile.write(u8, RATE, np.array([0, 128, 255], np.uint8))
+    np.testing.assert_allclose(read_wav(u8)[0], [-1.0, 0.0, 127 / 128])
