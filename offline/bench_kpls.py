@@ -86,7 +86,10 @@ def run_bench(args, log=print) -> dict:
         motion = motion[: args.frames]
     log(f"bench kpls: {take.name}, {len(motion)} frames driving the ICT head; targets: {', '.join(targets)} "
         f"(setup {time.perf_counter() - t0:.1f} s)")
-    rows = evaluate(ict, targets, motion, n_mixes=args.mixes, log=log)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):  # small matrices: threaded BLAS only contends
+        rows = evaluate(ict, targets, motion, n_mixes=args.mixes, log=log)
     table = format_table(rows, ict.units)
     log(table)
     target_table = format_table(rows, ict.units, key="e_target")

@@ -20,8 +20,9 @@ positions ``out_positions``; G ``spread_``.
 
 Counterparts q of the input points on the output face are needed (Dutreve et
 al. place them by hand): :func:`corresponding_vertices` uses the vertex itself
-when both faces share a topology, else the nearest output vertex once both
-faces' moving regions are scaled into the same bounding box.
+when both faces share a topology, else the nearest free output vertex once both
+faces' moving regions are scaled into the same bounding box (distinct, as RBF
+centres must be).
 """
 
 from __future__ import annotations
@@ -43,8 +44,13 @@ def corresponding_vertices(a, b, idx_a: np.ndarray) -> np.ndarray:
     lo_a, span_a = pa.min(0), np.ptp(pa, axis=0)
     lo_b, span_b = pb.min(0), np.ptp(pb, axis=0)
     moved = (a.vertices[idx_a] - lo_a) / np.where(span_a > 0, span_a, 1.0) * span_b + lo_b
-    nearest = np.argmin(((moved[:, None, :] - pb[None, :, :]) ** 2).sum(-1), axis=1)
-    return rb[nearest]
+    dist = ((moved[:, None, :] - pb[None, :, :]) ** 2).sum(-1)
+    chosen = np.empty(len(idx_a), dtype=np.int64)
+    taken = np.zeros(len(pb), dtype=bool)
+    for i in np.argsort(dist.min(axis=1)):  # nearest free vertex: RBF centres must be distinct
+        j = int(np.argmin(np.where(taken, np.inf, dist[i])))
+        chosen[i], taken[j] = j, True
+    return rb[chosen]
 
 
 class DutreveRBF:

@@ -227,7 +227,7 @@ class KernelPLS:
     def __init__(self, n_components="auto", kernel: str = "rbf", gamma: float | None = None,
                  degree: int = 2, coef0: float = 1.0, max_components: int | None = None,
                  cv_folds: int = 5, tol: float = 1e-6, max_iter: int = 2000, random_state: int = 0,
-                 gamma_scales: tuple = (1.0, 0.1, 0.01), solver: str = "eigh"):
+                 gamma_scales: tuple = (1.0, 0.1, 0.01, 0.001), solver: str = "eigh"):
         self.n_components = n_components
         self.kernel = kernel
         self.gamma = gamma
