@@ -34,6 +34,18 @@ def register(subparsers) -> None:
     r.add_argument("-o", "--output", type=Path, required=True, help="actor-pair table to write (.npz)")
     r.add_argument("--markers-to-mesh", type=Path, metavar="OVERRIDE.json",
                    help='JSON {"marker name": vertex index} overriding the nearest-vertex choice')
+    r.add_argument("--landmarks", type=Path, metavar="JSON",
+                   help="the character's 68 Multi-PIE landmark vertices (a JSON list or ICT's vertex_indices.json); "
+                        "default: the file named in the character's import settings")
+    r.add_argument("--include-shapes", nargs="+", default=[], metavar="PATTERN",
+                   help="shape names (fnmatch patterns) kept even if the markers cannot observe them, "
+                        "e.g. 'eyeLook*' or '*' for all")
+    r.add_argument("--exclude-shapes", nargs="+", metavar="PATTERN",
+                   help="shape names left out by name (default: eyeLook* PupilDilate*)")
+    r.add_argument("--region-radius", type=float, default=None, metavar="FAPU",
+                   help="a shape needs a marker within this many FAPU of its moving region (default 0.3)")
+    r.add_argument("--evaluate", type=Path, metavar="CAPTURE",
+                   help="report the marker-space transfer error on this take's frames (TRC/C3D/CSV, the actor's markers)")
     r.add_argument("--pictures", type=Path, metavar="DIR",
                    help="write face_actuations.png (the K actuations at s=1 on the character's face) here")
     r.set_defaults(func=_retarget_actor)
@@ -77,21 +89,46 @@ def _retarget_actor(args: argparse.Namespace) -> int:
     from facepuppet.runtime.actor import Actor
     from facepuppet.runtime.character import Character
 
-    from .actor_transfer import read_override, retarget_actor
+    from . import actor_transfer as transfer
 
     start = time.perf_counter()
     actor = Actor.load(args.actor)
     character = Character.load(args.character)
-    override = read_override(args.markers_to_mesh, actor.names, character.n_vertices) if args.markers_to_mesh else None
-    pair = retarget_actor(actor, character, override=override)
+    override = (transfer.read_override(args.markers_to_mesh, actor.names, character.n_vertices)
+                if args.markers_to_mesh else None)
+    landmarks = transfer.character_landmarks(character, args.landmarks)
+    options = {"include": args.include_shapes}
+    if args.exclude_shapes is not None:
+        options["exclude"] = args.exclude_shapes
+    if args.region_radius is not None:
+        options["radius"] = args.region_radius
+    pair = transfer.retarget_actor(actor, character, override=override, landmarks=landmarks, **options)
     out = pair.save(args.output)
     m = pair.metadata["metrics"]
-    print(f"{out}: {actor.n_markers} markers, K = {actor.n_actuations} -> {character.n_shapes} shapes of "
-          f"'{character.name}', {time.perf_counter() - start:.2f} s\n"
-          f"  alignment: scale {m['scale']:.3f}, RMS marker-to-skin {m['alignment_rms']:.3f} {character.units}, "
-          f"{m['overrides']} overrides\n"
-          f"  weights fit: {m['frames']} parameter-shape pairs, marker RMS {m['marker_fit_rms']:.3f} "
-          f"{character.units}, cubic weight RMS {m['weight_fit_rms']:.3f}")
+    u = character.units
+    lm = (f"{len(m['landmarks'])} landmark markers (RMS {m['landmark_rms']:.3f} {u})" if m["landmarks"]
+          else "no landmarks: ICP on the skin")
+    print(f"{out}: {actor.n_markers} markers, K = {actor.n_actuations} -> {m['shapes_used']} of {character.n_shapes} "
+          f"shapes of '{character.name}', {time.perf_counter() - start:.2f} s\n"
+          f"  alignment: {lm}, scale {m['scale']:.3f}, RMS marker-to-skin {m['alignment_rms']:.3f} {u}, "
+          f"{m['overrides']} overrides; FAPU ({m['fapu']}) {m['fapu_actor']:.3f} {actor.units} -> "
+          f"{m['fapu_character']:.3f} {u}\n"
+          f"  left out: " + (", ".join(f"{n} ({why})" for n, why in m["shapes_left_out"].items()) or "none") + "\n"
+          f"  weights fit: {m['frames']} parameter-shape pairs, s from {m['s_source']}, marker RMS "
+          f"{m['marker_fit_rms']:.3f} {u}, cubic weight RMS {m['weight_fit_rms']:.3f}")
+    if args.evaluate:
+        from .actor_transfer_eval import transfer_error
+        from .capture_io import read_capture
+
+        capture = read_capture(args.evaluate)
+        missing = [n for n in actor.names if n not in capture.names]
+        if missing:
+            raise ValueError(f"{args.evaluate}: markers {missing[:5]} of the actor are not in this take")
+        frames = capture.markers[:, [capture.names.index(n) for n in actor.names]]
+        e = transfer_error(actor, pair, character, frames, m["fapu_actor"], m["fapu_character"])
+        print(f"  {args.evaluate}: {e['frames']} frames, marker-space RMS transfer {e['transfer_rms']:.3f} {u} "
+              f"(neutral {e['zero_rms']:.3f}, per-frame best {e['oracle_rms']:.3f}; relative "
+              f"{e['relative']:.3f}); actor solve RMS {e['solve_rms']:.3f} {actor.units}")
     if args.pictures:
         from .actor_pictures import face_actuation_sheet
 

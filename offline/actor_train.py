@@ -23,6 +23,7 @@ from .stabilise import stabilise
 
 Progress = Callable[[str, float, str], None]
 BOUND_MARGIN = 0.25  # solver bounds: the training range widened by this fraction of it
+S_QUANTILE_LEVELS = (0.0, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99, 1.0)  # stored per actuation
 
 
 class ActorModel:
@@ -129,6 +130,9 @@ class ActorModel:
             "train_rms": train_rms, "holdout": errors, "k_report": k_rows, "ridge_ab_table": ridge_table,
             "head_rms_residual": stab.rms_residual, "head_max_angle_deg": stab.max_angle_deg,
             "gaps_left": len(capture.gaps), "samples_filled": int(capture.filled),
+            # the actuations' real range, for transfer training pairs (offline/actor_transfer.py)
+            "s_quantiles": {"levels": list(S_QUANTILE_LEVELS),
+                            "values": np.quantile(s, S_QUANTILE_LEVELS, axis=0).round(6).tolist()},
         }
         self.actor_ = Actor(
             names=capture.names, units=capture.units, neutral=markers[neutral],

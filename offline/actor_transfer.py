@@ -5,25 +5,42 @@ Paper symbols -> code names:
     s(t)        actor actuations of training frame t           s            (n_frames, K)
     x_i(t)      actor marker displacements (head coords)       disp         (n_frames, n_markers, 3)
     v_i         character vertex standing for marker i          marker_vertices (n_markers,)
-    B           character blendshape deltas at those vertices   basis        (3 n_markers, n_shapes)
+    B           character blendshape deltas at those vertices   basis        (3 n_markers, n_used)
     w(t)        character weights of frame t                    weights      (n_frames, n_shapes)
     a, b, c     cubic functions s -> w (eq 2 on weights)        pair.cubic   (3, K, n_shapes)
 
-Steps: a similarity transform of the actor's neutral marker cloud onto the
-character's skin (given landmarks / override vertices first, then ICP-like
-iterations of nearest front-facing skin vertex + Umeyama); each marker's
-nearest vertex (or the override); every training frame's displacements,
-FAPU-normalised (divided by the RMS radius of the marker cloud on each face),
-expressed in the character's weights by bounded least squares
-(``scipy.optimize.lsq_linear``, 0 <= w <= 1, small ridge); then cubic tables
-s -> w fitted like the markers (eqs 2-4).
+Steps:
+
+1. Marker -> mesh: a similarity of the actor's neutral marker cloud onto the
+   character, from corresponding landmarks where the marker names allow it
+   (:data:`MARKER_LANDMARKS`, AnimFace names -> 0-based Multi-PIE 68 landmarks,
+   given as the character's landmark vertices) -- else ICP-like iterations of
+   nearest front-facing skin vertex + Umeyama; then each marker's nearest
+   front skin vertex (landmark markers take their landmark's vertex); an
+   override file wins over both.
+2. Shapes: those the markers cannot observe are left out (weight 0): gaze and
+   pupil shapes by name (:data:`UNOBSERVABLE`) and shapes whose moving skin
+   region (|delta| >= half its largest) has no marker vertex within
+   ``radius`` (a fraction of the character's FAPU). ``include`` brings any back.
+3. Training pairs over the actuations' real range: s drawn from each
+   actuation's quantiles over the capture (``metrics["s_quantiles"]`` of the
+   actor table, negative values included) -- each actuation alone across its
+   range, sparse mixes, and dense mixes -- markers by eq 2.
+4. Each pair's displacements in FAPU (inner-eye-corner distance on each face:
+   markers ``Leye_Inside``/``Reye_Inside``, landmarks 39/42; else the marker
+   cloud's RMS radius on both), rotated into the character's axes, expressed
+   in the character's weights by bounded least squares
+   (``scipy.optimize.lsq_linear``, 0 <= w <= 1, small ridge); then cubic
+   tables s -> w fitted over that range (eqs 2-4).
 """
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import os
 from pathlib import Path
+from typing import NamedTuple, Sequence
 
 import numpy as np
 from scipy.optimize import lsq_linear
@@ -34,6 +51,22 @@ from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.geometry import vertex_normals
 
 from .cubic_fit import fit_polynomial
+
+# AnimFace marker -> 0-based Multi-PIE 68 landmark (L/R = the subject's own side; 36-41 is the right eye).
+# Only markers that sit on the landmark: AnimFace's ``*eye_Outside`` markers sit on the temples
+# (11.8 cm apart on the actor vs 8.9 cm between ICT's outer eye corners) and are left out.
+MARKER_LANDMARKS = {
+    "Reye_Inside": 39, "Leye_Inside": 42,           # inner eye corners
+    "NoseTop": 27, "NoseHead": 30,                  # top of the nose bridge, nose tip
+    "Mouth_Rend": 48, "Mouth_Lend": 54,             # mouth corners
+    "Mouth_Up": 51, "Mouth_Down": 57,               # upper / lower lip, middle
+    "Chin": 8,                                      # chin
+}
+FAPU_MARKERS = ("Leye_Inside", "Reye_Inside")       # actor FAPU: inner-eye-corner distance
+FAPU_LANDMARKS = (39, 42)                           # character FAPU: the same, Multi-PIE 0-based
+UNOBSERVABLE = ("eyeLook*", "PupilDilate*")         # markers on the skin cannot see gaze or pupils
+REGION_RADIUS = 0.3                                 # of the character's FAPU: a shape's region must have a
+                                                    # marker vertex this close
 
 
 def umeyama(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -75,24 +108,59 @@ def read_override(path: str | os.PathLike, marker_names, n_vertices: int) -> dic
     return out
 
 
-def align_markers(actor: Actor, character: Character, override: dict[int, int] | None = None,
-                  iterations: int = 30) -> tuple[np.ndarray, np.ndarray, float]:
-    """Similarity alignment of the actor's neutral onto the character's front skin; nearest vertices.
+def read_landmarks(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
+    """Landmark vertex indices (68,) int64 from a JSON list or ICT's ``vertex_indices.json``.
 
-    Returns similarity (4, 4) float64, marker_vertices (n_markers,) int64, RMS distance (character units).
+    Accepts ``[v0, v1, ...]`` or an object with ``idx_to_landmark_verts`` (0-based Multi-PIE order).
     """
-    override = override or {}
-    verts = character.vertices.astype(np.float64)
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not a readable JSON file ({exc})") from None
+    if isinstance(data, dict):
+        data = data.get("idx_to_landmark_verts")
+    if not (isinstance(data, list) and data and all(isinstance(v, int) and 0 <= v < n_vertices for v in data)):
+        raise ValueError(f"{path}: field idx_to_landmark_verts: expected a list of vertex indices "
+                         f"0..{n_vertices - 1}")
+    return np.asarray(data, dtype=np.int64)
+
+
+def character_landmarks(character: Character, path: str | os.PathLike | None = None) -> np.ndarray | None:
+    """The character's landmark vertices: from ``path``, else the file named in its import settings, else None."""
+    if path is None:
+        path = dict(character.metadata.get("settings", {})).get("landmarks")
+        if not path or not Path(path).is_file():
+            return None
+    return read_landmarks(path, character.n_vertices)
+
+
+class Alignment(NamedTuple):
+    """Marker -> mesh mapping: similarity (4, 4) float64, vertices (n_markers,) int64, and its quality.
+
+    rms : RMS distance of the moved markers to their vertices, character units
+    landmark_rms : RMS distance of the landmark markers to their landmarks (NaN without landmarks)
+    landmarks : {marker index: landmark index} used
+    """
+
+    similarity: np.ndarray
+    vertices: np.ndarray
+    rms: float
+    landmark_rms: float
+    landmarks: dict
+
+
+def front_skin(character: Character) -> np.ndarray:
+    """Indices of the skin vertices that face the viewer (+z); all vertices if there are too few."""
     kinds = character.material_params[:, 2].astype(int)
     skin_tri = kinds[character.triangle_material] == MATERIAL_KINDS["skin"]
     skin = np.unique(character.triangles[skin_tri])
     normals = vertex_normals(character.vertices, character.triangles)
-    front = skin[normals[skin, 2] > 0.3] if len(skin) else np.arange(len(verts))
-    if len(front) < 3:
-        front = np.arange(len(verts))
-    tree = cKDTree(verts[front])
-    src = actor.neutral.astype(np.float64)
-    # start: same axes convention; centre on the front skin, scale by the marker cloud's width
+    front = skin[normals[skin, 2] > 0.3] if len(skin) else np.arange(character.n_vertices)
+    return front if len(front) >= 3 else np.arange(character.n_vertices)
+
+
+def _icp(src: np.ndarray, verts: np.ndarray, front: np.ndarray, tree, override: dict, iterations: int):
     cloud = verts[front]
     face = cloud[cloud[:, 2] > np.percentile(cloud[:, 2], 40)]
     scale = (np.ptp(face[:, 0]) * 0.75) / max(np.ptp(src[:, 0]), 1e-9)
@@ -104,8 +172,7 @@ def align_markers(actor: Actor, character: Character, override: dict[int, int] |
         idx = np.array(sorted(override))
         m = umeyama(src[idx], verts[[override[i] for i in idx]])
     for _ in range(iterations):
-        moved = _apply(m, src)
-        _, near = tree.query(moved)
+        _, near = tree.query(_apply(m, src))
         dst = verts[front[near]]
         for i, v in override.items():
             dst[i] = verts[v]
@@ -113,35 +180,157 @@ def align_markers(actor: Actor, character: Character, override: dict[int, int] |
         if np.allclose(m_new, m, atol=1e-7):
             break
         m = m_new
+    return m
+
+
+def align_markers(actor: Actor, character: Character, override: dict[int, int] | None = None,
+                  landmarks: np.ndarray | None = None, iterations: int = 30,
+                  snap_landmarks: bool = True) -> Alignment:
+    """Similarity alignment of the actor's neutral onto the character; each marker's vertex.
+
+    Parameters
+    ----------
+    actor, character
+    override : {marker index: vertex index}, wins over everything
+    landmarks : ndarray of shape (68,), int, the character's Multi-PIE landmark vertices, or None.
+        With 3 or more markers named in :data:`MARKER_LANDMARKS` the similarity is the Umeyama fit of
+        those markers onto their landmarks; otherwise ICP on the front skin (override vertices held).
+    snap_landmarks : landmark markers take their landmark's vertex (else the nearest skin vertex)
+    """
+    override = override or {}
+    verts = character.vertices.astype(np.float64)
+    front = front_skin(character)
+    tree = cKDTree(verts[front])
+    src = actor.neutral.astype(np.float64)
+    pairs = {}
+    if landmarks is not None:
+        pairs = {actor.names.index(name): int(lm) for name, lm in MARKER_LANDMARKS.items()
+                 if name in actor.names and lm < len(landmarks)}
+    if len(pairs) >= 3:
+        idx = np.array(sorted(pairs))
+        m = umeyama(src[idx], verts[landmarks[[pairs[i] for i in idx]]])
+    else:
+        pairs = {}
+        m = _icp(src, verts, front, tree, override, iterations)
     moved = _apply(m, src)
-    dist, near = tree.query(moved)
+    _, near = tree.query(moved)
     vertices = front[near].astype(np.int64)
+    if snap_landmarks:
+        for i, lm in pairs.items():
+            vertices[i] = landmarks[lm]
     for i, v in override.items():
         vertices[i] = v
     rms = float(np.sqrt(np.mean(np.sum((verts[vertices] - moved) ** 2, axis=1))))
-    return m, vertices, rms
+    lm_rms = float("nan")
+    if pairs:
+        idx = np.array(sorted(pairs))
+        lm_rms = float(np.sqrt(np.mean(np.sum((verts[landmarks[[pairs[i] for i in idx]]] - moved[idx]) ** 2, 1))))
+    return Alignment(m, vertices, rms, lm_rms, pairs)
 
 
-def training_pairs(actor: Actor, n_random: int = 400, levels: int = 8, seed: int = 0):
-    """Parameter-shape pairs from the actor's own model: each actuation alone, then sparse mixes.
+def face_units(actor: Actor, character: Character, vertices: np.ndarray,
+               landmarks: np.ndarray | None) -> tuple[float, float, str]:
+    """FAPU on each face: (actor units, character units, kind).
 
-    Returns s (n, K) float64 within the actor's bounds (non-negative part) and
-    disp (n, n_markers, 3) float64, x(s) - neutral by eq 2.
+    The inner-eye-corner distance (markers :data:`FAPU_MARKERS`, landmarks :data:`FAPU_LANDMARKS`)
+    when both faces have them; otherwise the RMS radius of the marker cloud / its mapped vertices.
+    """
+    src = actor.neutral.astype(np.float64)
+    if all(n in actor.names for n in FAPU_MARKERS) and landmarks is not None and max(FAPU_LANDMARKS) < len(landmarks):
+        a, b = (src[actor.names.index(n)] for n in FAPU_MARKERS)
+        p, q = (character.vertices[landmarks[i]].astype(np.float64) for i in FAPU_LANDMARKS)
+        return float(np.linalg.norm(a - b)), float(np.linalg.norm(p - q)), "inner eye corners"
+    mapped = character.vertices[vertices].astype(np.float64)
+    radius = lambda p: float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))  # noqa: E731
+    return radius(src), radius(mapped), "marker cloud RMS radius"
+
+
+def observable_shapes(character: Character, marker_vertices: np.ndarray, radius: float,
+                      exclude: Sequence[str] = UNOBSERVABLE, include: Sequence[str] = ()) -> dict[str, str]:
+    """Shapes the markers cannot observe, with the reason: {shape name: why}.
+
+    A shape is left out when its name matches an ``exclude`` pattern (fnmatch), or when its moving
+    skin region (front skin vertices with |delta| >= half the largest) has no marker vertex within
+    ``radius`` (character units). Names matching an ``include`` pattern are never left out.
+    """
+    front = front_skin(character)
+    dense = character.dense_deltas().astype(np.float64)
+    marks = cKDTree(character.vertices[np.asarray(marker_vertices)].astype(np.float64))
+    out = {}
+    for j, name in enumerate(character.shape_names):
+        if any(fnmatch.fnmatchcase(name, p) for p in include):
+            continue
+        if any(fnmatch.fnmatchcase(name, p) for p in exclude):
+            out[name] = "excluded by name"
+            continue
+        length = np.linalg.norm(dense[j, front], axis=1)
+        if length.max(initial=0.0) <= 1e-6:
+            out[name] = "moves no front skin"
+            continue
+        region = character.vertices[front[length >= 0.5 * length.max()]].astype(np.float64)
+        dist, _ = marks.query(region)
+        if dist.min() > radius:
+            out[name] = f"no marker within {radius:.2f} {character.units} of its region"
+    return out
+
+
+def s_distribution(actor: Actor) -> tuple[np.ndarray, np.ndarray, str]:
+    """Per-actuation quantiles of s over the capture: levels (L,), values (L, K), source.
+
+    From the actor table's ``metrics["s_quantiles"]``; an older table without them gets a uniform
+    distribution over its bounds with the training margin taken off (source says which).
+    """
+    q = dict(actor.metadata.get("metrics", {})).get("s_quantiles")
+    k = actor.n_actuations
+    if q:
+        levels, values = np.asarray(q["levels"], np.float64), np.asarray(q["values"], np.float64)
+        if values.shape == (len(levels), k) and levels[0] == 0 and levels[-1] == 1:
+            return levels, np.sort(values, axis=0), "capture quantiles"
+    lo, hi = actor.s_lower.astype(np.float64), actor.s_upper.astype(np.float64)
+    span = (hi - lo) / 1.5                                  # actor_train widens by 0.25 of the span each side
+    lo, hi = np.minimum(lo + 0.25 * span, 0.0), np.maximum(hi - 0.25 * span, 0.0)
+    return np.array([0.0, 1.0]), np.vstack([lo, hi]), "bounds (table has no s_quantiles)"
+
+
+def training_pairs(actor: Actor, n_sparse: int = 400, n_dense: int = 200, levels: int = 12, seed: int = 0,
+                   low: float = 0.01, high: float = 0.99):
+    """Parameter-shape pairs from the actor's own model over the actuations' real range.
+
+    Each actuation alone at ``levels`` values from its ``low`` to its ``high`` quantile (negative
+    side included when the capture had one), ``n_sparse`` sparse mixes (each actuation active with
+    probability 3/K, drawn from its capture distribution) and ``n_dense`` frames with every
+    actuation drawn from its distribution (as in a real frame).
+
+    Returns s (n, K) float64 and disp (n, n_markers, 3) float64, x(s) - neutral by eq 2.
     """
     rng = np.random.default_rng(seed)
     k = actor.n_actuations
-    hi = np.clip(actor.s_upper.astype(np.float64), 0.0, 1.0)      # s = 1: a strong actuation
-    alone = [np.eye(k)[j] * hi[j] * t for j in range(k) for t in np.linspace(0, 1, levels + 1)[1:]]
-    mixes = rng.uniform(0, 1, (n_random, k)) * (rng.uniform(size=(n_random, k)) < 3.0 / k) * hi
-    s = np.vstack([np.zeros(k), np.asarray(alone), mixes])
+    q_levels, q_values, _ = s_distribution(actor)
+
+    def draw(u):                                        # inverse CDF, per actuation
+        return np.column_stack([np.interp(u[:, j], q_levels, q_values[:, j]) for j in range(k)])
+
+    ends = draw(np.array([[low] * k, [high] * k]))
+    alone = []
+    for j in range(k):
+        for v in np.linspace(ends[0, j], ends[1, j], levels):
+            row = np.zeros(k)
+            row[j] = v
+            alone.append(row)
+    sparse = draw(rng.uniform(size=(n_sparse, k))) * (rng.uniform(size=(n_sparse, k)) < 3.0 / k)
+    dense = draw(rng.uniform(size=(n_dense, k)))
+    s = np.vstack([np.zeros(k), np.asarray(alone), sparse, dense])
     coef = actor.cubic.astype(np.float64).reshape(3 * k, -1)
     disp = (np.concatenate([s ** 3, s ** 2, s], 1) @ coef).reshape(len(s), actor.n_markers, 3)  # eq. 2
     return s, disp
 
 
 def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = None, disp: np.ndarray | None = None,
-                   override: dict[int, int] | None = None, max_frames: int = 600, ridge: float = 1e-4) -> ActorPair:
-    """Cubic tables s -> character weights from the actor's training frames.
+                   override: dict[int, int] | None = None, landmarks: np.ndarray | None = None,
+                   exclude: Sequence[str] = UNOBSERVABLE, include: Sequence[str] = (),
+                   radius: float = REGION_RADIUS, max_frames: int = 800, ridge: float = 1e-4,
+                   snap_landmarks: bool = True) -> ActorPair:
+    """Cubic tables s -> character weights from parameter-shape pairs.
 
     Parameters
     ----------
@@ -150,38 +339,55 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     s : ndarray of shape (n_frames, K), float, training actuations; None: :func:`training_pairs`
     disp : ndarray of shape (n_frames, n_markers, 3), float, actor units, head-coordinate displacements
     override : {marker index: vertex index}
+    landmarks : ndarray of shape (68,), int, the character's Multi-PIE landmark vertices, or None
+    exclude, include : fnmatch patterns of shape names left out / always kept (:func:`observable_shapes`)
+    radius : float, region radius as a fraction of the character's FAPU (:func:`observable_shapes`)
     max_frames : int, training frames used (evenly spaced) for the bounded least squares
     ridge : float, Tikhonov weight on w (relative to the mean squared basis column)
+    snap_landmarks : landmark markers take their landmark's vertex
+
+    Left-out shapes keep their name in the pair with all-zero cubic coefficients.
     """
+    source = "given"
     if s is None or disp is None:
         s, disp = training_pairs(actor)
-    sim, vertices, rms = align_markers(actor, character, override)
+        source = s_distribution(actor)[2]
+    s, disp = np.asarray(s, np.float64), np.asarray(disp, np.float64)
+    align = align_markers(actor, character, override, landmarks, snap_landmarks=snap_landmarks)
+    sim, vertices = align.similarity, align.vertices
     rot = sim[:3, :3] / np.cbrt(np.linalg.det(sim[:3, :3]))
+    fapu_actor, fapu_char, fapu_kind = face_units(actor, character, vertices, landmarks)
+    left_out = observable_shapes(character, vertices, radius * fapu_char, exclude, include)
+    used = np.array([j for j, n in enumerate(character.shape_names) if n not in left_out], dtype=np.int64)
+    if len(used) == 0:
+        raise ValueError(f"retarget_actor: every shape of '{character.name}' was left out ({left_out})")
     dense = character.dense_deltas().astype(np.float64)           # (S, n_vertices, 3)
-    basis = dense[:, vertices, :].reshape(character.n_shapes, -1).T    # B, (3 n_markers, S)
-    # FAPU: RMS radius of the marker cloud on each face (actor units / character units)
-    src = actor.neutral.astype(np.float64)
-    fapu_actor = np.sqrt(np.mean(np.sum((src - src.mean(axis=0)) ** 2, axis=1)))
-    mapped = character.vertices[vertices].astype(np.float64)
-    fapu_char = np.sqrt(np.mean(np.sum((mapped - mapped.mean(axis=0)) ** 2, axis=1)))
+    basis = dense[used][:, vertices, :].reshape(len(used), -1).T  # B, (3 n_markers, n_used)
     pick = np.unique(np.linspace(0, len(s) - 1, min(max_frames, len(s))).astype(int))
     target = (disp[pick] / fapu_actor) @ rot.T * fapu_char            # FAPU-normalised, character axes
     col = float(np.mean(np.sum(basis ** 2, axis=0))) or 1.0
-    a = np.vstack([basis, np.sqrt(ridge * col) * np.eye(character.n_shapes)])
+    a = np.vstack([basis, np.sqrt(ridge * col) * np.eye(len(used))])
     weights = np.zeros((len(pick), character.n_shapes))
     resid = []
     for row, y in enumerate(target.reshape(len(pick), -1)):
-        sol = lsq_linear(a, np.r_[y, np.zeros(character.n_shapes)], bounds=(0.0, 1.0), method="bvls")
-        weights[row] = sol.x
+        sol = lsq_linear(a, np.r_[y, np.zeros(len(used))], bounds=(0.0, 1.0), method="bvls")
+        weights[row, used] = sol.x
         resid.append(np.sum((basis @ sol.x - y) ** 2))
     cubic = fit_polynomial(s[pick], weights, 3)                       # Shin & Lee eqs 2-4 on weights
-    fit = np.concatenate([s[pick] ** 3, s[pick] ** 2, s[pick]], 1) @ cubic.reshape(-1, character.n_shapes)
-    metrics = {"alignment_rms": rms, "scale": float(np.cbrt(np.linalg.det(sim[:3, :3]))),
-               "fapu_actor": float(fapu_actor), "fapu_character": float(fapu_char),
-               "frames": int(len(pick)), "marker_fit_rms": float(np.sqrt(np.mean(resid) / len(vertices))),
+    fit = np.clip(np.concatenate([s[pick] ** 3, s[pick] ** 2, s[pick]], 1) @ cubic.reshape(-1, character.n_shapes),
+                  0.0, 1.0)
+    metrics = {"alignment_rms": align.rms,
+               "landmark_rms": None if np.isnan(align.landmark_rms) else align.landmark_rms,
+               "landmarks": {actor.names[i]: lm for i, lm in sorted(align.landmarks.items())},
+               "scale": float(np.cbrt(np.linalg.det(sim[:3, :3]))),
+               "fapu_actor": fapu_actor, "fapu_character": fapu_char, "fapu": fapu_kind,
+               "frames": int(len(pick)), "s_source": source,
+               "s_range": [s[pick].min(axis=0).round(4).tolist(), s[pick].max(axis=0).round(4).tolist()],
+               "marker_fit_rms": float(np.sqrt(np.mean(resid) / len(vertices))),
                "weight_fit_rms": float(np.sqrt(np.mean((fit - weights) ** 2))),
-               "overrides": len(override or {})}
+               "overrides": len(override or {}), "shapes_used": int(len(used)), "shapes_left_out": left_out}
+    settings = {"max_frames": max_frames, "ridge": ridge, "character": character.name, "exclude": list(exclude),
+                "include": list(include), "radius_fapu": radius, "snap_landmarks": snap_landmarks}
     return ActorPair(cubic=cubic, shape_names=character.shape_names, marker_names=actor.names,
                      marker_vertices=vertices, similarity=sim, s_lower=actor.s_lower, s_upper=actor.s_upper,
-                     metadata={"settings": {"max_frames": max_frames, "ridge": ridge, "character": character.name},
-                               "metrics": metrics})
+                     metadata={"settings": settings, "metrics": metrics})

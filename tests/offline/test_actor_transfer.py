@@ -7,14 +7,21 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.offline.actor_transfer import align_markers, read_override, retarget_actor, umeyama
+from facepuppet.offline.actor_transfer import (align_markers, face_units, observable_shapes, read_landmarks,
+                                               read_override, retarget_actor, s_distribution, training_pairs,
+                                               umeyama)
+from facepuppet.offline.actor_transfer_eval import transfer_error
 from facepuppet.runtime.actor import Actor
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix, vertex_normals
 
 
-def grid_face() -> Character:
-    """A gently curved 21 x 21 sheet facing +z, cm, with shapes jawOpen (lower half drops) and puff (+z)."""
+def grid_face(extra: bool = False) -> Character:
+    """A gently curved 21 x 21 sheet facing +z, cm, with shapes jawOpen (lower half drops) and puff (+z).
+
+    ``extra`` adds jawClose (the opposite of jawOpen), eyeLookIn_L (a copy of puff, a gaze name) and
+    cornerBump (moves only the sheet's top-left corner, far from every marker).
+    """
     x, y = np.meshgrid(np.linspace(-5, 5, 21), np.linspace(-7, 7, 21))
     v = np.c_[x.ravel(), y.ravel(), 3.0 - 0.04 * (x.ravel() ** 2 + y.ravel() ** 2)].astype(np.float32)
     idx = np.arange(441).reshape(21, 21)
@@ -26,12 +33,19 @@ def grid_face() -> Character:
     jaw[:, 1] = np.where(v[:, 1] < 0, 0.1 * v[:, 1], 0.0)
     puff = np.zeros_like(v)
     puff[:, 2] = 0.5 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 8)
-    dense = np.stack([jaw, puff])
+    shapes = [jaw, puff]
+    names = ("jawOpen", "puff")
+    if extra:
+        bump = np.zeros_like(v)
+        bump[:, 2] = 0.8 * np.exp(-((v[:, 0] + 5) ** 2 + (v[:, 1] - 7) ** 2) / 0.5)
+        shapes += [-jaw, puff.copy(), bump]
+        names += ("jawClose", "eyeLookIn_L", "cornerBump")
+    dense = np.stack(shapes)
     offsets, indices, both = sparse_deltas(np.concatenate([dense, np.zeros_like(dense)], axis=2), tolerance=1e-7)
     return Character(name="grid", units="cm", vertices=v, triangles=tris,
                      triangle_material=np.zeros(len(tris), np.uint16), vertex_color=np.full((441, 3), 0.5, np.float32),
                      material_names=("skin",), material_params=np.array([[0.1, 10, MATERIAL_KINDS["skin"], 0]], np.float32),
-                     pivot=np.zeros(3, np.float32), shape_names=("jawOpen", "puff"), delta_offsets=offsets,
+                     pivot=np.zeros(3, np.float32), shape_names=names, delta_offsets=offsets,
                      delta_indices=indices, delta_positions=np.ascontiguousarray(both[:, :3]),
                      delta_normals=np.ascontiguousarray(both[:, 3:]))
 
@@ -39,8 +53,11 @@ def grid_face() -> Character:
 MARKER_VERTICES = np.array([30, 48, 66, 115, 140, 160, 200, 220, 245, 300, 330, 350, 390, 410])
 
 
-def actor_on(character: Character):
-    """An actor whose markers sit on the given vertices, seen through a known similarity (scale 1.25)."""
+def actor_on(character: Character, names=None, quantiles=None):
+    """An actor whose markers sit on the given vertices, seen through a known similarity (scale 1.25).
+
+    names : marker names (default m0, m1, ...); quantiles : (levels, values (L, 2)) stored as s_quantiles
+    """
     rot = quat_to_matrix(euler_to_quat(0.1, -0.05, 0.08)).astype(np.float64)
     scale, shift = 1.25, np.array([2.0, 60.0, -1.0])
     to_actor = lambda p: scale * p @ rot.T + shift          # noqa: E731
@@ -49,9 +66,13 @@ def actor_on(character: Character):
     cubic = np.zeros((3, 2, len(MARKER_VERTICES), 3))
     cubic[2, 0] = scale * dense[0] @ rot.T                 # actuation 0 is exactly jawOpen
     cubic[2, 1] = scale * dense[1] @ rot.T * 0.5           # actuation 1 is half a puff
-    actor = Actor(names=tuple(f"m{i}" for i in range(len(MARKER_VERTICES))), units="cm", neutral=neutral,
+    metrics = {} if quantiles is None else {"s_quantiles": {"levels": list(quantiles[0]),
+                                                             "values": np.asarray(quantiles[1]).tolist()}}
+    lower = np.minimum(-0.2, np.asarray(quantiles[1]).min(axis=0) - 0.2) if quantiles is not None else np.full(2, -0.2)
+    actor = Actor(names=tuple(names or (f"m{i}" for i in range(len(MARKER_VERTICES)))), units="cm", neutral=neutral,
                   cubic=cubic, unmixing=np.eye(2), class_axes=np.eye(3)[:2], class_marker=np.arange(2),
-                  head_markers=np.arange(3), s_lower=np.full(2, -0.2), s_upper=np.full(2, 1.2))
+                  head_markers=[11, 12, 13], s_lower=lower, s_upper=np.full(2, 1.2),
+                  metadata={"metrics": metrics})
     return actor, scale
 
 
@@ -69,7 +90,8 @@ def test_alignment_finds_the_marker_vertices_and_transfer_maps_s_to_weights(tmp_
     character = grid_face()
     actor, scale = actor_on(character)
     override = {0: int(MARKER_VERTICES[0]), 5: int(MARKER_VERTICES[5]), 9: int(MARKER_VERTICES[9])}
-    sim, vertices, rms = align_markers(actor, character, override)
+    sim, vertices, rms, landmark_rms, pairs = align_markers(actor, character, override)
+    assert pairs == {} and np.isnan(landmark_rms)
     np.testing.assert_array_equal(vertices, MARKER_VERTICES)
     assert np.cbrt(np.linalg.det(sim[:3, :3])) == pytest.approx(1 / scale, rel=1e-3) and rms < 1e-3
     pair = retarget_actor(actor, character, override=override)
@@ -115,3 +137,110 @@ def test_retarget_actor_command_draws_the_actuations_on_the_face(tmp_path, capsy
     neutral, jaw, puff = (sheet[:320, c * cell_w:(c + 1) * cell_w] for c in range(3))
     assert np.abs(jaw - neutral).mean() > 2                 # the jaw drops visibly
     assert np.abs(puff - neutral).max() > 3                 # the puff (towards the camera) changes the shading
+
+
+QUANTILES = ((0.0, 0.01, 0.5, 0.99, 1.0), [[-0.9, -0.1], [-0.8, 0.0], [0.0, 0.0], [1.0, 0.9], [1.1, 1.0]])
+
+
+def test_training_pairs_cover_the_capture_range_including_negative_s():
+    actor, _ = actor_on(grid_face(), quantiles=QUANTILES)
+    levels, values, source = s_distribution(actor)
+    assert source == "capture quantiles" and values.shape == (5, 2)
+    s, disp = training_pairs(actor, n_sparse=50, n_dense=50, levels=6)
+    alone = s[1:13]                                         # actuation 0 alone, then actuation 1 alone
+    np.testing.assert_allclose(alone[:6, 0], np.linspace(-0.8, 1.0, 6))
+    np.testing.assert_allclose(alone[6:, 1], np.linspace(0.0, 0.9, 6))
+    assert s[:, 0].min() < -0.5 and s[:, 1].min() >= -0.1 and s.max() <= 1.1
+    np.testing.assert_allclose(disp[3], actor.evaluate(s[3]) - actor.neutral, atol=1e-5)   # eq 2
+    plain, _ = actor_on(grid_face())                         # no stored quantiles: the bounds less the margin
+    _, values, source = s_distribution(plain)
+    assert source.startswith("bounds") and values[1, 0] == pytest.approx(1.2 - 1.4 / 6)
+
+
+def test_negative_actuation_drives_the_opposite_shape():
+    character = grid_face(extra=True)
+    actor, _ = actor_on(character, quantiles=QUANTILES)
+    override = {0: int(MARKER_VERTICES[0]), 5: int(MARKER_VERTICES[5]), 9: int(MARKER_VERTICES[9])}
+    pair = retarget_actor(actor, character, override=override)
+    names = list(character.shape_names)
+    up, down = pair.weights([0.8, 0.0]), pair.weights([-0.7, 0.0])
+    assert up[names.index("jawOpen")] > 0.6 and up[names.index("jawClose")] < 0.15
+    assert down[names.index("jawClose")] > 0.5 and down[names.index("jawOpen")] < 0.15
+    # trained on s >= 0 only (the old behaviour), the negative side is an extrapolated guess
+    s = np.array([[t, 0.0] for t in np.linspace(0, 1, 9)])
+    old = retarget_actor(actor, character, s=s, disp=np.array([actor.evaluate(x) - actor.neutral for x in s]),
+                         override=override)
+    assert old.weights([-0.7, 0.0])[names.index("jawClose")] < 0.2
+
+
+def test_unobservable_shapes_are_left_out_unless_included():
+    character = grid_face(extra=True)
+    actor, _ = actor_on(character)
+    left = observable_shapes(character, MARKER_VERTICES, radius=1.0)
+    assert left == {"eyeLookIn_L": "excluded by name",
+                    "cornerBump": "no marker within 1.00 cm of its region"}
+    assert observable_shapes(character, MARKER_VERTICES, 1.0, include=("eyeLook*", "corner*")) == {}
+    override = {0: int(MARKER_VERTICES[0]), 5: int(MARKER_VERTICES[5]), 9: int(MARKER_VERTICES[9])}
+    pair = retarget_actor(actor, character, override=override)
+    cubic = np.abs(pair.cubic).max(axis=(0, 1))
+    names = list(character.shape_names)
+    assert cubic[names.index("eyeLookIn_L")] == 0 and cubic[names.index("cornerBump")] == 0
+    assert pair.metadata["metrics"]["shapes_used"] == 3
+    # puff and its gaze-named copy share the work once the copy is included
+    both = retarget_actor(actor, character, override=override, include=("eyeLook*",))
+    w = both.weights([0.0, 1.0])
+    assert w[names.index("puff")] + w[names.index("eyeLookIn_L")] == pytest.approx(0.5, abs=0.05)
+
+
+LANDMARK_NAMES = {0: "NoseTop", 3: "Reye_Inside", 5: "Leye_Inside", 10: "Mouth_Rend", 12: "Mouth_Lend", 13: "Chin"}
+
+
+def test_landmark_alignment_and_inner_eye_corner_fapu(tmp_path):
+    character = grid_face()
+    names = [LANDMARK_NAMES.get(i, f"m{i}") for i in range(len(MARKER_VERTICES))]
+    actor, scale = actor_on(character, names=names)
+    landmarks = np.zeros(68, dtype=np.int64)
+    for i, name in LANDMARK_NAMES.items():
+        landmarks[{"NoseTop": 27, "Reye_Inside": 39, "Leye_Inside": 42, "Mouth_Rend": 48, "Mouth_Lend": 54,
+                   "Chin": 8}[name]] = MARKER_VERTICES[i]
+    align = align_markers(actor, character, landmarks=landmarks)
+    assert len(align.landmarks) == 6 and align.landmark_rms < 1e-4 and align.rms < 1e-3
+    assert np.cbrt(np.linalg.det(align.similarity[:3, :3])) == pytest.approx(1 / scale, rel=1e-4)
+    np.testing.assert_array_equal(align.vertices, MARKER_VERTICES)
+    fa, fc, kind = face_units(actor, character, align.vertices, landmarks)
+    assert kind == "inner eye corners" and fa == pytest.approx(scale * fc, rel=1e-5)
+    path = tmp_path / "vertex_indices.json"
+    path.write_text(json.dumps({"idx_to_landmark_verts": landmarks.tolist()}))
+    np.testing.assert_array_equal(read_landmarks(path, character.n_vertices), landmarks)
+    path.write_text(json.dumps({"idx_to_landmark_verts": [1, 2, 999]}))
+    with pytest.raises(ValueError, match=r"vertex_indices\.json: field idx_to_landmark_verts: expected a list"):
+        read_landmarks(path, character.n_vertices)
+
+
+def test_transfer_error_is_small_for_an_exact_pair_and_large_for_the_neutral():
+    character = grid_face()
+    actor, _ = actor_on(character)
+    override = {0: int(MARKER_VERTICES[0]), 5: int(MARKER_VERTICES[5]), 9: int(MARKER_VERTICES[9])}
+    pair = retarget_actor(actor, character, override=override)
+    fa, fc, _ = face_units(actor, character, pair.marker_vertices, None)
+    rng = np.random.default_rng(1)
+    s = rng.uniform(0, 0.9, (20, 2))
+    frames = np.array([actor.evaluate(x) for x in s])
+    e = transfer_error(actor, pair, character, frames, fa, fc)
+    assert e["frames"] == 20 and e["solve_rms"] < 0.03
+    assert e["transfer_rms"] < 0.2 * e["zero_rms"] and e["oracle_rms"] < 0.2 * e["zero_rms"]
+    with pytest.raises(ValueError, match="every shape of 'grid' was left out"):
+        retarget_actor(actor, character, override=override, exclude=("*",))
+
+
+def test_trained_actor_stores_its_actuation_quantiles():
+    from facepuppet.offline.actor_train import train_actor
+    from facepuppet.offline.synthetic_capture import synthetic_capture
+
+    cap, _ = synthetic_capture(n_frames=400, n_markers=12, k=3, seed=2)
+    model = train_actor(cap, k=3, head_markers=["M00", "M01", "M02", "M03"])
+    levels, values, source = s_distribution(model.actor_)
+    assert source == "capture quantiles"
+    np.testing.assert_allclose(values, np.quantile(model.s_, levels, axis=0), atol=1e-5)
+    s, _ = training_pairs(model.actor_, n_sparse=20, n_dense=20)
+    assert s.min() >= values[0].min() - 1e-9 and s.max() <= values[-1].max() + 1e-9
