@@ -326,3 +326,34 @@ def detail_character(character: Character, transfer: DetailTransfer, detail: Mar
         delta_normals=np.concatenate([character.delta_normals, nrm]).astype(np.float32),
         metadata=meta,
     )
+
+
+def detail_table(db, detail: MarkerDetail, take_names, rate: float = 60.0) -> np.ndarray:
+    """Detail weights per reference frame of a ``gesture_db`` (for :class:`~facepuppet.runtime.gestures.GestureLayer`).
+
+    Parameters
+    ----------
+    db : Tables of kind ``gesture_db``
+    detail : MarkerDetail of the marker takes, ``detail.tracks[i]`` for the take named ``take_names[i]``
+    take_names : sequence of str, the database's take names of those marker takes (the files' stems)
+    rate : float, Hz, frame rate of the marker takes
+
+    Returns
+    -------
+    table : ndarray of shape (n_db_frames, n_features), float32; frame j of a marker take (time j / fps)
+        holds its tracks linearly interpolated there, frames of other takes zero
+    """
+    takes = list(db.channels["takes"])
+    fps = float(db.settings.get("fps", 30.0))
+    frame_take = np.asarray(db["frame_take"])
+    out = np.zeros((len(frame_take), len(detail.feature_names)), np.float32)
+    if len(take_names) != len(detail.tracks):
+        raise ValueError(f"take_names: expected {len(detail.tracks)} names (one per track), got {len(take_names)}")
+    for name, track in zip(take_names, detail.tracks):
+        if name not in takes:
+            raise ValueError(f"take_names: {name!r} is not a take of the database ({takes})")
+        rows = np.flatnonzero(frame_take == takes.index(name))
+        t = np.arange(len(rows)) / fps
+        src = np.arange(len(track)) / rate
+        out[rows] = np.column_stack([np.interp(t, src, c) for c in track.T])
+    return out

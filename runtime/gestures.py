@@ -9,6 +9,7 @@ the face from the voice alone (``facepuppet run --input audio``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -39,9 +40,13 @@ class GestureLayer:
     mode : "add" or "voice"
     level : callable t -> dBFS or None; default: the frame's ``audio_level``
     inner : callable (frame, t) -> frame or None, applied to the tracked frame first
+    detail : (names, table) or None: §5.2 detail shape weights, table of shape (n_db_frames, len(names)),
+        float32, per reference frame of the marker takes (``facepuppet.offline.detail_transfer.detail_table``);
+        the weights of the head group's pick are appended as channels ``names`` (shapes of a character
+        made by ``detail_character``)
     """
 
-    def __init__(self, synth: GestureSynth, fps: float, mode: str = "add", level=None, inner=None):
+    def __init__(self, synth: GestureSynth, fps: float, mode: str = "add", level=None, inner=None, detail=None):
         if mode not in ("add", "voice"):
             raise ValueError(f"GestureLayer.mode: expected 'add' or 'voice', got {mode!r}")
         if not fps > 0:
@@ -58,6 +63,13 @@ class GestureLayer:
         self._residual = np.array([canonical(synth.out_names[i]) in {canonical(n) for n in stochastic}
                                    for i in self._face])
         self._maps: dict = {}
+        self._detail = None
+        if detail is not None:
+            names, table = tuple(detail[0]), np.asarray(detail[1], np.float32)
+            if "head" not in synth.groups or table.shape != (len(synth._intensity), len(names)):
+                raise ValueError(f"GestureLayer.detail: expected a head group and a table of shape "
+                                 f"({len(synth._intensity)}, {len(names)}), got {table.shape}")
+            self._detail = (names, table, synth.groups.index("head"))
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
         if self.inner is not None:
@@ -74,6 +86,14 @@ class GestureLayer:
 
     def compose(self, tracked: Frame | None, t: float) -> Frame:
         """The output frame for the current synthesised state over ``tracked`` (None: voice only)."""
+        out = self._compose(tracked, t)
+        if self._detail is None:
+            return out
+        names, table, k = self._detail
+        return dataclasses.replace(out, channels=tuple(out.channels) + names,
+                                   weights=np.concatenate([out.weights, table[self.synth._pick[k]]]))
+
+    def _compose(self, tracked: Frame | None, t: float) -> Frame:
         add = self.synth.additions
         face = add[self._face]
         residual = face - self.synth.mood_part[self._face]
@@ -137,11 +157,17 @@ class VoiceOnlySource:
         return None, 0
 
 
-def gesture_layer(path, inner=None, level=None, voice_only: bool = False, seed: int = 0, log=print) -> GestureLayer:
-    """A :class:`GestureLayer` over ``inner`` from the gesture tables at ``path`` (the run command's ``--gestures``)."""
+def gesture_layer(path, inner=None, level=None, voice_only: bool = False, seed: int = 0, log=print,
+                  n_neighbours: int = 8, detail=None) -> GestureLayer:
+    """A :class:`GestureLayer` over ``inner`` from the gesture tables at ``path`` (the run command's ``--gestures``).
+
+    n_neighbours : continuity jump candidates per reference frame (fewer: a cheaper step)
+    detail : see :class:`GestureLayer`
+    """
     db = load_gesture_db(path)
-    synth = GestureSynth(db, seed=seed)
+    synth = GestureSynth(db, seed=seed, n_neighbours=n_neighbours)
     fps = float(db.settings.get("fps", 30.0))
     log(f"gestures: {path} ({len(db['intensity'])} reference frames at {fps:g} fps, groups "
         f"{', '.join(synth.groups)}), {'voice only' if voice_only else 'added to the tracked face'}")
-    return GestureLayer(synth, fps=fps, mode="voice" if voice_only else "add", level=level, inner=inner)
+    return GestureLayer(synth, fps=fps, mode="voice" if voice_only else "add", level=level, inner=inner,
+                        detail=detail)

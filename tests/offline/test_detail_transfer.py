@@ -81,3 +81,25 @@ def test_bad_inputs_are_refused(placed, ict_character):
         place_markers(take.markers[0], take.names, ict_character, np.zeros(5, int))
     with pytest.raises(ValueError, match="displacements"):
         tr.transfer(np.zeros((3, 3)))
+
+
+def test_detail_table_aligns_marker_tracks_with_the_database_frames(tmp_path):
+    from facepuppet.offline.detail_transfer import MarkerDetail, detail_table
+    from facepuppet.runtime.gestures import GROUPS, load_gesture_db
+    from facepuppet.runtime.tables import save_tables
+
+    n = [40, 30]
+    arrays = {"intensity": np.zeros(70, np.float32), "features": np.zeros((70, 1), np.float32),
+              "feature_group": np.array([GROUPS.index("head")], np.int32), "feature_scale": np.ones(1, np.float32),
+              "blend_basis": np.zeros((0, 1), np.float32), "frame_take": np.repeat([0, 1], n).astype(np.int32),
+              "available": np.ones((70, 6), bool)}
+    save_tables(tmp_path / "g.npz", "gesture_db", arrays, channels={"features": ["headYaw"], "takes": ["a", "jaw"],
+                                                                     "groups": list(GROUPS)}, settings={"fps": 30.0})
+    db = load_gesture_db(tmp_path / "g.npz")
+    track = np.arange(60.0)[:, None]                     # 60 Hz: value = frame index at 60 Hz
+    det = MarkerDetail(("m",), np.zeros((1, 3)), ("detail_rest_0",), np.zeros((1, 1, 3)), [track], 0.0)
+    table = detail_table(db, det, ["jaw"])
+    assert np.all(table[:40] == 0.0)
+    np.testing.assert_allclose(table[40:, 0], np.minimum(2.0 * np.arange(30), 59.0))  # 30 fps row j = 60 Hz 2j
+    with pytest.raises(ValueError, match="not a take of the database"):
+        detail_table(db, det, ["cheeks"])

@@ -154,3 +154,17 @@ def test_bad_settings_and_bad_start_are_refused(db):
     with pytest.raises(ValueError, match="not a valid start"):
         synth.reset(start=0)
     assert np.isfinite(synth.step(math.nan)).all()  # NaN level: silence, not an error
+
+
+def test_detail_weights_follow_the_head_pick_as_extra_channels(db):
+    n = len(db["intensity"])
+    table = np.column_stack([np.arange(n), -np.arange(n)]).astype(np.float32)  # frame index, recognisable
+    layer = GestureLayer(GestureSynth(db, seed=3), fps=30.0, mode="voice", level=lambda t: -20.0,
+                         detail=(("detail_brows_0", "detail_lips_0"), table))
+    for k in range(20):
+        f = layer(None, k / 30.0)
+        head = layer.synth.picks["head"]
+        assert f.channels[-2:] == ("detail_brows_0", "detail_lips_0")
+        assert list(f.weights[-2:]) == [head, -head]
+    with pytest.raises(ValueError, match="detail: expected a head group and a table of shape"):
+        GestureLayer(GestureSynth(db), fps=30.0, detail=(("a",), table))
