@@ -346,7 +346,8 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     ridge : float, Tikhonov weight on w (relative to the mean squared basis column)
     snap_landmarks : landmark markers take their landmark's vertex
 
-    Left-out shapes keep their name in the pair with all-zero cubic coefficients.
+    Left-out shapes keep their name in the pair with all-zero cubic coefficients. The pair's
+    s_lower/s_upper are the range of the training s (``ActorPair.weights`` clamps to it).
     """
     source = "given"
     if s is None or disp is None:
@@ -389,5 +390,6 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     settings = {"max_frames": max_frames, "ridge": ridge, "character": character.name, "exclude": list(exclude),
                 "include": list(include), "radius_fapu": radius, "snap_landmarks": snap_landmarks}
     return ActorPair(cubic=cubic, shape_names=character.shape_names, marker_names=actor.names,
-                     marker_vertices=vertices, similarity=sim, s_lower=actor.s_lower, s_upper=actor.s_upper,
+                     marker_vertices=vertices, similarity=sim, s_lower=np.minimum(s[pick].min(axis=0), 0.0),
+                     s_upper=np.maximum(s[pick].max(axis=0), 0.0),
                      metadata={"settings": settings, "metrics": metrics})

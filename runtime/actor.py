@@ -52,8 +52,8 @@ PAIR_SCHEMA = register_schema(TableSchema(
         "cubic": Section("float32", (3, "n_actuations", "n_shapes"), "a, b, c: s -> character weights"),
         "marker_vertices": Section("int32", ("n_markers",), "character vertex of each actor marker"),
         "similarity": Section("float32", (4, 4), "actor head coords -> character coords"),
-        "s_lower": Section("float32", ("n_actuations",), "actor bounds"),
-        "s_upper": Section("float32", ("n_actuations",), "actor bounds"),
+        "s_lower": Section("float32", ("n_actuations",), "fitted range of s (weights() clamps to it)"),
+        "s_upper": Section("float32", ("n_actuations",), "fitted range of s (weights() clamps to it)"),
     },
     channels=("markers", "actuations", "shapes"),
     channel_dims={"markers": "n_markers", "actuations": "n_actuations", "shapes": "n_shapes"},
@@ -412,7 +412,11 @@ class ActorPair:
                    metadata={"settings": dict(t.settings), "metrics": dict(t.metrics)})
 
     def weights(self, s) -> np.ndarray:
-        """Character weights w(s) (n_shapes,), float32, clipped to [0, 1] (cubic of eq 2 on weights)."""
-        s = np.asarray(s, dtype=np.float64)
+        """Character weights w(s) (n_shapes,), float32, clipped to [0, 1] (cubic of eq 2 on weights).
+
+        s is first clamped to [s_lower, s_upper]: the range the tables were fitted over, so a solve
+        that runs past it holds the last fitted pose instead of extrapolating the cubic.
+        """
+        s = np.clip(np.asarray(s, dtype=np.float64), self.s_lower, self.s_upper)
         w = np.concatenate([s ** 3, s ** 2, s]) @ self._flat        # Shin & Lee eq. 2, §6.2 target
         return np.clip(w, 0.0, 1.0).astype(np.float32)
