@@ -143,6 +143,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         GLUnavailable when no OpenGL context can be made.
     """
     from .audio_level import open_audio
+    from .blas_threads import BlasThreads
     from .gl_context import create_context
     from .recorder import PacketRecorder
     from .udp_source import UdpSource
@@ -168,6 +169,9 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
     stop_event = stop_event or threading.Event()
     parts: list = []  # things to close, in reverse order
     try:
+        # One BLAS thread: OpenBLAS workers and llvmpipe's rasteriser threads fighting over 2 cores made
+        # the CPU deformation take 100-600 ms now and then (see blas_threads); also for the path choice.
+        parts.append(BlasThreads(1).__enter__())
         audio = None
         if args.audio is not None or args.audio_file is not None:
             audio = open_audio(device=args.audio, wav=args.audio_file, log=log)
