@@ -9,6 +9,9 @@ rendering the character at ``--size``. Reported:
 * receive -> GPU finished latency of each drawn frame (p50 / p99 / max, ms),
   and the per-stage split (:mod:`~facepuppet.runtime.live_stats`);
 * the CPU stages of the frame loop (snapshot, pipeline + map) p99;
+* receive is the kernel's arrival stamp of the datagram (SO_TIMESTAMPNS), so
+  time a datagram waits before the receiver reads it counts; ``--receiver``
+  picks the run's receiver (child process, the default, or thread);
 * frames sent, datagrams received, frames dropped as stale (the newest wins),
   UDP losses (sent - received);
 * with ``--flood``: ``--flood-factor`` x the rate for ``--flood-seconds``;
@@ -83,13 +86,16 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     run_args = SimpleNamespace(
         character=args.character, input="vmc", listen=f"127.0.0.1:{port}", allow=None, config=None,
         calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False, headless=True,
-        out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path)
+        out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path,
+        receiver=getattr(args, "receiver", "process"))
     stop = threading.Event()
     sender_out: list[str] = []
     procs = []
     rss: list[tuple[float, float]] = []
     newest: list[float] = []  # end-to-end ms of each drawn new frame (for per-second maxima)
     t_start = [0.0]
+
+    t_first_last = [math.inf, -math.inf]
 
     def on_ready(address):
         t_start[0] = time.monotonic()
@@ -113,6 +119,8 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
             next_rss[0] = now + 1.0
         if info.raw is not None:
             newest.append((now - t_start[0], (info.stamps[4] - info.raw.t) * 1e3))
+            t_first_last[0] = min(t_first_last[0], info.stamps[4])
+            t_first_last[1] = info.stamps[4]
 
     try:
         result = run_live(run_args, log=log, stop_event=stop, on_ready=on_ready, hooks=[sample])
@@ -125,6 +133,7 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     e2e = stats.samples_ms("end_to_end")
     udp = result.counters["udp"]
     timings = result.loop.timings
+    drawing_s = t_first_last[1] - t_first_last[0]
     per_second = {}
     for t, ms in newest:
         per_second[int(t)] = max(per_second.get(int(t), 0.0), ms)
@@ -137,6 +146,10 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
         "udp_lost": frames_sent * 3 - udp["packets"],
         "frames_decoded": udp.get("frames", None),
         "frames_drawn": int(e2e.size),
+        "ticks": result.loop.n_ticks,
+        "new_frames_drawn_per_s": float(e2e.size / drawing_s) if drawing_s > 0 else math.nan,
+        "receiver": run_args.receiver,
+        "waited_over_1ms": udp.get("waited_over_1ms", None),
         "stale_dropped": result.loop.counters["stale_dropped"],
         "late_ticks": result.loop.counters["late_ticks"],
         "skipped_ticks": result.loop.counters["skipped_ticks"],
@@ -149,7 +162,16 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
         "newest_frame_max_ms_per_second": [per_second[k] for k in sorted(per_second)],
         "rss_mb_per_second": [round(m, 1) for _, m in rss],
         "render_path": result.path,
+        "loadavg": _loadavg(),
     }
+
+
+def _loadavg() -> str:
+    try:
+        with open("/proc/loadavg") as f:
+            return " ".join(f.read().split()[:3])
+    except OSError:
+        return "n/a"
 
 
 def _percentiles(ms: np.ndarray) -> dict:
@@ -177,10 +199,15 @@ def _print(name: str, r: dict) -> None:
     e = r["end_to_end_ms"]
     print(f"latency bench [{name}]: {r['frames_sent']} frames at {r['rate_hz']:g} Hz for {r['seconds']:g} s; "
           f"datagrams received {r['datagrams_received']}/{r['datagrams_sent']}, stale dropped {r['stale_dropped']}, "
-          f"frames drawn {r['frames_drawn']} ({r['render_path']} path)")
+          f"frames drawn {r['frames_drawn']} ({r['new_frames_drawn_per_s']:.1f}/s, {r['render_path']} path, "
+          f"{r['receiver']} receiver); read >1 ms after arrival {r['waited_over_1ms']}; loadavg {r['loadavg']}")
     print(f"  receive -> GPU finished ms: p50 {e.get('p50', math.nan):.2f}  p99 {e.get('p99', math.nan):.2f}  "
           f"max {e.get('max', math.nan):.2f}; CPU before draw p99 {r['cpu_before_draw_p99_ms']:.3f} ms "
           f"(snapshot {r['cpu_stage_p99_ms']['snapshot']:.3f}, pipeline+map {r['cpu_stage_p99_ms']['pipeline_map']:.3f})")
+    st = r["stages_ms"]
+    print("  stages p50/p99 ms: " + ", ".join(
+        f"{name} {st[name].get('p50_ms', math.nan):.2f}/{st[name].get('p99_ms', math.nan):.2f}"
+        for name in ("receive_snap", "solve_map", "draw_submit", "gpu_finish") if name in st))
     rss = r["rss_mb_per_second"]
     if rss:
         print(f"  RSS MiB first/last/max: {rss[0]:.1f}/{rss[-1]:.1f}/{max(rss):.1f}")
@@ -193,6 +220,8 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", default="640x480", help="render size (640x480)")
     parser.add_argument("--fps", type=float, default=60.0, help="frame loop ticks per second (60)")
     parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    parser.add_argument("--receiver", choices=("process", "thread"), default="process",
+                        help="the run's receiver: a child process (default) or a thread")
     parser.add_argument("--flood", action="store_true", help="then flood: --flood-factor x the rate")
     parser.add_argument("--flood-factor", type=float, default=10.0, help="flood rate multiple (10)")
     parser.add_argument("--flood-seconds", type=float, default=60.0, help="seconds of flooding (60)")

@@ -163,3 +163,48 @@ def test_busy_port_is_a_message_not_a_traceback(character, capsys):
                      "--headless", "--duration", "0.1"])
     assert code == 2
     assert f"127.0.0.1:{port}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("receiver", ["process", "thread"])
+def test_both_receivers_draw_the_last_value_sent_and_record_every_packet(character, tmp_path, receiver):
+    from types import SimpleNamespace
+
+    from facepuppet.runtime.run import run_live
+
+    record = tmp_path / f"{receiver}.fps"
+    stop = threading.Event()
+    sent = []
+
+    def on_ready(address):
+        def send():
+            client = SimpleUDPClient(*address)
+            for jaw in np.linspace(0.1, 0.6, 40):
+                python_osc_jaw(client, float(jaw))
+                sent.append(float(jaw))
+                time.sleep(0.01)
+            time.sleep(0.5)
+            stop.set()
+        threading.Thread(target=send, daemon=True).start()
+
+    config = tmp_path / "live.toml"
+    config.write_text(FAST_CONFIG)
+    args = SimpleNamespace(
+        character=character, input="vmc", listen=f"127.0.0.1:{free_udp_port()}", allow=None, config=config,
+        calibrate=False, audio=None, audio_file=None, record=record, vmc_out=None, stats=False, headless=True,
+        out=None, dump_weights=None, size="64x48", fps=60.0, duration=30.0, path="auto", receiver=receiver)
+    result = run_live(args, log=lambda s: None, stop_event=stop, on_ready=on_ready)
+    assert stop.is_set(), "the run ended before the sender"
+    udp = result.counters["udp"]
+    assert udp["packets"] == len(sent) == 40 and udp["internal_error"] == 0
+    assert "waited_over_1ms" in udp
+    assert result.weights.array[-1, 0] == pytest.approx(sent[-1], abs=1e-3)
+    assert len(read_session(record).packets) == 40
+
+
+def test_unknown_receiver_is_refused(character):
+    from types import SimpleNamespace
+
+    from facepuppet.runtime.run import run_live
+
+    with pytest.raises(ValueError, match="--receiver: expected one of"):
+        run_live(SimpleNamespace(receiver="fiber"), log=lambda s: None)

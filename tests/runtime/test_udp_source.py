@@ -98,6 +98,29 @@ def test_receive_time_comes_from_the_given_clock(sender):
         assert poll_frame(source).t == 1000.0
 
 
+def test_default_receive_time_is_the_kernel_arrival_not_the_read(sender):
+    with UdpSource(VmcAdapter(), port=0) as source:
+        t_sent = time.monotonic()
+        sender.sendto(vmc_frame(0.1), source.address)
+        frame = poll_frame(source)
+        assert t_sent - 0.002 <= frame.t <= time.monotonic()
+        # keep the receive thread from reading for 50 ms: a busy loop holding the GIL (long switch interval)
+        import sys
+
+        switch = sys.getswitchinterval()
+        sys.setswitchinterval(1.0)
+        try:
+            t_sent = time.monotonic()
+            sender.sendto(vmc_frame(0.2), source.address)
+            while time.monotonic() - t_sent < 0.05:
+                pass
+        finally:
+            sys.setswitchinterval(switch)
+        frame = poll_frame(source)
+        assert frame.t - t_sent < 0.04, "stamped when read, not when it arrived"
+        assert source.counters["waited_over_1ms"] >= 1
+
+
 def test_senders_outside_allow_are_dropped_and_counted(sender):
     with UdpSource(VmcAdapter(), port=0, allow={"10.1.2.3"}) as source:
         sender.sendto(vmc_frame(0.5), source.address)

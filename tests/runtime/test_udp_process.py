@@ -1,0 +1,240 @@
+"""UdpProcessSource over real UDP on 127.0.0.1: a child process decodes, the newest frame comes through
+shared memory (seqlock), datagrams reach on_packet in the parent, counters are the child's."""
+
+from __future__ import annotations
+
+import os
+import random
+import socket
+import time
+
+import numpy as np
+import pytest
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+
+from facepuppet.runtime.channels import ARKIT_NAMES
+from facepuppet.runtime.input_kinds import make_adapter
+from facepuppet.runtime.livelinkface_udp import encode_packet
+from facepuppet.runtime.markers_osc import FRAME, LAYOUT
+from facepuppet.runtime.udp_process import UdpProcessSource
+from facepuppet.runtime.vmc import VmcAdapter
+
+JAW = ARKIT_NAMES.index("jawOpen")
+DEADLINE_S = 10.0
+
+
+def vmc_frame(value: float) -> bytes:
+    b = OscBundleBuilder(IMMEDIATELY)
+    m = OscMessageBuilder("/VMC/Ext/Blend/Val")
+    m.add_arg("JawOpen")
+    m.add_arg(value)
+    b.add_content(m.build())
+    b.add_content(OscMessageBuilder("/VMC/Ext/Blend/Apply").build())
+    return b.build().dgram
+
+
+def osc(address, *args) -> bytes:
+    b = OscMessageBuilder(address)
+    for a in args:
+        b.add_arg(*a) if isinstance(a, tuple) else b.add_arg(a)
+    return b.build().dgram
+
+
+def wait_for(predicate, what: str):
+    end = time.monotonic() + DEADLINE_S
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.002)
+    pytest.fail(f"timed out after {DEADLINE_S} s waiting for {what}")
+
+
+def poll_frame(source):
+    return wait_for(lambda: source.latest()[0], "a frame")
+
+
+@pytest.fixture
+def sender():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    yield s
+    s.close()
+
+
+def test_frame_crosses_the_process_with_its_kernel_arrival_time(sender):
+    with UdpProcessSource(VmcAdapter(), port=0) as source:
+        host, port = source.address
+        assert host == "127.0.0.1" and port > 0 and source.latest() == (None, 0)
+        t_sent = time.monotonic()
+        sender.sendto(vmc_frame(0.6), source.address)
+        frame = poll_frame(source)
+        t_taken = time.monotonic()
+        assert frame.weights[JAW] == pytest.approx(0.6) and frame.source == "vmc"
+        assert frame.channels[JAW] == "jawOpen"
+        assert t_sent - 0.002 <= frame.t <= t_taken  # arrival, on this process's monotonic clock
+        assert source.latest() == (None, 0)
+        counters = source.counters
+        assert counters["frames"] == 1 and counters["packets"] == 1 and counters["internal_error"] == 0
+        assert source.frames_taken == 1
+    assert source.counters["datagrams"] == 1  # final counters survive stop()
+
+
+def test_newest_frame_wins_and_overwritten_frames_are_counted_stale(sender):
+    with UdpProcessSource(VmcAdapter(), port=0) as source:
+        for i in range(5):
+            sender.sendto(vmc_frame(i / 10), source.address)
+        wait_for(lambda: source.counters["frames"] == 5, "5 frames handled")
+        frame, stale = source.latest(123.0)
+        assert frame.weights[JAW] == pytest.approx(0.4) and stale == 4
+        sender.sendto(vmc_frame(0.9), source.address)
+        assert poll_frame(source).weights[JAW] == pytest.approx(0.9)
+        assert source.counters["stale_dropped"] == 4 and source.frames_taken == 6
+
+
+def test_senders_outside_allow_are_dropped_and_counted(sender):
+    seen = []
+    with UdpProcessSource(VmcAdapter(), port=0, allow={"10.1.2.3"}, on_packet=lambda *a: seen.append(a)) as source:
+        sender.sendto(vmc_frame(0.5), source.address)
+        wait_for(lambda: source.counters["filtered_sender"] == 1, "the filtered packet")
+        assert source.latest() == (None, 0) and source.counters["datagrams"] == 0
+    assert seen == []  # filtered datagrams are not recorded
+
+
+def test_on_packet_runs_here_in_order_and_its_errors_are_counted(sender):
+    seen = []
+
+    def record(data, t, who):
+        seen.append((data, t, who))
+        if len(seen) == 1:
+            raise RuntimeError("recorder failed")
+
+    with UdpProcessSource(VmcAdapter(), port=0, on_packet=record) as source:
+        t_sent = time.monotonic()
+        sender.sendto(b"first", source.address)
+        sender.sendto(vmc_frame(0.3), source.address)
+        assert poll_frame(source).weights[JAW] == pytest.approx(0.3)
+        assert source.counters["internal_error"] == 1 and isinstance(source.last_error, RuntimeError)
+        sender.sendto(b"after the last tick", source.address)
+        wait_for(lambda: source.counters["packets"] == 3, "the third datagram")
+    # the rest of the ring is handed on by stop()
+    assert [d for d, _, _ in seen] == [b"first", vmc_frame(0.3), b"after the last tick"]
+    assert seen[0][2] == ("127.0.0.1", sender.getsockname()[1]) and seen[0][1] >= t_sent - 0.002
+    assert source.counters["malformed"] + source.counters["unknown_address"] >= 1  # b"first" is not OSC
+
+
+def test_a_full_ring_drops_and_counts_instead_of_blocking(sender):
+    seen = []
+    with UdpProcessSource(make_adapter("livelinkface"), port=0, on_packet=lambda *a: seen.append(a),
+                          ring_bytes=1 << 17) as source:
+        packet = encode_packet([0.5] * 52, number=1)
+        n = 2 * (1 << 17) // (len(packet) + 32) + 50  # about twice what the ring holds
+        for _ in range(n):
+            sender.sendto(packet, source.address)
+        wait_for(lambda: source.counters["packets"] == n, f"{n} datagrams read")
+        dropped = source.counters["packets_ring_dropped"]
+        assert dropped > 0
+        assert poll_frame(source).weights[0] == pytest.approx(0.5)  # decoding went on
+    assert len(seen) + dropped == n
+
+
+def test_markers_and_livelinkface_frames_keep_every_field(sender):
+    points = np.array([[0.0, 10.0, 5.0], [1.5, -40.0, 2.0], [np.nan, np.nan, np.nan]], dtype="<f4")
+    with UdpProcessSource(make_adapter("markers"), port=0) as source:
+        sender.sendto(osc(LAYOUT, 1, "nose", "chin", "mouthL"), source.address)
+        sender.sendto(osc(FRAME, 1, 7, (12.25, "d"), (points.tobytes(), "b")), source.address)
+        frame = poll_frame(source)
+        assert frame.marker_names == ("nose", "chin", "mouthL") and frame.number == 7 and frame.t_sender == 12.25
+        np.testing.assert_array_equal(frame.markers, points)
+        assert frame.weights is None and frame.channels is None and frame.head_rotation is None
+    weights = np.linspace(0, 1, 52)
+    with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
+        sender.sendto(encode_packet(weights, head=(0.3, -0.2, 0.1), number=77), source.address)
+        frame = poll_frame(source)
+        np.testing.assert_allclose(frame.weights[:52], weights, atol=1e-6)
+        assert frame.number == 77 and frame.head_rotation.shape == (4,)
+        assert np.linalg.norm(frame.head_rotation) == pytest.approx(1.0, abs=1e-5)
+
+
+def test_frames_read_while_the_child_writes_are_never_torn(sender):
+    # every frame has all 52 weights equal: a read that mixed two frames would show two values
+    with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
+        packets = [encode_packet([v] * 52, number=i) for i, v in enumerate(np.linspace(0, 1, 4000))]
+        taken = 0
+        for i, packet in enumerate(packets):
+            sender.sendto(packet, source.address)
+            frame, _ = source.latest()
+            if frame is not None:
+                taken += 1
+                w = frame.weights[:52]
+                assert np.all(w == w[0]), f"torn frame {frame.number}: {np.unique(w)}"
+                assert w[0] == pytest.approx(np.linspace(0, 1, 4000)[frame.number], abs=1e-6)
+        assert taken > 0
+
+
+def test_random_datagrams_do_not_stop_it(sender):
+    rng = random.Random(3)
+    good = vmc_frame(0.25)
+    with UdpProcessSource(VmcAdapter(), port=0) as source:
+        for i in range(5000):
+            kind = rng.random()
+            if kind < 0.5:
+                data = bytes(rng.getrandbits(8) for _ in range(rng.randrange(1, 200)))
+            else:
+                data = bytearray(good)
+                for _ in range(rng.randrange(1, 6)):
+                    data[rng.randrange(len(data))] = rng.getrandbits(8)
+                data = bytes(data)
+            sender.sendto(data, source.address)
+            if i % 200 == 0:
+                time.sleep(0.002)
+                source.latest()
+        wait_for(lambda: source.counters["packets"] == 5000, "every datagram read")
+        source.latest()  # what the mutated datagrams left in the slot
+        sender.sendto(vmc_frame(0.75), source.address)
+        assert poll_frame(source).weights[JAW] == pytest.approx(0.75)
+        assert source.counters["internal_error"] == 0, source.last_error
+
+
+def test_busy_port_and_stop_free_the_port():
+    with UdpProcessSource(VmcAdapter(), port=0) as first:
+        port = first.address[1]
+        with pytest.raises(OSError, match=f"127.0.0.1:{port}"):
+            UdpProcessSource(VmcAdapter(), port=port).start()
+        child = first._process
+    assert child.poll() is not None  # the child has exited
+    UdpProcessSource(VmcAdapter(), port=port).start().stop()
+
+
+def test_bad_ring_size_is_refused():
+    with pytest.raises(ValueError, match="ring_bytes: expected a multiple of 16"):
+        UdpProcessSource(VmcAdapter(), port=0, ring_bytes=1000)
+
+
+def test_the_child_leaves_when_the_parent_is_gone(tmp_path):
+    import subprocess
+    import sys
+
+    script = (
+        "import sys, time\n"
+        "from facepuppet.runtime.udp_process import UdpProcessSource\n"
+        "from facepuppet.runtime.vmc import VmcAdapter\n"
+        "s = UdpProcessSource(VmcAdapter(), port=0).start()\n"
+        "print(s._process.pid, flush=True)\n"
+        "time.sleep(60)\n")
+    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        child_pid = int(parent.stdout.readline())
+    finally:
+        parent.kill()
+        parent.wait()
+
+    def gone():
+        try:
+            os.kill(child_pid, 0)
+        except ProcessLookupError:
+            return True
+        with open(f"/proc/{child_pid}/stat") as f:  # a zombie (reaped later by init) counts as gone
+            return f.read().split(")")[-1].split()[0] == "Z"
+
+    wait_for(gone, "the orphaned child to exit")
