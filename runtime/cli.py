@@ -46,10 +46,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# Commands that draw every frame. They run with one BLAS thread: the CPU
+# deformation path's saxpy, split over OpenBLAS workers that compete with
+# llvmpipe's rasteriser threads, stalled for 100-600 ms now and then on a
+# 2-core machine (see runtime/blas_threads.py).
+_RENDERING_COMMANDS = frozenset({"run", "replay", "demo", "manipulate", "contact-sheet", "bench"})
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        if args.command in _RENDERING_COMMANDS:
+            from .blas_threads import BlasThreads
+
+            with BlasThreads(1):
+                return int(args.func(args) or 0)
         return int(args.func(args) or 0)
     except (TablesError, ValueError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
         print(f"facepuppet {args.command}: error: {exc}", file=sys.stderr)
