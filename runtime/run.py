@@ -207,8 +207,10 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         frame_pipeline = stages.pipeline(frame_pipeline)  # a markers solve goes first
         if voice_only:
             source = VoiceOnlySource(getattr(audio, "duration", None))
-        elif receiver == "process":
-            source = UdpProcessSource(adapter, host=host, port=port, allow=allow, on_packet=_Packets(pipeline, recorder))
+        elif receiver == "process":  # datagrams come back to this process only to be recorded
+            source = UdpProcessSource(adapter, host=host, port=port, allow=allow,
+                                      on_packet=recorder.put if recorder is not None else None,
+                                      watch=(CALIBRATE_ADDRESS, pipeline.request_calibration))
         else:
             source = UdpSource(adapter, host=host, port=port, allow=allow, on_packet=_Packets(pipeline, recorder))
         source.start()

@@ -32,6 +32,7 @@ times, then takes nothing this tick and counts ``snapshot_busy``). Names (channe
 tuples, marker names, sources, counter names, the last error) go through an
 append-only log in the same memory, written before the slot that uses them.
 Ordering relies on stores becoming visible in program order (x86-64's model).
+The child's side is :mod:`~facepuppet.runtime.udp_child`.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ from multiprocessing import shared_memory
 import numpy as np
 
 from .frames import Frame
-from .udp_source import LATE_READ_S, POLL_TIMEOUT_S, SOCKET_BUFFER, enable_kernel_stamps, receive_stamped
+from .udp_source import SOCKET_BUFFER, enable_kernel_stamps
 
 MAX_WEIGHTS = 1024
 MAX_MARKERS = 2048
@@ -61,7 +62,7 @@ MAX_ERRORS_LOGGED = 100
 START_TIMEOUT_S = 30.0  # a spawned interpreter importing NumPy on a loaded 2-core machine
 # control words (int64)
 SEQ, COMPLETED, NAMES_END, RING_W, RING_R, READY, STOP, N_WEIGHTS, N_MARKERS, CHANNELS, MARKER_NAMES, SOURCE, \
-    NUMBER, FLAGS, N_CTL = range(15)
+    NUMBER, FLAGS, WATCHED, N_CTL = range(16)
 HAS_WEIGHTS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION = 1, 2, 4, 8
 _RECORD = struct.Struct("<IdHBx")  # datagram length, receive time, sender port, sender host length (16 bytes)
 _WRAP = 0xFFFFFFFF
@@ -115,14 +116,19 @@ class UdpProcessSource:
     on_packet : callable(data bytes, t_receive float, sender (host, port)) or None, called
         on the thread that calls :meth:`latest` / :meth:`stop`
     ring_bytes : int, size of the datagram ring for ``on_packet`` (a multiple of 16, >= 128 KiB)
+    watch : (bytes, callable()) or None: the child counts accepted datagrams containing the bytes
+        (e.g. an OSC address) and :meth:`latest` calls the callable once per tick that saw any,
+        without shipping every datagram to this process as ``on_packet`` does
     """
 
     def __init__(self, adapter, host: str = "127.0.0.1", port: int | None = None,
-                 allow: set[str] | None = None, on_packet=None, ring_bytes: int = RING_BYTES):
+                 allow: set[str] | None = None, on_packet=None, ring_bytes: int = RING_BYTES, watch=None):
         if ring_bytes % 16 or ring_bytes < 1 << 17:
             raise ValueError(f"UdpProcessSource ring_bytes: expected a multiple of 16 of at least {1 << 17}, "
                              f"got {ring_bytes!r}")
         self.ring_bytes = int(ring_bytes)
+        self.watch = watch
+        self._watched = 0
         self.adapter = adapter
         self.host = host
         self.port = adapter.default_port if port is None else int(port)
@@ -185,15 +191,17 @@ class UdpProcessSource:
         self._shared = _Shared(self._shm, self.ring_bytes)
         self._names, self._counter_names, self._names_pos, self._final = {}, {}, 0, None
         self._taken = self._stale_dropped = 0
+        watch_bytes = None if self.watch is None else self.watch[0]
+        self._watched = 0
         # A fresh interpreter (not fork: this process may hold a GL context and threads; not
         # multiprocessing's spawn: it re-imports the caller's __main__), given the socket by descriptor.
         self._process = subprocess.Popen(
-            [sys.executable, "-c", "from facepuppet.runtime.udp_process import child_main; child_main()"],
+            [sys.executable, "-c", "from facepuppet.runtime.udp_child import child_main; child_main()"],
             stdin=subprocess.PIPE, pass_fds=(sock.fileno(),))
         try:
             self._process.stdin.write(pickle.dumps((self._shm.name, self.ring_bytes, sock.fileno(), sock.family,
                                                     self.adapter, self.allow, self.on_packet is not None,
-                                                    os.getpid())))
+                                                    os.getpid(), None if watch_bytes is None else bytes(watch_bytes))))
             self._process.stdin.close()
         except (OSError, pickle.PicklingError) as exc:
             self.stop()
@@ -271,6 +279,13 @@ class UdpProcessSource:
         # behind the frame taken reaches on_packet (the recorder) before this tick's TICK record
         if self.on_packet is not None:
             self._drain_ring()
+        if self.watch is not None and ctl[WATCHED] != self._watched:
+            self._watched = ctl[WATCHED]
+            try:
+                self.watch[1]()
+            except Exception as exc:
+                self._own["internal_error"] += 1
+                self.last_error = exc
         if copy is None:
             return None, 0
         try:
@@ -367,175 +382,3 @@ class UdpProcessSource:
 
 def _padded(n: int) -> int:
     return (n + 15) & ~15
-
-
-class _Writer:
-    """The child's side: names log, counters, slot, ring."""
-
-    def __init__(self, shared: _Shared, adapter):
-        self.shared, self.adapter = shared, adapter
-        self.ids: dict[tuple[str, object], int] = {}
-        self.counter_index: dict[str, int] = {}
-        self.errors_logged = 0
-        self.own = {"packets": 0, "filtered_sender": 0, "internal_error": 0, "waited_over_1ms": 0,
-                    "frame_too_large": 0, "packets_ring_dropped": 0, "names_full": 0}
-
-    def log(self, kind: str, key, value) -> bool:
-        """Append one name record; False (counted) when the log is full."""
-        payload = json.dumps([kind, key, value]).encode()
-        ctl, pos = self.shared.ctl, self.shared.ctl[NAMES_END]
-        if pos + 4 + len(payload) > NAMES_BYTES:
-            self.own["names_full"] += 1
-            return False
-        _NAME.pack_into(self.shared.names, pos, len(payload))
-        self.shared.names[pos + 4:pos + 4 + len(payload)] = payload
-        ctl[NAMES_END] = pos + 4 + len(payload)  # published after the bytes
-        return True
-
-    def error(self, exc: BaseException) -> None:
-        """Log an error for ``last_error`` (the first MAX_ERRORS_LOGGED only: the log must keep room for names)."""
-        if self.errors_logged < MAX_ERRORS_LOGGED:
-            self.errors_logged += 1
-            self.log("error", 0, repr(exc)[:500])
-
-    def name_id(self, kind: str, value) -> int | None:
-        if value is None:
-            return -1
-        key = (kind, value)
-        i = self.ids.get(key)
-        if i is None:
-            i = len(self.ids)
-            if not self.log(kind, i, list(value) if isinstance(value, tuple) else value):
-                return None
-            self.ids[key] = i
-        return i
-
-    def publish_counters(self) -> None:
-        merged = dict(self.adapter.counters)
-        for name, value in self.own.items():
-            merged[name] = merged.get(name, 0) + value
-        index, values = self.counter_index, self.shared.counters
-        for name, value in merged.items():
-            i = index.get(name)
-            if i is None:
-                if len(index) >= MAX_COUNTERS or not self.log("counter", len(index), name):
-                    continue
-                i = index[name] = len(index)
-            values[i] = int(value)
-
-    def publish(self, frame: Frame) -> None:
-        """Write ``frame`` into the slot (seqlock)."""
-        n_weights = 0 if frame.weights is None else len(frame.weights)
-        n_markers = 0 if frame.markers is None else len(frame.markers)
-        if n_weights > MAX_WEIGHTS or n_markers > MAX_MARKERS:
-            self.own["frame_too_large"] += 1
-            return
-        ids = (self.name_id("channels", frame.channels), self.name_id("markers", frame.marker_names),
-               self.name_id("source", frame.source))
-        if None in ids:
-            return
-        flags = ((HAS_WEIGHTS if frame.weights is not None else 0) | (HAS_MARKERS if frame.markers is not None else 0)
-                 | (HAS_ROTATION if frame.head_rotation is not None else 0)
-                 | (HAS_TRANSLATION if frame.head_translation is not None else 0))
-        shared = self.shared
-        ctl = shared.ctl
-        seq = ctl[SEQ]
-        ctl[SEQ] = seq + 1  # odd: being written
-        ctl[FLAGS], ctl[N_WEIGHTS], ctl[N_MARKERS] = flags, n_weights, n_markers
-        ctl[CHANNELS], ctl[MARKER_NAMES], ctl[SOURCE], ctl[NUMBER] = (*ids, int(frame.number))
-        shared.times[:] = (frame.t, frame.t_sender, frame.audio_level)
-        if frame.head_rotation is not None:
-            shared.pose[:4] = frame.head_rotation
-        if frame.head_translation is not None:
-            shared.pose[4:7] = frame.head_translation
-        if n_weights:
-            shared.weights[:n_weights] = frame.weights
-        if n_markers:
-            shared.markers[:3 * n_markers] = frame.markers.reshape(-1)
-        ctl[COMPLETED] += 1
-        ctl[SEQ] = seq + 2
-
-    def put_packet(self, data: bytes, t: float, sender) -> None:
-        """Copy one datagram into the ring for the parent's ``on_packet``; drop and count when full."""
-        ctl, ring, size = self.shared.ctl, self.shared.ring, self.shared.ring_bytes
-        host = str(sender[0]).encode("ascii", "replace")[:255]
-        n = _padded(_RECORD.size + len(host) + len(data))
-        w = ctl[RING_W]
-        free = size - (w - ctl[RING_R])
-        p = w % size
-        gap = size - p if p + n > size else 0  # the record must be contiguous: wrap to the start
-        if gap + n > free:
-            self.own["packets_ring_dropped"] += 1
-            return
-        if gap:
-            _RECORD.pack_into(ring, p, _WRAP, 0.0, 0, 0)
-            w, p = w + gap, 0
-        _RECORD.pack_into(ring, p, len(data), t, int(sender[1]) & 0xFFFF, len(host))
-        start = p + _RECORD.size
-        ring[start:start + len(host)] = host
-        ring[start + len(host):start + len(host) + len(data)] = data
-        ctl[RING_W] = w + n  # published after the bytes
-
-
-def child_main() -> None:
-    """Entry point of the receiving process: its arguments come pickled on stdin."""
-    shm_name, ring_bytes, fd, family, adapter, allow, want_packets, parent_pid = pickle.load(sys.stdin.buffer)
-    _child(shm_name, ring_bytes, socket.socket(family, socket.SOCK_DGRAM, fileno=fd), adapter, allow, want_packets,
-           parent_pid)
-
-
-def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, want_packets: bool,
-           parent_pid: int) -> None:
-    """The receiving process: read, stamp, filter, copy for on_packet, decode, publish; never raises."""
-    shm = shared_memory.SharedMemory(name=shm_name)
-    try:  # the parent owns (and unlinks) the block: this process must not have it tracked as its own
-        from multiprocessing import resource_tracker
-
-        resource_tracker.unregister(shm._name, "shared_memory")
-    except Exception:
-        pass
-    shared = _Shared(shm, ring_bytes)
-    writer = _Writer(shared, adapter)
-    own, ctl, handle = writer.own, shared.ctl, adapter.handle
-    stamped = enable_kernel_stamps(sock)
-    sock.settimeout(POLL_TIMEOUT_S)
-    writer.publish_counters()
-    ctl[READY] = 1
-    try:
-        while not ctl[STOP]:
-            try:
-                if stamped:
-                    data, sender, t, t_read = receive_stamped(sock)
-                    if t_read - t > LATE_READ_S:
-                        own["waited_over_1ms"] += 1
-                else:
-                    data, sender = sock.recvfrom(65536)
-                    t = time.monotonic()
-            except (socket.timeout, BlockingIOError, InterruptedError):
-                if os.getppid() != parent_pid:  # the parent is gone
-                    break
-                continue
-            except OSError as exc:
-                own["internal_error"] += 1
-                writer.error(exc)
-                time.sleep(POLL_TIMEOUT_S)
-                continue
-            try:
-                own["packets"] += 1
-                if allow is not None and sender[0] not in allow:
-                    own["filtered_sender"] += 1
-                else:
-                    if want_packets:
-                        writer.put_packet(data, t, sender)
-                    frame = handle(data, t)
-                    if frame is not None:
-                        writer.publish(frame)
-            except Exception as exc:  # nothing escapes
-                own["internal_error"] += 1
-                writer.error(exc)
-            writer.publish_counters()
-    finally:
-        writer.publish_counters()
-        sock.close()
-        shared.release()
-        shm.close()

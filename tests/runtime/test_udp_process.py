@@ -238,3 +238,19 @@ def test_the_child_leaves_when_the_parent_is_gone(tmp_path):
             return f.read().split(")")[-1].split()[0] == "Z"
 
     wait_for(gone, "the orphaned child to exit")
+
+
+def test_watched_bytes_call_back_once_per_tick_without_on_packet(sender):
+    calls = []
+    with UdpProcessSource(VmcAdapter(), port=0, watch=(b"/facepuppet/calibrate\x00", lambda: calls.append(1))) as source:
+        sender.sendto(vmc_frame(0.2), source.address)
+        poll_frame(source)
+        assert calls == []
+        calibrate = osc("/facepuppet/calibrate")
+        sender.sendto(calibrate, source.address)
+        sender.sendto(calibrate, source.address)
+        wait_for(lambda: source.counters["packets"] == 3, "both calibrate messages")
+        source.latest()
+        assert calls == [1]  # one call for the tick that saw them
+        source.latest()
+        assert calls == [1]

@@ -1,0 +1,203 @@
+"""The receiving process of :class:`~facepuppet.runtime.udp_process.UdpProcessSource`.
+
+Started as ``python -c "from facepuppet.runtime.udp_child import child_main; child_main()"``
+with its arguments pickled on stdin and the bound socket passed by descriptor.
+It reads each datagram with its kernel arrival stamp, drops senders outside
+``allow``, counts datagrams containing the watched bytes, copies accepted
+datagrams into the ring when the parent has an ``on_packet``, decodes with the
+adapter and publishes the frame (seqlock) and the counters into the shared
+block laid out by :class:`~facepuppet.runtime.udp_process._Shared`. It never
+raises, never blocks on the parent, and leaves when the parent is gone.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import socket
+import sys
+import time
+from multiprocessing import shared_memory
+
+from .frames import Frame
+from .udp_process import (
+    CHANNELS, COMPLETED, FLAGS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION, HAS_WEIGHTS, MARKER_NAMES,
+    MAX_COUNTERS, MAX_ERRORS_LOGGED, MAX_MARKERS, MAX_WEIGHTS, N_MARKERS, N_WEIGHTS, NAMES_BYTES, NAMES_END,
+    NUMBER, READY, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, _NAME, _RECORD, _WRAP, _padded, _Shared,
+)
+from .udp_source import LATE_READ_S, POLL_TIMEOUT_S, enable_kernel_stamps, receive_stamped
+
+
+class _Writer:
+    """The child's side: names log, counters, slot, ring."""
+
+    def __init__(self, shared: _Shared, adapter):
+        self.shared, self.adapter = shared, adapter
+        self.ids: dict[tuple[str, object], int] = {}
+        self.counter_index: dict[str, int] = {}
+        self.errors_logged = 0
+        self.own = {"packets": 0, "filtered_sender": 0, "internal_error": 0, "waited_over_1ms": 0,
+                    "frame_too_large": 0, "packets_ring_dropped": 0, "names_full": 0}
+
+    def log(self, kind: str, key, value) -> bool:
+        """Append one name record; False (counted) when the log is full."""
+        payload = json.dumps([kind, key, value]).encode()
+        ctl, pos = self.shared.ctl, self.shared.ctl[NAMES_END]
+        if pos + 4 + len(payload) > NAMES_BYTES:
+            self.own["names_full"] += 1
+            return False
+        _NAME.pack_into(self.shared.names, pos, len(payload))
+        self.shared.names[pos + 4:pos + 4 + len(payload)] = payload
+        ctl[NAMES_END] = pos + 4 + len(payload)  # published after the bytes
+        return True
+
+    def error(self, exc: BaseException) -> None:
+        """Log an error for ``last_error`` (the first MAX_ERRORS_LOGGED only: the log must keep room for names)."""
+        if self.errors_logged < MAX_ERRORS_LOGGED:
+            self.errors_logged += 1
+            self.log("error", 0, repr(exc)[:500])
+
+    def name_id(self, kind: str, value) -> int | None:
+        if value is None:
+            return -1
+        key = (kind, value)
+        i = self.ids.get(key)
+        if i is None:
+            i = len(self.ids)
+            if not self.log(kind, i, list(value) if isinstance(value, tuple) else value):
+                return None
+            self.ids[key] = i
+        return i
+
+    def publish_counters(self) -> None:
+        merged = dict(self.adapter.counters)
+        for name, value in self.own.items():
+            merged[name] = merged.get(name, 0) + value
+        index, values = self.counter_index, self.shared.counters
+        for name, value in merged.items():
+            i = index.get(name)
+            if i is None:
+                if len(index) >= MAX_COUNTERS or not self.log("counter", len(index), name):
+                    continue
+                i = index[name] = len(index)
+            values[i] = int(value)
+
+    def publish(self, frame: Frame) -> None:
+        """Write ``frame`` into the slot (seqlock)."""
+        n_weights = 0 if frame.weights is None else len(frame.weights)
+        n_markers = 0 if frame.markers is None else len(frame.markers)
+        if n_weights > MAX_WEIGHTS or n_markers > MAX_MARKERS:
+            self.own["frame_too_large"] += 1
+            return
+        ids = (self.name_id("channels", frame.channels), self.name_id("markers", frame.marker_names),
+               self.name_id("source", frame.source))
+        if None in ids:
+            return
+        flags = ((HAS_WEIGHTS if frame.weights is not None else 0) | (HAS_MARKERS if frame.markers is not None else 0)
+                 | (HAS_ROTATION if frame.head_rotation is not None else 0)
+                 | (HAS_TRANSLATION if frame.head_translation is not None else 0))
+        shared = self.shared
+        ctl = shared.ctl
+        seq = ctl[SEQ]
+        ctl[SEQ] = seq + 1  # odd: being written
+        ctl[FLAGS], ctl[N_WEIGHTS], ctl[N_MARKERS] = flags, n_weights, n_markers
+        ctl[CHANNELS], ctl[MARKER_NAMES], ctl[SOURCE], ctl[NUMBER] = (*ids, int(frame.number))
+        shared.times[:] = (frame.t, frame.t_sender, frame.audio_level)
+        if frame.head_rotation is not None:
+            shared.pose[:4] = frame.head_rotation
+        if frame.head_translation is not None:
+            shared.pose[4:7] = frame.head_translation
+        if n_weights:
+            shared.weights[:n_weights] = frame.weights
+        if n_markers:
+            shared.markers[:3 * n_markers] = frame.markers.reshape(-1)
+        ctl[COMPLETED] += 1
+        ctl[SEQ] = seq + 2
+
+    def put_packet(self, data: bytes, t: float, sender) -> None:
+        """Copy one datagram into the ring for the parent's ``on_packet``; drop and count when full."""
+        ctl, ring, size = self.shared.ctl, self.shared.ring, self.shared.ring_bytes
+        host = str(sender[0]).encode("ascii", "replace")[:255]
+        n = _padded(_RECORD.size + len(host) + len(data))
+        w = ctl[RING_W]
+        free = size - (w - ctl[RING_R])
+        p = w % size
+        gap = size - p if p + n > size else 0  # the record must be contiguous: wrap to the start
+        if gap + n > free:
+            self.own["packets_ring_dropped"] += 1
+            return
+        if gap:
+            _RECORD.pack_into(ring, p, _WRAP, 0.0, 0, 0)
+            w, p = w + gap, 0
+        _RECORD.pack_into(ring, p, len(data), t, int(sender[1]) & 0xFFFF, len(host))
+        start = p + _RECORD.size
+        ring[start:start + len(host)] = host
+        ring[start + len(host):start + len(host) + len(data)] = data
+        ctl[RING_W] = w + n  # published after the bytes
+
+
+def child_main() -> None:
+    """Entry point of the receiving process: its arguments come pickled on stdin."""
+    shm_name, ring_bytes, fd, family, adapter, allow, want_packets, parent_pid, watch = pickle.load(sys.stdin.buffer)
+    _child(shm_name, ring_bytes, socket.socket(family, socket.SOCK_DGRAM, fileno=fd), adapter, allow, want_packets,
+           parent_pid, watch)
+
+
+def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, want_packets: bool,
+           parent_pid: int, watch: bytes | None = None) -> None:
+    """The receiving process: read, stamp, filter, copy for on_packet, decode, publish; never raises."""
+    shm = shared_memory.SharedMemory(name=shm_name)
+    try:  # the parent owns (and unlinks) the block: this process must not have it tracked as its own
+        from multiprocessing import resource_tracker
+
+        resource_tracker.unregister(shm._name, "shared_memory")
+    except Exception:
+        pass
+    shared = _Shared(shm, ring_bytes)
+    writer = _Writer(shared, adapter)
+    own, ctl, handle = writer.own, shared.ctl, adapter.handle
+    stamped = enable_kernel_stamps(sock)
+    sock.settimeout(POLL_TIMEOUT_S)
+    writer.publish_counters()
+    ctl[READY] = 1
+    try:
+        while not ctl[STOP]:
+            try:
+                if stamped:
+                    data, sender, t, t_read = receive_stamped(sock)
+                    if t_read - t > LATE_READ_S:
+                        own["waited_over_1ms"] += 1
+                else:
+                    data, sender = sock.recvfrom(65536)
+                    t = time.monotonic()
+            except (socket.timeout, BlockingIOError, InterruptedError):
+                if os.getppid() != parent_pid:  # the parent is gone
+                    break
+                continue
+            except OSError as exc:
+                own["internal_error"] += 1
+                writer.error(exc)
+                time.sleep(POLL_TIMEOUT_S)
+                continue
+            try:
+                own["packets"] += 1
+                if allow is not None and sender[0] not in allow:
+                    own["filtered_sender"] += 1
+                else:
+                    if watch is not None and watch in data:
+                        ctl[WATCHED] += 1
+                    if want_packets:
+                        writer.put_packet(data, t, sender)
+                    frame = handle(data, t)
+                    if frame is not None:
+                        writer.publish(frame)
+            except Exception as exc:  # nothing escapes
+                own["internal_error"] += 1
+                writer.error(exc)
+            writer.publish_counters()
+    finally:
+        writer.publish_counters()
+        sock.close()
+        shared.release()
+        shm.close()
