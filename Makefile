@@ -26,7 +26,9 @@ $(STAMP): pyproject.toml .ci/system-deps
 	touch $(STAMP)
 
 # Benchmarks on the real ICT head from ../shared/data (imported first).
-ICT := ../shared/data/ict-facekit
+DATA := ../shared/data
+ICT := $(DATA)/ict-facekit
+export FACEPUPPET_DATA ?= $(abspath $(DATA))
 bench: $(STAMP)
 	mkdir -p bench-out
 	test -f bench-out/ict.npz || $(VENV)/bin/facepuppet import-rig $(ICT)/generic_neutral_mesh.obj $(ICT) -o bench-out/ict.npz

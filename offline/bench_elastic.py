@@ -9,21 +9,20 @@ adding < 1 %, tables at least 3x smaller than dense deltas.
 
 from __future__ import annotations
 
+from .bench_data import add_data_argument, data_dir
+
 import argparse
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
 
 from .control_points import ict_control_points
 from .elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis
 from .elastic_commands import main_front
 from .elastic_params import fit_character, target_fixed_mask
 
-REPO = Path(__file__).resolve().parents[1]
 
 
 def midpoint_subdivide(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
@@ -57,7 +56,7 @@ def _frame_costs(character, model, frames, width, height) -> dict:
 
 
 def bench_elastic(args: argparse.Namespace) -> dict:
-    ict = Path(args.data) / "ict-facekit"
+    ict = data_dir(args.data) / "ict-facekit"
     from .rig_import import import_rig
 
     character = import_rig(ict / "generic_neutral_mesh.obj", ict)
@@ -97,7 +96,7 @@ def _print(r: dict) -> None:
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--data", default=str(REPO.parent / "shared" / "data"), help="data kit folder (../shared/data)")
+    add_data_argument(parser)
     parser.add_argument("--k", type=int, default=DEFAULT_K)
     parser.add_argument("--fixed-ratio", type=float, default=DEFAULT_FIXED_RATIO)
     parser.add_argument("--frames", type=int, default=60, help="frames per deformation path (60)")

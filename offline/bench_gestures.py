@@ -12,17 +12,18 @@ intensity on the held-out part. Also synthesis speed and database size.
 
 from __future__ import annotations
 
+from .bench_data import add_data_argument, data_dir
+
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-_DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def _add_arguments(parser) -> None:
-    parser.add_argument("--data", type=Path, default=_DEFAULT_DATA, help="the data kit (default ../shared/data)")
+    add_data_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="first seed; --seeds consecutive seeds are run")
     parser.add_argument("--seeds", type=int, default=3, help="synthesis runs with consecutive seeds (default 3)")
     parser.add_argument("--minutes", type=float, default=10.0,
@@ -96,7 +97,7 @@ def run_bench(args) -> dict:
     from .gesture_db import build_gesture_db, read_llf_take
     from .speech_intensity import speech_intensity
 
-    d = Path(args.data)
+    d = data_dir(args.data)
     speech = (d / "speech/facegood_1114_3_15.wav", d / "speech/facegood_1114_3_15_blendshapes.csv",
               d / "speech/facegood_to_arkit.csv")
     llf = [d / "tracker/livelinkface_alex_rom_3.csv", d / "tracker/livelinkface_myslate_3.csv"]

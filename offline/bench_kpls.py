@@ -9,17 +9,17 @@ blendshape correspondence (the control) and once non-linear
 
 from __future__ import annotations
 
+from .bench_data import add_data_argument, data_dir
+
 import time
 from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
 
 
 def _add_arguments(parser) -> None:
-    parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
-                        help="data kit folder (default ../shared/data beside the repository)")
+    add_data_argument(parser)
     parser.add_argument("--take", default="livelinkface_myslate_3.csv", help="tracker CSV under DATA/tracker")
     parser.add_argument("--frames", type=int, default=0, help="use only the first N frames (0: all)")
     parser.add_argument("--mixes", type=int, default=300, help="random mixed pairs per direction")
@@ -66,8 +66,9 @@ def run_bench(args, log=print) -> dict:
     from .retarget_targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
     from .rig_import import import_rig
 
-    ict_dir = args.data / "ict-facekit"
-    take = args.data / "tracker" / args.take
+    data = data_dir(args.data)
+    ict_dir = data / "ict-facekit"
+    take = data / "tracker" / args.take
     for path in (ict_dir, take):
         if not path.exists():
             raise ValueError(f"bench kpls: {path} not found; pass --data DIR holding ict-facekit/ and tracker/")

@@ -8,13 +8,13 @@ held-out RMS marker error of the linear ICA model and the cubic one.
 
 from __future__ import annotations
 
+from .bench_data import add_data_argument, data_dir
+
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
-DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"   # ../shared/data
 TAKES = ("animface_jaw.trc", "animface_cheeks.trc")
 
 
@@ -91,7 +91,7 @@ def run(args) -> dict:
           f"{row['ica_s']:.2f} s, cubic {row['fit_s']:.2f} s = {row['train_s']:.2f} s (goal < 2 s)")
     results["solve"]["synthetic_68x3500"] = [
         _solve_times(model.actor_, model.stabilised_.markers[:args.solve_frames], n) for n in (None, 5, 1)]
-    data = Path(args.data)
+    data = data_dir(args.data)
     for take in TAKES:
         path = data / "markers" / take
         if not path.is_file():
@@ -119,7 +119,7 @@ def run(args) -> dict:
 
 
 def _arguments(parser) -> None:
-    parser.add_argument("--data", default=str(DEFAULT_DATA), help="data kit folder (default ../shared/data)")
+    add_data_argument(parser)
     parser.add_argument("--solve-frames", type=int, default=1500, help="synthetic frames to solve (default 1500)")
 
 

@@ -10,7 +10,6 @@ whole file) and writes a session file that ``facepuppet replay`` plays;
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from pathlib import Path
 

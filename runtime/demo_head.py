@@ -146,7 +146,7 @@ def _eye_turn(head: _Head, side: float, pitch: float = 0.0, yaw: float = 0.0) ->
 
 def _sided_shapes(head: _Head, side: float) -> dict:
     v = head.skin.vertices
-    x, y, z = v[:, 0], v[:, 1], v[:, 2]
+    x, y = v[:, 0], v[:, 1]
     sx = side * x  # > 0 on this side
     rel = head.skin.params["rel"]
     corner = gauss(sx, rel, parts.MOUTH_HALF_WIDTH, 0.15, 1.5, 1.25)

@@ -50,7 +50,6 @@ internal_error    an exception inside the adapter's own code (a bug); the
 
 from __future__ import annotations
 
-import math
 import struct
 
 from .frames import Frame
