@@ -196,33 +196,49 @@ class MarkerSolver:
         self._diag3 = flat[0::3 * k + 1]                             # diagonal of the a-block (a view)
         self._diag2 = flat[k::3 * k + 1]                             # diagonal of the b-block (a view)
         flat[2 * k::3 * k + 1] = 1.0                                 # c-block: identity
-        self._jg = np.empty((k, 3 * k))                              # preallocated per-iteration buffers
+        self._jga = np.empty((k, 3 * k + 1))                         # preallocated per-iteration buffers
         self._h = np.empty((k, k))
         self._hdiag = self._h.reshape(-1)[::k + 1]
-        self._phi = np.empty(3 * k)
+        self._powers = np.empty((3, k))                              # s in every row, then [s, s^2, s^3]
+        self._phis = (np.empty(3 * k), np.empty(3 * k))              # phi of the current and the trial point
         self.s = np.zeros(k)
         self.last_iterations = 0
         self.last_cost = float("nan")
         self._cache_key: bytes | None = None
         self._cache = None
+        self._all = None                                             # the cache entry of "all markers, weight 1"
 
     def reset(self) -> None:
         """Forget the warm start (s = neutral)."""
         self.s = np.zeros(self.actor.n_actuations)
 
     def _gram(self, present: np.ndarray, w: np.ndarray | None):
-        """M_sub W M_sub^T (3K, 3K) and the weighted M_sub for one marker subset, cached.
+        """Cached quantities of one marker subset (and weights) for eq. 5.
 
         Because x(s) is linear in phi(s) = [s^3, s^2, s], the Gauss-Newton
-        quantities of eq. 5 reduce to (3K, 3K) products with this Gram matrix,
-        whatever the number of markers.
+        quantities of eq. 5 reduce to (3K, 3K) products with the Gram matrix
+        G = M_sub W M_sub^T, whatever the number of markers.  The damping and
+        prior terms are quadratic in the s-block of phi, so they are folded
+        into G: (lam + mu) is added to the diagonal of its s-block.
+
+        Returns (ga, mw, x0, cols, wrep): ga (3K, 3K + 1) holds that G in its
+        first 3K columns (the last is scratch for the residual), mw the
+        weighted M_sub (3K, 3 n_sub), x0 the neutral of the subset (3 n_sub,),
+        cols the boolean coordinate mask (3 n,), wrep the per-coordinate
+        weights (3 n_sub,) or None.
         """
+        reg = self.damping + self.prior
         key = present.tobytes() + (b"" if w is None else w.tobytes())
-        if key != self._cache_key:
+        if key != self._cache_key or self._cache[5] != reg:
+            k = len(self._lo)
             cols = np.repeat(present, 3)
             m = self._m[:, cols]
-            mw = m if w is None else m * np.repeat(w[present], 3)
-            self._cache = (mw @ m.T, mw, self._neutral[cols], cols)
+            wrep = None if w is None else np.repeat(w[present], 3)
+            mw = m if w is None else m * wrep
+            ga = np.empty((3 * k, 3 * k + 1))
+            ga[:, :3 * k] = mw @ m.T
+            ga.reshape(-1)[2 * k * (3 * k + 2)::3 * k + 2][:k] += reg
+            self._cache = (ga, mw, self._neutral[cols], cols, wrep, reg)
             self._cache_key = key
         return self._cache
 
@@ -241,65 +257,74 @@ class MarkerSolver:
         obs = np.asarray(observed, dtype=np.float64)
         if obs.shape != (self.actor.n_markers, 3):
             raise ValueError(f"MarkerSolver.solve: observed must be ({self.actor.n_markers}, 3), got {obs.shape}")
-        present = ~np.isnan(obs).any(axis=1)
-        w = None
-        if weights is not None:
-            w = np.asarray(weights, dtype=np.float64)
-            if w.shape != (self.actor.n_markers,) or not (np.isfinite(w).all() and (w >= 0).all()):
-                raise ValueError(f"MarkerSolver.solve: weights must be ({self.actor.n_markers},) finite >= 0")
-            present &= w > 0
-        if not present.any():
-            self.last_iterations = 0
-            return self.s.copy()
-        gram, mw, x0, cols = self._gram(present, w)
-        target = obs.ravel()[cols] - x0                          # p_i - x_i^0
-        mt = mw @ target                                         # M W p, (3K,)
-        tt = float(target @ (target if w is None else target * np.repeat(w[present], 3)))
+        flat = obs.ravel()
+        if weights is None and flat.sum() == flat.sum():
+            # fast path, the common case: no NaN, so every marker is present with weight 1
+            entry = self._all
+            if entry is None or entry[5] != self.damping + self.prior:
+                entry = self._all = self._gram(np.ones(self.actor.n_markers, dtype=bool), None)
+            ga, mw, x0 = entry[0], entry[1], entry[2]
+            target = flat - x0                                   # p_i - x_i^0
+            tt = float(target @ target)
+        else:
+            present = ~np.isnan(obs).any(axis=1)
+            w = None
+            if weights is not None:
+                w = np.asarray(weights, dtype=np.float64)
+                if w.shape != (self.actor.n_markers,) or not (np.isfinite(w).all() and (w >= 0).all()):
+                    raise ValueError(f"MarkerSolver.solve: weights must be ({self.actor.n_markers},) finite >= 0")
+                present &= w > 0
+            if not present.any():
+                self.last_iterations = 0
+                return self.s.copy()
+            ga, mw, x0, cols, wrep, _ = self._gram(present, w)
+            target = flat[cols] - x0
+            tt = float(target @ (target if wrep is None else target * wrep))
+        k = len(self._lo)
         s_prev = self.s if s0 is None else np.clip(np.asarray(s0, dtype=np.float64), self._lo, self._hi)
-        lam, mu, lo, hi = self.damping, self.prior, self._lo, self._hi
+        lam, lo, hi, tol = self.damping, self._lo, self._hi, self.tolerance
+        # eq. 5 plus damping and prior: sum_i w_i ||x_i(s) - p_i||^2 + lam ||s - s_prev||^2 + mu ||s||^2
+        #   = phi'G phi - 2 phi'mt + tt, with G holding lam + mu (see _gram), mt = M W p + lam [0; 0; s_prev]
+        mt = mw @ target
+        mt[2 * k:] += lam * s_prev
+        tt += lam * float(s_prev @ s_prev)
         mt2 = 2.0 * mt
-        lam_prev = lam * s_prev
-        jsel, jt, jg, h, hdiag, phi = self._jsel, self._jsel.T, self._jg, self._h, self._hdiag, self._phi
-        d3, d2, k = self._diag3, self._diag2, len(s_prev)
-        a_part, b_part, c_part = phi[:k], phi[k:2 * k], phi[2 * k:]
-
-        def cost_at(s):
-            # eq. 5: sum_i w_i ||x_i(s) - p_i||^2 = phi'G phi - 2 phi'M W p + p'W p, plus damping/prior
-            np.multiply(s, s, out=b_part)
-            np.multiply(b_part, s, out=a_part)
-            c_part[:] = s
-            gphi = gram @ phi
-            d = s - s_prev
-            return float(phi @ (gphi - mt2)) + tt + lam * float(d @ d) + mu * float(s @ s), gphi
-
+        gram, resid = ga[:, :3 * k], ga[:, 3 * k]
+        jsel, jt, jga, h, hdiag = self._jsel, self._jsel.T, self._jga, self._h, self._hdiag
+        jg, g = jga[:, :3 * k], jga[:, 3 * k]
+        d3, d2, powers = self._diag3, self._diag2, self._powers
+        phi, phi_new = self._phis
         s = s_prev.copy()
-        cost, gphi = cost_at(s)
+        powers[:] = s
+        np.multiply.accumulate(powers, axis=0, out=phi.reshape(3, k)[::-1])    # phi = [s^3, s^2, s]
+        gphi = gram @ phi
+        cost = float(phi @ (gphi - mt2)) + tt
         budget = self.iterations if iterations is None else iterations
         nu, used = 1e-3, 0
         while used < budget:
             used += 1
-            np.multiply(s, s, out=d3)                                # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
-            d3 *= 3.0
+            np.multiply(phi[k:2 * k], 3.0, out=d3)                   # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
             np.multiply(s, 2.0, out=d2)
-            np.matmul(jsel, gram, out=jg)
-            np.matmul(jg, jt, out=h)                                 # J^T W J
-            g = jsel @ (gphi - mt)                                   # J^T W r
-            g += (lam + mu) * s
-            g -= lam_prev                                            # + damping + prior
-            hdiag += lam + mu
+            np.subtract(gphi, mt, out=resid)
+            np.matmul(jsel, ga, out=jga)                             # [J^T W J-half | J^T W r] in one product
+            np.matmul(jg, jt, out=h)                                 # J^T W J (+ damping + prior)
             hdiag *= 1.0 + nu                                        # Marquardt scaling
-            step = _spd_solve(h.T, g, overwrite_a=1, overwrite_b=1)[1]   # h is symmetric: h.T is its Fortran view
+            step = _spd_solve(h.T, g, overwrite_a=1)[1]              # h is symmetric: h.T is its Fortran view
             s_new = s - step
             np.maximum(s_new, lo, out=s_new)                         # bounded by projection
             np.minimum(s_new, hi, out=s_new)
             delta = s_new - s
-            if max(delta.max(), -delta.min()) < self.tolerance:      # converged: take the tiny step
+            if max(delta.max(), -delta.min()) < tol:                 # converged: take the tiny step
                 s = s_new
                 break
-            new_cost, new_gphi = cost_at(s_new)
+            powers[:] = s_new
+            np.multiply.accumulate(powers, axis=0, out=phi_new.reshape(3, k)[::-1])
+            new_gphi = gram @ phi_new
+            new_cost = float(phi_new @ (new_gphi - mt2)) + tt
             if new_cost <= cost:
                 gain = cost - new_cost
                 s, cost, gphi = s_new, new_cost, new_gphi
+                phi, phi_new = phi_new, phi
                 nu = max(nu * 0.3, 1e-7)
                 if gain <= self.cost_tolerance * (cost + 1e-300):      # converged: cost barely moves
                     break
