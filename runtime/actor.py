@@ -29,6 +29,8 @@ from scipy.linalg.lapack import dposv as _spd_solve
 
 from .tables import Section, TableSchema, TablesError, hash_inputs, load_tables, register_schema, save_tables
 
+_max, _min = np.maximum.reduce, np.minimum.reduce                   # plain ufunc reductions (no method wrapper)
+
 ACTOR_SCHEMA = register_schema(TableSchema(
     kind="actor",
     sections={
@@ -193,18 +195,22 @@ class MarkerSolver:
         # J^T (K, 3K) = [diag(3 s^2) | diag(2 s) | I]: its block diagonals are strided views, written in place
         self._jsel = np.zeros((k, 3 * k))
         flat = self._jsel.reshape(-1)
-        self._diag3 = flat[0::3 * k + 1]                             # diagonal of the a-block (a view)
-        self._diag2 = flat[k::3 * k + 1]                             # diagonal of the b-block (a view)
+        # diagonals of its a- and b-blocks as one (2, K) strided view: [j, i] -> flat[j K + i (3K + 1)]
+        self._diag32 = np.lib.stride_tricks.as_strided(flat, (2, k), (k * flat.itemsize, (3 * k + 1) * flat.itemsize))
+        self._jscale = np.array([[3.0], [2.0]])                      # d32 = [3 s^2; 2 s]
         flat[2 * k::3 * k + 1] = 1.0                                 # c-block: identity
         self._jga = np.empty((k, 3 * k + 1))                         # preallocated per-iteration buffers
         self._h = np.empty((k, k))
         self._hdiag = self._h.reshape(-1)[::k + 1]
         self._powers = np.empty((3, k))                              # s in every row, then [s, s^2, s^3]
         self._phis = (np.empty(3 * k), np.empty(3 * k))              # phi of the current and the trial point
+        self._gphis = (np.empty(3 * k), np.empty(3 * k))             # G phi of the current and the trial point
+        self._ss = (np.empty(k), np.empty(k))                        # s of the current and the trial point
+        self._tmp = np.empty(3 * k)
         self.s = np.zeros(k)
         self.last_iterations = 0
         self.last_cost = float("nan")
-        self._cache_key: bytes | None = None
+        self._cache_key: bytes | None = None                       # NaN pattern (+ weights) of the cached subset
         self._cache = None
         self._all = None                                             # the cache entry of "all markers, weight 1"
 
@@ -221,26 +227,22 @@ class MarkerSolver:
         prior terms are quadratic in the s-block of phi, so they are folded
         into G: (lam + mu) is added to the diagonal of its s-block.
 
-        Returns (ga, mw, x0, cols, wrep): ga (3K, 3K + 1) holds that G in its
-        first 3K columns (the last is scratch for the residual), mw the
+        Returns (ga, mw, x0, idx, wrep, reg): ga (3K, 3K + 1) holds that G in
+        its first 3K columns (the last is scratch for the residual), mw the
         weighted M_sub (3K, 3 n_sub), x0 the neutral of the subset (3 n_sub,),
-        cols the boolean coordinate mask (3 n,), wrep the per-coordinate
-        weights (3 n_sub,) or None.
+        idx the integer indices of the subset's coordinates (3 n_sub,), intp,
+        wrep the per-coordinate weights (3 n_sub,) or None, reg = lam + mu.
         """
         reg = self.damping + self.prior
-        key = present.tobytes() + (b"" if w is None else w.tobytes())
-        if key != self._cache_key or self._cache[5] != reg:
-            k = len(self._lo)
-            cols = np.repeat(present, 3)
-            m = self._m[:, cols]
-            wrep = None if w is None else np.repeat(w[present], 3)
-            mw = m if w is None else m * wrep
-            ga = np.empty((3 * k, 3 * k + 1))
-            ga[:, :3 * k] = mw @ m.T
-            ga.reshape(-1)[2 * k * (3 * k + 2)::3 * k + 2][:k] += reg
-            self._cache = (ga, mw, self._neutral[cols], cols, wrep, reg)
-            self._cache_key = key
-        return self._cache
+        k = len(self._lo)
+        idx = (3 * np.flatnonzero(present)[:, None] + np.arange(3)).ravel()
+        m = self._m[:, idx]
+        wrep = None if w is None else np.repeat(w[present], 3)
+        mw = m if w is None else m * wrep
+        ga = np.empty((3 * k, 3 * k + 1))
+        ga[:, :3 * k] = mw @ m.T
+        ga.reshape(-1)[2 * k * (3 * k + 2)::3 * k + 2][:k] += reg
+        return ga, mw, self._neutral[idx], idx, wrep, reg
 
     def solve(self, observed, weights=None, s0=None, iterations: int | None = None) -> np.ndarray:
         """Actuations s (K,), float64, that best explain the observed markers.
@@ -255,30 +257,44 @@ class MarkerSolver:
         No marker at all returns the previous solution unchanged.
         """
         obs = np.asarray(observed, dtype=np.float64)
-        if obs.shape != (self.actor.n_markers, 3):
-            raise ValueError(f"MarkerSolver.solve: observed must be ({self.actor.n_markers}, 3), got {obs.shape}")
+        n = self.actor.n_markers
+        if obs.shape != (n, 3):
+            raise ValueError(f"MarkerSolver.solve: observed must be ({n}, 3), got {obs.shape}")
         flat = obs.ravel()
+        reg = self.damping + self.prior
         if weights is None and flat.sum() == flat.sum():
             # fast path, the common case: no NaN, so every marker is present with weight 1
             entry = self._all
-            if entry is None or entry[5] != self.damping + self.prior:
-                entry = self._all = self._gram(np.ones(self.actor.n_markers, dtype=bool), None)
+            if entry is None or entry[5] != reg:
+                entry = self._all = self._gram(np.ones(n, dtype=bool), None)
             ga, mw, x0 = entry[0], entry[1], entry[2]
             target = flat - x0                                   # p_i - x_i^0
             tt = float(target @ target)
         else:
-            present = ~np.isnan(obs).any(axis=1)
+            # the cache key is the NaN pattern of the coordinates (+ the weights): when it repeats,
+            # as it does frame after frame, no mask is built at all
+            nan = np.isnan(flat)
             w = None
-            if weights is not None:
+            if weights is None:
+                key = nan.tobytes()
+            else:
                 w = np.asarray(weights, dtype=np.float64)
-                if w.shape != (self.actor.n_markers,) or not (np.isfinite(w).all() and (w >= 0).all()):
-                    raise ValueError(f"MarkerSolver.solve: weights must be ({self.actor.n_markers},) finite >= 0")
-                present &= w > 0
-            if not present.any():
+                if w.shape != (n,) or not (_min(w) >= 0.0 and _max(w) < np.inf):
+                    raise ValueError(f"MarkerSolver.solve: weights must be ({n},) finite >= 0")
+                key = nan.tobytes() + w.tobytes()
+            entry = self._cache
+            if key != self._cache_key or entry[5] != reg:
+                present = ~nan.reshape(n, 3).any(axis=1)
+                if w is not None:
+                    present &= w > 0
+                entry = self._cache = None if not present.any() else self._gram(present, w)
+                self._cache_key = key
+            if entry is None:
                 self.last_iterations = 0
                 return self.s.copy()
-            ga, mw, x0, cols, wrep, _ = self._gram(present, w)
-            target = flat[cols] - x0
+            ga, mw, x0, idx, wrep = entry[0], entry[1], entry[2], entry[3], entry[4]
+            target = flat.take(idx)
+            target -= x0
             tt = float(target @ (target if wrep is None else target * wrep))
         k = len(self._lo)
         s_prev = self.s if s0 is None else np.clip(np.asarray(s0, dtype=np.float64), self._lo, self._hi)
@@ -292,45 +308,51 @@ class MarkerSolver:
         gram, resid = ga[:, :3 * k], ga[:, 3 * k]
         jsel, jt, jga, h, hdiag = self._jsel, self._jsel.T, self._jga, self._h, self._hdiag
         jg, g = jga[:, :3 * k], jga[:, 3 * k]
-        d3, d2, powers = self._diag3, self._diag2, self._powers
+        d32, powers, tmp, jscale = self._diag32, self._powers, self._tmp, self._jscale
         phi, phi_new = self._phis
-        s = s_prev.copy()
+        gphi, new_gphi = self._gphis
+        s, s_new = self._ss
+        s[:] = s_prev
         powers[:] = s
         np.multiply.accumulate(powers, axis=0, out=phi.reshape(3, k)[::-1])    # phi = [s^3, s^2, s]
-        gphi = gram @ phi
-        cost = float(phi @ (gphi - mt2)) + tt
+        np.matmul(gram, phi, out=gphi)
+        np.subtract(gphi, mt2, out=tmp)
+        cost = float(phi @ tmp) + tt
         budget = self.iterations if iterations is None else iterations
-        nu, used = 1e-3, 0
+        nu, used, cost_tol = 1e-3, 0, self.cost_tolerance
         while used < budget:
             used += 1
-            np.multiply(phi[k:2 * k], 3.0, out=d3)                   # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
-            np.multiply(s, 2.0, out=d2)
+            np.multiply(phi[k:].reshape(2, k), jscale, out=d32)      # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
             np.subtract(gphi, mt, out=resid)
             np.matmul(jsel, ga, out=jga)                             # [J^T W J-half | J^T W r] in one product
             np.matmul(jg, jt, out=h)                                 # J^T W J (+ damping + prior)
             hdiag *= 1.0 + nu                                        # Marquardt scaling
             step = _spd_solve(h.T, g, overwrite_a=1)[1]              # h is symmetric: h.T is its Fortran view
-            s_new = s - step
+            np.subtract(s, step, out=s_new)
             np.maximum(s_new, lo, out=s_new)                         # bounded by projection
             np.minimum(s_new, hi, out=s_new)
-            delta = s_new - s
-            if max(delta.max(), -delta.min()) < tol:                 # converged: take the tiny step
-                s = s_new
+            np.subtract(s_new, s, out=step)                          # the step actually taken
+            if max(_max(step), -_min(step)) < tol:                   # converged: take the tiny step
+                s, s_new = s_new, s
                 break
             powers[:] = s_new
             np.multiply.accumulate(powers, axis=0, out=phi_new.reshape(3, k)[::-1])
-            new_gphi = gram @ phi_new
-            new_cost = float(phi_new @ (new_gphi - mt2)) + tt
+            np.matmul(gram, phi_new, out=new_gphi)
+            np.subtract(new_gphi, mt2, out=tmp)
+            new_cost = float(phi_new @ tmp) + tt
             if new_cost <= cost:
                 gain = cost - new_cost
-                s, cost, gphi = s_new, new_cost, new_gphi
+                s, s_new = s_new, s
+                cost = new_cost
+                gphi, new_gphi = new_gphi, gphi
                 phi, phi_new = phi_new, phi
                 nu = max(nu * 0.3, 1e-7)
-                if gain <= self.cost_tolerance * (cost + 1e-300):      # converged: cost barely moves
+                if gain <= cost_tol * (cost + 1e-300):               # converged: cost barely moves
                     break
             else:
                 nu *= 10.0
-        self.s = s
+        self._phis, self._gphis, self._ss = (phi, phi_new), (gphi, new_gphi), (s, s_new)
+        self.s = s.copy()
         self.last_iterations = used
         self.last_cost = max(cost, 0.0)
         return s.copy()
