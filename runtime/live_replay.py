@@ -66,18 +66,12 @@ def read_live_recording(path, make_adapter) -> LiveRecording | None:
         session = read_session(path)
     if session.frames or not session.packets:
         return None
-    adapters: dict = {}
-    frames, frame_packets, calibrate = [], [], []
-    for i, packet in enumerate(session.packets):
-        if CALIBRATE_ADDRESS in packet.data:
-            calibrate.append(i)
-        adapter = adapters.get(packet.kind)
-        if adapter is None:
-            adapter = adapters[packet.kind] = make_adapter(packet.kind)
-        frame = adapter.handle(packet.data, packet.t)
-        if frame is not None:
-            frames.append(frame)
-            frame_packets.append(i)
+    from .sources import decode_packets
+
+    calibrate = [i for i, packet in enumerate(session.packets) if CALIBRATE_ADDRESS in packet.data]
+    decoded = decode_packets(session.packets, make_adapter)
+    frames = [frame for _, frame in decoded]
+    frame_packets = [i for i, _ in decoded]
     if not frames:
         raise ValueError(f"{path}: the recorded packets decode to no frame")
     return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header))

@@ -72,6 +72,27 @@ class ReplaySource:
         self._next = 0
 
 
+def decode_packets(packets, make_adapter=None) -> list[tuple[int, Frame]]:
+    """(packet index, frame) for each packet that completes a frame, decoded as the live run did.
+
+    Each packet goes, in recorded order and with its recorded receive time,
+    through a fresh adapter of its input kind (``make_adapter(kind)``, by
+    default :func:`~facepuppet.runtime.input_kinds.make_adapter`).
+    """
+    if make_adapter is None:
+        from .input_kinds import make_adapter
+    adapters: dict = {}
+    decoded = []
+    for i, packet in enumerate(packets):
+        adapter = adapters.get(packet.kind)
+        if adapter is None:
+            adapter = adapters[packet.kind] = make_adapter(packet.kind)
+        frame = adapter.handle(packet.data, packet.t)
+        if frame is not None:
+            decoded.append((i, frame))
+    return decoded
+
+
 def frames_from_packets(packets) -> list[Frame]:
     """The frames a live run decoded from its packets, decoded again.
 
@@ -82,18 +103,7 @@ def frames_from_packets(packets) -> list[Frame]:
 
     packets : sequence of :class:`~facepuppet.runtime.session.Packet`
     """
-    from .input_kinds import make_adapter
-
-    adapters: dict = {}
-    frames = []
-    for packet in packets:
-        adapter = adapters.get(packet.kind)
-        if adapter is None:
-            adapter = adapters[packet.kind] = make_adapter(packet.kind)
-        frame = adapter.handle(packet.data, packet.t)
-        if frame is not None:
-            frames.append(frame)
-    return frames
+    return [frame for _, frame in decode_packets(packets)]
 
 
 def open_recording(path) -> list[Frame]:

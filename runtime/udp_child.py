@@ -26,7 +26,7 @@ from .udp_process import (
     MAX_COUNTERS, MAX_ERRORS_LOGGED, MAX_MARKERS, MAX_WEIGHTS, N_MARKERS, N_WEIGHTS, NAMES_BYTES, NAMES_END,
     NUMBER, READY, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, _NAME, _RECORD, _WRAP, _padded, _Shared,
 )
-from .udp_source import LATE_READ_S, POLL_TIMEOUT_S, enable_kernel_stamps, receive_stamped
+from .udp_source import POLL_TIMEOUT_S, enable_kernel_stamps, receive
 
 
 class _Writer:
@@ -164,13 +164,7 @@ def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, 
     try:
         while not ctl[STOP]:
             try:
-                if stamped:
-                    data, sender, t, t_read = receive_stamped(sock)
-                    if t_read - t > LATE_READ_S:
-                        own["waited_over_1ms"] += 1
-                else:
-                    data, sender = sock.recvfrom(65536)
-                    t = time.monotonic()
+                data, sender, t = receive(sock, stamped, time.monotonic, own)
             except (socket.timeout, BlockingIOError, InterruptedError):
                 if os.getppid() != parent_pid:  # the parent is gone
                     break

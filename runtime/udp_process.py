@@ -50,7 +50,7 @@ from multiprocessing import shared_memory
 import numpy as np
 
 from .frames import Frame
-from .udp_source import SOCKET_BUFFER, enable_kernel_stamps
+from .udp_source import bind_udp
 
 MAX_WEIGHTS = 1024
 MAX_MARKERS = 2048
@@ -171,21 +171,7 @@ class UdpProcessSource:
         """
         if self._process is not None:
             raise RuntimeError("UdpProcessSource.start: already started")
-        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
-        sock = socket.socket(family, socket.SOCK_DGRAM)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER)
-        except OSError:
-            pass
-        self.rcvbuf_bytes = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
-        enable_kernel_stamps(sock)  # before bind: the first datagram is stamped too
-        try:
-            sock.bind((self.host, self.port))
-        except OSError as exc:
-            sock.close()
-            raise OSError(exc.errno, f"cannot listen for {self.adapter.kind} input on "
-                                     f"{self.host}:{self.port}: {exc.strerror or exc} "
-                                     f"(is another program using this port?)") from exc
+        sock, self.rcvbuf_bytes = bind_udp(self.host, self.port, self.adapter.kind, stamps=True)
         self._sock = sock
         self._shm = shared_memory.SharedMemory(create=True, size=_Shared.size(self.ring_bytes))
         self._shared = _Shared(self._shm, self.ring_bytes)

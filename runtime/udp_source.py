@@ -82,6 +82,51 @@ def receive_stamped(sock: socket.socket) -> tuple[bytes, tuple, float, float]:
     return data, sender, t_read, t_read
 
 
+def receive(sock: socket.socket, stamped: bool, clock, own: dict) -> tuple[bytes, tuple, float]:
+    """One datagram: (data, sender, receive time in seconds).
+
+    With ``stamped`` the time is the kernel's arrival stamp and a read later
+    than LATE_READ_S after arrival counts in ``own["waited_over_1ms"]``;
+    otherwise it is ``clock()`` at the read. Raises what the socket raises.
+    """
+    if stamped:
+        data, sender, t, t_read = receive_stamped(sock)
+        if t_read - t > LATE_READ_S:
+            own["waited_over_1ms"] += 1
+        return data, sender, t
+    data, sender = sock.recvfrom(RECV_BUFFER)
+    return data, sender, clock()
+
+
+def bind_udp(host: str, port: int, kind: str, stamps: bool = False) -> tuple[socket.socket, int]:
+    """A UDP socket bound to host:port with a large receive buffer: (socket, buffer bytes granted).
+
+    ``stamps`` asks for kernel arrival stamps before binding, so the first
+    datagram is stamped too.
+
+    Raises
+    ------
+    OSError
+        naming the input kind and host:port when the address cannot be bound.
+    """
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER)
+    except OSError:
+        pass  # a smaller kernel buffer only means more drops in bursts
+    rcvbuf = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    if stamps:
+        enable_kernel_stamps(sock)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise OSError(exc.errno, f"cannot listen for {kind} input on {host}:{port}: "
+                                 f"{exc.strerror or exc} (is another program using this port?)") from exc
+    return sock, rcvbuf
+
+
 class UdpSource:
     """Frames from UDP datagrams decoded by ``adapter``.
 
@@ -133,20 +178,7 @@ class UdpSource:
         """
         if self._thread is not None:
             raise RuntimeError("UdpSource.start: already started")
-        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
-        sock = socket.socket(family, socket.SOCK_DGRAM)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER)
-        except OSError:
-            pass  # a smaller kernel buffer only means more drops in bursts
-        self.rcvbuf_bytes = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
-        try:
-            sock.bind((self.host, self.port))
-        except OSError as exc:
-            sock.close()
-            raise OSError(exc.errno, f"cannot listen for {self.adapter.kind} input on "
-                                     f"{self.host}:{self.port}: {exc.strerror or exc} "
-                                     f"(is another program using this port?)") from exc
+        sock, self.rcvbuf_bytes = bind_udp(self.host, self.port, self.adapter.kind)
         sock.settimeout(POLL_TIMEOUT_S)
         self._sock = sock
         self._stop.clear()
@@ -176,13 +208,7 @@ class UdpSource:
         stamped = clock is time.monotonic and enable_kernel_stamps(sock)
         while not stop.is_set():
             try:
-                if stamped:
-                    data, sender, t, t_read = receive_stamped(sock)
-                    if t_read - t > LATE_READ_S:
-                        own["waited_over_1ms"] += 1
-                else:
-                    data, sender = sock.recvfrom(RECV_BUFFER)
-                    t = clock()
+                data, sender, t = receive(sock, stamped, clock, own)
             except (socket.timeout, BlockingIOError, InterruptedError):
                 continue
             except OSError as exc:  # socket closed under us or a transient error (e.g. ICMP)
