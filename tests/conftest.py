@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+import time
 from pathlib import Path
 
 import pytest
@@ -48,3 +52,25 @@ def ict_character(ict_character_path):
     from facepuppet.runtime.character import Character
 
     return Character.load(ict_character_path)
+
+
+@pytest.fixture
+def x_display():
+    """A virtual X display (Xvfb) on a free number, stopped after the test."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        pytest.skip("Xvfb is not installed (make test installs it through .ci/system-deps); "
+                    "the window path needs an X display")
+    for number in range(91, 120):
+        if not os.path.exists(f"/tmp/.X{number}-lock"):
+            break
+    proc = subprocess.Popen([xvfb, f":{number}", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 10
+    while not os.path.exists(f"/tmp/.X11-unix/X{number}") and time.monotonic() < deadline:
+        time.sleep(0.05)
+    try:
+        yield f":{number}"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)

@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -197,26 +195,6 @@ def _parse(argv):
     parser = argparse.ArgumentParser()
     manipulate.register(parser.add_subparsers())
     return parser.parse_args(argv)
-
-
-@pytest.fixture
-def x_display():
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
-        pytest.skip("Xvfb is not installed; the window path needs an X display")
-    for number in range(121, 160):
-        if not os.path.exists(f"/tmp/.X{number}-lock"):
-            break
-    proc = subprocess.Popen([xvfb, f":{number}", "-screen", "0", "640x480x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 10
-    while not os.path.exists(f"/tmp/.X11-unix/X{number}") and time.monotonic() < deadline:
-        time.sleep(0.05)
-    try:
-        yield f":{number}"
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
 
 
 def window_scenario() -> None:

@@ -3,35 +3,11 @@
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
-import time
 
 import numpy as np
-import pytest
 from PIL import Image
-
-
-@pytest.fixture
-def x_display():
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
-        pytest.skip("Xvfb is not installed (make test installs it through .ci/system-deps); "
-                    "the window path needs an X display")
-    for number in range(91, 120):
-        if not os.path.exists(f"/tmp/.X{number}-lock"):
-            break
-    proc = subprocess.Popen([xvfb, f":{number}", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 10
-    while not os.path.exists(f"/tmp/.X11-unix/X{number}") and time.monotonic() < deadline:
-        time.sleep(0.05)
-    try:
-        yield f":{number}"
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
 
 
 def test_demo_opens_a_window_when_a_display_exists(x_display, tmp_path):
