@@ -73,3 +73,35 @@ def test_weights_are_checked():
         d.deform(np.zeros(3))
     with pytest.raises(ValueError, match="NaN"):
         d.deform(np.array([np.nan, 0.0]))
+
+
+def test_moving_spans_merge_short_gaps_only():
+    from facepuppet.runtime.deform import moving_spans
+
+    spans = moving_spans(np.array([3, 4, 5, 9, 10, 200, 201]), max_gap=4)
+    np.testing.assert_array_equal(spans, [[3, 11], [200, 202]])     # gap of 3 merged, gap of 189 not
+    np.testing.assert_array_equal(moving_spans(np.array([3, 9]), max_gap=0), [[3, 4], [9, 10]])
+    assert moving_spans(np.array([], dtype=np.int64)).shape == (0, 2)
+
+
+@pytest.mark.parametrize("n_active", [1, 5, 40, 57])
+def test_both_regimes_match_dense_deltas_on_ict(ict_character, n_active):
+    """Few active shapes take the saxpy branch, many the matrix product: both equal x0 + W D."""
+    c = ict_character
+    rng = np.random.default_rng(n_active)
+    w = np.zeros(c.n_shapes, np.float32)
+    w[rng.choice(c.n_shapes, n_active, replace=False)] = rng.uniform(-0.2, 1.0, n_active)
+    d = CpuDeformer(c)
+    assert 1 <= len(d.spans) < 64
+    raw = d.deform_into(w)
+    rest_normals = vertex_normals(c.vertices, c.triangles)
+    expected_pos = c.vertices + np.tensordot(w, c.dense_deltas(), axes=1)
+    expected_nrm = rest_normals + np.tensordot(w, c.dense_deltas(normals=True), axes=1)
+    np.testing.assert_allclose(raw[:, :3], expected_pos, atol=2e-4)
+    np.testing.assert_allclose(raw[:, 3:], expected_nrm, atol=2e-4)
+    # a caller's own buffer, dirty beforehand, gets the same (still vertices included)
+    mine = np.full((c.n_vertices, 6), 7.0, np.float32)
+    np.testing.assert_array_equal(d.deform_into(w, mine), raw)
+    # vertices no shape moves keep their rest position and normal exactly
+    still = np.setdiff1d(np.arange(c.n_vertices), np.unique(c.delta_indices))
+    np.testing.assert_array_equal(raw[still], np.c_[c.vertices, rest_normals][still])
