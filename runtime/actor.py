@@ -202,17 +202,22 @@ class MarkerSolver:
         self._jga = np.empty((k, 3 * k + 1))                         # preallocated per-iteration buffers
         self._h = np.empty((k, k))
         self._hdiag = self._h.reshape(-1)[::k + 1]
-        self._powers = np.empty((3, k))                              # s in every row, then [s, s^2, s^3]
-        self._phis = (np.empty(3 * k), np.empty(3 * k))              # phi of the current and the trial point
-        self._gphis = (np.empty(3 * k), np.empty(3 * k))             # G phi of the current and the trial point
-        self._ss = (np.empty(k), np.empty(k))                        # s of the current and the trial point
+        # the current and the trial point: (phi = [s^3, s^2, s], its blocks s^3, s^2, s, the view [s^2; s]
+        # of shape (2, K), G phi): s lives in phi, so no copies between them
+        self._points = tuple(self._point(k) for _ in range(2))
         self._tmp = np.empty(3 * k)
+        self._step = np.empty(k)
         self.s = np.zeros(k)
         self.last_iterations = 0
         self.last_cost = float("nan")
         self._cache_key: bytes | None = None                       # NaN pattern (+ weights) of the cached subset
         self._cache = None
         self._all = None                                             # the cache entry of "all markers, weight 1"
+
+    @staticmethod
+    def _point(k: int) -> tuple:
+        phi = np.empty(3 * k)
+        return phi, phi[:k], phi[k:2 * k], phi[2 * k:], phi[k:].reshape(2, k), np.empty(3 * k)
 
     def reset(self) -> None:
         """Forget the warm start (s = neutral)."""
@@ -262,7 +267,8 @@ class MarkerSolver:
             raise ValueError(f"MarkerSolver.solve: observed must be ({n}, 3), got {obs.shape}")
         flat = obs.ravel()
         reg = self.damping + self.prior
-        if weights is None and flat.sum() == flat.sum():
+        total = flat.sum()
+        if weights is None and total == total:
             # fast path, the common case: no NaN, so every marker is present with weight 1
             entry = self._all
             if entry is None or entry[5] != reg:
@@ -308,13 +314,14 @@ class MarkerSolver:
         gram, resid = ga[:, :3 * k], ga[:, 3 * k]
         jsel, jt, jga, h, hdiag = self._jsel, self._jsel.T, self._jga, self._h, self._hdiag
         jg, g = jga[:, :3 * k], jga[:, 3 * k]
-        d32, powers, tmp, jscale = self._diag32, self._powers, self._tmp, self._jscale
-        phi, phi_new = self._phis
-        gphi, new_gphi = self._gphis
-        s, s_new = self._ss
+        d32, tmp, jscale, step = self._diag32, self._tmp, self._jscale, self._step
+        cur, new = self._points
+        phi, s3, s2, s, s21, gphi = cur
+        # every array op below is one NumPy call on a preallocated buffer: per frame the call count, not the
+        # (3K)^2 arithmetic, is the cost
         s[:] = s_prev
-        powers[:] = s
-        np.multiply.accumulate(powers, axis=0, out=phi.reshape(3, k)[::-1])    # phi = [s^3, s^2, s]
+        np.multiply(s, s, out=s2)
+        np.multiply(s2, s, out=s3)                                   # phi = [s^3, s^2, s]
         np.matmul(gram, phi, out=gphi)
         np.subtract(gphi, mt2, out=tmp)
         cost = float(phi @ tmp) + tt
@@ -322,37 +329,37 @@ class MarkerSolver:
         nu, used, cost_tol = 1e-3, 0, self.cost_tolerance
         while used < budget:
             used += 1
-            np.multiply(phi[k:].reshape(2, k), jscale, out=d32)      # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
+            phi_new, s3_new, s2_new, s_new, s21_new, gphi_new = new
+            np.multiply(s21, jscale, out=d32)                        # dx/ds_k = 3 a s_k^2 + 2 b s_k + c
             np.subtract(gphi, mt, out=resid)
             np.matmul(jsel, ga, out=jga)                             # [J^T W J-half | J^T W r] in one product
             np.matmul(jg, jt, out=h)                                 # J^T W J (+ damping + prior)
             hdiag *= 1.0 + nu                                        # Marquardt scaling
-            step = _spd_solve(h.T, g, overwrite_a=1)[1]              # h is symmetric: h.T is its Fortran view
-            np.subtract(s, step, out=s_new)
+            np.subtract(s, _spd_solve(h.T, g, overwrite_a=1)[1], out=s_new)   # h symmetric: h.T its Fortran view
             np.maximum(s_new, lo, out=s_new)                         # bounded by projection
             np.minimum(s_new, hi, out=s_new)
             np.subtract(s_new, s, out=step)                          # the step actually taken
-            if max(_max(step), -_min(step)) < tol:                   # converged: take the tiny step
-                s, s_new = s_new, s
+            if max(map(abs, step.tolist())) < tol:                   # converged: take the tiny step
+                cur, new = new, cur
                 break
-            powers[:] = s_new
-            np.multiply.accumulate(powers, axis=0, out=phi_new.reshape(3, k)[::-1])
-            np.matmul(gram, phi_new, out=new_gphi)
-            np.subtract(new_gphi, mt2, out=tmp)
+            np.multiply(s_new, s_new, out=s2_new)
+            np.multiply(s2_new, s_new, out=s3_new)
+            np.matmul(gram, phi_new, out=gphi_new)
+            np.subtract(gphi_new, mt2, out=tmp)
             new_cost = float(phi_new @ tmp) + tt
             if new_cost <= cost:
                 gain = cost - new_cost
-                s, s_new = s_new, s
                 cost = new_cost
-                gphi, new_gphi = new_gphi, gphi
-                phi, phi_new = phi_new, phi
+                cur, new = new, cur
+                phi, s3, s2, s, s21, gphi = cur
                 nu = max(nu * 0.3, 1e-7)
                 if gain <= cost_tol * (cost + 1e-300):               # converged: cost barely moves
                     break
             else:
                 nu *= 10.0
-        self._phis, self._gphis, self._ss = (phi, phi_new), (gphi, new_gphi), (s, s_new)
-        self.s = s.copy()
+        self._points = (cur, new)
+        s = cur[3].copy()
+        self.s = s
         self.last_iterations = used
         self.last_cost = max(cost, 0.0)
         return s.copy()
