@@ -213,6 +213,7 @@ class MarkerSolver:
         self._cache_key: bytes | None = None                       # NaN pattern (+ weights) of the cached subset
         self._cache = None
         self._all = None                                             # the cache entry of "all markers, weight 1"
+        self._dense = True                                           # try the all-markers path first
 
     @staticmethod
     def _point(k: int) -> tuple:
@@ -267,16 +268,18 @@ class MarkerSolver:
             raise ValueError(f"MarkerSolver.solve: observed must be ({n}, 3), got {obs.shape}")
         flat = obs.ravel()
         reg = self.damping + self.prior
-        total = flat.sum()
-        if weights is None and total == total:
-            # fast path, the common case: no NaN, so every marker is present with weight 1
+        tt = float("nan")
+        if weights is None and self._dense:
+            # fast path, the common case: no NaN, so every marker is present with weight 1; a NaN
+            # anywhere makes ||p - x^0||^2 NaN, so that sum doubles as the test (while frames come
+            # with NaN, they go straight to the subset path until one comes complete again)
             entry = self._all
             if entry is None or entry[5] != reg:
                 entry = self._all = self._gram(np.ones(n, dtype=bool), None)
             ga, mw, x0 = entry[0], entry[1], entry[2]
             target = flat - x0                                   # p_i - x_i^0
             tt = float(target @ target)
-        else:
+        if tt != tt:
             # the cache key is the NaN pattern of the coordinates (+ the weights): when it repeats,
             # as it does frame after frame, no mask is built at all
             nan = np.isnan(flat)
@@ -298,6 +301,7 @@ class MarkerSolver:
             if entry is None:
                 self.last_iterations = 0
                 return self.s.copy()
+            self._dense = weights is None and len(entry[3]) == 3 * n
             ga, mw, x0, idx, wrep = entry[0], entry[1], entry[2], entry[3], entry[4]
             target = flat.take(idx)
             target -= x0
@@ -336,8 +340,7 @@ class MarkerSolver:
             np.matmul(jg, jt, out=h)                                 # J^T W J (+ damping + prior)
             hdiag *= 1.0 + nu                                        # Marquardt scaling
             np.subtract(s, _spd_solve(h.T, g, overwrite_a=1)[1], out=s_new)   # h symmetric: h.T its Fortran view
-            np.maximum(s_new, lo, out=s_new)                         # bounded by projection
-            np.minimum(s_new, hi, out=s_new)
+            s_new.clip(lo, hi, out=s_new)                            # bounded by projection
             np.subtract(s_new, s, out=step)                          # the step actually taken
             if max(map(abs, step.tolist())) < tol:                   # converged: take the tiny step
                 cur, new = new, cur
