@@ -87,7 +87,7 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
         character=args.character, input="vmc", listen=f"127.0.0.1:{port}", allow=None, config=None,
         calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False, headless=True,
         out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path,
-        receiver=getattr(args, "receiver", "process"))
+        receiver=getattr(args, "receiver", "process"), draw=getattr(args, "draw", "arrival"))
     stop = threading.Event()
     sender_out: list[str] = []
     procs = []
@@ -149,6 +149,7 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
         "ticks": result.loop.n_ticks,
         "new_frames_drawn_per_s": float(e2e.size / drawing_s) if drawing_s > 0 else math.nan,
         "receiver": run_args.receiver,
+        "draw": run_args.draw,
         "waited_over_1ms": udp.get("waited_over_1ms", None),
         "stale_dropped": result.loop.counters["stale_dropped"],
         "late_ticks": result.loop.counters["late_ticks"],
@@ -183,7 +184,8 @@ def _percentiles(ms: np.ndarray) -> dict:
 
 def bench_latency(args: argparse.Namespace) -> dict:
     log = print if args.verbose else (lambda s: None)
-    results = {"character": str(args.character), "size": args.size, "fps": args.fps}
+    results = {"character": str(args.character), "size": args.size, "fps": args.fps,
+               "draw": getattr(args, "draw", "arrival")}
     results["nominal"] = _phase(args, args.rate, args.seconds, log)
     _print("nominal", results["nominal"])
     if args.flood:
@@ -200,7 +202,7 @@ def _print(name: str, r: dict) -> None:
     print(f"latency bench [{name}]: {r['frames_sent']} frames at {r['rate_hz']:g} Hz for {r['seconds']:g} s; "
           f"datagrams received {r['datagrams_received']}/{r['datagrams_sent']}, stale dropped {r['stale_dropped']}, "
           f"frames drawn {r['frames_drawn']} ({r['new_frames_drawn_per_s']:.1f}/s, {r['render_path']} path, "
-          f"{r['receiver']} receiver); read >1 ms after arrival {r['waited_over_1ms']}; loadavg {r['loadavg']}")
+          f"{r['receiver']} receiver, draw on {r['draw']}); read >1 ms after arrival {r['waited_over_1ms']}; loadavg {r['loadavg']}")
     print(f"  receive -> GPU finished ms: p50 {e.get('p50', math.nan):.2f}  p99 {e.get('p99', math.nan):.2f}  "
           f"max {e.get('max', math.nan):.2f}; CPU before draw p99 {r['cpu_before_draw_p99_ms']:.3f} ms "
           f"(snapshot {r['cpu_stage_p99_ms']['snapshot']:.3f}, pipeline+map {r['cpu_stage_p99_ms']['pipeline_map']:.3f})")
@@ -218,7 +220,10 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=120.0, help="frames per second sent (120)")
     parser.add_argument("--seconds", type=float, default=30.0, help="seconds of sending (30)")
     parser.add_argument("--size", default="640x480", help="render size (640x480)")
-    parser.add_argument("--fps", type=float, default=60.0, help="frame loop ticks per second (60)")
+    parser.add_argument("--fps", type=float, default=60.0,
+                        help="frame loop ticks per second (60); with --draw arrival the idle redraw rate")
+    parser.add_argument("--draw", choices=("arrival", "tick"), default="arrival",
+                        help="the run's drawing: on arrival of each frame (default) or on the --fps grid")
     parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     parser.add_argument("--receiver", choices=("process", "thread"), default="process",
                         help="the run's receiver: a child process (default) or a thread")

@@ -11,6 +11,13 @@ The clock only paces the ticks; it never decides what is drawn. With a
 a :class:`WallClock` (a window) each tick waits for its real time, and a tick
 that is late is counted but still drawn at its recorded time, so the same
 recording gives the same frames either way (DESIGN.md, Determinism).
+
+A live run draws *on arrival* instead (``idle_fps``): the loop sleeps in the
+source's ``wait_for_frame`` until a new frame arrives (or ``1 / idle_fps``
+passes, so easing and gestures keep moving), and the tick is labelled with
+the first index of the ``fps`` grid at or after that moment. With a fine grid
+(the live run uses 1 kHz) a frame waits for nothing but the previous draw, and
+the labels still replay tick for tick.
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ from .frames import Frame
 from .timing import StageTimer
 
 STAGES = ("snapshot", "map", "draw_submit", "gpu_finish", "sink")
+ARRIVAL_GRID_HZ = 1000.0  # tick-label grid of a run that draws on arrival (see the module docstring)
 
 
 class RecordedClock:
@@ -169,13 +177,19 @@ class FrameLoop:
     stop : callable returning bool or None; checked before each tick, True ends the run
     catch_up : bool; a tick later than one period skips the ticks it missed
         (live runs: never fall behind real time) instead of drawing each one
+    idle_fps : float or None; draw on arrival (see the module docstring) when the
+        source has ``wait_for_frame(timeout_s) -> bool``, redrawing at least this
+        often without new frames; ``fps`` is then the grid of the tick labels
     """
 
     def __init__(self, character, renderer, clock, sinks=(), fps: float = 60.0, log=print, target=None,
                  retarget: "Retarget | None" = None, pipeline=None, on_tick=(), stop=None,
-                 catch_up: bool = False):
+                 catch_up: bool = False, idle_fps: float | None = None):
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
+        if idle_fps is not None and not (isinstance(idle_fps, (int, float)) and 0 < idle_fps <= fps):
+            raise ValueError(f"FrameLoop idle_fps: expected a number in (0, fps = {fps:g}], got {idle_fps!r}")
+        self.idle_fps = None if idle_fps is None else float(idle_fps)
         self.shape_names = tuple(character.shape_names)
         self.renderer = renderer
         self.clock = clock
@@ -239,15 +253,25 @@ class FrameLoop:
         info = TickInfo()
         n_ticks = 0
         closed = False
+        arrival = schedule is None and self.idle_fps is not None and hasattr(source, "wait_for_frame")
+        idle_s = 0.0 if self.idle_fps is None else 1.0 / self.idle_fps
         self.clock.start()
         k = i = 0
+        drawn_at = -math.inf
         while (k if schedule is None else i) <= last:
             if self.stop is not None and self.stop():
                 break
             if schedule is not None:
                 k, i = schedule[i], i + 1
+            if arrival:
+                # sleep until a frame arrives or the idle redraw is due; label: the next grid index
+                source.wait_for_frame(max(0.0, drawn_at + idle_s - self.clock.now()))
+                k = max(k, math.ceil(self.clock.now() * self.fps - 1e-9))
+                if k > last:
+                    break
+                drawn_at = self.clock.now()
             t = k / self.fps
-            late = self.clock.wait_until(t)
+            late = 0.0 if arrival else self.clock.wait_until(t)
             if late > 0:
                 counters["late_ticks"] += 1
                 if self.catch_up and schedule is None and late * self.fps >= 1.0:

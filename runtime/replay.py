@@ -99,7 +99,9 @@ def run_replay(args, log=print) -> int:
             fps = live_fps
             source = TickedSource(live, pipeline.request_calibration if pipeline is not None else None)
             ticks = source.ticks
-            log(f"replay: {args.session} tick for tick ({len(ticks)} live ticks at {fps:g} fps, "
+            pace = (f"drawn on arrival, tick labels at {fps:g} Hz" if live.header.get("info", {}).get("idle_fps")
+                    else f"at {fps:g} fps")
+            log(f"replay: {args.session} tick for tick ({len(ticks)} live ticks {pace}, "
                 f"{len(live.frames)} frames) on {args.character} ({len(stages.names)} channels)")
     if ticks is None:
         fps = 60.0 if fps is None else fps

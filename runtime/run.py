@@ -3,9 +3,10 @@
 One UDP socket read by a child process
 (:class:`~facepuppet.runtime.udp_process.UdpProcessSource`; with ``--receiver thread`` a
 thread of this process, :class:`~facepuppet.runtime.udp_source.UdpSource`) decodes the
-input kind's datagrams into frames; the frame loop ticks on the
-wall clock at ``--fps``, takes the newest frame each tick (older ones are
-dropped and counted, never queued), runs the live pipeline (filter, calibrate,
+input kind's datagrams into frames; the frame loop draws as soon as a new
+frame arrives (``--draw arrival``, the default; without new frames it redraws
+at ``--fps``) or on a fixed ``--fps`` grid (``--draw tick``), takes the newest
+frame each tick (older ones are dropped and counted, never queued), runs the live pipeline (filter, calibrate,
 gain/clamp, tracking-loss easing; :mod:`~facepuppet.runtime.pipeline`), maps
 it onto the rig and draws. Around that loop:
 
@@ -46,7 +47,7 @@ import numpy as np
 from .character import Character
 from .live_config import LiveConfig, load_live_config
 from .live_stats import LiveStats
-from .loop import FrameLoop, LoopResult, PngSink, WallClock, WeightLog
+from .loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, PngSink, WallClock, WeightLog
 from .pipeline import LivePipeline
 from .replay import parse_size
 from .run_stages import add_stage_arguments, build_stages, make_input_adapter
@@ -86,7 +87,11 @@ def register(subparsers) -> None:
     p.add_argument("--dump-weights", type=Path, default=None, metavar="FILE.npy",
                    help="save the rig weights of every tick, (n_ticks, n_shapes) float32, at exit")
     p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
-    p.add_argument("--fps", type=float, default=60.0, help="ticks per second (default 60)")
+    p.add_argument("--fps", type=float, default=60.0,
+                   help="ticks per second (default 60); with --draw arrival, the redraw rate without new frames")
+    p.add_argument("--draw", choices=("arrival", "tick"), default="arrival",
+                   help="'arrival' (default): draw as soon as a new frame arrives (lowest latency); "
+                        "'tick': draw on a fixed --fps grid")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     p.add_argument("--receiver", choices=RECEIVERS, default="process",
@@ -166,6 +171,9 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
     if args.duration is not None and not (args.duration > 0):
         raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
     voice_only = args.input == "audio"
+    # draw on arrival: tick labels on a 1 kHz grid (so a replay can follow them), redraws at --fps when idle
+    arrival = getattr(args, "draw", "arrival") == "arrival" and not voice_only
+    loop_fps, idle_fps = (ARRIVAL_GRID_HZ, args.fps) if arrival else (args.fps, None)
     if voice_only and (getattr(args, "gestures", None) is None or (args.audio is None and args.audio_file is None)):
         raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
     character = Character.load(args.character)
@@ -191,7 +199,8 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         recorder = None
         if args.record is not None:
             recorder = PacketRecorder(args.record, args.input, info={
-                "character": str(args.character), "listen": f"{host}:{port}", "fps": args.fps,
+                "character": str(args.character), "listen": f"{host}:{port}", "fps": loop_fps,
+                "idle_fps": idle_fps,
                 "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
                             for name in ("config", "calibrate", "actor", "pair", "retarget", "elastic", "gestures")}})
             parts.append(recorder)
@@ -244,8 +253,9 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
             if hasattr(source, "frames_taken"):  # which frame each tick drew, for a faithful replay
                 hooks.append(lambda info: recorder.put_tick(info.k, info.t, source.frames_taken, info.stamps[0]))
         loop = FrameLoop(SimpleNamespace(shape_names=stages.names), renderer, WallClock(), sinks=sinks,
-                         fps=args.fps, log=log, target=target, retarget=stages.retarget,
-                         pipeline=frame_pipeline, on_tick=hooks, stop=stop_event.is_set, catch_up=True)
+                         fps=loop_fps, log=log, target=target, retarget=stages.retarget,
+                         pipeline=frame_pipeline, on_tick=hooks, stop=stop_event.is_set, catch_up=True,
+                         idle_fps=idle_fps)
         counters["loop"] = loop.counters
         stats.counters = _LiveCounters(source, counters)
         if on_ready is not None:
@@ -326,7 +336,9 @@ def run_command(args, log=print) -> int:
         return 2
     loop = result.loop
     c = loop.counters
-    log(f"run: {loop.n_ticks} ticks at {args.fps:g} fps, {result.path} path; frames received "
+    pace = f"at {args.fps:g} fps" if getattr(args, "draw", "arrival") == "tick" or args.input == "audio" \
+        else f"on arrival (idle redraw {args.fps:g} fps)"
+    log(f"run: {loop.n_ticks} ticks {pace}, {result.path} path; frames received "
         f"{c['frames_received']}, stale dropped {c['stale_dropped']}, non-finite rejected "
         f"{c['nonfinite_rejected'] + result.counters['pipeline']['nonfinite_rejected']}, late ticks "
         f"{c['late_ticks']} (skipped {c['skipped_ticks']})" + (" (window closed)" if loop.closed_by_window else ""))

@@ -139,14 +139,19 @@ class _Writer:
 
 def child_main() -> None:
     """Entry point of the receiving process: its arguments come pickled on stdin."""
-    shm_name, ring_bytes, fd, family, adapter, allow, want_packets, parent_pid, watch = pickle.load(sys.stdin.buffer)
+    shm_name, ring_bytes, fd, family, adapter, allow, want_packets, parent_pid, watch, wake_fd = \
+        pickle.load(sys.stdin.buffer)
     _child(shm_name, ring_bytes, socket.socket(family, socket.SOCK_DGRAM, fileno=fd), adapter, allow, want_packets,
-           parent_pid, watch)
+           parent_pid, watch, wake_fd)
 
 
 def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, want_packets: bool,
-           parent_pid: int, watch: bytes | None = None) -> None:
-    """The receiving process: read, stamp, filter, copy for on_packet, decode, publish; never raises."""
+           parent_pid: int, watch: bytes | None = None, wake_fd: int | None = None) -> None:
+    """The receiving process: read, stamp, filter, copy for on_packet, decode, publish, wake; never raises.
+
+    ``wake_fd``, the non-blocking write end of the parent's pipe, gets a byte
+    after each published frame (a full pipe means the parent is awake anyway).
+    """
     shm = shared_memory.SharedMemory(name=shm_name)
     try:  # the parent owns (and unlinks) the block: this process must not have it tracked as its own
         from multiprocessing import resource_tracker
@@ -186,6 +191,11 @@ def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, 
                     frame = handle(data, t)
                     if frame is not None:
                         writer.publish(frame)
+                        if wake_fd is not None:
+                            try:
+                                os.write(wake_fd, b"\1")
+                            except BlockingIOError:
+                                pass
             except Exception as exc:  # nothing escapes
                 own["internal_error"] += 1
                 writer.error(exc)

@@ -23,6 +23,8 @@ Same interface as :class:`UdpSource`: ``start()``/``stop()``, ``address``,
   (``packets_ring_dropped``), never blocks;
 * the adapter is copied into the child (pickled), so ``source.adapter.counters``
   stays at zero: read :attr:`counters`, which the child keeps current;
+* :meth:`UdpProcessSource.wait_for_frame` sleeps on a pipe the child writes a
+  byte to after each frame it publishes (the frame loop's draw on arrival);
 * frames with more than ``MAX_WEIGHTS`` weights or ``MAX_MARKERS`` markers are
   dropped and counted (``frame_too_large``).
 
@@ -40,6 +42,7 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import select
 import socket
 import struct
 import subprocess
@@ -147,6 +150,7 @@ class UdpProcessSource:
         self._counter_names: dict[int, str] = {}
         self._names_pos = 0
         self._final: dict[str, int] | None = None
+        self._wake: tuple[int, int] | None = None   # pipe (read, write): a byte per published frame
 
     @property
     def address(self) -> tuple[str, int]:
@@ -179,15 +183,19 @@ class UdpProcessSource:
         self._taken = self._stale_dropped = 0
         watch_bytes = None if self.watch is None else self.watch[0]
         self._watched = 0
+        self._wake = os.pipe()
+        for fd in self._wake:
+            os.set_blocking(fd, False)   # the child never waits on a full pipe; the parent drains
         # A fresh interpreter (not fork: this process may hold a GL context and threads; not
         # multiprocessing's spawn: it re-imports the caller's __main__), given the socket by descriptor.
         self._process = subprocess.Popen(
             [sys.executable, "-c", "from facepuppet.runtime.udp_child import child_main; child_main()"],
-            stdin=subprocess.PIPE, pass_fds=(sock.fileno(),))
+            stdin=subprocess.PIPE, pass_fds=(sock.fileno(), self._wake[1]))
         try:
             self._process.stdin.write(pickle.dumps((self._shm.name, self.ring_bytes, sock.fileno(), sock.family,
                                                     self.adapter, self.allow, self.on_packet is not None,
-                                                    os.getpid(), None if watch_bytes is None else bytes(watch_bytes))))
+                                                    os.getpid(), None if watch_bytes is None else bytes(watch_bytes),
+                                                    self._wake[1])))
             self._process.stdin.close()
         except (OSError, pickle.PicklingError) as exc:
             self.stop()
@@ -225,6 +233,10 @@ class UdpProcessSource:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
+        if self._wake is not None:
+            for fd in self._wake:
+                os.close(fd)
+            self._wake = None
 
     def __enter__(self) -> "UdpProcessSource":
         return self.start()
@@ -236,6 +248,22 @@ class UdpProcessSource:
     def frames_taken(self) -> int:
         """Frames completed up to the newest one :meth:`latest` handed out (0 before any)."""
         return self._taken
+
+    def wait_for_frame(self, timeout_s: float) -> bool:
+        """Sleep until a frame not yet taken is there (True) or ``timeout_s`` passes (False)."""
+        shared, wake = self._shared, self._wake
+        if shared is None or wake is None:
+            time.sleep(max(0.0, timeout_s))
+            return False
+        try:                                  # bytes of frames already taken (or about to be: checked next)
+            os.read(wake[0], 1 << 16)
+        except BlockingIOError:
+            pass
+        if shared.ctl[COMPLETED] != self._taken:
+            return True
+        if timeout_s <= 0:
+            return False
+        return bool(select.select([wake[0]], [], [], timeout_s)[0])
 
     def latest(self, t: float | None = None) -> tuple[Frame | None, int]:
         """(newest frame not yet taken or None, frames overwritten unseen since the last call).

@@ -159,6 +159,7 @@ class UdpSource:
         self._sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._arrived = threading.Event()   # set by the thread on each new frame (wait_for_frame)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -227,6 +228,7 @@ class UdpSource:
                 frame = handle(data, t)
                 if frame is not None:
                     self._slot = (self._slot[0] + 1, frame)
+                    self._arrived.set()
             except Exception as exc:  # nothing escapes the thread
                 own["internal_error"] += 1
                 self.last_error = exc
@@ -235,6 +237,13 @@ class UdpSource:
     def frames_taken(self) -> int:
         """Frames completed up to the newest one :meth:`latest` handed out (0 before any)."""
         return self._taken
+
+    def wait_for_frame(self, timeout_s: float) -> bool:
+        """Sleep until a frame not yet taken is there (True) or ``timeout_s`` passes (False)."""
+        self._arrived.clear()
+        if self._slot[0] != self._taken:     # arrived before the clear: no wait
+            return True
+        return self._arrived.wait(timeout_s) if timeout_s > 0 else False
 
     def latest(self, t: float | None = None) -> tuple[Frame | None, int]:
         """(newest frame not yet taken or None, frames overwritten unseen since the last call).

@@ -224,8 +224,10 @@ def test_elastic_character_driven_by_a_muscle_channel_over_vmc(tmp_path):
     relaxed = int(np.flatnonzero((np.abs(w[:, 2]) < 1e-6))[-1])
     from PIL import Image
 
-    still = np.asarray(Image.open(pngs / f"frame_{relaxed:05d}.png"))
-    pulled = np.asarray(Image.open(pngs / f"frame_{len(w) - 1:05d}.png"))
+    drawn = sorted(pngs.glob("frame_*.png"))  # one per tick, named by tick label
+    assert len(drawn) == len(w)
+    still = np.asarray(Image.open(drawn[relaxed]))
+    pulled = np.asarray(Image.open(drawn[-1]))
     assert (still != pulled).any(), "the contraction did not move the image"
     assert result.counters["udp"]["unmapped_name"] == 0
 
