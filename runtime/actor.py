@@ -207,6 +207,9 @@ class MarkerSolver:
         self._points = tuple(self._point(k) for _ in range(2))
         self._tmp = np.empty(3 * k)
         self._step = np.empty(k)
+        jga = self._jga
+        self._work = (self._jsel, self._jsel.T, jga, jga[:, :3 * k], jga[:, 3 * k], self._h, self._hdiag,
+                      self._diag32, self._tmp, self._jscale, self._step)
         self.s = np.zeros(k)
         self.last_iterations = 0
         self.last_cost = float("nan")
@@ -233,8 +236,9 @@ class MarkerSolver:
         prior terms are quadratic in the s-block of phi, so they are folded
         into G: (lam + mu) is added to the diagonal of its s-block.
 
-        Returns (ga, mw, x0, idx, wrep, reg): ga (3K, 3K + 1) holds that G in
-        its first 3K columns (the last is scratch for the residual), mw the
+        Returns (ga, mw, x0, idx, wrep, reg, gram, resid): ga (3K, 3K + 1) holds
+        that G in its first 3K columns, ``gram``, and the residual G phi - mt
+        in its last, ``resid`` (scratch, written by each iteration), mw the
         weighted M_sub (3K, 3 n_sub), x0 the neutral of the subset (3 n_sub,),
         idx the integer indices of the subset's coordinates (3 n_sub,), intp,
         wrep the per-coordinate weights (3 n_sub,) or None, reg = lam + mu.
@@ -248,7 +252,7 @@ class MarkerSolver:
         ga = np.empty((3 * k, 3 * k + 1))
         ga[:, :3 * k] = mw @ m.T
         ga.reshape(-1)[2 * k * (3 * k + 2)::3 * k + 2][:k] += reg
-        return ga, mw, self._neutral[idx], idx, wrep, reg
+        return ga, mw, self._neutral[idx], idx, wrep, reg, ga[:, :3 * k], ga[:, 3 * k]
 
     def solve(self, observed, weights=None, s0=None, iterations: int | None = None) -> np.ndarray:
         """Actuations s (K,), float64, that best explain the observed markers.
@@ -315,10 +319,8 @@ class MarkerSolver:
         mt[2 * k:] += lam * s_prev
         tt += lam * float(s_prev @ s_prev)
         mt2 = 2.0 * mt
-        gram, resid = ga[:, :3 * k], ga[:, 3 * k]
-        jsel, jt, jga, h, hdiag = self._jsel, self._jsel.T, self._jga, self._h, self._hdiag
-        jg, g = jga[:, :3 * k], jga[:, 3 * k]
-        d32, tmp, jscale, step = self._diag32, self._tmp, self._jscale, self._step
+        gram, resid = entry[6], entry[7]
+        jsel, jt, jga, jg, g, h, hdiag, d32, tmp, jscale, step = self._work
         cur, new = self._points
         phi, s3, s2, s, s21, gphi = cur
         # every array op below is one NumPy call on a preallocated buffer: per frame the call count, not the

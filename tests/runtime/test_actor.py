@@ -88,6 +88,31 @@ def test_solver_respects_bounds_budget_and_missing_markers():
         solver.solve(np.zeros((N + 1, 3)))
 
 
+def test_early_stops_only_at_the_converged_solution():
+    """The step and cost-gain stops end the solve early only where a long, tight solve ends too.
+
+    Frames far from the warm start (and from the damping anchor), with noise and occlusions: the
+    solver must stop by its criteria (well inside the budget) at the solution that a 500-step solve
+    with no early stop reaches from the same start.
+    """
+    actor = make_actor()
+    rng = np.random.default_rng(1)
+    for trial in range(12):
+        s_true = rng.uniform(0.0, 1.2, K)
+        start = rng.uniform(-0.5, 1.5, K) if trial % 3 else np.zeros(K)
+        obs = actor.evaluate(s_true) + rng.normal(scale=0.05, size=(N, 3))
+        if trial % 2:
+            obs[rng.choice(np.arange(3, N), 5, replace=False)] = np.nan
+        fast = MarkerSolver(actor, iterations=30)
+        slow = MarkerSolver(actor, iterations=500, tolerance=1e-12, cost_tolerance=0.0)
+        fast.s, slow.s = start.copy(), start.copy()
+        got, want = fast.solve(obs), slow.solve(obs)
+        assert np.abs(start - want).max() > 0.3                     # the solve had far to go
+        assert fast.last_iterations < 30                             # stopped by a criterion, not the budget
+        assert slow.last_iterations > fast.last_iterations
+        np.testing.assert_allclose(got, want, atol=5e-4)
+
+
 def test_one_dragged_point_moves_the_face_through_s():
     actor = make_actor()
     solver = MarkerSolver(actor)
