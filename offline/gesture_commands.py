@@ -5,6 +5,10 @@
 on a WAV frame by frame (the runtime step, with the speaker normalised over the
 whole file) and writes a session file that ``facepuppet replay`` plays;
 ``--pictures DIR`` also draws the intensity with the synthesised tracks under it.
+``transfer-detail`` carries the §5.2 detail features of marker takes onto a
+character as extra shapes ``detail_<region>_<k>`` (:mod:`.detail_transfer`),
+optionally writes a copy of a gesture database with the detail weights per
+reference frame (which ``run --gestures`` then drives) and a contact sheet.
 """
 
 from __future__ import annotations
@@ -48,6 +52,33 @@ def register(subparsers) -> None:
     s.add_argument("--pictures", type=Path, default=None, help="also draw intensity + tracks as PNG here")
     s.add_argument("--overwrite", action="store_true", help="replace an existing session file")
     s.set_defaults(func=_synthesize)
+
+    t = subparsers.add_parser(
+        "transfer-detail", help="marker takes + character -> character with §5.2 detail shapes (.npz)",
+        description="Ju & Lee §5.2: the residual detail of marker takes (after the blend weights, per region) "
+                    "carried onto a character by a compact-support RBF, stored as extra shapes detail_<region>_<k>.")
+    t.add_argument("character", type=Path, help="character tables (.npz) that receive the detail shapes")
+    t.add_argument("--markers", nargs="+", type=Path, required=True,
+                   help="marker takes (C3D or TRC with the AnimFace marker names)")
+    t.add_argument("--landmarks", type=Path, required=True,
+                   help="JSON with the character's 68 Multi-PIE landmark vertices: a list, or a dict with "
+                        "idx_to_landmark_verts (ICT vertex_indices.json)")
+    t.add_argument("-o", "--output", type=Path, required=True, help="character to write (.npz)")
+    t.add_argument("--per-region", type=int, default=2, help="detail features per region (default 2)")
+    t.add_argument("--basis", type=int, default=6, help="whole-face expressions of the blend fit (default 6)")
+    t.add_argument("--window", type=int, default=41, help="temporal window of the blend weights, frames (41)")
+    t.add_argument("--step", type=int, default=2, help="fit basis and features on every STEP-th frame (2)")
+    t.add_argument("--radius", type=float, default=None,
+                   help="RBF support radius in character units (default: per region, from the marker spacing)")
+    t.add_argument("--gestures", type=Path, default=None,
+                   help="gesture tables built with these marker takes: also write a copy holding the detail "
+                        "weights per reference frame (--gestures-out), for run --gestures")
+    t.add_argument("--gestures-out", type=Path, default=None, help="where the gesture tables copy goes")
+    t.add_argument("--pictures", type=Path, default=None, help="also render a contact sheet of the shapes here")
+    t.add_argument("--picture-weight", type=float, default=3.0,
+                   help="weight of each detail shape in the pictures (a shape is 1 std of its feature; default 3)")
+    t.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    t.set_defaults(func=_transfer_detail)
 
 
 def parse_style(text: str) -> dict[str, str]:
@@ -163,3 +194,147 @@ def plot_tracks(path, level_db, tracks, names, fps: float, channels=_PLOT_CHANNE
     path.parent.mkdir(parents=True, exist_ok=True)
     img.save(path)
     return path
+
+
+def load_landmarks(path) -> np.ndarray:
+    """68 landmark vertex indices from JSON: a list, or a dict with ``idx_to_landmark_verts``; (68,) int64."""
+    import json
+
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: expected a JSON file of 68 landmark vertex indices ({exc})") from None
+    if isinstance(data, dict):
+        data = data.get("idx_to_landmark_verts")
+    if not isinstance(data, list) or len(data) != 68 or not all(isinstance(v, int) for v in data):
+        raise ValueError(f"{path}: expected 68 integer vertex indices (a list, or idx_to_landmark_verts), "
+                         f"got {type(data).__name__}{'' if not isinstance(data, list) else f' of {len(data)}'}")
+    return np.array(data, np.int64)
+
+
+def transfer_detail(character, marker_paths, landmarks, per_region: int = 2, n_basis: int = 6, window: int = 41,
+                    step: int = 2, radius=None, log=print):
+    """The §5.2 pipeline of :mod:`.detail_transfer` with progress; returns (character, detail, transfer, rate).
+
+    Parameters
+    ----------
+    character : Character; marker_paths : marker takes (same markers in each); landmarks : (68,) int
+    """
+    from .capture_io import read_capture
+    from .detail_transfer import DetailTransfer, detail_character, marker_detail, place_markers
+
+    start = time.perf_counter()
+    caps = [read_capture(p) for p in marker_paths]
+    names = caps[0].names
+    for c, p in zip(caps[1:], marker_paths[1:]):
+        if c.names != names or abs(c.rate - caps[0].rate) > 1e-9:
+            raise ValueError(f"{p}: expected the markers and rate of {marker_paths[0]} ({len(names)} markers, "
+                             f"{caps[0].rate:g} Hz), got {len(c.names)} markers at {c.rate:g} Hz")
+    log(f"[1/4] read {len(caps)} take(s): {sum(len(c.markers) for c in caps)} frames x {len(names)} markers "
+        f"at {caps[0].rate:g} Hz ({time.perf_counter() - start:.1f} s)")
+    det = marker_detail([c.markers for c in caps], names, per_region=per_region, n_basis=n_basis, window=window,
+                        step=step)
+    log(f"[2/4] detail features {', '.join(det.feature_names)}; blend fit RMS {det.blend_rms:.3f} "
+        f"{caps[0].units} ({time.perf_counter() - start:.1f} s)")
+    placement = place_markers(det.neutral, names, character, landmarks)
+    tr = DetailTransfer(placement, character, radius=radius)
+    log(f"[3/4] markers placed: scale {placement.scale:.3f}, landmark RMS {placement.rms:.3f} (character units); "
+        f"radius per region {', '.join(f'{r} {v:.2f}' for r, v in tr.radius.items())} "
+        f"({time.perf_counter() - start:.1f} s)")
+    out = detail_character(character, tr, det)
+    log(f"[4/4] {len(det.feature_names)} detail shapes added ({time.perf_counter() - start:.1f} s)")
+    return out, det, tr, caps[0].rate
+
+
+def render_detail_sheet(character, names, weight: float = 3.0, cell=(320, 320), columns: int = 0, path="cpu",
+                        log=None):
+    """Neutral, then each named shape at ``weight``, the skin tinted red by the displacement (common scale).
+
+    The detail is millimetres on a face of centimetres, so the tint shows where each shape acts; the
+    label gives its largest displacement at ``weight``. ``path``: the renderer's deformation path.
+
+    Returns
+    -------
+    sheet : ndarray of shape (h, w, 3), uint8
+    """
+    import dataclasses
+    import math
+
+    from facepuppet.runtime.gl_context import create_context
+    from facepuppet.runtime.images import contact_sheet
+    from facepuppet.runtime.renderer import FaceRenderer
+
+    dense = character.dense_deltas()
+    idx = [list(character.shape_names).index(n) for n in names]
+    mags = [np.linalg.norm(dense[i], axis=1) * abs(weight) for i in idx]
+    top = max(float(max(m.max() for m in mags)), 1e-9)
+    red = np.array([0.85, 0.1, 0.1], np.float32)
+    target = create_context(headless=True)
+    frames = []
+    try:
+        for label, shape, mag in [("neutral", None, None)] + list(zip(names, idx, mags)):
+            colour = character.vertex_color if mag is None else (
+                character.vertex_color + np.clip(mag / top, 0, 1)[:, None] * (red - character.vertex_color))
+            r = FaceRenderer(target.ctx, dataclasses.replace(character, vertex_color=colour.astype(np.float32)),
+                             cell[0], cell[1], path=path, log=log or (lambda *_: None), framing="face")
+            try:
+                w = np.zeros(character.n_shapes, np.float32)
+                if shape is not None:
+                    w[shape] = weight
+                r.draw(w)
+                text = label if mag is None else f"{label} x{weight:g}: max {mag.max():.2f} {character.units}"
+                frames.append((text, r.read_pixels()))
+            finally:
+                r.close()
+    finally:
+        target.close()
+    columns = columns or max(1, math.ceil(math.sqrt(len(frames))))
+    return contact_sheet(frames, columns)
+
+
+def _refuse_existing(path, overwrite: bool) -> None:
+    if path is not None and Path(path).exists() and not overwrite:
+        raise ValueError(f"{path}: exists; pass --overwrite to replace it")
+
+
+def _transfer_detail(args: argparse.Namespace) -> int:
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.gestures import load_gesture_db
+    from facepuppet.runtime.tables import save_tables
+
+    from .detail_transfer import detail_table
+
+    if (args.gestures is None) != (args.gestures_out is None):
+        raise ValueError("--gestures and --gestures-out go together (read one database, write its copy)")
+    for path in (args.output, args.gestures_out):
+        _refuse_existing(path, args.overwrite)
+    if args.per_region < 1 or args.step < 1:
+        raise ValueError(f"--per-region and --step: expected >= 1, got {args.per_region}, {args.step}")
+    character = Character.load(args.character)
+    out, det, tr, rate = transfer_detail(character, args.markers, load_landmarks(args.landmarks), args.per_region,
+                                         args.basis, args.window, args.step, args.radius)
+    path = out.save(args.output)
+    dense = out.dense_deltas()[character.n_shapes:]
+    print(f"{path}: {out.n_vertices} vertices, {out.n_shapes} shapes ({len(det.feature_names)} detail), "
+          f"{path.stat().st_size / 1e6:.1f} MB")
+    for name, d in zip(det.feature_names, dense):
+        m = np.linalg.norm(d, axis=1)
+        print(f"  {name}: {np.count_nonzero(m > 1e-5)} vertices moved, max {m.max():.4f} {out.units} "
+              f"at weight 1 (1 std of the feature)")
+    if args.gestures is not None:
+        db = load_gesture_db(args.gestures)
+        table = detail_table(db, det, [Path(p).stem for p in args.markers], rate=rate)
+        channels = {**db.channels, "detail": list(det.feature_names)}
+        g = save_tables(args.gestures_out, "gesture_db", {**db.arrays, "detail_weights": table}, units=db.units,
+                        channels=channels, settings=db.settings, metrics=db.metrics,
+                        input_hash=db.manifest.get("input_hash", ""))
+        rows = int(np.count_nonzero(np.abs(table).sum(1) > 0))
+        print(f"{g}: gesture tables with detail weights ({rows} of {len(table)} reference frames from the "
+              f"marker takes); run --gestures {g} --character {path} drives the detail shapes")
+    if args.pictures is not None:
+        from facepuppet.runtime.images import save_png
+
+        args.pictures.mkdir(parents=True, exist_ok=True)
+        sheet = render_detail_sheet(out, det.feature_names, args.picture_weight)
+        print(f"wrote {save_png(args.pictures / 'detail_shapes.png', sheet)}")
+    return 0

@@ -23,6 +23,20 @@ and draws among the ``n_candidates`` best with probability ∝ exp(-dist / σ).
   perfect continuation. So picks form runs of consecutive reference frames
   and jump only where another frame's history matches the synthesised one
   well enough to win the draw; :attr:`GestureSynth.run_lengths` measures it.
+* Recently shown frames are barred in every group but the lips (mood,
+  brows, eyes, rest, head; ``recent`` frames, default 150 = 5 s at 30 fps):
+  a candidate frame the group showed within the last ``recent`` steps costs
+  ``RECENT_PENALTY`` more, so it wins only when every candidate is recent.
+  (The lips follow the voice, and the few frames of its silence and loud
+  intensity bins must stay reachable, so they are not barred.) Without it the chain falls into short loops: in a still
+  stretch (eyes open, nothing moving) the window h frames back matches the
+  current one almost perfectly, so "jump back h frames" is as cheap as the
+  successor and the group replays the same second for minutes (measured on
+  the real database: one seed spent 87 % of 10 minutes cycling through 9
+  frames of a 5 s take, blinking 2.4/min against 18.4/min in the source).
+  A loop now needs more than ``recent`` distinct frames, which a blink-free
+  still stretch rarely has. Not in the paper (its database was one long
+  take); the video-texture literature avoids short loops the same way.
 * Two levels: level 1 is lips and mood (what the voice drives directly);
   level-2 groups (brows, eyes, rest, head) are conditioned on level 1 through
   the β term: the mood c of the level-1 pick made at the previous step
@@ -44,6 +58,7 @@ h               ``history`` (default 10 frames)
 β               ``beta`` (level-2 weight of the level-1 mood match)
 σ               ``sigma``
 2-4 candidates  ``n_candidates``
+(not in paper)  ``recent`` (frames a shown frame is barred)
 ==============  ==================================================
 
 Indexing (why the step is < 0.1 ms): the full distance is evaluated only on a
@@ -72,6 +87,7 @@ LEVEL1 = ("lips", "mood")
 HEAD_FEATURES = ("headYaw", "headPitch", "headRoll", "headX", "headY", "headZ")
 SILENCE_Z = -3.0  # normalised intensity of silence (floor)
 N_BINS = 24       # intensity bins of the speech candidates, over [SILENCE_Z, -SILENCE_Z]
+RECENT_PENALTY = 1e4  # added to a recently shown candidate's distance (distances are O(1); sentinels ~1e6)
 
 GESTURE_DB_SCHEMA = register_schema(TableSchema(
     kind="gesture_db",
@@ -83,9 +99,12 @@ GESTURE_DB_SCHEMA = register_schema(TableSchema(
         "blend_basis": Section("float32", ("n_basis", "n_features"), "whole-face expressions B (§4.1)"),
         "frame_take": Section("int32", ("n_frames",), "take index of each frame"),
         "available": Section("bool", ("n_frames", 6), "whether the frame's take provides each group"),
+        "detail_weights": Section("float32", ("n_frames", "n_detail"), "§5.2 detail shape weights per frame "
+                                  "(marker-take frames; zero elsewhere), shapes named by channels.detail",
+                                  optional=True),
     },
     channels=("features", "takes", "groups"),
-    channel_dims={"features": "n_features"},
+    channel_dims={"features": "n_features", "detail": "n_detail"},
 ))
 
 
@@ -177,16 +196,22 @@ class GestureSynth:
     n_candidates : int, how many of the best candidates are drawn from (2-4 in the paper)
     n_neighbours, n_speech : int, jump candidates per frame by continuity, and per intensity bin
     variance : float in (0, 1], share of each group's variance kept by the continuity features
+    recent : int, frames; a reference frame a group (not the lips) showed within the last ``recent`` steps is
+        barred (``RECENT_PENALTY``) so that the picks cannot loop over a short still stretch (0: off)
     normaliser : SpeakerNormaliser or None (default: one from the db's speaker stats and gate)
     """
 
     def __init__(self, db, seed: int = 0, style=None, history: int = 10, alpha=None, beta: float = 0.5,
                  sigma: float = 0.01, n_candidates: int = 3, n_neighbours: int = 8, n_speech: int = 6,
-                 variance: float = 0.95, max_dims: int = 8, normaliser: SpeakerNormaliser | None = None):
-        if history < 1 or n_candidates < 1 or sigma < 0 or not 0 < variance <= 1 or beta < 0:
+                 variance: float = 0.95, max_dims: int = 8, normaliser: SpeakerNormaliser | None = None,
+                 recent: int = 150):
+        if (history < 1 or n_candidates < 1 or sigma < 0 or not 0 < variance <= 1 or beta < 0
+                or recent < 0):
             raise ValueError(f"GestureSynth: expected history >= 1, n_candidates >= 1, sigma >= 0, beta >= 0, "
-                             f"0 < variance <= 1; got {history}, {n_candidates}, {sigma}, {beta}, {variance}")
+                             f"0 < variance <= 1, recent >= 0; got {history}, {n_candidates}, {sigma}, {beta}, "
+                             f"{variance}, {recent}")
         self.h, self.sigma, self.n_candidates, self.seed = history, float(sigma), n_candidates, seed
+        self.recent = int(recent)
         self.names = tuple(db.channels["features"])
         self.takes = tuple(db.channels["takes"])
         feats = np.asarray(db["features"], np.float64)
@@ -333,6 +358,13 @@ class GestureSynth:
         self._desc_w = (self._desc * self._wc[None, :, None]).transpose(1, 0, 2).reshape(G * n, -1).astype(np.float32)
         self._last_pick = np.zeros(G, np.int64)
         self._is_jump = np.zeros(G, bool)
+        # step at which each (group, frame) was last shown, rows as in _X (g (n + 1) + i); sentinels never shown
+        self._seen = np.zeros(G * (n + 1), np.int64)
+        self._goff_seen = self._gidx * (n + 1)
+        self._cand_seen = np.zeros(G * M, np.int64)
+        self._barred = np.zeros(G * M, bool)
+        self._penalty = np.zeros(G * M, np.float32)
+        self._bar = np.repeat([0.0 if g == "lips" else RECENT_PENALTY for g in self.groups], M).astype(np.float32)
 
     def _output_names(self) -> tuple[str, ...]:
         """Output channels; sets the flat gather (``_out_group``, ``_out_cols``) and ``_mood``."""
@@ -395,6 +427,8 @@ class GestureSynth:
             self._a_hist[i] = self._a_hist[i + h] = self._intensity[self._pick[0] + l]
         self._apos = self._zpos = 0
         self._t = 0
+        self._seen[:] = -(self.recent + 1)          # nothing shown yet
+        self._seen[self._pick + self._goff_seen] = 0
         self._jumps = np.zeros(G, np.int64)
         self._emit()
 
@@ -428,7 +462,15 @@ class GestureSynth:
         diff *= diff
         diff[:, 0, c0:] = 0.0  # the natural successor continues perfectly: no continuity cost
         # §5.1: α/h Σ (s - s_ref)² + β |c - c_ref|² + (1-α)/h Σ |x - x_ref|² (weights folded into the rows)
-        dist = np.matmul(diff.reshape(G * self._M, -1), self._ones, out=self._dist).reshape(G, self._M)
+        dist = np.matmul(diff.reshape(G * self._M, -1), self._ones, out=self._dist)
+        if self.recent > 0:  # bar the frames shown in the last `recent` steps (no short loops)
+            cs = self._cand_seen
+            np.add(cand, self._goff_X, out=cs)
+            self._seen.take(cs, out=cs)
+            np.greater_equal(cs, self._t - self.recent + 1, out=self._barred)
+            np.multiply(self._barred, self._bar, out=self._penalty)
+            dist += self._penalty
+        dist = dist.reshape(G, self._M)
         m = self._m
         if self.sigma > 0 and m > 1:
             # §5.1: among the m best, P(candidate) ∝ exp(-dist / σ), drawn by the Gumbel-max trick:
@@ -447,6 +489,7 @@ class GestureSynth:
         self._z_hist[:, zp] = self._z_hist[:, zp + h] = self._desc_w.take(idx, 0)
         self._zpos = (zp + 1) % h
         self._t += 1
+        self._seen[pick + self._goff_seen] = self._t
         return self._emit(idx)
 
     def _emit(self, idx: np.ndarray | None = None) -> np.ndarray:

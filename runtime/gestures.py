@@ -162,12 +162,16 @@ def gesture_layer(path, inner=None, level=None, voice_only: bool = False, seed: 
     """A :class:`GestureLayer` over ``inner`` from the gesture tables at ``path`` (the run command's ``--gestures``).
 
     n_neighbours : continuity jump candidates per reference frame (fewer: a cheaper step)
-    detail : see :class:`GestureLayer`
+    detail : see :class:`GestureLayer`; default: the tables' ``detail_weights`` when they have them
+        (written by ``facepuppet transfer-detail --gestures``), named by their ``detail`` channels
     """
     db = load_gesture_db(path)
     synth = GestureSynth(db, seed=seed, n_neighbours=n_neighbours)
     fps = float(db.settings.get("fps", 30.0))
+    if detail is None and "detail_weights" in db.arrays:
+        detail = (list(db.channels.get("detail", [])), db["detail_weights"])
     log(f"gestures: {path} ({len(db['intensity'])} reference frames at {fps:g} fps, groups "
-        f"{', '.join(synth.groups)}), {'voice only' if voice_only else 'added to the tracked face'}")
+        f"{', '.join(synth.groups)}), {'voice only' if voice_only else 'added to the tracked face'}"
+        + (f", detail shapes {', '.join(detail[0])}" if detail is not None else ""))
     return GestureLayer(synth, fps=fps, mode="voice" if voice_only else "add", level=level, inner=inner,
                         detail=detail)

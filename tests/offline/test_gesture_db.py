@@ -79,3 +79,61 @@ def test_run_input_audio_needs_gestures_and_audio():
                               duration=1.0, listen=None, allow=None, vmc_out=None, config=None, character="x")
     with pytest.raises(ValueError, match="--input audio"):
         run_live(args)
+
+
+def test_transfer_detail_writes_a_character_with_local_detail_shapes_and_gesture_tables(db_path, ict_character_path,
+                                                                                       tmp_path, capsys):
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.gestures import gesture_layer
+
+    ict = need_shared("ict-facekit")
+    parser = argparse.ArgumentParser()
+    gesture_commands.register(parser.add_subparsers())
+    out, g_out = tmp_path / "detail.npz", tmp_path / "g_detail.npz"
+    args = parser.parse_args(["transfer-detail", str(ict_character_path), "--markers",
+                              str(need_shared("markers", "animface_jaw.c3d")), "--landmarks",
+                              str(ict / "vertex_indices.json"), "-o", str(out), "--per-region", "1", "--step", "4",
+                              "--window", "11", "--gestures", str(db_path), "--gestures-out", str(g_out)])
+    assert args.func(args) == 0
+    text = capsys.readouterr().out
+    assert "[4/4] 4 detail shapes added" in text and "detail_lips_0:" in text
+    base, char = Character.load(ict_character_path), Character.load(out)
+    names = ("detail_brows_0", "detail_eyes_0", "detail_lips_0", "detail_rest_0")
+    assert char.shape_names == base.shape_names + names
+    dense = char.dense_deltas()
+    np.testing.assert_array_equal(dense[:base.n_shapes], base.dense_deltas())   # the rig's own shapes kept
+    moved = np.linalg.norm(dense[base.n_shapes:], axis=2) > 1e-5
+    assert moved.any(1).all()
+    centre = {n: base.vertices[m].mean(0) for n, m in zip(names, moved)}
+    assert centre["detail_brows_0"][1] > centre["detail_eyes_0"][1] > centre["detail_lips_0"][1]  # y up
+    z = base.vertices[:, 2]                                   # the head spans z -9.2 .. 13.1 cm; the face looks +z
+    assert base.vertices[moved.any(0), 2].min() > z.min() + 0.3 * np.ptp(z)   # front of the head only, never the back
+    layer = gesture_layer(g_out, voice_only=True, log=lambda *_: None)
+    frame = layer(None, 0.0)
+    assert frame.channels[-4:] == names
+    with pytest.raises(ValueError, match="exists; pass --overwrite"):
+        args.func(args)
+
+
+def test_detail_contact_sheet_tints_where_each_shape_acts(ict_character_path):
+    from facepuppet.runtime.character import Character
+
+    char = Character.load(ict_character_path)
+    rows = {}
+    for shape in ("jawOpen", "browDown_L"):   # each on its own sheet: the tint scale is common to a sheet
+        sheet = gesture_commands.render_detail_sheet(char, [shape], weight=1.0, cell=(96, 96), columns=2)
+        assert sheet.shape[1] == 2 * 96
+        neutral, cell = (sheet[:96, k * 96:(k + 1) * 96].astype(int) for k in range(2))
+        tint = (cell[..., 0] - cell[..., 1]) - (neutral[..., 0] - neutral[..., 1]) > 40   # redder than neutral
+        assert tint.sum() > 20, shape
+        rows[shape] = np.flatnonzero(tint.any(1)).mean()
+    assert rows["jawOpen"] > 48 > rows["browDown_L"], rows     # the jaw in the lower half, the brow above
+
+
+def test_landmarks_json_is_checked(tmp_path):
+    bad = tmp_path / "lm.json"
+    bad.write_text("[1, 2, 3]")
+    with pytest.raises(ValueError, match="expected 68 integer vertex indices"):
+        gesture_commands.load_landmarks(bad)
+    bad.write_text('{"idx_to_landmark_verts": ' + str(list(range(68))) + "}")
+    assert gesture_commands.load_landmarks(bad).shape == (68,)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.gesture_synth import RECENT_PENALTY
 from facepuppet.runtime.gestures import GROUPS, GestureLayer, GestureSynth, load_gesture_db
 from facepuppet.runtime.tables import TablesError, save_tables
 
@@ -118,7 +119,8 @@ def test_step_distance_matches_the_slow_definition_and_the_successor_has_no_cont
     rng = np.random.default_rng(0)
     speech = list(synth._intensity[synth._pick[0] + np.arange(-synth.h + 1, 1)])  # reset's speech history
     hist = {k: [synth._desc[synth._pick[k] + l, k] for l in range(-synth.h + 1, 1)] for k in range(len(synth.groups))}
-    for a in rng.normal(0, 1.5, 40):
+    shown = {k: {int(synth._pick[k]): 0} for k in range(len(synth.groups))}  # frame -> step it was last shown
+    for t, a in enumerate(rng.normal(0, 1.5, 40), 1):
         prev = synth._pick.copy()
         mood_prev = synth._moodf[prev[synth._km]]
         speech.append(a)
@@ -131,13 +133,19 @@ def test_step_distance_matches_the_slow_definition_and_the_successor_has_no_cont
             if cand[0] == prev[k] + 1:  # the natural successor continues perfectly: speech (+ mood) term only
                 d[0] = slow_distance(synth, k, cand[0], speech, [synth._desc[cand[0] - l, k] for l in
                                                                  range(synth.h, 0, -1)], mood_prev)
+            if synth.groups[k] != "lips":  # a frame shown in the last `recent` steps is barred (not the lips)
+                d = [v + RECENT_PENALTY * (shown[k].get(c, -10 ** 9) >= t - synth.recent) for v, c in zip(d, cand)]
             best = int(np.argmin(d))
             assert synth._pick[k] == cand[best] or d[cand.index(synth._pick[k])] <= d[best] + 1e-4  # float32
             hist[k].append(synth._desc[synth._pick[k], k])
+            shown[k][int(synth._pick[k])] = t
 
 
 def test_picks_run_through_consecutive_reference_frames(db):
-    synth = GestureSynth(db, seed=0)
+    # the MRF's own preference for continuity, without the bar on recent frames (which, on this 600-frame
+    # database, bars a quarter of it at the default 150 and so forces jumps; the real database's runs are
+    # measured by the bench: run_length_frames)
+    synth = GestureSynth(db, seed=0, recent=0)
     for v in -30 + 12 * np.sin(np.arange(600) / 9.0):
         synth.step(float(v))
     runs = synth.run_lengths
@@ -168,3 +176,27 @@ def test_detail_weights_follow_the_head_pick_as_extra_channels(db):
         assert list(f.weights[-2:]) == [head, -head]
     with pytest.raises(ValueError, match="detail: expected a head group and a table of shape"):
         GestureLayer(GestureSynth(db), fps=30.0, detail=(("a",), table))
+
+
+def test_recent_frames_are_barred_so_a_still_stretch_does_not_loop(tmp_path):
+    """A still stretch matches itself h frames back: without the bar the picks cycle through it."""
+    db = small_db(tmp_path / "still.npz", n_takes=2, n=400, seed=3)
+    arrays = {k: np.array(db[k]) for k in db.arrays}
+    arrays["features"][:, 1:] = 0.0                      # gestures and mood still everywhere ...
+    arrays["features"][::37, 1:] = 1.0                   # ... but for an event every 37 frames
+    arrays["intensity"][:] = 0.0
+    save_tables(tmp_path / "still.npz", "gesture_db", arrays, channels=dict(db.channels), settings={"fps": 30.0})
+    db = load_gesture_db(tmp_path / "still.npz")
+    for recent, loops in ((0, True), (100, False)):
+        synth = GestureSynth(db, seed=1, sigma=0.0, n_candidates=1, recent=recent)
+        last, min_gap = {}, np.inf
+        for t in range(1, 1500):
+            synth.step_normalised(0.0)
+            p = int(synth._pick[synth.groups.index("eyes")])
+            min_gap = min(min_gap, t - last.get(p, -np.inf))
+            last[p] = t
+        assert (min_gap <= 36) == loops, (recent, min_gap)
+        if not loops:
+            assert min_gap > 100
+    with pytest.raises(ValueError, match="recent >= 0"):
+        GestureSynth(db, recent=-1)
