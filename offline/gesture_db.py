@@ -145,8 +145,8 @@ def assemble(takes: list[Take], n_basis: int = 6, epsilon: float = 0.1, window: 
     """
     lips = sorted({n for t in takes if "lips" in t.groups for n in t.columns})
     mood_takes = [t for t in takes if "mood" in t.groups]
-    stoch = sorted({n for t in mood_takes for n in t.columns if region_of(n) != "lips"},
-                   key=lambda n: ("brows", "eyes", "rest").index(region_of(n)))
+    stoch = sorted({n for t in mood_takes for n in t.columns if region_of(n) != "lips"},  # by region, then name:
+                   key=lambda n: (("brows", "eyes", "rest").index(region_of(n)), n))  # not the set's hash order
     head = list(HEAD_FEATURES) if any("head" in t.groups for t in takes) else []
     n_b = n_basis if mood_takes else 0
     names = lips + [f"mood_{i}" for i in range(n_b)] + stoch + head

@@ -33,6 +33,10 @@ def test_real_database_has_each_group_from_its_take(db_path):
     assert avail[1472:1636, GROUPS.index("eyes")].all() and avail[1636:, GROUPS.index("head")].all()
     jaw = np.asarray(db["features"])[:1472, names.index("jawOpen")]
     assert np.corrcoef(jaw, db["intensity"][:1472])[0, 1] > 0.4  # the voice opens the jaw
+    # the stochastic columns come by region, then name (not in a set's hash order, which changes per process)
+    stoch = [n for n in names if db["feature_group"][names.index(n)] in
+             [GROUPS.index(g) for g in ("brows", "eyes", "rest")]]
+    assert stoch == sorted(stoch, key=lambda n: (db["feature_group"][names.index(n)], n))
 
 
 def test_synthesize_command_writes_a_replayable_session(db_path, tmp_path):
