@@ -65,6 +65,10 @@ def _add_arguments(parser) -> None:
     parser.add_argument("--recent", type=int, default=None,
                         help="frames a shown reference frame is barred (default: the synth's; 0: off, the "
                              "behaviour before the loop fix)")
+    parser.add_argument("--whole", default=None,
+                        help="comma-separated groups shown whole (own residual + own frame's mood c·B; default: "
+                             "the synth's, eyes); 'none': the mood pick's c·B summed into every channel, the "
+                             "behaviour before the one-moment blink fix")
     parser.add_argument("--blend-frames", type=int, default=600, help="frames for the blend-solver comparison")
 
 
@@ -255,6 +259,8 @@ def run_bench(args) -> dict:
     extra = {} if args.sigma is None else {"sigma": args.sigma}
     if args.recent is not None:
         extra["recent"] = args.recent
+    if args.whole is not None:
+        extra["whole"] = () if args.whole == "none" else tuple(g for g in args.whole.split(",") if g)
     held = level[cut:]
     reps = max(1, int(np.ceil(args.minutes * 60 * fps / len(held))))
     drive = np.tile(held, reps)   # the held-out speech, repeated
@@ -326,7 +332,7 @@ def run_bench(args) -> dict:
         "synth_over_reference": _ratio(syn, ref), "noise_over_reference": _ratio(noi, ref),
         "run_length_frames": _mean([r for _, r in runs]), "eyes_occupancy_per_seed": occupancy,
         "synth_settings": {"sigma": synth.sigma, "n_candidates": synth.n_candidates, "history": synth.h,
-                           "recent": synth.recent},
+                           "recent": synth.recent, "whole": list(synth.whole)},
         "jawopen": {"intensity_corr_reference_train": jaw_ref,
                     "intensity_corr_synthesised_heldout": float(np.mean([np.corrcoef(j, z_drive)[0, 1] for j in jaw])),
                     "mean_in_silence": float(np.mean([j[silent].mean() for j in jaw])) if silent.any() else None,

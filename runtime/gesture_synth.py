@@ -37,6 +37,19 @@ and draws among the ``n_candidates`` best with probability ∝ exp(-dist / σ).
   A loop now needs more than ``recent`` distinct frames, which a blink-free
   still stretch rarely has. Not in the paper (its database was one long
   take); the video-texture literature avoids short loops the same way.
+* The eyes are shown whole (``whole``, default ("eyes",)): the eyes group's
+  channels are its pick's residual plus that *same* frame's mood c·B, i.e.
+  the reference frame's own value, and the mood group adds nothing to them.
+  The paper sums c(t)·B of the level-1 pick with D_j of the level-2 pick;
+  for a lid that turns a blink into the sum of two reference moments (the
+  residual of a blink plus the windowed lid level of another frame, which
+  is the local share of closed-eye frames, not an expression), and the
+  mismatch pushes the lid through 0.5 where neither moment blinks. Measured
+  on the real database (8 seeds x 10 min): the eyes' own source frames
+  blink 19.9/min, the summed output 22.8/min (reference 18.4); about 64
+  crossings per run had no crossing of the source within 3 frames, at a
+  mood mismatch of +0.13 on the lid. The mood still reaches the eyes through
+  the β term (the eyes pick is conditioned on the mood track), as in §5.1.
 * Two levels: level 1 is lips and mood (what the voice drives directly);
   level-2 groups (brows, eyes, rest, head) are conditioned on level 1 through
   the β term: the mood c of the level-1 pick made at the previous step
@@ -59,6 +72,7 @@ h               ``history`` (default 10 frames)
 σ               ``sigma``
 2-4 candidates  ``n_candidates``
 (not in paper)  ``recent`` (frames a shown frame is barred)
+(not in paper)  ``whole`` (groups shown with their own frame's c·B)
 ==============  ==================================================
 
 Indexing (why the step is < 0.1 ms): the full distance is evaluated only on a
@@ -88,6 +102,7 @@ HEAD_FEATURES = ("headYaw", "headPitch", "headRoll", "headX", "headY", "headZ")
 SILENCE_Z = -3.0  # normalised intensity of silence (floor)
 N_BINS = 24       # intensity bins of the speech candidates, over [SILENCE_Z, -SILENCE_Z]
 RECENT_PENALTY = 1e4  # added to a recently shown candidate's distance (distances are O(1); sentinels ~1e6)
+WHOLE_GROUPS = ("eyes",)  # groups whose channels show one reference frame whole (own residual + own c·B)
 
 GESTURE_DB_SCHEMA = register_schema(TableSchema(
     kind="gesture_db",
@@ -199,12 +214,15 @@ class GestureSynth:
     recent : int, frames; a reference frame a group (not the lips) showed within the last ``recent`` steps is
         barred (``RECENT_PENALTY``) so that the picks cannot loop over a short still stretch (0: off)
     normaliser : SpeakerNormaliser or None (default: one from the db's speaker stats and gate)
+    whole : groups (stochastic: brows, eyes, rest) whose channels are shown whole: the pick's residual plus the
+        same frame's mood c·B, with no mood-pick contribution (default ``WHOLE_GROUPS``: a blink is one
+        reference moment; () sums the mood pick's c·B into every channel, the paper's plain composition)
     """
 
     def __init__(self, db, seed: int = 0, style=None, history: int = 10, alpha=None, beta: float = 0.5,
                  sigma: float = 0.01, n_candidates: int = 3, n_neighbours: int = 8, n_speech: int = 6,
                  variance: float = 0.95, max_dims: int = 8, normaliser: SpeakerNormaliser | None = None,
-                 recent: int = 150):
+                 recent: int = 150, whole=WHOLE_GROUPS):
         if (history < 1 or n_candidates < 1 or sigma < 0 or not 0 < variance <= 1 or beta < 0
                 or recent < 0):
             raise ValueError(f"GestureSynth: expected history >= 1, n_candidates >= 1, sigma >= 0, beta >= 0, "
@@ -212,6 +230,9 @@ class GestureSynth:
                              f"{variance}, {recent}")
         self.h, self.sigma, self.n_candidates, self.seed = history, float(sigma), n_candidates, seed
         self.recent = int(recent)
+        self.whole = tuple(whole)
+        if not set(self.whole) <= {"brows", "eyes", "rest"}:
+            raise ValueError(f"GestureSynth.whole: expected groups among ('brows', 'eyes', 'rest'), got {self.whole}")
         self.names = tuple(db.channels["features"])
         self.takes = tuple(db.channels["takes"])
         feats = np.asarray(db["features"], np.float64)
@@ -272,9 +293,6 @@ class GestureSynth:
         self.out_names = self._output_names()
         self.additions = np.zeros(len(self.out_names), np.float32)
         self._ones_g = np.ones(len(self.groups), np.float32)
-        # the mood expression c·B of the current pick (a view, updated by every step; zeros without mood)
-        self.mood_part = (self._out_rows[self._mood[0]] if self._mood is not None
-                          else np.zeros(len(self.out_names), np.float32))
         self.reset()
 
     def _build_candidates(self, n_neighbours: int, n_speech: int, last: np.ndarray) -> None:
@@ -395,11 +413,21 @@ class GestureSynth:
         for j, (k, c) in enumerate(zip(out_group, out_cols)):
             if c >= 0 and self.groups[k] != "mood":
                 table[k, :, j] = self._feats[:, c]
+        whole = [k for k, g in enumerate(self.groups) if g in self.whole]
+        self._whole_k = np.array(whole if self._mood is not None else [], np.int64)
+        self._own_table = np.zeros((len(self._whole_k) * n, len(names)), np.float32)
         if self._mood is not None:
             k = self._mood[0]
-            table[k] = self._feats[:, self._cols[k]] @ self._basis_out  # §4.1: blend expression c·B
+            blend = self._feats[:, self._cols[k]] @ self._basis_out  # §4.1: blend expression c·B, per frame
+            for w, kw in enumerate(self._whole_k):  # a whole group: its own frame's c·B on its channels
+                own = np.flatnonzero(np.asarray(out_group) == kw)
+                table[kw][:, own] += blend[:, own]
+                self._own_table[w * n:(w + 1) * n, own] = blend[:, own]
+                blend[:, own] = 0.0
+            table[k] = blend
         self._out_table = table.reshape(G * n, len(names))
         self._out_rows = np.zeros((G, len(names)), np.float32)
+        self._own_off = np.arange(len(self._whole_k)) * n
         return tuple(names)
 
     def reset(self, start: int | None = None) -> None:
@@ -501,6 +529,21 @@ class GestureSynth:
             idx = self._pick + self._goff_n
         np.take(self._out_table, idx, 0, out=self._out_rows)
         return np.matmul(self._ones_g, self._out_rows, out=self.additions)
+
+    @property
+    def mood_part(self) -> np.ndarray:
+        """The mood expressions c·B inside ``additions`` now, (len(out_names),) float32, a new array.
+
+        The mood pick's c·B on the other channels, each whole group's own pick's c·B on its channels
+        (zeros without mood), so ``additions - mood_part`` is the residuals of the picks. Computed on
+        demand (only the "add" mode of the layer needs it), not in :meth:`step`.
+        """
+        if self._mood is None:
+            return np.zeros(len(self.out_names), np.float32)
+        part = self._out_rows[self._mood[0]].copy()
+        if len(self._whole_k):
+            part += self._own_table.take(self._pick.take(self._whole_k) + self._own_off, 0).sum(0)
+        return part
 
     @property
     def picks(self) -> dict[str, int]:

@@ -96,13 +96,13 @@ class GestureLayer:
     def _compose(self, tracked: Frame | None, t: float) -> Frame:
         add = self.synth.additions
         face = add[self._face]
-        residual = face - self.synth.mood_part[self._face]
         rot, trans = self._pose(add)
         if tracked is None or tracked.weights is None:
             return Frame(t, source="gestures", channels=self._face_names, weights=face,
                          head_rotation=rot, head_translation=trans,
                          audio_level=math.nan if tracked is None else tracked.audio_level)
         names, idx_t, idx_s, extra = self._map(tracked.channels)
+        residual = face - self.synth.mood_part[self._face]  # the picks' residuals (see GestureSynth.mood_part)
         w = np.array(tracked.weights, np.float32)
         lost = np.isnan(w[idx_t])
         w[idx_t] = np.where(lost, face[idx_s], w[idx_t] + np.where(self._residual[idx_s], residual[idx_s], 0.0))

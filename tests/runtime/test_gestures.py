@@ -200,3 +200,32 @@ def test_recent_frames_are_barred_so_a_still_stretch_does_not_loop(tmp_path):
             assert min_gap > 100
     with pytest.raises(ValueError, match="recent >= 0"):
         GestureSynth(db, recent=-1)
+
+
+def test_eyes_show_one_reference_frame_whole_not_the_mood_picks_lid(db):
+    """A blink is drawn from one reference moment: eyeBlinkLeft is the eyes pick's own value (residual + the
+    same frame's c·B), never the eyes residual plus the c·B of the mood group's (different) pick."""
+    F, B = np.asarray(db["features"], np.float64), np.asarray(db["blend_basis"], np.float64)
+    names = list(db.channels["features"])
+    blink, mood = names.index("eyeBlinkLeft"), [names.index("mood_0"), names.index("mood_1")]
+    assert np.abs(B[:, blink]).max() > 0  # the mood basis does move the lid
+    runs = []
+    for whole in (("eyes",), ()):
+        synth = GestureSynth(db, seed=4, sigma=0.5, n_candidates=4, whole=whole)
+        j = synth.out_names.index("eyeBlinkLeft")
+        out, picks = [], []
+        for v in -30 + 12 * np.sin(np.arange(200) / 4.0):
+            out.append(float(synth.step(float(v))[j]))
+            picks.append((synth.picks["eyes"], synth.picks["mood"]))
+            # add mode adds the eyes residual of the eyes pick (the mood part is the eyes pick's own)
+            assert synth.additions[j] - synth.mood_part[j] == pytest.approx(F[picks[-1][0], blink], abs=1e-5)
+        pe, pm = np.array(picks).T
+        runs.append((np.array(out), pe, pm))
+    out, pe, pm = runs[0]
+    assert np.mean(pe != pm) > 0.5  # the two groups pick different frames, so the sum would mix two moments
+    np.testing.assert_allclose(out, F[pe, blink] + F[pe][:, mood] @ B[:, blink], atol=1e-5)
+    out, pe, pm = runs[1]  # whole=(): the paper's plain sum, the lid of two moments
+    np.testing.assert_allclose(out, F[pe, blink] + F[pm][:, mood] @ B[:, blink], atol=1e-5)
+    assert np.abs(F[pm][:, mood] @ B[:, blink] - F[pe][:, mood] @ B[:, blink]).max() > 0.05
+    with pytest.raises(ValueError, match="whole"):
+        GestureSynth(db, whole=("lips",))
