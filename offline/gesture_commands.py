@@ -137,7 +137,6 @@ def _synthesize(args: argparse.Namespace) -> int:
                                           "seed": args.seed, "style": args.style}, overwrite=args.overwrite) as w:
         for i, row in enumerate(tracks):
             synth.additions[:] = row
-            synth.mood_part[:] = 0.0
             f = layer.compose(None, i / fps)
             w.write_frame(Frame(i / fps, source="gestures", channels=f.channels, weights=f.weights,
                                 head_rotation=f.head_rotation, head_translation=f.head_translation,
