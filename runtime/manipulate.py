@@ -20,7 +20,8 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from .actor import Actor, ActorPair
+from .actor import Actor
+from .actor_pair import ActorPair
 from .character import Character
 from .manipulation import Manipulation, ScreenView, read_script, run_step
 

@@ -206,7 +206,8 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
             raise ValueError(f"--actor/--pair: only for --input markers, not {input_kind!r}")
         if retarget_path is not None:
             raise ValueError("--actor/--pair and --retarget: choose one parameter space")
-        from .actor import Actor, ActorPair
+        from .actor import Actor
+        from .actor_pair import ActorPair
         from .actor_retarget import ActorRetarget
 
         pair = ActorPair.load(pair_path)

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from facepuppet.runtime.actor import Actor, ActorPair, MarkerSolver
+from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.marker_solver import MarkerSolver
 from facepuppet.runtime.actor_retarget import ActorRetarget
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.tables import TablesError

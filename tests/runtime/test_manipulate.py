@@ -13,7 +13,8 @@ import pytest
 from PIL import Image
 
 from facepuppet.runtime import manipulate
-from facepuppet.runtime.actor import Actor, ActorPair
+from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actor_pair import ActorPair
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.runtime.manipulation import Manipulation, ScreenView, read_script
