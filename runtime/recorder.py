@@ -16,7 +16,8 @@ from __future__ import annotations
 import collections
 import threading
 
-from .session import RecordKind, SessionWriter, encode_audio, encode_packet, encode_tick
+from .session import SessionWriter
+from .session_records import RecordKind, encode_audio, encode_packet, encode_tick
 
 
 class PacketRecorder:
@@ -66,7 +67,7 @@ class PacketRecorder:
         self._wake.set()
 
     def put_tick(self, k: int, t: float, frames: int, t_clock: float) -> None:
-        """Queue one TICK record (frame-loop thread; see :class:`~.session.Tick`). Never blocks."""
+        """Queue one TICK record (frame-loop thread; see :class:`~.session_records.Tick`). Never blocks."""
         if len(self._queue) >= self.capacity:
             self.counters["record_dropped"] += 1
             return

@@ -101,7 +101,7 @@ def frames_from_packets(packets) -> list[Frame]:
     (:func:`~facepuppet.runtime.input_kinds.make_adapter`), as the UDP thread
     did live; adapters are deterministic, so the frames are the live ones.
 
-    packets : sequence of :class:`~facepuppet.runtime.session.Packet`
+    packets : sequence of :class:`~facepuppet.runtime.session_records.Packet`
     """
     return [frame for _, frame in decode_packets(packets)]
 

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.session import MAGIC, RecordKind, SessionWriter, read_session
+from facepuppet.runtime.session import MAGIC, SessionWriter, read_session
+from facepuppet.runtime.session_records import RecordKind
 from facepuppet.runtime.sources import open_recording
 
 ARKIT3 = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")

@@ -1,0 +1,265 @@
+"""Session record kinds and the byte layout of each kind's payload (encode and decode).
+
+The file framing around these payloads (magic, length, CRC, kind code) and the
+writer and reader live in :mod:`facepuppet.runtime.session`. Payloads, all
+integers and floats little-endian:
+
+========  ====  ==============================================================
+kind      code  payload
+========  ====  ==============================================================
+HEADER    0     UTF-8 JSON object
+LAYOUT    1     UTF-8 JSON ``{"id", "source", "channels", "marker_names",
+                "n_markers"}``: what the following frames with this layout id
+                carry. Written automatically the first time a frame with a new
+                (source, channels, markers) combination is written.
+FRAME     2     ``t f64, t_sender f64, number i64, layout id u32, flags u8``,
+                then, each present only when its flag bit is set, in this
+                order: weights f32[n_channels], head rotation f32[4] (x, y, z,
+                w), head translation f32[3], audio level f32 (dBFS), markers
+                f32[n_markers * 3]
+PACKET    3     live recording: ``b"P1"``, receive time f64 (monotonic s),
+                input kind length u16, input kind UTF-8, then the datagram's
+                raw bytes
+AUDIO     4     live recording: ``b"A1"``, tick time f64 (s), level f32 (dBFS)
+TICK      5     live recording: ``b"K1"``, tick index i64, tick time f64 (s
+                since the loop started), frames i64 (frames the source had
+                completed when the tick took its snapshot), snapshot time f64
+                (monotonic s, the packets' clock); lets a replay tick as the
+                live run did (same frames at the same tick times)
+========  ====  ==============================================================
+
+The PACKET/AUDIO/TICK decoders return None for a payload they cannot decode
+(the reader counts those as skipped); the FRAME and LAYOUT decoders raise
+ValueError (the reader treats that as corruption).
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+import math
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from .frames import Frame
+
+_FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
+_PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
+_AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
+_TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames completed, snapshot time
+
+
+class RecordKind(enum.IntEnum):
+    """Record kind codes; new kinds get new codes, codes are never reused."""
+
+    HEADER = 0
+    LAYOUT = 1
+    FRAME = 2
+    PACKET = 3  # live recording: raw bytes + receive time + input kind
+    AUDIO = 4  # live recording: audio levels
+    TICK = 5  # live recording: which frame each tick took, and when
+
+
+RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK})
+
+
+class FrameFlags(enum.IntFlag):
+    """Which optional parts a FRAME record carries."""
+
+    WEIGHTS = 1
+    HEAD_ROTATION = 2
+    HEAD_TRANSLATION = 4
+    AUDIO_LEVEL = 8
+    MARKERS = 16
+
+
+@dataclass(frozen=True)
+class Layout:
+    """What the FRAME records under one layout id carry (a LAYOUT record's content)."""
+
+    source: str
+    channels: tuple[str, ...] | None
+    marker_names: tuple[str, ...] | None
+    n_markers: int
+
+    def to_json(self, layout_id: int) -> dict:
+        return {
+            "id": layout_id,
+            "source": self.source,
+            "channels": None if self.channels is None else list(self.channels),
+            "marker_names": None if self.marker_names is None else list(self.marker_names),
+            "n_markers": self.n_markers,
+        }
+
+
+def layout_of(frame: Frame) -> Layout:
+    """The layout ``frame`` is written under."""
+    n_markers = 0 if frame.markers is None else int(frame.markers.shape[0])
+    return Layout(frame.source, frame.channels, frame.marker_names, n_markers)
+
+
+def encode_frame(frame: Frame, layout_id: int) -> bytes:
+    """FRAME payload of ``frame`` under ``layout_id`` (see the module docstring)."""
+    flags = 0
+    parts = []
+    if frame.weights is not None:
+        flags |= FrameFlags.WEIGHTS
+        parts.append(frame.weights.astype("<f4", copy=False).tobytes())
+    if frame.head_rotation is not None:
+        flags |= FrameFlags.HEAD_ROTATION
+        parts.append(frame.head_rotation.astype("<f4", copy=False).tobytes())
+    if frame.head_translation is not None:
+        flags |= FrameFlags.HEAD_TRANSLATION
+        parts.append(frame.head_translation.astype("<f4", copy=False).tobytes())
+    if not math.isnan(frame.audio_level):
+        flags |= FrameFlags.AUDIO_LEVEL
+        parts.append(struct.pack("<f", frame.audio_level))
+    if frame.markers is not None:
+        flags |= FrameFlags.MARKERS
+        parts.append(frame.markers.astype("<f4", copy=False).tobytes())
+    head = _FRAME_HEAD.pack(frame.t, frame.t_sender, frame.number, layout_id, flags)
+    return head + b"".join(parts)
+
+
+@dataclass(frozen=True)
+class Packet:
+    """One received datagram of a live recording.
+
+    Attributes
+    ----------
+    t : float, receive time, seconds on the monotonic clock
+    kind : str, the input kind that decoded it ("vmc", "livelinkface", ...)
+    data : bytes, the datagram as received
+    """
+
+    t: float
+    kind: str
+    data: bytes
+
+
+def encode_packet(t: float, kind: str, data: bytes) -> bytes:
+    """PACKET payload (see the module docstring)."""
+    name = kind.encode("utf-8")
+    return _PACKET_HEAD.pack(b"P1", t, len(name)) + name + bytes(data)
+
+
+def encode_audio(t: float, level_db: float) -> bytes:
+    """AUDIO payload (see the module docstring)."""
+    return _AUDIO.pack(b"A1", t, level_db)
+
+
+@dataclass(frozen=True)
+class Tick:
+    """One drawn tick of a live recording.
+
+    Attributes
+    ----------
+    k : int, tick index (t = k / fps)
+    t : float, tick time, seconds since the frame loop started
+    frames : int, frames the live source had completed when this tick took its snapshot
+    t_clock : float, the snapshot's time on the monotonic clock (the packets' receive clock)
+    """
+
+    k: int
+    t: float
+    frames: int
+    t_clock: float
+
+
+def encode_tick(k: int, t: float, frames: int, t_clock: float) -> bytes:
+    """TICK payload (see the module docstring)."""
+    return _TICK.pack(b"K1", int(k), float(t), int(frames), float(t_clock))
+
+
+def decode_packet(payload: bytes) -> Packet | None:
+    """Packet from a PACKET payload; None when it is not one this reader knows."""
+    if len(payload) < _PACKET_HEAD.size or payload[:2] != b"P1":
+        return None
+    _, t, n = _PACKET_HEAD.unpack_from(payload)
+    end = _PACKET_HEAD.size + n
+    if end > len(payload):
+        return None
+    try:
+        kind = payload[_PACKET_HEAD.size:end].decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    return Packet(t, kind, bytes(payload[end:]))
+
+
+def decode_audio(payload: bytes) -> tuple[float, float] | None:
+    """(t, level_db) from an AUDIO payload; None when it is not one this reader knows."""
+    if len(payload) != _AUDIO.size or payload[:2] != b"A1":
+        return None
+    _, t, level = _AUDIO.unpack(payload)
+    return t, level
+
+
+def decode_tick(payload: bytes) -> Tick | None:
+    """Tick from a TICK payload; None when it is not one this reader knows."""
+    if len(payload) != _TICK.size or payload[:2] != b"K1":
+        return None
+    _, k, t, frames, t_clock = _TICK.unpack(payload)
+    return Tick(k, t, frames, t_clock)
+
+
+def decode_frame(payload: bytes, layouts: dict[int, Layout]) -> Frame:
+    """Frame from a FRAME payload; ValueError when it does not fit its layout."""
+    if len(payload) < _FRAME_HEAD.size:
+        raise ValueError(f"frame record of {len(payload)} bytes, shorter than its {_FRAME_HEAD.size}-byte head")
+    t, t_sender, number, layout_id, flags = _FRAME_HEAD.unpack_from(payload)
+    layout = layouts.get(layout_id)
+    if layout is None:
+        raise ValueError(f"frame refers to layout id {layout_id}, which no earlier LAYOUT record defined")
+    if flags & ~0x1F:
+        raise ValueError(f"frame flags 0x{flags:02x} have unknown bits")
+    n_ch = 0 if layout.channels is None else len(layout.channels)
+    sizes = (
+        (FrameFlags.WEIGHTS, "weights", n_ch),
+        (FrameFlags.HEAD_ROTATION, "head_rotation", 4),
+        (FrameFlags.HEAD_TRANSLATION, "head_translation", 3),
+        (FrameFlags.AUDIO_LEVEL, "audio_level", 1),
+        (FrameFlags.MARKERS, "markers", layout.n_markers * 3),
+    )
+    expected = _FRAME_HEAD.size + 4 * sum(n for flag, _, n in sizes if flags & flag)
+    if len(payload) != expected:
+        raise ValueError(f"frame record of {len(payload)} bytes, its flags and layout need {expected}")
+    values = np.frombuffer(payload, dtype="<f4", offset=_FRAME_HEAD.size)
+    parts: dict = {}
+    at = 0
+    for flag, name, n in sizes:
+        if flags & flag:
+            parts[name] = values[at:at + n]
+            at += n
+    markers = parts.get("markers")
+    return Frame(
+        t=t,
+        source=layout.source,
+        channels=layout.channels,
+        weights=parts.get("weights"),
+        head_rotation=parts.get("head_rotation"),
+        head_translation=parts.get("head_translation"),
+        audio_level=float(parts["audio_level"][0]) if "audio_level" in parts else math.nan,
+        markers=None if markers is None else markers.reshape(-1, 3),
+        marker_names=layout.marker_names if markers is not None else None,
+        t_sender=t_sender,
+        number=number,
+    )
+
+
+def decode_layout(payload: bytes) -> tuple[int, Layout]:
+    """(layout id, Layout) from a LAYOUT payload; ValueError when it is not the expected JSON."""
+    try:
+        obj = json.loads(payload.decode("utf-8"))
+        channels = obj["channels"]
+        marker_names = obj["marker_names"]
+        layout = Layout(
+            str(obj["source"]),
+            None if channels is None else tuple(str(c) for c in channels),
+            None if marker_names is None else tuple(str(m) for m in marker_names),
+            int(obj["n_markers"]),
+        )
+        return int(obj["id"]), layout
+    except (UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"layout record is not the expected JSON object: {exc}") from None
