@@ -234,7 +234,9 @@ def _loadavg() -> str:
 
 
 def run_bench(args) -> dict:
-    from facepuppet.runtime.gestures import GestureSynth, SpeakerNormaliser, load_gesture_db
+    from facepuppet.runtime.gesture_synth import GestureSynth
+    from facepuppet.runtime.gesture_tables import load_gesture_db
+    from facepuppet.runtime.speaker_normaliser import SpeakerNormaliser
 
     from .blend_weights import BlendWeights, choose_basis
     from .gesture_db import build_gesture_db, read_llf_take

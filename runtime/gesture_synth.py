@@ -37,19 +37,9 @@ and draws among the ``n_candidates`` best with probability ∝ exp(-dist / σ).
   A loop now needs more than ``recent`` distinct frames, which a blink-free
   still stretch rarely has. Not in the paper (its database was one long
   take); the video-texture literature avoids short loops the same way.
-* The eyes are shown whole (``whole``, default ("eyes",)): the eyes group's
-  channels are its pick's residual plus that *same* frame's mood c·B, i.e.
-  the reference frame's own value, and the mood group adds nothing to them.
-  The paper sums c(t)·B of the level-1 pick with D_j of the level-2 pick;
-  for a lid that turns a blink into the sum of two reference moments (the
-  residual of a blink plus the windowed lid level of another frame, which
-  is the local share of closed-eye frames, not an expression), and the
-  mismatch pushes the lid through 0.5 where neither moment blinks. Measured
-  on the real database (8 seeds x 10 min): the eyes' own source frames
-  blink 19.9/min, the summed output 22.8/min (reference 18.4); about 64
-  crossings per run had no crossing of the source within 3 frames, at a
-  mood mismatch of +0.13 on the lid. The mood still reaches the eyes through
-  the β term (the eyes pick is conditioned on the mood track), as in §5.1.
+* The eyes are shown whole (``whole``, default ("eyes",)): their channels are
+  the pick's residual plus that same frame's mood c·B, not the mood pick's
+  (why, measured: :mod:`.gesture_output`).
 * Two levels: level 1 is lips and mood (what the voice drives directly);
   level-2 groups (brows, eyes, rest, head) are conditioned on level 1 through
   the β term: the mood c of the level-1 pick made at the previous step
@@ -76,93 +66,28 @@ h               ``history`` (default 10 frames)
 ==============  ==================================================
 
 Indexing (why the step is < 0.1 ms): the full distance is evaluated only on a
-small candidate set per group, precomputed per reference frame p (the last
-pick): the successor p+1 and the ``n_neighbours`` frames whose continuity
-windows are nearest to p+1's (exact, brute force at construction), plus
-``n_speech`` frames from the bin of the current intensity. The weighted
-windows of every frame are one preallocated matrix, so a step is one gather,
-one squared difference and one matrix-vector product for all groups at once;
-the draw among the best candidates is a Gumbel-max (one random call for all
-groups), and the output is a gather of one precomputed row per group (its
-features, or for the mood group its expression c·B) summed by one product.
+small candidate set per group (the successor of the last pick, its continuity
+neighbours and frames of the current intensity's bin; :mod:`.gesture_candidates`).
+The weighted windows of every frame are one preallocated matrix, so a step is
+one gather, one squared difference and one matrix-vector product for all groups
+at once; the draw among the best candidates is a Gumbel-max (one random call
+for all groups), and the output is a gather of one precomputed row per group
+(its features, or for the mood group its expression c·B; :mod:`.gesture_output`)
+summed by one product.
 About 30 NumPy calls per step, ~60-80 µs on a loaded 2-core machine.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from .tables import Section, TableSchema, TablesError, load_tables, register_schema
+from .gesture_candidates import N_BINS, build_candidates
+from .gesture_output import output_table
+from .gesture_tables import GROUPS, LEVEL1
+from .speaker_normaliser import SILENCE_Z, SpeakerNormaliser
 
-GROUPS = ("lips", "mood", "brows", "eyes", "rest", "head")
-LEVEL1 = ("lips", "mood")
-HEAD_FEATURES = ("headYaw", "headPitch", "headRoll", "headX", "headY", "headZ")
-SILENCE_Z = -3.0  # normalised intensity of silence (floor)
-N_BINS = 24       # intensity bins of the speech candidates, over [SILENCE_Z, -SILENCE_Z]
 RECENT_PENALTY = 1e4  # added to a recently shown candidate's distance (distances are O(1); sentinels ~1e6)
 WHOLE_GROUPS = ("eyes",)  # groups whose channels show one reference frame whole (own residual + own c·B)
-
-GESTURE_DB_SCHEMA = register_schema(TableSchema(
-    kind="gesture_db",
-    sections={
-        "intensity": Section("float32", ("n_frames",), "speech intensity s(t), per-speaker z-score of dB"),
-        "features": Section("float32", ("n_frames", "n_features"), "P(t), c(t), D_j(t), head per frame"),
-        "feature_group": Section("int32", ("n_features",), "group id of each feature (index into GROUPS)"),
-        "feature_scale": Section("float32", ("n_features",), "per-feature std, for the distances"),
-        "blend_basis": Section("float32", ("n_basis", "n_features"), "whole-face expressions B (§4.1)"),
-        "frame_take": Section("int32", ("n_frames",), "take index of each frame"),
-        "available": Section("bool", ("n_frames", 6), "whether the frame's take provides each group"),
-        "detail_weights": Section("float32", ("n_frames", "n_detail"), "§5.2 detail shape weights per frame "
-                                  "(marker-take frames; zero elsewhere), shapes named by channels.detail",
-                                  optional=True),
-    },
-    channels=("features", "takes", "groups"),
-    channel_dims={"features": "n_features", "detail": "n_detail"},
-))
-
-
-def load_gesture_db(path):
-    """Load and check a ``gesture_db`` tables file; TablesError naming the field otherwise."""
-    db = load_tables(path, kind="gesture_db")
-    if list(db.channels["groups"]) != list(GROUPS):
-        raise TablesError(path, "channels.groups", f"expected {list(GROUPS)}, found {db.channels['groups']}")
-    n_takes = len(db.channels["takes"])
-    take = db["frame_take"]
-    if take.size and (take.min() < 0 or take.max() >= n_takes):
-        raise TablesError(path, "frame_take", f"expected take indices in [0, {n_takes}), found "
-                                              f"{take.min()}..{take.max()}")
-    groups = db["feature_group"]
-    if groups.size and (groups.min() < 0 or groups.max() >= len(GROUPS)):
-        raise TablesError(path, "feature_group", f"expected group ids in [0, {len(GROUPS)})")
-    return db
-
-
-class SpeakerNormaliser:
-    """dBFS -> per-speaker z-score with a noise gate, running statistics of voiced frames.
-
-    Parameters
-    ----------
-    mean_db, std_db : float, dBFS, starting estimate of the speaker's voiced level
-    gate_db : float, dBFS; at or below it (or NaN: not measured) the frame is silence (SILENCE_Z).
-        Offline it is derived from the speaker's level distribution (10th percentile + a margin,
-        see ``facepuppet.offline.speech_intensity.speaker_stats``)
-    rate : float, weight of a new voiced frame in the running mean/variance (0: frozen)
-    """
-
-    def __init__(self, mean_db: float = -30.0, std_db: float = 8.0, gate_db: float = -60.0,
-                 rate: float = 0.002):
-        self.mean_db, self.var_db, self.gate_db, self.rate = float(mean_db), float(std_db) ** 2, gate_db, rate
-
-    def __call__(self, level_db: float) -> float:
-        if not (level_db > self.gate_db):  # NaN, or below the noise gate: silence
-            return SILENCE_Z
-        if self.rate > 0:
-            d = level_db - self.mean_db
-            self.mean_db += self.rate * d
-            self.var_db += self.rate * (d * d - self.var_db)
-        return max(SILENCE_Z, (level_db - self.mean_db) / math.sqrt(max(self.var_db, 1.0)))
 
 
 def _principal_axes(x: np.ndarray, ok: np.ndarray, variance: float, max_dims: int) -> np.ndarray:
@@ -172,28 +97,6 @@ def _principal_axes(x: np.ndarray, ok: np.ndarray, variance: float, max_dims: in
     frac = np.cumsum(sv ** 2) / max(float(np.sum(sv ** 2)), 1e-30)
     r = min(int(np.searchsorted(frac, variance - 1e-12)) + 1, max_dims, len(sv))
     return xc @ vt[:r].T
-
-
-def _nearest(windows: np.ndarray, rows: np.ndarray, k: int, exclude: int, chunk: int = 512) -> np.ndarray:
-    """Row indices (frames ``rows``) of the ``k`` nearest windows to each window, frames >= ``exclude`` apart.
-
-    windows : (len(rows), D) float, one per frame of ``rows``; exact squared Euclidean; -1 pads.
-    """
-    w = windows.astype(np.float32)
-    sq = np.einsum("ij,ij->i", w, w)
-    out = np.zeros((len(rows), k), np.int64)
-    for s in range(0, len(rows), chunk):
-        d = sq[s:s + chunk, None] + sq[None, :] - 2.0 * (w[s:s + chunk] @ w.T)
-        near = np.abs(rows[s:s + chunk, None] - rows[None, :]) < exclude  # no jump within the own run
-        d[near] = np.inf
-        kk = min(k, len(rows) - 1)
-        part = np.argpartition(d, kk - 1, axis=1)[:, :kk] if kk > 0 else np.zeros((len(d), 0), np.int64)
-        order = np.take_along_axis(d, part, 1).argsort(1, kind="stable")
-        best = np.take_along_axis(part, order, 1)
-        best_d = np.take_along_axis(d, best, 1)
-        out[s:s + chunk] = -1
-        out[s:s + chunk, :kk] = np.where(np.isfinite(best_d), rows[best], -1)
-    return out
 
 
 class GestureSynth:
@@ -288,48 +191,12 @@ class GestureSynth:
         has_mood = avail[:, GROUPS.index("mood")]
         self._beta = np.array([beta if (g not in LEVEL1 and self._km >= 0 and has_mood[self._valid[k]].all())
                                else 0.0 for k, g in enumerate(self.groups)])
-        self._build_candidates(n_neighbours, n_speech, last)
+        self._T_raw = build_candidates(self._desc, self._valid, self._intensity, last, h, n_neighbours, n_speech)
         self._prepare_windows()
         self.out_names = self._output_names()
         self.additions = np.zeros(len(self.out_names), np.float32)
         self._ones_g = np.ones(len(self.groups), np.float32)
         self.reset()
-
-    def _build_candidates(self, n_neighbours: int, n_speech: int, last: np.ndarray) -> None:
-        """Candidate rows per group: for last pick p, [p+1, nearest windows to p+1's]; per intensity bin, frames."""
-        G, n, h = len(self.groups), len(last), self.h
-        K = n_neighbours + 1
-        T = np.full((G, n + N_BINS, max(K, n_speech)), n, np.int64)  # frame n: the sentinel (never wins)
-        bins = self._bin(self._intensity)
-        for k in range(G):
-            valid = np.flatnonzero(self._valid[k])
-            win = self._desc[np.clip(valid[:, None] + np.arange(-h + 1, 1), 0, n - 1), k].reshape(len(valid), -1)
-            near = _nearest(win, valid, n_neighbours, exclude=h)  # windows x(i-h+1 .. i) like p+1's history
-            row_of = np.full(n, -1)
-            row_of[valid] = np.arange(len(valid))
-            succ = np.where(~last[:-1] & self._valid[k, 1:], np.arange(1, n), -1)
-            succ = np.r_[succ, -1]
-            for p in range(n):
-                s = succ[p]
-                if s >= 0:
-                    T[k, p, 0] = s
-                    jumps = near[row_of[p]] + 1 if row_of[p] >= 0 else near[row_of[s]]  # j: x(j-h..j-1) ≈ x(p-h+1..p)
-                else:  # end of a take (or invalid frame): only jumps, to frames whose history is like p's
-                    anchor = p if row_of[p] >= 0 else valid[0]
-                    jumps = near[row_of[anchor]] + 1
-                jumps = jumps[(jumps > 0) & (jumps < n)]
-                jumps = jumps[self._valid[k, jumps] & (jumps != s)][:K - 1]
-                T[k, p, 1:1 + len(jumps)] = jumps
-            filled = np.unique(bins[valid])
-            for b in range(N_BINS):  # an empty bin takes the frames of the nearest filled bin
-                members = valid[bins[valid] == filled[np.argmin(np.abs(filled - b))]]
-                pick = members[np.unique(np.linspace(0, len(members) - 1, n_speech).round().astype(int))]
-                T[k, n + b, :len(pick)] = pick
-        self._T_raw = T
-
-    @staticmethod
-    def _bin(a):
-        return np.clip(((np.asarray(a) - SILENCE_Z) / (-2 * SILENCE_Z) * N_BINS).astype(int), 0, N_BINS - 1)
 
     def _prepare_windows(self) -> None:
         """Flat tables for the step: one row per (group, frame) holding its weighted history window.
@@ -385,50 +252,12 @@ class GestureSynth:
         self._bar = np.repeat([0.0 if g == "lips" else RECENT_PENALTY for g in self.groups], M).astype(np.float32)
 
     def _output_names(self) -> tuple[str, ...]:
-        """Output channels; sets the flat gather (``_out_group``, ``_out_cols``) and ``_mood``."""
-        names: list[str] = []
-        out_group, out_cols = [], []
-        for k, g in enumerate(self.groups):
-            if g == "mood":
-                continue
-            names += [self.names[c] for c in self._cols[k]]
-            out_group += [k] * len(self._cols[k])
-            out_cols += list(self._cols[k])
-        self._mood = None
-        if "mood" in self.groups:
-            used = np.flatnonzero(np.abs(self._basis).sum(0) > 0)
-            for c in used:
-                if self.names[c] not in names:  # a mood-only channel: no residual feature, gather a zero
-                    names.append(self.names[c])
-                    out_group.append(self.groups.index("mood"))
-                    out_cols.append(-1)
-            dst = np.array([names.index(self.names[c]) for c in used], np.int64)
-            self._mood = (self.groups.index("mood"), used, dst)
-            self._basis_out = np.zeros((len(self._basis), len(names)), np.float32)
-            self._basis_out[:, dst] = self._basis[:, used]
-        # per (group, frame) the group's contribution to the output, the mood rows holding c·B (§4.1), so that
-        # the output is one gather of G rows and their sum
-        n, G = len(self._feats), len(self.groups)
-        table = np.zeros((G, n, len(names)), np.float32)
-        for j, (k, c) in enumerate(zip(out_group, out_cols)):
-            if c >= 0 and self.groups[k] != "mood":
-                table[k, :, j] = self._feats[:, c]
-        whole = [k for k, g in enumerate(self.groups) if g in self.whole]
-        self._whole_k = np.array(whole if self._mood is not None else [], np.int64)
-        self._own_table = np.zeros((len(self._whole_k) * n, len(names)), np.float32)
-        if self._mood is not None:
-            k = self._mood[0]
-            blend = self._feats[:, self._cols[k]] @ self._basis_out  # §4.1: blend expression c·B, per frame
-            for w, kw in enumerate(self._whole_k):  # a whole group: its own frame's c·B on its channels
-                own = np.flatnonzero(np.asarray(out_group) == kw)
-                table[kw][:, own] += blend[:, own]
-                self._own_table[w * n:(w + 1) * n, own] = blend[:, own]
-                blend[:, own] = 0.0
-            table[k] = blend
-        self._out_table = table.reshape(G * n, len(names))
-        self._out_rows = np.zeros((G, len(names)), np.float32)
-        self._own_off = np.arange(len(self._whole_k)) * n
-        return tuple(names)
+        """Output channels; sets the output row tables (:func:`.gesture_output.output_table`) and ``_mood``."""
+        out = output_table(self.groups, self._cols, self.names, self._feats, self._basis, self.whole)
+        self._mood, self._out_table, self._whole_k, self._own_table = out.mood, out.table, out.whole_k, out.own_table
+        self._out_rows = np.zeros((len(self.groups), len(out.names)), np.float32)
+        self._own_off = np.arange(len(self._whole_k)) * len(self._feats)
+        return out.names
 
     def reset(self, start: int | None = None) -> None:
         """Restart the sequence: each group at reference frame ``start`` (default: a seeded random valid frame).

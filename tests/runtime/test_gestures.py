@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.gesture_synth import RECENT_PENALTY
-from facepuppet.runtime.gestures import GROUPS, GestureLayer, GestureSynth, load_gesture_db
+from facepuppet.runtime.gesture_candidates import intensity_bin
+from facepuppet.runtime.gesture_synth import RECENT_PENALTY, GestureSynth
+from facepuppet.runtime.gesture_tables import GROUPS, load_gesture_db
+from facepuppet.runtime.gestures import GestureLayer
 from facepuppet.runtime.tables import TablesError, save_tables
 
 
@@ -124,7 +126,7 @@ def test_step_distance_matches_the_slow_definition_and_the_successor_has_no_cont
         prev = synth._pick.copy()
         mood_prev = synth._moodf[prev[synth._km]]
         speech.append(a)
-        b = synth._bin(a)
+        b = intensity_bin(a)
         synth.step_normalised(float(a))
         for k in range(len(synth.groups)):
             cand = [c for c in list(synth._T_raw[k, prev[k]]) + list(synth._T_raw[k, len(synth._intensity) + b])
