@@ -1,4 +1,4 @@
-"""Gesture layer: exact reproduction, determinism, voice-only jaw, the layer over tracked frames, tables."""
+"""Gesture layer: exact reproduction, determinism, voice-only jaw, the layer over tracked frames."""
 
 import math
 
@@ -8,38 +8,10 @@ import pytest
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.gesture_candidates import intensity_bin
 from facepuppet.runtime.gesture_synth import RECENT_PENALTY, GestureSynth
-from facepuppet.runtime.gesture_tables import GROUPS, load_gesture_db
+from facepuppet.runtime.gesture_tables import load_gesture_db
 from facepuppet.runtime.gestures import GestureLayer
-from facepuppet.runtime.tables import TablesError, save_tables
-
-
-def small_db(path, n_takes=2, n=300, seed=0):
-    """A synthetic gesture_db: lips follow the intensity (jawOpen = loudness), random-walk gestures."""
-    rng = np.random.default_rng(seed)
-    names = ["jawOpen", "mood_0", "mood_1", "browInnerUp", "eyeBlinkLeft", "cheekPuff", "headYaw"]
-    group = [GROUPS.index(g) for g in ("lips", "mood", "mood", "brows", "eyes", "rest", "head")]
-    N = n_takes * n
-    t = np.arange(N)
-    intensity = np.where(np.sin(t / 13.0) > 0, np.sin(t / 5.0) + rng.normal(0, 0.1, N), -3.0)
-    F = np.zeros((N, len(names)))
-    F[:, 0] = np.clip((intensity + 3.0) / 4.0, 0, 1)
-    F[:, 1:] = np.cumsum(rng.normal(0, 0.05, (N, len(names) - 1)), 0)
-    basis = np.zeros((2, len(names)))
-    basis[0, 3], basis[1, 4] = 0.3, 0.2
-    arrays = {
-        "intensity": intensity.astype(np.float32), "features": F.astype(np.float32),
-        "feature_group": np.array(group, np.int32), "feature_scale": F.std(0).astype(np.float32),
-        "blend_basis": basis.astype(np.float32), "frame_take": np.repeat(np.arange(n_takes), n).astype(np.int32),
-        "available": np.ones((N, 6), bool),
-    }
-    save_tables(path, "gesture_db", arrays, channels={"features": names, "takes": [f"take{i}" for i in range(n_takes)],
-                                                      "groups": list(GROUPS)}, settings={"fps": 30.0})
-    return load_gesture_db(path)
-
-
-@pytest.fixture(scope="module")
-def db(tmp_path_factory):
-    return small_db(tmp_path_factory.mktemp("g") / "g.npz")
+from facepuppet.runtime.tables import save_tables
+from gesture_dbs import db, small_db  # noqa: F401  (db is a pytest fixture)
 
 
 def test_reproduces_reference_with_sigma_zero_and_one_candidate(db):
@@ -96,14 +68,6 @@ def test_style_restricts_a_group_to_one_take(db):
         assert db["frame_take"][synth.picks["brows"]] == 1
     with pytest.raises(ValueError, match="style"):
         GestureSynth(db, style={"brows": "nope"})
-
-
-def test_loading_refuses_a_table_with_bad_take_indices(tmp_path, db):
-    arrays = {k: np.array(v) for k, v in db.arrays.items()}
-    arrays["frame_take"][0] = 7
-    save_tables(tmp_path / "bad.npz", "gesture_db", arrays, channels=dict(db.channels))
-    with pytest.raises(TablesError, match="frame_take"):
-        load_gesture_db(tmp_path / "bad.npz")
 
 
 def slow_distance(synth, k, i, speech, history, mood_prev):

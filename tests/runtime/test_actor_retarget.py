@@ -1,0 +1,36 @@
+"""The Retarget stage: marker frames -> solver -> ActorPair (§6.2) -> target weights."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.actor_retarget import ActorRetarget
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.marker_solver import MarkerSolver
+from small_actors import K, N, make_actor
+
+
+def test_retarget_stage_turns_marker_frames_into_weights(tmp_path):
+    actor = make_actor()
+    cubic = np.zeros((3, K, 2))
+    cubic[2, 0, 0] = 1.0                                  # w0 = s0, w1 = s1^2
+    cubic[1, 1, 1] = 1.0
+    pair = ActorPair(cubic=cubic, shape_names=("a", "b"), marker_names=actor.names,
+                     marker_vertices=np.arange(N), similarity=np.eye(4), s_lower=actor.s_lower,
+                     s_upper=actor.s_upper)
+    pair = ActorPair.load(pair.save(tmp_path / "pair.npz"))
+    stage = ActorRetarget(actor, pair, MarkerSolver(actor, iterations=30))
+    s_true = np.array([0.7, 0.5, 0.0, 0.0])
+    # a rigidly moved head, names in another order, one marker missing
+    angle = 0.2
+    rot = np.array([[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]])
+    markers = actor.evaluate(s_true) @ rot.T + [3.0, -1.0, 2.0]
+    order = np.arange(N)[::-1]
+    markers = markers[order]
+    markers[0] = np.nan
+    frame = Frame(t=0.0, source="markers", markers=markers, marker_names=tuple(actor.names[i] for i in order))
+    weights = stage.apply(frame)
+    assert stage.target_names == ("a", "b")
+    np.testing.assert_allclose(weights, [0.7, 0.25], atol=0.03)
+    assert stage.apply(Frame(t=0.1, source="x")) is None

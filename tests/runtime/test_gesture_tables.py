@@ -1,0 +1,16 @@
+"""The gesture_db table loader: validation of the stored arrays."""
+
+import numpy as np
+import pytest
+
+from facepuppet.runtime.gesture_tables import load_gesture_db
+from facepuppet.runtime.tables import TablesError, save_tables
+from gesture_dbs import db  # noqa: F401  (a pytest fixture)
+
+
+def test_loading_refuses_a_table_with_bad_take_indices(tmp_path, db):
+    arrays = {k: np.array(v) for k, v in db.arrays.items()}
+    arrays["frame_take"][0] = 7
+    save_tables(tmp_path / "bad.npz", "gesture_db", arrays, channels=dict(db.channels))
+    with pytest.raises(TablesError, match="frame_take"):
+        load_gesture_db(tmp_path / "bad.npz")
