@@ -3,14 +3,13 @@ sleeps in it (a frame is drawn when it arrives, not at the next tick of a fixed 
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from test_udp_process import vmc_frame
+from udp_helpers import vmc_frame
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.loop import FrameLoop, WallClock, WeightLog
@@ -22,24 +21,17 @@ JAW = ARKIT_NAMES.index("jawOpen")
 SOURCES = {"process": UdpProcessSource, "thread": UdpSource}
 
 
-@pytest.fixture
-def sender():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    yield s
-    s.close()
-
-
 @pytest.mark.parametrize("kind", sorted(SOURCES))
-def test_wait_for_frame_wakes_on_a_frame_and_times_out_without(kind, sender):
+def test_wait_for_frame_wakes_on_a_frame_and_times_out_without(kind, udp_sender):
     with SOURCES[kind](VmcAdapter(), port=0) as source:
         assert source.wait_for_frame(0.05) is False           # nothing sent: the timeout
         assert source.wait_for_frame(0.0) is False
-        threading.Timer(0.2, lambda: sender.sendto(vmc_frame(0.7), source.address)).start()
+        threading.Timer(0.2, lambda: udp_sender.sendto(vmc_frame(0.7), source.address)).start()
         assert source.wait_for_frame(30.0) is True             # woken by the frame, not the 30 s
         frame, stale = source.latest()
         assert frame.weights[JAW] == pytest.approx(0.7) and stale == 0
         assert source.wait_for_frame(0.05) is False           # the frame was taken: wait again
-        sender.sendto(vmc_frame(0.2), source.address)
+        udp_sender.sendto(vmc_frame(0.2), source.address)
         deadline = time.monotonic() + 10.0
         while source.counters["frames"] < 2 and time.monotonic() < deadline:
             time.sleep(0.002)
@@ -64,7 +56,7 @@ class _Renderer:
 
 
 @pytest.mark.parametrize("kind", sorted(SOURCES))
-def test_the_loop_draws_each_arriving_frame_between_rare_idle_ticks(kind, sender):
+def test_the_loop_draws_each_arriving_frame_between_rare_idle_ticks(kind, udp_sender):
     """Frames every 40 ms with an idle redraw of 2 per second: on a fixed 2 fps grid about 3 ticks
     would draw in 2 s; on arrival nearly every frame gets its own tick, labelled on the 1 kHz grid."""
     n_frames = 30
@@ -75,7 +67,7 @@ def test_the_loop_draws_each_arriving_frame_between_rare_idle_ticks(kind, sender
             for i in range(n_frames):
                 if stop.wait(0.04):
                     return
-                sender.sendto(vmc_frame((i + 1) / n_frames), source.address)
+                udp_sender.sendto(vmc_frame((i + 1) / n_frames), source.address)
 
         log = WeightLog()
         loop = FrameLoop(SimpleNamespace(shape_names=ARKIT_NAMES), _Renderer(), WallClock(), sinks=[log],

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import os
 import random
-import socket
 import time
 
 import numpy as np
 import pytest
-from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message_builder import OscMessageBuilder
+
+from udp_helpers import osc, poll_frame, vmc_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.input_kinds import make_adapter
@@ -20,54 +19,16 @@ from facepuppet.runtime.markers_osc import FRAME, LAYOUT
 from facepuppet.runtime.udp_process import UdpProcessSource
 from facepuppet.runtime.vmc import VmcAdapter
 
+
 JAW = ARKIT_NAMES.index("jawOpen")
-DEADLINE_S = 10.0
 
 
-def vmc_frame(value: float) -> bytes:
-    b = OscBundleBuilder(IMMEDIATELY)
-    m = OscMessageBuilder("/VMC/Ext/Blend/Val")
-    m.add_arg("JawOpen")
-    m.add_arg(value)
-    b.add_content(m.build())
-    b.add_content(OscMessageBuilder("/VMC/Ext/Blend/Apply").build())
-    return b.build().dgram
-
-
-def osc(address, *args) -> bytes:
-    b = OscMessageBuilder(address)
-    for a in args:
-        b.add_arg(*a) if isinstance(a, tuple) else b.add_arg(a)
-    return b.build().dgram
-
-
-def wait_for(predicate, what: str):
-    end = time.monotonic() + DEADLINE_S
-    while time.monotonic() < end:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.002)
-    pytest.fail(f"timed out after {DEADLINE_S} s waiting for {what}")
-
-
-def poll_frame(source):
-    return wait_for(lambda: source.latest()[0], "a frame")
-
-
-@pytest.fixture
-def sender():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    yield s
-    s.close()
-
-
-def test_frame_crosses_the_process_with_its_kernel_arrival_time(sender):
+def test_frame_crosses_the_process_with_its_kernel_arrival_time(udp_sender):
     with UdpProcessSource(VmcAdapter(), port=0) as source:
         host, port = source.address
         assert host == "127.0.0.1" and port > 0 and source.latest() == (None, 0)
         t_sent = time.monotonic()
-        sender.sendto(vmc_frame(0.6), source.address)
+        udp_sender.sendto(vmc_frame(0.6), source.address)
         frame = poll_frame(source)
         t_taken = time.monotonic()
         assert frame.weights[JAW] == pytest.approx(0.6) and frame.source == "vmc"
@@ -80,28 +41,28 @@ def test_frame_crosses_the_process_with_its_kernel_arrival_time(sender):
     assert source.counters["datagrams"] == 1  # final counters survive stop()
 
 
-def test_newest_frame_wins_and_overwritten_frames_are_counted_stale(sender):
+def test_newest_frame_wins_and_overwritten_frames_are_counted_stale(udp_sender):
     with UdpProcessSource(VmcAdapter(), port=0) as source:
         for i in range(5):
-            sender.sendto(vmc_frame(i / 10), source.address)
+            udp_sender.sendto(vmc_frame(i / 10), source.address)
         wait_for(lambda: source.counters["frames"] == 5, "5 frames handled")
         frame, stale = source.latest(123.0)
         assert frame.weights[JAW] == pytest.approx(0.4) and stale == 4
-        sender.sendto(vmc_frame(0.9), source.address)
+        udp_sender.sendto(vmc_frame(0.9), source.address)
         assert poll_frame(source).weights[JAW] == pytest.approx(0.9)
         assert source.counters["stale_dropped"] == 4 and source.frames_taken == 6
 
 
-def test_senders_outside_allow_are_dropped_and_counted(sender):
+def test_senders_outside_allow_are_dropped_and_counted(udp_sender):
     seen = []
     with UdpProcessSource(VmcAdapter(), port=0, allow={"10.1.2.3"}, on_packet=lambda *a: seen.append(a)) as source:
-        sender.sendto(vmc_frame(0.5), source.address)
+        udp_sender.sendto(vmc_frame(0.5), source.address)
         wait_for(lambda: source.counters["filtered_sender"] == 1, "the filtered packet")
         assert source.latest() == (None, 0) and source.counters["datagrams"] == 0
     assert seen == []  # filtered datagrams are not recorded
 
 
-def test_on_packet_runs_here_in_order_and_its_errors_are_counted(sender):
+def test_on_packet_runs_here_in_order_and_its_errors_are_counted(udp_sender):
     seen = []
 
     def record(data, t, who):
@@ -111,26 +72,26 @@ def test_on_packet_runs_here_in_order_and_its_errors_are_counted(sender):
 
     with UdpProcessSource(VmcAdapter(), port=0, on_packet=record) as source:
         t_sent = time.monotonic()
-        sender.sendto(b"first", source.address)
-        sender.sendto(vmc_frame(0.3), source.address)
+        udp_sender.sendto(b"first", source.address)
+        udp_sender.sendto(vmc_frame(0.3), source.address)
         assert poll_frame(source).weights[JAW] == pytest.approx(0.3)
         assert source.counters["internal_error"] == 1 and isinstance(source.last_error, RuntimeError)
-        sender.sendto(b"after the last tick", source.address)
+        udp_sender.sendto(b"after the last tick", source.address)
         wait_for(lambda: source.counters["packets"] == 3, "the third datagram")
     # the rest of the ring is handed on by stop()
     assert [d for d, _, _ in seen] == [b"first", vmc_frame(0.3), b"after the last tick"]
-    assert seen[0][2] == ("127.0.0.1", sender.getsockname()[1]) and seen[0][1] >= t_sent - 0.002
+    assert seen[0][2] == ("127.0.0.1", udp_sender.getsockname()[1]) and seen[0][1] >= t_sent - 0.002
     assert source.counters["malformed"] + source.counters["unknown_address"] >= 1  # b"first" is not OSC
 
 
-def test_a_full_ring_drops_and_counts_instead_of_blocking(sender):
+def test_a_full_ring_drops_and_counts_instead_of_blocking(udp_sender):
     seen = []
     with UdpProcessSource(make_adapter("livelinkface"), port=0, on_packet=lambda *a: seen.append(a),
                           ring_bytes=1 << 17) as source:
         packet = encode_packet([0.5] * 52, number=1)
         n = 2 * (1 << 17) // (len(packet) + 32) + 50  # about twice what the ring holds
         for _ in range(n):
-            sender.sendto(packet, source.address)
+            udp_sender.sendto(packet, source.address)
         wait_for(lambda: source.counters["packets"] == n, f"{n} datagrams read")
         dropped = source.counters["packets_ring_dropped"]
         assert dropped > 0
@@ -138,31 +99,31 @@ def test_a_full_ring_drops_and_counts_instead_of_blocking(sender):
     assert len(seen) + dropped == n
 
 
-def test_markers_and_livelinkface_frames_keep_every_field(sender):
+def test_markers_and_livelinkface_frames_keep_every_field(udp_sender):
     points = np.array([[0.0, 10.0, 5.0], [1.5, -40.0, 2.0], [np.nan, np.nan, np.nan]], dtype="<f4")
     with UdpProcessSource(make_adapter("markers"), port=0) as source:
-        sender.sendto(osc(LAYOUT, 1, "nose", "chin", "mouthL"), source.address)
-        sender.sendto(osc(FRAME, 1, 7, (12.25, "d"), (points.tobytes(), "b")), source.address)
+        udp_sender.sendto(osc(LAYOUT, 1, "nose", "chin", "mouthL"), source.address)
+        udp_sender.sendto(osc(FRAME, 1, 7, (12.25, "d"), (points.tobytes(), "b")), source.address)
         frame = poll_frame(source)
         assert frame.marker_names == ("nose", "chin", "mouthL") and frame.number == 7 and frame.t_sender == 12.25
         np.testing.assert_array_equal(frame.markers, points)
         assert frame.weights is None and frame.channels is None and frame.head_rotation is None
     weights = np.linspace(0, 1, 52)
     with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
-        sender.sendto(encode_packet(weights, head=(0.3, -0.2, 0.1), number=77), source.address)
+        udp_sender.sendto(encode_packet(weights, head=(0.3, -0.2, 0.1), number=77), source.address)
         frame = poll_frame(source)
         np.testing.assert_allclose(frame.weights[:52], weights, atol=1e-6)
         assert frame.number == 77 and frame.head_rotation.shape == (4,)
         assert np.linalg.norm(frame.head_rotation) == pytest.approx(1.0, abs=1e-5)
 
 
-def test_frames_read_while_the_child_writes_are_never_torn(sender):
+def test_frames_read_while_the_child_writes_are_never_torn(udp_sender):
     # every frame has all 52 weights equal: a read that mixed two frames would show two values
     with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
         packets = [encode_packet([v] * 52, number=i) for i, v in enumerate(np.linspace(0, 1, 4000))]
         taken = 0
         for i, packet in enumerate(packets):
-            sender.sendto(packet, source.address)
+            udp_sender.sendto(packet, source.address)
             frame, _ = source.latest()
             if frame is not None:
                 taken += 1
@@ -172,7 +133,7 @@ def test_frames_read_while_the_child_writes_are_never_torn(sender):
         assert taken > 0
 
 
-def test_random_datagrams_do_not_stop_it(sender):
+def test_random_datagrams_do_not_stop_it(udp_sender):
     rng = random.Random(3)
     good = vmc_frame(0.25)
     with UdpProcessSource(VmcAdapter(), port=0) as source:
@@ -185,13 +146,13 @@ def test_random_datagrams_do_not_stop_it(sender):
                 for _ in range(rng.randrange(1, 6)):
                     data[rng.randrange(len(data))] = rng.getrandbits(8)
                 data = bytes(data)
-            sender.sendto(data, source.address)
+            udp_sender.sendto(data, source.address)
             if i % 200 == 0:
                 time.sleep(0.002)
                 source.latest()
         wait_for(lambda: source.counters["packets"] == 5000, "every datagram read")
         source.latest()  # what the mutated datagrams left in the slot
-        sender.sendto(vmc_frame(0.75), source.address)
+        udp_sender.sendto(vmc_frame(0.75), source.address)
         assert poll_frame(source).weights[JAW] == pytest.approx(0.75)
         assert source.counters["internal_error"] == 0, source.last_error
 
@@ -240,15 +201,15 @@ def test_the_child_leaves_when_the_parent_is_gone(tmp_path):
     wait_for(gone, "the orphaned child to exit")
 
 
-def test_watched_bytes_call_back_once_per_tick_without_on_packet(sender):
+def test_watched_bytes_call_back_once_per_tick_without_on_packet(udp_sender):
     calls = []
     with UdpProcessSource(VmcAdapter(), port=0, watch=(b"/facepuppet/calibrate\x00", lambda: calls.append(1))) as source:
-        sender.sendto(vmc_frame(0.2), source.address)
+        udp_sender.sendto(vmc_frame(0.2), source.address)
         poll_frame(source)
         assert calls == []
         calibrate = osc("/facepuppet/calibrate")
-        sender.sendto(calibrate, source.address)
-        sender.sendto(calibrate, source.address)
+        udp_sender.sendto(calibrate, source.address)
+        udp_sender.sendto(calibrate, source.address)
         wait_for(lambda: source.counters["packets"] == 3, "both calibrate messages")
         source.latest()
         assert calls == [1]  # one call for the tick that saw them

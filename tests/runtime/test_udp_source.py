@@ -4,14 +4,13 @@ and end to end with an independent OSC implementation (liblo's oscsend)."""
 from __future__ import annotations
 
 import shutil
-import socket
 import subprocess
 import time
 
 import numpy as np
 import pytest
-from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message_builder import OscMessageBuilder
+
+from udp_helpers import poll_frame, vmc_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.input_kinds import INPUT_KINDS, make_adapter
@@ -19,43 +18,8 @@ from facepuppet.runtime.livelinkface_udp import encode_packet
 from facepuppet.runtime.udp_source import UdpSource
 from facepuppet.runtime.vmc import VmcAdapter
 
+
 JAW = ARKIT_NAMES.index("jawOpen")
-DEADLINE_S = 5.0
-
-
-def vmc_frame(value: float) -> bytes:
-    b = OscBundleBuilder(IMMEDIATELY)
-    m = OscMessageBuilder("/VMC/Ext/Blend/Val")
-    m.add_arg("JawOpen")
-    m.add_arg(value)
-    b.add_content(m.build())
-    b.add_content(OscMessageBuilder("/VMC/Ext/Blend/Apply").build())
-    return b.build().dgram
-
-
-def wait_for(predicate, what: str):
-    """Poll ``predicate`` until true; fail (not hang) after DEADLINE_S."""
-    end = time.monotonic() + DEADLINE_S
-    while time.monotonic() < end:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.002)
-    pytest.fail(f"timed out after {DEADLINE_S} s waiting for {what}")
-
-
-def poll_frame(source):
-    def take():
-        frame, _ = source.latest()
-        return frame
-    return wait_for(take, "a frame")
-
-
-@pytest.fixture
-def sender():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    yield s
-    s.close()
 
 
 def test_registry_and_default_ports():
@@ -66,42 +30,42 @@ def test_registry_and_default_ports():
         make_adapter("osc")
 
 
-def test_frame_arrives_and_latest_takes_it_once(sender):
+def test_frame_arrives_and_latest_takes_it_once(udp_sender):
     with UdpSource(VmcAdapter(), port=0) as source:
         host, port = source.address
         assert host == "127.0.0.1" and port > 0
         assert source.latest() == (None, 0)
-        sender.sendto(vmc_frame(0.6), source.address)
+        udp_sender.sendto(vmc_frame(0.6), source.address)
         frame = poll_frame(source)
         assert frame.weights[JAW] == pytest.approx(0.6) and frame.source == "vmc"
         assert source.latest() == (None, 0)  # taken: nothing new
         assert source.counters["frames"] == 1 and source.counters["packets"] == 1
 
 
-def test_newest_frame_wins_and_overwritten_frames_are_counted_stale(sender):
+def test_newest_frame_wins_and_overwritten_frames_are_counted_stale(udp_sender):
     with UdpSource(VmcAdapter(), port=0) as source:
         for i in range(5):
-            sender.sendto(vmc_frame(i / 10), source.address)
+            udp_sender.sendto(vmc_frame(i / 10), source.address)
         wait_for(lambda: source.counters["frames"] == 5, "5 frames handled")
         frame, stale = source.latest(123.0)
         assert frame.weights[JAW] == pytest.approx(0.4) and stale == 4
         assert source.counters["stale_dropped"] == 4
-        sender.sendto(vmc_frame(0.9), source.address)
+        udp_sender.sendto(vmc_frame(0.9), source.address)
         frame, stale = poll_frame(source), source.counters["stale_dropped"]
         assert frame.weights[JAW] == pytest.approx(0.9) and stale == 4
 
 
-def test_receive_time_comes_from_the_given_clock(sender):
+def test_receive_time_comes_from_the_given_clock(udp_sender):
     ticks = iter(range(1000, 2000))
     with UdpSource(VmcAdapter(), port=0, clock=lambda: float(next(ticks))) as source:
-        sender.sendto(vmc_frame(0.1), source.address)
+        udp_sender.sendto(vmc_frame(0.1), source.address)
         assert poll_frame(source).t == 1000.0
 
 
-def test_default_receive_time_is_the_kernel_arrival_not_the_read(sender):
+def test_default_receive_time_is_the_kernel_arrival_not_the_read(udp_sender):
     with UdpSource(VmcAdapter(), port=0) as source:
         t_sent = time.monotonic()
-        sender.sendto(vmc_frame(0.1), source.address)
+        udp_sender.sendto(vmc_frame(0.1), source.address)
         frame = poll_frame(source)
         assert t_sent - 0.002 <= frame.t <= time.monotonic()
         # keep the receive thread from reading for 50 ms: a busy loop holding the GIL (long switch interval)
@@ -111,7 +75,7 @@ def test_default_receive_time_is_the_kernel_arrival_not_the_read(sender):
         sys.setswitchinterval(1.0)
         try:
             t_sent = time.monotonic()
-            sender.sendto(vmc_frame(0.2), source.address)
+            udp_sender.sendto(vmc_frame(0.2), source.address)
             while time.monotonic() - t_sent < 0.05:
                 pass
         finally:
@@ -121,17 +85,17 @@ def test_default_receive_time_is_the_kernel_arrival_not_the_read(sender):
         assert source.counters["waited_over_1ms"] >= 1
 
 
-def test_senders_outside_allow_are_dropped_and_counted(sender):
+def test_senders_outside_allow_are_dropped_and_counted(udp_sender):
     with UdpSource(VmcAdapter(), port=0, allow={"10.1.2.3"}) as source:
-        sender.sendto(vmc_frame(0.5), source.address)
+        udp_sender.sendto(vmc_frame(0.5), source.address)
         wait_for(lambda: source.counters["filtered_sender"] == 1, "the filtered packet")
         assert source.latest() == (None, 0) and source.counters["datagrams"] == 0
     with UdpSource(VmcAdapter(), port=0, allow={"127.0.0.1"}) as source:
-        sender.sendto(vmc_frame(0.5), source.address)
+        udp_sender.sendto(vmc_frame(0.5), source.address)
         assert poll_frame(source).weights[JAW] == pytest.approx(0.5)
 
 
-def test_on_packet_sees_raw_bytes_and_its_errors_are_counted(sender):
+def test_on_packet_sees_raw_bytes_and_its_errors_are_counted(udp_sender):
     seen = []
 
     def record(data, t, who):
@@ -140,10 +104,10 @@ def test_on_packet_sees_raw_bytes_and_its_errors_are_counted(sender):
             raise RuntimeError("recorder failed")
 
     with UdpSource(VmcAdapter(), port=0, on_packet=record) as source:
-        sender.sendto(b"first", source.address)
+        udp_sender.sendto(b"first", source.address)
         wait_for(lambda: source.counters["internal_error"] == 1, "the recorder error")
         assert isinstance(source.last_error, RuntimeError)
-        sender.sendto(vmc_frame(0.3), source.address)  # the thread goes on
+        udp_sender.sendto(vmc_frame(0.3), source.address)  # the thread goes on
         assert poll_frame(source).weights[JAW] == pytest.approx(0.3)
     assert seen[0][0] == b"first" and seen[1][0] == vmc_frame(0.3)
     assert seen[0][2][0] == "127.0.0.1"
@@ -165,11 +129,11 @@ def test_stop_ends_the_thread_and_frees_the_port():
     UdpSource(VmcAdapter(), port=port).start().stop()  # the port can be bound again
 
 
-def test_livelinkface_packets_over_udp(sender):
+def test_livelinkface_packets_over_udp(udp_sender):
     weights = [0.0] * 52
     weights[JAW] = 0.8
     with UdpSource(make_adapter("livelinkface"), port=0) as source:
-        sender.sendto(encode_packet(weights, number=77), source.address)
+        udp_sender.sendto(encode_packet(weights, number=77), source.address)
         frame = poll_frame(source)
         assert frame.weights[JAW] == pytest.approx(0.8) and frame.number == 77
 
