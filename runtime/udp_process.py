@@ -53,7 +53,7 @@ from multiprocessing import shared_memory
 import numpy as np
 
 from .frames import Frame
-from .udp_source import bind_udp
+from .udp_source import bind_udp, bound_address
 
 MAX_WEIGHTS = 1024
 MAX_MARKERS = 2048
@@ -155,10 +155,7 @@ class UdpProcessSource:
     @property
     def address(self) -> tuple[str, int]:
         """(host, port) actually bound; the requested ones before :meth:`start`."""
-        if self._sock is None:
-            return self.host, self.port
-        host, port = self._sock.getsockname()[:2]
-        return host, port
+        return bound_address(self._sock, self.host, self.port)
 
     def start(self) -> "UdpProcessSource":
         """Bind (here, so a busy port raises here) and start the receiving process.

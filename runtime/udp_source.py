@@ -127,6 +127,14 @@ def bind_udp(host: str, port: int, kind: str, stamps: bool = False) -> tuple[soc
     return sock, rcvbuf
 
 
+def bound_address(sock: socket.socket | None, host: str, port: int) -> tuple[str, int]:
+    """(host, port) ``sock`` is bound to, or the requested ``host``, ``port`` while there is no socket."""
+    if sock is None:
+        return host, port
+    bound_host, bound_port = sock.getsockname()[:2]
+    return bound_host, bound_port
+
+
 class UdpSource:
     """Frames from UDP datagrams decoded by ``adapter``.
 
@@ -164,10 +172,7 @@ class UdpSource:
     @property
     def address(self) -> tuple[str, int]:
         """(host, port) actually bound; the requested ones before :meth:`start`."""
-        if self._sock is None:
-            return self.host, self.port
-        host, port = self._sock.getsockname()[:2]
-        return host, port
+        return bound_address(self._sock, self.host, self.port)
 
     def start(self) -> "UdpSource":
         """Bind and start the receive thread.
