@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from udp_helpers import vmc_frame
+from osc_helpers import vmc_frame
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.loop import FrameLoop, WallClock, WeightLog

@@ -6,33 +6,12 @@ import math
 
 import numpy as np
 import pytest
-from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message_builder import OscMessageBuilder
+from osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.facecap import FACECAP_ORDER, FaceCapAdapter
 
 I = {name: i for i, name in enumerate(ARKIT_NAMES)}
-
-
-def msg(address, *args):
-    b = OscMessageBuilder(address)
-    for a in args:
-        b.add_arg(a)
-    return b.build()
-
-
-def bundle(*messages):
-    b = OscBundleBuilder(IMMEDIATELY)
-    for m in messages:
-        b.add_content(m)
-    return b.build().dgram
-
-
-def counts(adapter, **expected):
-    want = {k: 0 for k in adapter.counters}
-    want.update(expected)
-    assert adapter.counters == want
 
 
 def test_index_24_is_jaw_open_in_face_cap_order():

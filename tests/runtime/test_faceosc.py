@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message_builder import OscMessageBuilder
+from osc_helpers import counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.faceosc import RESET_SPANS, SPANS, TAU_ACTIVE, FaceOscAdapter
@@ -16,13 +16,6 @@ from facepuppet.runtime.geometry import euler_to_quat
 I = {name: i for i, name in enumerate(ARKIT_NAMES)}
 REST = {"mouth/height": 1.0, "mouth/width": 14.0, "eyebrow/left": 7.5, "eyebrow/right": 7.5,
         "eye/left": 2.8, "eye/right": 2.8, "jaw": 20.0, "nostrils": 6.0}
-
-
-def msg(address, *args):
-    b = OscMessageBuilder(address)
-    for a in args:
-        b.add_arg(a)
-    return b.build()
 
 
 def frame_bundle(found=1, **gestures):
@@ -34,12 +27,6 @@ def frame_bundle(found=1, **gestures):
     for name, v in values.items():
         b.add_content(msg("/gesture/" + name, v))
     return b.build().dgram
-
-
-def counts(adapter, **expected):
-    want = {k: 0 for k in adapter.counters}
-    want.update(expected)
-    assert adapter.counters == want
 
 
 def w(frame, name):

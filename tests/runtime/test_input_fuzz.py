@@ -19,9 +19,8 @@ import time
 
 import numpy as np
 import pytest
-from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.osc_packet import OscPacket
+from osc_helpers import bundle, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES, pascal
 from facepuppet.runtime.input_kinds import INPUT_KINDS, make_adapter
@@ -35,20 +34,6 @@ N_LIVE = 4_000     # per kind over loopback: 20,000 in all
 DEADLINE_S = 5.0
 JAW = ARKIT_NAMES.index("jawOpen")
 TAGS = "ifsbdhTFNrmtcSI[]x\x00"
-
-
-def msg(address, *args):
-    b = OscMessageBuilder(address)
-    for a in args:
-        b.add_arg(*a) if isinstance(a, tuple) else b.add_arg(a)
-    return b.build()
-
-
-def bundle(*messages):
-    b = OscBundleBuilder(IMMEDIATELY)
-    for m in messages:
-        b.add_content(m)
-    return b.build().dgram
 
 
 MARKER_NAMES = tuple(f"m{i}" for i in range(8))

@@ -7,6 +7,7 @@ import struct
 
 import numpy as np
 import pytest
+from osc_helpers import counts
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.geometry import euler_to_quat
@@ -27,12 +28,6 @@ def values61(**named):
     for k, x in named.items():
         v[ARKIT_NAMES.index(k) if k in ARKIT_NAMES else 52 + ("yaw", "pitch", "roll").index(k)] = x
     return v
-
-
-def counts(adapter, **expected):
-    want = {k: 0 for k in adapter.counters}
-    want.update(expected)
-    assert adapter.counters == want
 
 
 def test_jaw_open_at_arkit_index_17_and_head_rotation():

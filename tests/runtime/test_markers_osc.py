@@ -6,20 +6,12 @@ import math
 
 import numpy as np
 import pytest
-from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message_builder import OscMessageBuilder
+from osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.markers_osc import FRAME, LAYOUT, MAX_LAYOUTS, MAX_MARKERS, MarkersAdapter
 
 NAMES = ("nose", "chin", "mouthL")
 POINTS = np.array([[0.0, 10.0, 5.0], [0.0, -40.0, 2.0], [np.nan, np.nan, np.nan]], dtype="<f4")
-
-
-def msg(address, *args):
-    b = OscMessageBuilder(address)
-    for a in args:
-        b.add_arg(*a) if isinstance(a, tuple) else b.add_arg(a)
-    return b.build()
 
 
 def layout(layout_id=1, names=NAMES):
@@ -28,19 +20,6 @@ def layout(layout_id=1, names=NAMES):
 
 def frame(layout_id=1, number=7, t_sender=(12.25, "d"), points=POINTS):
     return msg(FRAME, layout_id, number, t_sender, (np.asarray(points, "<f4").tobytes(), "b"))
-
-
-def bundle(*messages):
-    b = OscBundleBuilder(IMMEDIATELY)
-    for m in messages:
-        b.add_content(m)
-    return b.build().dgram
-
-
-def counts(adapter, **expected):
-    want = {k: 0 for k in adapter.counters}
-    want.update(expected)
-    assert adapter.counters == want
 
 
 def test_layout_then_frame_gives_named_markers_with_nan_for_occluded():

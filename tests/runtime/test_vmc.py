@@ -7,8 +7,7 @@ import struct
 
 import numpy as np
 import pytest
-from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message_builder import OscMessageBuilder
+from osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.vmc import PRESETS, VmcAdapter
@@ -17,33 +16,9 @@ VAL, APPLY = "/VMC/Ext/Blend/Val", "/VMC/Ext/Blend/Apply"
 I = {name: i for i, name in enumerate(ARKIT_NAMES)}
 
 
-def msg(address, *args):
-    b = OscMessageBuilder(address)
-    for a in args:
-        if isinstance(a, tuple):
-            b.add_arg(*a)
-        else:
-            b.add_arg(a)
-    return b.build()
-
-
-def bundle(*messages):
-    b = OscBundleBuilder(IMMEDIATELY)
-    for m in messages:
-        b.add_content(m)
-    return b.build().dgram
-
-
 def blend(*pairs):
     """One bundle: Val per (name, value), then Apply."""
     return bundle(*(msg(VAL, n, v) for n, v in pairs), msg(APPLY))
-
-
-def counts(adapter, **expected):
-    """Counters, with every counter not named expected to be 0."""
-    want = {k: 0 for k in adapter.counters}
-    want.update(expected)
-    assert adapter.counters == want
 
 
 def test_val_then_apply_gives_jaw_open_and_nan_elsewhere():
