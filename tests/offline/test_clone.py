@@ -8,7 +8,7 @@ from facepuppet.offline.control_points import (
     ControlPoints, propose_control_points, read_control_points, similarity_transform, write_control_points,
 )
 from facepuppet.offline.elastic_basis import ElasticBasis, fixed_region
-from tests.offline.elastic_meshes import face_points, grid
+from helpers.elastic_meshes import face_points, grid
 
 
 def rotation(axis, angle):

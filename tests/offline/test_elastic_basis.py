@@ -6,7 +6,7 @@ import pytest
 from facepuppet.offline.elastic_basis import ElasticBasis, fixed_region
 from facepuppet.offline.elastic_params import ExpressionFit
 from facepuppet.offline.laplacian import bilaplacian
-from tests.offline.elastic_meshes import face_points, grid
+from helpers.elastic_meshes import face_points, grid
 
 
 @pytest.fixture(scope="module")

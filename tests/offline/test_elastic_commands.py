@@ -11,7 +11,7 @@ from facepuppet.offline.control_points import ControlPoints, write_control_point
 from facepuppet.offline.elastic_basis import ElasticBasis, fixed_region
 from facepuppet.offline.lip_line import cut_lip_line, fix_inner_lips
 from facepuppet.runtime.elastic import ElasticModel
-from tests.offline.elastic_meshes import grid, nearest
+from helpers.elastic_meshes import grid, nearest
 
 SPOTS = {
     "nose_tip": (0, 0), "forehead": (0, 2.5), "eye_inner_L": (0.9, 1.3), "eye_inner_R": (-0.9, 1.3),

@@ -6,7 +6,7 @@ import pytest
 from facepuppet.offline.laplacian import (
     bilaplacian, components, cotangent_laplacian, vertex_areas, vertex_gradients,
 )
-from tests.offline.elastic_meshes import grid
+from helpers.elastic_meshes import grid
 
 
 def dense_cotangent(v, tris):

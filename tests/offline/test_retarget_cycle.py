@@ -7,7 +7,7 @@ import argparse
 import numpy as np
 import pytest
 
-from kpls_characters import SHAPES, bump_character
+from helpers.kpls_characters import SHAPES, bump_character
 from facepuppet.offline.cyclic_eval import DUTREVE, cyclic_error, evaluate, format_table, bar_plot, improvements
 from facepuppet.offline.retarget_targets import ExaggeratedRigTarget, LinearRigTarget, stylise
 from facepuppet.offline.kpls import KernelPLS

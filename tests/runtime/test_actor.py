@@ -7,7 +7,7 @@ import pytest
 
 from facepuppet.runtime.actor import Actor
 from facepuppet.runtime.tables import TablesError
-from small_actors import K, make_actor
+from helpers.small_actors import K, make_actor
 
 
 def test_evaluate_is_eq2_and_tables_round_trip(tmp_path):

@@ -8,7 +8,7 @@ from facepuppet.runtime.actor_pair import ActorPair
 from facepuppet.runtime.actor_retarget import ActorRetarget
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.marker_solver import MarkerSolver
-from small_actors import K, N, make_actor
+from helpers.small_actors import K, N, make_actor
 
 
 def test_retarget_stage_turns_marker_frames_into_weights(tmp_path):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from small_characters import sphere_character
+from helpers.small_characters import sphere_character
 
 from facepuppet.runtime import bench
 

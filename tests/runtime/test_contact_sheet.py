@@ -6,7 +6,7 @@ import argparse
 import numpy as np
 import pytest
 from PIL import Image
-from small_characters import sphere_character
+from helpers.small_characters import sphere_character
 
 from facepuppet.runtime import contact_sheet
 from facepuppet.runtime.images import LABEL_HEIGHT, contact_sheet as make_sheet, save_png

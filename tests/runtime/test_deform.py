@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from small_characters import sphere_character
+from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.deform import CpuDeformer
 from facepuppet.runtime.geometry import vertex_normals

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from osc_helpers import vmc_frame
+from helpers.osc_helpers import vmc_frame
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.loop import FrameLoop, WallClock, WeightLog

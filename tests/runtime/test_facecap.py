@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from osc_helpers import bundle, counts, msg
+from helpers.osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.facecap import FACECAP_ORDER, FaceCapAdapter

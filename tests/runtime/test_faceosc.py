@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from osc_helpers import counts, msg
+from helpers.osc_helpers import counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.faceosc import RESET_SPANS, SPANS, TAU_ACTIVE, FaceOscAdapter

@@ -5,7 +5,7 @@ import pytest
 
 from facepuppet.runtime.gesture_tables import load_gesture_db
 from facepuppet.runtime.tables import TablesError, save_tables
-from gesture_dbs import db  # noqa: F401  (a pytest fixture)
+from helpers.gesture_dbs import db  # noqa: F401  (a pytest fixture)
 
 
 def test_loading_refuses_a_table_with_bad_take_indices(tmp_path, db):

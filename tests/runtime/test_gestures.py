@@ -11,7 +11,7 @@ from facepuppet.runtime.gesture_synth import RECENT_PENALTY, GestureSynth
 from facepuppet.runtime.gesture_tables import load_gesture_db
 from facepuppet.runtime.gestures import GestureLayer
 from facepuppet.runtime.tables import save_tables
-from gesture_dbs import db, small_db  # noqa: F401  (db is a pytest fixture)
+from helpers.gesture_dbs import db, small_db  # noqa: F401  (db is a pytest fixture)
 
 
 def test_reproduces_reference_with_sigma_zero_and_one_candidate(db):

@@ -20,7 +20,7 @@ import time
 import numpy as np
 import pytest
 from pythonosc.osc_packet import OscPacket
-from osc_helpers import bundle, msg
+from helpers.osc_helpers import bundle, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES, pascal
 from facepuppet.runtime.input_kinds import INPUT_KINDS, make_adapter

@@ -10,18 +10,7 @@ import pytest
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls_retarget import KplsRetarget
 from facepuppet.runtime.tables import TablesError, load_tables, save_tables
-
-
-def _stage(kernel="rbf", n_train=30, n_features=12, source=("jawOpen", "eyeBlinkLeft", "eyeBlinkRight"),
-           target=("a", "b", "c", "d"), seed=0):
-    rng = np.random.default_rng(seed)
-    return KplsRetarget(
-        source_names=source, target_names=target,
-        source_features=rng.normal(size=(n_features, len(source))), train_inputs=rng.normal(size=(n_train, n_features)),
-        dual_coef=rng.normal(size=(n_train, len(target))) * 0.1, kernel_col_mean=rng.uniform(0, 1, n_train),
-        kernel_grand_mean=0.4, target_mean=rng.uniform(0, 1, len(target)), kernel=kernel, gamma=0.05,
-        coef0=1.0, degree=2, units="cm",
-    )
+from helpers.kpls_stages import random_stage
 
 
 def _reference(stage, w):
@@ -43,7 +32,7 @@ def _reference(stage, w):
 
 @pytest.mark.parametrize("kernel", ["rbf", "poly", "linear"])
 def test_per_frame_path_matches_the_plain_reference(kernel):
-    stage = _stage(kernel)
+    stage = random_stage(kernel)
     rng = np.random.default_rng(1)
     for _ in range(5):
         w = rng.uniform(0, 1, 3)
@@ -53,7 +42,7 @@ def test_per_frame_path_matches_the_plain_reference(kernel):
 
 
 def test_apply_maps_frame_channels_by_name_and_skips_frames_without_weights():
-    stage = _stage()
+    stage = random_stage()
     w = np.array([0.3, 0.8, 0.1], np.float32)
     # Live Link spelling, another order, an extra channel and a NaN (missing = 0)
     frame = Frame(t=0.0, channels=("EyeBlinkRight", "JawOpen", "TongueOut", "EyeBlinkLeft"),
@@ -65,7 +54,7 @@ def test_apply_maps_frame_channels_by_name_and_skips_frames_without_weights():
 
 
 def test_tables_round_trip_and_damaged_files(tmp_path):
-    stage = _stage("poly")
+    stage = random_stage("poly")
     path = stage.save(tmp_path / "r.npz")
     back = KplsRetarget.load(path)
     assert back.kernel == "poly" and back.source_names == stage.source_names and back.units == "cm"
@@ -91,11 +80,11 @@ def test_replay_command_uses_the_retarget(tmp_path, egl_ctx):
 
     character = build_demo_character()
     char_path = character.save(tmp_path / "demo.npz")
-    stage = _stage(target=character.shape_names, source=("jawOpen", "mouthSmileLeft"))
+    stage = random_stage(target=character.shape_names, source=("jawOpen", "mouthSmileLeft"))
     stage.save(tmp_path / "r.npz")
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers())
-    wrong = _stage().save(tmp_path / "wrong.npz")
+    wrong = random_stage().save(tmp_path / "wrong.npz")
     session = tmp_path / "take.csv"
     session.write_text("Timecode,BlendShapeCount,JawOpen,MouthSmileLeft\n"
                        "00:00:00:00.000,2,0.1,0.2\n00:00:00:01.000,2,0.6,0.4\n")

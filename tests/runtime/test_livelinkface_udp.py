@@ -7,7 +7,7 @@ import struct
 
 import numpy as np
 import pytest
-from osc_helpers import counts
+from helpers.osc_helpers import counts
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.geometry import euler_to_quat

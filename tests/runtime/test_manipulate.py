@@ -251,8 +251,9 @@ def window_scenario() -> None:
 def test_window_callbacks_drag_a_point_on_a_real_glfw_window(x_display):
     env = {**os.environ, "DISPLAY": x_display}
     env.pop("WAYLAND_DISPLAY", None)
-    code = ("import sys; sys.path.insert(0, sys.argv[1]); import test_manipulate as t; t.window_scenario()")
-    result = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent)], env=env,
+    code = ("import runpy, sys; sys.path.insert(0, sys.argv[2]); "
+            "runpy.run_path(sys.argv[1])['window_scenario']()")
+    result = subprocess.run([sys.executable, "-c", code, str(Path(__file__)), str(next(p for p in Path(__file__).resolve().parents if p.name == "tests"))], env=env,
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "window scenario: ok" in result.stdout

@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from facepuppet.runtime.marker_solver import MarkerSolver
-from small_actors import K, N, make_actor
+from helpers.small_actors import K, N, make_actor
 
 
 def test_solver_recovers_s_and_matches_a_reference_least_squares():

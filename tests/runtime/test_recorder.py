@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
-from small_characters import sphere_character
+from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.input_kinds import make_adapter
 from facepuppet.runtime.recorder import PacketRecorder

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from small_characters import sphere_character
+from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.gl_context import GLUnavailable, create_context

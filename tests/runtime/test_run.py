@@ -16,7 +16,7 @@ import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
-from small_characters import sphere_character
+from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.pipeline import LivePipeline

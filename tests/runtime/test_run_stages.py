@@ -24,8 +24,8 @@ from facepuppet.runtime.elastic import ElasticModel
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls_retarget import KplsRetarget
 from facepuppet.runtime.session import read_session
-from tests.runtime.small_characters import sphere_character
-from tests.runtime.test_elastic import random_model
+from helpers.small_characters import sphere_character
+from helpers.elastic_models import random_model
 
 NO_SMOOTHING = "\n".join(f"[filter.{r}]\nmin_cutoff = 500.0\nbeta = 0.0" for r in ("eyes", "brows", "mouth", "other",
                                                                                   "head")) + \
@@ -86,7 +86,7 @@ def actor_files(tmp_path_factory):
     from facepuppet.offline.actor_train import train_actor
     from facepuppet.offline.actor_transfer import retarget_actor
     from facepuppet.offline.synthetic_capture import synthetic_capture
-    from tests.offline.test_actor_transfer import grid_face
+    from helpers.small_characters import grid_face
 
     tmp = tmp_path_factory.mktemp("actor")
     cap, truth = synthetic_capture(n_frames=600, n_markers=20, k=3, seed=4)
@@ -164,7 +164,7 @@ def test_markers_need_an_actor_and_a_pair_that_fit(actor_files, tmp_path):
 # -- kernel PLS ----------------------------------------------------------------------------------------------------
 
 def test_kpls_retarget_in_the_live_run(tmp_path):
-    from tests.runtime.test_kpls_retarget import _stage
+    from helpers.kpls_stages import random_stage as _stage
 
     character = sphere_character()
     char_path = character.save(tmp_path / "sphere.npz")

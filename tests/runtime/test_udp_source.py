@@ -9,8 +9,8 @@ import time
 
 import numpy as np
 import pytest
-from osc_helpers import vmc_frame
-from udp_helpers import poll_frame, wait_for
+from helpers.osc_helpers import vmc_frame
+from helpers.udp_helpers import poll_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.input_kinds import INPUT_KINDS, make_adapter

@@ -7,7 +7,7 @@ import struct
 
 import numpy as np
 import pytest
-from osc_helpers import bundle, counts, msg
+from helpers.osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.vmc import PRESETS, VmcAdapter

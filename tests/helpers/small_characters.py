@@ -78,3 +78,37 @@ def make_character(v, tris, mats, color, material_names, params, shapes: dict) -
         delta_positions=positions,
         delta_normals=normals,
     )
+
+
+def grid_face(extra: bool = False) -> Character:
+    """A gently curved 21 x 21 sheet facing +z, cm, with shapes jawOpen (lower half drops) and puff (+z).
+
+    ``extra`` adds jawClose (the opposite of jawOpen), eyeLookIn_L (a copy of puff, a gaze name) and
+    cornerBump (moves only the sheet's top-left corner, far from every marker).
+    """
+    x, y = np.meshgrid(np.linspace(-5, 5, 21), np.linspace(-7, 7, 21))
+    v = np.c_[x.ravel(), y.ravel(), 3.0 - 0.04 * (x.ravel() ** 2 + y.ravel() ** 2)].astype(np.float32)
+    idx = np.arange(441).reshape(21, 21)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    tris = np.r_[np.c_[a, b, d], np.c_[a, d, c]].astype(np.uint32)
+    if vertex_normals(v, tris)[220, 2] < 0:
+        tris = tris[:, ::-1].copy()
+    jaw = np.zeros_like(v)
+    jaw[:, 1] = np.where(v[:, 1] < 0, 0.1 * v[:, 1], 0.0)
+    puff = np.zeros_like(v)
+    puff[:, 2] = 0.5 * np.exp(-(v[:, 0] ** 2 + v[:, 1] ** 2) / 8)
+    shapes = [jaw, puff]
+    names = ("jawOpen", "puff")
+    if extra:
+        bump = np.zeros_like(v)
+        bump[:, 2] = 0.8 * np.exp(-((v[:, 0] + 5) ** 2 + (v[:, 1] - 7) ** 2) / 0.5)
+        shapes += [-jaw, puff.copy(), bump]
+        names += ("jawClose", "eyeLookIn_L", "cornerBump")
+    dense = np.stack(shapes)
+    offsets, indices, both = sparse_deltas(np.concatenate([dense, np.zeros_like(dense)], axis=2), tolerance=1e-7)
+    return Character(name="grid", units="cm", vertices=v, triangles=tris,
+                     triangle_material=np.zeros(len(tris), np.uint16), vertex_color=np.full((441, 3), 0.5, np.float32),
+                     material_names=("skin",), material_params=np.array([[0.1, 10, MATERIAL_KINDS["skin"], 0]], np.float32),
+                     pivot=np.zeros(3, np.float32), shape_names=names, delta_offsets=offsets,
+                     delta_indices=indices, delta_positions=np.ascontiguousarray(both[:, :3]),
+                     delta_normals=np.ascontiguousarray(both[:, 3:]))
