@@ -16,10 +16,10 @@ import numpy as np
 from facepuppet.runtime.actor import Actor
 from facepuppet.runtime.tables import hash_inputs
 
-from .actuation import ActuationModel, k_report, neutral_frame
-from .capture_io import Capture
-from .cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
-from .stabilise import stabilise
+from facepuppet.offline.actuation import ActuationModel, k_report, neutral_frame
+from facepuppet.offline.capture_io import Capture
+from facepuppet.offline.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
+from facepuppet.offline.stabilise import stabilise
 
 Progress = Callable[[str, float, str], None]
 BOUND_MARGIN = 0.25  # solver bounds: the training range widened by this fraction of it

@@ -9,7 +9,7 @@ adding < 1 %, tables at least 3x smaller than dense deltas.
 
 from __future__ import annotations
 
-from .bench_data import add_data_argument, data_dir
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 import argparse
 import json
@@ -18,10 +18,10 @@ import time
 import numpy as np
 
 
-from .control_points import ict_control_points
-from .elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis
-from .elastic_commands import main_front
-from .elastic_params import fit_character, target_fixed_mask
+from facepuppet.offline.control_points import ict_control_points
+from facepuppet.offline.elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis
+from facepuppet.offline.elastic_commands import main_front
+from facepuppet.offline.elastic_params import fit_character, target_fixed_mask
 
 
 
@@ -57,7 +57,7 @@ def _frame_costs(character, model, frames, width, height) -> dict:
 
 def bench_elastic(args: argparse.Namespace) -> dict:
     ict = data_dir(args.data) / "ict-facekit"
-    from .rig_import import import_rig
+    from facepuppet.offline.rig_import import import_rig
 
     character = import_rig(ict / "generic_neutral_mesh.obj", ict)
     marks = json.loads((ict / "vertex_indices.json").read_text(encoding="utf-8"))["idx_to_landmark_verts"]

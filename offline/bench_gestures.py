@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_data import add_data_argument, data_dir
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 BLOCK_FRAMES = 60      # block length of the reference bootstrap (2 s at 30 fps)
 N_BOOT = 1000
@@ -238,9 +238,9 @@ def run_bench(args) -> dict:
     from facepuppet.runtime.gesture_tables import load_gesture_db
     from facepuppet.runtime.speaker_normaliser import SpeakerNormaliser
 
-    from .blend_weights import BlendWeights, choose_basis
-    from .gesture_db import build_gesture_db, read_llf_take
-    from .speech_intensity import speech_intensity
+    from facepuppet.offline.blend_weights import BlendWeights, choose_basis
+    from facepuppet.offline.gesture_db import build_gesture_db, read_llf_take
+    from facepuppet.offline.speech_intensity import speech_intensity
 
     d = data_dir(args.data)
     speech = (d / "speech/facegood_1114_3_15.wav", d / "speech/facegood_1114_3_15_blendshapes.csv",

@@ -9,7 +9,7 @@ blendshape correspondence (the control) and once non-linear
 
 from __future__ import annotations
 
-from .bench_data import add_data_argument, data_dir
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 import time
 from pathlib import Path
@@ -29,9 +29,9 @@ def _add_arguments(parser) -> None:
 def _runtime_timing(source, target, frames, log) -> dict:
     from facepuppet.runtime.kpls_retarget import KplsRetarget
 
-    from .kpls import KernelPLS
-    from .kpls_commands import to_runtime
-    from .retarget_pairs import training_pairs
+    from facepuppet.offline.kpls import KernelPLS
+    from facepuppet.offline.kpls_commands import to_runtime
+    from facepuppet.offline.retarget_pairs import training_pairs
 
     pairs = training_pairs(source, target)
     model = KernelPLS(kernel="rbf").fit(pairs.X, pairs.Y)
@@ -62,9 +62,9 @@ def run_bench(args, log=print) -> dict:
     from facepuppet.runtime.demo_head import build_demo_character
     from facepuppet.runtime.livelinkface_csv import read_llf_csv
 
-    from .cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights
-    from .retarget_targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
-    from .rig_import import import_rig
+    from facepuppet.offline.cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights
+    from facepuppet.offline.retarget_targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
+    from facepuppet.offline.rig_import import import_rig
 
     data = data_dir(args.data)
     ict_dir = data / "ict-facekit"

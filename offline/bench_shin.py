@@ -8,7 +8,7 @@ held-out RMS marker error of the linear ICA model and the cubic one.
 
 from __future__ import annotations
 
-from .bench_data import add_data_argument, data_dir
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 import time
 import warnings
@@ -65,7 +65,7 @@ def machine_load() -> dict:
 
 
 def _train(capture, k: int, **settings) -> tuple[object, dict]:
-    from .actor_train import train_actor
+    from facepuppet.offline.actor_train import train_actor
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -80,8 +80,8 @@ def _train(capture, k: int, **settings) -> tuple[object, dict]:
 
 
 def run(args) -> dict:
-    from .capture_io import read_capture
-    from .synthetic_capture import synthetic_capture
+    from facepuppet.offline.capture_io import read_capture
+    from facepuppet.offline.synthetic_capture import synthetic_capture
 
     results: dict = {"solve": {}, "training": {}, "machine_before": machine_load()}
     cap, _ = synthetic_capture(n_frames=3500, n_markers=68, k=13, seed=0)

@@ -11,15 +11,15 @@ import numpy as np
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic import ElasticModel
 
-from .clone import character_with_shapes, clone_model, mesh_character
-from .control_points import (
+from facepuppet.offline.clone import character_with_shapes, clone_model, mesh_character
+from facepuppet.offline.control_points import (
     ANCHOR_NAMES, MEDIAPIPE_ANCHORS, ControlPoints, anchor_positions, front_vertices, ict_control_points,
     propose_control_points, read_control_points, write_control_points,
 )
-from .elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K
-from .elastic_params import build_model, fit_character
-from .laplacian import components
-from .lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
+from facepuppet.offline.elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K
+from facepuppet.offline.elastic_params import build_model, fit_character
+from facepuppet.offline.laplacian import components
+from facepuppet.offline.lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
 
 
 # Anchor groups (control_points.ANCHOR_NAMES) by control-point name.
@@ -64,7 +64,7 @@ def load_target(spec: str) -> Character:
         return build_demo_character()
     path = Path(spec)
     if path.suffix.lower() == ".obj":
-        from .obj import read_obj
+        from facepuppet.offline.obj import read_obj
 
         mesh = read_obj(path)
         return mesh_character(mesh.vertices, mesh.triangles, path.stem)
@@ -92,7 +92,7 @@ def _fit(args: argparse.Namespace) -> int:
     if args.pictures:
         from facepuppet.runtime.gl_context import create_context
 
-        from .elastic_pictures import overlay, reconstruction_sheets
+        from facepuppet.offline.elastic_pictures import overlay, reconstruction_sheets
 
         args.pictures.mkdir(parents=True, exist_ok=True)
         ctx = create_context(headless=True).ctx
@@ -148,7 +148,7 @@ def _clone(args: argparse.Namespace) -> int:
     if args.pictures:
         from facepuppet.runtime.gl_context import create_context
 
-        from .elastic_pictures import expression_sheet, overlay
+        from facepuppet.offline.elastic_pictures import expression_sheet, overlay
 
         args.pictures.mkdir(parents=True, exist_ok=True)
         ctx = create_context(headless=True).ctx

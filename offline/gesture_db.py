@@ -35,9 +35,9 @@ from facepuppet.runtime.gesture_tables import GROUPS, HEAD_FEATURES
 from facepuppet.runtime.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.tables import hash_inputs, save_tables
 
-from .blend_weights import BlendWeights, choose_basis
-from .regional_features import head_track, region_of
-from .speech_intensity import speech_intensity
+from facepuppet.offline.blend_weights import BlendWeights, choose_basis
+from facepuppet.offline.regional_features import head_track, region_of
+from facepuppet.offline.speech_intensity import speech_intensity
 
 
 @dataclass

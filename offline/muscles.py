@@ -28,7 +28,7 @@ import numpy as np
 
 from facepuppet.runtime.elastic import MUSCLE_KINDS
 
-from .control_points import ControlPoints
+from facepuppet.offline.control_points import ControlPoints
 
 
 @dataclass(frozen=True)

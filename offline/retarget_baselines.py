@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kpls import check_inputs, check_pairs
+from facepuppet.offline.kpls import check_inputs, check_pairs
 
 
 class _Regressor:

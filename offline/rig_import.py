@@ -29,8 +29,8 @@ from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.geometry import incidence_matrix
 from facepuppet.runtime.tables import hash_inputs
 
-from .mtl import read_mtl
-from .obj import read_obj, read_vertices_only
+from facepuppet.offline.mtl import read_mtl
+from facepuppet.offline.obj import read_obj, read_vertices_only
 
 __all__ = ["import_rig", "material_kind", "NORMAL_TOLERANCE", "KIND_WORDS"]
 

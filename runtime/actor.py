@@ -21,7 +21,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .tables import Section, TableSchema, TablesError, hash_inputs, load_tables, register_schema, save_tables
+from facepuppet.runtime.tables import Section, TableSchema, TablesError, hash_inputs, load_tables, register_schema, save_tables
 
 ACTOR_SCHEMA = register_schema(TableSchema(
     kind="actor",
@@ -86,7 +86,7 @@ class Actor:
         for name in ("class_marker", "head_markers"):
             object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), dtype=np.int32))
         object.__setattr__(self, "names", tuple(self.names))
-        from .tables import _check_channels, _resolve_dims
+        from facepuppet.runtime.tables import _check_channels, _resolve_dims
 
         dims = _resolve_dims(ACTOR_SCHEMA, self._arrays(), None)
         _check_channels(ACTOR_SCHEMA, self._channels(), dims, None)

@@ -19,8 +19,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .actor import _f32
-from .tables import Section, TableSchema, load_tables, register_schema, save_tables
+from facepuppet.runtime.actor import _f32
+from facepuppet.runtime.tables import Section, TableSchema, load_tables, register_schema, save_tables
 
 PAIR_SCHEMA = register_schema(TableSchema(
     kind="actor_pair",
@@ -64,7 +64,7 @@ class ActorPair:
         for name in ("cubic", "similarity", "s_lower", "s_upper"):
             object.__setattr__(self, name, _f32(getattr(self, name)))
         object.__setattr__(self, "marker_vertices", np.ascontiguousarray(self.marker_vertices, dtype=np.int32))
-        from .tables import _check_channels, _resolve_dims
+        from facepuppet.runtime.tables import _check_channels, _resolve_dims
 
         dims = _resolve_dims(PAIR_SCHEMA, self._arrays(), None)
         _check_channels(PAIR_SCHEMA, self._channels(), dims, None)

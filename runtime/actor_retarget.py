@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .actor import Actor
-from .actor_pair import ActorPair
-from .frames import Frame
-from .marker_solver import MarkerSolver
-from .rigid import kabsch
+from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.marker_solver import MarkerSolver
+from facepuppet.runtime.rigid import kabsch
 
 
 class ActorRetarget:

@@ -35,7 +35,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .bench import peak_rss_mb, register_bench
+from facepuppet.runtime.bench import peak_rss_mb, register_bench
 
 _PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2**20 if hasattr(os, "sysconf") else 4096 / 2**20
 
@@ -51,9 +51,9 @@ def rss_mb() -> float:
 
 def send(host: str, port: int, rate: float, seconds: float) -> int:
     """Stream VMC frames at ``rate`` Hz for ``seconds``; returns the number of frames sent."""
-    from .channels import ARKIT_NAMES
-    from .geometry import euler_to_quat
-    from .vmc_out import VmcSender
+    from facepuppet.runtime.channels import ARKIT_NAMES
+    from facepuppet.runtime.geometry import euler_to_quat
+    from facepuppet.runtime.vmc_out import VmcSender
 
     sender = VmcSender(host, port, ARKIT_NAMES)
     n = len(ARKIT_NAMES)
@@ -76,7 +76,7 @@ def send(host: str, port: int, rate: float, seconds: float) -> int:
 
 def _phase(args, rate: float, seconds: float, log) -> dict:
     """One sender process at ``rate`` for ``seconds`` against one headless live run."""
-    from .run import run_live
+    from facepuppet.runtime.run import run_live
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))

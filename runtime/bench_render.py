@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from .bench import peak_rss_mb, register_bench
+from facepuppet.runtime.bench import peak_rss_mb, register_bench
 
 
 def synthetic_performance(n_frames: int, n_shapes: int, n_active: int = 10, fps: float = 60.0) -> np.ndarray:
@@ -70,9 +70,9 @@ def measure_path(renderer, weights: np.ndarray, warmup: int = 5) -> dict:
 
 
 def bench_render(args: argparse.Namespace) -> dict:
-    from .character import Character
-    from .gl_context import create_context
-    from .renderer import FaceRenderer
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.gl_context import create_context
+    from facepuppet.runtime.renderer import FaceRenderer
 
     character = Character.load(args.character)
     weights = synthetic_performance(args.frames, character.n_shapes, n_active=args.active)

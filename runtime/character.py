@@ -20,7 +20,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .tables import Section, TableSchema, TablesError, load_tables, register_schema, save_tables
+from facepuppet.runtime.tables import Section, TableSchema, TablesError, load_tables, register_schema, save_tables
 
 # Material kinds the shader knows (column 2 of ``material_params``).
 MATERIAL_KINDS = {"skin": 0, "eye": 1, "teeth": 2, "mouth": 3, "lashes": 4, "hidden": 5, "lips": 6}
@@ -107,7 +107,7 @@ class Character:
         if len(self.delta_indices) and int(self.delta_indices.max()) >= n_v:
             _fail("delta_indices", f"vertex index out of range for {n_v} vertices")
         # Every array goes through the tables schema: dtypes, shapes, finiteness.
-        from .tables import _resolve_dims, _check_channels
+        from facepuppet.runtime.tables import _resolve_dims, _check_channels
 
         dims = _resolve_dims(CHARACTER_SCHEMA, self._arrays(), None)
         _check_channels(CHARACTER_SCHEMA, self._channels(), dims, None)

@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.blas import saxpy
 
-from .character import Character
-from .geometry import vertex_normals
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.geometry import vertex_normals
 
 
 def check_weights(weights, n_shapes: int) -> np.ndarray:

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .loop import FrameLoop, PngSink, RecordedClock, WallClock
-from .replay import parse_size
-from .sources import ReplaySource
+from facepuppet.runtime.loop import FrameLoop, PngSink, RecordedClock, WallClock
+from facepuppet.runtime.replay import parse_size
+from facepuppet.runtime.sources import ReplaySource
 
 SHEET_CELLS = 12
 
@@ -57,11 +57,11 @@ def register(subparsers) -> None:
 
 def run_demo(args, log=print) -> int:
     """Run the ``demo`` command from parsed ``args``; returns the exit code."""
-    from .demo_head import build_demo_character
-    from .demo_performance import demo_frames
-    from .gl_context import GLUnavailable, create_context
-    from .images import contact_sheet, save_png
-    from .renderer import FaceRenderer
+    from facepuppet.runtime.demo_head import build_demo_character
+    from facepuppet.runtime.demo_performance import demo_frames
+    from facepuppet.runtime.gl_context import GLUnavailable, create_context
+    from facepuppet.runtime.images import contact_sheet, save_png
+    from facepuppet.runtime.renderer import FaceRenderer
 
     width, height = parse_size(args.size)
     if not (args.fps > 0) or not (args.duration > 0):

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import demo_head_parts as parts
-from .character import MATERIAL_KINDS, Character, sparse_deltas
-from .demo_head_parts import gauss, smoothstep
-from .geometry import vertex_normals
+from facepuppet.runtime import demo_head_parts as parts
+from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.demo_head_parts import gauss, smoothstep
+from facepuppet.runtime.geometry import vertex_normals
 
 MATERIALS = ("skin", "lips", "eye", "teeth", "mouth")
 # specular, shininess per material; the kind code comes from MATERIAL_KINDS
@@ -304,6 +304,6 @@ def build_demo_character() -> Character:
 
 
 def _arkit_order(name: str) -> int:
-    from .channels import ARKIT_NAMES
+    from facepuppet.runtime.channels import ARKIT_NAMES
 
     return ARKIT_NAMES.index(name)

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .frames import Frame
-from .geometry import euler_to_quat
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.geometry import euler_to_quat
 
 DEMO_CHANNELS: tuple[str, ...] = (
     "jawOpen", "mouthFunnel", "mouthPucker", "mouthClose",

@@ -29,8 +29,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .rigid import kabsch
-from .tables import Section, TableSchema, TablesError, _check_channels, _resolve_dims, load_tables, register_schema, save_tables
+from facepuppet.runtime.rigid import kabsch
+from facepuppet.runtime.tables import Section, TableSchema, TablesError, _check_channels, _resolve_dims, load_tables, register_schema, save_tables
 
 MUSCLE_KINDS = {"linear": 0, "sphincter": 1}
 

@@ -12,10 +12,10 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from .character import Character
-from .elastic import ElasticModel
-from .geometry import vertex_normals
-from .shader_loader import load_program
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.elastic import ElasticModel
+from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.shader_loader import load_program
 
 ELASTIC_TEXTURE_WIDTH = 4096
 

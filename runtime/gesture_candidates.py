@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .speaker_normaliser import SILENCE_Z
+from facepuppet.runtime.speaker_normaliser import SILENCE_Z
 
 N_BINS = 24       # intensity bins of the speech candidates, over [SILENCE_Z, -SILENCE_Z]
 

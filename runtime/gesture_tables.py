@@ -12,7 +12,7 @@ take of the frame and which groups that take provides.
 
 from __future__ import annotations
 
-from .tables import Section, TableSchema, TablesError, load_tables, register_schema
+from facepuppet.runtime.tables import Section, TableSchema, TablesError, load_tables, register_schema
 
 GROUPS = ("lips", "mood", "brows", "eyes", "rest", "head")
 LEVEL1 = ("lips", "mood")

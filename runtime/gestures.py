@@ -14,12 +14,12 @@ import math
 
 import numpy as np
 
-from .channels import canonical
-from .frames import Frame
-from .geometry import euler_to_quat, quat_mul
-from .gesture_synth import GestureSynth
-from .gesture_tables import GESTURE_DB_SCHEMA, GROUPS, HEAD_FEATURES, LEVEL1, load_gesture_db
-from .speaker_normaliser import SILENCE_Z, SpeakerNormaliser
+from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.geometry import euler_to_quat, quat_mul
+from facepuppet.runtime.gesture_synth import GestureSynth
+from facepuppet.runtime.gesture_tables import GESTURE_DB_SCHEMA, GROUPS, HEAD_FEATURES, LEVEL1, load_gesture_db
+from facepuppet.runtime.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
 
 __all__ = ["GESTURE_DB_SCHEMA", "GROUPS", "HEAD_FEATURES", "LEVEL1", "SILENCE_Z", "GestureSynth", "SpeakerNormaliser",
            "load_gesture_db", "GestureLayer", "VoiceOnlySource", "gesture_layer"]

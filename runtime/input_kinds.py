@@ -16,11 +16,11 @@ livelinkface   :class:`.livelinkface_udp.LiveLinkFaceAdapter`  11111  binary UDP
 
 from __future__ import annotations
 
-from .faceosc import FaceOscAdapter
-from .facecap import FaceCapAdapter
-from .livelinkface_udp import LiveLinkFaceAdapter
-from .markers_osc import MarkersAdapter
-from .vmc import VmcAdapter
+from facepuppet.runtime.faceosc import FaceOscAdapter
+from facepuppet.runtime.facecap import FaceCapAdapter
+from facepuppet.runtime.livelinkface_udp import LiveLinkFaceAdapter
+from facepuppet.runtime.markers_osc import MarkersAdapter
+from facepuppet.runtime.vmc import VmcAdapter
 
 INPUT_KINDS: dict[str, type] = {
     "vmc": VmcAdapter,

@@ -27,9 +27,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .channels import ChannelMap
-from .frames import Frame
-from .tables import Section, TableSchema, TablesError, load_tables, register_schema, save_tables
+from facepuppet.runtime.channels import ChannelMap
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.tables import Section, TableSchema, TablesError, load_tables, register_schema, save_tables
 
 KERNEL_CODES = {"linear": 0, "rbf": 1, "poly": 2}
 
@@ -95,7 +95,7 @@ class KplsRetarget:
             set_(self, name, np.ascontiguousarray(getattr(self, name), dtype=np.float32))
         set_(self, "source_names", tuple(self.source_names))
         set_(self, "target_names", tuple(self.target_names))
-        from .tables import _check_channels, _resolve_dims
+        from facepuppet.runtime.tables import _check_channels, _resolve_dims
 
         dims = _resolve_dims(RETARGET_KPLS_SCHEMA, self._arrays(), None)
         _check_channels(RETARGET_KPLS_SCHEMA, self._channels(), dims, None)

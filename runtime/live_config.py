@@ -37,7 +37,7 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from .channels import canonical
+from facepuppet.runtime.channels import canonical
 
 REGIONS = ("eyes", "brows", "mouth", "other", "head")
 

@@ -22,7 +22,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from .frames import Frame
+from facepuppet.runtime.frames import Frame
 
 CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
 
@@ -55,7 +55,7 @@ def read_live_recording(path, make_adapter) -> LiveRecording | None:
     ValueError
         naming the file when its packets decode to no frame.
     """
-    from .session import MAGIC, read_session
+    from facepuppet.runtime.session import MAGIC, read_session
 
     path = Path(path)
     with open(path, "rb") as f:
@@ -66,7 +66,7 @@ def read_live_recording(path, make_adapter) -> LiveRecording | None:
         session = read_session(path)
     if session.frames or not session.packets:
         return None
-    from .sources import decode_packets
+    from facepuppet.runtime.sources import decode_packets
 
     calibrate = [i for i, packet in enumerate(session.packets) if CALIBRATE_ADDRESS in packet.data]
     decoded = decode_packets(session.packets, make_adapter)

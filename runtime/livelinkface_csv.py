@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .frames import Frame
-from .geometry import euler_to_quat
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.geometry import euler_to_quat
 
 SOURCE = "livelinkface_csv"
 TIMECODE_FPS = 60.0

@@ -41,10 +41,10 @@ import struct
 
 import numpy as np
 
-from .channels import ARKIT_NAMES
-from .frames import Frame
-from .geometry import euler_to_quat
-from .osc_decode import COUNTER_NAMES
+from facepuppet.runtime.channels import ARKIT_NAMES
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.osc_decode import COUNTER_NAMES
 
 VERSION = 6
 N_VALUES = 61

@@ -30,9 +30,9 @@ from typing import Protocol
 
 import numpy as np
 
-from .channels import ChannelMap
-from .frames import Frame
-from .timing import StageTimer
+from facepuppet.runtime.channels import ChannelMap
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.timing import StageTimer
 
 STAGES = ("snapshot", "map", "draw_submit", "gpu_finish", "sink")
 ARRIVAL_GRID_HZ = 1000.0  # tick-label grid of a run that draws on arrival (see the module docstring)

@@ -20,17 +20,17 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from .actor import Actor
-from .actor_pair import ActorPair
-from .character import Character
-from .manipulation import Manipulation, ScreenView, read_script, run_step
+from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.manipulation import Manipulation, ScreenView, read_script, run_step
 
 class PointOverlay:
     """Round dots drawn over a renderer's framebuffer (shaders/overlay.glsl, GL_POINTS, no depth test)."""
 
     def __init__(self, ctx: moderngl.Context, view_projection: np.ndarray, max_points: int = 256,
                  point_size: float = 9.0):
-        from .shader_loader import load_program
+        from facepuppet.runtime.shader_loader import load_program
 
         self.ctx = ctx
         self.prog = load_program(ctx, "overlay.glsl")
@@ -142,10 +142,10 @@ def register(subparsers) -> None:
 
 
 def _manipulate(args) -> int:
-    from .gl_context import GLUnavailable, create_context
-    from .images import save_png
-    from .renderer import FaceRenderer
-    from .replay import parse_size
+    from facepuppet.runtime.gl_context import GLUnavailable, create_context
+    from facepuppet.runtime.images import save_png
+    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.replay import parse_size
 
     width, height = parse_size(args.size)
     actor, pair, character = Actor.load(args.actor), ActorPair.load(args.pair), Character.load(args.character)

@@ -38,8 +38,8 @@ import math
 
 import numpy as np
 
-from .frames import Frame
-from .osc_decode import OscAdapter, as_float
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.osc_decode import OscAdapter, as_float
 
 LAYOUT = "/facepuppet/markers/layout"
 FRAME = "/facepuppet/markers/frame"

@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import struct
 
-from .frames import Frame
+from facepuppet.runtime.frames import Frame
 
 COUNTER_NAMES: tuple[str, ...] = (
     "datagrams", "frames", "malformed", "unknown_address", "nonfinite",

@@ -31,10 +31,10 @@ import math
 
 import numpy as np
 
-from .frames import Frame
-from .geometry import quat_mul
-from .live_config import LiveConfig, region_of
-from .one_euro import OneEuroFilter
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.geometry import quat_mul
+from facepuppet.runtime.live_config import LiveConfig, region_of
+from facepuppet.runtime.one_euro import OneEuroFilter
 
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 

@@ -16,8 +16,8 @@ from __future__ import annotations
 import collections
 import threading
 
-from .session import SessionWriter
-from .session_records import RecordKind, encode_audio, encode_packet, encode_tick
+from facepuppet.runtime.session import SessionWriter
+from facepuppet.runtime.session_records import RecordKind, encode_audio, encode_packet, encode_tick
 
 
 class PacketRecorder:

@@ -24,12 +24,12 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from .camera import frame_bounds, model_matrix
-from .character import MATERIAL_KINDS, Character
-from .deform import CpuDeformer, check_weights
-from .elastic_renderer import check_model, setup_elastic, upload_controls
-from .geometry import bounds, vertex_normals
-from .shader_loader import load_program
+from facepuppet.runtime.camera import frame_bounds, model_matrix
+from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.deform import CpuDeformer, check_weights
+from facepuppet.runtime.elastic_renderer import check_model, setup_elastic, upload_controls
+from facepuppet.runtime.geometry import bounds, vertex_normals
+from facepuppet.runtime.shader_loader import load_program
 
 DELTA_TEXTURE_WIDTH = 4096
 MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights

@@ -26,10 +26,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .character import Character
-from .loop import FrameLoop, PngSink, RecordedClock, WallClock, WeightLog
-from .run_stages import add_stage_arguments
-from .sources import ReplaySource, open_recording
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.loop import FrameLoop, PngSink, RecordedClock, WallClock, WeightLog
+from facepuppet.runtime.run_stages import add_stage_arguments
+from facepuppet.runtime.sources import ReplaySource, open_recording
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -70,9 +70,9 @@ def register(subparsers) -> None:
 
 def run_replay(args, log=print) -> int:
     """Run the ``replay`` command from parsed ``args``; returns the exit code."""
-    from .gl_context import GLUnavailable, create_context
-    from .live_replay import TickedSource, read_live_recording
-    from .run_stages import build_stages, make_input_adapter
+    from facepuppet.runtime.gl_context import GLUnavailable, create_context
+    from facepuppet.runtime.live_replay import TickedSource, read_live_recording
+    from facepuppet.runtime.run_stages import build_stages, make_input_adapter
 
     width, height = parse_size(args.size)
     fps = getattr(args, "fps", None)
@@ -86,8 +86,8 @@ def run_replay(args, log=print) -> int:
         live = read_live_recording(args.session, lambda k: make_input_adapter(k, stages.extra_names, log=log))
     pipeline = None
     if getattr(args, "pipeline", False) or getattr(args, "config", None) is not None or getattr(args, "calibrate", False):
-        from .live_config import LiveConfig, load_live_config
-        from .pipeline import LivePipeline
+        from facepuppet.runtime.live_config import LiveConfig, load_live_config
+        from facepuppet.runtime.pipeline import LivePipeline
 
         pipeline = LivePipeline(load_live_config(args.config) if getattr(args, "config", None) else LiveConfig(), log=log)
         if getattr(args, "calibrate", False):

@@ -44,14 +44,14 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .character import Character
-from .live_config import LiveConfig, load_live_config
-from .live_stats import LiveStats
-from .loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, PngSink, WallClock, WeightLog
-from .pipeline import LivePipeline
-from .replay import parse_size
-from .run_stages import add_stage_arguments, build_stages, make_input_adapter
-from .vmc_out import parse_host_port
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.live_config import LiveConfig, load_live_config
+from facepuppet.runtime.live_stats import LiveStats
+from facepuppet.runtime.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, PngSink, WallClock, WeightLog
+from facepuppet.runtime.pipeline import LivePipeline
+from facepuppet.runtime.replay import parse_size
+from facepuppet.runtime.run_stages import add_stage_arguments, build_stages, make_input_adapter
+from facepuppet.runtime.vmc_out import parse_host_port
 
 CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
 RECEIVERS = ("process", "thread")
@@ -59,7 +59,7 @@ THREAD_SWITCH_INTERVAL_S = 0.0005  # GIL switch interval while a receive *thread
 
 
 def register(subparsers) -> None:
-    from .input_kinds import INPUT_KINDS
+    from facepuppet.runtime.input_kinds import INPUT_KINDS
 
     p = subparsers.add_parser(
         "run", help="drive a character live from a tracker over UDP (VMC, Face Cap, FaceOSC, markers, Live Link Face)",
@@ -154,13 +154,13 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         for bad options or files (named); OSError when the address cannot be bound;
         GLUnavailable when no OpenGL context can be made.
     """
-    from .audio_level import open_audio
-    from .blas_threads import BlasThreads
-    from .gl_context import create_context
-    from .recorder import PacketRecorder
-    from .udp_process import UdpProcessSource
-    from .udp_source import UdpSource
-    from .vmc_out import VmcSender
+    from facepuppet.runtime.audio_level import open_audio
+    from facepuppet.runtime.blas_threads import BlasThreads
+    from facepuppet.runtime.gl_context import create_context
+    from facepuppet.runtime.recorder import PacketRecorder
+    from facepuppet.runtime.udp_process import UdpProcessSource
+    from facepuppet.runtime.udp_source import UdpSource
+    from facepuppet.runtime.vmc_out import VmcSender
 
     receiver = getattr(args, "receiver", "process")
     if receiver not in RECEIVERS:
@@ -209,7 +209,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
             pipeline.request_calibration()
         frame_pipeline = pipeline
         if getattr(args, "gestures", None) is not None:
-            from .gestures import VoiceOnlySource, gesture_layer
+            from facepuppet.runtime.gestures import VoiceOnlySource, gesture_layer
 
             frame_pipeline = gesture_layer(args.gestures, inner=pipeline, voice_only=voice_only, log=log,
                                            level=audio.level if audio is not None else None, seed=args.gesture_seed)
@@ -322,7 +322,7 @@ def _bind_calibrate_key(target, pipeline: LivePipeline) -> None:
 
 def run_command(args, log=print) -> int:
     """The ``run`` command: returns the exit code."""
-    from .gl_context import GLUnavailable
+    from facepuppet.runtime.gl_context import GLUnavailable
 
     try:
         result = run_live(args, log=log)

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .frames import Frame
+from facepuppet.runtime.frames import Frame
 
 
 class SolvedFrames:
@@ -148,7 +148,7 @@ class Stages:
 
     def renderer(self, ctx, character, width, height, path, target_fbo, log):
         """The renderer to hand the loop (an :class:`ElasticDraw` with ``--elastic``)."""
-        from .renderer import FaceRenderer
+        from facepuppet.runtime.renderer import FaceRenderer
 
         if self.elastic is None:
             return FaceRenderer(ctx, character, width, height, path=path, target_fbo=target_fbo, log=log)
@@ -186,7 +186,7 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
     shapes = tuple(character.shape_names)
     stages = Stages(names=shapes)
     if elastic_path is not None:
-        from .elastic import ElasticModel
+        from facepuppet.runtime.elastic import ElasticModel
 
         model = ElasticModel.load(elastic_path)
         if model.n_vertices != character.n_vertices or tuple(model.shape_names) != shapes:
@@ -206,9 +206,9 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
             raise ValueError(f"--actor/--pair: only for --input markers, not {input_kind!r}")
         if retarget_path is not None:
             raise ValueError("--actor/--pair and --retarget: choose one parameter space")
-        from .actor import Actor
-        from .actor_pair import ActorPair
-        from .actor_retarget import ActorRetarget
+        from facepuppet.runtime.actor import Actor
+        from facepuppet.runtime.actor_pair import ActorPair
+        from facepuppet.runtime.actor_retarget import ActorRetarget
 
         pair = ActorPair.load(pair_path)
         if tuple(pair.shape_names) != shapes:
@@ -221,7 +221,7 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
             raise ValueError(f"--actor {actor_path} / --pair {pair_path}: {exc}") from None
         log(f"actor: {actor_path} ({actor.n_markers} markers, K={actor.n_actuations}) -> pair {pair_path}")
     if retarget_path is not None:
-        from .kpls_retarget import KplsRetarget
+        from facepuppet.runtime.kpls_retarget import KplsRetarget
 
         retarget = KplsRetarget.load(retarget_path)
         if tuple(retarget.target_names) != shapes:
@@ -235,10 +235,10 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
 
 def make_input_adapter(kind: str, extra_names=(), log=print):
     """A new adapter of ``kind`` that also carries ``extra_names`` channels where its protocol can (VMC)."""
-    from .input_kinds import make_adapter
+    from facepuppet.runtime.input_kinds import make_adapter
 
     if extra_names and kind == "vmc":
-        from .vmc import VmcAdapter
+        from facepuppet.runtime.vmc import VmcAdapter
 
         return VmcAdapter(extra_names=extra_names)
     if extra_names:

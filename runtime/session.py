@@ -31,8 +31,8 @@ import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .frames import Frame
-from .session_records import (
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.session_records import (
     RESERVED_KINDS,
     Layout,
     Packet,

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .frames import Frame
+from facepuppet.runtime.frames import Frame
 
 _FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
 _PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length

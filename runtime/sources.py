@@ -12,9 +12,9 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
-from .frames import Frame
-from .livelinkface_csv import looks_like_llf_csv, read_llf_csv
-from .session import MAGIC, read_session
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.livelinkface_csv import looks_like_llf_csv, read_llf_csv
+from facepuppet.runtime.session import MAGIC, read_session
 
 
 class ReplaySource:
@@ -80,7 +80,7 @@ def decode_packets(packets, make_adapter=None) -> list[tuple[int, Frame]]:
     default :func:`~facepuppet.runtime.input_kinds.make_adapter`).
     """
     if make_adapter is None:
-        from .input_kinds import make_adapter
+        from facepuppet.runtime.input_kinds import make_adapter
     adapters: dict = {}
     decoded = []
     for i, packet in enumerate(packets):

@@ -20,13 +20,13 @@ import sys
 import time
 from multiprocessing import shared_memory
 
-from .frames import Frame
-from .udp_process import (
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.udp_process import (
     CHANNELS, COMPLETED, FLAGS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION, HAS_WEIGHTS, MARKER_NAMES,
     MAX_COUNTERS, MAX_ERRORS_LOGGED, MAX_MARKERS, MAX_WEIGHTS, N_MARKERS, N_WEIGHTS, NAMES_BYTES, NAMES_END,
     NUMBER, READY, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, _NAME, _RECORD, _WRAP, _padded, _Shared,
 )
-from .udp_source import POLL_TIMEOUT_S, enable_kernel_stamps, receive
+from facepuppet.runtime.udp_source import POLL_TIMEOUT_S, enable_kernel_stamps, receive
 
 
 class _Writer:

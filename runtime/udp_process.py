@@ -52,8 +52,8 @@ from multiprocessing import shared_memory
 
 import numpy as np
 
-from .frames import Frame
-from .udp_source import bind_udp, bound_address
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.udp_source import bind_udp, bound_address
 
 MAX_WEIGHTS = 1024
 MAX_MARKERS = 2048

@@ -43,7 +43,7 @@ import struct
 import threading
 import time
 
-from .frames import Frame
+from facepuppet.runtime.frames import Frame
 
 RECV_BUFFER = 65536
 POLL_TIMEOUT_S = 0.05  # how often the thread looks at the stop flag while idle

@@ -48,9 +48,9 @@ import math
 
 import numpy as np
 
-from .channels import ARKIT_NAMES, canonical
-from .frames import Frame
-from .osc_decode import OscAdapter, all_finite, as_float, finite32, floats
+from facepuppet.runtime.channels import ARKIT_NAMES, canonical
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.osc_decode import OscAdapter, all_finite, as_float, finite32, floats
 
 _INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 

@@ -29,7 +29,7 @@ import numpy as np
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 
-from .channels import pascal
+from facepuppet.runtime.channels import pascal
 
 MAX_BUNDLE = 1500
 _BUNDLE_HEAD = 16  # "#bundle\0" + 8-byte time tag
