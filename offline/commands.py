@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import sys
 import time
 from pathlib import Path
@@ -12,29 +11,30 @@ from pathlib import Path
 from facepuppet.runtime.character import MATERIAL_KINDS
 
 
-# Offline modules with their own ``register(subparsers)``. Entries for work in
-# progress may not exist yet; a module that exists but fails to import raises.
-_COMMAND_MODULES = ("actor_commands", "elastic_commands", "gesture_commands", "kpls_commands")
+# Offline modules with their own ``register(subparsers)``; each must exist and import
+# (a missing one is an error, never a silently dropped command).
+_COMMAND_MODULES = ("facepuppet.offline.actor_commands", "facepuppet.offline.elastic_commands",
+                    "facepuppet.offline.gesture_commands", "facepuppet.offline.kpls_commands")
 # Offline modules with ``register_benches(register_bench)``, same rule.
-_BENCH_MODULES = ("bench_shin", "bench_elastic", "bench_gestures", "bench_kpls")
+_BENCH_MODULES = ("facepuppet.offline.bench_shin", "facepuppet.offline.bench_elastic",
+                  "facepuppet.offline.bench_gestures", "facepuppet.offline.bench_kpls")
 
 
-def _existing(names):
+def _modules(names):
     for name in names:
-        if importlib.util.find_spec(f"{__package__}.{name}") is not None:
-            yield importlib.import_module(f"{__package__}.{name}")
+        yield importlib.import_module(name)
 
 
 def register_benches(register_bench) -> None:
     """Entry point of the ``facepuppet.benches`` group: add the offline benchmarks."""
-    for module in _existing(_BENCH_MODULES):
+    for module in _modules(_BENCH_MODULES):
         module.register_benches(register_bench)
 
 
 def register(subparsers) -> None:
     """Add the offline commands to the ``facepuppet`` parser."""
     _register_import_rig(subparsers)
-    for module in _existing(_COMMAND_MODULES):
+    for module in _modules(_COMMAND_MODULES):
         module.register(subparsers)
 
 
@@ -58,7 +58,7 @@ def _register_import_rig(subparsers) -> None:
 
 
 def _import_rig(args: argparse.Namespace) -> int:
-    from .rig_import import import_rig
+    from facepuppet.offline.rig_import import import_rig
 
     start = time.perf_counter()
     tty = sys.stderr.isatty()

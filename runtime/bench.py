@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import json
 import os
 import platform
@@ -24,9 +23,8 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Callable
 
-# Runtime modules that register benchmarks when imported.
-# Entries for work in progress may not exist yet and are skipped.
-_BENCH_MODULES = ("bench_render", "bench_latency", "bench_solve")
+# Runtime modules that register benchmarks when imported; each must exist and import.
+_BENCH_MODULES = ("facepuppet.runtime.bench_render", "facepuppet.runtime.bench_latency")
 
 
 @dataclass(frozen=True)
@@ -54,9 +52,7 @@ def benches() -> dict[str, Bench]:
     if not _LOADED:
         _LOADED = True
         for module in _BENCH_MODULES:
-            if importlib.util.find_spec(f"{__package__}.{module}") is None:
-                continue
-            importlib.import_module(f"{__package__}.{module}")
+            importlib.import_module(module)
         for ep in entry_points(group="facepuppet.benches"):
             ep.load()(register_bench)
     return dict(_REGISTRY)

@@ -9,22 +9,20 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import sys
 from importlib.metadata import entry_points
 
-from .tables import TablesError
+from facepuppet.runtime.tables import TablesError
 
-# Runtime modules that add subcommands, in the order --help lists them. An
-# entry for work in progress may not exist yet and is skipped; a module that
-# exists but fails to import raises.
+# Runtime modules that add subcommands, in the order --help lists them. Each
+# must exist and import: a missing one is an error, never a silently dropped command.
 _COMMAND_MODULES = (
-    "run",
-    "manipulate",
-    "demo",
-    "replay",
-    "contact_sheet",
-    "bench",
+    "facepuppet.runtime.run",
+    "facepuppet.runtime.manipulate",
+    "facepuppet.runtime.demo",
+    "facepuppet.runtime.replay",
+    "facepuppet.runtime.contact_sheet",
+    "facepuppet.runtime.bench",
 )
 
 
@@ -38,9 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"facepuppet {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in _COMMAND_MODULES:
-        if importlib.util.find_spec(f"facepuppet.runtime.{name}") is None:
-            continue
-        importlib.import_module(f"facepuppet.runtime.{name}").register(sub)
+        importlib.import_module(name).register(sub)
     for ep in entry_points(group="facepuppet.commands"):
         ep.load()(sub)
     return parser
@@ -58,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         if args.command in _RENDERING_COMMANDS:
-            from .blas_threads import BlasThreads
+            from facepuppet.runtime.blas_threads import BlasThreads
 
             with BlasThreads(1):
                 return int(args.func(args) or 0)
