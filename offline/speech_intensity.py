@@ -18,7 +18,7 @@ lips close there.
 Symbols: s(t) -> ``intensity`` (normalised), dB(t) -> ``level_db``.
 
 Inputs are checked at the door (decoding by the runtime's
-:func:`~facepuppet.runtime.audio_level.read_wav`): mono int16/int32/uint8/float WAV at any rate
+:func:`~facepuppet.runtime.inputs.audio.read_wav`): mono int16/int32/uint8/float WAV at any rate
 (resampled to ``rate`` Hz with :func:`scipy.signal.resample_poly`); stereo is
 refused unless ``stereo="mix"``; NaN or infinite samples are refused;
 all-silent audio gives floor levels (and a warning from the normaliser).
@@ -33,7 +33,7 @@ from fractions import Fraction
 import numpy as np
 from scipy.signal import resample_poly
 
-from facepuppet.runtime.audio_level import read_wav
+from facepuppet.runtime.inputs.audio import read_wav
 from facepuppet.runtime.gestures import SILENCE_Z
 
 DEFAULT_RATE = 16000

@@ -1,8 +1,8 @@
 """``facepuppet run``: drive a character live from a tracker over UDP.
 
 One UDP socket read by a child process
-(:class:`~facepuppet.runtime.udp_process.UdpProcessSource`; with ``--receiver thread`` a
-thread of this process, :class:`~facepuppet.runtime.udp_source.UdpSource`) decodes the
+(:class:`~facepuppet.runtime.inputs.udp_process.UdpProcessSource`; with ``--receiver thread`` a
+thread of this process, :class:`~facepuppet.runtime.inputs.udp.UdpSource`) decodes the
 input kind's datagrams into frames; the frame loop draws as soon as a new
 frame arrives (``--draw arrival``, the default; without new frames it redraws
 at ``--fps``) or on a fixed ``--fps`` grid (``--draw tick``), takes the newest
@@ -59,7 +59,7 @@ THREAD_SWITCH_INTERVAL_S = 0.0005  # GIL switch interval while a receive *thread
 
 
 def register(subparsers) -> None:
-    from facepuppet.runtime.input_kinds import INPUT_KINDS
+    from facepuppet.runtime.inputs.kinds import INPUT_KINDS
 
     p = subparsers.add_parser(
         "run", help="drive a character live from a tracker over UDP (VMC, Face Cap, FaceOSC, markers, Live Link Face)",
@@ -154,12 +154,12 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         for bad options or files (named); OSError when the address cannot be bound;
         GLUnavailable when no OpenGL context can be made.
     """
-    from facepuppet.runtime.audio_level import open_audio
+    from facepuppet.runtime.inputs.audio import open_audio
     from facepuppet.runtime.blas_threads import BlasThreads
     from facepuppet.runtime.gl_context import create_context
     from facepuppet.runtime.recorder import PacketRecorder
-    from facepuppet.runtime.udp_process import UdpProcessSource
-    from facepuppet.runtime.udp_source import UdpSource
+    from facepuppet.runtime.inputs.udp_process import UdpProcessSource
+    from facepuppet.runtime.inputs.udp import UdpSource
     from facepuppet.runtime.vmc_out import VmcSender
 
     receiver = getattr(args, "receiver", "process")

@@ -235,10 +235,10 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
 
 def make_input_adapter(kind: str, extra_names=(), log=print):
     """A new adapter of ``kind`` that also carries ``extra_names`` channels where its protocol can (VMC)."""
-    from facepuppet.runtime.input_kinds import make_adapter
+    from facepuppet.runtime.inputs.kinds import make_adapter
 
     if extra_names and kind == "vmc":
-        from facepuppet.runtime.vmc import VmcAdapter
+        from facepuppet.runtime.inputs.vmc import VmcAdapter
 
         return VmcAdapter(extra_names=extra_names)
     if extra_names:

@@ -77,10 +77,10 @@ def decode_packets(packets, make_adapter=None) -> list[tuple[int, Frame]]:
 
     Each packet goes, in recorded order and with its recorded receive time,
     through a fresh adapter of its input kind (``make_adapter(kind)``, by
-    default :func:`~facepuppet.runtime.input_kinds.make_adapter`).
+    default :func:`~facepuppet.runtime.inputs.kinds.make_adapter`).
     """
     if make_adapter is None:
-        from facepuppet.runtime.input_kinds import make_adapter
+        from facepuppet.runtime.inputs.kinds import make_adapter
     adapters: dict = {}
     decoded = []
     for i, packet in enumerate(packets):
@@ -98,7 +98,7 @@ def frames_from_packets(packets) -> list[Frame]:
 
     Each packet goes, in recorded order and with its recorded receive time,
     through a fresh adapter of its input kind
-    (:func:`~facepuppet.runtime.input_kinds.make_adapter`), as the UDP thread
+    (:func:`~facepuppet.runtime.inputs.kinds.make_adapter`), as the UDP thread
     did live; adapters are deterministic, so the frames are the live ones.
 
     packets : sequence of :class:`~facepuppet.runtime.session_records.Packet`

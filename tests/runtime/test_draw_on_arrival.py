@@ -13,9 +13,9 @@ from helpers.osc_helpers import vmc_frame
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.loop import FrameLoop, WallClock, WeightLog
-from facepuppet.runtime.udp_process import UdpProcessSource
-from facepuppet.runtime.udp_source import UdpSource
-from facepuppet.runtime.vmc import VmcAdapter
+from facepuppet.runtime.inputs.udp_process import UdpProcessSource
+from facepuppet.runtime.inputs.udp import UdpSource
+from facepuppet.runtime.inputs.vmc import VmcAdapter
 
 JAW = ARKIT_NAMES.index("jawOpen")
 SOURCES = {"process": UdpProcessSource, "thread": UdpSource}

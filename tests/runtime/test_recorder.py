@@ -17,11 +17,11 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 from helpers.small_characters import sphere_character
 
-from facepuppet.runtime.input_kinds import make_adapter
+from facepuppet.runtime.inputs.kinds import make_adapter
 from facepuppet.runtime.recorder import PacketRecorder
 from facepuppet.runtime.session import read_session
 from facepuppet.runtime.sources import open_recording
-from facepuppet.runtime.udp_source import UdpSource
+from facepuppet.runtime.inputs.udp import UdpSource
 
 
 def vmc_bundle(jaw: float, blink: float, yaw: float = 0.0) -> bytes:

@@ -23,10 +23,10 @@ from pythonosc.osc_packet import OscPacket
 from helpers.osc_helpers import bundle, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES, pascal
-from facepuppet.runtime.input_kinds import INPUT_KINDS, make_adapter
-from facepuppet.runtime.livelinkface_udp import encode_packet
-from facepuppet.runtime.osc_decode import UNSUPPORTED, decode
-from facepuppet.runtime.udp_source import UdpSource
+from facepuppet.runtime.inputs.kinds import INPUT_KINDS, make_adapter
+from facepuppet.runtime.inputs.livelinkface import encode_packet
+from facepuppet.runtime.inputs.osc import UNSUPPORTED, decode
+from facepuppet.runtime.inputs.udp import UdpSource
 
 SEED = 3
 N_DIRECT = 16_000  # per kind: 80,000 in all

@@ -9,7 +9,7 @@ import pytest
 from helpers.osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.facecap import FACECAP_ORDER, FaceCapAdapter
+from facepuppet.runtime.inputs.facecap import FACECAP_ORDER, FaceCapAdapter
 
 I = {name: i for i, name in enumerate(ARKIT_NAMES)}
 

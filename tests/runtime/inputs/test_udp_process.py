@@ -13,11 +13,11 @@ from helpers.osc_helpers import osc, vmc_frame
 from helpers.udp_helpers import poll_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.input_kinds import make_adapter
-from facepuppet.runtime.livelinkface_udp import encode_packet
-from facepuppet.runtime.markers_osc import FRAME, LAYOUT
-from facepuppet.runtime.udp_process import UdpProcessSource
-from facepuppet.runtime.vmc import VmcAdapter
+from facepuppet.runtime.inputs.kinds import make_adapter
+from facepuppet.runtime.inputs.livelinkface import encode_packet
+from facepuppet.runtime.inputs.markers import FRAME, LAYOUT
+from facepuppet.runtime.inputs.udp_process import UdpProcessSource
+from facepuppet.runtime.inputs.vmc import VmcAdapter
 
 
 JAW = ARKIT_NAMES.index("jawOpen")
@@ -178,8 +178,8 @@ def test_the_child_leaves_when_the_parent_is_gone(tmp_path):
 
     script = (
         "import sys, time\n"
-        "from facepuppet.runtime.udp_process import UdpProcessSource\n"
-        "from facepuppet.runtime.vmc import VmcAdapter\n"
+        "from facepuppet.runtime.inputs.udp_process import UdpProcessSource\n"
+        "from facepuppet.runtime.inputs.vmc import VmcAdapter\n"
         "s = UdpProcessSource(VmcAdapter(), port=0).start()\n"
         "print(s._process.pid, flush=True)\n"
         "time.sleep(60)\n")

@@ -1,6 +1,6 @@
 """A live frame source whose receiving and decoding run in a child process.
 
-Why: in :class:`~facepuppet.runtime.udp_source.UdpSource` the receive thread
+Why: in :class:`~facepuppet.runtime.inputs.udp.UdpSource` the receive thread
 decodes datagrams in pure Python and needs the GIL, which the frame loop holds
 through every moderngl call (a draw and ``finish()`` on llvmpipe: 10-30 ms).
 Datagrams then wait in the kernel until the loop lets go (measured in a live
@@ -34,7 +34,7 @@ times, then takes nothing this tick and counts ``snapshot_busy``). Names (channe
 tuples, marker names, sources, counter names, the last error) go through an
 append-only log in the same memory, written before the slot that uses them.
 Ordering relies on stores becoming visible in program order (x86-64's model).
-The child's side is :mod:`~facepuppet.runtime.udp_child`.
+The child's side is :mod:`~facepuppet.runtime.inputs.udp_child`.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ from multiprocessing import shared_memory
 import numpy as np
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.udp_source import bind_udp, bound_address
+from facepuppet.runtime.inputs.udp import bind_udp, bound_address
 
 MAX_WEIGHTS = 1024
 MAX_MARKERS = 2048
@@ -186,7 +186,7 @@ class UdpProcessSource:
         # A fresh interpreter (not fork: this process may hold a GL context and threads; not
         # multiprocessing's spawn: it re-imports the caller's __main__), given the socket by descriptor.
         self._process = subprocess.Popen(
-            [sys.executable, "-c", "from facepuppet.runtime.udp_child import child_main; child_main()"],
+            [sys.executable, "-c", "from facepuppet.runtime.inputs.udp_child import child_main; child_main()"],
             stdin=subprocess.PIPE, pass_fds=(sock.fileno(), self._wake[1]))
         try:
             self._process.stdin.write(pickle.dumps((self._shm.name, self.ring_bytes, sock.fileno(), sock.family,

@@ -1,12 +1,12 @@
-"""The receiving process of :class:`~facepuppet.runtime.udp_process.UdpProcessSource`.
+"""The receiving process of :class:`~facepuppet.runtime.inputs.udp_process.UdpProcessSource`.
 
-Started as ``python -c "from facepuppet.runtime.udp_child import child_main; child_main()"``
+Started as ``python -c "from facepuppet.runtime.inputs.udp_child import child_main; child_main()"``
 with its arguments pickled on stdin and the bound socket passed by descriptor.
 It reads each datagram with its kernel arrival stamp, drops senders outside
 ``allow``, counts datagrams containing the watched bytes, copies accepted
 datagrams into the ring when the parent has an ``on_packet``, decodes with the
 adapter and publishes the frame (seqlock) and the counters into the shared
-block laid out by :class:`~facepuppet.runtime.udp_process._Shared`. It never
+block laid out by :class:`~facepuppet.runtime.inputs.udp_process._Shared`. It never
 raises, never blocks on the parent, and leaves when the parent is gone.
 """
 
@@ -21,12 +21,12 @@ import time
 from multiprocessing import shared_memory
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.udp_process import (
+from facepuppet.runtime.inputs.udp_process import (
     CHANNELS, COMPLETED, FLAGS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION, HAS_WEIGHTS, MARKER_NAMES,
     MAX_COUNTERS, MAX_ERRORS_LOGGED, MAX_MARKERS, MAX_WEIGHTS, N_MARKERS, N_WEIGHTS, NAMES_BYTES, NAMES_END,
     NUMBER, READY, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, _NAME, _RECORD, _WRAP, _padded, _Shared,
 )
-from facepuppet.runtime.udp_source import POLL_TIMEOUT_S, enable_kernel_stamps, receive
+from facepuppet.runtime.inputs.udp import POLL_TIMEOUT_S, enable_kernel_stamps, receive
 
 
 class _Writer:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.io import wavfile
 
-from facepuppet.runtime.audio_level import LevelMeter, WavLevel, open_audio
+from facepuppet.runtime.inputs.audio import LevelMeter, WavLevel, open_audio
 
 RATE = 48000  # 800 samples per 60 Hz tick: a 600 Hz sine fills each tick with whole cycles
 
@@ -93,7 +93,7 @@ def test_missing_device_gives_a_message_and_no_audio():
 
 
 def test_read_wav_refuses_stereo_and_non_finite_samples_when_asked(tmp_path):
-    from facepuppet.runtime.audio_level import read_wav
+    from facepuppet.runtime.inputs.audio import read_wav
 
     s = sine(0.25, 0.1).astype(np.float32)
     stereo = tmp_path / "st.wav"

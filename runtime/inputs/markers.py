@@ -39,7 +39,7 @@ import math
 import numpy as np
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.osc_decode import OscAdapter, as_float
+from facepuppet.runtime.inputs.osc import OscAdapter, as_float
 
 LAYOUT = "/facepuppet/markers/layout"
 FRAME = "/facepuppet/markers/frame"

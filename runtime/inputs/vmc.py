@@ -50,7 +50,7 @@ import numpy as np
 
 from facepuppet.runtime.channels import ARKIT_NAMES, canonical
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.osc_decode import OscAdapter, all_finite, as_float, finite32, floats
+from facepuppet.runtime.inputs.osc import OscAdapter, all_finite, as_float, finite32, floats
 
 _INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 

@@ -10,7 +10,7 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from helpers.osc_helpers import counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.faceosc import RESET_SPANS, SPANS, TAU_ACTIVE, FaceOscAdapter
+from facepuppet.runtime.inputs.faceosc import RESET_SPANS, SPANS, TAU_ACTIVE, FaceOscAdapter
 from facepuppet.runtime.geometry import euler_to_quat
 
 I = {name: i for i, name in enumerate(ARKIT_NAMES)}

@@ -4,7 +4,7 @@
 takes the types trackers send (``i h f d s b T F N``), nested bundles up to
 ``MAX_DEPTH`` levels, and returns None for anything malformed, never raising,
 never sleeping, never logging. python-osc (:mod:`pythonosc.osc_packet`) is the
-reference it is tested against (tests/runtime/test_input_fuzz.py checks that
+reference it is tested against (tests/runtime/inputs/test_fuzz.py checks that
 on every datagram this reader accepts, python-osc reads the same messages), and
 the sender side's builder. Receiving does not go through python-osc because,
 measured here (1.10.2, 2-core machine): it takes about twice as long as this

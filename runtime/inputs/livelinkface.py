@@ -44,7 +44,7 @@ import numpy as np
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
-from facepuppet.runtime.osc_decode import COUNTER_NAMES
+from facepuppet.runtime.inputs.osc import COUNTER_NAMES
 
 VERSION = 6
 N_VALUES = 61

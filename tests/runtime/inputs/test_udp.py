@@ -13,10 +13,10 @@ from helpers.osc_helpers import vmc_frame
 from helpers.udp_helpers import poll_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.input_kinds import INPUT_KINDS, make_adapter
-from facepuppet.runtime.livelinkface_udp import encode_packet
-from facepuppet.runtime.udp_source import UdpSource
-from facepuppet.runtime.vmc import VmcAdapter
+from facepuppet.runtime.inputs.kinds import INPUT_KINDS, make_adapter
+from facepuppet.runtime.inputs.livelinkface import encode_packet
+from facepuppet.runtime.inputs.udp import UdpSource
+from facepuppet.runtime.inputs.vmc import VmcAdapter
 
 
 JAW = ARKIT_NAMES.index("jawOpen")

@@ -24,7 +24,7 @@ datagrams read more than 1 ms after they arrived. With another clock (tests),
 or where the kernel gives no stamp, ``clock()`` at read time is used.
 
 For a receiver whose decoding never competes with the frame loop for the GIL,
-see :class:`~facepuppet.runtime.udp_process.UdpProcessSource` (same interface,
+see :class:`~facepuppet.runtime.inputs.udp_process.UdpProcessSource` (same interface,
 decoding in a child process).
 
 The socket asks for a large kernel receive buffer (``SOCKET_BUFFER``, 4 MiB;

@@ -10,7 +10,7 @@ import pytest
 from helpers.osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.vmc import PRESETS, VmcAdapter
+from facepuppet.runtime.inputs.vmc import PRESETS, VmcAdapter
 
 VAL, APPLY = "/VMC/Ext/Blend/Val", "/VMC/Ext/Blend/Apply"
 I = {name: i for i, name in enumerate(ARKIT_NAMES)}

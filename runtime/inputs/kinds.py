@@ -16,11 +16,11 @@ livelinkface   :class:`.livelinkface_udp.LiveLinkFaceAdapter`  11111  binary UDP
 
 from __future__ import annotations
 
-from facepuppet.runtime.faceosc import FaceOscAdapter
-from facepuppet.runtime.facecap import FaceCapAdapter
-from facepuppet.runtime.livelinkface_udp import LiveLinkFaceAdapter
-from facepuppet.runtime.markers_osc import MarkersAdapter
-from facepuppet.runtime.vmc import VmcAdapter
+from facepuppet.runtime.inputs.faceosc import FaceOscAdapter
+from facepuppet.runtime.inputs.facecap import FaceCapAdapter
+from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter
+from facepuppet.runtime.inputs.markers import MarkersAdapter
+from facepuppet.runtime.inputs.vmc import VmcAdapter
 
 INPUT_KINDS: dict[str, type] = {
     "vmc": VmcAdapter,
