@@ -129,7 +129,7 @@ def _build(args: argparse.Namespace) -> int:
 def _synthesize(args: argparse.Namespace) -> int:
     from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.gestures import GestureLayer
-    from facepuppet.runtime.session import SessionWriter
+    from facepuppet.runtime.recording.session import SessionWriter
 
     synth, level, tracks, seconds = synthesize(args.database, args.speech, args.seed, parse_style(args.style),
                                                args.sigma, args.candidates, args.history, args.stereo)

@@ -32,7 +32,7 @@ import numpy as np
 
 from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.gesture_tables import GROUPS, HEAD_FEATURES
-from facepuppet.runtime.livelinkface_csv import read_llf_csv
+from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.tables import hash_inputs, save_tables
 
 from facepuppet.offline.blend_weights import BlendWeights, choose_basis

@@ -18,7 +18,7 @@ import numpy as np
 
 from facepuppet.runtime.loop import FrameLoop, PngSink, RecordedClock, WallClock
 from facepuppet.runtime.replay import parse_size
-from facepuppet.runtime.sources import ReplaySource
+from facepuppet.runtime.recording.replay_source import ReplaySource
 
 SHEET_CELLS = 12
 

@@ -1,14 +1,14 @@
 """``facepuppet replay``: play a recording on a character through the live frame loop.
 
 The recording is a session file or a Live Link Face CSV
-(:func:`~facepuppet.runtime.sources.open_recording`). It plays on recorded
+(:func:`~facepuppet.runtime.recording.replay_source.open_recording`). It plays on recorded
 time: headless, as fast as the machine draws (:class:`RecordedClock`); in a
 window, paced to real time (:class:`WallClock`). Either way tick ``k`` shows
 the recording at ``k / fps`` seconds, so two replays give the same weights and
 the same images.
 
 A live recording (``run --record``) with TICK records replays tick for tick
-(:mod:`~facepuppet.runtime.live_replay`): the frames each live tick took, at
+(:mod:`~facepuppet.runtime.recording.ticked_source`): the frames each live tick took, at
 its tick times, at the live ``--fps`` (another ``--fps`` resamples instead).
 ``--pipeline`` (implied by ``--config`` / ``--calibrate``) runs the live
 pipeline as ``run`` does, so the same options give the live run's weights.
@@ -29,7 +29,7 @@ import numpy as np
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.loop import FrameLoop, PngSink, RecordedClock, WallClock, WeightLog
 from facepuppet.runtime.run_stages import add_stage_arguments
-from facepuppet.runtime.sources import ReplaySource, open_recording
+from facepuppet.runtime.recording.replay_source import ReplaySource, open_recording
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -71,7 +71,7 @@ def register(subparsers) -> None:
 def run_replay(args, log=print) -> int:
     """Run the ``replay`` command from parsed ``args``; returns the exit code."""
     from facepuppet.runtime.gl_context import GLUnavailable, create_context
-    from facepuppet.runtime.live_replay import TickedSource, read_live_recording
+    from facepuppet.runtime.recording.ticked_source import TickedSource, read_live_recording
     from facepuppet.runtime.run_stages import build_stages, make_input_adapter
 
     width, height = parse_size(args.size)

@@ -12,7 +12,7 @@ it onto the rig and draws. Around that loop:
 
 * ``--record FILE``: every accepted datagram (raw bytes, receive time, input
   kind) and the audio level of each tick go to a session file
-  (:mod:`~facepuppet.runtime.recorder`); ``facepuppet replay FILE`` re-decodes it.
+  (:mod:`~facepuppet.runtime.recording.recorder`); ``facepuppet replay FILE`` re-decodes it.
 * ``--audio [DEVICE]`` / ``--audio-file WAV``: the audio level (dBFS) on every
   drawn frame; no device is a message, not an error.
 * ``--vmc-out HOST:PORT``: the rig weights and head pose as VMC, every tick.
@@ -157,7 +157,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
     from facepuppet.runtime.inputs.audio import open_audio
     from facepuppet.runtime.blas_threads import BlasThreads
     from facepuppet.runtime.gl_context import create_context
-    from facepuppet.runtime.recorder import PacketRecorder
+    from facepuppet.runtime.recording.recorder import PacketRecorder
     from facepuppet.runtime.inputs.udp_process import UdpProcessSource
     from facepuppet.runtime.inputs.udp import UdpSource
     from facepuppet.runtime.vmc_out import VmcSender

@@ -6,7 +6,7 @@ bytes to ``on_packet`` (a recorder; must not block) and to the adapter, and
 puts a completed frame in a slot: one tuple assignment ``(sequence, frame)``,
 atomic under the GIL, so the frame loop never waits on a lock and nothing is
 queued. :meth:`UdpSource.latest` answers like
-:meth:`~facepuppet.runtime.sources.ReplaySource.latest`: the newest frame not
+:meth:`~facepuppet.runtime.recording.replay_source.ReplaySource.latest`: the newest frame not
 yet taken and how many completed frames were overwritten since the last call.
 
 The thread never raises: anything escaping the adapter or ``on_packet`` is

@@ -9,7 +9,7 @@ from facepuppet.offline import gesture_commands
 from facepuppet.offline.gesture_db import build_gesture_db, quantile_map
 from facepuppet.offline.regional_features import head_track, split_regions
 from facepuppet.runtime.gesture_tables import GROUPS, load_gesture_db
-from facepuppet.runtime.sources import open_recording
+from facepuppet.runtime.recording.replay_source import open_recording
 from tests.conftest import need_shared
 
 

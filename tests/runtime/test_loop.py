@@ -10,7 +10,7 @@ import pytest
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.loop import FrameLoop, RecordedClock, WallClock, WeightLog
-from facepuppet.runtime.sources import ReplaySource
+from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.timing import StageTimer
 
 RIG = SimpleNamespace(shape_names=("jawOpen", "eyeBlink_L", "eyeBlink_R", "cheekRaiser_L"))

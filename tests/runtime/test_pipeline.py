@@ -15,7 +15,7 @@ from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live_config import ChannelSettings, FilterSettings, LiveConfig
 from facepuppet.runtime.loop import FrameLoop, RecordedClock, WeightLog
 from facepuppet.runtime.pipeline import LivePipeline
-from facepuppet.runtime.sources import ReplaySource
+from facepuppet.runtime.recording.replay_source import ReplaySource
 
 RIG = SimpleNamespace(shape_names=("jawOpen", "eyeBlink_L"))
 CHANNELS = ("jawOpen", "eyeBlinkLeft", "tongueOut")

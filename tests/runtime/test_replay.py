@@ -11,11 +11,11 @@ from PIL import Image
 
 from conftest import need_shared
 from facepuppet.runtime.character import Character, sparse_deltas
-from facepuppet.runtime.livelinkface_csv import read_llf_csv
+from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.loop import FrameLoop, PngSink, RecordedClock, WeightLog
 from facepuppet.runtime.replay import parse_size, register
-from facepuppet.runtime.session import SessionWriter
-from facepuppet.runtime.sources import ReplaySource
+from facepuppet.runtime.recording.session import SessionWriter
+from facepuppet.runtime.recording.replay_source import ReplaySource
 
 MYSLATE = ("tracker", "livelinkface_myslate_3.csv")
 N_TICKS = 30

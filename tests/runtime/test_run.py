@@ -21,8 +21,8 @@ from helpers.small_characters import sphere_character
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.pipeline import LivePipeline
 from facepuppet.runtime.run import CALIBRATE_ADDRESS, _Packets
-from facepuppet.runtime.session import read_session
-from facepuppet.runtime.sources import open_recording
+from facepuppet.runtime.recording.session import read_session
+from facepuppet.runtime.recording.replay_source import open_recording
 
 FAST_CONFIG = """
 [filter.mouth]

@@ -23,7 +23,7 @@ from facepuppet.runtime.actor_retarget import ActorRetarget
 from facepuppet.runtime.elastic import ElasticModel
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls_retarget import KplsRetarget
-from facepuppet.runtime.session import read_session
+from facepuppet.runtime.recording.session import read_session
 from helpers.small_characters import sphere_character
 from helpers.elastic_models import random_model
 

@@ -18,9 +18,9 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.inputs.kinds import make_adapter
-from facepuppet.runtime.recorder import PacketRecorder
-from facepuppet.runtime.session import read_session
-from facepuppet.runtime.sources import open_recording
+from facepuppet.runtime.recording.recorder import PacketRecorder
+from facepuppet.runtime.recording.session import read_session
+from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.inputs.udp import UdpSource
 
 

@@ -4,10 +4,10 @@ The UDP receive thread calls :meth:`PacketRecorder.put` for each accepted
 datagram; ``put`` only appends a tuple to a bounded deque (never blocks, never
 raises: when the writer falls behind by ``capacity`` records the record is
 dropped and counted). A writer thread takes them off and appends one PACKET
-record each to a :class:`~facepuppet.runtime.session.SessionWriter` (one
+record each to a :class:`~facepuppet.runtime.recording.session.SessionWriter` (one
 ``os.write`` per record, so a ``kill -9`` loses at most the record being
 written). Replaying the file re-decodes the packets with a fresh adapter of the
-recorded input kind (:func:`~facepuppet.runtime.sources.open_recording`),
+recorded input kind (:func:`~facepuppet.runtime.recording.replay_source.open_recording`),
 which gives back the frame stream the live run saw.
 """
 
@@ -16,8 +16,8 @@ from __future__ import annotations
 import collections
 import threading
 
-from facepuppet.runtime.session import SessionWriter
-from facepuppet.runtime.session_records import RecordKind, encode_audio, encode_packet, encode_tick
+from facepuppet.runtime.recording.session import SessionWriter
+from facepuppet.runtime.recording.records import RecordKind, encode_audio, encode_packet, encode_tick
 
 
 class PacketRecorder:

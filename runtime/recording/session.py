@@ -8,7 +8,7 @@ Layout of a file (all integers little-endian)::
 The first record is always a ``HEADER`` (JSON: created, facepuppet version,
 free-form info). Records of other kinds (LAYOUT, FRAME, PACKET, AUDIO, TICK)
 follow in the order written; the kind codes and each kind's payload are in
-:mod:`facepuppet.runtime.session_records`.
+:mod:`facepuppet.runtime.recording.records`.
 
 A reader skips PACKET/AUDIO/TICK records it cannot decode (older readers skip them
 all; their length is in the record header) and counts them in
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.session_records import (
+from facepuppet.runtime.recording.records import (
     RESERVED_KINDS,
     Layout,
     Packet,

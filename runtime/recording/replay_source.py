@@ -13,8 +13,8 @@ import warnings
 from pathlib import Path
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.livelinkface_csv import looks_like_llf_csv, read_llf_csv
-from facepuppet.runtime.session import MAGIC, read_session
+from facepuppet.runtime.recording.livelinkface_csv import looks_like_llf_csv, read_llf_csv
+from facepuppet.runtime.recording.session import MAGIC, read_session
 
 
 class ReplaySource:
@@ -101,7 +101,7 @@ def frames_from_packets(packets) -> list[Frame]:
     (:func:`~facepuppet.runtime.inputs.kinds.make_adapter`), as the UDP thread
     did live; adapters are deterministic, so the frames are the live ones.
 
-    packets : sequence of :class:`~facepuppet.runtime.session_records.Packet`
+    packets : sequence of :class:`~facepuppet.runtime.recording.records.Packet`
     """
     return [frame for _, frame in decode_packets(packets)]
 
@@ -113,7 +113,7 @@ def open_recording(path) -> list[Frame]:
     packets decode to (:func:`frames_from_packets`).
 
     A session whose tail was torn gives the frames before the tear (with a
-    warning from :func:`~facepuppet.runtime.session.read_session`).
+    warning from :func:`~facepuppet.runtime.recording.session.read_session`).
 
     Raises
     ------

@@ -4,7 +4,7 @@ A live run ticks on the wall clock and takes whatever frame has arrived by
 then, so which frame each tick saw is a fact of that run, not of the frame
 times. ``run --record`` writes one TICK record per drawn tick (tick index,
 tick time, how many frames the source had completed at the snapshot; see
-:mod:`~facepuppet.runtime.session`). :class:`TickedSource` hands the frame
+:mod:`~facepuppet.runtime.recording.session`). :class:`TickedSource` hands the frame
 loop exactly those frames at exactly those ticks (``FrameLoop.run(ticks=...)``),
 so the live pipeline (filters, calibration, tracking loss), which works on
 tick times and receive times only, computes the same weights bit for bit.
@@ -55,7 +55,7 @@ def read_live_recording(path, make_adapter) -> LiveRecording | None:
     ValueError
         naming the file when its packets decode to no frame.
     """
-    from facepuppet.runtime.session import MAGIC, read_session
+    from facepuppet.runtime.recording.session import MAGIC, read_session
 
     path = Path(path)
     with open(path, "rb") as f:
@@ -66,7 +66,7 @@ def read_live_recording(path, make_adapter) -> LiveRecording | None:
         session = read_session(path)
     if session.frames or not session.packets:
         return None
-    from facepuppet.runtime.sources import decode_packets
+    from facepuppet.runtime.recording.replay_source import decode_packets
 
     calibrate = [i for i, packet in enumerate(session.packets) if CALIBRATE_ADDRESS in packet.data]
     decoded = decode_packets(session.packets, make_adapter)

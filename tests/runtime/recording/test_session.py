@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.session import MAGIC, SessionWriter, read_session
-from facepuppet.runtime.session_records import RecordKind
-from facepuppet.runtime.sources import open_recording
+from facepuppet.runtime.recording.session import MAGIC, SessionWriter, read_session
+from facepuppet.runtime.recording.records import RecordKind
+from facepuppet.runtime.recording.replay_source import open_recording
 
 ARKIT3 = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")
 PASCAL2 = ("JawOpen", "MouthSmileLeft")
@@ -174,7 +174,7 @@ def test_bad_magic_is_a_value_error_naming_the_file(tmp_path):
 _CHILD = textwrap.dedent("""
     import sys
     from facepuppet.runtime.frames import Frame
-    from facepuppet.runtime.session import SessionWriter
+    from facepuppet.runtime.recording.session import SessionWriter
     with SessionWriter(sys.argv[1], fsync_every_s=None) as w:
         i = 0
         while True:

@@ -1,7 +1,7 @@
 """Session record kinds and the byte layout of each kind's payload (encode and decode).
 
 The file framing around these payloads (magic, length, CRC, kind code) and the
-writer and reader live in :mod:`facepuppet.runtime.session`. Payloads, all
+writer and reader live in :mod:`facepuppet.runtime.recording.session`. Payloads, all
 integers and floats little-endian:
 
 ========  ====  ==============================================================

@@ -1,0 +1,1 @@
+"""Recordings: the session file format, the recorder, and the sources that replay a recording."""
