@@ -19,7 +19,7 @@ from facepuppet.runtime.rigid import kabsch
 
 
 class ActorRetarget:
-    """Implements the ``Retarget`` protocol of :mod:`facepuppet.runtime.loop`.
+    """Implements the ``Retarget`` protocol of :mod:`facepuppet.runtime.live.loop`.
 
     Parameters
     ----------

@@ -2,12 +2,12 @@
 
 A separate sender *process* streams VMC frames (every ARKit channel in
 PascalCase plus the Head bone, split into bundles under 1,500 bytes with
-Apply last, i.e. what :class:`~facepuppet.runtime.vmc_out.VmcSender` sends)
+Apply last, i.e. what :class:`~facepuppet.runtime.live.vmc_out.VmcSender` sends)
 at ``--rate`` Hz for ``--seconds`` to a headless ``run`` in this process,
 rendering the character at ``--size``. Reported:
 
 * receive -> GPU finished latency of each drawn frame (p50 / p99 / max, ms),
-  and the per-stage split (:mod:`~facepuppet.runtime.live_stats`);
+  and the per-stage split (:mod:`~facepuppet.runtime.live.stats`);
 * the CPU stages of the frame loop (snapshot, pipeline + map) p99;
 * receive is the kernel's arrival stamp of the datagram (SO_TIMESTAMPNS), so
   time a datagram waits before the receiver reads it counts; ``--receiver``
@@ -53,7 +53,7 @@ def send(host: str, port: int, rate: float, seconds: float) -> int:
     """Stream VMC frames at ``rate`` Hz for ``seconds``; returns the number of frames sent."""
     from facepuppet.runtime.channels import ARKIT_NAMES
     from facepuppet.runtime.geometry import euler_to_quat
-    from facepuppet.runtime.vmc_out import VmcSender
+    from facepuppet.runtime.live.vmc_out import VmcSender
 
     sender = VmcSender(host, port, ARKIT_NAMES)
     n = len(ARKIT_NAMES)

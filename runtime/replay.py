@@ -13,7 +13,7 @@ its tick times, at the live ``--fps`` (another ``--fps`` resamples instead).
 ``--pipeline`` (implied by ``--config`` / ``--calibrate``) runs the live
 pipeline as ``run`` does, so the same options give the live run's weights.
 The parameter-space options (``--actor``/``--pair``, ``--retarget``,
-``--elastic``) are ``run``'s (:mod:`~facepuppet.runtime.run_stages`).
+``--elastic``) are ``run``'s (:mod:`~facepuppet.runtime.live.stages`).
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.loop import FrameLoop, PngSink, RecordedClock, WallClock, WeightLog
-from facepuppet.runtime.run_stages import add_stage_arguments
+from facepuppet.runtime.live.loop import FrameLoop, PngSink, RecordedClock, WallClock, WeightLog
+from facepuppet.runtime.live.stages import add_stage_arguments
 from facepuppet.runtime.recording.replay_source import ReplaySource, open_recording
 
 
@@ -72,7 +72,7 @@ def run_replay(args, log=print) -> int:
     """Run the ``replay`` command from parsed ``args``; returns the exit code."""
     from facepuppet.runtime.gl_context import GLUnavailable, create_context
     from facepuppet.runtime.recording.ticked_source import TickedSource, read_live_recording
-    from facepuppet.runtime.run_stages import build_stages, make_input_adapter
+    from facepuppet.runtime.live.stages import build_stages, make_input_adapter
 
     width, height = parse_size(args.size)
     fps = getattr(args, "fps", None)
@@ -86,8 +86,8 @@ def run_replay(args, log=print) -> int:
         live = read_live_recording(args.session, lambda k: make_input_adapter(k, stages.extra_names, log=log))
     pipeline = None
     if getattr(args, "pipeline", False) or getattr(args, "config", None) is not None or getattr(args, "calibrate", False):
-        from facepuppet.runtime.live_config import LiveConfig, load_live_config
-        from facepuppet.runtime.pipeline import LivePipeline
+        from facepuppet.runtime.live.config import LiveConfig, load_live_config
+        from facepuppet.runtime.live.pipeline import LivePipeline
 
         pipeline = LivePipeline(load_live_config(args.config) if getattr(args, "config", None) else LiveConfig(), log=log)
         if getattr(args, "calibrate", False):

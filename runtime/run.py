@@ -7,7 +7,7 @@ input kind's datagrams into frames; the frame loop draws as soon as a new
 frame arrives (``--draw arrival``, the default; without new frames it redraws
 at ``--fps``) or on a fixed ``--fps`` grid (``--draw tick``), takes the newest
 frame each tick (older ones are dropped and counted, never queued), runs the live pipeline (filter, calibrate,
-gain/clamp, tracking-loss easing; :mod:`~facepuppet.runtime.pipeline`), maps
+gain/clamp, tracking-loss easing; :mod:`~facepuppet.runtime.live.pipeline`), maps
 it onto the rig and draws. Around that loop:
 
 * ``--record FILE``: every accepted datagram (raw bytes, receive time, input
@@ -17,7 +17,7 @@ it onto the rig and draws. Around that loop:
   drawn frame; no device is a message, not an error.
 * ``--vmc-out HOST:PORT``: the rig weights and head pose as VMC, every tick.
 * ``--stats``: counters and per-stage latency once a second and at exit.
-* Parameter spaces (:mod:`~facepuppet.runtime.run_stages`): ``--input markers``
+* Parameter spaces (:mod:`~facepuppet.runtime.live.stages`): ``--input markers``
   with ``--actor``/``--pair`` (marker solve, Shin & Lee), ``--retarget`` (kernel
   PLS), ``--elastic`` (elastic path; muscles as input channels).
 * With ``--record``, one TICK record per drawn tick (which frame it took and
@@ -45,13 +45,13 @@ from types import SimpleNamespace
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.live_config import LiveConfig, load_live_config
-from facepuppet.runtime.live_stats import LiveStats
-from facepuppet.runtime.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, PngSink, WallClock, WeightLog
-from facepuppet.runtime.pipeline import LivePipeline
+from facepuppet.runtime.live.config import LiveConfig, load_live_config
+from facepuppet.runtime.live.stats import LiveStats
+from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, PngSink, WallClock, WeightLog
+from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.replay import parse_size
-from facepuppet.runtime.run_stages import add_stage_arguments, build_stages, make_input_adapter
-from facepuppet.runtime.vmc_out import parse_host_port
+from facepuppet.runtime.live.stages import add_stage_arguments, build_stages, make_input_adapter
+from facepuppet.runtime.live.vmc_out import parse_host_port
 
 CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
 RECEIVERS = ("process", "thread")
@@ -160,7 +160,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
     from facepuppet.runtime.recording.recorder import PacketRecorder
     from facepuppet.runtime.inputs.udp_process import UdpProcessSource
     from facepuppet.runtime.inputs.udp import UdpSource
-    from facepuppet.runtime.vmc_out import VmcSender
+    from facepuppet.runtime.live.vmc_out import VmcSender
 
     receiver = getattr(args, "receiver", "process")
     if receiver not in RECEIVERS:

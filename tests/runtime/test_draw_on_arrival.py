@@ -12,7 +12,7 @@ import pytest
 from helpers.osc_helpers import vmc_frame
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.loop import FrameLoop, WallClock, WeightLog
+from facepuppet.runtime.live.loop import FrameLoop, WallClock, WeightLog
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.udp import UdpSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter

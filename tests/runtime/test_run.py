@@ -19,7 +19,7 @@ from pythonosc.udp_client import SimpleUDPClient
 from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.cli import main
-from facepuppet.runtime.pipeline import LivePipeline
+from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.run import CALIBRATE_ADDRESS, _Packets
 from facepuppet.runtime.recording.session import read_session
 from facepuppet.runtime.recording.replay_source import open_recording

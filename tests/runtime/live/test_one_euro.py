@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from facepuppet.runtime.one_euro import OneEuroFilter
+from facepuppet.runtime.live.one_euro import OneEuroFilter
 
 
 class ScalarOneEuro:

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.loop import FrameLoop, RecordedClock, WallClock, WeightLog
+from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock, WeightLog
 from facepuppet.runtime.recording.replay_source import ReplaySource
-from facepuppet.runtime.timing import StageTimer
+from facepuppet.runtime.live.timing import StageTimer
 
 RIG = SimpleNamespace(shape_names=("jawOpen", "eyeBlink_L", "eyeBlink_R", "cheekRaiser_L"))
 

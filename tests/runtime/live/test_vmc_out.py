@@ -14,7 +14,7 @@ import pytest
 from pythonosc.osc_bundle import OscBundle
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.vmc_out import MAX_BUNDLE, VmcSender, parse_host_port
+from facepuppet.runtime.live.vmc_out import MAX_BUNDLE, VmcSender, parse_host_port
 
 LINE = re.compile(r'^\S+ (?P<address>/\S+)(?: (?P<types>\S+))?(?: (?P<args>.*))?$')  # time tag, address, ...
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.timing import StageTimer
+from facepuppet.runtime.live.timing import StageTimer
 
 STAGES = ("snapshot", "map", "draw_submit", "gpu_finish", "sink")
 ARRIVAL_GRID_HZ = 1000.0  # tick-label grid of a run that draws on arrival (see the module docstring)
@@ -169,7 +169,7 @@ class FrameLoop:
         solver, a kernel-PLS retarget, ...)
     pipeline : callable ``(frame or None, t) -> Frame or None`` or None; live
         processing between snapshot and map (filtering, calibration, tracking
-        loss, see :class:`~facepuppet.runtime.pipeline.LivePipeline`). It is
+        loss, see :class:`~facepuppet.runtime.live.pipeline.LivePipeline`). It is
         called every tick with the new finite frame (None when there is none)
         and its result, when not None, is the frame drawn.
     on_tick : sequence of callables taking a :class:`TickInfo`, called after

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from facepuppet.runtime.live_config import (DEFAULT_FILTERS, LiveConfig, LiveConfigError, load_live_config,
+from facepuppet.runtime.live.config import (DEFAULT_FILTERS, LiveConfig, LiveConfigError, load_live_config,
                                             region_of)
 
 FULL = """

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.live_config import ChannelSettings, FilterSettings, LiveConfig
-from facepuppet.runtime.loop import FrameLoop, RecordedClock, WeightLog
-from facepuppet.runtime.pipeline import LivePipeline
+from facepuppet.runtime.live.config import ChannelSettings, FilterSettings, LiveConfig
+from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WeightLog
+from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
 RIG = SimpleNamespace(shape_names=("jawOpen", "eyeBlink_L"))

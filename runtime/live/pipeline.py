@@ -6,7 +6,7 @@ For each accepted frame, in this order:
    (counted in ``counters["nonfinite_rejected"]``; NaN weights mean "not
    sent" and pass).
 2. **Filter**: a One Euro filter per weight channel with its region's settings
-   (eyes light, mouth heavier, see :mod:`~facepuppet.runtime.live_config`),
+   (eyes light, mouth heavier, see :mod:`~facepuppet.runtime.live.config`),
    and one for the head (quaternion components, kept in one hemisphere and
    renormalised; translation). ``dt`` is the difference of receive times.
 3. **Calibrate**: subtract the neutral pose (weights and translation; the
@@ -33,8 +33,8 @@ import numpy as np
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import quat_mul
-from facepuppet.runtime.live_config import LiveConfig, region_of
-from facepuppet.runtime.one_euro import OneEuroFilter
+from facepuppet.runtime.live.config import LiveConfig, region_of
+from facepuppet.runtime.live.one_euro import OneEuroFilter
 
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
