@@ -9,7 +9,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from facepuppet.runtime.actor import Actor
-from facepuppet.runtime.images import contact_sheet, save_png
+from facepuppet.runtime.render.images import contact_sheet, save_png
 
 _BG, _NEUTRAL, _MOVED, _LINK = (250, 250, 248), (150, 150, 150), (200, 40, 30), (60, 90, 200)
 
@@ -91,7 +91,7 @@ def face_actuation_images(pair, character, ctx, size: tuple[int, int] = (320, 32
     Returns [(label, ndarray of shape (height, width, 3), uint8)], the neutral first; each label names
     the actuation and its two largest weights.
     """
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     k = pair.cubic.shape[1]
     zoom = 2                                      # render larger, then crop to the marked region of the face

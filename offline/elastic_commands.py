@@ -90,7 +90,7 @@ def _fit(args: argparse.Namespace) -> int:
           f"(truncation adds {100 * report['truncation_added_median']:.2f}% median); "
           f"tables {report['ratio']:.1f}x smaller than dense deltas")
     if args.pictures:
-        from facepuppet.runtime.gl_context import create_context
+        from facepuppet.runtime.render.gl_context import create_context
 
         from facepuppet.offline.elastic_pictures import overlay, reconstruction_sheets
 
@@ -146,7 +146,7 @@ def _clone(args: argparse.Namespace) -> int:
     char_out = character.save(Path(args.output).with_name(Path(args.output).stem + "_character.npz"))
     print(f"{out}: cloned {len(model.shape_names)} expressions onto {target.n_vertices} vertices; character {char_out}")
     if args.pictures:
-        from facepuppet.runtime.gl_context import create_context
+        from facepuppet.runtime.render.gl_context import create_context
 
         from facepuppet.offline.elastic_pictures import expression_sheet, overlay
 

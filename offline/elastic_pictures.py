@@ -9,8 +9,8 @@ from PIL import Image, ImageDraw
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic import ElasticModel
-from facepuppet.runtime.images import contact_sheet, save_png
-from facepuppet.runtime.renderer import FaceRenderer
+from facepuppet.runtime.render.images import contact_sheet, save_png
+from facepuppet.runtime.render.renderer import FaceRenderer
 
 CELL = (240, 240)
 

@@ -261,9 +261,9 @@ def render_detail_sheet(character, names, weight: float = 3.0, cell=(320, 320), 
     import dataclasses
     import math
 
-    from facepuppet.runtime.gl_context import create_context
-    from facepuppet.runtime.images import contact_sheet
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.gl_context import create_context
+    from facepuppet.runtime.render.images import contact_sheet
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     dense = character.dense_deltas()
     idx = [list(character.shape_names).index(n) for n in names]
@@ -333,7 +333,7 @@ def _transfer_detail(args: argparse.Namespace) -> int:
         print(f"{g}: gesture tables with detail weights ({rows} of {len(table)} reference frames from the "
               f"marker takes); run --gestures {g} --character {path} drives the detail shapes")
     if args.pictures is not None:
-        from facepuppet.runtime.images import save_png
+        from facepuppet.runtime.render.images import save_png
 
         args.pictures.mkdir(parents=True, exist_ok=True)
         sheet = render_detail_sheet(out, det.feature_names, args.picture_weight)

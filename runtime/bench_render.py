@@ -71,8 +71,8 @@ def measure_path(renderer, weights: np.ndarray, warmup: int = 5) -> dict:
 
 def bench_render(args: argparse.Namespace) -> dict:
     from facepuppet.runtime.character import Character
-    from facepuppet.runtime.gl_context import create_context
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.gl_context import create_context
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     character = Character.load(args.character)
     weights = synthetic_performance(args.frames, character.n_shapes, n_active=args.active)

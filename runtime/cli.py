@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
 # Commands that draw every frame. They run with one BLAS thread: the CPU
 # deformation path's saxpy, split over OpenBLAS workers that compete with
 # llvmpipe's rasteriser threads, stalled for 100-600 ms now and then on a
-# 2-core machine (see runtime/blas_threads.py).
+# 2-core machine (see runtime/render/blas_threads.py).
 _RENDERING_COMMANDS = frozenset({"run", "replay", "demo", "manipulate", "contact-sheet", "bench"})
 
 
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         if args.command in _RENDERING_COMMANDS:
-            from facepuppet.runtime.blas_threads import BlasThreads
+            from facepuppet.runtime.render.blas_threads import BlasThreads
 
             with BlasThreads(1):
                 return int(args.func(args) or 0)

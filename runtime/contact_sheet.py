@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.images import contact_sheet, save_png
+from facepuppet.runtime.render.images import contact_sheet, save_png
 
 
 def parse_cell(text: str) -> tuple[int, int]:
@@ -30,7 +30,7 @@ def render_shapes(ctx, character: Character, cell=(320, 320), path: str = "auto"
     -------
     list of (label, ndarray of shape (cell_h, cell_w, 3), uint8)
     """
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     renderer = FaceRenderer(ctx, character, cell[0], cell[1], path=path, log=log, framing=framing)
     try:
@@ -49,7 +49,7 @@ def render_shapes(ctx, character: Character, cell=(320, 320), path: str = "auto"
 
 
 def run(args: argparse.Namespace) -> int:
-    from facepuppet.runtime.gl_context import create_context
+    from facepuppet.runtime.render.gl_context import create_context
 
     character = Character.load(args.character)
     target = create_context(headless=True)

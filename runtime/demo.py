@@ -59,9 +59,9 @@ def run_demo(args, log=print) -> int:
     """Run the ``demo`` command from parsed ``args``; returns the exit code."""
     from facepuppet.runtime.demo_head import build_demo_character
     from facepuppet.runtime.demo_performance import demo_frames
-    from facepuppet.runtime.gl_context import GLUnavailable, create_context
-    from facepuppet.runtime.images import contact_sheet, save_png
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
+    from facepuppet.runtime.render.images import contact_sheet, save_png
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     width, height = parse_size(args.size)
     if not (args.fps > 0) or not (args.duration > 0):

@@ -30,7 +30,7 @@ class PointOverlay:
 
     def __init__(self, ctx: moderngl.Context, view_projection: np.ndarray, max_points: int = 256,
                  point_size: float = 9.0):
-        from facepuppet.runtime.shader_loader import load_program
+        from facepuppet.runtime.render.shader_loader import load_program
 
         self.ctx = ctx
         self.prog = load_program(ctx, "overlay.glsl")
@@ -142,9 +142,9 @@ def register(subparsers) -> None:
 
 
 def _manipulate(args) -> int:
-    from facepuppet.runtime.gl_context import GLUnavailable, create_context
-    from facepuppet.runtime.images import save_png
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
+    from facepuppet.runtime.render.images import save_png
+    from facepuppet.runtime.render.renderer import FaceRenderer
     from facepuppet.runtime.replay import parse_size
 
     width, height = parse_size(args.size)

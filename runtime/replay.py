@@ -70,7 +70,7 @@ def register(subparsers) -> None:
 
 def run_replay(args, log=print) -> int:
     """Run the ``replay`` command from parsed ``args``; returns the exit code."""
-    from facepuppet.runtime.gl_context import GLUnavailable, create_context
+    from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
     from facepuppet.runtime.recording.ticked_source import TickedSource, read_live_recording
     from facepuppet.runtime.live.stages import build_stages, make_input_adapter
 

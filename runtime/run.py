@@ -155,8 +155,8 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         GLUnavailable when no OpenGL context can be made.
     """
     from facepuppet.runtime.inputs.audio import open_audio
-    from facepuppet.runtime.blas_threads import BlasThreads
-    from facepuppet.runtime.gl_context import create_context
+    from facepuppet.runtime.render.blas_threads import BlasThreads
+    from facepuppet.runtime.render.gl_context import create_context
     from facepuppet.runtime.recording.recorder import PacketRecorder
     from facepuppet.runtime.inputs.udp_process import UdpProcessSource
     from facepuppet.runtime.inputs.udp import UdpSource
@@ -322,7 +322,7 @@ def _bind_calibrate_key(target, pipeline: LivePipeline) -> None:
 
 def run_command(args, log=print) -> int:
     """The ``run`` command: returns the exit code."""
-    from facepuppet.runtime.gl_context import GLUnavailable
+    from facepuppet.runtime.render.gl_context import GLUnavailable
 
     try:
         result = run_live(args, log=log)

@@ -148,7 +148,7 @@ class Stages:
 
     def renderer(self, ctx, character, width, height, path, target_fbo, log):
         """The renderer to hand the loop (an :class:`ElasticDraw` with ``--elastic``)."""
-        from facepuppet.runtime.renderer import FaceRenderer
+        from facepuppet.runtime.render.renderer import FaceRenderer
 
         if self.elastic is None:
             return FaceRenderer(ctx, character, width, height, path=path, target_fbo=target_fbo, log=log)

@@ -9,7 +9,7 @@ from PIL import Image
 from helpers.small_characters import sphere_character
 
 from facepuppet.runtime import contact_sheet
-from facepuppet.runtime.images import LABEL_HEIGHT, contact_sheet as make_sheet, save_png
+from facepuppet.runtime.render.images import LABEL_HEIGHT, contact_sheet as make_sheet, save_png
 
 
 def parse(module, argv):
@@ -61,7 +61,7 @@ def test_cell_option_is_validated():
 
 def test_face_framing_shows_the_face_larger_than_head_framing(egl_ctx, ict_character):
     """ICT's neck and shoulders make head framing much wider than the face."""
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     covered = {}
     for framing in ("head", "face"):

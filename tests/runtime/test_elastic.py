@@ -32,8 +32,8 @@ def test_bad_index_is_refused():
 
 def gpu_elastic(ctx, character, model, controls):
     """Deformed positions and normals read back from face.glsl's elastic variant (transform feedback)."""
-    from facepuppet.runtime.elastic_renderer import basis_textures, elastic_defines
-    from facepuppet.runtime.shader_loader import load_program
+    from facepuppet.runtime.render.elastic_path import basis_textures, elastic_defines
+    from facepuppet.runtime.render.shader_loader import load_program
     import moderngl
 
     prog = load_program(ctx, "face.glsl", elastic_defines(model), varyings=("v_world", "v_normal"))
@@ -75,7 +75,7 @@ def test_gpu_elastic_path_matches_numpy(egl_ctx):
 
 
 def test_renderer_elastic_path_draws_and_checks_its_table(egl_ctx):
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     c = sphere_character(with_hidden=False)
     model = random_model(c)

@@ -123,7 +123,7 @@ def test_drag_one_point_the_face_follows_and_pins_hold():
 
 
 def test_cursor_path_picks_unprojects_and_solves(egl_ctx):
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     character = bump_face()
     actor, pair = actor_and_pair(character)
@@ -202,8 +202,8 @@ def window_scenario() -> None:
     """Drive the glfw callbacks of a real window (run in a child process: GLX beside EGL in one process dies)."""
     import glfw
 
-    from facepuppet.runtime.gl_context import create_context
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.gl_context import create_context
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     character = bump_face()
     actor, pair = actor_and_pair(character)

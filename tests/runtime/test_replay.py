@@ -23,7 +23,7 @@ W, H = 320, 240
 
 
 def _replay(ctx, character, frames, out_dir, path):
-    from facepuppet.runtime.renderer import FaceRenderer
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
     renderer = FaceRenderer(ctx, character, W, H, path=path, log=lambda s: None)
     weights, messages = WeightLog(), []

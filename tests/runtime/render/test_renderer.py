@@ -7,8 +7,8 @@ import pytest
 from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.geometry import euler_to_quat
-from facepuppet.runtime.gl_context import GLUnavailable, create_context
-from facepuppet.runtime.renderer import FaceRenderer, realistic_weights
+from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
+from facepuppet.runtime.render.renderer import FaceRenderer, realistic_weights
 
 W, H = 160, 120
 
@@ -155,9 +155,9 @@ def test_window_without_display_raises_and_headless_works(monkeypatch):
 
 def gpu_deformed(ctx, character, weights):
     """Deformed positions and normals read back from face.glsl's vertex shader (transform feedback)."""
-    from facepuppet.runtime.deform import CpuDeformer
-    from facepuppet.runtime.renderer import delta_textures, gpu_defines
-    from facepuppet.runtime.shader_loader import load_program
+    from facepuppet.runtime.render.cpu_deform import CpuDeformer
+    from facepuppet.runtime.render.renderer import delta_textures, gpu_defines
+    from facepuppet.runtime.render.shader_loader import load_program
 
     prog = load_program(ctx, "face.glsl", gpu_defines(character), varyings=("v_world", "v_normal"))
     textures = delta_textures(ctx, character)
@@ -197,7 +197,7 @@ def moderngl_points():
 
 @pytest.mark.parametrize("which", ["sphere", "ict"])
 def test_vertex_shader_deforms_like_the_cpu_deformer(egl_ctx, request, which):
-    from facepuppet.runtime.deform import CpuDeformer
+    from facepuppet.runtime.render.cpu_deform import CpuDeformer
 
     c = sphere_character() if which == "sphere" else request.getfixturevalue("ict_character")
     w = realistic_weights(c.n_shapes) if which == "ict" else np.array([0.7, -0.2], np.float32)

@@ -1,7 +1,7 @@
 """Limit the OpenBLAS libraries already loaded in this process to a number of threads.
 
 Why the live loop needs it: the CPU deformation path sums blendshape deltas
-with BLAS ``saxpy`` (:mod:`~facepuppet.runtime.deform`), and OpenBLAS splits a
+with BLAS ``saxpy`` (:mod:`~facepuppet.runtime.render.cpu_deform`), and OpenBLAS splits a
 long ``saxpy`` across its worker threads. On a 2-core machine where Mesa's
 llvmpipe rasteriser threads, the UDP receiver and the tracker already compete
 for the cores, those workers wait on each other: the same deformation that

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from facepuppet.runtime.shader_loader import ShaderError, load_program, preprocess
+from facepuppet.runtime.render.shader_loader import ShaderError, load_program, preprocess
 
 MAIN = """#version 330 core
 #include "common.glsl"

@@ -7,7 +7,7 @@ import ctypes
 import pytest
 import scipy.linalg.blas  # noqa: F401  (loads SciPy's OpenBLAS, as the CPU deformer does)
 
-from facepuppet.runtime.blas_threads import BlasThreads
+from facepuppet.runtime.render.blas_threads import BlasThreads
 
 
 def thread_counts() -> dict[str, int]:

@@ -5,11 +5,11 @@ Two deformation paths give the same picture:
 * ``gpu``: every shape's position and normal deltas sit in float textures;
   per frame only the active (shape, weight) pairs are uploaded as uniforms
   (a few hundred bytes) and the vertex shader sums them.
-* ``cpu``: :class:`~facepuppet.runtime.deform.CpuDeformer` sums the same
+* ``cpu``: :class:`~facepuppet.runtime.render.cpu_deform.CpuDeformer` sums the same
   deltas with NumPy and the result is written into the vertex buffer.
 * ``elastic`` (only when asked, with an elastic table): the vertex shader
   spreads control-point displacements with a compact basis
-  (:mod:`~facepuppet.runtime.elastic_renderer`, Yano & Harada 2009).
+  (:mod:`~facepuppet.runtime.render.elastic_path`, Yano & Harada 2009).
 
 On a real GPU the first wins by far. On Mesa's software rasteriser the vertex
 shader is emulated and the CPU path can be faster, so with ``path="auto"`` the
@@ -24,12 +24,12 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.camera import frame_bounds, model_matrix
+from facepuppet.runtime.render.camera import frame_bounds, model_matrix
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
-from facepuppet.runtime.deform import CpuDeformer, check_weights
-from facepuppet.runtime.elastic_renderer import check_model, setup_elastic, upload_controls
+from facepuppet.runtime.render.cpu_deform import CpuDeformer, check_weights
+from facepuppet.runtime.render.elastic_path import check_model, setup_elastic, upload_controls
 from facepuppet.runtime.geometry import bounds, vertex_normals
-from facepuppet.runtime.shader_loader import load_program
+from facepuppet.runtime.render.shader_loader import load_program
 
 DELTA_TEXTURE_WIDTH = 4096
 MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers.small_characters import sphere_character
 
-from facepuppet.runtime.deform import CpuDeformer
+from facepuppet.runtime.render.cpu_deform import CpuDeformer
 from facepuppet.runtime.geometry import vertex_normals
 
 
@@ -76,7 +76,7 @@ def test_weights_are_checked():
 
 
 def test_moving_spans_merge_short_gaps_only():
-    from facepuppet.runtime.deform import moving_spans
+    from facepuppet.runtime.render.cpu_deform import moving_spans
 
     spans = moving_spans(np.array([3, 4, 5, 9, 10, 200, 201]), max_gap=4)
     np.testing.assert_array_equal(spans, [[3, 11], [200, 202]])     # gap of 3 merged, gap of 189 not

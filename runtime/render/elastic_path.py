@@ -15,7 +15,7 @@ import numpy as np
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic import ElasticModel
 from facepuppet.runtime.geometry import vertex_normals
-from facepuppet.runtime.shader_loader import load_program
+from facepuppet.runtime.render.shader_loader import load_program
 
 ELASTIC_TEXTURE_WIDTH = 4096
 
