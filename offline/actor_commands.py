@@ -86,7 +86,7 @@ def _train_actor(args: argparse.Namespace) -> int:
 
 
 def _retarget_actor(args: argparse.Namespace) -> int:
-    from facepuppet.runtime.actor import Actor
+    from facepuppet.runtime.actuation.actor import Actor
     from facepuppet.runtime.character import Character
 
     from facepuppet.offline import actor_transfer as transfer

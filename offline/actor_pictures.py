@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.render.images import contact_sheet, save_png
 
 _BG, _NEUTRAL, _MOVED, _LINK = (250, 250, 248), (150, 150, 150), (200, 40, 30), (60, 90, 200)

@@ -2,7 +2,7 @@
 
 The three stages of Shin & Lee 2009 in one estimator. ``ActorModel`` stores
 its settings in the constructor; ``fit(capture)`` learns ``actor_`` (the
-runtime :class:`~facepuppet.runtime.actor.Actor` table), ``s_`` (the training
+runtime :class:`~facepuppet.runtime.actuation.actor.Actor` table), ``s_`` (the training
 actuations), ``stabilised_`` and ``metrics_`` (timings, errors, K report).
 """
 
@@ -13,7 +13,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.actuation import ActuationModel, k_report, neutral_frame

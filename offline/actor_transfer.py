@@ -46,8 +46,8 @@ import numpy as np
 from scipy.optimize import lsq_linear
 from scipy.spatial import cKDTree
 
-from facepuppet.runtime.actor import Actor
-from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.geometry import vertex_normals
 

@@ -2,7 +2,7 @@
 
 For each frame of a take: bring the markers into the actor's head coordinates
 (Kabsch on the actor's head markers), solve the actuations s (eq 5, the
-runtime :class:`~facepuppet.runtime.marker_solver.MarkerSolver`), drive the character
+runtime :class:`~facepuppet.runtime.actuation.solver.MarkerSolver`), drive the character
 through the pair (w = pair.weights(s)) and compare, at each marker's vertex,
 the character's displacement B w with the actor's observed displacement
 carried into character units and axes (divided by the actor's FAPU, rotated by
@@ -21,10 +21,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from facepuppet.runtime.actor import Actor
-from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.marker_solver import MarkerSolver
+from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.rigid import kabsch
 
 

@@ -19,7 +19,7 @@ TAKES = ("animface_jaw.trc", "animface_cheeks.trc")
 
 
 def _solve_times(actor, markers: np.ndarray, n_given: int | None, seed: int = 0) -> dict:
-    from facepuppet.runtime.marker_solver import MarkerSolver
+    from facepuppet.runtime.actuation.solver import MarkerSolver
 
     rng = np.random.default_rng(seed)
     solver = MarkerSolver(actor)

@@ -3,7 +3,7 @@
 Window: left-drag pulls a marker, right-click (or shift+left) toggles a pin,
 R resets to the neutral (and clears the pins), Escape quits. ``--script``
 runs a JSON list of steps through the same code
-(:mod:`~facepuppet.runtime.manipulation`), headless or in the window, and
+(:mod:`~facepuppet.runtime.actuation.manipulation`), headless or in the window, and
 writes a PNG per step and ``manipulate.json`` (s and weights per step).
 Markers, pins and the drag target are drawn as dots over the face
 (``shaders/overlay.glsl``).
@@ -20,10 +20,10 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.actor import Actor
-from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.manipulation import Manipulation, ScreenView, read_script, run_step
+from facepuppet.runtime.actuation.manipulation import Manipulation, ScreenView, read_script, run_step
 
 class PointOverlay:
     """Round dots drawn over a renderer's framebuffer (shaders/overlay.glsl, GL_POINTS, no depth test)."""

@@ -206,9 +206,9 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
             raise ValueError(f"--actor/--pair: only for --input markers, not {input_kind!r}")
         if retarget_path is not None:
             raise ValueError("--actor/--pair and --retarget: choose one parameter space")
-        from facepuppet.runtime.actor import Actor
-        from facepuppet.runtime.actor_pair import ActorPair
-        from facepuppet.runtime.actor_retarget import ActorRetarget
+        from facepuppet.runtime.actuation.actor import Actor
+        from facepuppet.runtime.actuation.pair import ActorPair
+        from facepuppet.runtime.actuation.stage import ActorRetarget
 
         pair = ActorPair.load(pair_path)
         if tuple(pair.shape_names) != shapes:

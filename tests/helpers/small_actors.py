@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actuation.actor import Actor
 
 N, K = 12, 4
 

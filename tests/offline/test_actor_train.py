@@ -15,8 +15,8 @@ from facepuppet.offline.actor_train import train_actor
 from facepuppet.offline.capture_io import Capture, write_trc
 from facepuppet.offline.cubic_fit import evaluate, fit_polynomial
 from facepuppet.offline.synthetic_capture import synthetic_capture
-from facepuppet.runtime.actor import Actor
-from facepuppet.runtime.marker_solver import MarkerSolver
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.rigid import kabsch
 
 K = 6

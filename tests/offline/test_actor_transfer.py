@@ -11,7 +11,7 @@ from facepuppet.offline.actor_transfer import (align_markers, face_units, observ
                                                read_override, retarget_actor, s_distribution, training_pairs,
                                                umeyama)
 from facepuppet.offline.actor_transfer_eval import transfer_error
-from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix, vertex_normals
 from helpers.small_characters import grid_face

@@ -13,11 +13,11 @@ import pytest
 from PIL import Image
 
 from facepuppet.runtime import manipulate
-from facepuppet.runtime.actor import Actor
-from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import vertex_normals
-from facepuppet.runtime.manipulation import Manipulation, ScreenView, read_script
+from facepuppet.runtime.actuation.manipulation import Manipulation, ScreenView, read_script
 
 GRID = 21
 CENTRES = [(-3.0, -4.0), (3.0, -4.0), (0.0, 3.0), (-3.5, 4.5)]      # one local actuation around each

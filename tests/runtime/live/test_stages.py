@@ -19,7 +19,7 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
 
 from facepuppet.runtime import replay, run
-from facepuppet.runtime.actor_retarget import ActorRetarget
+from facepuppet.runtime.actuation.stage import ActorRetarget
 from facepuppet.runtime.elastic import ElasticModel
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls_retarget import KplsRetarget

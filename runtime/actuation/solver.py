@@ -23,7 +23,7 @@ import numpy as np
 
 from scipy.linalg.lapack import dposv as _spd_solve
 
-from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actuation.actor import Actor
 
 _max, _min = np.maximum.reduce, np.minimum.reduce                   # plain ufunc reductions (no method wrapper)
 

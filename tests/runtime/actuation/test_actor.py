@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.actor import Actor
+from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.tables import TablesError
 from helpers.small_actors import K, make_actor
 

@@ -3,7 +3,7 @@
 Each accepted frame's markers (capture coordinates, NaN = occluded) are
 matched to the actor's markers by name, brought into head coordinates by a
 Kabsch fit of the visible head markers to the actor's neutral, solved for s
-(:class:`~facepuppet.runtime.marker_solver.MarkerSolver`, eq 5, warm-started) and
+(:class:`~facepuppet.runtime.actuation.solver.MarkerSolver`, eq 5, warm-started) and
 mapped to the character's weights through the pair table (§6.2).
 """
 
@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.actor import Actor
-from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.marker_solver import MarkerSolver
+from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.rigid import kabsch
 
 

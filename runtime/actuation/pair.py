@@ -19,7 +19,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from facepuppet.runtime.actor import _f32
+from facepuppet.runtime.actuation.actor import _f32
 from facepuppet.runtime.tables import Section, TableSchema, load_tables, register_schema, save_tables
 
 PAIR_SCHEMA = register_schema(TableSchema(

@@ -24,10 +24,10 @@ from typing import Callable
 
 import numpy as np
 
-from facepuppet.runtime.actor import Actor
-from facepuppet.runtime.actor_pair import ActorPair
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.marker_solver import MarkerSolver
+from facepuppet.runtime.actuation.solver import MarkerSolver
 
 PICK_RADIUS = 30.0   # pixels: a click farther than this from every marker picks nothing
 DRAG_STEPS = 8       # cursor events a scripted drag is cut into

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from facepuppet.runtime.marker_solver import MarkerSolver
+from facepuppet.runtime.actuation.solver import MarkerSolver
 from helpers.small_actors import K, N, make_actor
 
 
