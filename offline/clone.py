@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
-from facepuppet.runtime.elastic import ElasticModel
+from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.control_points import ControlPoints

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.elastic import ElasticModel
+from facepuppet.runtime.elastic.model import ElasticModel
 
 from facepuppet.offline.clone import character_with_shapes, clone_model, mesh_character
 from facepuppet.offline.control_points import (

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import qr, solve_triangular
 
-from facepuppet.runtime.elastic import ElasticModel, no_muscles
+from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
 
 from facepuppet.offline.elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
 from facepuppet.offline.muscles import default_muscles, muscle_sections

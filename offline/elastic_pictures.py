@@ -8,7 +8,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.elastic import ElasticModel
+from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.render.images import contact_sheet, save_png
 from facepuppet.runtime.render.renderer import FaceRenderer
 

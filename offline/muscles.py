@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facepuppet.runtime.elastic import MUSCLE_KINDS
+from facepuppet.runtime.elastic.model import MUSCLE_KINDS
 
 from facepuppet.offline.control_points import ControlPoints
 

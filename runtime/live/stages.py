@@ -186,7 +186,7 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
     shapes = tuple(character.shape_names)
     stages = Stages(names=shapes)
     if elastic_path is not None:
-        from facepuppet.runtime.elastic import ElasticModel
+        from facepuppet.runtime.elastic.model import ElasticModel
 
         model = ElasticModel.load(elastic_path)
         if model.n_vertices != character.n_vertices or tuple(model.shape_names) != shapes:

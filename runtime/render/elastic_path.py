@@ -13,7 +13,7 @@ import moderngl
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.elastic import ElasticModel
+from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.runtime.render.shader_loader import load_program
 

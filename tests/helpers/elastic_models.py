@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.elastic import ElasticModel, no_muscles
+from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
 
 
 def random_model(character, n_controls=6, k=4, seed=0) -> ElasticModel:

@@ -10,7 +10,7 @@ from facepuppet.offline.clone import character_with_shapes, mesh_character
 from facepuppet.offline.control_points import ControlPoints, write_control_points
 from facepuppet.offline.elastic_basis import ElasticBasis, fixed_region
 from facepuppet.offline.lip_line import cut_lip_line, fix_inner_lips
-from facepuppet.runtime.elastic import ElasticModel
+from facepuppet.runtime.elastic.model import ElasticModel
 from helpers.elastic_meshes import grid, nearest
 
 SPOTS = {

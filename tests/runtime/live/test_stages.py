@@ -20,7 +20,7 @@ from pythonosc.udp_client import SimpleUDPClient
 
 from facepuppet.runtime import replay, run
 from facepuppet.runtime.actuation.stage import ActorRetarget
-from facepuppet.runtime.elastic import ElasticModel
+from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls_retarget import KplsRetarget
 from facepuppet.runtime.recording.session import read_session

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from facepuppet.runtime.elastic import ElasticModel, no_muscles
+from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
 from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.runtime.tables import TablesError
 from helpers.elastic_models import random_model
