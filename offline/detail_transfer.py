@@ -329,7 +329,7 @@ def detail_character(character: Character, transfer: DetailTransfer, detail: Mar
 
 
 def detail_table(db, detail: MarkerDetail, take_names, rate: float = 60.0) -> np.ndarray:
-    """Detail weights per reference frame of a ``gesture_db`` (for :class:`~facepuppet.runtime.gestures.GestureLayer`).
+    """Detail weights per reference frame of a ``gesture_db`` (for :class:`~facepuppet.runtime.gestures.layer.GestureLayer`).
 
     Parameters
     ----------

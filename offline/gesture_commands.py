@@ -1,7 +1,7 @@
 """``facepuppet build-gestures`` and ``facepuppet synthesize-gestures`` (Ju & Lee 2008 gesture layer).
 
 ``build-gestures`` assembles the reference database (:mod:`.gesture_db`);
-``synthesize-gestures`` runs :class:`~facepuppet.runtime.gesture_synth.GestureSynth`
+``synthesize-gestures`` runs :class:`~facepuppet.runtime.gestures.synth.GestureSynth`
 on a WAV frame by frame (the runtime step, with the speaker normalised over the
 whole file) and writes a session file that ``facepuppet replay`` plays;
 ``--pictures DIR`` also draws the intensity with the synthesised tracks under it.
@@ -95,9 +95,9 @@ def parse_style(text: str) -> dict[str, str]:
 def synthesize(database, speech, seed: int = 0, style=None, sigma: float = 0.01, n_candidates: int = 3,
                history: int = 10, stereo: str = "refuse"):
     """Synthesised tracks for a WAV; returns (synth, level_db (n,), tracks (n, n_out) float32, seconds)."""
-    from facepuppet.runtime.gesture_synth import GestureSynth
-    from facepuppet.runtime.gesture_tables import load_gesture_db
-    from facepuppet.runtime.speaker_normaliser import SpeakerNormaliser
+    from facepuppet.runtime.gestures.synth import GestureSynth
+    from facepuppet.runtime.gestures.tables import load_gesture_db
+    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 
     from facepuppet.offline.speech_intensity import speech_intensity
 
@@ -128,7 +128,7 @@ def _build(args: argparse.Namespace) -> int:
 
 def _synthesize(args: argparse.Namespace) -> int:
     from facepuppet.runtime.frames import Frame
-    from facepuppet.runtime.gestures import GestureLayer
+    from facepuppet.runtime.gestures.layer import GestureLayer
     from facepuppet.runtime.recording.session import SessionWriter
 
     synth, level, tracks, seconds = synthesize(args.database, args.speech, args.seed, parse_style(args.style),
@@ -153,7 +153,7 @@ def _synthesize(args: argparse.Namespace) -> int:
 
 
 def synth_fps(database) -> float:
-    from facepuppet.runtime.gesture_tables import load_gesture_db
+    from facepuppet.runtime.gestures.tables import load_gesture_db
 
     return float(load_gesture_db(database).settings.get("fps", 30.0))
 
@@ -300,7 +300,7 @@ def _refuse_existing(path, overwrite: bool) -> None:
 
 def _transfer_detail(args: argparse.Namespace) -> int:
     from facepuppet.runtime.character import Character
-    from facepuppet.runtime.gesture_tables import load_gesture_db
+    from facepuppet.runtime.gestures.tables import load_gesture_db
     from facepuppet.runtime.tables import save_tables
 
     from facepuppet.offline.detail_transfer import detail_table

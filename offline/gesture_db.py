@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.channels import canonical
-from facepuppet.runtime.gesture_tables import GROUPS, HEAD_FEATURES
+from facepuppet.runtime.gestures.tables import GROUPS, HEAD_FEATURES
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.tables import hash_inputs, save_tables
 

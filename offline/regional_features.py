@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from facepuppet.runtime.channels import canonical
-from facepuppet.runtime.gestures import HEAD_FEATURES
+from facepuppet.runtime.gestures.layer import HEAD_FEATURES
 
 REGIONS = ("brows", "eyes", "lips", "rest")
 # markers that move rigidly with the skull in the AnimFace takes (data README: forehead + nose top)

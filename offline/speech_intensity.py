@@ -5,7 +5,7 @@ its level is the RMS of a Hann window of ``window_s`` seconds centred there,
 in dB relative to full scale (``20 log10(rms)``), floored at ``floor_db``.
 The speaker normalisation is a z-score over the voiced frames:
 ``s(t) = (dB(t) - mean_voiced) / std_voiced``, silence at
-:data:`~facepuppet.runtime.gestures.SILENCE_Z`. Voiced means above a noise
+:data:`~facepuppet.runtime.gestures.layer.SILENCE_Z`. Voiced means above a noise
 gate derived from the speaker's own level distribution: the 10th percentile
 of the frame levels estimates the noise floor (a take with at least 10 %
 pauses), and the gate sits ``GATE_MARGIN_DB`` (6 dB) above it, capped at
@@ -34,7 +34,7 @@ import numpy as np
 from scipy.signal import resample_poly
 
 from facepuppet.runtime.inputs.audio import read_wav
-from facepuppet.runtime.gestures import SILENCE_Z
+from facepuppet.runtime.gestures.layer import SILENCE_Z
 
 DEFAULT_RATE = 16000
 FLOOR_DB = -60.0

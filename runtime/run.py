@@ -209,7 +209,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
             pipeline.request_calibration()
         frame_pipeline = pipeline
         if getattr(args, "gestures", None) is not None:
-            from facepuppet.runtime.gestures import VoiceOnlySource, gesture_layer
+            from facepuppet.runtime.gestures.layer import VoiceOnlySource, gesture_layer
 
             frame_pipeline = gesture_layer(args.gestures, inner=pipeline, voice_only=voice_only, log=log,
                                            level=audio.level if audio is not None else None, seed=args.gesture_seed)

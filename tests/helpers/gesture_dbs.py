@@ -4,7 +4,7 @@ gesture table tests; a test file uses the fixture by importing it."""
 import numpy as np
 import pytest
 
-from facepuppet.runtime.gesture_tables import GROUPS, load_gesture_db
+from facepuppet.runtime.gestures.tables import GROUPS, load_gesture_db
 from facepuppet.runtime.tables import save_tables
 
 

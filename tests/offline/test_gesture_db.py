@@ -8,7 +8,7 @@ import pytest
 from facepuppet.offline import gesture_commands
 from facepuppet.offline.gesture_db import build_gesture_db, quantile_map
 from facepuppet.offline.regional_features import head_track, split_regions
-from facepuppet.runtime.gesture_tables import GROUPS, load_gesture_db
+from facepuppet.runtime.gestures.tables import GROUPS, load_gesture_db
 from facepuppet.runtime.recording.replay_source import open_recording
 from tests.conftest import need_shared
 
@@ -88,7 +88,7 @@ def test_run_input_audio_needs_gestures_and_audio():
 def test_transfer_detail_writes_a_character_with_local_detail_shapes_and_gesture_tables(db_path, ict_character_path,
                                                                                        tmp_path, capsys):
     from facepuppet.runtime.character import Character
-    from facepuppet.runtime.gestures import gesture_layer
+    from facepuppet.runtime.gestures.layer import gesture_layer
 
     ict = need_shared("ict-facekit")
     parser = argparse.ArgumentParser()

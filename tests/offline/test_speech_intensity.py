@@ -5,7 +5,7 @@ import pytest
 from scipy.io import wavfile
 
 from facepuppet.offline.speech_intensity import FLOOR_DB, SpeechInputError, speech_intensity
-from facepuppet.runtime.gestures import SILENCE_Z
+from facepuppet.runtime.gestures.layer import SILENCE_Z
 from tests.conftest import need_shared
 
 

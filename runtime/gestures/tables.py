@@ -2,9 +2,9 @@
 
 The reference database of Ju & Lee (2008) gestures, written offline by
 ``facepuppet build-gestures`` (:mod:`facepuppet.offline.gesture_db`) and read at
-runtime by :class:`~facepuppet.runtime.gesture_synth.GestureSynth`. Per frame at
+runtime by :class:`~facepuppet.runtime.gestures.synth.GestureSynth`. Per frame at
 the animation rate it holds the normalised speech intensity s(t) (a z-score
-floored at :data:`~facepuppet.runtime.speaker_normaliser.SILENCE_Z`), the
+floored at :data:`~facepuppet.runtime.gestures.speaker_normaliser.SILENCE_Z`), the
 features of the groups :data:`GROUPS` (lips P(t), mood c(t), the residuals
 D_j(t) of brows, eyes and rest, the head pose named :data:`HEAD_FEATURES`), the
 take of the frame and which groups that take provides.

@@ -3,7 +3,7 @@
 The paper composes the output as c(t)·B of the level-1 mood pick (§4.1,
 whole-face blend expressions) plus the residuals D_j of the level-2 picks.
 :func:`output_table` precomputes that composition per (group, reference frame)
-so that a :class:`~facepuppet.runtime.gesture_synth.GestureSynth` step is one
+so that a :class:`~facepuppet.runtime.gestures.synth.GestureSynth` step is one
 gather of one row per group and their sum.
 
 The eyes are shown whole (``whole``, default ("eyes",)): the eyes group's

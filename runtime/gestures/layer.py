@@ -1,7 +1,7 @@
 """Gesture layer: speech-driven stochastic facial gestures (Ju & Lee 2008) over the tracked face, per frame.
 
 :class:`GestureLayer` is a frame-loop pipeline ``(frame, t) -> frame`` that steps a
-:class:`~facepuppet.runtime.gesture_synth.GestureSynth` (the two-level MRF of §5.1,
+:class:`~facepuppet.runtime.gestures.synth.GestureSynth` (the two-level MRF of §5.1,
 in :mod:`.gesture_synth`) once per animation frame from the voice level and adds
 the synthesised motion to the tracked face, fills what tracking lost, or animates
 the face from the voice alone (``facepuppet run --input audio``).
@@ -17,9 +17,9 @@ import numpy as np
 from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat, quat_mul
-from facepuppet.runtime.gesture_synth import GestureSynth
-from facepuppet.runtime.gesture_tables import GESTURE_DB_SCHEMA, GROUPS, HEAD_FEATURES, LEVEL1, load_gesture_db
-from facepuppet.runtime.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
+from facepuppet.runtime.gestures.synth import GestureSynth
+from facepuppet.runtime.gestures.tables import GESTURE_DB_SCHEMA, GROUPS, HEAD_FEATURES, LEVEL1, load_gesture_db
+from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
 
 __all__ = ["GESTURE_DB_SCHEMA", "GROUPS", "HEAD_FEATURES", "LEVEL1", "SILENCE_Z", "GestureSynth", "SpeakerNormaliser",
            "load_gesture_db", "GestureLayer", "VoiceOnlySource", "gesture_layer"]

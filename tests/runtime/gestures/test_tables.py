@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from facepuppet.runtime.gesture_tables import load_gesture_db
+from facepuppet.runtime.gestures.tables import load_gesture_db
 from facepuppet.runtime.tables import TablesError, save_tables
 from helpers.gesture_dbs import db  # noqa: F401  (a pytest fixture)
 

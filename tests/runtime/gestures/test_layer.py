@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.gesture_candidates import intensity_bin
-from facepuppet.runtime.gesture_synth import RECENT_PENALTY, GestureSynth
-from facepuppet.runtime.gesture_tables import load_gesture_db
-from facepuppet.runtime.gestures import GestureLayer
+from facepuppet.runtime.gestures.candidates import intensity_bin
+from facepuppet.runtime.gestures.synth import RECENT_PENALTY, GestureSynth
+from facepuppet.runtime.gestures.tables import load_gesture_db
+from facepuppet.runtime.gestures.layer import GestureLayer
 from facepuppet.runtime.tables import save_tables
 from helpers.gesture_dbs import db, small_db  # noqa: F401  (db is a pytest fixture)
 

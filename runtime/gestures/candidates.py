@@ -5,14 +5,14 @@ precomputed per reference frame p (the last pick): the successor p+1 and the
 ``n_neighbours`` frames whose continuity windows are nearest to p+1's (exact,
 brute force at construction), plus ``n_speech`` frames from the bin of the
 current intensity (:data:`N_BINS` bins over [SILENCE_Z, -SILENCE_Z]).
-Used by :class:`~facepuppet.runtime.gesture_synth.GestureSynth`.
+Used by :class:`~facepuppet.runtime.gestures.synth.GestureSynth`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.speaker_normaliser import SILENCE_Z
+from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z
 
 N_BINS = 24       # intensity bins of the speech candidates, over [SILENCE_Z, -SILENCE_Z]
 
