@@ -4,7 +4,7 @@ A Live Link Face take drives the ICT head (source); it is retargeted to the
 stylised ICT head and the procedural demo head, each once as a linear
 blendshape correspondence (the control) and once non-linear
 (:mod:`.retarget_targets`), and back (:mod:`.cyclic_eval`). The exported runtime stage
-(:mod:`facepuppet.runtime.kpls_retarget`) is timed per frame on the same take.
+(:mod:`facepuppet.runtime.kpls.stage`) is timed per frame on the same take.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def _add_arguments(parser) -> None:
 
 
 def _runtime_timing(source, target, frames, log) -> dict:
-    from facepuppet.runtime.kpls_retarget import KplsRetarget
+    from facepuppet.runtime.kpls.stage import KplsRetarget
 
     from facepuppet.offline.kpls import KernelPLS
     from facepuppet.offline.kpls_commands import to_runtime

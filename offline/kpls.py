@@ -21,7 +21,7 @@ The NIPALS loop (eqs. 3–7) alternates t = K u / ‖K u‖, c = Yᵀ t, u = Y c
 ‖Y c‖ until t stops changing; the Gram matrix and Y are then deflated
 (eq. 9). Prediction (eq. 10) is ``Ŷ = Ktc @ dual_coef_ + mean(Y)``, so a new
 input costs one kernel row and one small matrix product, which is what the
-runtime stage (:mod:`facepuppet.runtime.kpls_retarget`) evaluates.
+runtime stage (:mod:`facepuppet.runtime.kpls.stage`) evaluates.
 
 With the linear kernel the scores span the same space as ordinary PLS
 (NIPALS with X deflation), so predictions equal those of scikit-learn's

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.kpls_retarget import KplsRetarget
+from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.kpls import KernelPLS

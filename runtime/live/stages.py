@@ -221,7 +221,7 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
             raise ValueError(f"--actor {actor_path} / --pair {pair_path}: {exc}") from None
         log(f"actor: {actor_path} ({actor.n_markers} markers, K={actor.n_actuations}) -> pair {pair_path}")
     if retarget_path is not None:
-        from facepuppet.runtime.kpls_retarget import KplsRetarget
+        from facepuppet.runtime.kpls.stage import KplsRetarget
 
         retarget = KplsRetarget.load(retarget_path)
         if tuple(retarget.target_names) != shapes:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.kpls_retarget import KplsRetarget
+from facepuppet.runtime.kpls.stage import KplsRetarget
 
 
 def random_stage(kernel="rbf", n_train=30, n_features=12, source=("jawOpen", "eyeBlinkLeft", "eyeBlinkRight"),

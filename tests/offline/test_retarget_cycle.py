@@ -16,7 +16,7 @@ from facepuppet.offline.retarget_pairs import (farthest_points, feature_matrix, 
                                                read_pairing, training_pairs)
 from facepuppet.offline.retarget_baselines import LinearRetarget
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.kpls_retarget import KplsRetarget
+from facepuppet.runtime.kpls.stage import KplsRetarget
 
 SIDED = tuple(n.replace("Left", "_L").replace("Right", "_R") for n in SHAPES)
 

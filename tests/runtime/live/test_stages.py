@@ -22,7 +22,7 @@ from facepuppet.runtime import replay, run
 from facepuppet.runtime.actuation.stage import ActorRetarget
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.kpls_retarget import KplsRetarget
+from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.recording.session import read_session
 from helpers.small_characters import sphere_character
 from helpers.elastic_models import random_model

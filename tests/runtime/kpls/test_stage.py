@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.kpls_retarget import KplsRetarget
+from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.tables import TablesError, load_tables, save_tables
 from helpers.kpls_stages import random_stage
 

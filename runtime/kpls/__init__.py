@@ -1,0 +1,1 @@
+"""Ouzounis et al. at runtime: the kernel-PLS retarget tables and their per-frame stage."""
