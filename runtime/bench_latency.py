@@ -76,7 +76,7 @@ def send(host: str, port: int, rate: float, seconds: float) -> int:
 
 def _phase(args, rate: float, seconds: float, log) -> dict:
     """One sender process at ``rate`` for ``seconds`` against one headless live run."""
-    from facepuppet.runtime.run import run_live
+    from facepuppet.runtime.commands.run import run_live
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))

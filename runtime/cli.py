@@ -17,11 +17,11 @@ from facepuppet.runtime.tables import TablesError
 # Runtime modules that add subcommands, in the order --help lists them. Each
 # must exist and import: a missing one is an error, never a silently dropped command.
 _COMMAND_MODULES = (
-    "facepuppet.runtime.run",
-    "facepuppet.runtime.manipulate",
-    "facepuppet.runtime.demo",
-    "facepuppet.runtime.replay",
-    "facepuppet.runtime.contact_sheet",
+    "facepuppet.runtime.commands.run",
+    "facepuppet.runtime.commands.manipulate",
+    "facepuppet.runtime.commands.demo",
+    "facepuppet.runtime.commands.replay",
+    "facepuppet.runtime.commands.contact_sheet",
     "facepuppet.runtime.bench",
 )
 

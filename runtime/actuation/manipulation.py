@@ -13,7 +13,7 @@ to (``pair.marker_vertices``), on the deformed mesh. A drag moves the mesh
 point by Δ in character space; the actor marker's target is its position at
 the press plus the similarity's inverse of Δ. Pins hold the actor marker where
 it was when pinned. Scripts (:func:`read_script`, :func:`run_step`) make the
-same calls; the window and the command are :mod:`~facepuppet.runtime.manipulate`.
+same calls; the window and the command are :mod:`~facepuppet.runtime.commands.manipulate`.
 """
 
 from __future__ import annotations

@@ -77,7 +77,7 @@ def test_quantile_map_keeps_order_and_takes_the_reference_distribution():
 
 
 def test_run_input_audio_needs_gestures_and_audio():
-    from facepuppet.runtime.run import run_live
+    from facepuppet.runtime.commands.run import run_live
 
     args = argparse.Namespace(input="audio", gestures=None, audio=None, audio_file=None, size="64x64", fps=30.0,
                               duration=1.0, listen=None, allow=None, vmc_out=None, config=None, character="x")

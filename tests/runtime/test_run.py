@@ -20,7 +20,7 @@ from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.live.pipeline import LivePipeline
-from facepuppet.runtime.run import CALIBRATE_ADDRESS, _Packets
+from facepuppet.runtime.commands.run import CALIBRATE_ADDRESS, _Packets
 from facepuppet.runtime.recording.session import read_session
 from facepuppet.runtime.recording.replay_source import open_recording
 
@@ -169,7 +169,7 @@ def test_busy_port_is_a_message_not_a_traceback(character, capsys):
 def test_both_receivers_record_every_packet_and_see_the_calibrate_message(character, tmp_path, receiver):
     from types import SimpleNamespace
 
-    from facepuppet.runtime.run import run_live
+    from facepuppet.runtime.commands.run import run_live
 
     record = tmp_path / f"{receiver}.fps"
     stop = threading.Event()
@@ -205,7 +205,7 @@ def test_both_receivers_record_every_packet_and_see_the_calibrate_message(charac
 def test_unknown_receiver_is_refused(character):
     from types import SimpleNamespace
 
-    from facepuppet.runtime.run import run_live
+    from facepuppet.runtime.commands.run import run_live
 
     with pytest.raises(ValueError, match="--receiver: expected one of"):
         run_live(SimpleNamespace(receiver="fiber"), log=lambda s: None)

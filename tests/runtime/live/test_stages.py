@@ -18,7 +18,7 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
 
-from facepuppet.runtime import replay, run
+from facepuppet.runtime.commands import replay, run
 from facepuppet.runtime.actuation.stage import ActorRetarget
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.frames import Frame

@@ -8,7 +8,7 @@ import pytest
 from PIL import Image
 from helpers.small_characters import sphere_character
 
-from facepuppet.runtime import contact_sheet
+from facepuppet.runtime.commands import contact_sheet
 from facepuppet.runtime.render.images import LABEL_HEIGHT, contact_sheet as make_sheet, save_png
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.live.loop import FrameLoop, PngSink, RecordedClock, WallClock
-from facepuppet.runtime.replay import parse_size
+from facepuppet.runtime.commands.replay import parse_size
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
 SHEET_CELLS = 12

@@ -145,7 +145,7 @@ def _manipulate(args) -> int:
     from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
     from facepuppet.runtime.render.images import save_png
     from facepuppet.runtime.render.renderer import FaceRenderer
-    from facepuppet.runtime.replay import parse_size
+    from facepuppet.runtime.commands.replay import parse_size
 
     width, height = parse_size(args.size)
     actor, pair, character = Actor.load(args.actor), ActorPair.load(args.pair), Character.load(args.character)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from facepuppet.runtime import manipulate
+from facepuppet.runtime.commands import manipulate
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas

@@ -49,7 +49,7 @@ from facepuppet.runtime.live.config import LiveConfig, load_live_config
 from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, PngSink, WallClock, WeightLog
 from facepuppet.runtime.live.pipeline import LivePipeline
-from facepuppet.runtime.replay import parse_size
+from facepuppet.runtime.commands.replay import parse_size
 from facepuppet.runtime.live.stages import add_stage_arguments, build_stages, make_input_adapter
 from facepuppet.runtime.live.vmc_out import parse_host_port
 

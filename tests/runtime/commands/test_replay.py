@@ -13,7 +13,7 @@ from conftest import need_shared
 from facepuppet.runtime.character import Character, sparse_deltas
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.live.loop import FrameLoop, PngSink, RecordedClock, WeightLog
-from facepuppet.runtime.replay import parse_size, register
+from facepuppet.runtime.commands.replay import parse_size, register
 from facepuppet.runtime.recording.session import SessionWriter
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
