@@ -59,7 +59,7 @@ def _runtime_timing(source, target, frames, log) -> dict:
 
 
 def run_bench(args, log=print) -> dict:
-    from facepuppet.runtime.demo_head import build_demo_character
+    from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 
     from facepuppet.offline.cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights

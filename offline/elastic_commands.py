@@ -31,7 +31,7 @@ POINT_ANCHORS = {
 
 def demo_anchors(character: Character) -> dict:
     """Anchor groups on the procedural demo head, from its construction constants."""
-    from facepuppet.runtime.demo_head_parts import EYE_XY, MOUTH_HALF_WIDTH, MOUTH_Y
+    from facepuppet.runtime.demo.head_parts import EYE_XY, MOUTH_HALF_WIDTH, MOUTH_Y
 
     v = character.vertices.astype(np.float64)
     front = main_front(character)
@@ -59,7 +59,7 @@ def main_front(character: Character) -> np.ndarray:
 def load_target(spec: str) -> Character:
     """A target character: ``demo``, a character table (.npz) or a bare OBJ mesh."""
     if spec == "demo":
-        from facepuppet.runtime.demo_head import build_demo_character
+        from facepuppet.runtime.demo.head import build_demo_character
 
         return build_demo_character()
     path = Path(spec)

@@ -57,8 +57,8 @@ def register(subparsers) -> None:
 
 def run_demo(args, log=print) -> int:
     """Run the ``demo`` command from parsed ``args``; returns the exit code."""
-    from facepuppet.runtime.demo_head import build_demo_character
-    from facepuppet.runtime.demo_performance import demo_frames
+    from facepuppet.runtime.demo.head import build_demo_character
+    from facepuppet.runtime.demo.performance import demo_frames
     from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
     from facepuppet.runtime.render.images import contact_sheet, save_png
     from facepuppet.runtime.render.renderer import FaceRenderer

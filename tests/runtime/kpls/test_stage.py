@@ -75,7 +75,7 @@ def test_tables_round_trip_and_damaged_files(tmp_path):
 
 
 def test_replay_command_uses_the_retarget(tmp_path, egl_ctx):
-    from facepuppet.runtime.demo_head import build_demo_character
+    from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.commands.replay import register, run_replay
 
     character = build_demo_character()

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facepuppet.runtime import demo_head_parts as parts
+from facepuppet.runtime.demo import head_parts as parts
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
-from facepuppet.runtime.demo_head_parts import gauss, smoothstep
+from facepuppet.runtime.demo.head_parts import gauss, smoothstep
 from facepuppet.runtime.geometry import vertex_normals
 
 MATERIALS = ("skin", "lips", "eye", "teeth", "mouth")

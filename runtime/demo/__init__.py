@@ -1,0 +1,1 @@
+"""The embedded demo: a procedural head and a synthetic performance, needing no data files."""
