@@ -40,7 +40,7 @@ def midpoint_subdivide(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _frame_costs(character, model, frames, width, height) -> dict:
-    from facepuppet.runtime.bench_render import measure_path, synthetic_performance
+    from facepuppet.runtime.bench.render import measure_path, synthetic_performance
     from facepuppet.runtime.render.gl_context import create_context
     from facepuppet.runtime.render.renderer import FaceRenderer
 

@@ -22,7 +22,7 @@ _COMMAND_MODULES = (
     "facepuppet.runtime.commands.demo",
     "facepuppet.runtime.commands.replay",
     "facepuppet.runtime.commands.contact_sheet",
-    "facepuppet.runtime.bench",
+    "facepuppet.runtime.bench.registry",
 )
 
 

@@ -18,7 +18,7 @@ rendering the character at ``--size``. Reported:
   latency of the newest frame per second and resident memory (RSS) sampled
   every second, which must stay flat.
 
-Run the sender alone with ``python -m facepuppet.runtime.bench_latency --send HOST PORT RATE SECONDS``.
+Run the sender alone with ``python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS``.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from facepuppet.runtime.bench import peak_rss_mb, register_bench
+from facepuppet.runtime.bench.registry import peak_rss_mb, register_bench
 
 _PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2**20 if hasattr(os, "sysconf") else 4096 / 2**20
 
@@ -100,7 +100,7 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     def on_ready(address):
         t_start[0] = time.monotonic()
         procs.append(subprocess.Popen(
-            [sys.executable, "-m", "facepuppet.runtime.bench_latency", "--send", "127.0.0.1", str(address[1]),
+            [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(address[1]),
              repr(rate), repr(seconds)], stdout=subprocess.PIPE, text=True))
 
         def wait_for_sender():
@@ -245,5 +245,5 @@ if __name__ == "__main__":
     if len(sys.argv) == 6 and sys.argv[1] == "--send":
         print(send(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])), flush=True)
     else:
-        print("usage: python -m facepuppet.runtime.bench_latency --send HOST PORT RATE SECONDS", file=sys.stderr)
+        print("usage: python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS", file=sys.stderr)
         raise SystemExit(2)

@@ -7,9 +7,7 @@ import json
 
 from helpers.small_characters import sphere_character
 
-from facepuppet.runtime import bench
-
-
+from facepuppet.runtime.bench import registry as bench
 def parse(argv):
     parser = argparse.ArgumentParser()
     bench.register(parser.add_subparsers())

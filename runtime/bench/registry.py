@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Callable
 
 # Runtime modules that register benchmarks when imported; each must exist and import.
-_BENCH_MODULES = ("facepuppet.runtime.bench_render", "facepuppet.runtime.bench_latency")
+_BENCH_MODULES = ("facepuppet.runtime.bench.render", "facepuppet.runtime.bench.latency")
 
 
 @dataclass(frozen=True)

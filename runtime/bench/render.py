@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from facepuppet.runtime.bench import peak_rss_mb, register_bench
+from facepuppet.runtime.bench.registry import peak_rss_mb, register_bench
 
 
 def synthetic_performance(n_frames: int, n_shapes: int, n_active: int = 10, fps: float = 60.0) -> np.ndarray:

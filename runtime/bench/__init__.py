@@ -1,0 +1,1 @@
+"""``facepuppet bench``: the benchmark registry and the runtime's benchmarks."""
