@@ -63,7 +63,7 @@ def _progress():
 
 def _train_actor(args: argparse.Namespace) -> int:
     from facepuppet.offline.actor_train import train_actor
-    from facepuppet.offline.capture_io import read_capture
+    from facepuppet.offline.io.capture import read_capture
 
     start = time.perf_counter()
     capture = read_capture(args.capture, max_gap=args.max_gap)
@@ -118,7 +118,7 @@ def _retarget_actor(args: argparse.Namespace) -> int:
           f"{m['marker_fit_rms']:.3f} {u}, cubic weight RMS {m['weight_fit_rms']:.3f}")
     if args.evaluate:
         from facepuppet.offline.actor_transfer_eval import transfer_error
-        from facepuppet.offline.capture_io import read_capture
+        from facepuppet.offline.io.capture import read_capture
 
         capture = read_capture(args.evaluate)
         missing = [n for n in actor.names if n not in capture.names]

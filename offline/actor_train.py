@@ -17,7 +17,7 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.actuation import ActuationModel, k_report, neutral_frame
-from facepuppet.offline.capture_io import Capture
+from facepuppet.offline.io.capture import Capture
 from facepuppet.offline.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
 from facepuppet.offline.stabilise import stabilise
 

@@ -57,7 +57,7 @@ def _frame_costs(character, model, frames, width, height) -> dict:
 
 def bench_elastic(args: argparse.Namespace) -> dict:
     ict = data_dir(args.data) / "ict-facekit"
-    from facepuppet.offline.rig_import import import_rig
+    from facepuppet.offline.io.rig_import import import_rig
 
     character = import_rig(ict / "generic_neutral_mesh.obj", ict)
     marks = json.loads((ict / "vertex_indices.json").read_text(encoding="utf-8"))["idx_to_landmark_verts"]

@@ -64,7 +64,7 @@ def run_bench(args, log=print) -> dict:
 
     from facepuppet.offline.cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights
     from facepuppet.offline.retarget_targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
-    from facepuppet.offline.rig_import import import_rig
+    from facepuppet.offline.io.rig_import import import_rig
 
     data = data_dir(args.data)
     ict_dir = data / "ict-facekit"

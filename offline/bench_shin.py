@@ -80,7 +80,7 @@ def _train(capture, k: int, **settings) -> tuple[object, dict]:
 
 
 def run(args) -> dict:
-    from facepuppet.offline.capture_io import read_capture
+    from facepuppet.offline.io.capture import read_capture
     from facepuppet.offline.synthetic_capture import synthetic_capture
 
     results: dict = {"solve": {}, "training": {}, "machine_before": machine_load()}

@@ -58,7 +58,7 @@ def _register_import_rig(subparsers) -> None:
 
 
 def _import_rig(args: argparse.Namespace) -> int:
-    from facepuppet.offline.rig_import import import_rig
+    from facepuppet.offline.io.rig_import import import_rig
 
     start = time.perf_counter()
     tty = sys.stderr.isatty()

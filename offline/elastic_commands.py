@@ -64,7 +64,7 @@ def load_target(spec: str) -> Character:
         return build_demo_character()
     path = Path(spec)
     if path.suffix.lower() == ".obj":
-        from facepuppet.offline.obj import read_obj
+        from facepuppet.offline.io.obj import read_obj
 
         mesh = read_obj(path)
         return mesh_character(mesh.vertices, mesh.triangles, path.stem)

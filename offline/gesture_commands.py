@@ -221,7 +221,7 @@ def transfer_detail(character, marker_paths, landmarks, per_region: int = 2, n_b
     ----------
     character : Character; marker_paths : marker takes (same markers in each); landmarks : (68,) int
     """
-    from facepuppet.offline.capture_io import read_capture
+    from facepuppet.offline.io.capture import read_capture
     from facepuppet.offline.detail_transfer import DetailTransfer, detail_character, marker_detail, place_markers
 
     start = time.perf_counter()

@@ -41,7 +41,7 @@ def egl_ctx():
 def ict_character_path(tmp_path_factory) -> Path:
     """The ICT-FaceKit head imported once per test session with the real files."""
     ict = need_shared("ict-facekit")
-    from facepuppet.offline.rig_import import import_rig
+    from facepuppet.offline.io.rig_import import import_rig
 
     out = tmp_path_factory.mktemp("ict") / "ict.npz"
     import_rig(ict / "generic_neutral_mesh.obj", ict).save(out)

@@ -12,7 +12,7 @@ from scipy.optimize import linear_sum_assignment
 from facepuppet.offline import actor_commands
 from facepuppet.offline.actuation import ActuationModel, class_axes, mean_shift
 from facepuppet.offline.actor_train import train_actor
-from facepuppet.offline.capture_io import Capture, write_trc
+from facepuppet.offline.io.capture import Capture, write_trc
 from facepuppet.offline.cubic_fit import evaluate, fit_polynomial
 from facepuppet.offline.synthetic_capture import synthetic_capture
 from facepuppet.runtime.actuation.actor import Actor

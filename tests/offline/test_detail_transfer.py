@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.offline.capture_io import read_c3d
+from facepuppet.offline.io.capture import read_c3d
 from facepuppet.offline.detail_transfer import (DetailTransfer, detail_character, marker_detail, marker_region,
                                                 place_markers)
 from tests.conftest import need_shared

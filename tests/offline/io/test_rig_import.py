@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.offline.obj import ObjError
-from facepuppet.offline.rig_import import IRIS, KIND_COLOR, NORMAL_TOLERANCE, PUPIL, SCLERA, import_rig, material_kind
+from facepuppet.offline.io.obj import ObjError
+from facepuppet.offline.io.rig_import import IRIS, KIND_COLOR, NORMAL_TOLERANCE, PUPIL, SCLERA, import_rig, material_kind
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.geometry import vertex_normals

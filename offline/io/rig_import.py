@@ -29,8 +29,8 @@ from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.geometry import incidence_matrix
 from facepuppet.runtime.tables import hash_inputs
 
-from facepuppet.offline.mtl import read_mtl
-from facepuppet.offline.obj import read_obj, read_vertices_only
+from facepuppet.offline.io.mtl import read_mtl
+from facepuppet.offline.io.obj import read_obj, read_vertices_only
 
 __all__ = ["import_rig", "material_kind", "NORMAL_TOLERANCE", "KIND_WORDS"]
 
@@ -116,7 +116,7 @@ def import_rig(
         the neutral, the folder, a shape or the landmark file is missing.
     ValueError
         no shapes, a shape whose vertex count differs from the neutral's (names both files and
-        counts), bad numbers (:class:`~facepuppet.offline.obj.ObjError`, names file and line).
+        counts), bad numbers (:class:`~facepuppet.offline.io.obj.ObjError`, names file and line).
     """
     neutral_path, shapes_dir = Path(neutral_path), Path(shapes_dir)
     if units not in UNITS_PER_CM:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import need_shared
-from facepuppet.offline.capture_io import (Capture, CaptureError, fill_gaps, read_capture, write_c3d, write_csv,
+from facepuppet.offline.io.capture import (Capture, CaptureError, fill_gaps, read_capture, write_c3d, write_csv,
                                            write_trc)
 
 

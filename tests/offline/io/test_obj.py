@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.offline.mtl import read_mtl
-from facepuppet.offline.obj import ObjError, read_obj, read_vertices_only
+from facepuppet.offline.io.mtl import read_mtl
+from facepuppet.offline.io.obj import ObjError, read_obj, read_vertices_only
 
 from conftest import need_shared
 

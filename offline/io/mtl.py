@@ -7,7 +7,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from facepuppet.offline.obj import ObjError
+from facepuppet.offline.io.obj import ObjError
 
 __all__ = ["MtlMaterial", "read_mtl"]
 
