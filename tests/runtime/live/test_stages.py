@@ -83,9 +83,9 @@ def vmc(client, values: dict) -> None:
 
 @pytest.fixture(scope="module")
 def actor_files(tmp_path_factory):
-    from facepuppet.offline.actor_train import train_actor
-    from facepuppet.offline.actor_transfer import retarget_actor
-    from facepuppet.offline.synthetic_capture import synthetic_capture
+    from facepuppet.offline.actuation.train import train_actor
+    from facepuppet.offline.actuation.transfer import retarget_actor
+    from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
     from helpers.small_characters import grid_face
 
     tmp = tmp_path_factory.mktemp("actor")

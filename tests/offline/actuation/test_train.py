@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from facepuppet.offline import actor_commands
-from facepuppet.offline.actuation import ActuationModel, class_axes, mean_shift
-from facepuppet.offline.actor_train import train_actor
+from facepuppet.offline.actuation import commands as actor_commands
+from facepuppet.offline.actuation.basis import ActuationModel, class_axes, mean_shift
+from facepuppet.offline.actuation.train import train_actor
 from facepuppet.offline.io.capture import Capture, write_trc
-from facepuppet.offline.cubic_fit import evaluate, fit_polynomial
-from facepuppet.offline.synthetic_capture import synthetic_capture
+from facepuppet.offline.actuation.cubic_fit import evaluate, fit_polynomial
+from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.rigid import kabsch
@@ -139,7 +139,7 @@ def test_train_actor_command_writes_tables_and_pictures(tmp_path, capsys):
 
 
 def test_ridge_on_cubic_terms_shrinks_towards_linear_and_is_chosen_by_held_out_error():
-    from facepuppet.offline.cubic_fit import choose_ridge_ab, holdout_errors
+    from facepuppet.offline.actuation.cubic_fit import choose_ridge_ab, holdout_errors
 
     rng = np.random.default_rng(3)
     s = rng.uniform(0.0, 1.0, (300, 3))

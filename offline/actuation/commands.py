@@ -62,7 +62,7 @@ def _progress():
 
 
 def _train_actor(args: argparse.Namespace) -> int:
-    from facepuppet.offline.actor_train import train_actor
+    from facepuppet.offline.actuation.train import train_actor
     from facepuppet.offline.io.capture import read_capture
 
     start = time.perf_counter()
@@ -76,7 +76,7 @@ def _train_actor(args: argparse.Namespace) -> int:
     out = model.actor_.save(args.output)
     print(f"{out}: written, {time.perf_counter() - start:.2f} s\n{model.summary()}")
     if args.pictures:
-        from facepuppet.offline.actor_pictures import actuation_sheet, signal_plot
+        from facepuppet.offline.actuation.pictures import actuation_sheet, signal_plot
 
         args.pictures.mkdir(parents=True, exist_ok=True)
         sheet = actuation_sheet(model.actor_, args.pictures / "actuations.png")
@@ -89,8 +89,7 @@ def _retarget_actor(args: argparse.Namespace) -> int:
     from facepuppet.runtime.actuation.actor import Actor
     from facepuppet.runtime.character import Character
 
-    from facepuppet.offline import actor_transfer as transfer
-
+    from facepuppet.offline.actuation import transfer as transfer
     start = time.perf_counter()
     actor = Actor.load(args.actor)
     character = Character.load(args.character)
@@ -117,7 +116,7 @@ def _retarget_actor(args: argparse.Namespace) -> int:
           f"  weights fit: {m['frames']} parameter-shape pairs, s from {m['s_source']}, marker RMS "
           f"{m['marker_fit_rms']:.3f} {u}, cubic weight RMS {m['weight_fit_rms']:.3f}")
     if args.evaluate:
-        from facepuppet.offline.actor_transfer_eval import transfer_error
+        from facepuppet.offline.actuation.transfer_eval import transfer_error
         from facepuppet.offline.io.capture import read_capture
 
         capture = read_capture(args.evaluate)
@@ -130,7 +129,7 @@ def _retarget_actor(args: argparse.Namespace) -> int:
               f"(neutral {e['zero_rms']:.3f}, per-frame best {e['oracle_rms']:.3f}; relative "
               f"{e['relative']:.3f}); actor solve RMS {e['solve_rms']:.3f} {actor.units}")
     if args.pictures:
-        from facepuppet.offline.actor_pictures import face_actuation_sheet
+        from facepuppet.offline.actuation.pictures import face_actuation_sheet
 
         args.pictures.mkdir(parents=True, exist_ok=True)
         print(f"pictures: {face_actuation_sheet(pair, character, args.pictures / 'face_actuations.png')}")

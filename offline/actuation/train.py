@@ -16,10 +16,10 @@ import numpy as np
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.tables import hash_inputs
 
-from facepuppet.offline.actuation import ActuationModel, k_report, neutral_frame
+from facepuppet.offline.actuation.basis import ActuationModel, k_report, neutral_frame
 from facepuppet.offline.io.capture import Capture
-from facepuppet.offline.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
-from facepuppet.offline.stabilise import stabilise
+from facepuppet.offline.actuation.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
+from facepuppet.offline.actuation.stabilise import stabilise
 
 Progress = Callable[[str, float, str], None]
 BOUND_MARGIN = 0.25  # solver bounds: the training range widened by this fraction of it
@@ -39,7 +39,7 @@ class ActorModel:
     random_state : int, FastICA seed
     report_ks : tuple of int, the K values of the reconstruction report
     ridge_ab : float or "auto", ridge on the cubic and quadratic terms (a, b); "auto" picks it by
-        held-out error on a split of the take (:func:`~facepuppet.offline.cubic_fit.choose_ridge_ab`).
+        held-out error on a split of the take (:func:`~facepuppet.offline.actuation.cubic_fit.choose_ridge_ab`).
         On the AnimFace jaw take the plain cubic overfits (held-out 0.0836 cm vs linear 0.0823);
         the chosen ridge (0.03) gives 0.0779
     threads : int or None, BLAS threads during the fit (default 1: these matrices are small, and
@@ -130,7 +130,7 @@ class ActorModel:
             "train_rms": train_rms, "holdout": errors, "k_report": k_rows, "ridge_ab_table": ridge_table,
             "head_rms_residual": stab.rms_residual, "head_max_angle_deg": stab.max_angle_deg,
             "gaps_left": len(capture.gaps), "samples_filled": int(capture.filled),
-            # the actuations' real range, for transfer training pairs (offline/actor_transfer.py)
+            # the actuations' real range, for transfer training pairs (offline/actuation/transfer.py)
             "s_quantiles": {"levels": list(S_QUANTILE_LEVELS),
                             "values": np.quantile(s, S_QUANTILE_LEVELS, axis=0).round(6).tolist()},
         }

@@ -65,7 +65,7 @@ def machine_load() -> dict:
 
 
 def _train(capture, k: int, **settings) -> tuple[object, dict]:
-    from facepuppet.offline.actor_train import train_actor
+    from facepuppet.offline.actuation.train import train_actor
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -81,7 +81,7 @@ def _train(capture, k: int, **settings) -> tuple[object, dict]:
 
 def run(args) -> dict:
     from facepuppet.offline.io.capture import read_capture
-    from facepuppet.offline.synthetic_capture import synthetic_capture
+    from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
 
     results: dict = {"solve": {}, "training": {}, "machine_before": machine_load()}
     cap, _ = synthetic_capture(n_frames=3500, n_markers=68, k=13, seed=0)

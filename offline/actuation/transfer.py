@@ -51,7 +51,7 @@ from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.geometry import vertex_normals
 
-from facepuppet.offline.cubic_fit import fit_polynomial
+from facepuppet.offline.actuation.cubic_fit import fit_polynomial
 
 # AnimFace marker -> 0-based Multi-PIE 68 landmark (L/R = the subject's own side; 36-41 is the right eye).
 # Only markers that sit on the landmark: AnimFace's ``*eye_Outside`` markers sit on the temples

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.offline.stabilise import find_head_markers, kabsch, stabilise
+from facepuppet.offline.actuation.stabilise import find_head_markers, kabsch, stabilise
 from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix
 
 

@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.offline.actor_transfer import (align_markers, face_units, observable_shapes, read_landmarks,
+from facepuppet.offline.actuation.transfer import (align_markers, face_units, observable_shapes, read_landmarks,
                                                read_override, retarget_actor, s_distribution, training_pairs,
                                                umeyama)
-from facepuppet.offline.actor_transfer_eval import transfer_error
+from facepuppet.offline.actuation.transfer_eval import transfer_error
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix, vertex_normals
@@ -87,8 +87,7 @@ def test_retarget_actor_command_draws_the_actuations_on_the_face(tmp_path, capsy
 
     from PIL import Image
 
-    from facepuppet.offline import actor_commands
-
+    from facepuppet.offline.actuation import commands as actor_commands
     character = grid_face()
     actor, _ = actor_on(character)
     parser = argparse.ArgumentParser()
@@ -201,8 +200,8 @@ def test_transfer_error_is_small_for_an_exact_pair_and_large_for_the_neutral():
 
 
 def test_trained_actor_stores_its_actuation_quantiles():
-    from facepuppet.offline.actor_train import train_actor
-    from facepuppet.offline.synthetic_capture import synthetic_capture
+    from facepuppet.offline.actuation.train import train_actor
+    from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
 
     cap, _ = synthetic_capture(n_frames=400, n_markers=12, k=3, seed=2)
     model = train_actor(cap, k=3, head_markers=["M00", "M01", "M02", "M03"])
