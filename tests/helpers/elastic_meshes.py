@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.offline.control_points import ControlPoints
+from facepuppet.offline.elastic.control_points import ControlPoints
 
 
 def grid(n: int = 13, size: float = 10.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

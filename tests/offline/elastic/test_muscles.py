@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from facepuppet.offline.muscles import Muscle, muscle_displacements
+from facepuppet.offline.elastic.muscles import Muscle, muscle_displacements
 
 
 def test_linear_muscle_pulls_towards_attachment_inside_its_zone_only():

@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from facepuppet.offline.laplacian import bilaplacian, check_mesh, components, vertex_gradients
+from facepuppet.offline.elastic.laplacian import bilaplacian, check_mesh, components, vertex_gradients
 
 DEFAULT_FIXED_RATIO = 1.4
 DEFAULT_K = 8

@@ -11,15 +11,15 @@ import numpy as np
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
 
-from facepuppet.offline.clone import character_with_shapes, clone_model, mesh_character
-from facepuppet.offline.control_points import (
+from facepuppet.offline.elastic.clone import character_with_shapes, clone_model, mesh_character
+from facepuppet.offline.elastic.control_points import (
     ANCHOR_NAMES, MEDIAPIPE_ANCHORS, ControlPoints, anchor_positions, front_vertices, ict_control_points,
     propose_control_points, read_control_points, write_control_points,
 )
-from facepuppet.offline.elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K
-from facepuppet.offline.elastic_params import build_model, fit_character
-from facepuppet.offline.laplacian import components
-from facepuppet.offline.lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
+from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
+from facepuppet.offline.elastic.params import build_model, fit_character
+from facepuppet.offline.elastic.laplacian import components
+from facepuppet.offline.elastic.lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
 
 
 # Anchor groups (control_points.ANCHOR_NAMES) by control-point name.
@@ -92,7 +92,7 @@ def _fit(args: argparse.Namespace) -> int:
     if args.pictures:
         from facepuppet.runtime.render.gl_context import create_context
 
-        from facepuppet.offline.elastic_pictures import overlay, reconstruction_sheets
+        from facepuppet.offline.elastic.pictures import overlay, reconstruction_sheets
 
         args.pictures.mkdir(parents=True, exist_ok=True)
         ctx = create_context(headless=True).ctx
@@ -148,7 +148,7 @@ def _clone(args: argparse.Namespace) -> int:
     if args.pictures:
         from facepuppet.runtime.render.gl_context import create_context
 
-        from facepuppet.offline.elastic_pictures import expression_sheet, overlay
+        from facepuppet.offline.elastic.pictures import expression_sheet, overlay
 
         args.pictures.mkdir(parents=True, exist_ok=True)
         ctx = create_context(headless=True).ctx

@@ -25,9 +25,9 @@ from scipy.linalg import qr, solve_triangular
 
 from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
 
-from facepuppet.offline.elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
-from facepuppet.offline.muscles import default_muscles, muscle_sections
-from facepuppet.offline.rigid_parts import rigid_labels
+from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
+from facepuppet.offline.elastic.muscles import default_muscles, muscle_sections
+from facepuppet.offline.elastic.rigid_parts import rigid_labels
 
 MOVED_FRACTION = 0.01
 

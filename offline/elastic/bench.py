@@ -18,10 +18,10 @@ import time
 import numpy as np
 
 
-from facepuppet.offline.control_points import ict_control_points
-from facepuppet.offline.elastic_basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis
-from facepuppet.offline.elastic_commands import main_front
-from facepuppet.offline.elastic_params import fit_character, target_fixed_mask
+from facepuppet.offline.elastic.control_points import ict_control_points
+from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis
+from facepuppet.offline.elastic.commands import main_front
+from facepuppet.offline.elastic.params import fit_character, target_fixed_mask
 
 
 

@@ -22,7 +22,7 @@ from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_delta
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.geometry import vertex_normals
 
-from facepuppet.offline.control_points import ControlPoints
+from facepuppet.offline.elastic.control_points import ControlPoints
 
 
 def fapu(positions: np.ndarray, points: ControlPoints) -> float:

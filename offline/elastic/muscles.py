@@ -28,7 +28,7 @@ import numpy as np
 
 from facepuppet.runtime.elastic.model import MUSCLE_KINDS
 
-from facepuppet.offline.control_points import ControlPoints
+from facepuppet.offline.elastic.control_points import ControlPoints
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ import numpy as np
 
 from facepuppet.runtime.rigid import kabsch
 
-from facepuppet.offline.control_points import ControlPoints
+from facepuppet.offline.elastic.control_points import ControlPoints
 
 # Measured on ICT jawOpen (RMS error of the rigid vertices, cm; 3.14 if held fixed): chin + jaw_chin_L/R
 # + lip_lower 0.48; adding jaw_L/R (the cheek-side contour, which lags the bone) 1.14; without lip_lower 1.79.

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from facepuppet.offline.control_points import ControlPoints
+from facepuppet.offline.elastic.control_points import ControlPoints
 
 UPPER, LOWER = "lip_upper_inner", "lip_lower_inner"
 CORNERS = ("mouth_inner_R", "mouth_inner_L")

@@ -1,0 +1,1 @@
+"""Yano & Harada (2009) offline: bi-Laplacian basis, parameters, control points, cloning, muscles."""
