@@ -14,10 +14,10 @@ from facepuppet.runtime.character import MATERIAL_KINDS
 # Offline modules with their own ``register(subparsers)``; each must exist and import
 # (a missing one is an error, never a silently dropped command).
 _COMMAND_MODULES = ("facepuppet.offline.actuation.commands", "facepuppet.offline.elastic.commands",
-                    "facepuppet.offline.gesture_commands", "facepuppet.offline.kpls_commands")
+                    "facepuppet.offline.gestures.commands", "facepuppet.offline.kpls_commands")
 # Offline modules with ``register_benches(register_bench)``, same rule.
 _BENCH_MODULES = ("facepuppet.offline.actuation.bench", "facepuppet.offline.elastic.bench",
-                  "facepuppet.offline.bench_gestures", "facepuppet.offline.bench_kpls")
+                  "facepuppet.offline.gestures.bench", "facepuppet.offline.bench_kpls")
 
 
 def _modules(names):

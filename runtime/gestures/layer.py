@@ -42,7 +42,7 @@ class GestureLayer:
     level : callable t -> dBFS or None; default: the frame's ``audio_level``
     inner : callable (frame, t) -> frame or None, applied to the tracked frame first
     detail : (names, table) or None: §5.2 detail shape weights, table of shape (n_db_frames, len(names)),
-        float32, per reference frame of the marker takes (``facepuppet.offline.detail_transfer.detail_table``);
+        float32, per reference frame of the marker takes (``facepuppet.offline.gestures.detail_transfer.detail_table``);
         the weights of the head group's pick are appended as channels ``names`` (shapes of a character
         made by ``detail_character``)
     """

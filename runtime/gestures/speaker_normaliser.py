@@ -1,7 +1,7 @@
 """Speech intensity at runtime: a voice level in dBFS -> the per-speaker z-score s(t) the gestures are matched on.
 
 :data:`SILENCE_Z` is the floor of that scale (silence, or below the noise
-gate); the offline reference intensities (:mod:`facepuppet.offline.speech_intensity`)
+gate); the offline reference intensities (:mod:`facepuppet.offline.gestures.speech_intensity`)
 use the same floor.
 """
 
@@ -20,7 +20,7 @@ class SpeakerNormaliser:
     mean_db, std_db : float, dBFS, starting estimate of the speaker's voiced level
     gate_db : float, dBFS; at or below it (or NaN: not measured) the frame is silence (SILENCE_Z).
         Offline it is derived from the speaker's level distribution (10th percentile + a margin,
-        see ``facepuppet.offline.speech_intensity.speaker_stats``)
+        see ``facepuppet.offline.gestures.speech_intensity.speaker_stats``)
     rate : float, weight of a new voiced frame in the running mean/variance (0: frozen)
     """
 

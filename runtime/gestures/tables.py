@@ -1,7 +1,7 @@
 """The ``gesture_db`` tables contract: its schema, its loader, and the names of its feature groups.
 
 The reference database of Ju & Lee (2008) gestures, written offline by
-``facepuppet build-gestures`` (:mod:`facepuppet.offline.gesture_db`) and read at
+``facepuppet build-gestures`` (:mod:`facepuppet.offline.gestures.database`) and read at
 runtime by :class:`~facepuppet.runtime.gestures.synth.GestureSynth`. Per frame at
 the animation rate it holds the normalised speech intensity s(t) (a z-score
 floored at :data:`~facepuppet.runtime.gestures.speaker_normaliser.SILENCE_Z`), the

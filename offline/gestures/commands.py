@@ -99,7 +99,7 @@ def synthesize(database, speech, seed: int = 0, style=None, sigma: float = 0.01,
     from facepuppet.runtime.gestures.tables import load_gesture_db
     from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 
-    from facepuppet.offline.speech_intensity import speech_intensity
+    from facepuppet.offline.gestures.speech_intensity import speech_intensity
 
     db = load_gesture_db(database)
     fps = float(db.settings.get("fps", 30.0))
@@ -114,7 +114,7 @@ def synthesize(database, speech, seed: int = 0, style=None, sigma: float = 0.01,
 
 
 def _build(args: argparse.Namespace) -> int:
-    from facepuppet.offline.gesture_db import build_gesture_db
+    from facepuppet.offline.gestures.database import build_gesture_db
 
     start = time.perf_counter()
     path, takes = build_gesture_db(args.output, tuple(args.speech), args.llf, args.markers, n_basis=args.basis,
@@ -222,7 +222,7 @@ def transfer_detail(character, marker_paths, landmarks, per_region: int = 2, n_b
     character : Character; marker_paths : marker takes (same markers in each); landmarks : (68,) int
     """
     from facepuppet.offline.io.capture import read_capture
-    from facepuppet.offline.detail_transfer import DetailTransfer, detail_character, marker_detail, place_markers
+    from facepuppet.offline.gestures.detail_transfer import DetailTransfer, detail_character, marker_detail, place_markers
 
     start = time.perf_counter()
     caps = [read_capture(p) for p in marker_paths]
@@ -303,7 +303,7 @@ def _transfer_detail(args: argparse.Namespace) -> int:
     from facepuppet.runtime.gestures.tables import load_gesture_db
     from facepuppet.runtime.tables import save_tables
 
-    from facepuppet.offline.detail_transfer import detail_table
+    from facepuppet.offline.gestures.detail_transfer import detail_table
 
     if (args.gestures is None) != (args.gestures_out is None):
         raise ValueError("--gestures and --gestures-out go together (read one database, write its copy)")

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from facepuppet.offline.blend_weights import BlendWeights, temporal_window
+from facepuppet.offline.gestures.blend_weights import BlendWeights, temporal_window
 
 
 @pytest.fixture(scope="module")

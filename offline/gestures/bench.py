@@ -238,9 +238,9 @@ def run_bench(args) -> dict:
     from facepuppet.runtime.gestures.tables import load_gesture_db
     from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 
-    from facepuppet.offline.blend_weights import BlendWeights, choose_basis
-    from facepuppet.offline.gesture_db import build_gesture_db, read_llf_take
-    from facepuppet.offline.speech_intensity import speech_intensity
+    from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
+    from facepuppet.offline.gestures.database import build_gesture_db, read_llf_take
+    from facepuppet.offline.gestures.speech_intensity import speech_intensity
 
     d = data_dir(args.data)
     speech = (d / "speech/facegood_1114_3_15.wav", d / "speech/facegood_1114_3_15_blendshapes.csv",

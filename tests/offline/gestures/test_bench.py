@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from facepuppet.offline.bench_gestures import (_block_bootstrap, blink_onsets, blink_onsets_hysteresis,
+from facepuppet.offline.gestures.bench import (_block_bootstrap, blink_onsets, blink_onsets_hysteresis,
                                                short_blink_onsets)
-from facepuppet.offline.gesture_db import Take
+from facepuppet.offline.gestures.database import Take
 
 
 def lid(events, n=300):

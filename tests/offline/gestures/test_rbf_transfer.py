@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from facepuppet.offline.rbf_transfer import RBFTransfer, cubic_bspline
+from facepuppet.offline.gestures.rbf_transfer import RBFTransfer, cubic_bspline
 
 
 def test_kernel_is_the_cubic_bspline_with_compact_support():

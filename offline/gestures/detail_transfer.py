@@ -49,9 +49,9 @@ from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_delta
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.actuation.transfer import umeyama
-from facepuppet.offline.blend_weights import BlendWeights, choose_basis
-from facepuppet.offline.rbf_transfer import RBFTransfer
-from facepuppet.offline.regional_features import STABLE_MARKERS
+from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
+from facepuppet.offline.gestures.rbf_transfer import RBFTransfer
+from facepuppet.offline.gestures.regional_features import STABLE_MARKERS
 from facepuppet.offline.actuation.stabilise import stabilise
 
 DETAIL_REGIONS = ("brows", "eyes", "lips", "rest")

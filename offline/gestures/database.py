@@ -35,9 +35,9 @@ from facepuppet.runtime.gestures.tables import GROUPS, HEAD_FEATURES
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.tables import hash_inputs, save_tables
 
-from facepuppet.offline.blend_weights import BlendWeights, choose_basis
-from facepuppet.offline.regional_features import head_track, region_of
-from facepuppet.offline.speech_intensity import speech_intensity
+from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
+from facepuppet.offline.gestures.regional_features import head_track, region_of
+from facepuppet.offline.gestures.speech_intensity import speech_intensity
 
 
 @dataclass

@@ -5,9 +5,9 @@ import argparse
 import numpy as np
 import pytest
 
-from facepuppet.offline import gesture_commands
-from facepuppet.offline.gesture_db import build_gesture_db, quantile_map
-from facepuppet.offline.regional_features import head_track, split_regions
+from facepuppet.offline.gestures import commands as gesture_commands
+from facepuppet.offline.gestures.database import build_gesture_db, quantile_map
+from facepuppet.offline.gestures.regional_features import head_track, split_regions
 from facepuppet.runtime.gestures.tables import GROUPS, load_gesture_db
 from facepuppet.runtime.recording.replay_source import open_recording
 from tests.conftest import need_shared

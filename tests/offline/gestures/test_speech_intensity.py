@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.io import wavfile
 
-from facepuppet.offline.speech_intensity import FLOOR_DB, SpeechInputError, speech_intensity
+from facepuppet.offline.gestures.speech_intensity import FLOOR_DB, SpeechInputError, speech_intensity
 from facepuppet.runtime.gestures.layer import SILENCE_Z
 from tests.conftest import need_shared
 
