@@ -1,6 +1,6 @@
 """Kernel-PLS retarget stage: source channel weights -> target character weights, per frame.
 
-The offline fitter (:mod:`facepuppet.offline.kpls`, Ouzounis, Kiliadis &
+The offline fitter (:mod:`facepuppet.offline.kpls.model`, Ouzounis, Kiliadis &
 Mousas) writes a ``retarget_kpls`` tables file; this module loads it with
 nothing but NumPy and evaluates eq. 10 for one frame:
 

@@ -1,4 +1,4 @@
-"""Baseline retargeting regressors behind the :class:`~facepuppet.offline.kpls.KernelPLS` interface.
+"""Baseline retargeting regressors behind the :class:`~facepuppet.offline.kpls.model.KernelPLS` interface.
 
 Each maps source expressions X (n, n_features), here feature-point
 displacements, to target expressions Y (n, n_outputs) (target feature-point
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.offline.kpls import check_inputs, check_pairs
+from facepuppet.offline.kpls.model import check_inputs, check_pairs
 
 
 class _Regressor:

@@ -30,8 +30,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
-from facepuppet.offline.kpls import check_inputs
-from facepuppet.offline.retarget_pairs import moving_vertices
+from facepuppet.offline.kpls.model import check_inputs
+from facepuppet.offline.kpls.pairs import moving_vertices
 
 
 def corresponding_vertices(a, b, idx_a: np.ndarray) -> np.ndarray:

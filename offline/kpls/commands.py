@@ -17,8 +17,8 @@ import numpy as np
 from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.tables import hash_inputs
 
-from facepuppet.offline.kpls import KernelPLS
-from facepuppet.offline.retarget_pairs import TrainingPairs, read_pairing, training_pairs
+from facepuppet.offline.kpls.model import KernelPLS
+from facepuppet.offline.kpls.pairs import TrainingPairs, read_pairing, training_pairs
 
 
 def to_runtime(model: KernelPLS, pairs: TrainingPairs, source, target, settings=None,

@@ -36,7 +36,7 @@ import numpy as np
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import vertex_normals
 
-from facepuppet.offline.retarget_pairs import feature_matrix, feature_points, match_matrix
+from facepuppet.offline.kpls.pairs import feature_matrix, feature_points, match_matrix
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.offline.retarget_baselines import (PairRBF, KernelRidgeRetarget, LinearPLS,
+from facepuppet.offline.kpls.baselines import (PairRBF, KernelRidgeRetarget, LinearPLS,
                                                    LinearRetarget, PCARBFRetarget)
 
 ALL = [PairRBF, LinearRetarget, LinearPLS, KernelRidgeRetarget, PCARBFRetarget]
@@ -33,7 +33,7 @@ def test_baselines_fit_a_smooth_map_and_refuse_bad_use(cls):
 
 
 def test_dutreve_transfers_displacements_through_the_face_to_face_warp():
-    from facepuppet.offline.dutreve_rbf import DutreveRBF
+    from facepuppet.offline.kpls.dutreve_rbf import DutreveRBF
 
     rng = np.random.default_rng(1)
     p = rng.normal(size=(20, 3))

@@ -29,9 +29,9 @@ def _add_arguments(parser) -> None:
 def _runtime_timing(source, target, frames, log) -> dict:
     from facepuppet.runtime.kpls.stage import KplsRetarget
 
-    from facepuppet.offline.kpls import KernelPLS
-    from facepuppet.offline.kpls_commands import to_runtime
-    from facepuppet.offline.retarget_pairs import training_pairs
+    from facepuppet.offline.kpls.model import KernelPLS
+    from facepuppet.offline.kpls.commands import to_runtime
+    from facepuppet.offline.kpls.pairs import training_pairs
 
     pairs = training_pairs(source, target)
     model = KernelPLS(kernel="rbf").fit(pairs.X, pairs.Y)
@@ -62,8 +62,8 @@ def run_bench(args, log=print) -> dict:
     from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 
-    from facepuppet.offline.cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights
-    from facepuppet.offline.retarget_targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
+    from facepuppet.offline.kpls.cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights
+    from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
     from facepuppet.offline.io.rig_import import import_rig
 
     data = data_dir(args.data)

@@ -1,0 +1,1 @@
+"""Ouzounis et al. offline: kernel PLS, training pairs, baselines and the cyclic retarget error."""
