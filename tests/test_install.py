@@ -57,7 +57,7 @@ def test_wheel_compiles_its_shaders_on_a_real_context(installed_wheel, egl_ctx):
     tmp, site = installed_wheel
     out = in_wheel(site, tmp, (
         "import moderngl\n"
-        "from facepuppet.runtime import shader_loader\n"
+        "from facepuppet.runtime.render import shader_loader\n"
         "ctx = moderngl.create_standalone_context(backend='egl', require=330)\n"
         "prog = shader_loader.load_program(ctx, 'face.glsl')\n"
         "print(shader_loader.__file__)\n"
@@ -72,3 +72,13 @@ def test_console_command_lists_runtime_and_offline_commands(installed_wheel):
     out = in_wheel(site, tmp, "from facepuppet.runtime.cli import main; main(['--help'])")
     for command in ("demo", "replay", "contact-sheet", "bench", "import-rig"):
         assert command in out.stdout, f"{command} missing from --help:\n{out.stdout}"
+
+
+def test_wheel_carries_every_module_of_every_sub_package(installed_wheel):
+    tmp, site = installed_wheel
+    for folder in ("runtime", "offline"):
+        ours = {p.relative_to(REPO / folder).as_posix() for p in (REPO / folder).rglob("*.py")
+                if "_top" not in p.parts and "__pycache__" not in p.parts}
+        wheel = {p.relative_to(site / "facepuppet" / folder).as_posix()
+                 for p in (site / "facepuppet" / folder).rglob("*.py")}
+        assert ours - wheel == set(), f"{folder}/ modules missing from the wheel (add the package to pyproject.toml)"
