@@ -50,6 +50,14 @@ _RENDERING_COMMANDS = frozenset({"run", "replay", "demo", "manipulate", "contact
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; every error a user can cause becomes a message and an exit code here, in one place.
+
+    Exit codes: 0 done; 2 bad input (an option, a file, a table; an address that cannot be bound);
+    3 no OpenGL context; 130 interrupted.
+    """
+    from facepuppet.runtime.errors import FacepuppetError
+    from facepuppet.runtime.render.gl_context import GLUnavailable
+
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -59,12 +67,19 @@ def main(argv: list[str] | None = None) -> int:
             with BlasThreads(1):
                 return int(args.func(args) or 0)
         return int(args.func(args) or 0)
-    except (TablesError, ValueError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
-        print(f"facepuppet {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+    except GLUnavailable as exc:
+        return _error(args.command, exc, 3)
+    except (FacepuppetError, TablesError, ValueError, OSError) as exc:
+        # OSError: files that are missing or not readable, an address that cannot be bound
+        return _error(args.command, exc, 2)
     except KeyboardInterrupt:
         print(f"facepuppet {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def _error(command: str, exc: BaseException, code: int) -> int:
+    print(f"facepuppet {command}: error: {exc}", file=sys.stderr)
+    return code
 
 
 if __name__ == "__main__":

@@ -61,6 +61,26 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     )
 
 
+def matrix_to_quat(m: np.ndarray) -> np.ndarray:
+    """Quaternion (x, y, z, w) float64, w >= 0, of a rotation matrix (3, 3) (Shepperd's method)."""
+    m = np.asarray(m, dtype=np.float64)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * np.sqrt(1.0 + trace)
+        q = np.array([(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s])
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(max(1.0 + m[i, i] - m[j, j] - m[k, k], 1e-300))
+        q = np.empty(4)
+        q[i] = 0.25 * s
+        q[j] = (m[j, i] + m[i, j]) / s
+        q[k] = (m[k, i] + m[i, k]) / s
+        q[3] = (m[k, j] - m[j, k]) / s
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0 else q
+
+
 def euler_to_quat(yaw: float, pitch: float, roll: float) -> np.ndarray:
     """Quaternion (x, y, z, w) float64 of head yaw (about +y), pitch (about +x), roll (about +z), radians.
 

@@ -276,7 +276,6 @@ def run_bench(args) -> dict:
         t0 = time.perf_counter()
         synth = GestureSynth(db, seed=seed, normaliser=SpeakerNormaliser(*stats, rate=0.0), **extra)
         index_s.append(time.perf_counter() - t0)
-        ke = synth.groups.index("eyes")
         out = np.zeros((len(drive), len(synth.out_names)), np.float32)
         eyes = np.zeros(len(drive), np.int64)
         st = np.zeros(len(drive))
@@ -284,7 +283,7 @@ def run_bench(args) -> dict:
             s0 = time.perf_counter()
             out[i] = synth.step(float(v))
             st[i] = time.perf_counter() - s0
-            eyes[i] = synth._pick[ke]
+            eyes[i] = synth.pick("eyes")
         steps.append(st)
         runs.append((out, synth.run_lengths))
         share = np.bincount(frame_take[eyes], minlength=len(take_names)) / len(eyes)

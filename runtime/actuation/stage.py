@@ -1,10 +1,13 @@
-"""Frame-loop Retarget stage: marker frames -> actuations s -> character weights.
+"""The ``solve`` stage of the live chain: marker frames -> actuations s -> character weights and head pose.
 
 Each accepted frame's markers (capture coordinates, NaN = occluded) are
 matched to the actor's markers by name, brought into head coordinates by a
 Kabsch fit of the visible head markers to the actor's neutral, solved for s
 (:class:`~facepuppet.runtime.actuation.solver.MarkerSolver`, eq 5, warm-started) and
-mapped to the character's weights through the pair table (§6.2).
+mapped to the character's weights through the pair table (§6.2). The Kabsch
+rotation is the head's turn away from the actor's neutral; carried into the
+character's axes through the pair's similarity, it becomes the frame's head
+rotation, so the character's head turns with the performer's.
 """
 
 from __future__ import annotations
@@ -14,12 +17,13 @@ import numpy as np
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.geometry import matrix_to_quat
 from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.rigid import kabsch
 
 
 class ActorRetarget:
-    """Implements the ``Retarget`` protocol of :mod:`facepuppet.runtime.live.loop`.
+    """The ``solve`` stage (a :class:`~facepuppet.runtime.protocols.Stage`): marker frame -> weights frame.
 
     Parameters
     ----------
@@ -31,8 +35,12 @@ class ActorRetarget:
     ----------
     target_names : tuple of n_shapes str
     s : ndarray of shape (K,), float64, the last solved actuations
+    head_rotation : ndarray of shape (4,), float64, quaternion (x, y, z, w) in the character's axes: the
+        last frame's head rotation away from the actor's neutral (identity before any frame)
     counters : dict, ``frames``, ``no_markers``, ``no_head_pose``
     """
+
+    name = "solve"
 
     def __init__(self, actor: Actor, pair: ActorPair, solver: MarkerSolver | None = None):
         if tuple(pair.marker_names) != tuple(actor.names) or pair.cubic.shape[1] != actor.n_actuations:
@@ -49,6 +57,11 @@ class ActorRetarget:
         self._index: np.ndarray | None = None
         self._head = np.asarray(actor.head_markers, dtype=np.int64)
         self._neutral = actor.neutral.astype(np.float64)
+        self.head_rotation = np.array([0.0, 0.0, 0.0, 1.0])
+        # the similarity's rotation (actor head axes -> character axes), its scale divided out
+        linear = np.asarray(pair.similarity, np.float64)[:3, :3]
+        scale = abs(np.linalg.det(linear)) ** (1.0 / 3.0)
+        self._axes = linear / scale if scale > 0 else np.eye(3)
 
     def _order(self, names) -> np.ndarray:
         """Frame marker index of each actor marker (-1 when the frame lacks it), cached per name tuple."""
@@ -73,7 +86,23 @@ class ActorRetarget:
             return None
         h = self._head[head_visible]
         r, t = kabsch(self._neutral[h], obs[h])
+        # r takes capture axes to head axes, so the head turned by r^T; in the character's axes A r^T A^T
+        self.head_rotation = matrix_to_quat(self._axes @ r.T @ self._axes.T)
         return obs @ r.T + t
+
+    def __call__(self, frame: Frame | None, t: float) -> Frame | None:
+        """The stage: the character's weights and head rotation for a new marker frame, else None.
+
+        A frame the solve cannot use (no markers, fewer than 3 head markers visible) counts as no new frame.
+        """
+        if frame is None:
+            return None
+        weights = self.apply(frame)
+        if weights is None:
+            return None
+        return Frame(t=frame.t, source=frame.source, channels=self.target_names,
+                     weights=np.asarray(weights, np.float32), head_rotation=self.head_rotation,
+                     audio_level=frame.audio_level, t_sender=frame.t_sender, number=frame.number)
 
     def apply(self, frame: Frame) -> np.ndarray | None:
         """Character weights (n_shapes,) float32 for a marker frame, or None to keep the previous ones."""

@@ -10,14 +10,14 @@ prints the per-stage timing summary at the end.
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.live.loop import FrameLoop, PngSink, RecordedClock, WallClock
-from facepuppet.runtime.commands.replay import parse_size
+from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
+from facepuppet.runtime.live.sinks import PngSink
+from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
 SHEET_CELLS = 12
@@ -59,7 +59,7 @@ def run_demo(args, log=print) -> int:
     """Run the ``demo`` command from parsed ``args``; returns the exit code."""
     from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.demo.performance import demo_frames
-    from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
+    from facepuppet.runtime.render.gl_context import create_context
     from facepuppet.runtime.render.images import contact_sheet, save_png
     from facepuppet.runtime.render.renderer import FaceRenderer
 
@@ -72,12 +72,8 @@ def run_demo(args, log=print) -> int:
     log(f"demo: procedural head, {character.n_vertices} vertices, {len(character.triangles)} triangles, "
         f"{character.n_shapes} shapes; performance {args.duration:g} s, {len(frames)} frames "
         f"(seed {args.seed}); built in {time.perf_counter() - started:.2f} s")
-    try:
-        target = create_context(headless=True if args.headless else None, width=width, height=height,
-                                title="facepuppet demo")
-    except GLUnavailable as exc:
-        print(f"facepuppet demo: error: {exc}", file=sys.stderr)
-        return 3
+    target = create_context(headless=True if args.headless else None, width=width, height=height,
+                            title="facepuppet demo")
     out = args.out if args.out is not None else (Path("demo-out") if target.headless else None)
     log(f"demo: {'headless (EGL)' if target.headless else 'window'}, {target.ctx.info['GL_RENDERER']}, "
         f"{width}x{height} at {args.fps:g} fps" + (f", writing to {out}" if out else ""))
@@ -91,7 +87,8 @@ def run_demo(args, log=print) -> int:
         if out is not None and not args.no_frames:
             sinks.append(PngSink(out))
         clock = RecordedClock() if target.headless else WallClock()
-        loop = FrameLoop(character, renderer, clock, sinks=sinks, fps=args.fps, log=log, target=target)
+        loop = FrameLoop(character.shape_names, renderer, clock, sinks=sinks, fps=args.fps, log=log, target=target)
+        log("stages: demo performance→map→draw")
         result = loop.run(ReplaySource(frames), duration=args.duration)
     finally:
         if renderer is not None:

@@ -12,7 +12,6 @@ Markers, pins and the drag target are drawn as dots over the face
 from __future__ import annotations
 
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Callable
@@ -145,24 +144,18 @@ def _manipulate(args) -> int:
     from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
     from facepuppet.runtime.render.images import save_png
     from facepuppet.runtime.render.renderer import FaceRenderer
-    from facepuppet.runtime.commands.replay import parse_size
+    from facepuppet.runtime.commands.options import parse_size
 
     width, height = parse_size(args.size)
     actor, pair, character = Actor.load(args.actor), ActorPair.load(args.pair), Character.load(args.character)
     steps = read_script(args.script, actor.names) if args.script else None
     if args.headless and steps is None:
         raise ValueError("--headless needs --script (there is no window to click in)")
-    try:
-        target = create_context(headless=True if args.headless else None, width=width, height=height,
-                                title="facepuppet manipulate")
-    except GLUnavailable as exc:
-        print(f"facepuppet manipulate: error: {exc}", file=sys.stderr)
-        return 3
+    target = create_context(headless=True if args.headless else None, width=width, height=height,
+                            title="facepuppet manipulate")
     if target.headless and steps is None:
         target.close()
-        print("facepuppet manipulate: error: no display for a window; run with --headless --script FILE",
-              file=sys.stderr)
-        return 3
+        raise GLUnavailable("no display for a window; run with --headless --script FILE")
     print(f"manipulate: {'headless (EGL)' if target.headless else 'window'}, {actor.n_markers} markers, "
           f"K = {actor.n_actuations}, {character.n_shapes} shapes of {character.name!r}", flush=True)
     renderer = overlay = None

@@ -10,34 +10,28 @@ the same images.
 A live recording (``run --record``) with TICK records replays tick for tick
 (:mod:`~facepuppet.runtime.recording.ticked_source`): the frames each live tick took, at
 its tick times, at the live ``--fps`` (another ``--fps`` resamples instead).
-``--pipeline`` (implied by ``--config`` / ``--calibrate``) runs the live
-pipeline as ``run`` does, so the same options give the live run's weights.
-The parameter-space options (``--actor``/``--pair``, ``--retarget``,
-``--elastic``) are ``run``'s (:mod:`~facepuppet.runtime.live.stages`).
+The stage chain is ``run``'s, built by the same function
+(:func:`~facepuppet.runtime.live.stages.build_chain`) from the same options
+(``--actor``/``--pair``, ``--retarget``, ``--elastic``, ``--gestures``,
+``--gesture-seed``); ``--pipeline`` (implied by ``--config`` / ``--calibrate``)
+adds the filter stage as ``run`` has it. The audio levels a live recording kept
+(one per tick) feed the ``audio`` stage, so the same options give the live run's
+weights, gestures included.
 """
 
 from __future__ import annotations
 
 import json
-import re
-import sys
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.live.loop import FrameLoop, PngSink, RecordedClock, WallClock, WeightLog
-from facepuppet.runtime.live.stages import add_stage_arguments
+from facepuppet.runtime.commands.options import parse_size
+from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
+from facepuppet.runtime.live.sinks import PngSink, WeightLog
+from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, build_chain, make_input_adapter
 from facepuppet.runtime.recording.replay_source import ReplaySource, open_recording
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """(width, height) of ``"1280x720"``; ValueError otherwise."""
-    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
-    if m is None or int(m.group(1)) <= 0 or int(m.group(2)) <= 0:
-        raise ValueError(f"--size: expected WIDTHxHEIGHT in pixels such as 1280x720, got {text!r}")
-    return int(m.group(1)), int(m.group(2))
 
 
 def register(subparsers) -> None:
@@ -58,10 +52,8 @@ def register(subparsers) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds to play (default: the whole recording)")
     p.add_argument("--stats", action="store_true", help="also print the counters and timings as one JSON line")
     p.add_argument("--pipeline", action="store_true",
-                   help="run the live pipeline (filters, calibration, tracking loss) as `run` does")
-    p.add_argument("--config", type=Path, default=None, help="TOML config of the live pipeline (implies --pipeline)")
-    p.add_argument("--calibrate", action="store_true",
-                   help="capture the neutral from the first 0.5 s of frames (implies --pipeline)")
+                   help="run the filter stage (filters, calibration, tracking loss) as `run` does "
+                        "(implied by --config and --calibrate)")
     p.add_argument("--dump-weights", type=Path, default=None, metavar="FILE.npy",
                    help="save the weights drawn at every tick, (n_ticks, n_channels) float32")
     add_stage_arguments(p)
@@ -70,9 +62,8 @@ def register(subparsers) -> None:
 
 def run_replay(args, log=print) -> int:
     """Run the ``replay`` command from parsed ``args``; returns the exit code."""
-    from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
     from facepuppet.runtime.recording.ticked_source import TickedSource, read_live_recording
-    from facepuppet.runtime.live.stages import build_stages, make_input_adapter
+    from facepuppet.runtime.render.gl_context import create_context
 
     width, height = parse_size(args.size)
     fps = getattr(args, "fps", None)
@@ -81,55 +72,59 @@ def run_replay(args, log=print) -> int:
     character = Character.load(args.character)
     live = read_live_recording(args.session, lambda kind: make_input_adapter(kind, (), log=lambda s: None))
     kind = live.header.get("info", {}).get("input") if live is not None else None
-    stages = build_stages(args, character, kind, log=log)
-    if live is not None and stages.extra_names:  # decode again, with the muscle names
-        live = read_live_recording(args.session, lambda k: make_input_adapter(k, stages.extra_names, log=log))
-    pipeline = None
-    if getattr(args, "pipeline", False) or getattr(args, "config", None) is not None or getattr(args, "calibrate", False):
-        from facepuppet.runtime.live.config import LiveConfig, load_live_config
-        from facepuppet.runtime.live.pipeline import LivePipeline
-
-        pipeline = LivePipeline(load_live_config(args.config) if getattr(args, "config", None) else LiveConfig(), log=log)
-        if getattr(args, "calibrate", False):
-            pipeline.request_calibration()
-    ticks = None
-    if live is not None and live.ticks:
-        live_fps = float(live.header.get("info", {}).get("fps", 60.0))
-        if fps is None or fps == live_fps:
-            fps = live_fps
-            source = TickedSource(live, pipeline.request_calibration if pipeline is not None else None)
-            ticks = source.ticks
-            pace = (f"drawn on arrival, tick labels at {fps:g} Hz" if live.header.get("info", {}).get("idle_fps")
-                    else f"at {fps:g} fps")
-            log(f"replay: {args.session} tick for tick ({len(ticks)} live ticks {pace}, "
-                f"{len(live.frames)} frames) on {args.character} ({len(stages.names)} channels)")
-    if ticks is None:
-        fps = 60.0 if fps is None else fps
-        source = ReplaySource(live.frames if live is not None else open_recording(args.session))
-        log(f"replay: {args.session} ({len(source.frames)} frames, {source.duration:.2f} s) "
-            f"on {args.character} ({len(stages.names)} channels)")
-    try:
-        target = create_context(headless=True if args.headless else None, width=width, height=height,
-                                title=f"facepuppet replay {args.session.name}")
-    except GLUnavailable as exc:
-        print(f"facepuppet replay: error: {exc}", file=sys.stderr)
-        return 3
+    filtered = bool(getattr(args, "pipeline", False) or getattr(args, "config", None) is not None
+                    or getattr(args, "calibrate", False))
+    levels = RecordedLevels(live.audio_levels) if live is not None and live.audio_levels else None
+    source, ticks, fps = _source(args, live, fps, log)
+    chain = build_chain(args, character, kind, filtered=filtered, audio_level=levels,
+                        calibrate_requests=(lambda: source.watched) if isinstance(source, TickedSource) else None,
+                        voice_only=kind == "audio", label=f"replay({kind or 'frames'})", log=log)
+    if live is not None and chain.extra_names:  # decode again, with the muscle names
+        live = read_live_recording(args.session, lambda k: make_input_adapter(k, chain.extra_names, log=log))
+        source, ticks, fps = _source(args, live, getattr(args, "fps", None), lambda s: None)
+    log(chain.describe())
+    target = create_context(headless=True if args.headless else None, width=width, height=height,
+                            title=f"facepuppet replay {args.session.name}")
     renderer = None
     weights = WeightLog()
     try:
         screen = None if target.headless else target.ctx.screen
-        renderer = stages.renderer(target.ctx, character, width, height, args.path, screen, log)
+        renderer = chain.renderer(target.ctx, character, width, height, args.path, screen, log)
         sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
         clock = RecordedClock() if target.headless else WallClock()
-        loop = FrameLoop(SimpleNamespace(shape_names=stages.names), renderer, clock, sinks=sinks, fps=fps, log=log,
-                         target=target, retarget=stages.retarget, pipeline=stages.pipeline(pipeline))
+        loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
+                         stages=chain.stages)
         result = loop.run(source, duration=args.duration, ticks=ticks)
     finally:
         if renderer is not None:
             renderer.close()
         target.close()
+    _report(args, result, renderer.path, fps, source, weights, log)
+    return 0
+
+
+def _source(args, live, fps, log):
+    """(frame source, the live tick schedule or None, ticks per second) for the recording."""
+    from facepuppet.runtime.recording.ticked_source import TickedSource
+
+    if live is not None and live.ticks:
+        live_fps = float(live.header.get("info", {}).get("fps", 60.0))
+        if fps is None or fps == live_fps:
+            source = TickedSource(live)
+            pace = (f"drawn on arrival, tick labels at {live_fps:g} Hz" if live.header.get("info", {}).get("idle_fps")
+                    else f"at {live_fps:g} fps")
+            log(f"replay: {args.session} tick for tick ({len(source.ticks)} live ticks {pace}, "
+                f"{len(live.frames)} frames) on {args.character}")
+            return source, source.ticks, live_fps
+    fps = 60.0 if fps is None else fps
+    source = ReplaySource(live.frames if live is not None else open_recording(args.session))
+    log(f"replay: {args.session} ({len(source.frames)} frames, {source.duration:.2f} s) on {args.character}")
+    return source, None, fps
+
+
+def _report(args, result, path: str, fps: float, source, weights, log) -> None:
     c = result.counters
-    log(f"replay: {result.n_ticks} ticks at {fps:g} fps, {renderer.path} path; frames received "
+    log(f"replay: {result.n_ticks} ticks at {fps:g} fps, {path} path; frames received "
         f"{c['frames_received']}, stale dropped {c['stale_dropped']}, non-finite rejected "
         f"{c['nonfinite_rejected']}, ticks without a new frame {c['ticks_without_new_frame']}, "
         f"late ticks {c['late_ticks']}" + (" (window closed)" if result.closed_by_window else ""))
@@ -138,11 +133,10 @@ def run_replay(args, log=print) -> int:
             "(packets dropped by the recorder); the weights differ from the live run's from there on")
     log(result.timer.table())
     if args.stats:
-        log(json.dumps({"n_ticks": result.n_ticks, "path": renderer.path, "counters": c,
+        log(json.dumps({"n_ticks": result.n_ticks, "path": path, "counters": c,
                         "timings_ms": result.timings}, sort_keys=True))
     if getattr(args, "dump_weights", None) is not None:
         np.save(args.dump_weights, weights.array)
         log(f"replay: wrote the weights of {result.n_ticks} ticks to {args.dump_weights}")
     if args.out is not None:
         log(f"replay: wrote {result.n_ticks} PNGs to {args.out}")
-    return 0

@@ -34,7 +34,6 @@ stops it cleanly; either way the final stats are printed.
 
 from __future__ import annotations
 
-import ipaddress
 import signal
 import sys
 import threading
@@ -45,13 +44,12 @@ from types import SimpleNamespace
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.live.config import LiveConfig, load_live_config
+from facepuppet.runtime.commands.options import parse_allow, parse_host_port, parse_size
+from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, WallClock
+from facepuppet.runtime.live.sinks import PngSink, RecordingHook, WeightLog
+from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, make_input_adapter
 from facepuppet.runtime.live.stats import LiveStats
-from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, PngSink, WallClock, WeightLog
-from facepuppet.runtime.live.pipeline import LivePipeline
-from facepuppet.runtime.commands.replay import parse_size
-from facepuppet.runtime.live.stages import add_stage_arguments, build_stages, make_input_adapter
-from facepuppet.runtime.live.vmc_out import parse_host_port
+from facepuppet.runtime.live.vmc_out import VmcSender
 
 CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
 RECEIVERS = ("process", "thread")
@@ -71,14 +69,9 @@ def register(subparsers) -> None:
                    help="address to listen on (default 127.0.0.1 on the input's default port); "
                         "an address other than loopback must be named here explicitly")
     p.add_argument("--allow", metavar="IP[,IP...]", default=None, help="accept packets only from these senders")
-    p.add_argument("--config", type=Path, default=None, help="TOML config: filters, gain/clamp, tracking loss")
-    p.add_argument("--calibrate", action="store_true", help="capture the neutral pose from the first 0.5 s of frames")
     p.add_argument("--audio", nargs="?", const="", default=None, metavar="DEVICE",
                    help="measure the microphone level (default input device, or DEVICE by name or number)")
     p.add_argument("--audio-file", type=Path, default=None, metavar="WAV", help="a WAV file as the audio input")
-    p.add_argument("--gestures", type=Path, default=None, metavar="GESTURES.npz",
-                   help="gesture tables (build-gestures): add voice-driven blinks, brows and head motion")
-    p.add_argument("--gesture-seed", type=int, default=0, help="seed of the gesture synthesis (default 0)")
     p.add_argument("--record", type=Path, default=None, metavar="FILE", help="record packets and audio levels")
     p.add_argument("--vmc-out", default=None, metavar="HOST:PORT", help="send the rig weights and head as VMC")
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
@@ -101,19 +94,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_command)
 
 
-def parse_allow(text: str | None) -> set[str] | None:
-    """Sender IPs of ``--allow`` ("10.0.0.2,10.0.0.3"), or None; ValueError on a bad address."""
-    if text is None:
-        return None
-    allow = set()
-    for part in text.split(","):
-        try:
-            allow.add(str(ipaddress.ip_address(part.strip())))
-        except ValueError:
-            raise ValueError(f"--allow: expected comma-separated IP addresses, got {part.strip()!r}") from None
-    return allow
-
-
 @dataclass
 class LiveRunResult:
     """What one live run did: the loop result, the stats, the per-tick weights and the parts' counters."""
@@ -124,20 +104,65 @@ class LiveRunResult:
     counters: dict
     path: str
     address: tuple
+    chain: str = ""
 
 
-class _Packets:
-    """The UDP thread's ``on_packet``: spot the calibrate message, hand the datagram to the recorder."""
+@dataclass
+class _Options:
+    """The checked options of one live run."""
 
-    def __init__(self, pipeline: LivePipeline, recorder=None):
-        self.pipeline = pipeline
-        self.put = recorder.put if recorder is not None else None
+    width: int
+    height: int
+    loop_fps: float
+    idle_fps: float | None
+    voice_only: bool
+    host: str
+    port: int
+    allow: set | None
+    vmc_out: tuple | None
 
-    def __call__(self, data: bytes, t: float, sender) -> None:
-        if CALIBRATE_ADDRESS in data:
-            self.pipeline.request_calibration()
-        if self.put is not None:
-            self.put(data, t, sender)
+
+def _check_options(args, default_port) -> _Options:
+    """Every option that can be checked before anything opens; ValueError naming the option otherwise."""
+    width, height = parse_size(args.size)
+    if not (args.fps > 0):
+        raise ValueError(f"--fps: expected a positive number, got {args.fps}")
+    if args.duration is not None and not (args.duration > 0):
+        raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
+    voice_only = args.input == "audio"
+    if voice_only and (getattr(args, "gestures", None) is None or (args.audio is None and args.audio_file is None)):
+        raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
+    # draw on arrival: tick labels on a 1 kHz grid (so a replay can follow them), redraws at --fps when idle
+    arrival = getattr(args, "draw", "arrival") == "arrival" and not voice_only
+    loop_fps, idle_fps = (ARRIVAL_GRID_HZ, args.fps) if arrival else (args.fps, None)
+    host, port = ("127.0.0.1", default_port) if args.listen is None else parse_host_port(args.listen, "--listen")
+    vmc_out = parse_host_port(args.vmc_out) if args.vmc_out else None
+    return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out)
+
+
+def _record_info(args, opts: _Options) -> dict:
+    """The header facts of ``--record``: enough for ``replay`` to rebuild the same chain."""
+    options = ("config", "calibrate", "actor", "pair", "retarget", "elastic", "gestures", "gesture_seed")
+    return {"character": str(args.character), "listen": f"{opts.host}:{opts.port}", "fps": opts.loop_fps,
+            "idle_fps": opts.idle_fps,
+            "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
+                        for name in options}}
+
+
+def _open_source(args, adapter, opts: _Options, recorder):
+    """The live frame source: the UDP receiver of ``--receiver``, or none for ``--input audio``."""
+    from facepuppet.runtime.gestures.layer import VoiceOnlySource
+    from facepuppet.runtime.inputs.udp import UdpSource
+    from facepuppet.runtime.inputs.udp_process import UdpProcessSource
+
+    if opts.voice_only:
+        return VoiceOnlySource(None)
+    on_packet = recorder.put if recorder is not None else None
+    if getattr(args, "receiver", "process") == "process":  # datagrams come back to this process only to be recorded
+        return UdpProcessSource(adapter, host=opts.host, port=opts.port, allow=opts.allow, on_packet=on_packet,
+                                watch=CALIBRATE_ADDRESS)
+    return UdpSource(adapter, host=opts.host, port=opts.port, allow=opts.allow, on_packet=on_packet,
+                     watch=CALIBRATE_ADDRESS)
 
 
 def run_live(args, log=print, stop_event: threading.Event | None = None, on_ready=None,
@@ -155,36 +180,16 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
         GLUnavailable when no OpenGL context can be made.
     """
     from facepuppet.runtime.inputs.audio import open_audio
+    from facepuppet.runtime.recording.recorder import PacketRecorder
     from facepuppet.runtime.render.blas_threads import BlasThreads
     from facepuppet.runtime.render.gl_context import create_context
-    from facepuppet.runtime.recording.recorder import PacketRecorder
-    from facepuppet.runtime.inputs.udp_process import UdpProcessSource
-    from facepuppet.runtime.inputs.udp import UdpSource
-    from facepuppet.runtime.live.vmc_out import VmcSender
 
     receiver = getattr(args, "receiver", "process")
     if receiver not in RECEIVERS:
         raise ValueError(f"--receiver: expected one of {RECEIVERS}, got {receiver!r}")
-    width, height = parse_size(args.size)
-    if not (args.fps > 0):
-        raise ValueError(f"--fps: expected a positive number, got {args.fps}")
-    if args.duration is not None and not (args.duration > 0):
-        raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
-    voice_only = args.input == "audio"
-    # draw on arrival: tick labels on a 1 kHz grid (so a replay can follow them), redraws at --fps when idle
-    arrival = getattr(args, "draw", "arrival") == "arrival" and not voice_only
-    loop_fps, idle_fps = (ARRIVAL_GRID_HZ, args.fps) if arrival else (args.fps, None)
-    if voice_only and (getattr(args, "gestures", None) is None or (args.audio is None and args.audio_file is None)):
-        raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
+    adapter_kind = None if args.input == "audio" else args.input
+    opts = _check_options(args, input_default_port(adapter_kind))
     character = Character.load(args.character)
-    stages = build_stages(args, character, None if voice_only else args.input, log=log)
-    adapter = None if voice_only else make_input_adapter(args.input, stages.extra_names, log=log)
-    host, port = ("127.0.0.1", adapter.default_port if adapter else 0) if args.listen is None else \
-        parse_host_port(args.listen, "--listen")
-    allow = parse_allow(args.allow)
-    vmc_out = parse_host_port(args.vmc_out) if args.vmc_out else None
-    config = load_live_config(args.config) if args.config is not None else LiveConfig()
-
     stop_event = stop_event or threading.Event()
     parts: list = []  # things to close, in reverse order
     try:
@@ -196,89 +201,89 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
             audio = open_audio(device=args.audio, wav=args.audio_file, log=log)
             if audio is not None:
                 parts.append(audio)
+        late = SimpleNamespace(source=None)  # the filter reads the source's calibrate count once it exists
+        chain = build_chain(args, character, adapter_kind, audio_level=audio.level if audio is not None else None,
+                            calibrate_requests=lambda: getattr(late.source, "watched", 0),
+                            voice_only=opts.voice_only, label=args.input, log=log)
+        log(chain.describe())
+        adapter = None if opts.voice_only else make_input_adapter(args.input, chain.extra_names, log=log)
         recorder = None
         if args.record is not None:
-            recorder = PacketRecorder(args.record, args.input, info={
-                "character": str(args.character), "listen": f"{host}:{port}", "fps": loop_fps,
-                "idle_fps": idle_fps,
-                "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
-                            for name in ("config", "calibrate", "actor", "pair", "retarget", "elastic", "gestures")}})
+            recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts))
             parts.append(recorder)
-        pipeline = LivePipeline(config, audio_level=audio.level if audio is not None else None, log=log)
-        if args.calibrate:
-            pipeline.request_calibration()
-        frame_pipeline = pipeline
-        if getattr(args, "gestures", None) is not None:
-            from facepuppet.runtime.gestures.layer import VoiceOnlySource, gesture_layer
-
-            frame_pipeline = gesture_layer(args.gestures, inner=pipeline, voice_only=voice_only, log=log,
-                                           level=audio.level if audio is not None else None, seed=args.gesture_seed)
-        frame_pipeline = stages.pipeline(frame_pipeline)  # a markers solve goes first
-        if voice_only:
-            source = VoiceOnlySource(getattr(audio, "duration", None))
-        elif receiver == "process":  # datagrams come back to this process only to be recorded
-            source = UdpProcessSource(adapter, host=host, port=port, allow=allow,
-                                      on_packet=recorder.put if recorder is not None else None,
-                                      watch=(CALIBRATE_ADDRESS, pipeline.request_calibration))
-        else:
-            source = UdpSource(adapter, host=host, port=port, allow=allow, on_packet=_Packets(pipeline, recorder))
+        source = late.source = _open_source(args, adapter, opts, recorder)
+        if opts.voice_only:
+            source.duration = getattr(audio, "duration", None)
         source.start()
         parts.append(source)
         log(f"run: listening for {args.input} on {source.address[0]}:{source.address[1]}"
-            + (f" (only from {', '.join(sorted(allow))})" if allow else ""))
+            + (f" (only from {', '.join(sorted(opts.allow))})" if opts.allow else ""))
 
-        target = create_context(headless=True if args.headless else None, width=width, height=height,
+        target = create_context(headless=True if args.headless else None, width=opts.width, height=opts.height,
                                 title=f"facepuppet run ({args.input})")
         parts.append(target)
         screen = None if target.headless else target.ctx.screen
-        renderer = stages.renderer(target.ctx, character, width, height, args.path, screen, log)
+        renderer = chain.renderer(target.ctx, character, opts.width, opts.height, args.path, screen, log)
         parts.append(renderer)
-        if not target.headless:
-            _bind_calibrate_key(target, pipeline)
+        if not target.headless and chain.filter is not None:
+            _bind_calibrate_key(target, chain.filter)
 
         weights = WeightLog()
         sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
-        counters = {"udp": source.counters, "pipeline": pipeline.counters}
+        counters = {"udp": source.counters}
+        if chain.filter is not None:
+            counters["pipeline"] = chain.filter.counters
         stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
         hooks = [stats.on_tick, *hooks]
-        if vmc_out is not None:
-            sender = VmcSender(vmc_out[0], vmc_out[1], stages.names)
+        if opts.vmc_out is not None:
+            sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names)
             parts.append(sender)
             hooks.append(sender.on_tick)
             counters["vmc_out"] = sender.counters
         if recorder is not None:
             counters["record"] = recorder.counters
-            if audio is not None:
-                hooks.append(lambda info: recorder.put_audio(info.t, audio.level(info.t)))
-            if hasattr(source, "frames_taken"):  # which frame each tick drew, for a faithful replay
-                hooks.append(lambda info: recorder.put_tick(info.k, info.t, source.frames_taken, info.stamps[0]))
-        loop = FrameLoop(SimpleNamespace(shape_names=stages.names), renderer, WallClock(), sinks=sinks,
-                         fps=loop_fps, log=log, target=target, retarget=stages.retarget,
-                         pipeline=frame_pipeline, on_tick=hooks, stop=stop_event.is_set, catch_up=True,
-                         idle_fps=idle_fps)
+            hooks.append(RecordingHook(recorder, source, chain.audio))
+        loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
+                         target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
+                         catch_up=True, idle_fps=opts.idle_fps)
         counters["loop"] = loop.counters
         stats.counters = _LiveCounters(source, counters)
         if on_ready is not None:
             on_ready(source.address)
-        # A receive *thread* gives the GIL back on every recvfrom and must win it back from the busy frame
-        # loop each time: a short switch interval keeps datagrams from waiting in the kernel (measured, 0.5 ms
-        # vs the default 5 ms: arrival -> read p50 3 vs 7 ms, p99 16 vs 30 ms). A receive process needs none.
-        switch = sys.getswitchinterval()
-        if isinstance(source, UdpSource):
-            sys.setswitchinterval(min(switch, THREAD_SWITCH_INTERVAL_S))
-        try:
-            with _sigint_sets(stop_event):
-                result = loop.run(source, duration=args.duration)
-        finally:
-            sys.setswitchinterval(switch)
+        result = _run_loop(loop, source, args.duration, stop_event)
         counters["loop"] = result.counters
-        return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address)
+        return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address,
+                             chain.describe())
     finally:
         for part in reversed(parts):
             for name in ("stop", "close"):
                 if hasattr(part, name):
                     getattr(part, name)()
                     break
+
+
+def _run_loop(loop: FrameLoop, source, duration: float | None, stop_event: threading.Event) -> LoopResult:
+    """Run the loop until ``duration``, the window closes or Ctrl-C (which sets ``stop_event``)."""
+    from facepuppet.runtime.inputs.udp import UdpSource
+
+    # A receive *thread* gives the GIL back on every recvfrom and must win it back from the busy frame
+    # loop each time: a short switch interval keeps datagrams from waiting in the kernel (measured, 0.5 ms
+    # vs the default 5 ms: arrival -> read p50 3 vs 7 ms, p99 16 vs 30 ms). A receive process needs none.
+    switch = sys.getswitchinterval()
+    if isinstance(source, UdpSource):
+        sys.setswitchinterval(min(switch, THREAD_SWITCH_INTERVAL_S))
+    try:
+        with _sigint_sets(stop_event):
+            return loop.run(source, duration=duration)
+    finally:
+        sys.setswitchinterval(switch)
+
+
+def input_default_port(kind: str | None) -> int:
+    """The default port of an input kind (0 for none)."""
+    from facepuppet.runtime.inputs.kinds import INPUT_KINDS
+
+    return 0 if kind is None else INPUT_KINDS[kind].default_port
 
 
 class _LiveCounters(dict):
@@ -310,7 +315,7 @@ class _sigint_sets:
             signal.signal(signal.SIGINT, self.previous)
 
 
-def _bind_calibrate_key(target, pipeline: LivePipeline) -> None:
+def _bind_calibrate_key(target, pipeline) -> None:
     import glfw
 
     def on_key(window, key, scancode, action, mods):
@@ -321,26 +326,15 @@ def _bind_calibrate_key(target, pipeline: LivePipeline) -> None:
 
 
 def run_command(args, log=print) -> int:
-    """The ``run`` command: returns the exit code."""
-    from facepuppet.runtime.render.gl_context import GLUnavailable
-
-    try:
-        result = run_live(args, log=log)
-    except GLUnavailable as exc:
-        print(f"facepuppet run: error: {exc}", file=sys.stderr)
-        return 3
-    except OSError as exc:
-        if isinstance(exc, (FileNotFoundError, PermissionError)):
-            raise
-        print(f"facepuppet run: error: {exc}", file=sys.stderr)
-        return 2
+    """The ``run`` command: returns the exit code (errors are mapped to exit codes in ``cli.main``)."""
+    result = run_live(args, log=log)
     loop = result.loop
     c = loop.counters
     pace = f"at {args.fps:g} fps" if getattr(args, "draw", "arrival") == "tick" or args.input == "audio" \
         else f"on arrival (idle redraw {args.fps:g} fps)"
     log(f"run: {loop.n_ticks} ticks {pace}, {result.path} path; frames received "
         f"{c['frames_received']}, stale dropped {c['stale_dropped']}, non-finite rejected "
-        f"{c['nonfinite_rejected'] + result.counters['pipeline']['nonfinite_rejected']}, late ticks "
+        f"{c['nonfinite_rejected']}, late ticks "
         f"{c['late_ticks']} (skipped {c['skipped_ticks']})" + (" (window closed)" if loop.closed_by_window else ""))
     if args.stats:
         result.stats.final()

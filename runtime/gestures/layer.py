@@ -1,6 +1,6 @@
 """Gesture layer: speech-driven stochastic facial gestures (Ju & Lee 2008) over the tracked face, per frame.
 
-:class:`GestureLayer` is a frame-loop pipeline ``(frame, t) -> frame`` that steps a
+:class:`GestureLayer` is the ``gestures`` stage of the live chain, ``(frame, t) -> frame``: it steps a
 :class:`~facepuppet.runtime.gestures.synth.GestureSynth` (the two-level MRF of §5.1,
 in :mod:`.gesture_synth`) once per animation frame from the voice level and adds
 the synthesised motion to the tracked face, fills what tracking lost, or animates
@@ -26,7 +26,7 @@ __all__ = ["GESTURE_DB_SCHEMA", "GROUPS", "HEAD_FEATURES", "LEVEL1", "SILENCE_Z"
 
 
 class GestureLayer:
-    """Combine synthesised gestures with tracked frames; a frame-loop pipeline ``(frame, t) -> frame``.
+    """Combine synthesised gestures with tracked frames: the ``gestures`` stage, ``(frame, t) -> frame``.
 
     Modes: ``"add"`` adds the stochastic residuals (brows, eyes, rest) and the
     head motion to the tracked face and fills channels the tracker lost (NaN)
@@ -39,20 +39,23 @@ class GestureLayer:
     synth : GestureSynth
     fps : float, animation rate of the database (frames per second)
     mode : "add" or "voice"
-    level : callable t -> dBFS or None; default: the frame's ``audio_level``
-    inner : callable (frame, t) -> frame or None, applied to the tracked frame first
+    level : callable t -> dBFS or None; default: the frame's ``audio_level``. In the live chain it is the
+        tick's level (:class:`~facepuppet.runtime.live.stages.AudioTap`), one value for every animation
+        frame stepped that tick, which is the value a recording keeps
     detail : (names, table) or None: §5.2 detail shape weights, table of shape (n_db_frames, len(names)),
         float32, per reference frame of the marker takes (``facepuppet.offline.gestures.detail_transfer.detail_table``);
         the weights of the head group's pick are appended as channels ``names`` (shapes of a character
         made by ``detail_character``)
     """
 
-    def __init__(self, synth: GestureSynth, fps: float, mode: str = "add", level=None, inner=None, detail=None):
+    name = "gestures"
+
+    def __init__(self, synth: GestureSynth, fps: float, mode: str = "add", level=None, detail=None):
         if mode not in ("add", "voice"):
             raise ValueError(f"GestureLayer.mode: expected 'add' or 'voice', got {mode!r}")
         if not fps > 0:
             raise ValueError(f"GestureLayer.fps: expected a positive number, got {fps}")
-        self.synth, self.fps, self.mode, self.level, self.inner = synth, float(fps), mode, level, inner
+        self.synth, self.fps, self.mode, self.level = synth, float(fps), mode, level
         self._k = 0  # animation frames synthesised
         self._last: Frame | None = None
         self._names = tuple(canonical(n) for n in synth.out_names)
@@ -60,21 +63,19 @@ class GestureLayer:
         self._face = np.array([i for i, n in enumerate(self._names) if n not in HEAD_FEATURES], np.int64)
         self._face_names = tuple(self._names[i] for i in self._face)
         stochastic = {synth.names[c] for g in ("brows", "eyes", "rest") if g in synth.groups
-                      for c in synth._cols[synth.groups.index(g)]}
+                      for c in synth.group_columns(g)}
         self._residual = np.array([canonical(synth.out_names[i]) in {canonical(n) for n in stochastic}
                                    for i in self._face])
         self._maps: dict = {}
         self._detail = None
         if detail is not None:
             names, table = tuple(detail[0]), np.asarray(detail[1], np.float32)
-            if "head" not in synth.groups or table.shape != (len(synth._intensity), len(names)):
+            if "head" not in synth.groups or table.shape != (synth.n_reference_frames, len(names)):
                 raise ValueError(f"GestureLayer.detail: expected a head group and a table of shape "
-                                 f"({len(synth._intensity)}, {len(names)}), got {table.shape}")
-            self._detail = (names, table, synth.groups.index("head"))
+                                 f"({synth.n_reference_frames}, {len(names)}), got {table.shape}")
+            self._detail = (names, table)
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
-        if self.inner is not None:
-            frame = self.inner(frame, t)
         if frame is not None:
             self._last = frame
         while self._k <= t * self.fps + 1e-9:  # one synth step per animation frame up to t
@@ -90,9 +91,9 @@ class GestureLayer:
         out = self._compose(tracked, t)
         if self._detail is None:
             return out
-        names, table, k = self._detail
+        names, table = self._detail
         return dataclasses.replace(out, channels=tuple(out.channels) + names,
-                                   weights=np.concatenate([out.weights, table[self.synth._pick[k]]]))
+                                   weights=np.concatenate([out.weights, table[self.synth.pick("head")]]))
 
     def _compose(self, tracked: Frame | None, t: float) -> Frame:
         add = self.synth.additions
@@ -158,9 +159,9 @@ class VoiceOnlySource:
         return None, 0
 
 
-def gesture_layer(path, inner=None, level=None, voice_only: bool = False, seed: int = 0, log=print,
+def gesture_layer(path, level=None, voice_only: bool = False, seed: int = 0, log=print,
                   n_neighbours: int = 8, detail=None) -> GestureLayer:
-    """A :class:`GestureLayer` over ``inner`` from the gesture tables at ``path`` (the run command's ``--gestures``).
+    """A :class:`GestureLayer` from the gesture tables at ``path`` (``--gestures`` of ``run`` and ``replay``).
 
     n_neighbours : continuity jump candidates per reference frame (fewer: a cheaper step)
     detail : see :class:`GestureLayer`; default: the tables' ``detail_weights`` when they have them
@@ -174,5 +175,4 @@ def gesture_layer(path, inner=None, level=None, voice_only: bool = False, seed: 
     log(f"gestures: {path} ({len(db['intensity'])} reference frames at {fps:g} fps, groups "
         f"{', '.join(synth.groups)}), {'voice only' if voice_only else 'added to the tracked face'}"
         + (f", detail shapes {', '.join(detail[0])}" if detail is not None else ""))
-    return GestureLayer(synth, fps=fps, mode="voice" if voice_only else "add", level=level, inner=inner,
-                        detail=detail)
+    return GestureLayer(synth, fps=fps, mode="voice" if voice_only else "add", level=level, detail=detail)

@@ -375,6 +375,21 @@ class GestureSynth:
         return part
 
     @property
+    def n_reference_frames(self) -> int:
+        """Frames of the reference database."""
+        return len(self._intensity)
+
+    def group_columns(self, group: str) -> np.ndarray:
+        """Indices into :attr:`names` of the feature columns of ``group`` (ValueError for an unknown group)."""
+        if group not in self.groups:
+            raise ValueError(f"GestureSynth.group_columns: expected one of {self.groups}, got {group!r}")
+        return self._cols[self.groups.index(group)].copy()
+
+    def pick(self, group: str) -> int:
+        """The reference frame ``group`` shows now (its last pick)."""
+        return int(self._pick[self.groups.index(group)])
+
+    @property
     def picks(self) -> dict[str, int]:
         """The reference frame each group shows now."""
         return {g: int(p) for g, p in zip(self.groups, self._pick)}

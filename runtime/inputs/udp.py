@@ -145,19 +145,24 @@ class UdpSource:
     host : str, address to bind
     port : int or None, None for the adapter's default port, 0 for any free port
     allow : set of str or None, sender IP addresses accepted (None: all)
-    on_packet : callable(data bytes, t_receive float, sender (host, port)) or None
+    on_packet : callable(data bytes, t_receive float, sender (host, port)) or None, called on the
+        receive thread (the recorder's ``put``: must not block)
     clock : callable() -> float seconds, the receive-time clock; with the default
         (``time.monotonic``) the kernel's arrival stamp is used where there is one
+    watch : bytes or None: accepted datagrams containing the bytes (e.g. an OSC address) are counted
+        in :attr:`watched`
     """
 
     def __init__(self, adapter, host: str = "127.0.0.1", port: int | None = None,
-                 allow: set[str] | None = None, on_packet=None, clock=time.monotonic):
+                 allow: set[str] | None = None, on_packet=None, clock=time.monotonic, watch: bytes | None = None):
         self.adapter = adapter
         self.host = host
         self.port = adapter.default_port if port is None else int(port)
         self.allow = None if allow is None else frozenset(allow)
         self.on_packet = on_packet
         self.clock = clock
+        self.watch = None if watch is None else bytes(watch)
+        self.watched = 0  # accepted datagrams containing ``watch`` (only the receive thread writes it)
         self.last_error: BaseException | None = None
         self._own = {"packets": 0, "filtered_sender": 0, "internal_error": 0, "waited_over_1ms": 0}
         self.rcvbuf_bytes = 0  # kernel receive buffer granted (getsockopt), 0 before start
@@ -210,7 +215,8 @@ class UdpSource:
 
     def _run(self) -> None:
         sock, stop, own = self._sock, self._stop, self._own
-        allow, on_packet, handle, clock = self.allow, self.on_packet, self.adapter.handle, self.clock
+        allow, on_packet, handle, clock, watch = self.allow, self.on_packet, self.adapter.handle, self.clock, \
+            self.watch
         stamped = clock is time.monotonic and enable_kernel_stamps(sock)
         while not stop.is_set():
             try:
@@ -228,6 +234,8 @@ class UdpSource:
                 if allow is not None and sender[0] not in allow:
                     own["filtered_sender"] += 1
                     continue
+                if watch is not None and watch in data:
+                    self.watched += 1
                 if on_packet is not None:
                     on_packet(data, t, sender)
                 frame = handle(data, t)

@@ -6,7 +6,7 @@ It reads each datagram with its kernel arrival stamp, drops senders outside
 ``allow``, counts datagrams containing the watched bytes, copies accepted
 datagrams into the ring when the parent has an ``on_packet``, decodes with the
 adapter and publishes the frame (seqlock) and the counters into the shared
-block laid out by :class:`~facepuppet.runtime.inputs.udp_process._Shared`. It never
+block laid out by :class:`~facepuppet.runtime.inputs.udp_shared.SharedBlock`. It never
 raises, never blocks on the parent, and leaves when the parent is gone.
 """
 
@@ -21,10 +21,10 @@ import time
 from multiprocessing import shared_memory
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.inputs.udp_process import (
+from facepuppet.runtime.inputs.udp_shared import (
     CHANNELS, COMPLETED, FLAGS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION, HAS_WEIGHTS, MARKER_NAMES,
-    MAX_COUNTERS, MAX_ERRORS_LOGGED, MAX_MARKERS, MAX_WEIGHTS, N_MARKERS, N_WEIGHTS, NAMES_BYTES, NAMES_END,
-    NUMBER, READY, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, _NAME, _RECORD, _WRAP, _padded, _Shared,
+    MAX_COUNTERS, MAX_ERRORS_LOGGED, MAX_MARKERS, MAX_WEIGHTS, NAME, NAMES_BYTES, NAMES_END, NUMBER, N_MARKERS,
+    N_WEIGHTS, READY, RECORD, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, WRAP, SharedBlock, padded,
 )
 from facepuppet.runtime.inputs.udp import POLL_TIMEOUT_S, enable_kernel_stamps, receive
 
@@ -32,7 +32,7 @@ from facepuppet.runtime.inputs.udp import POLL_TIMEOUT_S, enable_kernel_stamps, 
 class _Writer:
     """The child's side: names log, counters, slot, ring."""
 
-    def __init__(self, shared: _Shared, adapter):
+    def __init__(self, shared: SharedBlock, adapter):
         self.shared, self.adapter = shared, adapter
         self.ids: dict[tuple[str, object], int] = {}
         self.counter_index: dict[str, int] = {}
@@ -47,7 +47,7 @@ class _Writer:
         if pos + 4 + len(payload) > NAMES_BYTES:
             self.own["names_full"] += 1
             return False
-        _NAME.pack_into(self.shared.names, pos, len(payload))
+        NAME.pack_into(self.shared.names, pos, len(payload))
         self.shared.names[pos + 4:pos + 4 + len(payload)] = payload
         ctl[NAMES_END] = pos + 4 + len(payload)  # published after the bytes
         return True
@@ -119,7 +119,7 @@ class _Writer:
         """Copy one datagram into the ring for the parent's ``on_packet``; drop and count when full."""
         ctl, ring, size = self.shared.ctl, self.shared.ring, self.shared.ring_bytes
         host = str(sender[0]).encode("ascii", "replace")[:255]
-        n = _padded(_RECORD.size + len(host) + len(data))
+        n = padded(RECORD.size + len(host) + len(data))
         w = ctl[RING_W]
         free = size - (w - ctl[RING_R])
         p = w % size
@@ -128,10 +128,10 @@ class _Writer:
             self.own["packets_ring_dropped"] += 1
             return
         if gap:
-            _RECORD.pack_into(ring, p, _WRAP, 0.0, 0, 0)
+            RECORD.pack_into(ring, p, WRAP, 0.0, 0, 0)
             w, p = w + gap, 0
-        _RECORD.pack_into(ring, p, len(data), t, int(sender[1]) & 0xFFFF, len(host))
-        start = p + _RECORD.size
+        RECORD.pack_into(ring, p, len(data), t, int(sender[1]) & 0xFFFF, len(host))
+        start = p + RECORD.size
         ring[start:start + len(host)] = host
         ring[start + len(host):start + len(host) + len(data)] = data
         ctl[RING_W] = w + n  # published after the bytes
@@ -159,7 +159,7 @@ def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, 
         resource_tracker.unregister(shm._name, "shared_memory")
     except Exception:
         pass
-    shared = _Shared(shm, ring_bytes)
+    shared = SharedBlock(shm, ring_bytes)
     writer = _Writer(shared, adapter)
     own, ctl, handle = writer.own, shared.ctl, adapter.handle
     stamped = enable_kernel_stamps(sock)

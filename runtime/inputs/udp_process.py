@@ -11,16 +11,17 @@ writes the newest frame into a shared-memory slot; the frame loop copies the
 slot once per tick and nothing else in its process competes for its GIL.
 
 Same interface as :class:`UdpSource`: ``start()``/``stop()``, ``address``,
-``latest(t) -> (frame or None, stale)``, ``frames_taken``, ``counters``,
+``latest(t) -> (frame or None, stale)``, ``frames_taken``, ``watched``, ``counters``,
 ``last_error``, ``on_packet``. Differences:
 
 * the receive time is always the kernel's arrival stamp on the monotonic clock
   (``SO_TIMESTAMPNS``; the child's read time where there is none): no ``clock``;
-* ``on_packet`` (the recorder, the calibrate message) runs in the *parent*: the
-  child copies each accepted datagram into a shared ring (4 MiB) and
-  :meth:`UdpProcessSource.latest` hands the ring's datagrams to ``on_packet``
-  every tick, then :meth:`stop` the rest; a full ring drops and counts
-  (``packets_ring_dropped``), never blocks;
+* ``on_packet`` (the recorder) runs in the *parent*: the child copies each
+  accepted datagram into a shared ring (4 MiB) and
+  :meth:`UdpProcessSource.deliver_packets` hands the ring's datagrams to
+  ``on_packet`` when the frame loop's recording hook calls it (once a tick),
+  :meth:`stop` the rest; a full ring drops and counts
+  (``packets_ring_dropped``), never blocks. :meth:`latest` is a snapshot only;
 * the adapter is copied into the child (pickled), so ``source.adapter.counters``
   stays at zero: read :attr:`counters`, which the child keeps current;
 * :meth:`UdpProcessSource.wait_for_frame` sleeps on a pipe the child writes a
@@ -44,7 +45,6 @@ import os
 import pickle
 import select
 import socket
-import struct
 import subprocess
 import sys
 import time
@@ -54,57 +54,14 @@ import numpy as np
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.udp import bind_udp, bound_address
+from facepuppet.runtime.inputs.udp_shared import (
+    CHANNELS, COMPLETED, FLAGS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION, HAS_WEIGHTS, MARKER_NAMES,
+    MAX_COUNTERS, MAX_MARKERS, MAX_WEIGHTS, NAME, NAMES_BYTES, NAMES_END, NUMBER, N_CTL, N_MARKERS, N_WEIGHTS,
+    READY, RECORD, RING_BYTES, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, WRAP, SharedBlock, padded,
+)
 
-MAX_WEIGHTS = 1024
-MAX_MARKERS = 2048
-MAX_COUNTERS = 64
-NAMES_BYTES = 1 << 20
-RING_BYTES = 4 << 20
 READ_TRIES = 64
-MAX_ERRORS_LOGGED = 100
 START_TIMEOUT_S = 30.0  # a spawned interpreter importing NumPy on a loaded 2-core machine
-# control words (int64)
-SEQ, COMPLETED, NAMES_END, RING_W, RING_R, READY, STOP, N_WEIGHTS, N_MARKERS, CHANNELS, MARKER_NAMES, SOURCE, \
-    NUMBER, FLAGS, WATCHED, N_CTL = range(16)
-HAS_WEIGHTS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION = 1, 2, 4, 8
-_RECORD = struct.Struct("<IdHBx")  # datagram length, receive time, sender port, sender host length (16 bytes)
-_WRAP = 0xFFFFFFFF
-_NAME = struct.Struct("<I")
-
-
-class _Shared:
-    """Views of the shared block: control words, times, pose, counters, weights, markers, name log, ring."""
-
-    def __init__(self, shm: shared_memory.SharedMemory, ring_bytes: int):
-        self.shm = shm
-        self.ring_bytes = ring_bytes
-        buf = shm.buf
-        o = 0
-
-        def take(n_bytes):
-            nonlocal o
-            view = buf[o:o + n_bytes]
-            o += n_bytes
-            return view
-
-        self.ctl = take(8 * N_CTL).cast("q")
-        self.times = np.frombuffer(take(8 * 3), dtype=np.float64)  # t, t_sender, audio_level
-        self.pose = np.frombuffer(take(4 * 8), dtype=np.float32)  # rotation (4), translation (3), pad
-        self.counters = take(8 * MAX_COUNTERS).cast("q")
-        self.weights = np.frombuffer(take(4 * MAX_WEIGHTS), dtype=np.float32)
-        self.markers = np.frombuffer(take(4 * 3 * MAX_MARKERS), dtype=np.float32)
-        self.names = take(NAMES_BYTES)
-        self.ring = take(ring_bytes)
-
-    @staticmethod
-    def size(ring_bytes: int) -> int:
-        return 8 * N_CTL + 24 + 32 + 8 * MAX_COUNTERS + 4 * MAX_WEIGHTS + 12 * MAX_MARKERS + NAMES_BYTES + ring_bytes
-
-    def release(self) -> None:
-        for name in ("ctl", "counters", "names", "ring"):
-            getattr(self, name).release()
-        self.times = self.pose = self.weights = self.markers = None
-
 
 class UdpProcessSource:
     """Frames from UDP datagrams decoded by ``adapter`` in a child process.
@@ -117,11 +74,10 @@ class UdpProcessSource:
     port : int or None, None for the adapter's default port, 0 for any free port
     allow : set of str or None, sender IP addresses accepted (None: all)
     on_packet : callable(data bytes, t_receive float, sender (host, port)) or None, called
-        on the thread that calls :meth:`latest` / :meth:`stop`
+        on the thread that calls :meth:`deliver_packets` / :meth:`stop`
     ring_bytes : int, size of the datagram ring for ``on_packet`` (a multiple of 16, >= 128 KiB)
-    watch : (bytes, callable()) or None: the child counts accepted datagrams containing the bytes
-        (e.g. an OSC address) and :meth:`latest` calls the callable once per tick that saw any,
-        without shipping every datagram to this process as ``on_packet`` does
+    watch : bytes or None: the child counts accepted datagrams containing the bytes (e.g. an OSC
+        address) in :attr:`watched`, without shipping every datagram to this process as ``on_packet`` does
     """
 
     def __init__(self, adapter, host: str = "127.0.0.1", port: int | None = None,
@@ -130,8 +86,7 @@ class UdpProcessSource:
             raise ValueError(f"UdpProcessSource ring_bytes: expected a multiple of 16 of at least {1 << 17}, "
                              f"got {ring_bytes!r}")
         self.ring_bytes = int(ring_bytes)
-        self.watch = watch
-        self._watched = 0
+        self.watch = None if watch is None else bytes(watch)
         self.adapter = adapter
         self.host = host
         self.port = adapter.default_port if port is None else int(port)
@@ -144,13 +99,14 @@ class UdpProcessSource:
         self._taken = 0
         self._sock: socket.socket | None = None
         self._shm: shared_memory.SharedMemory | None = None
-        self._shared: _Shared | None = None
+        self._shared: SharedBlock | None = None
         self._process = None
         self._names: dict[tuple[str, int], object] = {}
         self._counter_names: dict[int, str] = {}
         self._names_pos = 0
         self._final: dict[str, int] | None = None
         self._wake: tuple[int, int] | None = None   # pipe (read, write): a byte per published frame
+        self._watched_final = 0
 
     @property
     def address(self) -> tuple[str, int]:
@@ -174,12 +130,10 @@ class UdpProcessSource:
             raise RuntimeError("UdpProcessSource.start: already started")
         sock, self.rcvbuf_bytes = bind_udp(self.host, self.port, self.adapter.kind, stamps=True)
         self._sock = sock
-        self._shm = shared_memory.SharedMemory(create=True, size=_Shared.size(self.ring_bytes))
-        self._shared = _Shared(self._shm, self.ring_bytes)
+        self._shm = shared_memory.SharedMemory(create=True, size=SharedBlock.size(self.ring_bytes))
+        self._shared = SharedBlock(self._shm, self.ring_bytes)
         self._names, self._counter_names, self._names_pos, self._final = {}, {}, 0, None
         self._taken = self._stale_dropped = 0
-        watch_bytes = None if self.watch is None else self.watch[0]
-        self._watched = 0
         self._wake = os.pipe()
         for fd in self._wake:
             os.set_blocking(fd, False)   # the child never waits on a full pipe; the parent drains
@@ -191,7 +145,7 @@ class UdpProcessSource:
         try:
             self._process.stdin.write(pickle.dumps((self._shm.name, self.ring_bytes, sock.fileno(), sock.family,
                                                     self.adapter, self.allow, self.on_packet is not None,
-                                                    os.getpid(), None if watch_bytes is None else bytes(watch_bytes),
+                                                    os.getpid(), self.watch,
                                                     self._wake[1])))
             self._process.stdin.close()
         except (OSError, pickle.PicklingError) as exc:
@@ -219,7 +173,8 @@ class UdpProcessSource:
                 self._process.wait(timeout=5.0)
             self._process = None
         if shared is not None:
-            self._drain_ring()
+            self.deliver_packets()
+            self._watched_final = int(shared.ctl[WATCHED])
             self._final = self._read_counters()
             shared.release()
             self._shared = None
@@ -240,6 +195,12 @@ class UdpProcessSource:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+    @property
+    def watched(self) -> int:
+        """Accepted datagrams that contained ``watch`` so far (a count that only grows)."""
+        shared = self._shared
+        return int(shared.ctl[WATCHED]) if shared is not None else self._watched_final
 
     @property
     def frames_taken(self) -> int:
@@ -265,8 +226,8 @@ class UdpProcessSource:
     def latest(self, t: float | None = None) -> tuple[Frame | None, int]:
         """(newest frame not yet taken or None, frames overwritten unseen since the last call).
 
-        Hands the datagrams received since the last call to ``on_packet`` first.
-        ``t`` is accepted for the source interface and ignored.
+        A snapshot: no callbacks (:meth:`deliver_packets` hands datagrams on). ``t`` is accepted for the
+        source interface and ignored.
         """
         shared = self._shared
         if shared is None:
@@ -286,17 +247,6 @@ class UdpProcessSource:
             copy = None
         else:
             self._own["snapshot_busy"] += 1
-        # after the slot: the child rings a datagram before it publishes its frame, so every datagram
-        # behind the frame taken reaches on_packet (the recorder) before this tick's TICK record
-        if self.on_packet is not None:
-            self._drain_ring()
-        if self.watch is not None and ctl[WATCHED] != self._watched:
-            self._watched = ctl[WATCHED]
-            try:
-                self.watch[1]()
-            except Exception as exc:
-                self._own["internal_error"] += 1
-                self.last_error = exc
         if copy is None:
             return None, 0
         try:
@@ -311,7 +261,7 @@ class UdpProcessSource:
         return frame, stale
 
     @staticmethod
-    def _copy_slot(shared: _Shared) -> tuple:
+    def _copy_slot(shared: SharedBlock) -> tuple:
         ctl = shared.ctl
         flags, n_weights, n_markers = ctl[FLAGS], ctl[N_WEIGHTS], ctl[N_MARKERS]
         weights = shared.weights[:n_weights].copy() if flags & HAS_WEIGHTS else None
@@ -336,7 +286,7 @@ class UdpProcessSource:
         shared = self._shared
         end = shared.ctl[NAMES_END]
         while self._names_pos < end:
-            (n,) = _NAME.unpack_from(shared.names, self._names_pos)
+            (n,) = NAME.unpack_from(shared.names, self._names_pos)
             kind, key, value = json.loads(bytes(shared.names[self._names_pos + 4:self._names_pos + 4 + n]))
             self._names_pos += 4 + n
             if kind == "counter":
@@ -348,8 +298,13 @@ class UdpProcessSource:
         self._names.setdefault(("channels", -1), None)
         self._names.setdefault(("markers", -1), None)
 
-    def _drain_ring(self) -> None:
-        """Hand every datagram in the ring to ``on_packet`` (its errors are counted, never raised)."""
+    def deliver_packets(self) -> None:
+        """Hand every datagram in the ring to ``on_packet`` (its errors are counted, never raised).
+
+        The child rings a datagram before it publishes its frame, so after :meth:`latest` every
+        datagram behind the frame taken is in the ring: called after the snapshot (the recording
+        hook does), they reach the recorder before that tick's TICK record.
+        """
         shared, on_packet = self._shared, self.on_packet
         if shared is None or on_packet is None:
             return
@@ -357,14 +312,14 @@ class UdpProcessSource:
         r, w = ctl[RING_R], ctl[RING_W]
         while r < w:
             p = r % size
-            length, t, port, host_len = _RECORD.unpack_from(ring, p)
-            if length == _WRAP:
+            length, t, port, host_len = RECORD.unpack_from(ring, p)
+            if length == WRAP:
                 r += size - p
                 continue
-            start = p + _RECORD.size
+            start = p + RECORD.size
             host = bytes(ring[start:start + host_len]).decode("ascii")
             data = bytes(ring[start + host_len:start + host_len + length])
-            r += _padded(_RECORD.size + host_len + length)
+            r += padded(RECORD.size + host_len + length)
             try:
                 on_packet(data, t, (host, port))
             except Exception as exc:
@@ -389,7 +344,3 @@ class UdpProcessSource:
         merged["stale_dropped"] = self._stale_dropped
         merged["rcvbuf_bytes"] = self.rcvbuf_bytes
         return merged
-
-
-def _padded(n: int) -> int:
-    return (n + 15) & ~15

@@ -1,10 +1,12 @@
-"""The frame loop: one snapshot, one map, one draw per tick, on a clock it is given.
+"""The frame loop: one snapshot, the stage chain, one map, one draw per tick, on a clock it is given.
 
 Tick ``k`` happens at time ``t_k = k / fps`` (seconds since the source's first
 frame). Each tick takes the newest frame the source has by ``t_k`` (older ones
-are dropped and counted, never queued), maps its channels onto the rig's
-shapes with a :class:`~facepuppet.runtime.channels.ChannelMap` cached per
-channel tuple, draws, waits for the GPU, and hands the result to the sinks.
+are dropped and counted, never queued), rejects it if it is not finite, runs
+the stages (:func:`~facepuppet.runtime.live.stages.build_chain`), maps the last
+stage's channels onto the renderer's by name with a
+:class:`~facepuppet.runtime.channels.ChannelMap` cached per channel tuple,
+draws, waits for the GPU, and hands the result to the sinks and hooks.
 
 The clock only paces the ticks; it never decides what is drawn. With a
 :class:`RecordedClock` (headless replay) ticks follow one another at once; with
@@ -25,8 +27,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 
@@ -86,23 +86,6 @@ class WallClock:
         return -ahead
 
 
-class Retarget(Protocol):
-    """A stage that turns an input frame into the rig's weights.
-
-    Attributes
-    ----------
-    target_names : tuple of n_shapes str, the character's shape names in order
-
-    ``apply(frame)`` returns ndarray of shape (n_shapes,), float32, or None to
-    keep the previous weights (e.g. a frame without the data it needs). It runs
-    on the frame-loop thread once per accepted frame and must stay cheap.
-    """
-
-    target_names: tuple[str, ...]
-
-    def apply(self, frame: Frame) -> np.ndarray | None: ...
-
-
 class TickInfo:
     """What one tick did, handed to the ``on_tick`` hooks (one object, reused every tick).
 
@@ -110,8 +93,8 @@ class TickInfo:
     ----------
     k : int, tick index
     t : float, tick time (s)
-    raw : Frame or None, the new frame the snapshot returned this tick (before the pipeline)
-    frame : Frame or None, the frame on screen (after the pipeline)
+    raw : Frame or None, the new frame the snapshot returned this tick (before the stages)
+    frame : Frame or None, the frame on screen (after the stages)
     weights : ndarray of shape (n_shapes,), float32, the rig weights drawn (the loop's buffer: copy to keep)
     rotation, translation : ndarray or None, the head pose drawn
     stamps : tuple of 5 floats on the loop's timer clock (``time.perf_counter``, which is the
@@ -150,63 +133,56 @@ class LoopResult:
 
 
 class FrameLoop:
-    """Drive a renderer from a frame source, tick by tick.
+    """Drive a renderer from a frame source, tick by tick, through a chain of stages.
 
     Parameters
     ----------
-    character : Character, whose ``shape_names`` are the map's targets
-    renderer : FaceRenderer-like, with ``draw(weights, head_rotation,
+    names : sequence of str, the channels the renderer draws, in order (the map's targets)
+    renderer : Renderer (:class:`~facepuppet.runtime.protocols.Renderer`): ``draw(weights, head_rotation,
         head_translation)``, ``finish()`` and ``read_pixels()``
     clock : RecordedClock or WallClock (anything with start/now/wait_until)
-    sinks : sequence of objects with ``consume(tick_index, t, weights, frame, renderer)``
+    sinks : sequence of Sink, each with ``consume(tick_index, t, weights, frame, renderer)``
     fps : float, ticks per second of recorded time
-    log : callable taking one str; the channel-map report goes here, once per
-        distinct channel tuple
+    log : callable taking one str; the channel-map report goes here, once per distinct channel tuple
     target : GLTarget or None; when it has a window (``headless`` False) each
         tick polls events, stops on ``should_close()`` and swaps buffers
-    retarget : Retarget or None; when given it turns each accepted frame into
-        the rig's weights instead of the name-based channel map (a marker
-        solver, a kernel-PLS retarget, ...)
-    pipeline : callable ``(frame or None, t) -> Frame or None`` or None; live
-        processing between snapshot and map (filtering, calibration, tracking
-        loss, see :class:`~facepuppet.runtime.live.pipeline.LivePipeline`). It is
-        called every tick with the new finite frame (None when there is none)
-        and its result, when not None, is the frame drawn.
-    on_tick : sequence of callables taking a :class:`TickInfo`, called after
-        the sinks on every tick (live stats, OSC output)
+    stages : sequence of Stage (:func:`~facepuppet.runtime.live.stages.build_chain`), run in order every
+        tick on the new finite frame (None when there is none); the last one's frame, when not None,
+        is mapped by channel name onto ``names`` and drawn
+    on_tick : sequence of callables taking a :class:`TickInfo`, called after the sinks on every tick
+        (live stats, OSC output, the recorder)
     stop : callable returning bool or None; checked before each tick, True ends the run
     catch_up : bool; a tick later than one period skips the ticks it missed
         (live runs: never fall behind real time) instead of drawing each one
     idle_fps : float or None; draw on arrival (see the module docstring) when the
         source has ``wait_for_frame(timeout_s) -> bool``, redrawing at least this
         often without new frames; ``fps`` is then the grid of the tick labels
+
+    A frame with an infinite weight or a non-finite head pose is rejected here, once, before the
+    stages (``counters["nonfinite_rejected"]``; NaN weights mean "not sent" and pass).
     """
 
-    def __init__(self, character, renderer, clock, sinks=(), fps: float = 60.0, log=print, target=None,
-                 retarget: "Retarget | None" = None, pipeline=None, on_tick=(), stop=None,
-                 catch_up: bool = False, idle_fps: float | None = None):
+    def __init__(self, names, renderer, clock, sinks=(), fps: float = 60.0, log=print, target=None,
+                 stages=(), on_tick=(), stop=None, catch_up: bool = False, idle_fps: float | None = None):
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
         if idle_fps is not None and not (isinstance(idle_fps, (int, float)) and 0 < idle_fps <= fps):
             raise ValueError(f"FrameLoop idle_fps: expected a number in (0, fps = {fps:g}], got {idle_fps!r}")
+        if isinstance(names, str) or not all(isinstance(n, str) for n in names):
+            raise ValueError(f"FrameLoop names: expected a sequence of channel names, got {names!r}")
         self.idle_fps = None if idle_fps is None else float(idle_fps)
-        self.shape_names = tuple(character.shape_names)
+        self.shape_names = tuple(names)
         self.renderer = renderer
         self.clock = clock
         self.sinks = tuple(sinks)
         self.fps = float(fps)
         self.log = log
         self.target = target
-        self.retarget = retarget
-        self.pipeline = pipeline
+        self.stages = tuple(stages)
         self.on_tick = tuple(on_tick)
         self.stop = stop
         self.catch_up = bool(catch_up)
         self.counters: dict[str, int] = {}
-        if retarget is not None and tuple(retarget.target_names) != self.shape_names:
-            raise ValueError(
-                f"FrameLoop retarget: its targets {tuple(retarget.target_names)[:4]}... are not the "
-                f"character's {len(self.shape_names)} shapes in order")
         self._maps: dict[tuple[str, ...], ChannelMap] = {}
         self._weights = np.zeros(len(self.shape_names), dtype=np.float32)
         self._rotation: np.ndarray | None = None
@@ -233,18 +209,9 @@ class FrameLoop:
         instead, ignoring ``duration`` and ``catch_up``: a replay ticking as a
         recorded live run did.
         """
-        if duration is None:
-            duration = getattr(source, "duration", None)
-        # the last tick is the first at or after ``duration``, so the last recorded frame is shown
-        last = math.inf if duration is None else max(0, math.ceil(duration * self.fps - 1e-6))
-        schedule = None if ticks is None else [int(k) for k in ticks]
-        if schedule is not None:
-            if any(b <= a for a, b in zip(schedule, schedule[1:])) or (schedule and schedule[0] < 0):
-                raise ValueError("FrameLoop.run ticks: expected increasing non-negative tick indices")
-            last = len(schedule) - 1
+        schedule, last = self._plan(source, duration, ticks)
         window = self.target is not None and not getattr(self.target, "headless", True)
         timer = StageTimer(STAGES)
-        now, add = timer.now, timer.add
         counters = self.counters  # updated in place: hooks may hold it
         counters.clear()
         counters.update(dict.fromkeys(
@@ -270,116 +237,89 @@ class FrameLoop:
                 if k > last:
                     break
                 drawn_at = self.clock.now()
-            t = k / self.fps
-            late = 0.0 if arrival else self.clock.wait_until(t)
-            if late > 0:
-                counters["late_ticks"] += 1
-                if self.catch_up and schedule is None and late * self.fps >= 1.0:
-                    skip = min(int(late * self.fps), last - k)
-                    counters["skipped_ticks"] += skip
-                    k += skip
-                    t = k / self.fps
+            else:
+                k = self._wait_for_tick(k, last, schedule is None)
             if window:
                 self.target.poll()
                 if self.target.should_close():
                     closed = True
                     break
-
-            t0 = now()
-            frame, stale = source.latest(t)
-            t1 = now()
-            add("snapshot", t1 - t0)
-            raw = frame
-            if frame is None:
-                counters["ticks_without_new_frame"] += 1
-            else:
-                counters["frames_received"] += 1 + stale
-                counters["stale_dropped"] += stale
-                if not frame.is_finite():
-                    counters["nonfinite_rejected"] += 1
-                    frame = None
-            if self.pipeline is not None:
-                frame = self.pipeline(frame, t)
-            if frame is not None:
-                self._accept(frame)
-            t2 = now()
-            add("map", t2 - t1)
-
-            self.renderer.draw(self._weights, self._rotation, self._translation)
-            t3 = now()
-            add("draw_submit", t3 - t2)
-            self.renderer.finish()
-            t4 = now()
-            add("gpu_finish", t4 - t3)
-            for sink in self.sinks:
-                sink.consume(k, t, self._weights, self._frame, self.renderer)
-            if self.on_tick:
-                info.k, info.t, info.raw, info.frame, info.weights = k, t, raw, self._frame, self._weights
-                info.rotation, info.translation = self._rotation, self._translation
-                info.stamps = (t0, t1, t2, t3, t4)
-                for hook in self.on_tick:
-                    hook(info)
-            add("sink", now() - t4)
+            self._tick(k, k / self.fps, source, timer, info)
             if window:
                 self.target.swap()
             n_ticks += 1
             k += 1
         return LoopResult(n_ticks, counters, timer.summary(), timer, closed)
 
+    def _plan(self, source, duration: float | None, ticks) -> tuple[list[int] | None, float]:
+        """(the explicit tick schedule or None, index of the last tick)."""
+        if duration is None:
+            duration = getattr(source, "duration", None)
+        # the last tick is the first at or after ``duration``, so the last recorded frame is shown
+        last = math.inf if duration is None else max(0, math.ceil(duration * self.fps - 1e-6))
+        if ticks is None:
+            return None, last
+        schedule = [int(k) for k in ticks]
+        if any(b <= a for a, b in zip(schedule, schedule[1:])) or (schedule and schedule[0] < 0):
+            raise ValueError("FrameLoop.run ticks: expected increasing non-negative tick indices")
+        return schedule, len(schedule) - 1
+
+    def _wait_for_tick(self, k: int, last: float, may_skip: bool) -> int:
+        """Wait for tick ``k``'s time; a late tick is counted and, with ``catch_up``, skips the ticks it missed."""
+        late = self.clock.wait_until(k / self.fps)
+        if late > 0:
+            self.counters["late_ticks"] += 1
+            if self.catch_up and may_skip and late * self.fps >= 1.0:
+                skip = min(int(late * self.fps), last - k)
+                self.counters["skipped_ticks"] += skip
+                k += skip
+        return k
+
+    def _tick(self, k: int, t: float, source, timer: StageTimer, info: TickInfo) -> None:
+        """One tick: snapshot, the stages and the map, draw, wait for the GPU, sinks and hooks."""
+        now, add, counters = timer.now, timer.add, self.counters
+        t0 = now()
+        frame, stale = source.latest(t)
+        t1 = now()
+        add("snapshot", t1 - t0)
+        raw = frame
+        if frame is None:
+            counters["ticks_without_new_frame"] += 1
+        else:
+            counters["frames_received"] += 1 + stale
+            counters["stale_dropped"] += stale
+            if not frame.is_finite():
+                counters["nonfinite_rejected"] += 1
+                frame = None
+        for stage in self.stages:
+            frame = stage(frame, t)
+        if frame is not None:
+            self._accept(frame)
+        t2 = now()
+        add("map", t2 - t1)
+
+        self.renderer.draw(self._weights, self._rotation, self._translation)
+        t3 = now()
+        add("draw_submit", t3 - t2)
+        self.renderer.finish()
+        t4 = now()
+        add("gpu_finish", t4 - t3)
+        for sink in self.sinks:
+            sink.consume(k, t, self._weights, self._frame, self.renderer)
+        if self.on_tick:
+            info.k, info.t, info.raw, info.frame, info.weights = k, t, raw, self._frame, self._weights
+            info.rotation, info.translation = self._rotation, self._translation
+            info.stamps = (t0, t1, t2, t3, t4)
+            for hook in self.on_tick:
+                hook(info)
+        add("sink", now() - t4)
+
     def _accept(self, frame: Frame) -> None:
-        """Make ``frame`` the current one: its weights mapped, its pose kept where it has one."""
-        if self.retarget is not None:
-            weights = self.retarget.apply(frame)
-            if weights is not None:
-                self._weights[:] = weights
-        elif frame.weights is not None:
+        """Make ``frame`` the current one: its weights mapped by name, its pose kept where it has one."""
+        if frame.weights is not None:
             self.channel_map(frame.channels, frame.source).apply(frame.weights, out=self._weights)
         if frame.head_rotation is not None:
             self._rotation = frame.head_rotation
         if frame.head_translation is not None:
             self._translation = frame.head_translation
         self._frame = frame
-
-
-class PngSink:
-    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``renderer.read_pixels()``."""
-
-    def __init__(self, out_dir):
-        self.out_dir = Path(out_dir)
-        self.out_dir.mkdir(parents=True, exist_ok=True)
-        self.paths: list[Path] = []
-
-    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
-        from PIL import Image
-
-        path = self.out_dir / f"frame_{tick_index:05d}.png"
-        Image.fromarray(np.ascontiguousarray(renderer.read_pixels())).save(path)
-        self.paths.append(path)
-
-
-class WeightLog:
-    """Keep each tick's rig weights (for tests and offline analysis).
-
-    Attributes
-    ----------
-    array : ndarray of shape (n_ticks, n_shapes), float32
-    times : ndarray of shape (n_ticks,), float64, seconds
-    """
-
-    def __init__(self):
-        self._rows: list[np.ndarray] = []
-        self._times: list[float] = []
-
-    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
-        self._rows.append(np.array(weights, dtype=np.float32, copy=True))
-        self._times.append(t)
-
-    @property
-    def array(self) -> np.ndarray:
-        if not self._rows:
-            return np.zeros((0, 0), dtype=np.float32)
-        return np.stack(self._rows)
-
-    @property
-    def times(self) -> np.ndarray:
-        return np.asarray(self._times, dtype=np.float64)

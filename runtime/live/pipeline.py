@@ -1,21 +1,19 @@
-"""Per-frame processing of live input between the snapshot and the draw.
+"""The ``filter`` stage of the live chain: filter, calibrate, gain/clamp, tracking loss.
 
-For each accepted frame, in this order:
+For each accepted frame (finite: the frame loop rejects non-finite frames before any stage), in this order:
 
-1. **Reject** a frame with an infinite weight or a non-finite head pose
-   (counted in ``counters["nonfinite_rejected"]``; NaN weights mean "not
-   sent" and pass).
-2. **Filter**: a One Euro filter per weight channel with its region's settings
+1. **Filter**: a One Euro filter per weight channel with its region's settings
    (eyes light, mouth heavier, see :mod:`~facepuppet.runtime.live.config`),
    and one for the head (quaternion components, kept in one hemisphere and
    renormalised; translation). ``dt`` is the difference of receive times.
-3. **Calibrate**: subtract the neutral pose (weights and translation; the
+2. **Calibrate**: subtract the neutral pose (weights and translation; the
    rotation is taken relative to the neutral rotation). The neutral is the mean
    of the raw frames over ``capture_s`` seconds after :meth:`request_calibration`
-   (``--calibrate`` at start, the OSC message ``/facepuppet/calibrate``, or the
-   key C in a window).
-4. **Gain and clamp** per channel.
-5. **Tracking loss**: with no frame for ``timeout_s`` the output eases to
+   (``--calibrate`` at start, the key C in a window) or after the source's count
+   of calibrate messages (``/facepuppet/calibrate``) grows: the stage reads that
+   count each tick (``calibrate_requests``); nothing calls into it from the receiver.
+3. **Gain and clamp** per channel.
+4. **Tracking loss**: with no frame for ``timeout_s`` the output eases to
    neutral over ``ease_out_s`` (smoothstep) instead of freezing; when frames
    return, the output blends from wherever it was to the live value over
    ``ease_in_s``, so no tick jumps by more than the live motion plus
@@ -84,7 +82,7 @@ class _ChannelState:
 
 
 class LivePipeline:
-    """Filtering, calibration, gain/clamp and tracking-loss easing of live frames.
+    """The ``filter`` stage: filtering, calibration, gain/clamp and tracking-loss easing of live frames.
 
     Parameters
     ----------
@@ -92,6 +90,8 @@ class LivePipeline:
     audio_level : callable taking the tick time (s) and returning dBFS (NaN for
         none), or None; its value is stamped on the frames this emits
     log : callable taking one str
+    calibrate_requests : callable returning an int or None: a count of calibration requests that only
+        grows (the source's calibrate messages); read every tick, each increase requests a calibration
 
     Call it once per tick as ``pipeline(frame, t)`` (the frame loop's
     ``pipeline`` hook): ``frame`` is the newest new frame or None; the return
@@ -99,17 +99,21 @@ class LivePipeline:
 
     Attributes
     ----------
-    counters : dict of str to int: ``nonfinite_rejected``, ``tracking_lost``
-        (times the input went quiet past the timeout), ``calibrations``
+    counters : dict of str to int: ``tracking_lost`` (times the input went quiet past the timeout),
+        ``calibrations``
     state : str, ``waiting`` (no frame yet), ``live``, ``lost``, ``returning``
     neutral_weights : ndarray of shape (n_channels,), float64, or None before calibration
     """
 
-    def __init__(self, config: LiveConfig | None = None, audio_level=None, log=print):
+    name = "filter"
+
+    def __init__(self, config: LiveConfig | None = None, audio_level=None, log=print, calibrate_requests=None):
         self.config = config or LiveConfig()
         self.audio_level = audio_level
         self.log = log
-        self.counters = {"nonfinite_rejected": 0, "tracking_lost": 0, "calibrations": 0}
+        self.calibrate_requests = calibrate_requests
+        self._requests_seen = 0 if calibrate_requests is None else int(calibrate_requests())
+        self.counters = {"tracking_lost": 0, "calibrations": 0}
         self.state = "waiting"
         self._channels: tuple[str, ...] | None = None
         self._cs: _ChannelState | None = None
@@ -135,9 +139,11 @@ class LivePipeline:
         return self._calib_pending or self._capture is not None
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
-        if frame is not None and not frame.is_finite():
-            self.counters["nonfinite_rejected"] += 1
-            frame = None
+        if self.calibrate_requests is not None:
+            requests = int(self.calibrate_requests())
+            if requests != self._requests_seen:
+                self._requests_seen = requests
+                self.request_calibration()
         if frame is None:
             return self._quiet(t)
         if frame.channels != self._channels:

@@ -1,164 +1,154 @@
-"""The parameter spaces of ``run`` and ``replay``: what turns input frames into what is drawn.
+"""The per-frame chain of ``run`` and ``replay``: one ordered list of stages, built in one place.
 
-Both commands assemble the same stages from the same options, so a recording
-replayed with a live run's options draws what the live run drew:
+:func:`build_chain` turns the options both commands share into the stages the
+frame loop runs every tick, in this order (each present only when asked for):
 
-* ``--actor ACTOR.npz --pair PAIR.npz`` (Shin & Lee, markers input): each new
-  marker frame is solved to actuations s and mapped through the pair table
-  to the character's weights (:class:`~.actor_retarget.ActorRetarget`)
-  *before* the live pipeline (:class:`SolvedFrames`), so filtering,
-  calibration and tracking loss act on the character's weights. (The pipeline
-  passes weights and pose only; marker positions would not survive it.)
-* ``--retarget RETARGET.npz`` (kernel PLS): the frame loop's ``retarget``
-  stage, *after* the pipeline: the tracker's channels are filtered and
-  calibrated in their own space, which is the space the model was trained on.
-* ``--elastic ELASTIC.npz`` (Yano & Harada): the renderer's elastic path;
-  the loop draws the table's channels, shapes then muscles
-  (:class:`ElasticDraw`), so input channels named after muscles (VMC
-  ``/VMC/Ext/Blend/Val`` with the muscle's exact name) drive contractions.
+=========  ============================================  ===================================================
+stage      what it does                                  module
+=========  ============================================  ===================================================
+audio      samples the voice level once per tick         :class:`AudioTap` (here)
+solve      marker frame -> actuations s -> the           :mod:`facepuppet.runtime.actuation.stage`
+           character's weights and head rotation         (Shin & Lee eq 5, §6.2; ``--actor``/``--pair``)
+filter     One Euro filter, calibration, gain/clamp,     :mod:`facepuppet.runtime.live.pipeline`
+           tracking-loss easing                          (``--config``, ``--calibrate``)
+gestures   voice-driven blinks, brows, head motion       :mod:`facepuppet.runtime.gestures.layer`
+                                                         (Ju & Lee, ``--gestures``)
+kpls       the tracker's channels -> the character's     :class:`KplsStage` (here) over
+           shapes by kernel PLS                          :mod:`facepuppet.runtime.kpls.stage` (``--retarget``)
+=========  ============================================  ===================================================
 
-:func:`build_stages` validates the files against the character and says what
-was loaded; :func:`make_input_adapter` gives an adapter that knows the extra
-channel names (muscles) where the protocol can carry them (VMC).
+then the frame loop maps the last frame's channels by name onto what the
+renderer draws (``map``) and draws (``draw``; through the elastic path with
+``--elastic``, :mod:`facepuppet.runtime.render.elastic_path`). The chain is
+printed at start, e.g. ``stages: markers→solve→filter→gestures→kpls→map→draw``.
+
+Why this order: the solve turns markers into the character's weights, so the
+filter, calibration and tracking loss act on weights (marker positions would not
+survive them); the gestures add to the filtered face; the kernel-PLS model was
+trained on the tracker's channels, so it runs on them after they are filtered and
+calibrated in their own space. Every stage sees tick times only, so a replay on
+recorded time computes what the live run did.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
 
 from facepuppet.runtime.frames import Frame
 
 
-class SolvedFrames:
-    """Frame-loop ``pipeline`` hook: a stage turns each new frame into the character's weights, then ``inner``.
+class AudioTap:
+    """The ``audio`` stage: the voice level (dBFS) sampled once per tick, for the stages after it.
 
     Parameters
     ----------
-    stage : object with ``target_names`` (tuple of n str) and ``apply(frame) -> ndarray (n,) float32 or None``
-        (e.g. :class:`~.actor_retarget.ActorRetarget`)
-    inner : callable ``(frame or None, t) -> Frame or None`` or None (the live pipeline)
+    level : callable taking the tick time (s) and returning dBFS (NaN: none): a microphone or a WAV
+        (:func:`~facepuppet.runtime.inputs.audio.open_audio`), or the levels a recording kept
 
-    A frame the stage cannot use (no head pose, no markers) counts as no new frame.
+    :attr:`value` is the tick's level; :meth:`level` hands it to the stages that take a level callable
+    (the filter stamps it on its frames, the gestures step on it) and the recorder keeps it, so the
+    value a stage used is the value a replay gives it back.
     """
 
-    def __init__(self, stage, inner=None):
-        self.stage = stage
-        self.inner = inner
-        self.channels = tuple(stage.target_names)
+    name = "audio"
+
+    def __init__(self, level):
+        self.source = level
+        self.value = math.nan
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
-        if frame is not None:
-            weights = self.stage.apply(frame)
-            frame = None if weights is None else Frame(
-                t=frame.t, source=frame.source, channels=self.channels, weights=np.asarray(weights, np.float32),
-                audio_level=frame.audio_level, t_sender=frame.t_sender, number=frame.number)
-        return frame if self.inner is None else self.inner(frame, t)
+        self.value = float(self.source(t))
+        return frame
+
+    def level(self, t: float | None = None) -> float:
+        """The level sampled this tick (``t`` is accepted for the level-callable interface and ignored)."""
+        return self.value
 
 
-class PaddedRetarget:
-    """A Retarget onto some of the loop's channels (by name); the others stay 0 (e.g. muscles).
+class RecordedLevels:
+    """The audio levels a live recording kept, one per tick time: a level callable for :class:`AudioTap`."""
 
-    Parameters
-    ----------
-    inner : Retarget, with ``target_names`` all among ``names``
-    names : tuple of str, the frame loop's channels
-    """
+    def __init__(self, levels):
+        self._by_t = {float(t): float(v) for t, v in levels}
 
-    def __init__(self, inner, names):
-        self.inner = inner
-        self.target_names = tuple(names)
-        lookup = {n: i for i, n in enumerate(self.target_names)}
-        missing = [n for n in inner.target_names if n not in lookup]
-        if missing:
-            raise ValueError(f"retarget: its targets {missing[:4]} are not channels of the drawn character")
-        self._index = np.array([lookup[n] for n in inner.target_names], dtype=np.int64)
-        self._out = np.zeros(len(self.target_names), np.float32)
+    def __call__(self, t: float) -> float:
+        return self._by_t.get(float(t), math.nan)
 
-    def apply(self, frame: Frame) -> np.ndarray | None:
-        w = self.inner.apply(frame)
-        if w is None:
-            return None
-        self._out[self._index] = w
-        return self._out
+    def __len__(self) -> int:
+        return len(self._by_t)
 
 
-class ElasticDraw:
-    """Renderer adapter of the elastic path: ``draw(values)`` with values of the table's channels.
+class KplsStage:
+    """The ``kpls`` stage: a frame of the tracker's channels -> a frame of the character's shapes.
 
     Parameters
     ----------
-    renderer : FaceRenderer made with ``path="elastic"``
-    model : ElasticModel
-
-    Attributes
-    ----------
-    shape_names : tuple of str, ``model.channel_names`` (shapes then muscles): the
-        frame loop's targets (the loop reads nothing else of its ``character``)
-    path : str, "elastic"
+    model : KplsRetarget (``apply(frame) -> ndarray (n_targets,) float32 or None``)
     """
 
-    def __init__(self, renderer, model):
-        if renderer.path != "elastic":
-            raise ValueError(f"ElasticDraw: the renderer must use the 'elastic' path, not {renderer.path!r}")
-        self.renderer = renderer
+    name = "kpls"
+
+    def __init__(self, model):
         self.model = model
-        self.shape_names = tuple(model.channel_names)
-        self.path = "elastic"
+        self.channels = tuple(model.target_names)
 
-    def draw(self, values, head_rotation=None, head_translation=None) -> None:
-        """Draw channel values, ndarray (n_shapes + n_muscles,) float32: U = Σ w P + Σ c Q, then the basis."""
-        self.renderer.prepare_controls(self.model.controls(values), head_rotation, head_translation)
-        self.renderer.submit()
-
-    def finish(self) -> None:
-        self.renderer.finish()
-
-    def read_pixels(self) -> np.ndarray:
-        return self.renderer.read_pixels()
-
-    def close(self) -> None:
-        self.renderer.close()
+    def __call__(self, frame: Frame | None, t: float) -> Frame | None:
+        if frame is None:
+            return None
+        weights = self.model.apply(frame)
+        if weights is None:
+            return None
+        return Frame(t=frame.t, source=frame.source, channels=self.channels, weights=weights,
+                     head_rotation=frame.head_rotation, head_translation=frame.head_translation,
+                     audio_level=frame.audio_level, t_sender=frame.t_sender, number=frame.number)
 
 
 @dataclass
-class Stages:
-    """What :func:`build_stages` assembled.
+class Chain:
+    """What :func:`build_chain` assembled.
 
     Attributes
     ----------
-    names : tuple of str, the channels the loop draws (the character's shapes, or the elastic channels)
-    before : object or None, a stage run on each new frame before the pipeline (markers solve)
-    retarget : Retarget or None, the frame loop's retarget stage (after the pipeline)
-    elastic : ElasticModel or None
+    input : str, what feeds the chain (the input kind, ``audio`` for voice only, or a recording's kind)
+    stages : tuple of Stage, in the order the frame loop runs them
+    names : tuple of str, the channels the renderer draws (the character's shapes, or the elastic channels)
+    filter : LivePipeline or None, the filter stage (the window's key C requests a calibration of it)
+    audio : AudioTap or None
+    elastic : ElasticModel or None, the elastic path's tables
     extra_names : tuple of str, input channel names beyond the trackers' own (muscles)
     """
 
-    names: tuple
-    before: object = None
-    retarget: object = None
+    input: str
+    stages: tuple = ()
+    names: tuple = ()
+    filter: object = None
+    audio: object = None
     elastic: object = None
-    extra_names: tuple = ()
+    extra_names: tuple = field(default_factory=tuple)
 
-    def pipeline(self, inner):
-        """The frame loop's ``pipeline`` hook around ``inner`` (None: no live pipeline)."""
-        return inner if self.before is None else SolvedFrames(self.before, inner)
+    def describe(self) -> str:
+        """``stages: vmc→filter→gestures→map→draw`` (``draw(elastic)`` on the elastic path)."""
+        draw = "draw(elastic)" if self.elastic is not None else "draw"
+        return "stages: " + "→".join([self.input, *(s.name for s in self.stages), "map", draw])
 
-    def renderer(self, ctx, character, width, height, path, target_fbo, log):
-        """The renderer to hand the loop (an :class:`ElasticDraw` with ``--elastic``)."""
+    def renderer(self, ctx, character, width: int, height: int, path: str, target_fbo, log):
+        """The renderer the loop draws with (an :class:`~facepuppet.runtime.render.elastic_path.ElasticDraw`
+        with ``--elastic``)."""
         from facepuppet.runtime.render.renderer import FaceRenderer
 
         if self.elastic is None:
             return FaceRenderer(ctx, character, width, height, path=path, target_fbo=target_fbo, log=log)
+        from facepuppet.runtime.render.elastic_path import ElasticDraw
+
         r = FaceRenderer(ctx, character, width, height, path="elastic", target_fbo=target_fbo, log=log,
                          elastic=self.elastic)
         return ElasticDraw(r, self.elastic)
 
 
 def add_stage_arguments(parser, markers: bool = True) -> None:
-    """The parameter-space options shared by ``run`` and ``replay``."""
+    """The options of the stage chain, shared by ``run`` and ``replay``."""
     if markers:
         parser.add_argument("--actor", type=Path, default=None, metavar="ACTOR.npz",
                             help="actor table (train-actor): markers input is solved to actuations s")
@@ -170,10 +160,29 @@ def add_stage_arguments(parser, markers: bool = True) -> None:
     parser.add_argument("--elastic", type=Path, default=None, metavar="ELASTIC.npz",
                         help="elastic tables of the character: draw through the elastic path; input channels "
                              "named after its muscles drive contractions")
+    parser.add_argument("--config", type=Path, default=None, help="TOML config: filters, gain/clamp, tracking loss")
+    parser.add_argument("--calibrate", action="store_true",
+                        help="capture the neutral pose from the first 0.5 s of frames")
+    parser.add_argument("--gestures", type=Path, default=None, metavar="GESTURES.npz",
+                        help="gesture tables (build-gestures): add voice-driven blinks, brows and head motion")
+    parser.add_argument("--gesture-seed", type=int, default=0, help="seed of the gesture synthesis (default 0)")
 
 
-def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
-    """Load and check the stage files named by ``args`` (``actor``, ``pair``, ``retarget``, ``elastic``).
+def build_chain(args, character, input_kind: str | None, *, filtered: bool = True, audio_level=None,
+                calibrate_requests=None, voice_only: bool = False, label: str | None = None, log=print) -> Chain:
+    """The stage chain for parsed options (``actor``, ``pair``, ``retarget``, ``elastic``, ``config``,
+    ``calibrate``, ``gestures``, ``gesture_seed``), checked against the character; logs what it loaded.
+
+    Parameters
+    ----------
+    args : argparse.Namespace (missing options count as not given)
+    character : Character, what is drawn
+    input_kind : str or None, the input kind of the frames (None: unknown, e.g. a recording of frames)
+    filtered : bool, include the ``filter`` stage (``run`` always; ``replay`` with ``--pipeline``)
+    audio_level : callable t -> dBFS or None; adds the ``audio`` stage
+    calibrate_requests : callable returning a growing count, or None (see LivePipeline)
+    voice_only : bool, the face from the voice alone (``run --input audio``): the gestures drive it
+    label : str or None, what :meth:`Chain.describe` names as the input (default ``input_kind``)
 
     Raises
     ------
@@ -181,56 +190,97 @@ def build_stages(args, character, input_kind: str | None, log=print) -> Stages:
         naming the option and file when a table does not fit the character or the input,
         or when markers input lacks ``--actor``/``--pair``.
     """
-    actor_path, pair_path = getattr(args, "actor", None), getattr(args, "pair", None)
-    retarget_path, elastic_path = getattr(args, "retarget", None), getattr(args, "elastic", None)
+    opt = lambda name: getattr(args, name, None)  # noqa: E731
     shapes = tuple(character.shape_names)
-    stages = Stages(names=shapes)
-    if elastic_path is not None:
-        from facepuppet.runtime.elastic.model import ElasticModel
+    chain = Chain(input=label or input_kind or "recording", names=shapes)
+    elastic = _load_elastic(opt("elastic"), character, log) if opt("elastic") is not None else None
+    if elastic is not None:
+        chain.elastic, chain.names, chain.extra_names = elastic, tuple(elastic.channel_names), \
+            tuple(elastic.muscle_names)
+    solve = _load_solve(opt("actor"), opt("pair"), opt("retarget"), shapes, input_kind, log)
+    kpls = _load_kpls(opt("retarget"), shapes, log) if opt("retarget") is not None else None
+    if voice_only and opt("gestures") is None:
+        raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
+    stages = []
+    if audio_level is not None:
+        chain.audio = AudioTap(audio_level)
+        stages.append(chain.audio)
+    if solve is not None:
+        stages.append(solve)
+    level = chain.audio.level if chain.audio is not None else None
+    if filtered:
+        from facepuppet.runtime.live.config import LiveConfig, load_live_config
+        from facepuppet.runtime.live.pipeline import LivePipeline
 
-        model = ElasticModel.load(elastic_path)
-        if model.n_vertices != character.n_vertices or tuple(model.shape_names) != shapes:
-            raise ValueError(f"--elastic {elastic_path}: made for {model.n_vertices} vertices and "
-                             f"{len(model.shape_names)} shapes, not for the character's {character.n_vertices} "
-                             f"vertices and {len(shapes)} shapes in order")
-        stages.elastic, stages.names, stages.extra_names = model, tuple(model.channel_names), tuple(model.muscle_names)
-        log(f"elastic: {elastic_path} ({model.n_controls} control points, k={model.k}, "
-            f"{len(model.muscle_names)} muscles: {', '.join(model.muscle_names) or 'none'})")
+        config = load_live_config(opt("config")) if opt("config") is not None else LiveConfig()
+        chain.filter = LivePipeline(config, audio_level=level, log=log, calibrate_requests=calibrate_requests)
+        if opt("calibrate"):
+            chain.filter.request_calibration()
+        stages.append(chain.filter)
+    if opt("gestures") is not None:
+        from facepuppet.runtime.gestures.layer import gesture_layer
+
+        stages.append(gesture_layer(opt("gestures"), voice_only=voice_only, log=log, level=level,
+                                    seed=opt("gesture_seed") or 0))
+    if kpls is not None:
+        stages.append(kpls)
+    chain.stages = tuple(stages)
+    return chain
+
+
+def _load_elastic(path, character, log):
+    from facepuppet.runtime.elastic.model import ElasticModel
+
+    model = ElasticModel.load(path)
+    if model.n_vertices != character.n_vertices or tuple(model.shape_names) != tuple(character.shape_names):
+        raise ValueError(f"--elastic {path}: made for {model.n_vertices} vertices and "
+                         f"{len(model.shape_names)} shapes, not for the character's {character.n_vertices} "
+                         f"vertices and {character.n_shapes} shapes in order")
+    log(f"elastic: {path} ({model.n_controls} control points, k={model.k}, "
+        f"{len(model.muscle_names)} muscles: {', '.join(model.muscle_names) or 'none'})")
+    return model
+
+
+def _load_solve(actor_path, pair_path, retarget_path, shapes, input_kind, log):
+    """The ``solve`` stage of ``--actor``/``--pair``, or None; checks they come together and fit."""
     if (actor_path is None) != (pair_path is None):
         raise ValueError("--actor and --pair go together (the actor's solve, then its pair table for this character)")
     if input_kind == "markers" and actor_path is None:
         raise ValueError("--input markers: needs --actor ACTOR.npz and --pair PAIR.npz (train-actor, retarget-actor) "
                          "to turn marker frames into the character's weights")
-    if actor_path is not None:
-        if input_kind not in ("markers", None):
-            raise ValueError(f"--actor/--pair: only for --input markers, not {input_kind!r}")
-        if retarget_path is not None:
-            raise ValueError("--actor/--pair and --retarget: choose one parameter space")
-        from facepuppet.runtime.actuation.actor import Actor
-        from facepuppet.runtime.actuation.pair import ActorPair
-        from facepuppet.runtime.actuation.stage import ActorRetarget
-
-        pair = ActorPair.load(pair_path)
-        if tuple(pair.shape_names) != shapes:
-            raise ValueError(f"--pair {pair_path}: its shapes ({len(pair.shape_names)}) are not the shapes of the "
-                             f"character ({len(shapes)}) in order; make it with retarget-actor for this character")
-        actor = Actor.load(actor_path)
-        try:
-            stages.before = ActorRetarget(actor, pair)
-        except ValueError as exc:
-            raise ValueError(f"--actor {actor_path} / --pair {pair_path}: {exc}") from None
-        log(f"actor: {actor_path} ({actor.n_markers} markers, K={actor.n_actuations}) -> pair {pair_path}")
+    if actor_path is None:
+        return None
+    if input_kind not in ("markers", None):
+        raise ValueError(f"--actor/--pair: only for --input markers, not {input_kind!r}")
     if retarget_path is not None:
-        from facepuppet.runtime.kpls.stage import KplsRetarget
+        raise ValueError("--actor/--pair and --retarget: choose one parameter space")
+    from facepuppet.runtime.actuation.actor import Actor
+    from facepuppet.runtime.actuation.pair import ActorPair
+    from facepuppet.runtime.actuation.stage import ActorRetarget
 
-        retarget = KplsRetarget.load(retarget_path)
-        if tuple(retarget.target_names) != shapes:
-            raise ValueError(f"--retarget {retarget_path}: its target shapes ({len(retarget.target_names)}) "
-                             f"are not the shapes of the character ({len(shapes)}) in order")
-        stages.retarget = retarget if stages.names == shapes else PaddedRetarget(retarget, stages.names)
-        log(f"retarget: {retarget_path} ({retarget.kernel} kernel, {len(retarget.source_names)} source "
-            f"shapes -> {len(retarget.target_names)} character shapes)")
-    return stages
+    pair = ActorPair.load(pair_path)
+    if tuple(pair.shape_names) != shapes:
+        raise ValueError(f"--pair {pair_path}: its shapes ({len(pair.shape_names)}) are not the shapes of the "
+                         f"character ({len(shapes)}) in order; make it with retarget-actor for this character")
+    actor = Actor.load(actor_path)
+    try:
+        stage = ActorRetarget(actor, pair)
+    except ValueError as exc:
+        raise ValueError(f"--actor {actor_path} / --pair {pair_path}: {exc}") from None
+    log(f"actor: {actor_path} ({actor.n_markers} markers, K={actor.n_actuations}) -> pair {pair_path}")
+    return stage
+
+
+def _load_kpls(path, shapes, log) -> KplsStage:
+    from facepuppet.runtime.kpls.stage import KplsRetarget
+
+    model = KplsRetarget.load(path)
+    if tuple(model.target_names) != shapes:
+        raise ValueError(f"--retarget {path}: its target shapes ({len(model.target_names)}) "
+                         f"are not the shapes of the character ({len(shapes)}) in order")
+    log(f"retarget: {path} ({model.kernel} kernel, {len(model.source_names)} source "
+        f"shapes -> {len(model.target_names)} character shapes)")
+    return KplsStage(model)
 
 
 def make_input_adapter(kind: str, extra_names=(), log=print):

@@ -21,7 +21,6 @@ input applies the other way. Positions keep the character's units.
 
 from __future__ import annotations
 
-import re
 import socket
 import struct
 
@@ -34,14 +33,6 @@ from facepuppet.runtime.channels import pascal
 MAX_BUNDLE = 1500
 _BUNDLE_HEAD = 16  # "#bundle\0" + 8-byte time tag
 _F32 = struct.Struct(">f")
-
-
-def parse_host_port(text: str, option: str = "--vmc-out") -> tuple[str, int]:
-    """(host, port) of ``"HOST:PORT"``; ValueError naming the option otherwise."""
-    m = re.fullmatch(r"\s*(\[[^\]]+\]|[^:\s]+):(\d+)\s*", text or "")
-    if m is None or not 0 < int(m.group(2)) < 65536:
-        raise ValueError(f"{option}: expected HOST:PORT such as 127.0.0.1:39539, got {text!r}")
-    return m.group(1).strip("[]"), int(m.group(2))
 
 
 def _message(address: str, *args):

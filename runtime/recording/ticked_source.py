@@ -10,16 +10,17 @@ so the live pipeline (filters, calibration, tracking loss), which works on
 tick times and receive times only, computes the same weights bit for bit.
 
 Calibrate messages (``/facepuppet/calibrate``) recorded among the packets are
-requested of the pipeline with the first frame that arrived after them, as
-live. One race is not reproduced: a calibrate message arriving between a
-tick's snapshot and its pipeline call was applied live with that tick's
-(older) frame, here with the next one.
+counted in :attr:`TickedSource.watched` with the first frame that arrived after
+them, as the live receiver counted them; the filter stage reads that count each
+tick and calibrates when it grows, as live. One race is not reproduced: a
+calibrate message arriving between a tick's snapshot and its filter stage was
+applied live with that tick's (older) frame, here with the next one.
 """
 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from facepuppet.runtime.frames import Frame
@@ -38,6 +39,7 @@ class LiveRecording:
     calibrate_packets : list of int, packet indices of calibrate messages
     ticks : list of Tick
     header : dict
+    audio_levels : list of (t, level_db), the audio level of each live tick (the tick's time)
     """
 
     frames: list
@@ -45,6 +47,7 @@ class LiveRecording:
     calibrate_packets: list
     ticks: list
     header: dict
+    audio_levels: list = field(default_factory=list)
 
 
 def read_live_recording(path, make_adapter) -> LiveRecording | None:
@@ -74,7 +77,8 @@ def read_live_recording(path, make_adapter) -> LiveRecording | None:
     frame_packets = [i for i, _ in decoded]
     if not frames:
         raise ValueError(f"{path}: the recorded packets decode to no frame")
-    return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header))
+    return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header),
+                         list(session.audio_levels))
 
 
 class TickedSource:
@@ -83,22 +87,22 @@ class TickedSource:
     Parameters
     ----------
     recording : LiveRecording with ticks
-    request_calibration : callable() or None, called before handing over the first frame that
-        arrived after a recorded calibrate message
 
     Attributes
     ----------
     ticks : list of int, the tick indices to draw (``FrameLoop.run(ticks=...)``)
     missing : int, frames the ticks refer to that the recording lacks (packets lost from the recording)
+    watched : int, recorded calibrate messages before the newest frame handed over (the live
+        receiver's count of them, as the filter stage read it)
     """
 
-    def __init__(self, recording: LiveRecording, request_calibration=None):
+    def __init__(self, recording: LiveRecording):
         if not recording.ticks:
             raise ValueError("TickedSource: the recording has no TICK records (recorded before they existed)")
         self.recording = recording
         self.ticks = [t.k for t in recording.ticks]
         self.duration = None
-        self.request_calibration = request_calibration
+        self.watched = 0
         self.missing = 0
         self._i = 0
         self._seen = 0
@@ -117,9 +121,7 @@ class TickedSource:
         stale = n - self._seen - 1
         self._seen = n
         packet = rec.frame_packets[n - 1]
-        if self._calib and self._calib[0] < packet:
-            while self._calib and self._calib[0] < packet:
-                self._calib.pop(0)
-            if self.request_calibration is not None:
-                self.request_calibration()
+        while self._calib and self._calib[0] < packet:
+            self._calib.pop(0)
+            self.watched += 1
         return rec.frames[n - 1], stale

@@ -94,3 +94,41 @@ def upload_controls(state: dict, controls) -> None:
         state["prog"]["u_controls"].write(u.tobytes())
     if model.n_rigid:  # rows of [R | t] per rigid part, fitted to the anchors on the CPU
         state["prog"]["u_rigid"].write(np.ascontiguousarray(model.rigid_transforms(u)).tobytes())
+
+
+class ElasticDraw:
+    """Renderer adapter of the elastic path: ``draw(values)`` with values of the table's channels.
+
+    Parameters
+    ----------
+    renderer : FaceRenderer made with ``path="elastic"``
+    model : ElasticModel
+
+    Attributes
+    ----------
+    shape_names : tuple of str, ``model.channel_names`` (shapes then muscles): the
+        frame loop's targets (the loop reads nothing else of its ``character``)
+    path : str, "elastic"
+    """
+
+    def __init__(self, renderer, model):
+        if renderer.path != "elastic":
+            raise ValueError(f"ElasticDraw: the renderer must use the 'elastic' path, not {renderer.path!r}")
+        self.renderer = renderer
+        self.model = model
+        self.shape_names = tuple(model.channel_names)
+        self.path = "elastic"
+
+    def draw(self, values, head_rotation=None, head_translation=None) -> None:
+        """Draw channel values, ndarray (n_shapes + n_muscles,) float32: U = Σ w P + Σ c Q, then the basis."""
+        self.renderer.prepare_controls(self.model.controls(values), head_rotation, head_translation)
+        self.renderer.submit()
+
+    def finish(self) -> None:
+        self.renderer.finish()
+
+    def read_pixels(self) -> np.ndarray:
+        return self.renderer.read_pixels()
+
+    def close(self) -> None:
+        self.renderer.close()

@@ -6,13 +6,15 @@ import os
 
 import moderngl
 
+from facepuppet.runtime.errors import FacepuppetError
+
 EGL_HELP = (
     "headless OpenGL needs libEGL and Mesa's drivers; install them with "
     "`apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri`"
 )
 
 
-class GLUnavailable(RuntimeError):
+class GLUnavailable(FacepuppetError, RuntimeError):
     """No OpenGL context could be made; the message says what is missing."""
 
 

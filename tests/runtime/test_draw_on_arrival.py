@@ -12,7 +12,8 @@ import pytest
 from helpers.osc_helpers import vmc_frame
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.live.loop import FrameLoop, WallClock, WeightLog
+from facepuppet.runtime.live.loop import FrameLoop, WallClock
+from facepuppet.runtime.live.sinks import WeightLog
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.udp import UdpSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
@@ -70,7 +71,7 @@ def test_the_loop_draws_each_arriving_frame_between_rare_idle_ticks(kind, udp_se
                 udp_sender.sendto(vmc_frame((i + 1) / n_frames), source.address)
 
         log = WeightLog()
-        loop = FrameLoop(SimpleNamespace(shape_names=ARKIT_NAMES), _Renderer(), WallClock(), sinks=[log],
+        loop = FrameLoop(ARKIT_NAMES, _Renderer(), WallClock(), sinks=[log],
                          fps=1000.0, idle_fps=2.0, log=lambda *a: None)
         thread = threading.Thread(target=send)
         thread.start()
@@ -91,4 +92,4 @@ def test_the_loop_draws_each_arriving_frame_between_rare_idle_ticks(kind, udp_se
 
 def test_idle_fps_is_checked():
     with pytest.raises(ValueError, match="idle_fps"):
-        FrameLoop(SimpleNamespace(shape_names=("a",)), _Renderer(), WallClock(), fps=60.0, idle_fps=120.0)
+        FrameLoop(("a",), _Renderer(), WallClock(), fps=60.0, idle_fps=120.0)

@@ -20,7 +20,8 @@ from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.live.pipeline import LivePipeline
-from facepuppet.runtime.commands.run import CALIBRATE_ADDRESS, _Packets
+from facepuppet.runtime.commands.run import CALIBRATE_ADDRESS
+from helpers.udp_helpers import wait_for
 from facepuppet.runtime.recording.session import read_session
 from facepuppet.runtime.recording.replay_source import open_recording
 
@@ -132,15 +133,20 @@ def test_audio_file_levels_are_recorded_per_tick(character, tmp_path, capsys):
     assert all(t1 > t0 for (t0, _), (t1, _) in zip(levels, levels[1:]))
 
 
-def test_calibrate_message_on_the_input_port_requests_calibration():
-    pipeline = LivePipeline(log=lambda s: None)
-    packets = _Packets(pipeline)
-    packets(b"/VMC/Ext/Blend/Apply\x00\x00\x00\x00,\x00\x00\x00", 1.0, ("127.0.0.1", 1))
-    assert not pipeline.calibrating
-    m = OscMessageBuilder("/facepuppet/calibrate").build().dgram
-    assert m.startswith(CALIBRATE_ADDRESS)
-    packets(m, 2.0, ("127.0.0.1", 1))
-    assert pipeline.calibrating
+@pytest.mark.parametrize("receiver", ["process", "thread"])
+def test_the_receivers_count_calibrate_messages_and_only_those(udp_sender, receiver):
+    from facepuppet.runtime.inputs.udp import UdpSource
+    from facepuppet.runtime.inputs.udp_process import UdpProcessSource
+    from facepuppet.runtime.inputs.vmc import VmcAdapter
+
+    kind = UdpProcessSource if receiver == "process" else UdpSource
+    with kind(VmcAdapter(), port=0, watch=CALIBRATE_ADDRESS) as source:
+        udp_sender.sendto(b"/VMC/Ext/Blend/Apply\x00\x00\x00\x00,\x00\x00\x00", source.address)
+        m = OscMessageBuilder("/facepuppet/calibrate").build().dgram
+        assert m.startswith(CALIBRATE_ADDRESS)
+        udp_sender.sendto(m, source.address)
+        wait_for(lambda: source.counters["packets"] == 2, "both datagrams")
+        assert source.watched == 1
 
 
 @pytest.mark.parametrize("option, value, match", [

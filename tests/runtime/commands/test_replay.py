@@ -12,8 +12,10 @@ from PIL import Image
 from conftest import need_shared
 from facepuppet.runtime.character import Character, sparse_deltas
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
-from facepuppet.runtime.live.loop import FrameLoop, PngSink, RecordedClock, WeightLog
-from facepuppet.runtime.commands.replay import parse_size, register
+from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
+from facepuppet.runtime.live.sinks import PngSink, WeightLog
+from facepuppet.runtime.commands.options import parse_size
+from facepuppet.runtime.commands.replay import register
 from facepuppet.runtime.recording.session import SessionWriter
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
@@ -27,7 +29,7 @@ def _replay(ctx, character, frames, out_dir, path):
 
     renderer = FaceRenderer(ctx, character, W, H, path=path, log=lambda s: None)
     weights, messages = WeightLog(), []
-    loop = FrameLoop(character, renderer, RecordedClock(), sinks=[weights, PngSink(out_dir)], log=messages.append)
+    loop = FrameLoop(character.shape_names, renderer, RecordedClock(), sinks=[weights, PngSink(out_dir)], log=messages.append)
     result = loop.run(ReplaySource(frames), duration=(N_TICKS - 1) / 60)
     renderer.close()
     assert ctx.error == "GL_NO_ERROR"

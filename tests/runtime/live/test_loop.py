@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock, WeightLog
+from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
+from facepuppet.runtime.live.sinks import WeightLog
 from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.live.timing import StageTimer
 
@@ -43,7 +44,7 @@ def test_newest_frame_wins_stale_frames_are_dropped_and_counted():
     frames = [_frame(0.0, 0.0), _frame(0.11, 0.1), _frame(0.13, 0.2), _frame(0.15, 0.3), _frame(0.19, 0.4),
               _frame(0.31, 0.5)]
     renderer, log = StubRenderer(), WeightLog()
-    loop = FrameLoop(RIG, renderer, RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None)
+    loop = FrameLoop(RIG.shape_names, renderer, RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None)
     result = loop.run(ReplaySource(frames), duration=0.4)
     assert result.n_ticks == 5  # t = 0, 0.1, 0.2, 0.3, 0.4
     np.testing.assert_array_equal(log.times, [0.0, 0.1, 0.2, 0.3, 0.4])
@@ -61,7 +62,7 @@ def test_non_finite_frames_are_rejected_not_drawn():
     frames = [_frame(0.0, 0.25), _frame(0.1, math.inf), _frame(0.2, 0.5, head_rotation=[0, 0, math.nan, 1]),
               _frame(0.3, 0.75, head_rotation=[0, 0, 0, 1])]
     renderer, log = StubRenderer(), WeightLog()
-    result = FrameLoop(RIG, renderer, RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(
+    result = FrameLoop(RIG.shape_names, renderer, RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(
         ReplaySource(frames))
     assert result.counters["nonfinite_rejected"] == 2
     np.testing.assert_array_equal(log.array[:, 0], np.float32([0.25, 0.25, 0.25, 0.75]))
@@ -74,7 +75,7 @@ def test_channels_mapped_by_name_and_report_logged_once_per_channel_tuple():
               Frame(t=0.2, source="other", channels=other, weights=[0.9, 0.8]), _frame(0.3, 0.7, 0.45)]
     messages = []
     log = WeightLog()
-    FrameLoop(RIG, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=messages.append).run(
+    FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=messages.append).run(
         ReplaySource(frames))
     assert len(messages) == 2  # one per distinct channel tuple, not per frame
     assert "TongueOut" in messages[0] and "cheekRaiser_L" in messages[0]
@@ -107,7 +108,7 @@ def test_wall_clock_sleeps_to_each_tick_and_counts_late_ones():
     frames = [_frame(i / 10, 0.1 * i) for i in range(5)]
     clock = WallClock(monotonic=fake.monotonic, sleep=fake.sleep)
     log = WeightLog()
-    result = FrameLoop(RIG, SlowRenderer(), clock, sinks=[log], fps=10.0, log=lambda s: None).run(
+    result = FrameLoop(RIG.shape_names, SlowRenderer(), clock, sinks=[log], fps=10.0, log=lambda s: None).run(
         ReplaySource(frames))
     assert result.counters["late_ticks"] == 1
     # late or not, each tick shows the recording at its own recorded time
@@ -132,7 +133,7 @@ def test_window_target_is_polled_swapped_and_can_close():
             self.swaps += 1
 
     win = Window()
-    result = FrameLoop(RIG, StubRenderer(), RecordedClock(), fps=10.0, log=lambda s: None, target=win).run(
+    result = FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), fps=10.0, log=lambda s: None, target=win).run(
         ReplaySource([_frame(0.1 * i, 0.0) for i in range(10)]))
     assert result.closed_by_window and result.n_ticks == 3 and win.swaps == 3
 
@@ -166,30 +167,39 @@ def test_stage_timer_summary():
     assert s["b"]["p50_ms"] == pytest.approx(1.0)
     assert timer.table().splitlines()[0].split()[:2] == ["stage", "n"]
     with pytest.raises(ValueError, match="fps"):
-        FrameLoop(RIG, StubRenderer(), RecordedClock(), fps=0)
+        FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), fps=0)
 
 
 def test_default_duration_reaches_the_last_frame():
     frames = [_frame(0.0, 0.1), _frame(0.1, 0.2), _frame(0.25, 0.3)]  # the last falls between ticks
     src, log = ReplaySource(frames), WeightLog()
-    result = FrameLoop(RIG, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(src)
+    result = FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(src)
     assert result.n_ticks == 4 and result.counters["frames_received"] == 3 and src.done(0.3)
     assert log.array[-1, 0] == np.float32(0.3)
 
 
-def test_a_retarget_stage_replaces_the_channel_map():
-    """A Retarget turns frames into weights; frames it declines keep the previous weights."""
+def test_stages_run_in_order_and_the_last_frame_is_mapped_by_name():
+    """Each tick runs the stages in order on the new frame; the last one's channels are mapped by name;
+    a tick whose stages give nothing keeps the previous weights."""
+    calls = []
 
     class Halve:
-        target_names = ("a", "b")
+        name = "halve"
 
-        def apply(self, frame):
-            if frame.weights is None:
+        def __call__(self, frame, t):
+            calls.append(("halve", t, frame is not None))
+            if frame is None or frame.weights is None:
                 return None
-            return np.asarray(frame.weights[:2], np.float32) * 0.5
+            return Frame(t=frame.t, channels=("b", "a"), weights=np.asarray(frame.weights[:2], np.float32) * 0.5)
 
-    class Char:
-        shape_names = ("a", "b")
+    class AddOne:
+        name = "add_one"
+
+        def __call__(self, frame, t):
+            calls.append(("add_one", t, frame is not None))
+            if frame is None:
+                return None
+            return Frame(t=frame.t, channels=frame.channels, weights=np.asarray(frame.weights) + 1.0)
 
     class NullRenderer:
         def draw(self, weights, rotation, translation):
@@ -200,10 +210,11 @@ def test_a_retarget_stage_replaces_the_channel_map():
 
     frames = [Frame(t=0.0, channels=("x", "y"), weights=[1.0, 0.4]), Frame(t=0.1)]
     log = WeightLog()
-    FrameLoop(Char(), NullRenderer(), RecordedClock(), sinks=[log], fps=10, log=lambda s: None,
-              retarget=Halve()).run(ReplaySource(frames), duration=0.2)
-    np.testing.assert_allclose(log.array, [[0.5, 0.2], [0.5, 0.2], [0.5, 0.2]])
-    with pytest.raises(ValueError, match="retarget"):
-        class Wrong(Halve):
-            target_names = ("b", "a")
-        FrameLoop(Char(), NullRenderer(), RecordedClock(), retarget=Wrong())
+    FrameLoop(("a", "b"), NullRenderer(), RecordedClock(), sinks=[log], fps=10, log=lambda s: None,
+              stages=[Halve(), AddOne()]).run(ReplaySource(frames), duration=0.2)
+    # halve then add one: b = 1.0 * 0.5 + 1, a = 0.4 * 0.5 + 1 (the stage renamed the channels)
+    np.testing.assert_allclose(log.array, [[1.2, 1.5]] * 3)
+    assert [c[0] for c in calls] == ["halve", "add_one"] * 3          # every tick, in order
+    assert [c[2] for c in calls[::2]] == [True, True, False]          # the frame without weights, then none
+    with pytest.raises(ValueError, match="names"):
+        FrameLoop("ab", NullRenderer(), RecordedClock())

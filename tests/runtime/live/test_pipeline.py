@@ -13,7 +13,8 @@ import pytest
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.config import ChannelSettings, FilterSettings, LiveConfig
-from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WeightLog
+from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
+from facepuppet.runtime.live.sinks import WeightLog
 from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
@@ -41,7 +42,8 @@ def frames(t0, t1, jaw, blink=0.0, rotation=None, translation=None, rate=FPS):
 
 def run(pipeline, stream, duration):
     renderer, log = StubRenderer(), WeightLog()
-    loop = FrameLoop(RIG, renderer, RecordedClock(), sinks=[log], fps=FPS, log=lambda s: None, pipeline=pipeline)
+    loop = FrameLoop(RIG.shape_names, renderer, RecordedClock(), sinks=[log], fps=FPS, log=lambda s: None,
+                     stages=[pipeline])
     result = loop.run(ReplaySource(stream), duration=duration)
     return log, renderer, result
 
@@ -120,16 +122,44 @@ def test_default_filter_smooths_jitter_and_mouth_more_than_eyes():
     assert jaw_sd < 0.3 * 0.05 and jaw_sd < blink_sd < 0.05
 
 
-def test_non_finite_frames_are_rejected_and_counted_not_drawn():
+def test_non_finite_frames_are_rejected_once_by_the_loop_before_any_stage():
     good = frames(0.0, 0.2, 0.4)
     bad = Frame(t=0.2, source="test", channels=CHANNELS, weights=[math.inf, 0.0, 0.0])
     bad_pose = Frame(t=0.25, source="test", channels=CHANNELS, weights=[0.9, 0.0, 0.0],
                      head_rotation=[0, 0, math.nan, 1])
     pipeline = LivePipeline(passthrough_config(), log=lambda s: None)
-    assert pipeline(bad, 0.0) is None and pipeline.counters["nonfinite_rejected"] == 1
-    log, _, result = run(pipeline, good + [bad, bad_pose], duration=0.3)
+    seen = []
+    original = pipeline.__call__
+
+    class Spy:
+        name = "filter"
+
+        def __call__(self, frame, t):
+            seen.append(frame)
+            return original(frame, t)
+
+    renderer, log = StubRenderer(), WeightLog()
+    result = FrameLoop(RIG.shape_names, renderer, RecordedClock(), sinks=[log], fps=FPS, log=lambda s: None,
+                       stages=[Spy()]).run(ReplaySource(good + [bad, bad_pose]), duration=0.3)
     np.testing.assert_allclose(log.array[:, 0], 0.4, atol=1e-6)
-    assert result.counters["nonfinite_rejected"] == 2  # the loop rejects them before the pipeline
+    assert result.counters["nonfinite_rejected"] == 2       # one counter, in the loop
+    assert all(f is None or f.is_finite() for f in seen)      # no stage sees a non-finite frame
+    assert "nonfinite_rejected" not in pipeline.counters     # and none counts them a second time
+
+
+def test_a_growing_request_count_calibrates_and_nothing_calls_into_the_stage():
+    count = {"n": 0}
+    pipeline = LivePipeline(passthrough_config(capture_s=0.1), log=lambda s: None,
+                            calibrate_requests=lambda: count["n"])
+    one = lambda t: Frame(t=t, source="test", channels=CHANNELS, weights=[0.3, 0.0, math.nan])  # noqa: E731
+    pipeline(one(0.0), 0.0)
+    assert not pipeline.calibrating
+    count["n"] = 2                                           # two calibrate messages since the last tick
+    pipeline(None, 1 / FPS)
+    assert pipeline.calibrating                              # one request, read by the stage itself
+    for k in range(2, 12):
+        pipeline(one(k / FPS), k / FPS)
+    assert pipeline.counters["calibrations"] == 1 and not pipeline.calibrating
 
 
 def test_calibration_request_from_another_thread_is_a_flag():

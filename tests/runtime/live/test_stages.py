@@ -46,7 +46,7 @@ def free_udp_port() -> int:
         return s.getsockname()[1]
 
 
-def live(argv, send, tmp_path):
+def live(argv, send, tmp_path, hooks=()):
     """Run ``run`` with ``argv`` (plus --listen, --headless); ``send(client, stop)`` runs once the socket is bound."""
     port = free_udp_port()
     args = parser().parse_args(["run", *argv, "--listen", f"127.0.0.1:{port}", "--headless", "--size", "48x40"])
@@ -60,7 +60,7 @@ def live(argv, send, tmp_path):
 
     logs: list[str] = []
     try:
-        result = run.run_live(args, log=logs.append, on_ready=on_ready)
+        result = run.run_live(args, log=logs.append, on_ready=on_ready, hooks=hooks)
     finally:
         stop.set()
         for t in threads:
@@ -143,6 +143,55 @@ def test_markers_over_udp_are_solved_and_mapped_through_the_pair(actor_files, tm
     assert result.counters["udp"]["malformed"] == 0 and result.loop.counters["frames_received"] > 20
     assert np.abs(w - expected[0]).max(axis=1).min() < 1e-3, "the first pose was never drawn"
     np.testing.assert_allclose(w[-1], expected[1], atol=1e-3)
+
+
+def rotation_deg(q) -> float:
+    return float(np.degrees(2 * np.arccos(min(1.0, abs(float(q[3]) / float(np.linalg.norm(q)))))))
+
+
+def test_markers_turn_the_head(actor_files, tmp_path):
+    """The Kabsch head pose of the solve is the drawn head rotation (it used to be computed and dropped)."""
+    paths, cap, truth, actor, pair = actor_files
+    neutral = cap.markers[0].astype(np.float64)
+    centre = neutral[actor.head_markers].mean(axis=0)
+    a = np.radians(20.0)
+    turn = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])  # 20 deg about y
+    poses = [neutral.astype(np.float32), ((neutral - centre) @ turn.T + centre).astype(np.float32)]
+
+    stage = ActorRetarget(actor, pair)  # the stage alone: a frame in, the weights and the head's turn out
+    out = stage(Frame(t=0.0, markers=poses[1], marker_names=cap.names), 0.0)
+    assert out.channels == tuple(pair.shape_names)
+    assert rotation_deg(out.head_rotation) == pytest.approx(20.0, abs=0.5)
+    assert rotation_deg(stage(Frame(t=0.1, markers=poses[0], marker_names=cap.names), 0.1).head_rotation) < 0.5
+
+    def send(client, stop):
+        layout = OscMessageBuilder("/facepuppet/markers/layout")
+        layout.add_arg(1)
+        for name in cap.names:
+            layout.add_arg(name, "s")
+        start, n = time.monotonic(), 0
+        while not stop.is_set():
+            if n % 20 == 0:
+                client.send(layout.build())
+            m = OscMessageBuilder("/facepuppet/markers/frame")
+            m.add_arg(1)
+            m.add_arg(n)
+            m.add_arg(time.time(), "d")
+            m.add_arg(poses[0 if time.monotonic() - start < 0.6 else 1].astype("<f4").tobytes(), "b")
+            client.send(m.build())
+            n += 1
+            time.sleep(0.01)
+
+    drawn = []
+    config = tmp_path / "fast.toml"
+    config.write_text(NO_SMOOTHING)
+    result, logs = live(["-c", str(paths["character"]), "--input", "markers", "--actor", str(paths["actor"]),
+                         "--pair", str(paths["pair"]), "--duration", "1.4", "--config", str(config)], send, tmp_path,
+                        hooks=[lambda info: drawn.append(None if info.rotation is None else info.rotation.copy())])
+    assert "stages: markers→solve→filter→map→draw" in logs
+    angles = [rotation_deg(q) for q in drawn if q is not None]
+    assert angles and min(angles) < 1.0, "the neutral pose was never drawn"
+    assert angles[-1] == pytest.approx(20.0, abs=1.0), "the head did not turn with the markers"
 
 
 def test_markers_need_an_actor_and_a_pair_that_fit(actor_files, tmp_path):
@@ -281,3 +330,53 @@ def test_replay_of_a_live_recording_draws_the_live_weights(tmp_path):
                                "--dump-weights", str(replay_w)])
     assert replay.run_replay(raw, log=logs.append) == 0
     assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # without the pipeline: the raw frames
+
+
+def test_replay_of_a_live_gestures_run_draws_the_live_weights(tmp_path):
+    """``run --gestures`` with a voice recorded, replayed with the same options: the same weights tick for tick."""
+    import wave
+
+    from helpers.gesture_dbs import small_db
+
+    small_db(tmp_path / "gestures.npz")
+    character = dataclasses.replace(sphere_character(), shape_names=("jawOpen", "browInnerUp"))  # brows: gestures
+    char_path = character.save(tmp_path / "sphere.npz")
+    rate = 16000
+    t = np.arange(int(2.5 * rate)) / rate
+    voice = (0.5 * np.sin(2 * np.pi * 220 * t) * (np.sin(2 * np.pi * 1.5 * t) > 0)).astype(np.float32)
+    wav = tmp_path / "voice.wav"
+    with wave.open(str(wav), "wb") as w:
+        w.setnchannels(1), w.setsampwidth(2), w.setframerate(rate)
+        w.writeframes((voice * 32767).astype("<i2").tobytes())
+
+    def send(client, stop):
+        start = time.monotonic()
+        while not stop.is_set():
+            vmc(client, {"JawOpen": 0.3 + 0.2 * np.sin(5 * (time.monotonic() - start)), "BrowInnerUp": 0.1})
+            time.sleep(0.01)
+
+    record, live_w, replay_w = tmp_path / "take.fps", tmp_path / "live.npy", tmp_path / "replay.npy"
+    options = ["--gestures", str(tmp_path / "gestures.npz"), "--gesture-seed", "3"]
+    result, logs = live(["-c", str(char_path), "--input", "vmc", "--duration", "1.5", "--audio-file", str(wav),
+                         "--record", str(record), *options], send, tmp_path)
+    assert "stages: vmc→audio→filter→gestures→map→draw" in logs
+    np.save(live_w, result.weights.array)
+    session = read_session(record)
+    assert len(session.ticks) == result.loop.n_ticks == len(session.audio_levels)
+    assert session.header["info"]["options"]["gestures"] == str(tmp_path / "gestures.npz")
+
+    logs = []
+    args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
+                                "--pipeline", *options, "--dump-weights", str(replay_w)])
+    assert replay.run_replay(args, log=logs.append) == 0
+    assert "stages: replay(vmc)→audio→filter→gestures→map→draw" in logs
+    live_weights, replayed = np.load(live_w), np.load(replay_w)
+    assert live_weights.shape == replayed.shape
+    assert np.ptp(live_weights, axis=0).max() > 0.05  # the face moved
+    np.testing.assert_array_equal(replayed, live_weights)
+
+    other_seed = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
+                                      "--pipeline", "--gestures", str(tmp_path / "gestures.npz"), "--gesture-seed",
+                                      "4", "--dump-weights", str(replay_w)])
+    assert replay.run_replay(other_seed, log=logs.append) == 0
+    assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # the gestures are in what was compared

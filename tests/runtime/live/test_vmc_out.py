@@ -14,7 +14,8 @@ import pytest
 from pythonosc.osc_bundle import OscBundle
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.live.vmc_out import MAX_BUNDLE, VmcSender, parse_host_port
+from facepuppet.runtime.commands.options import parse_host_port
+from facepuppet.runtime.live.vmc_out import MAX_BUNDLE, VmcSender
 
 LINE = re.compile(r'^\S+ (?P<address>/\S+)(?: (?P<types>\S+))?(?: (?P<args>.*))?$')  # time tag, address, ...
 

@@ -126,8 +126,10 @@ def test_kill_9_mid_record_leaves_a_file_that_replays_up_to_the_last_complete_re
          "--duration", "60"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        line = proc.stdout.readline()
-        assert "listening for vmc on 127.0.0.1" in line, line
+        lines = [proc.stdout.readline()]
+        while lines[-1] and "listening for" not in lines[-1]:  # the stage chain and the like come first
+            lines.append(proc.stdout.readline())
+        assert "listening for vmc on 127.0.0.1" in lines[-1], lines
         sent = 0
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
             deadline = time.monotonic() + 20

@@ -1,0 +1,89 @@
+"""What the frame loop hands each drawn tick to: PNG frames, the weight log, the recording.
+
+Sinks (``consume(tick_index, t, weights, frame, renderer)``) see the picture; tick hooks
+(``hook(info)`` with a :class:`~facepuppet.runtime.live.loop.TickInfo`) see the whole tick.
+VMC output is :mod:`facepuppet.runtime.live.vmc_out`; the live stats are
+:mod:`facepuppet.runtime.live.stats`.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+class PngSink:
+    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``renderer.read_pixels()``."""
+
+    def __init__(self, out_dir):
+        self.out_dir = Path(out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.paths: list[Path] = []
+
+    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
+        from PIL import Image
+
+        path = self.out_dir / f"frame_{tick_index:05d}.png"
+        Image.fromarray(np.ascontiguousarray(renderer.read_pixels())).save(path)
+        self.paths.append(path)
+
+
+class WeightLog:
+    """Keep each tick's rig weights (for tests and offline analysis).
+
+    Attributes
+    ----------
+    array : ndarray of shape (n_ticks, n_shapes), float32
+    times : ndarray of shape (n_ticks,), float64, seconds
+    """
+
+    def __init__(self):
+        self._rows: list[np.ndarray] = []
+        self._times: list[float] = []
+
+    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
+        self._rows.append(np.array(weights, dtype=np.float32, copy=True))
+        self._times.append(t)
+
+    @property
+    def array(self) -> np.ndarray:
+        if not self._rows:
+            return np.zeros((0, 0), dtype=np.float32)
+        return np.stack(self._rows)
+
+    @property
+    def times(self) -> np.ndarray:
+        return np.asarray(self._times, dtype=np.float64)
+
+
+class RecordingHook:
+    """``run --record``: per tick, the received datagrams, the tick's audio level and one TICK record.
+
+    Parameters
+    ----------
+    recorder : PacketRecorder
+    source : the live source; its ``deliver_packets()`` (if any) hands the datagrams received since
+        the last tick to the recorder (the process receiver's ring), its ``frames_taken`` says which
+        frame the tick drew (a faithful replay needs it)
+    audio : AudioTap or None, the tick's audio level (recorded as the stages used it)
+
+    The datagrams behind the frame a tick took reach the recorder before that tick's TICK record.
+    """
+
+    def __init__(self, recorder, source, audio=None):
+        self.recorder = recorder
+        self.source = source
+        self.audio = audio
+        self._deliver = getattr(source, "deliver_packets", None)
+        self._ticks = hasattr(source, "frames_taken")
+
+    def __call__(self, info) -> None:
+        if self._deliver is not None:
+            self._deliver()
+        if self.audio is not None:
+            level = self.audio.value
+            self.recorder.put_audio(info.t, level if math.isfinite(level) else math.nan)
+        if self._ticks:
+            self.recorder.put_tick(info.k, info.t, self.source.frames_taken, info.stamps[0])

@@ -1,0 +1,89 @@
+"""The seams of the live path, as typing Protocols: what each part must offer the next.
+
+A datagram becomes pixels through these parts, in this order (ARCHITECTURE.md, the frame walk):
+
+==============  ==========================================================  ===============================
+seam            what it does                                                implemented by
+==============  ==========================================================  ===============================
+InputAdapter    bytes of one datagram -> a completed Frame (or None)        runtime/inputs/{vmc,facecap,...}
+FrameSource     the newest Frame by tick time, stale ones counted           runtime/inputs/udp*.py,
+                (``latest`` has no side effects)                            runtime/recording/*_source.py
+Stage           one step of the per-frame chain: (frame or None, t) ->      runtime/live/stages.py builds
+                frame or None                                               the chain
+Renderer        weights + head pose -> an image                             runtime/render/renderer.py
+Sink            what the loop hands each drawn tick to                      runtime/live/sinks.py
+==============  ==========================================================  ===============================
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from facepuppet.runtime.frames import Frame
+
+
+@runtime_checkable
+class InputAdapter(Protocol):
+    """Decodes one tracker protocol. ``handle`` never raises: malformed input is counted in ``counters``."""
+
+    default_port: int
+    counters: dict[str, int]
+
+    def handle(self, data: bytes, t: float) -> Frame | None:
+        """The frame this datagram completes (receive time ``t``, seconds), or None."""
+        ...
+
+
+@runtime_checkable
+class FrameSource(Protocol):
+    """Answers once per tick: the newest frame that has arrived by ``t``, and how many older ones were skipped.
+
+    ``latest`` is a snapshot: it has no side effects beyond marking the frame taken (no callbacks, no
+    recording, no calibration). Live sources may also offer ``wait_for_frame(timeout_s) -> bool`` (draw on
+    arrival), ``frames_taken``, ``watched`` (datagrams carrying the calibrate message, a count) and
+    ``deliver_packets()`` (hand received datagrams to the recorder; called by the recording sink).
+    """
+
+    def latest(self, t: float) -> tuple[Frame | None, int]: ...
+
+
+@runtime_checkable
+class Stage(Protocol):
+    """One step of the per-frame chain.
+
+    Called once per tick with the newest new frame (None when none arrived, or the previous stage had
+    nothing new) and the tick time ``t`` (seconds). Returns the frame for the next stage, or None to keep
+    what is on screen. Runs on the frame-loop thread and must stay cheap; ``name`` is what the chain
+    prints (``stages: vmc→filter→gestures→map→draw``).
+    """
+
+    name: str
+
+    def __call__(self, frame: Frame | None, t: float) -> Frame | None: ...
+
+
+@runtime_checkable
+class Renderer(Protocol):
+    """Draws channel values; ``shape_names`` are the channels it takes, in order."""
+
+    path: str
+
+    def draw(self, weights: np.ndarray, head_rotation: np.ndarray | None = None,
+             head_translation: np.ndarray | None = None) -> None: ...
+
+    def finish(self) -> None: ...
+
+    def read_pixels(self) -> np.ndarray: ...
+
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class Sink(Protocol):
+    """Takes every drawn tick: index, time (s), the weights drawn (the loop's buffer: copy to keep),
+    the frame on screen and the renderer (for pixels)."""
+
+    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
+                renderer: Renderer) -> None: ...
