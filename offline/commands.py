@@ -10,7 +10,6 @@ from pathlib import Path
 
 from facepuppet.runtime.character import MATERIAL_KINDS
 
-
 # Offline modules with their own ``register(subparsers)``; each must exist and import
 # (a missing one is an error, never a silently dropped command).
 _COMMAND_MODULES = ("facepuppet.offline.actuation.commands", "facepuppet.offline.elastic.commands",

@@ -8,12 +8,12 @@ held-out RMS marker error of the linear ICA model and the cubic one.
 
 from __future__ import annotations
 
-from facepuppet.offline.bench_data import add_data_argument, data_dir
-
 import time
 import warnings
 
 import numpy as np
+
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 TAKES = ("animface_jaw.trc", "animface_cheeks.trc")
 
@@ -80,8 +80,8 @@ def _train(capture, k: int, **settings) -> tuple[object, dict]:
 
 
 def run(args) -> dict:
-    from facepuppet.offline.io.capture import read_capture
     from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
+    from facepuppet.offline.io.capture import read_capture
 
     results: dict = {"solve": {}, "training": {}, "machine_before": machine_load()}
     cap, _ = synthetic_capture(n_frames=3500, n_markers=68, k=13, seed=0)

@@ -89,7 +89,7 @@ def _retarget_actor(args: argparse.Namespace) -> int:
     from facepuppet.runtime.actuation.actor import Actor
     from facepuppet.runtime.character import Character
 
-    from facepuppet.offline.actuation import transfer as transfer
+    from facepuppet.offline.actuation import transfer
     start = time.perf_counter()
     actor = Actor.load(args.actor)
     character = Character.load(args.character)

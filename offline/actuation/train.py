@@ -17,9 +17,9 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.actuation.basis import ActuationModel, k_report, neutral_frame
-from facepuppet.offline.io.capture import Capture
 from facepuppet.offline.actuation.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
 from facepuppet.offline.actuation.stabilise import stabilise
+from facepuppet.offline.io.capture import Capture
 
 Progress = Callable[[str, float, str], None]
 BOUND_MARGIN = 0.25  # solver bounds: the training range widened by this fraction of it

@@ -9,20 +9,17 @@ adding < 1 %, tables at least 3x smaller than dense deltas.
 
 from __future__ import annotations
 
-from facepuppet.offline.bench_data import add_data_argument, data_dir
-
 import argparse
 import json
 import time
 
 import numpy as np
 
-
-from facepuppet.offline.elastic.control_points import ict_control_points
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis
 from facepuppet.offline.elastic.commands import main_front
+from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.elastic.params import fit_character, target_fixed_mask
-
 
 
 def midpoint_subdivide(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:

@@ -11,16 +11,22 @@ import numpy as np
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
 
+from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
 from facepuppet.offline.elastic.clone import character_with_shapes, clone_model, mesh_character
 from facepuppet.offline.elastic.control_points import (
-    ANCHOR_NAMES, MEDIAPIPE_ANCHORS, ControlPoints, anchor_positions, front_vertices, ict_control_points,
-    propose_control_points, read_control_points, write_control_points,
+    ANCHOR_NAMES,
+    MEDIAPIPE_ANCHORS,
+    ControlPoints,
+    anchor_positions,
+    front_vertices,
+    ict_control_points,
+    propose_control_points,
+    read_control_points,
+    write_control_points,
 )
-from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
-from facepuppet.offline.elastic.params import build_model, fit_character
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
-
+from facepuppet.offline.elastic.params import build_model, fit_character
 
 # Anchor groups (control_points.ANCHOR_NAMES) by control-point name.
 POINT_ANCHORS = {

@@ -234,9 +234,9 @@ def _loadavg() -> str:
 
 
 def run_bench(args) -> dict:
+    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
     from facepuppet.runtime.gestures.synth import GestureSynth
     from facepuppet.runtime.gestures.tables import load_gesture_db
-    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 
     from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
     from facepuppet.offline.gestures.database import build_gesture_db, read_llf_take

@@ -95,9 +95,9 @@ def parse_style(text: str) -> dict[str, str]:
 def synthesize(database, speech, seed: int = 0, style=None, sigma: float = 0.01, n_candidates: int = 3,
                history: int = 10, stereo: str = "refuse"):
     """Synthesised tracks for a WAV; returns (synth, level_db (n,), tracks (n, n_out) float32, seconds)."""
+    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
     from facepuppet.runtime.gestures.synth import GestureSynth
     from facepuppet.runtime.gestures.tables import load_gesture_db
-    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 
     from facepuppet.offline.gestures.speech_intensity import speech_intensity
 
@@ -221,8 +221,13 @@ def transfer_detail(character, marker_paths, landmarks, per_region: int = 2, n_b
     ----------
     character : Character; marker_paths : marker takes (same markers in each); landmarks : (68,) int
     """
+    from facepuppet.offline.gestures.detail_transfer import (
+        DetailTransfer,
+        detail_character,
+        marker_detail,
+        place_markers,
+    )
     from facepuppet.offline.io.capture import read_capture
-    from facepuppet.offline.gestures.detail_transfer import DetailTransfer, detail_character, marker_detail, place_markers
 
     start = time.perf_counter()
     caps = [read_capture(p) for p in marker_paths]

@@ -113,8 +113,9 @@ def read_llf_take(path, speech_z: np.ndarray, fps: float = 30.0) -> Take:
 
 def read_marker_take(path, speech_z: np.ndarray, fps: float = 30.0) -> Take:
     """Marker take (C3D): head track; proxy intensity from the chin's distance to the nose top."""
-    import c3d
     import warnings
+
+    import c3d
 
     with open(path, "rb") as handle, warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "No analog data found" is expected

@@ -48,11 +48,11 @@ from scipy.spatial import cKDTree
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import vertex_normals
 
+from facepuppet.offline.actuation.stabilise import stabilise
 from facepuppet.offline.actuation.transfer import umeyama
 from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
 from facepuppet.offline.gestures.rbf_transfer import RBFTransfer
 from facepuppet.offline.gestures.regional_features import STABLE_MARKERS
-from facepuppet.offline.actuation.stabilise import stabilise
 
 DETAIL_REGIONS = ("brows", "eyes", "lips", "rest")
 RADIUS_FACTOR = 1.5

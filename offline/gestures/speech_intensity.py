@@ -33,8 +33,8 @@ from fractions import Fraction
 import numpy as np
 from scipy.signal import resample_poly
 
-from facepuppet.runtime.inputs.audio import read_wav
 from facepuppet.runtime.gestures.layer import SILENCE_Z
+from facepuppet.runtime.inputs.audio import read_wav
 
 DEFAULT_RATE = 16000
 FLOOR_DB = -60.0

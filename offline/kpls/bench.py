@@ -9,13 +9,12 @@ blendshape correspondence (the control) and once non-linear
 
 from __future__ import annotations
 
-from facepuppet.offline.bench_data import add_data_argument, data_dir
-
 import time
 from pathlib import Path
 
 import numpy as np
 
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 
 def _add_arguments(parser) -> None:
@@ -29,8 +28,8 @@ def _add_arguments(parser) -> None:
 def _runtime_timing(source, target, frames, log) -> dict:
     from facepuppet.runtime.kpls.stage import KplsRetarget
 
-    from facepuppet.offline.kpls.model import KernelPLS
     from facepuppet.offline.kpls.commands import to_runtime
+    from facepuppet.offline.kpls.model import KernelPLS
     from facepuppet.offline.kpls.pairs import training_pairs
 
     pairs = training_pairs(source, target)
@@ -62,9 +61,9 @@ def run_bench(args, log=print) -> dict:
     from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 
+    from facepuppet.offline.io.rig_import import import_rig
     from facepuppet.offline.kpls.cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights
     from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
-    from facepuppet.offline.io.rig_import import import_rig
 
     data = data_dir(args.data)
     ict_dir = data / "ict-facekit"

@@ -28,9 +28,9 @@ import numpy as np
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.character import Character
 
-from facepuppet.offline.kpls.model import KernelPLS
-from facepuppet.offline.kpls.dutreve_rbf import DutreveRBF, corresponding_vertices
 from facepuppet.offline.kpls.baselines import KernelRidgeRetarget, LinearPLS, LinearRetarget, PairRBF, PCARBFRetarget
+from facepuppet.offline.kpls.dutreve_rbf import DutreveRBF, corresponding_vertices
+from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.pairs import feature_matrix, feature_points, moving_vertices, pair_weights
 from facepuppet.offline.kpls.targets import stylise  # noqa: F401  (kept importable from here)
 

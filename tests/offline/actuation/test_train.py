@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from facepuppet.offline.actuation import commands as actor_commands
-from facepuppet.offline.actuation.basis import ActuationModel, class_axes, mean_shift
-from facepuppet.offline.actuation.train import train_actor
-from facepuppet.offline.io.capture import Capture, write_trc
-from facepuppet.offline.actuation.cubic_fit import evaluate, fit_polynomial
-from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.rigid import kabsch
+
+from facepuppet.offline.actuation import commands as actor_commands
+from facepuppet.offline.actuation.basis import ActuationModel, class_axes, mean_shift
+from facepuppet.offline.actuation.cubic_fit import evaluate, fit_polynomial
+from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
+from facepuppet.offline.actuation.train import train_actor
+from facepuppet.offline.io.capture import Capture, write_trc
 
 K = 6
 TRAIN = 1300
