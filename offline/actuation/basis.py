@@ -180,7 +180,7 @@ class ActuationModel:
         self.strong_quantile = strong_quantile
         self.random_state = random_state
 
-    def fit(self, disp: np.ndarray) -> "ActuationModel":
+    def fit(self, disp: np.ndarray) -> ActuationModel:
         """Learn class axes and the unmixing from displacements (n_frames, n_markers, 3), float, units."""
         from sklearn.decomposition import FastICA
 

@@ -9,7 +9,7 @@ actuations), ``stabilised_`` and ``metrics_`` (timings, errors, K report).
 from __future__ import annotations
 
 import time
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -60,7 +60,7 @@ class ActorModel:
         self.threads = threads
         self.ridge_ab = ridge_ab
 
-    def fit(self, capture: Capture, progress: Progress | None = None) -> "ActorModel":
+    def fit(self, capture: Capture, progress: Progress | None = None) -> ActorModel:
         """Learn the actor from ``capture`` (any units; head motion is removed first)."""
         if self.threads is None:
             return self._fit(capture, progress)
@@ -69,7 +69,7 @@ class ActorModel:
         with threadpool_limits(limits=self.threads, user_api="blas"):
             return self._fit(capture, progress)
 
-    def _fit(self, capture: Capture, progress: Progress | None) -> "ActorModel":
+    def _fit(self, capture: Capture, progress: Progress | None) -> ActorModel:
         say = progress or (lambda stage, fraction, message: None)
         if not isinstance(capture, Capture):
             raise TypeError(f"ActorModel.fit: expected a Capture, got {type(capture).__name__}")

@@ -104,7 +104,7 @@ class ElasticBasis:
         self.k = int(k)
         self.free_components = tuple(int(c) for c in free_components)
 
-    def fit(self, vertices, triangles, handles, fixed_mask=None, names=None) -> "ElasticBasis":
+    def fit(self, vertices, triangles, handles, fixed_mask=None, names=None) -> ElasticBasis:
         """Precompute the basis (eqs. 3–5) and its compact form.
 
         Parameters

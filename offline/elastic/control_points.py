@@ -86,13 +86,13 @@ class ControlPoints:
     def vertex(self, name: str) -> int:
         return int(self.vertices[self.index(name)])
 
-    def check(self, n_vertices: int, where: str = "control points") -> "ControlPoints":
+    def check(self, n_vertices: int, where: str = "control points") -> ControlPoints:
         if self.vertices.min() < 0 or self.vertices.max() >= n_vertices:
             raise ValueError(f"{where}: vertex indices must lie in 0..{n_vertices - 1}, "
                              f"got {self.vertices.min()}..{self.vertices.max()}")
         return self
 
-    def reorder(self, names) -> "ControlPoints":
+    def reorder(self, names) -> ControlPoints:
         """The points named ``names``, in that order (ValueError if one is missing)."""
         return ControlPoints(tuple(names), np.array([self.vertex(n) for n in names], np.int64))
 

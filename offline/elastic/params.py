@@ -43,7 +43,7 @@ class ExpressionFit:
     relative_ : ndarray of shape (n_shapes,), float64, rms_ / largest displacement
     """
 
-    def fit(self, basis, deltas, evaluate=None) -> "ExpressionFit":
+    def fit(self, basis, deltas, evaluate=None) -> ExpressionFit:
         """Fit eq. 6.
 
         Parameters

@@ -61,7 +61,7 @@ class BlendWeights:
         self.basis, self.epsilon, self.window, self.method = basis, epsilon, window, method
         self.n_samples, self.n_neighbours, self.seed = n_samples, n_neighbours, seed
 
-    def fit(self, X) -> "BlendWeights":
+    def fit(self, X) -> BlendWeights:
         """Compute ``weights_`` (n_frames, k), ``blend_`` (n_frames, d) = c·B and ``residual_`` = X - blend_."""
         X = _check_matrix("X", X)
         B = _check_matrix("basis", self.basis)

@@ -41,7 +41,7 @@ class RBFTransfer:
     def __init__(self, radius: float):
         self.radius = radius
 
-    def fit(self, centres, values) -> "RBFTransfer":
+    def fit(self, centres, values) -> RBFTransfer:
         """centres : (n, 3) float, marker positions; values : (n, k) float, detail features at them."""
         c = np.asarray(centres, np.float64)
         v = np.asarray(values, np.float64)

@@ -73,7 +73,7 @@ class DutreveRBF:
         self.out_basis = out_basis
         self.kernel = kernel
 
-    def fit(self, X=None, Y=None) -> "DutreveRBF":
+    def fit(self, X=None, Y=None) -> DutreveRBF:
         """Build both RBF networks from the neutral faces; example pairs X, Y are checked, not learnt from."""
         p = check_inputs(self.in_points, "DutreveRBF: in_points")
         q = check_inputs(self.in_on_out, "DutreveRBF: in_on_out")

@@ -267,7 +267,7 @@ class KernelPLS:
             return 1.0 / med if med > 0 else 1.0
         return 1.0 / X.shape[1]
 
-    def fit(self, X, Y) -> "KernelPLS":
+    def fit(self, X, Y) -> KernelPLS:
         """Fit on paired rows of X (n_pairs, n_features) and Y (n_pairs, n_outputs); returns self."""
         X, Y = check_pairs(X, Y)
         self._check_settings(len(X))
