@@ -202,7 +202,8 @@ class ActuationModel:
             s = ica.fit_transform(x)
         self.converged_ = ica.n_iter_ < ica.max_iter
         if not self.converged_:
-            warnings.warn(f"FastICA did not converge in {ica.max_iter} iterations (K={k})", RuntimeWarning)
+            warnings.warn(f"FastICA did not converge in {ica.max_iter} iterations (K={k})", RuntimeWarning,
+                          stacklevel=2)
         w = ica.components_                                    # s = W (x - mean)
         s = s - (-w @ ica.mean_)                               # shift so the neutral (x = 0) gives s = 0
         lo, hi = np.quantile(s, 1 - self.strong_quantile, axis=0), np.quantile(s, self.strong_quantile, axis=0)

@@ -31,7 +31,7 @@ def _solve_times(actor, markers: np.ndarray, n_given: int | None, seed: int = 0)
         keep[given] = True
         obs = np.where(keep[None, :, None], obs, np.nan)
     times, cpu, iters = np.empty(len(obs)), np.empty(len(obs)), np.empty(len(obs))
-    for rep in range(2):                                        # first pass warms caches
+    for _ in range(2):                                          # first pass warms caches
         solver.reset()
         for f in range(len(obs)):
             c0, t0 = time.thread_time(), time.perf_counter()

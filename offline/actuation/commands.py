@@ -45,7 +45,8 @@ def register(subparsers) -> None:
     r.add_argument("--region-radius", type=float, default=None, metavar="FAPU",
                    help="a shape needs a marker within this many FAPU of its moving region (default 0.3)")
     r.add_argument("--evaluate", type=Path, metavar="CAPTURE",
-                   help="report the marker-space transfer error on this take's frames (TRC/C3D/CSV, the actor's markers)")
+                   help="report the marker-space transfer error on this take's frames "
+                        "(TRC/C3D/CSV, the actor's markers)")
     r.add_argument("--pictures", type=Path, metavar="DIR",
                    help="write face_actuations.png (the K actuations at s=1 on the character's face) here")
     r.set_defaults(func=_retarget_actor)

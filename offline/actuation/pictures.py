@@ -63,7 +63,7 @@ def signal_plot(s: np.ndarray, rate: float, path: str | os.PathLike, width: int 
     lo, hi = min(-0.2, float(s.min())), max(1.2, float(s.max()))
     for j in range(k):
         y0 = top + j * lane
-        to_y = lambda v: y0 + lane - 4 - (v - lo) / (hi - lo) * (lane - 8)  # noqa: E731
+        to_y = lambda v, y0=y0: y0 + lane - 4 - (v - lo) / (hi - lo) * (lane - 8)  # noqa: E731
         for level, colour in ((0.0, (180, 180, 180)), (1.0, (220, 200, 200))):
             draw.line([(left, to_y(level)), (width - 10, to_y(level))], fill=colour)
         draw.text((4, y0 + lane / 2 - 6), f"s{j + 1:02d}", fill=(30, 30, 30))

@@ -159,7 +159,8 @@ class ActorModel:
         lines = [
             f"actor: {a.n_markers} markers, {m['n_classes']} marker classes, K = {a.n_actuations}, {a.units}",
             f"  frames: {m['n_training_frames']} of {m['n_frames']} used (complete); neutral frame "
-            f"{a.metadata['settings']['neutral_frame']}; head markers {', '.join(a.metadata['settings']['head_markers'])}",
+            f"{a.metadata['settings']['neutral_frame']}; "
+            f"head markers {', '.join(a.metadata['settings']['head_markers'])}",
             f"  head: {self.stabilised_.summary()}",
             f"  time: preprocess {m['preprocess_s']:.2f} s, ICA {m['ica_s']:.2f} s, cubic fit {m['fit_s']:.2f} s",
             f"  held-out RMS marker error: linear {h['linear_rms']:.4f}, cubic {h['cubic_rms']:.4f}, cubic with "

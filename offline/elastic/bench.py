@@ -81,12 +81,16 @@ def bench_elastic(args: argparse.Namespace) -> dict:
 
 def _print(r: dict) -> None:
     i = r["ict"]
-    print(f"ICT head {i['n_vertices']} vertices, {i['n_controls']} controls, k={i['k']}: basis {i['basis_seconds']:.2f} s; "
+    print(f"ICT head {i['n_vertices']} vertices, {i['n_controls']} controls, k={i['k']}: "
+          f"basis {i['basis_seconds']:.2f} s; "
           f"subdivided {r['subdivided']['n_vertices']} vertices: basis {r['subdivided']['basis_seconds']:.1f} s")
-    print(f"relative RMS error per shape: median {100 * i['median_relative']:.1f}% worst {100 * i['worst_relative']:.1f}%; "
+    print(f"relative RMS error per shape: median {100 * i['median_relative']:.1f}% "
+          f"worst {100 * i['worst_relative']:.1f}%; "
           f"RMS median {i['median_rms_cm']:.3f} cm, worst vertex {i['worst_cm']:.2f} cm; "
-          f"truncation adds {100 * i['truncation_added_median']:.2f}% (median) {100 * i['truncation_added_worst']:.2f}% (worst)")
-    print(f"tables {i['compact_bytes'] / 1e6:.2f} MB vs dense deltas {i['dense_bytes'] / 1e6:.2f} MB: {i['ratio']:.1f}x")
+          f"truncation adds {100 * i['truncation_added_median']:.2f}% (median) "
+          f"{100 * i['truncation_added_worst']:.2f}% (worst)")
+    print(f"tables {i['compact_bytes'] / 1e6:.2f} MB vs dense deltas {i['dense_bytes'] / 1e6:.2f} MB: "
+          f"{i['ratio']:.1f}x")
     for path, m in r["frame"].items():
         print(f"  {path:8s} prepare {m['cpu_prepare_ms']:.2f} ms, draw+finish {m['draw_finish_ms']:.2f} ms (median)")
     print("goals:", ", ".join(f"{k}={'yes' if v else 'NO'}" for k, v in r["goals"].items()))

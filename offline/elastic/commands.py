@@ -128,8 +128,8 @@ def _clone(args: argparse.Namespace) -> int:
             raise SystemExit("clone-elastic: --correspondences FILE is needed for this target")
         src_pos = source.arrays["control_positions"].astype(np.float64)
         src_anchor = np.stack([src_pos[[src_points.index(n) for n in POINT_ANCHORS[a]]].mean(0) for a in ANCHOR_NAMES])
-        points = propose_control_points(src_pos, src_anchor, target.vertices, anchor_positions(target.vertices, anchors),
-                                        main_front(target), names)
+        points = propose_control_points(src_pos, src_anchor, target.vertices,
+                                        anchor_positions(target.vertices, anchors), main_front(target), names)
         points = fix_inner_lips(points, target.vertices, target.triangles, main_front(target), slit)
         if args.correspondences:
             write_control_points(args.correspondences, points)

@@ -70,7 +70,8 @@ class ControlPoints:
     def __post_init__(self):
         v = np.asarray(self.vertices)
         if v.ndim != 1 or v.dtype.kind not in "iu" or len(v) != len(self.names) or len(v) == 0:
-            raise ValueError(f"control points: expected {len(self.names)} integer vertex indices, got {v.dtype} {v.shape}")
+            raise ValueError(f"control points: expected {len(self.names)} integer vertex indices, "
+                             f"got {v.dtype} {v.shape}")
         if len(set(self.names)) != len(self.names):
             dup = next(n for n in self.names if self.names.count(n) > 1)
             raise ValueError(f"control points: duplicate name {dup!r}")
@@ -113,7 +114,8 @@ def read_control_points(path: str | os.PathLike, n_vertices: int | None = None) 
     except (OSError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: not a readable JSON control-point file ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise ValueError(f"{path}: format: expected {FORMAT!r}, got {doc.get('format') if isinstance(doc, dict) else doc!r}")
+        found = doc.get("format") if isinstance(doc, dict) else doc
+        raise ValueError(f"{path}: format: expected {FORMAT!r}, got {found!r}")
     try:
         names = tuple(str(p["name"]) for p in doc["points"])
         verts = np.array([int(p["vertex"]) for p in doc["points"]], np.int64)

@@ -113,7 +113,8 @@ def default_muscles(positions, points: ControlPoints) -> list:
     for side, sx in (("L", 1.0), ("R", -1.0)):
         lift = np.array([sx * 0.55, 0.35, -0.6]) * e
         linear(f"zygomaticMajor_{side}", at(f"cheekbone_{side}") + lift, at(f"mouth_corner_{side}"), 22, 0.35)
-        linear(f"frontalis_{side}", at(f"forehead_{side}") + np.array([0, 0.9, -0.4]) * e, at(f"brow_mid_{side}"), 35, 0.25)
+        linear(f"frontalis_{side}", at(f"forehead_{side}") + np.array([0, 0.9, -0.4]) * e, at(f"brow_mid_{side}"),
+               35, 0.25)
         linear(f"corrugator_{side}", at("nose_root") + np.array([sx * 0.15, 0.25, -0.2]) * e,
                at(f"brow_inner_{side}"), 40, 0.15)
         linear(f"depressorAnguli_{side}", at(f"jaw_chin_{side}") + np.array([sx * 0.3, -0.3, -0.3]) * e,

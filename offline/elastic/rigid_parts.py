@@ -52,7 +52,9 @@ def jaw_transforms(params, control_positions, anchors) -> tuple[np.ndarray, np.n
     return kabsch(rest[None] + u, np.broadcast_to(rest, u.shape))
 
 
-def rigid_labels(vertices, points: ControlPoints, detached_mask, params=None, deltas=None) -> tuple[np.ndarray, np.ndarray]:
+def rigid_labels(
+    vertices, points: ControlPoints, detached_mask, params=None, deltas=None
+) -> tuple[np.ndarray, np.ndarray]:
     """The rigid-part sections of an elastic table: one part, the jaw.
 
     Parameters

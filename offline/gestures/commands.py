@@ -185,7 +185,8 @@ def plot_tracks(path, level_db, tracks, names, fps: float, channels=_PLOT_CHANNE
     for k, c in enumerate(chans, 1):
         y = tracks[:, list(names).index(c)]
         lo, hi = float(y.min()), float(y.max())
-        lane_plot(k, y, c, lo, hi if hi > lo else lo + 1.0, (40, 90, 200) if not c.startswith("head") else (200, 80, 40))
+        colour = (200, 80, 40) if c.startswith("head") else (40, 90, 200)
+        lane_plot(k, y, c, lo, hi if hi > lo else lo + 1.0, colour)
     y_axis = top + lane * (len(chans) + 1)
     for s in range(0, int(n / fps) + 1):
         x = left + s * fps * (width - left - 10) / max(n - 1, 1)

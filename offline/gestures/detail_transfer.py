@@ -221,7 +221,7 @@ class DetailTransfer:
         k = len(d)
         out = np.zeros((k, len(self.vertex_region), 3))
         verts = self._vertices
-        for r, mk, vx, rbf, mask in self._parts:
+        for _, mk, vx, rbf, mask in self._parts:
             values = d[:, mk].transpose(1, 0, 2).reshape(len(mk), 3 * k)
             rbf.fit(self.placement.surface[mk], values)         # §5.2: Φ w = d, no linear term
             f = rbf.transform(verts[vx]).reshape(len(vx), k, 3).transpose(1, 0, 2)
@@ -329,7 +329,9 @@ def detail_character(character: Character, transfer: DetailTransfer, detail: Mar
 
 
 def detail_table(db, detail: MarkerDetail, take_names, rate: float = 60.0) -> np.ndarray:
-    """Detail weights per reference frame of a ``gesture_db`` (for :class:`~facepuppet.runtime.gestures.layer.GestureLayer`).
+    """Detail weights per reference frame of a ``gesture_db``, as the runtime's gesture layer reads them.
+
+    See :class:`~facepuppet.runtime.gestures.layer.GestureLayer`.
 
     Parameters
     ----------
