@@ -19,6 +19,7 @@ frame and s = 1 a strong actuation (the ``strong_quantile`` of the take).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.signal import argrelmax
@@ -173,7 +174,7 @@ class ActuationModel:
 
     def __init__(self, n_components: int = 13, bandwidth: float = DEFAULT_BANDWIDTH,
                  handover_power: float = DEFAULT_HANDOVER_POWER, strong_quantile: float = 0.99,
-                 random_state: int = 0):
+                 random_state: int = 0) -> None:
         self.n_components = n_components
         self.bandwidth = bandwidth
         self.handover_power = handover_power
@@ -231,7 +232,7 @@ class ActuationModel:
             raise RuntimeError("ActuationModel is not fitted; call fit(disp) first")
 
 
-def k_report(disp: np.ndarray, signals: np.ndarray, ks=(1, 2, 4, 8, 13, 20, 30)) -> list[dict]:
+def k_report(disp: np.ndarray, signals: np.ndarray, ks: Sequence[int] = (1, 2, 4, 8, 13, 20, 30)) -> list[dict]:
     """Held-in marker reconstruction error versus K, actuation signals against plain PCA.
 
     FastICA rotates the whitened K-dimensional principal subspace of the

@@ -8,8 +8,10 @@ held-out RMS marker error of the linear ICA model and the cubic one.
 
 from __future__ import annotations
 
+import argparse
 import time
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 
@@ -79,7 +81,7 @@ def _train(capture, k: int, **settings) -> tuple[object, dict]:
                    "units": model.actor_.units}
 
 
-def run(args) -> dict:
+def run(args: argparse.Namespace) -> dict:
     from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
     from facepuppet.offline.io.capture import read_capture
 
@@ -123,7 +125,7 @@ def _arguments(parser) -> None:
     parser.add_argument("--solve-frames", type=int, default=1500, help="synthetic frames to solve (default 1500)")
 
 
-def register_benches(register_bench) -> None:
+def register_benches(register_bench: Callable[..., None]) -> None:
     """Entry point: add the ``shin`` benchmark."""
     register_bench("shin", run, "Shin & Lee: training time (synthetic 68x3500, real takes), solve ms, "
                                 "linear vs cubic error", _arguments)

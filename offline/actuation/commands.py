@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``train-actor`` and ``retarget-actor`` to the ``facepuppet`` parser."""
     p = subparsers.add_parser(
         "train-actor", help="marker capture (TRC/C3D/CSV) -> actor table (actuations + cubic functions)",

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -49,7 +50,7 @@ class ActorModel:
     def __init__(self, k: int = 13, head_markers: Sequence[str] | None = None, neutral_frame: int | None = None,
                  bandwidth: float = 0.5, handover_power: float = 4.0, random_state: int = 0,
                  report_ks: tuple[int, ...] = (1, 2, 4, 8, 13, 20, 30), threads: int | None = 1,
-                 ridge_ab: float | str = "auto"):
+                 ridge_ab: float | str = "auto") -> None:
         self.k = k
         self.head_markers = head_markers
         self.neutral_frame = neutral_frame
@@ -172,6 +173,6 @@ class ActorModel:
         return "\n".join(lines)
 
 
-def train_actor(capture: Capture, k: int = 13, progress: Progress | None = None, **settings) -> ActorModel:
+def train_actor(capture: Capture, k: int = 13, progress: Progress | None = None, **settings: Any) -> ActorModel:
     """``ActorModel(k, **settings).fit(capture, progress)``."""
     return ActorModel(k=k, **settings).fit(capture, progress)
