@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.elastic.params import fit_character, target_fixed_mask
 
 
-def midpoint_subdivide(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
+def midpoint_subdivide(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One level of midpoint subdivision: each triangle into four. Returns (vertices, triangles)."""
     v = np.asarray(vertices, np.float64)
     t = np.asarray(triangles, np.int64)
@@ -105,6 +106,6 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=int, default=480)
 
 
-def register_benches(register_bench) -> None:
+def register_benches(register_bench: Callable[..., None]) -> None:
     register_bench("elastic", bench_elastic, "elastic control-point model: basis time, frame cost, memory, error",
                    _add_arguments)

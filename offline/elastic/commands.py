@@ -163,7 +163,7 @@ def _clone(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("fit-elastic", help="elastic control-point model (Yano & Harada 2009) of a character")
     p.add_argument("character", type=Path, help="character table (.npz) or 'demo'")
     p.add_argument("-o", "--output", type=Path, required=True, help="elastic tables to write (.npz)")

@@ -21,13 +21,18 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from facepuppet.runtime.geometry import vertex_normals
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 FORMAT = "facepuppet-control-points"
 ROLES = ("nose_tip", "forehead", "eye_inner_L", "eye_inner_R")
@@ -67,7 +72,7 @@ class ControlPoints:
     names: tuple
     vertices: np.ndarray
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         v = np.asarray(self.vertices)
         if v.ndim != 1 or v.dtype.kind not in "iu" or len(v) != len(self.names) or len(v) == 0:
             raise ValueError(f"control points: expected {len(self.names)} integer vertex indices, "
@@ -93,7 +98,7 @@ class ControlPoints:
                              f"got {self.vertices.min()}..{self.vertices.max()}")
         return self
 
-    def reorder(self, names) -> ControlPoints:
+    def reorder(self, names: Sequence[str]) -> ControlPoints:
         """The points named ``names``, in that order (ValueError if one is missing)."""
         return ControlPoints(tuple(names), np.array([self.vertex(n) for n in names], np.int64))
 
@@ -125,7 +130,7 @@ def read_control_points(path: str | os.PathLike, n_vertices: int | None = None) 
     return points.check(n_vertices, str(path)) if n_vertices is not None else points
 
 
-def front_vertices(vertices, triangles, min_normal_z: float = 0.3) -> np.ndarray:
+def front_vertices(vertices: np.ndarray, triangles: np.ndarray, min_normal_z: float = 0.3) -> np.ndarray:
     """Indices of vertices in triangles whose normal faces the viewer (+z) enough, (p,) int64."""
     v = np.asarray(vertices, np.float64)
     used = np.unique(np.asarray(triangles, np.int64))
@@ -139,7 +144,8 @@ def _front_point(vertices, candidates, x: float, y: float) -> int:
     return int(candidates[np.argmin(d)])
 
 
-def ict_control_points(landmarks, vertices, triangles, face_vertices=None) -> ControlPoints:
+def ict_control_points(landmarks: ArrayLike, vertices: np.ndarray, triangles: np.ndarray,
+                       face_vertices: np.ndarray | None = None) -> ControlPoints:
     """47 control points on a head with 68 Multi-PIE landmarks (40 landmarks + 7 added points).
 
     The set follows the MPEG-4 feature points, denser at the eyes and mouth:
@@ -178,7 +184,7 @@ def ict_control_points(landmarks, vertices, triangles, face_vertices=None) -> Co
     return ControlPoints(tuple(names), np.array(verts, np.int64))
 
 
-def similarity_transform(source, target) -> tuple[float, np.ndarray, np.ndarray]:
+def similarity_transform(source: np.ndarray, target: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Least-squares similarity (Umeyama 1991) mapping ``source`` points onto ``target``.
 
     Returns (scale, rotation (3, 3), translation (3,)) with target ≈ scale * R @ source + t.
@@ -193,14 +199,19 @@ def similarity_transform(source, target) -> tuple[float, np.ndarray, np.ndarray]
     return scale, r, mb - scale * r @ ma
 
 
-def anchor_positions(vertices, groups: dict) -> np.ndarray:
+def anchor_positions(vertices: np.ndarray, groups: dict) -> np.ndarray:
     """(len(ANCHOR_NAMES), 3) anchor positions: each the mean of its vertex group."""
     v = np.asarray(vertices, np.float64)
     return np.stack([v[list(groups[name])].mean(0) for name in ANCHOR_NAMES])
 
 
 def propose_control_points(
-    source_points, source_anchors, target_vertices, target_anchors, candidates, names
+    source_points: np.ndarray,
+    source_anchors: np.ndarray,
+    target_vertices: np.ndarray,
+    target_anchors: np.ndarray,
+    candidates: np.ndarray,
+    names: Sequence[str],
 ) -> ControlPoints:
     """Propose target control points: align anchors, then take the nearest free candidate vertex.
 
