@@ -9,7 +9,9 @@ blendshape correspondence (the control) and once non-linear
 
 from __future__ import annotations
 
+import argparse
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -57,7 +59,7 @@ def _runtime_timing(source, target, frames, log) -> dict:
     return result
 
 
-def run_bench(args, log=print) -> dict:
+def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> dict:
     from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 
@@ -104,6 +106,6 @@ def run_bench(args, log=print) -> dict:
             "runtime_stage": runtime}
 
 
-def register_benches(register_bench) -> None:
+def register_benches(register_bench: Callable[..., None]) -> None:
     register_bench("kpls", run_bench, "kernel-PLS retargeting: cyclic error per method, fit/predict "
                    "times, runtime stage per frame", _add_arguments)
