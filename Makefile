@@ -5,13 +5,16 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test setup system-deps bench clean
+.PHONY: demo test lint setup system-deps bench clean
 
 demo: $(STAMP)
 	$(VENV)/bin/facepuppet demo --out demo-out
 
 test: $(STAMP)
 	$(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
 
 setup: $(STAMP)
 

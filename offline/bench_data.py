@@ -20,7 +20,7 @@ def add_data_argument(parser: argparse.ArgumentParser) -> None:
                         help=f"the data kit folder (default: ${ENV})")
 
 
-def data_dir(value) -> Path:
+def data_dir(value: str | os.PathLike | None) -> Path:
     """The data kit folder from ``--data`` or $FACEPUPPET_DATA; ValueError when neither names a folder."""
     chosen = value if value is not None else os.environ.get(ENV)
     if not chosen:

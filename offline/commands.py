@@ -6,10 +6,10 @@ import argparse
 import importlib
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from facepuppet.runtime.character import MATERIAL_KINDS
-
 
 # Offline modules with their own ``register(subparsers)``; each must exist and import
 # (a missing one is an error, never a silently dropped command).
@@ -25,13 +25,13 @@ def _modules(names):
         yield importlib.import_module(name)
 
 
-def register_benches(register_bench) -> None:
+def register_benches(register_bench: Callable[..., None]) -> None:
     """Entry point of the ``facepuppet.benches`` group: add the offline benchmarks."""
     for module in _modules(_BENCH_MODULES):
         module.register_benches(register_bench)
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the offline commands to the ``facepuppet`` parser."""
     _register_import_rig(subparsers)
     for module in _modules(_COMMAND_MODULES):

@@ -19,6 +19,7 @@ frame and s = 1 a strong actuation (the ``strong_quantile`` of the take).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.signal import argrelmax
@@ -173,14 +174,14 @@ class ActuationModel:
 
     def __init__(self, n_components: int = 13, bandwidth: float = DEFAULT_BANDWIDTH,
                  handover_power: float = DEFAULT_HANDOVER_POWER, strong_quantile: float = 0.99,
-                 random_state: int = 0):
+                 random_state: int = 0) -> None:
         self.n_components = n_components
         self.bandwidth = bandwidth
         self.handover_power = handover_power
         self.strong_quantile = strong_quantile
         self.random_state = random_state
 
-    def fit(self, disp: np.ndarray) -> "ActuationModel":
+    def fit(self, disp: np.ndarray) -> ActuationModel:
         """Learn class axes and the unmixing from displacements (n_frames, n_markers, 3), float, units."""
         from sklearn.decomposition import FastICA
 
@@ -202,7 +203,8 @@ class ActuationModel:
             s = ica.fit_transform(x)
         self.converged_ = ica.n_iter_ < ica.max_iter
         if not self.converged_:
-            warnings.warn(f"FastICA did not converge in {ica.max_iter} iterations (K={k})", RuntimeWarning)
+            warnings.warn(f"FastICA did not converge in {ica.max_iter} iterations (K={k})", RuntimeWarning,
+                          stacklevel=2)
         w = ica.components_                                    # s = W (x - mean)
         s = s - (-w @ ica.mean_)                               # shift so the neutral (x = 0) gives s = 0
         lo, hi = np.quantile(s, 1 - self.strong_quantile, axis=0), np.quantile(s, self.strong_quantile, axis=0)
@@ -230,7 +232,7 @@ class ActuationModel:
             raise RuntimeError("ActuationModel is not fitted; call fit(disp) first")
 
 
-def k_report(disp: np.ndarray, signals: np.ndarray, ks=(1, 2, 4, 8, 13, 20, 30)) -> list[dict]:
+def k_report(disp: np.ndarray, signals: np.ndarray, ks: Sequence[int] = (1, 2, 4, 8, 13, 20, 30)) -> list[dict]:
     """Held-in marker reconstruction error versus K, actuation signals against plain PCA.
 
     FastICA rotates the whitened K-dimensional principal subspace of the

@@ -8,12 +8,14 @@ held-out RMS marker error of the linear ICA model and the cubic one.
 
 from __future__ import annotations
 
-from facepuppet.offline.bench_data import add_data_argument, data_dir
-
+import argparse
 import time
 import warnings
+from collections.abc import Callable
 
 import numpy as np
+
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 TAKES = ("animface_jaw.trc", "animface_cheeks.trc")
 
@@ -31,7 +33,7 @@ def _solve_times(actor, markers: np.ndarray, n_given: int | None, seed: int = 0)
         keep[given] = True
         obs = np.where(keep[None, :, None], obs, np.nan)
     times, cpu, iters = np.empty(len(obs)), np.empty(len(obs)), np.empty(len(obs))
-    for rep in range(2):                                        # first pass warms caches
+    for _ in range(2):                                          # first pass warms caches
         solver.reset()
         for f in range(len(obs)):
             c0, t0 = time.thread_time(), time.perf_counter()
@@ -79,9 +81,9 @@ def _train(capture, k: int, **settings) -> tuple[object, dict]:
                    "units": model.actor_.units}
 
 
-def run(args) -> dict:
-    from facepuppet.offline.io.capture import read_capture
+def run(args: argparse.Namespace) -> dict:
     from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
+    from facepuppet.offline.io.capture import read_capture
 
     results: dict = {"solve": {}, "training": {}, "machine_before": machine_load()}
     cap, _ = synthetic_capture(n_frames=3500, n_markers=68, k=13, seed=0)
@@ -123,7 +125,7 @@ def _arguments(parser) -> None:
     parser.add_argument("--solve-frames", type=int, default=1500, help="synthetic frames to solve (default 1500)")
 
 
-def register_benches(register_bench) -> None:
+def register_benches(register_bench: Callable[..., None]) -> None:
     """Entry point: add the ``shin`` benchmark."""
     register_bench("shin", run, "Shin & Lee: training time (synthetic 68x3500, real takes), solve ms, "
                                 "linear vs cubic error", _arguments)

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``train-actor`` and ``retarget-actor`` to the ``facepuppet`` parser."""
     p = subparsers.add_parser(
         "train-actor", help="marker capture (TRC/C3D/CSV) -> actor table (actuations + cubic functions)",
@@ -45,7 +45,8 @@ def register(subparsers) -> None:
     r.add_argument("--region-radius", type=float, default=None, metavar="FAPU",
                    help="a shape needs a marker within this many FAPU of its moving region (default 0.3)")
     r.add_argument("--evaluate", type=Path, metavar="CAPTURE",
-                   help="report the marker-space transfer error on this take's frames (TRC/C3D/CSV, the actor's markers)")
+                   help="report the marker-space transfer error on this take's frames "
+                        "(TRC/C3D/CSV, the actor's markers)")
     r.add_argument("--pictures", type=Path, metavar="DIR",
                    help="write face_actuations.png (the K actuations at s=1 on the character's face) here")
     r.set_defaults(func=_retarget_actor)
@@ -89,7 +90,7 @@ def _retarget_actor(args: argparse.Namespace) -> int:
     from facepuppet.runtime.actuation.actor import Actor
     from facepuppet.runtime.character import Character
 
-    from facepuppet.offline.actuation import transfer as transfer
+    from facepuppet.offline.actuation import transfer
     start = time.perf_counter()
     actor = Actor.load(args.actor)
     character = Character.load(args.character)

@@ -16,6 +16,8 @@ min ||Phi theta_j - x_j||^2 for every j with one factorisation.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 
@@ -111,7 +113,7 @@ def point_rms(coef: np.ndarray, s: np.ndarray, y: np.ndarray, n_points: int) -> 
     return float(np.sqrt(d2[valid].mean())) if valid.any() else float("nan")
 
 
-def choose_ridge_ab(s: np.ndarray, y: np.ndarray, n_points: int, strengths=RIDGE_AB_STRENGTHS,
+def choose_ridge_ab(s: np.ndarray, y: np.ndarray, n_points: int, strengths: Sequence[float] = RIDGE_AB_STRENGTHS,
                     fraction: float = 0.2) -> tuple[float, list[dict]]:
     """The ``ridge_ab`` of least held-out error on a split of the given frames (:func:`holdout_split`).
 

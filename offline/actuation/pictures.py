@@ -4,12 +4,19 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from PIL import Image, ImageDraw
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.render.images import contact_sheet, save_png
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from facepuppet.runtime.actuation.pair import ActorPair
+    from facepuppet.runtime.character import Character
 
 _BG, _NEUTRAL, _MOVED, _LINK = (250, 250, 248), (150, 150, 150), (200, 40, 30), (60, 90, 200)
 
@@ -63,7 +70,7 @@ def signal_plot(s: np.ndarray, rate: float, path: str | os.PathLike, width: int 
     lo, hi = min(-0.2, float(s.min())), max(1.2, float(s.max()))
     for j in range(k):
         y0 = top + j * lane
-        to_y = lambda v: y0 + lane - 4 - (v - lo) / (hi - lo) * (lane - 8)  # noqa: E731
+        to_y = lambda v, y0=y0: y0 + lane - 4 - (v - lo) / (hi - lo) * (lane - 8)  # noqa: E731
         for level, colour in ((0.0, (180, 180, 180)), (1.0, (220, 200, 200))):
             draw.line([(left, to_y(level)), (width - 10, to_y(level))], fill=colour)
         draw.text((4, y0 + lane / 2 - 6), f"s{j + 1:02d}", fill=(30, 30, 30))
@@ -77,7 +84,8 @@ def signal_plot(s: np.ndarray, rate: float, path: str | os.PathLike, width: int 
     return path
 
 
-def face_actuation_images(pair, character, ctx, size: tuple[int, int] = (320, 320), strength: float = 1.0,
+def face_actuation_images(pair: ActorPair, character: Character, ctx: moderngl.Context,
+                          size: tuple[int, int] = (320, 320), strength: float = 1.0,
                           path: str = "auto") -> list[tuple[str, np.ndarray]]:
     """Each actuation at s = ``strength`` e_k, transferred to ``character`` through ``pair`` and rendered.
 
@@ -125,7 +133,8 @@ def _marker_box(pixels: np.ndarray, width: int, height: int, aspect: float, marg
     return tuple(int(round(v)) for v in (*(centre - half), *(centre + half)))
 
 
-def face_actuation_sheet(pair, character, path: str | os.PathLike, columns: int = 5, ctx=None) -> Path:
+def face_actuation_sheet(pair: ActorPair, character: Character, path: str | os.PathLike, columns: int = 5,
+                         ctx: moderngl.Context | None = None) -> Path:
     """Contact sheet of the neutral and the K actuations at s = 1 on the character's face; returns the PNG path."""
     own = ctx is None
     if own:

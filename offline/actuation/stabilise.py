@@ -12,6 +12,7 @@ rotation R and translation t with R Q + t ≈ P (frame -> head coordinates).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,7 +84,8 @@ def find_head_markers(markers: np.ndarray, n: int = DEFAULT_N_HEAD) -> tuple[int
     return tuple(sorted(chosen))
 
 
-def stabilise(markers: np.ndarray, names, head_markers=None, reference_frame: int = 0,
+def stabilise(markers: np.ndarray, names: Sequence[str], head_markers: Sequence[str | int] | None = None,
+              reference_frame: int = 0,
               n_head: int = DEFAULT_N_HEAD) -> Stabilised:
     """Express a take in head coordinates.
 

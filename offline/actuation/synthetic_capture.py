@@ -30,7 +30,7 @@ def synthetic_actuations(n_frames: int, k: int, rng: np.random.Generator, rate: 
 
 
 def synthetic_capture(n_frames: int = 3500, n_markers: int = 68, k: int = 13, noise: float = 0.005,
-                      occlusion_gaps: int = 20, head_motion: bool = True, seed: int = 0):
+                      occlusion_gaps: int = 20, head_motion: bool = True, seed: int = 0) -> tuple[Capture, dict]:
     """A take in cm with known actuations.
 
     Parameters

@@ -9,7 +9,8 @@ actuations), ``stabilised_`` and ``metrics_`` (timings, errors, K report).
 from __future__ import annotations
 
 import time
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -17,9 +18,9 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.actuation.basis import ActuationModel, k_report, neutral_frame
-from facepuppet.offline.io.capture import Capture
 from facepuppet.offline.actuation.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
 from facepuppet.offline.actuation.stabilise import stabilise
+from facepuppet.offline.io.capture import Capture
 
 Progress = Callable[[str, float, str], None]
 BOUND_MARGIN = 0.25  # solver bounds: the training range widened by this fraction of it
@@ -49,7 +50,7 @@ class ActorModel:
     def __init__(self, k: int = 13, head_markers: Sequence[str] | None = None, neutral_frame: int | None = None,
                  bandwidth: float = 0.5, handover_power: float = 4.0, random_state: int = 0,
                  report_ks: tuple[int, ...] = (1, 2, 4, 8, 13, 20, 30), threads: int | None = 1,
-                 ridge_ab: float | str = "auto"):
+                 ridge_ab: float | str = "auto") -> None:
         self.k = k
         self.head_markers = head_markers
         self.neutral_frame = neutral_frame
@@ -60,7 +61,7 @@ class ActorModel:
         self.threads = threads
         self.ridge_ab = ridge_ab
 
-    def fit(self, capture: Capture, progress: Progress | None = None) -> "ActorModel":
+    def fit(self, capture: Capture, progress: Progress | None = None) -> ActorModel:
         """Learn the actor from ``capture`` (any units; head motion is removed first)."""
         if self.threads is None:
             return self._fit(capture, progress)
@@ -69,7 +70,7 @@ class ActorModel:
         with threadpool_limits(limits=self.threads, user_api="blas"):
             return self._fit(capture, progress)
 
-    def _fit(self, capture: Capture, progress: Progress | None) -> "ActorModel":
+    def _fit(self, capture: Capture, progress: Progress | None) -> ActorModel:
         say = progress or (lambda stage, fraction, message: None)
         if not isinstance(capture, Capture):
             raise TypeError(f"ActorModel.fit: expected a Capture, got {type(capture).__name__}")
@@ -159,7 +160,8 @@ class ActorModel:
         lines = [
             f"actor: {a.n_markers} markers, {m['n_classes']} marker classes, K = {a.n_actuations}, {a.units}",
             f"  frames: {m['n_training_frames']} of {m['n_frames']} used (complete); neutral frame "
-            f"{a.metadata['settings']['neutral_frame']}; head markers {', '.join(a.metadata['settings']['head_markers'])}",
+            f"{a.metadata['settings']['neutral_frame']}; "
+            f"head markers {', '.join(a.metadata['settings']['head_markers'])}",
             f"  head: {self.stabilised_.summary()}",
             f"  time: preprocess {m['preprocess_s']:.2f} s, ICA {m['ica_s']:.2f} s, cubic fit {m['fit_s']:.2f} s",
             f"  held-out RMS marker error: linear {h['linear_rms']:.4f}, cubic {h['cubic_rms']:.4f}, cubic with "
@@ -171,6 +173,6 @@ class ActorModel:
         return "\n".join(lines)
 
 
-def train_actor(capture: Capture, k: int = 13, progress: Progress | None = None, **settings) -> ActorModel:
+def train_actor(capture: Capture, k: int = 13, progress: Progress | None = None, **settings: Any) -> ActorModel:
     """``ActorModel(k, **settings).fit(capture, progress)``."""
     return ActorModel(k=k, **settings).fit(capture, progress)

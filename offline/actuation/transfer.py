@@ -39,8 +39,9 @@ from __future__ import annotations
 import fnmatch
 import json
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import lsq_linear
@@ -89,7 +90,7 @@ def _apply(m: np.ndarray, p: np.ndarray) -> np.ndarray:
     return p @ m[:3, :3].T + m[:3, 3]
 
 
-def read_override(path: str | os.PathLike, marker_names, n_vertices: int) -> dict[int, int]:
+def read_override(path: str | os.PathLike, marker_names: Sequence[str], n_vertices: int) -> dict[int, int]:
     """``{"marker name": vertex index, ...}`` JSON -> {marker index: vertex index}, checked."""
     path = Path(path)
     try:
@@ -294,7 +295,7 @@ def s_distribution(actor: Actor) -> tuple[np.ndarray, np.ndarray, str]:
 
 
 def training_pairs(actor: Actor, n_sparse: int = 400, n_dense: int = 200, levels: int = 12, seed: int = 0,
-                   low: float = 0.01, high: float = 0.99):
+                   low: float = 0.01, high: float = 0.99) -> tuple[np.ndarray, np.ndarray]:
     """Parameter-shape pairs from the actor's own model over the actuations' real range.
 
     Each actuation alone at ``levels`` values from its ``low`` to its ``high`` quantile (negative

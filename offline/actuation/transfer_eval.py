@@ -23,8 +23,8 @@ from scipy.optimize import lsq_linear
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.actuation.solver import MarkerSolver
+from facepuppet.runtime.character import Character
 from facepuppet.runtime.rigid import kabsch
 
 

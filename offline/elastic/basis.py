@@ -23,6 +23,8 @@ because its bending system would be singular.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -30,11 +32,15 @@ from scipy.sparse.linalg import splu
 
 from facepuppet.offline.elastic.laplacian import bilaplacian, check_mesh, components, vertex_gradients
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
 DEFAULT_FIXED_RATIO = 1.4
 DEFAULT_K = 8
 
 
-def fixed_region(vertices, nose_tip, forehead, ratio: float = DEFAULT_FIXED_RATIO) -> np.ndarray:
+def fixed_region(vertices: np.ndarray, nose_tip: ArrayLike, forehead: ArrayLike,
+                 ratio: float = DEFAULT_FIXED_RATIO) -> np.ndarray:
     """Vertices far from the nose tip: |x - nose| > ratio * |forehead - nose| (Yano & Harada §4).
 
     Parameters
@@ -57,7 +63,8 @@ def fixed_region(vertices, nose_tip, forehead, ratio: float = DEFAULT_FIXED_RATI
     return np.linalg.norm(v - nose, axis=1) > ratio * scale  # Yano & Harada §4 distance rule
 
 
-def check_handles(handles, n_vertices: int, fixed_mask: np.ndarray, names=None) -> np.ndarray:
+def check_handles(handles: np.ndarray, n_vertices: int, fixed_mask: np.ndarray,
+                  names: Sequence[str] | None = None) -> np.ndarray:
     """Handles as (n_c,) int64, or ValueError on duplicates, range or a handle in the fixed region."""
     h = np.asarray(handles)
     if h.ndim != 1 or len(h) == 0 or h.dtype.kind not in "iu":
@@ -100,11 +107,12 @@ class ElasticBasis:
     solve_seconds_ : float, factorisation plus solve time
     """
 
-    def __init__(self, k: int = DEFAULT_K, free_components=()):
+    def __init__(self, k: int = DEFAULT_K, free_components: Sequence[int] = ()) -> None:
         self.k = int(k)
         self.free_components = tuple(int(c) for c in free_components)
 
-    def fit(self, vertices, triangles, handles, fixed_mask=None, names=None) -> "ElasticBasis":
+    def fit(self, vertices: np.ndarray, triangles: np.ndarray, handles: np.ndarray,
+            fixed_mask: np.ndarray | None = None, names: Sequence[str] | None = None) -> ElasticBasis:
         """Precompute the basis (eqs. 3–5) and its compact form.
 
         Parameters
@@ -187,7 +195,7 @@ class ElasticBasis:
             shape=(n, len(self.handles_)),
         )
 
-    def displace(self, controls, compact: bool = False) -> np.ndarray:
+    def displace(self, controls: np.ndarray, compact: bool = False) -> np.ndarray:
         """Vertex displacements for control displacements U: d = Σ_i b_i u_i (eq. 5), (n, 3) float64."""
         u = np.asarray(controls, dtype=np.float64)
         if u.shape != (len(self.handles_), 3):

@@ -9,23 +9,21 @@ adding < 1 %, tables at least 3x smaller than dense deltas.
 
 from __future__ import annotations
 
-from facepuppet.offline.bench_data import add_data_argument, data_dir
-
 import argparse
 import json
 import time
+from collections.abc import Callable
 
 import numpy as np
 
-
-from facepuppet.offline.elastic.control_points import ict_control_points
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis
 from facepuppet.offline.elastic.commands import main_front
+from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.elastic.params import fit_character, target_fixed_mask
 
 
-
-def midpoint_subdivide(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
+def midpoint_subdivide(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One level of midpoint subdivision: each triangle into four. Returns (vertices, triangles)."""
     v = np.asarray(vertices, np.float64)
     t = np.asarray(triangles, np.int64)
@@ -84,12 +82,16 @@ def bench_elastic(args: argparse.Namespace) -> dict:
 
 def _print(r: dict) -> None:
     i = r["ict"]
-    print(f"ICT head {i['n_vertices']} vertices, {i['n_controls']} controls, k={i['k']}: basis {i['basis_seconds']:.2f} s; "
+    print(f"ICT head {i['n_vertices']} vertices, {i['n_controls']} controls, k={i['k']}: "
+          f"basis {i['basis_seconds']:.2f} s; "
           f"subdivided {r['subdivided']['n_vertices']} vertices: basis {r['subdivided']['basis_seconds']:.1f} s")
-    print(f"relative RMS error per shape: median {100 * i['median_relative']:.1f}% worst {100 * i['worst_relative']:.1f}%; "
+    print(f"relative RMS error per shape: median {100 * i['median_relative']:.1f}% "
+          f"worst {100 * i['worst_relative']:.1f}%; "
           f"RMS median {i['median_rms_cm']:.3f} cm, worst vertex {i['worst_cm']:.2f} cm; "
-          f"truncation adds {100 * i['truncation_added_median']:.2f}% (median) {100 * i['truncation_added_worst']:.2f}% (worst)")
-    print(f"tables {i['compact_bytes'] / 1e6:.2f} MB vs dense deltas {i['dense_bytes'] / 1e6:.2f} MB: {i['ratio']:.1f}x")
+          f"truncation adds {100 * i['truncation_added_median']:.2f}% (median) "
+          f"{100 * i['truncation_added_worst']:.2f}% (worst)")
+    print(f"tables {i['compact_bytes'] / 1e6:.2f} MB vs dense deltas {i['dense_bytes'] / 1e6:.2f} MB: "
+          f"{i['ratio']:.1f}x")
     for path, m in r["frame"].items():
         print(f"  {path:8s} prepare {m['cpu_prepare_ms']:.2f} ms, draw+finish {m['draw_finish_ms']:.2f} ms (median)")
     print("goals:", ", ".join(f"{k}={'yes' if v else 'NO'}" for k, v in r["goals"].items()))
@@ -104,6 +106,6 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=int, default=480)
 
 
-def register_benches(register_bench) -> None:
+def register_benches(register_bench: Callable[..., None]) -> None:
     register_bench("elastic", bench_elastic, "elastic control-point model: basis time, frame cost, memory, error",
                    _add_arguments)

@@ -16,6 +16,8 @@ Symbols → code names:
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 import numpy as np
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
@@ -49,7 +51,8 @@ def face_frame(positions: np.ndarray, points: ControlPoints) -> np.ndarray:
     return np.stack([x, y, np.cross(x, y)])
 
 
-def clone_parameters(params, source_positions, source_points, target_positions, target_points) -> np.ndarray:
+def clone_parameters(params: np.ndarray, source_positions: np.ndarray, source_points: ControlPoints,
+                     target_positions: np.ndarray, target_points: ControlPoints) -> np.ndarray:
     """Carry control displacements from source to target (§5).
 
     Parameters
@@ -72,7 +75,7 @@ def clone_parameters(params, source_positions, source_points, target_positions, 
     return (scale * local @ r_t).astype(np.float32)  # FAPU scale, back out of the target frame (§5)
 
 
-def mesh_character(vertices, triangles, name: str, units: str = "cm") -> Character:
+def mesh_character(vertices: np.ndarray, triangles: np.ndarray, name: str, units: str = "cm") -> Character:
     """A shape-less skin-coloured character for a bare target mesh."""
     v = np.asarray(vertices, np.float32)
     t = np.asarray(triangles, np.uint32)
@@ -108,7 +111,12 @@ def character_with_shapes(base: Character, shapes: dict) -> Character:
     )
 
 
-def clone_model(source: ElasticModel, target_points: ControlPoints, target_vertices, build_model) -> ElasticModel:
+def clone_model(
+    source: ElasticModel,
+    target_points: ControlPoints,
+    target_vertices: np.ndarray,
+    build_model: Callable[[ControlPoints, np.ndarray, Sequence[str]], ElasticModel],
+) -> ElasticModel:
     """An elastic model for the target: its own basis, the source's parameters cloned (§5).
 
     ``build_model(points, params, shape_names)`` fits the target basis and

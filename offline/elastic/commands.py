@@ -11,16 +11,22 @@ import numpy as np
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
 
+from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
 from facepuppet.offline.elastic.clone import character_with_shapes, clone_model, mesh_character
 from facepuppet.offline.elastic.control_points import (
-    ANCHOR_NAMES, MEDIAPIPE_ANCHORS, ControlPoints, anchor_positions, front_vertices, ict_control_points,
-    propose_control_points, read_control_points, write_control_points,
+    ANCHOR_NAMES,
+    MEDIAPIPE_ANCHORS,
+    ControlPoints,
+    anchor_positions,
+    front_vertices,
+    ict_control_points,
+    propose_control_points,
+    read_control_points,
+    write_control_points,
 )
-from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
-from facepuppet.offline.elastic.params import build_model, fit_character
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
-
+from facepuppet.offline.elastic.params import build_model, fit_character
 
 # Anchor groups (control_points.ANCHOR_NAMES) by control-point name.
 POINT_ANCHORS = {
@@ -122,8 +128,8 @@ def _clone(args: argparse.Namespace) -> int:
             raise SystemExit("clone-elastic: --correspondences FILE is needed for this target")
         src_pos = source.arrays["control_positions"].astype(np.float64)
         src_anchor = np.stack([src_pos[[src_points.index(n) for n in POINT_ANCHORS[a]]].mean(0) for a in ANCHOR_NAMES])
-        points = propose_control_points(src_pos, src_anchor, target.vertices, anchor_positions(target.vertices, anchors),
-                                        main_front(target), names)
+        points = propose_control_points(src_pos, src_anchor, target.vertices,
+                                        anchor_positions(target.vertices, anchors), main_front(target), names)
         points = fix_inner_lips(points, target.vertices, target.triangles, main_front(target), slit)
         if args.correspondences:
             write_control_points(args.correspondences, points)
@@ -157,7 +163,7 @@ def _clone(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("fit-elastic", help="elastic control-point model (Yano & Harada 2009) of a character")
     p.add_argument("character", type=Path, help="character table (.npz) or 'demo'")
     p.add_argument("-o", "--output", type=Path, required=True, help="elastic tables to write (.npz)")

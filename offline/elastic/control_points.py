@@ -21,13 +21,18 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from facepuppet.runtime.geometry import vertex_normals
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 FORMAT = "facepuppet-control-points"
 ROLES = ("nose_tip", "forehead", "eye_inner_L", "eye_inner_R")
@@ -67,10 +72,11 @@ class ControlPoints:
     names: tuple
     vertices: np.ndarray
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         v = np.asarray(self.vertices)
         if v.ndim != 1 or v.dtype.kind not in "iu" or len(v) != len(self.names) or len(v) == 0:
-            raise ValueError(f"control points: expected {len(self.names)} integer vertex indices, got {v.dtype} {v.shape}")
+            raise ValueError(f"control points: expected {len(self.names)} integer vertex indices, "
+                             f"got {v.dtype} {v.shape}")
         if len(set(self.names)) != len(self.names):
             dup = next(n for n in self.names if self.names.count(n) > 1)
             raise ValueError(f"control points: duplicate name {dup!r}")
@@ -86,13 +92,13 @@ class ControlPoints:
     def vertex(self, name: str) -> int:
         return int(self.vertices[self.index(name)])
 
-    def check(self, n_vertices: int, where: str = "control points") -> "ControlPoints":
+    def check(self, n_vertices: int, where: str = "control points") -> ControlPoints:
         if self.vertices.min() < 0 or self.vertices.max() >= n_vertices:
             raise ValueError(f"{where}: vertex indices must lie in 0..{n_vertices - 1}, "
                              f"got {self.vertices.min()}..{self.vertices.max()}")
         return self
 
-    def reorder(self, names) -> "ControlPoints":
+    def reorder(self, names: Sequence[str]) -> ControlPoints:
         """The points named ``names``, in that order (ValueError if one is missing)."""
         return ControlPoints(tuple(names), np.array([self.vertex(n) for n in names], np.int64))
 
@@ -113,7 +119,8 @@ def read_control_points(path: str | os.PathLike, n_vertices: int | None = None) 
     except (OSError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: not a readable JSON control-point file ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise ValueError(f"{path}: format: expected {FORMAT!r}, got {doc.get('format') if isinstance(doc, dict) else doc!r}")
+        found = doc.get("format") if isinstance(doc, dict) else doc
+        raise ValueError(f"{path}: format: expected {FORMAT!r}, got {found!r}")
     try:
         names = tuple(str(p["name"]) for p in doc["points"])
         verts = np.array([int(p["vertex"]) for p in doc["points"]], np.int64)
@@ -123,7 +130,7 @@ def read_control_points(path: str | os.PathLike, n_vertices: int | None = None) 
     return points.check(n_vertices, str(path)) if n_vertices is not None else points
 
 
-def front_vertices(vertices, triangles, min_normal_z: float = 0.3) -> np.ndarray:
+def front_vertices(vertices: np.ndarray, triangles: np.ndarray, min_normal_z: float = 0.3) -> np.ndarray:
     """Indices of vertices in triangles whose normal faces the viewer (+z) enough, (p,) int64."""
     v = np.asarray(vertices, np.float64)
     used = np.unique(np.asarray(triangles, np.int64))
@@ -137,7 +144,8 @@ def _front_point(vertices, candidates, x: float, y: float) -> int:
     return int(candidates[np.argmin(d)])
 
 
-def ict_control_points(landmarks, vertices, triangles, face_vertices=None) -> ControlPoints:
+def ict_control_points(landmarks: ArrayLike, vertices: np.ndarray, triangles: np.ndarray,
+                       face_vertices: np.ndarray | None = None) -> ControlPoints:
     """47 control points on a head with 68 Multi-PIE landmarks (40 landmarks + 7 added points).
 
     The set follows the MPEG-4 feature points, denser at the eyes and mouth:
@@ -176,7 +184,7 @@ def ict_control_points(landmarks, vertices, triangles, face_vertices=None) -> Co
     return ControlPoints(tuple(names), np.array(verts, np.int64))
 
 
-def similarity_transform(source, target) -> tuple[float, np.ndarray, np.ndarray]:
+def similarity_transform(source: np.ndarray, target: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Least-squares similarity (Umeyama 1991) mapping ``source`` points onto ``target``.
 
     Returns (scale, rotation (3, 3), translation (3,)) with target ≈ scale * R @ source + t.
@@ -191,14 +199,19 @@ def similarity_transform(source, target) -> tuple[float, np.ndarray, np.ndarray]
     return scale, r, mb - scale * r @ ma
 
 
-def anchor_positions(vertices, groups: dict) -> np.ndarray:
+def anchor_positions(vertices: np.ndarray, groups: dict) -> np.ndarray:
     """(len(ANCHOR_NAMES), 3) anchor positions: each the mean of its vertex group."""
     v = np.asarray(vertices, np.float64)
     return np.stack([v[list(groups[name])].mean(0) for name in ANCHOR_NAMES])
 
 
 def propose_control_points(
-    source_points, source_anchors, target_vertices, target_anchors, candidates, names
+    source_points: np.ndarray,
+    source_anchors: np.ndarray,
+    target_vertices: np.ndarray,
+    target_anchors: np.ndarray,
+    candidates: np.ndarray,
+    names: Sequence[str],
 ) -> ControlPoints:
     """Propose target control points: align anchors, then take the nearest free candidate vertex.
 

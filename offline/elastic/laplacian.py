@@ -23,7 +23,7 @@ from scipy.sparse.csgraph import connected_components
 _AREA_EPS = 1e-12
 
 
-def check_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
+def check_mesh(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vertices as (n, 3) float64 and triangles as (m, 3) int64, or ValueError saying what came."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles)
@@ -52,7 +52,7 @@ def _corner_cotangents(v: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.nda
     return cots, double_area
 
 
-def cotangent_laplacian(vertices, triangles) -> sp.csr_matrix:
+def cotangent_laplacian(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:
     """Cotangent stiffness matrix K (positive semi-definite, rows sum to zero).
 
     ``K[i, j] = -(cot α_ij + cot β_ij) / 2`` for an edge (i, j) and
@@ -83,7 +83,7 @@ def cotangent_laplacian(vertices, triangles) -> sp.csr_matrix:
     )
 
 
-def vertex_areas(vertices, triangles) -> np.ndarray:
+def vertex_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Barycentric vertex areas (one third of each incident triangle), (n,) float64, units².
 
     Vertices in no (non-degenerate) triangle get a tiny positive area so that
@@ -97,19 +97,19 @@ def vertex_areas(vertices, triangles) -> np.ndarray:
     return np.maximum(areas, floor)
 
 
-def mass_matrix(vertices, triangles) -> sp.dia_matrix:
+def mass_matrix(vertices: np.ndarray, triangles: np.ndarray) -> sp.dia_matrix:
     """Lumped mass matrix M = diag(vertex_areas), (n, n) sparse float64."""
     return sp.diags(vertex_areas(vertices, triangles))
 
 
-def bilaplacian(vertices, triangles) -> sp.csr_matrix:
+def bilaplacian(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:
     """Pure-bending operator B = K M^-1 K, (n, n) sparse float64, symmetric positive semi-definite."""
     k = cotangent_laplacian(vertices, triangles)
     inv_m = sp.diags(1.0 / vertex_areas(vertices, triangles))
     return (k @ inv_m @ k).tocsr()
 
 
-def components(n_vertices: int, triangles) -> tuple[int, np.ndarray]:
+def components(n_vertices: int, triangles: np.ndarray) -> tuple[int, np.ndarray]:
     """Connected components of the mesh edge graph.
 
     Returns
@@ -125,7 +125,7 @@ def components(n_vertices: int, triangles) -> tuple[int, np.ndarray]:
     return int(count), labels.astype(np.int32)
 
 
-def vertex_gradients(vertices, triangles) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
+def vertex_gradients(vertices: np.ndarray, triangles: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
     """Per-vertex surface gradient operators (Gx, Gy, Gz), each (n, n) sparse float64, 1/units.
 
     ``G @ f`` is the area-weighted mean over the incident triangles of the

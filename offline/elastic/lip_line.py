@@ -20,6 +20,8 @@ the inner-lip control points after the proposal:
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
@@ -35,7 +37,7 @@ MEDIAPIPE_INNER_LIPS = (
 )
 
 
-def cut_lip_line(triangles, upper, lower) -> np.ndarray:
+def cut_lip_line(triangles: np.ndarray, upper: Iterable[int], lower: Iterable[int]) -> np.ndarray:
     """``triangles`` without the strip bridging the upper and lower inner lip paths, (m', 3) same dtype.
 
     A bridging triangle has all three corners on the lip line and touches both lips.
@@ -48,7 +50,7 @@ def cut_lip_line(triangles, upper, lower) -> np.ndarray:
     return t[~(on_line & touches_up & touches_low)]
 
 
-def boundary_loops(n_vertices: int, triangles) -> list:
+def boundary_loops(n_vertices: int, triangles: np.ndarray) -> list:
     """Vertex loops of the mesh boundary (edges in one triangle), each an ordered (p,) int64 array."""
     t = np.asarray(triangles, np.int64)
     edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
@@ -75,7 +77,8 @@ def boundary_loops(n_vertices: int, triangles) -> list:
     return loops
 
 
-def mouth_slit(vertices, triangles, near, max_width: float) -> tuple[np.ndarray, np.ndarray] | None:
+def mouth_slit(vertices: np.ndarray, triangles: np.ndarray, near: np.ndarray,
+               max_width: float) -> tuple[np.ndarray, np.ndarray] | None:
     """(upper, lower) vertex paths of the boundary loop nearest ``near`` and narrower than ``max_width``, or None."""
     v = np.asarray(vertices, np.float64)
     best, best_d = None, np.inf
@@ -91,7 +94,8 @@ def mouth_slit(vertices, triangles, near, max_width: float) -> tuple[np.ndarray,
     return (one, two) if v[one, 1].mean() > v[two, 1].mean() else (two, one)
 
 
-def fix_inner_lips(points: ControlPoints, vertices, triangles, candidates, slit=None) -> ControlPoints:
+def fix_inner_lips(points: ControlPoints, vertices: np.ndarray, triangles: np.ndarray, candidates: np.ndarray,
+                   slit: tuple[np.ndarray, np.ndarray] | None = None) -> ControlPoints:
     """``points`` with the inner-lip points in order on a closed mouth (see the module docstring).
 
     Parameters

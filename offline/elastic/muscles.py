@@ -22,6 +22,7 @@ Symbols → code names (equation numbers as this project maps §6):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +41,7 @@ class Muscle:
     points: np.ndarray
     ranges: np.ndarray
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.kind not in MUSCLE_KINDS:
             raise ValueError(f"muscle {self.name!r}: kind must be one of {tuple(MUSCLE_KINDS)}, got {self.kind!r}")
         object.__setattr__(self, "points", np.asarray(self.points, np.float64).reshape(2, 3))
@@ -77,14 +78,14 @@ def sphincter_displacements(muscle: Muscle, positions: np.ndarray) -> np.ndarray
     return strength * fall[:, None] * inward  # Yano & Harada eq. 11 (c = 1)
 
 
-def muscle_displacements(muscles, positions) -> np.ndarray:
+def muscle_displacements(muscles: Sequence[Muscle], positions: np.ndarray) -> np.ndarray:
     """(n_muscles, n_c, 3) float32: each muscle's control displacements per unit contraction."""
     p = np.asarray(positions, np.float64)
     out = [linear_displacements(m, p) if m.kind == "linear" else sphincter_displacements(m, p) for m in muscles]
     return np.asarray(out, np.float32).reshape(len(out), len(p), 3)
 
 
-def muscle_sections(muscles, positions) -> dict:
+def muscle_sections(muscles: Sequence[Muscle], positions: np.ndarray) -> dict:
     """The muscle sections of an elastic table."""
     return {
         "muscle_params": muscle_displacements(muscles, positions),
@@ -94,7 +95,7 @@ def muscle_sections(muscles, positions) -> dict:
     }
 
 
-def default_muscles(positions, points: ControlPoints) -> list:
+def default_muscles(positions: np.ndarray, points: ControlPoints) -> list[Muscle]:
     """A default muscle set placed from named control points (any head facing +z, y up).
 
     Distances are in units of the inner-eye-corner distance e, so one set fits
@@ -113,7 +114,8 @@ def default_muscles(positions, points: ControlPoints) -> list:
     for side, sx in (("L", 1.0), ("R", -1.0)):
         lift = np.array([sx * 0.55, 0.35, -0.6]) * e
         linear(f"zygomaticMajor_{side}", at(f"cheekbone_{side}") + lift, at(f"mouth_corner_{side}"), 22, 0.35)
-        linear(f"frontalis_{side}", at(f"forehead_{side}") + np.array([0, 0.9, -0.4]) * e, at(f"brow_mid_{side}"), 35, 0.25)
+        linear(f"frontalis_{side}", at(f"forehead_{side}") + np.array([0, 0.9, -0.4]) * e, at(f"brow_mid_{side}"),
+               35, 0.25)
         linear(f"corrugator_{side}", at("nose_root") + np.array([sx * 0.15, 0.25, -0.2]) * e,
                at(f"brow_inner_{side}"), 40, 0.15)
         linear(f"depressorAnguli_{side}", at(f"jaw_chin_{side}") + np.array([sx * 0.3, -0.3, -0.3]) * e,

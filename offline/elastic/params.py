@@ -19,6 +19,9 @@ displacement.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import qr, solve_triangular
@@ -28,6 +31,11 @@ from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
 from facepuppet.offline.elastic.muscles import default_muscles, muscle_sections
 from facepuppet.offline.elastic.rigid_parts import rigid_labels
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.character import Character
+
+    from facepuppet.offline.elastic.control_points import ControlPoints
 
 MOVED_FRACTION = 0.01
 
@@ -43,7 +51,8 @@ class ExpressionFit:
     relative_ : ndarray of shape (n_shapes,), float64, rms_ / largest displacement
     """
 
-    def fit(self, basis, deltas, evaluate=None) -> "ExpressionFit":
+    def fit(self, basis: np.ndarray | sp.spmatrix, deltas: np.ndarray,
+            evaluate: np.ndarray | None = None) -> ExpressionFit:
         """Fit eq. 6.
 
         Parameters
@@ -73,7 +82,8 @@ class ExpressionFit:
         return self.basis_ @ self.params_[s].astype(np.float64)  # Yano & Harada eq. 5
 
 
-def reconstruction_errors(basis, params, deltas, evaluate=None):
+def reconstruction_errors(basis: np.ndarray | sp.spmatrix, params: np.ndarray, deltas: np.ndarray,
+                          evaluate: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per shape (rms, worst, relative) errors of B U_s against D_s; see the module docstring."""
     b = basis.toarray() if sp.issparse(basis) else np.asarray(basis, np.float64)
     d = np.asarray(deltas, np.float64)
@@ -104,15 +114,16 @@ def storage_bytes(n_vertices: int, n_shapes: int, n_controls: int, k: int) -> di
     return {"compact_bytes": compact, "dense_bytes": dense, "ratio": dense / compact}
 
 
-def target_fixed_mask(vertices, points, fixed_ratio):
+def target_fixed_mask(vertices: np.ndarray, points: ControlPoints, fixed_ratio: float) -> np.ndarray:
     """The §4 fixed region of a mesh from its ``nose_tip`` and ``forehead`` control points, (n,) bool."""
     v = np.asarray(vertices, np.float64)
     return fixed_region(v, v[points.vertex("nose_tip")], v[points.vertex("forehead")], fixed_ratio)
 
 
-def build_model(vertices, triangles, points, params, shape_names, *, k=DEFAULT_K,
-                fixed_ratio=DEFAULT_FIXED_RATIO, units="cm", with_muscles=True, basis=None, metrics=None,
-                deltas=None):
+def build_model(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints, params: np.ndarray,
+                shape_names: Sequence[str], *, k: int = DEFAULT_K, fixed_ratio: float = DEFAULT_FIXED_RATIO,
+                units: str = "cm", with_muscles: bool = True, basis: ElasticBasis | None = None,
+                metrics: dict | None = None, deltas: np.ndarray | None = None) -> tuple[ElasticModel, ElasticBasis]:
     """An ElasticModel from a mesh, its control points and expression parameters (n_shapes, n_c, 3).
 
     Handle-free pieces below the mouth (lower teeth, tongue) become the rigid
@@ -146,7 +157,9 @@ def build_model(vertices, triangles, points, params, shape_names, *, k=DEFAULT_K
     return model, basis
 
 
-def fit_character(character, points, *, k=DEFAULT_K, fixed_ratio=DEFAULT_FIXED_RATIO, with_muscles=True):
+def fit_character(character: Character, points: ControlPoints, *, k: int = DEFAULT_K,
+                  fixed_ratio: float = DEFAULT_FIXED_RATIO,
+                  with_muscles: bool = True) -> tuple[ElasticModel, ElasticBasis, dict]:
     """Basis, eq. 6 parameters and error report for every shape of ``character``.
 
     Errors are measured on the components that carry control points (the
@@ -189,7 +202,7 @@ def fit_character(character, points, *, k=DEFAULT_K, fixed_ratio=DEFAULT_FIXED_R
     return model, basis, report
 
 
-def rigid_report(model, character, deltas) -> dict:
+def rigid_report(model: ElasticModel, character: Character, deltas: np.ndarray) -> dict:
     """Rigid-part size and, where the character has ``jawOpen``, the RMS error (cm) of the rigid
     vertices there: with the rigid jaw and as if held fixed."""
     on = model.arrays["rigid_labels"] >= 0

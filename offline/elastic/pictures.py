@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from PIL import Image, ImageDraw
@@ -11,6 +14,9 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.render.images import contact_sheet, save_png
 from facepuppet.runtime.render.renderer import FaceRenderer
+
+if TYPE_CHECKING:
+    import moderngl
 
 CELL = (240, 240)
 
@@ -24,7 +30,9 @@ def _renderers(ctx, character, model, cell):
     return dense, elastic
 
 
-def reconstruction_sheets(ctx, character: Character, model: ElasticModel, out_dir, per_sheet=16, cell=CELL):
+def reconstruction_sheets(ctx: moderngl.Context, character: Character, model: ElasticModel,
+                          out_dir: str | os.PathLike, per_sheet: int = 16,
+                          cell: tuple[int, int] = CELL) -> list[Path]:
     """Original (dense deltas) beside reconstruction (elastic path) for every shape; returns the PNG paths."""
     dense, elastic = _renderers(ctx, character, model, cell)
     pairs = []
@@ -44,7 +52,8 @@ def reconstruction_sheets(ctx, character: Character, model: ElasticModel, out_di
     return paths
 
 
-def expression_sheet(ctx, character: Character, model: ElasticModel, names, path, cell=CELL):
+def expression_sheet(ctx: moderngl.Context, character: Character, model: ElasticModel, names: Sequence[str],
+                     path: str | os.PathLike, cell: tuple[int, int] = CELL) -> Path:
     """The named expressions (and muscles) of ``model`` drawn on ``character`` with the elastic path."""
     _, elastic = _renderers(ctx, character, model, cell)
     images = [("neutral", _draw(elastic, model, None))]
@@ -64,7 +73,8 @@ def _draw(renderer, model, values):
     return renderer.read_pixels()
 
 
-def overlay(ctx, character: Character, model: ElasticModel, path, size=(640, 640)):
+def overlay(ctx: moderngl.Context, character: Character, model: ElasticModel, path: str | os.PathLike,
+            size: tuple[int, int] = (640, 640)) -> Path:
     """Neutral face with the control points (dots, names) and muscles (lines, ellipses) drawn over it."""
     r = FaceRenderer(ctx, character, *size, path="elastic", elastic=model, log=lambda s: None, framing="face")
     image = Image.fromarray(_draw(r, model, None))

@@ -44,7 +44,8 @@ def jaw_anchor_mask(points: ControlPoints) -> np.ndarray | None:
     return mask
 
 
-def jaw_transforms(params, control_positions, anchors) -> tuple[np.ndarray, np.ndarray]:
+def jaw_transforms(params: np.ndarray, control_positions: np.ndarray,
+                   anchors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Jaw rotation (n_s, 3, 3) and translation (n_s, 3) of each parameter set, fitted to the anchors (Kabsch)."""
     a = np.asarray(anchors, bool)
     rest = np.asarray(control_positions, np.float64)[a]
@@ -52,7 +53,13 @@ def jaw_transforms(params, control_positions, anchors) -> tuple[np.ndarray, np.n
     return kabsch(rest[None] + u, np.broadcast_to(rest, u.shape))
 
 
-def rigid_labels(vertices, points: ControlPoints, detached_mask, params=None, deltas=None) -> tuple[np.ndarray, np.ndarray]:
+def rigid_labels(
+    vertices: np.ndarray,
+    points: ControlPoints,
+    detached_mask: np.ndarray,
+    params: np.ndarray | None = None,
+    deltas: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The rigid-part sections of an elastic table: one part, the jaw.
 
     Parameters

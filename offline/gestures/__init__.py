@@ -1,1 +1,1 @@
-"""Ju & Lee (2008) offline: blend weights, regional features, speech intensity, the gesture database, detail transfer."""
+"""Ju & Lee (2008) offline: blend weights, regional features, speech intensity, gesture database, detail transfer."""

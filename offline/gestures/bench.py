@@ -41,8 +41,10 @@ Also synthesis speed, database size, the blend solvers (§4.1) and the jaw.
 
 from __future__ import annotations
 
+import argparse
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -125,7 +127,7 @@ def energy_corr(x: np.ndarray, intensity: np.ndarray) -> float:
     return float(np.corrcoef(e, s)[0, 1]) if e.std() > 0 and s.std() > 0 else 0.0
 
 
-def perlin(n: int, d: int, period: float, rng) -> np.ndarray:
+def perlin(n: int, d: int, period: float, rng: np.random.Generator) -> np.ndarray:
     """1-D gradient (Perlin) noise, (n, d), one lattice point every ``period`` frames."""
     grads = rng.uniform(-1, 1, size=(int(n / period) + 2, d))
     x = np.arange(n) / period
@@ -233,10 +235,10 @@ def _loadavg() -> str:
         return "unknown"
 
 
-def run_bench(args) -> dict:
+def run_bench(args: argparse.Namespace) -> dict:
+    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
     from facepuppet.runtime.gestures.synth import GestureSynth
     from facepuppet.runtime.gestures.tables import load_gesture_db
-    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 
     from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
     from facepuppet.offline.gestures.database import build_gesture_db, read_llf_take
@@ -351,6 +353,6 @@ def run_bench(args) -> dict:
     }
 
 
-def register_benches(register_bench) -> None:
+def register_benches(register_bench: Callable[..., None]) -> None:
     register_bench("gestures", run_bench, "Ju & Lee gestures: synthesised vs reference vs Perlin noise, speed, size",
                    _add_arguments)

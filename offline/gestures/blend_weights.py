@@ -56,12 +56,12 @@ class BlendWeights:
     seed : int, seed of the random samples
     """
 
-    def __init__(self, basis, epsilon: float = 0.1, window: int = 41, method: str = "lsq",
-                 n_samples: int = 1000, n_neighbours: int = 60, seed: int = 0):
+    def __init__(self, basis: np.ndarray, epsilon: float = 0.1, window: int = 41, method: str = "lsq",
+                 n_samples: int = 1000, n_neighbours: int = 60, seed: int = 0) -> None:
         self.basis, self.epsilon, self.window, self.method = basis, epsilon, window, method
         self.n_samples, self.n_neighbours, self.seed = n_samples, n_neighbours, seed
 
-    def fit(self, X) -> "BlendWeights":
+    def fit(self, X: np.ndarray) -> BlendWeights:
         """Compute ``weights_`` (n_frames, k), ``blend_`` (n_frames, d) = c·B and ``residual_`` = X - blend_."""
         X = _check_matrix("X", X)
         B = _check_matrix("basis", self.basis)
@@ -89,7 +89,7 @@ class BlendWeights:
         return self
 
 
-def choose_basis(X, k: int = 6, window: int = 41, seed: int = 0) -> np.ndarray:
+def choose_basis(X: np.ndarray, k: int = 6, window: int = 41, seed: int = 0) -> np.ndarray:
     """A basis of ``k`` whole-face expressions from data: k-means centres of the windowed frames.
 
     The first row is the frame-wise minimum (a neutral), so a blend can stay near rest.

@@ -14,13 +14,22 @@ reference frame (which ``run --gestures`` then drives) and a contact sheet.
 from __future__ import annotations
 
 import argparse
+import os
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.gestures.synth import GestureSynth
 
-def register(subparsers) -> None:
+    from facepuppet.offline.gestures.detail_transfer import DetailTransfer, MarkerDetail
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "build-gestures", help="speech + tracker + marker takes -> gesture reference database (.npz)",
         description="Build the Ju & Lee gesture database: lips from a speech take with mouth curves, mood and "
@@ -92,12 +101,13 @@ def parse_style(text: str) -> dict[str, str]:
     return style
 
 
-def synthesize(database, speech, seed: int = 0, style=None, sigma: float = 0.01, n_candidates: int = 3,
-               history: int = 10, stereo: str = "refuse"):
+def synthesize(database: str | os.PathLike, speech: str | os.PathLike, seed: int = 0,
+               style: dict[str, str] | None = None, sigma: float = 0.01, n_candidates: int = 3, history: int = 10,
+               stereo: str = "refuse") -> tuple[GestureSynth, np.ndarray, np.ndarray, float]:
     """Synthesised tracks for a WAV; returns (synth, level_db (n,), tracks (n, n_out) float32, seconds)."""
+    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
     from facepuppet.runtime.gestures.synth import GestureSynth
     from facepuppet.runtime.gestures.tables import load_gesture_db
-    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 
     from facepuppet.offline.gestures.speech_intensity import speech_intensity
 
@@ -152,7 +162,7 @@ def _synthesize(args: argparse.Namespace) -> int:
     return 0
 
 
-def synth_fps(database) -> float:
+def synth_fps(database: str | os.PathLike) -> float:
     from facepuppet.runtime.gestures.tables import load_gesture_db
 
     return float(load_gesture_db(database).settings.get("fps", 30.0))
@@ -161,7 +171,8 @@ def synth_fps(database) -> float:
 _PLOT_CHANNELS = ("jawOpen", "mouthFunnel", "eyeBlinkLeft", "browInnerUp", "browDownLeft", "headYaw", "headPitch")
 
 
-def plot_tracks(path, level_db, tracks, names, fps: float, channels=_PLOT_CHANNELS, width: int = 1200):
+def plot_tracks(path: str | os.PathLike, level_db: np.ndarray, tracks: np.ndarray, names: Sequence[str], fps: float,
+                channels: Sequence[str] = _PLOT_CHANNELS, width: int = 1200) -> Path:
     """Draw the speech level (dBFS) with the synthesised tracks under it, one lane each, as a PNG (Pillow)."""
     from PIL import Image, ImageDraw
 
@@ -185,7 +196,8 @@ def plot_tracks(path, level_db, tracks, names, fps: float, channels=_PLOT_CHANNE
     for k, c in enumerate(chans, 1):
         y = tracks[:, list(names).index(c)]
         lo, hi = float(y.min()), float(y.max())
-        lane_plot(k, y, c, lo, hi if hi > lo else lo + 1.0, (40, 90, 200) if not c.startswith("head") else (200, 80, 40))
+        colour = (200, 80, 40) if c.startswith("head") else (40, 90, 200)
+        lane_plot(k, y, c, lo, hi if hi > lo else lo + 1.0, colour)
     y_axis = top + lane * (len(chans) + 1)
     for s in range(0, int(n / fps) + 1):
         x = left + s * fps * (width - left - 10) / max(n - 1, 1)
@@ -197,7 +209,7 @@ def plot_tracks(path, level_db, tracks, names, fps: float, channels=_PLOT_CHANNE
     return path
 
 
-def load_landmarks(path) -> np.ndarray:
+def load_landmarks(path: str | os.PathLike) -> np.ndarray:
     """68 landmark vertex indices from JSON: a list, or a dict with ``idx_to_landmark_verts``; (68,) int64."""
     import json
 
@@ -213,16 +225,30 @@ def load_landmarks(path) -> np.ndarray:
     return np.array(data, np.int64)
 
 
-def transfer_detail(character, marker_paths, landmarks, per_region: int = 2, n_basis: int = 6, window: int = 41,
-                    step: int = 2, radius=None, log=print):
+def transfer_detail(
+    character: Character,
+    marker_paths: Sequence[str | os.PathLike],
+    landmarks: np.ndarray,
+    per_region: int = 2,
+    n_basis: int = 6,
+    window: int = 41,
+    step: int = 2,
+    radius: float | dict[str, float] | None = None,
+    log: Callable[[str], None] = print,
+) -> tuple[Character, MarkerDetail, DetailTransfer, float]:
     """The §5.2 pipeline of :mod:`.detail_transfer` with progress; returns (character, detail, transfer, rate).
 
     Parameters
     ----------
     character : Character; marker_paths : marker takes (same markers in each); landmarks : (68,) int
     """
+    from facepuppet.offline.gestures.detail_transfer import (
+        DetailTransfer,
+        detail_character,
+        marker_detail,
+        place_markers,
+    )
     from facepuppet.offline.io.capture import read_capture
-    from facepuppet.offline.gestures.detail_transfer import DetailTransfer, detail_character, marker_detail, place_markers
 
     start = time.perf_counter()
     caps = [read_capture(p) for p in marker_paths]
@@ -247,8 +273,9 @@ def transfer_detail(character, marker_paths, landmarks, per_region: int = 2, n_b
     return out, det, tr, caps[0].rate
 
 
-def render_detail_sheet(character, names, weight: float = 3.0, cell=(320, 320), columns: int = 0, path="cpu",
-                        log=None):
+def render_detail_sheet(character: Character, names: Sequence[str], weight: float = 3.0,
+                        cell: tuple[int, int] = (320, 320), columns: int = 0, path: str = "cpu",
+                        log: Callable[[str], None] | None = None) -> np.ndarray:
     """Neutral, then each named shape at ``weight``, the skin tinted red by the displacement (common scale).
 
     The detail is millimetres on a face of centimetres, so the tint shows where each shape acts; the

@@ -25,6 +25,8 @@ Every take is brought to ``fps`` (linear interpolation on its time stamps).
 from __future__ import annotations
 
 import csv
+import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,7 +53,7 @@ class Take:
     source: str = ""
     n_frames: int = field(init=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.n_frames = len(self.intensity)
 
 
@@ -68,7 +70,8 @@ def quantile_map(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return np.quantile(reference, ranks)
 
 
-def read_speech_take(wav, curves_csv, mapping_csv, fps: float = 30.0, frames: slice = slice(None)) -> Take:
+def read_speech_take(wav: str | os.PathLike, curves_csv: str | os.PathLike, mapping_csv: str | os.PathLike,
+                     fps: float = 30.0, frames: slice = slice(None)) -> Take:
     """FACEGOOD speech take: intensity from the WAV, lips P(t) mapped to ARKit (``valid`` rows only)."""
     with open(curves_csv, newline="") as handle:
         rows = list(csv.reader(handle))
@@ -97,7 +100,7 @@ def read_speech_take(wav, curves_csv, mapping_csv, fps: float = 30.0, frames: sl
     return take
 
 
-def read_llf_take(path, speech_z: np.ndarray, fps: float = 30.0) -> Take:
+def read_llf_take(path: str | os.PathLike, speech_z: np.ndarray, fps: float = 30.0) -> Take:
     """Live Link Face take: all weight channels at ``fps``; proxy intensity from its jawOpen."""
     frames = [f for f in read_llf_csv(path) if f.weights is not None]
     if len(frames) < 2:
@@ -111,10 +114,11 @@ def read_llf_take(path, speech_z: np.ndarray, fps: float = 30.0) -> Take:
     return Take(Path(path).stem, z, columns, ("mood", "brows", "eyes", "rest"), source=Path(path).name)
 
 
-def read_marker_take(path, speech_z: np.ndarray, fps: float = 30.0) -> Take:
+def read_marker_take(path: str | os.PathLike, speech_z: np.ndarray, fps: float = 30.0) -> Take:
     """Marker take (C3D): head track; proxy intensity from the chin's distance to the nose top."""
-    import c3d
     import warnings
+
+    import c3d
 
     with open(path, "rb") as handle, warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "No analog data found" is expected
@@ -134,7 +138,7 @@ def read_marker_take(path, speech_z: np.ndarray, fps: float = 30.0) -> Take:
 
 
 def assemble(takes: list[Take], n_basis: int = 6, epsilon: float = 0.1, window: int = 41,
-             method: str = "lsq", seed: int = 0):
+             method: str = "lsq", seed: int = 0) -> tuple[dict, dict, dict]:
     """Blend weights (§4.1) over the mood takes, regional residuals (§4.2), one frame table.
 
     Returns
@@ -191,9 +195,10 @@ def assemble(takes: list[Take], n_basis: int = 6, epsilon: float = 0.1, window: 
     return arrays, channels, metrics
 
 
-def build_gesture_db(out, speech: tuple, llf=(), markers=(), fps: float = 30.0, speech_frames=slice(None),
+def build_gesture_db(out: str | os.PathLike, speech: tuple, llf: Sequence[str | os.PathLike] = (),
+                     markers: Sequence[str | os.PathLike] = (), fps: float = 30.0, speech_frames: slice = slice(None),
                      n_basis: int = 6, epsilon: float = 0.1, window: int = 41, method: str = "lsq",
-                     seed: int = 0, alpha=None):
+                     seed: int = 0, alpha: dict[str, float] | None = None) -> tuple[Path, list[Take]]:
     """Read the references, assemble and save the ``gesture_db`` tables at ``out``; returns (path, takes).
 
     Parameters

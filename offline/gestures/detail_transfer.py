@@ -40,7 +40,9 @@ r -> ``radius``, φ -> :func:`.rbf_transfer.cubic_bspline`.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -48,11 +50,16 @@ from scipy.spatial import cKDTree
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import vertex_normals
 
+from facepuppet.offline.actuation.stabilise import stabilise
 from facepuppet.offline.actuation.transfer import umeyama
 from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
 from facepuppet.offline.gestures.rbf_transfer import RBFTransfer
 from facepuppet.offline.gestures.regional_features import STABLE_MARKERS
-from facepuppet.offline.actuation.stabilise import stabilise
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from facepuppet.runtime.tables import Tables
 
 DETAIL_REGIONS = ("brows", "eyes", "lips", "rest")
 RADIUS_FACTOR = 1.5
@@ -115,7 +122,8 @@ def _front_skin(character: Character) -> np.ndarray:
     return front if len(front) >= 3 else np.arange(character.n_vertices)
 
 
-def place_markers(neutral, names, character: Character, landmarks) -> Placement:
+def place_markers(neutral: np.ndarray, names: Sequence[str], character: Character,
+                  landmarks: ArrayLike) -> Placement:
     """Similarity of the marker cloud onto the character's landmarks, then each marker's nearest front skin vertex.
 
     Parameters
@@ -160,7 +168,8 @@ class DetailTransfer:
         ``RADIUS_FACTOR`` x the largest nearest-neighbour distance among its surface points
     """
 
-    def __init__(self, placement: Placement, character: Character, radius=None):
+    def __init__(self, placement: Placement, character: Character,
+                 radius: float | dict[str, float] | None = None) -> None:
         self.placement = placement
         self.regions = np.array([marker_region(n) for n in placement.names])
         self._vertices = verts = character.vertices.astype(np.float64)
@@ -198,7 +207,7 @@ class DetailTransfer:
             self.radius[r] = rad
             self._parts.append((r, mk, vx, RBFTransfer(rad), mask))
 
-    def transfer(self, displacements) -> np.ndarray:
+    def transfer(self, displacements: np.ndarray) -> np.ndarray:
         """Per-vertex offsets of marker displacements.
 
         Parameters
@@ -221,7 +230,7 @@ class DetailTransfer:
         k = len(d)
         out = np.zeros((k, len(self.vertex_region), 3))
         verts = self._vertices
-        for r, mk, vx, rbf, mask in self._parts:
+        for _, mk, vx, rbf, mask in self._parts:
             values = d[:, mk].transpose(1, 0, 2).reshape(len(mk), 3 * k)
             rbf.fit(self.placement.surface[mk], values)         # §5.2: Φ w = d, no linear term
             f = rbf.transform(verts[vx]).reshape(len(vx), k, 3).transpose(1, 0, 2)
@@ -251,8 +260,8 @@ class MarkerDetail:
     blend_rms: float
 
 
-def marker_detail(takes, names, per_region: int = 2, n_basis: int = 6, window: int = 41, step: int = 1,
-                  seed: int = 0) -> MarkerDetail:
+def marker_detail(takes: Sequence[np.ndarray], names: Sequence[str], per_region: int = 2, n_basis: int = 6,
+                  window: int = 41, step: int = 1, seed: int = 0) -> MarkerDetail:
     """Detail features of marker takes: stabilise, displacements, §4.1 blend fit, per-region PCA of the residual.
 
     Parameters
@@ -328,8 +337,10 @@ def detail_character(character: Character, transfer: DetailTransfer, detail: Mar
     )
 
 
-def detail_table(db, detail: MarkerDetail, take_names, rate: float = 60.0) -> np.ndarray:
-    """Detail weights per reference frame of a ``gesture_db`` (for :class:`~facepuppet.runtime.gestures.layer.GestureLayer`).
+def detail_table(db: Tables, detail: MarkerDetail, take_names: Sequence[str], rate: float = 60.0) -> np.ndarray:
+    """Detail weights per reference frame of a ``gesture_db``, as the runtime's gesture layer reads them.
+
+    See :class:`~facepuppet.runtime.gestures.layer.GestureLayer`.
 
     Parameters
     ----------

@@ -38,10 +38,10 @@ class RBFTransfer:
     radius : float, support radius r, in the positions' units
     """
 
-    def __init__(self, radius: float):
+    def __init__(self, radius: float) -> None:
         self.radius = radius
 
-    def fit(self, centres, values) -> "RBFTransfer":
+    def fit(self, centres: np.ndarray, values: np.ndarray) -> RBFTransfer:
         """centres : (n, 3) float, marker positions; values : (n, k) float, detail features at them."""
         c = np.asarray(centres, np.float64)
         v = np.asarray(values, np.float64)
@@ -66,7 +66,7 @@ class RBFTransfer:
         q = np.linalg.norm(x[rows] - c[cols], axis=1) / self.radius
         return sp.csr_matrix((cubic_bspline(q), (rows, cols)), shape=(len(x), len(c)))
 
-    def transform(self, points) -> np.ndarray:
+    def transform(self, points: np.ndarray) -> np.ndarray:
         """f(x) at ``points`` (m, 3): ndarray of shape (m, k), zero where no marker is within r (§5.2)."""
         if not hasattr(self, "weights_"):
             raise ValueError("RBFTransfer: call fit(centres, values) before transform")

@@ -13,6 +13,8 @@ Symbols: P(t) -> group ``lips``, D_j(t) -> groups ``brows``, ``eyes``,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -36,13 +38,13 @@ def region_of(name: str) -> str:
     return "rest"
 
 
-def split_regions(names) -> dict[str, np.ndarray]:
+def split_regions(names: Sequence[str]) -> dict[str, np.ndarray]:
     """Column indices of each region, {region: ndarray of int64}; every column in exactly one."""
     regions = [region_of(n) for n in names]
     return {r: np.array([i for i, g in enumerate(regions) if g == r], np.int64) for r in REGIONS}
 
 
-def head_track(markers: np.ndarray, names, stable=STABLE_MARKERS) -> np.ndarray:
+def head_track(markers: np.ndarray, names: Sequence[str], stable: Sequence[str] = STABLE_MARKERS) -> np.ndarray:
     """Head pose per frame from the rigid motion of the stable markers.
 
     Parameters

@@ -27,14 +27,15 @@ all-silent audio gives floor levels (and a warning from the normaliser).
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from fractions import Fraction
 
 import numpy as np
 from scipy.signal import resample_poly
 
-from facepuppet.runtime.inputs.audio import read_wav
 from facepuppet.runtime.gestures.layer import SILENCE_Z
+from facepuppet.runtime.inputs.audio import read_wav
 
 DEFAULT_RATE = 16000
 FLOOR_DB = -60.0
@@ -47,7 +48,7 @@ class SpeechInputError(ValueError):
     """A speech WAV that cannot be used; the message names the file and says why."""
 
 
-def read_speech(path, rate: int = DEFAULT_RATE, stereo: str = "refuse") -> np.ndarray:
+def read_speech(path: str | os.PathLike, rate: int = DEFAULT_RATE, stereo: str = "refuse") -> np.ndarray:
     """Mono float64 samples in [-1, 1] of ``path`` at ``rate`` Hz.
 
     Parameters
@@ -134,8 +135,8 @@ def normalise(level: np.ndarray, mean_db: float, std_db: float, gate_db: float =
     return np.where(level > gate_db, z, SILENCE_Z)
 
 
-def speech_intensity(path, fps: float = 30.0, rate: int = DEFAULT_RATE, stereo: str = "refuse",
-                     n_frames: int | None = None):
+def speech_intensity(path: str | os.PathLike, fps: float = 30.0, rate: int = DEFAULT_RATE, stereo: str = "refuse",
+                     n_frames: int | None = None) -> tuple[np.ndarray, np.ndarray, tuple[float, float, float]]:
     """WAV -> (level_db, intensity, (mean_db, std_db, gate_db)) at ``fps`` frames per second.
 
     Returns

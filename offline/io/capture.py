@@ -24,6 +24,7 @@ import csv
 import math
 import os
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -37,7 +38,7 @@ DEFAULT_MAX_GAP = 10  # frames
 class CaptureError(ValueError):
     """A capture file cannot be read; names the file and the line or field."""
 
-    def __init__(self, path, where: str, problem: str):
+    def __init__(self, path: str | os.PathLike, where: str, problem: str) -> None:
         self.path, self.where, self.problem = str(path), where, problem
         super().__init__(f"{path}: {where}: {problem}")
 
@@ -73,7 +74,7 @@ class Capture:
     gaps: tuple[Gap, ...] = field(default=())
     filled: int = 0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         m = np.asarray(self.markers, dtype=np.float32)
         where = self.source or "capture"
         if m.ndim != 3 or m.shape[2] != 3 or m.shape[0] < 1 or m.shape[1] < 1:
@@ -99,7 +100,8 @@ class Capture:
         return self.markers.shape[1]
 
 
-def fill_gaps(markers: np.ndarray, names, max_gap: int = DEFAULT_MAX_GAP) -> tuple[np.ndarray, list[Gap], int]:
+def fill_gaps(markers: np.ndarray, names: Sequence[str],
+              max_gap: int = DEFAULT_MAX_GAP) -> tuple[np.ndarray, list[Gap], int]:
     """Linearly interpolate interior gaps of at most ``max_gap`` frames.
 
     Parameters

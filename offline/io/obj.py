@@ -32,7 +32,7 @@ __all__ = ["ObjError", "ObjMesh", "read_obj", "read_vertices_only"]
 class ObjError(ValueError):
     """An OBJ file cannot be read; the message names the file and, where known, the line."""
 
-    def __init__(self, path: str | os.PathLike, line: int | None, problem: str):
+    def __init__(self, path: str | os.PathLike, line: int | None, problem: str) -> None:
         self.path = str(path)
         self.line = line
         self.problem = problem

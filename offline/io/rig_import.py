@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -29,8 +29,8 @@ from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.geometry import incidence_matrix
 from facepuppet.runtime.tables import hash_inputs
 
-from facepuppet.offline.io.mtl import read_mtl
-from facepuppet.offline.io.obj import read_obj, read_vertices_only
+from facepuppet.offline.io.mtl import MtlMaterial, read_mtl
+from facepuppet.offline.io.obj import ObjMesh, read_obj, read_vertices_only
 
 __all__ = ["import_rig", "material_kind", "NORMAL_TOLERANCE", "KIND_WORDS"]
 
@@ -128,66 +128,14 @@ def import_rig(
     shape_paths = _shape_paths(neutral_path, shapes_dir, shapes)
 
     mesh = read_obj(neutral_path)
-    neutral = mesh.vertices
-    n_v = len(neutral)
-    normals_of = _NormalOperator(n_v, mesh.triangles)
-    neutral_normals = normals_of(neutral)
+    deltas, per_shape = _sparse_deltas(mesh, neutral_path, shape_paths, tolerance, progress)
 
-    offsets, indices, d_pos, d_nrm, per_shape = [0], [], [], [], {}
-    for i, path in enumerate(shape_paths, start=1):
-        shape = read_vertices_only(path)
-        if len(shape) != n_v:
-            raise ValueError(
-                f"{path}: has {len(shape)} vertices but the neutral {neutral_path} has {n_v}; "
-                "a shape must list the neutral's vertices in the same order"
-            )
-        delta = shape - neutral
-        d_normal = normals_of(shape) - neutral_normals
-        length = np.linalg.norm(delta, axis=1)
-        moved = length > tolerance
-        keep = np.flatnonzero(moved | (np.linalg.norm(d_normal, axis=1) > NORMAL_TOLERANCE))
-        indices.append(keep.astype(np.uint32))
-        d_pos.append(delta[keep].astype(np.float32))
-        d_nrm.append(d_normal[keep].astype(np.float32))
-        offsets.append(offsets[-1] + len(keep))
-        per_shape[path.stem] = {
-            "moved": int(moved.sum()),
-            "stored": int(len(keep)),
-            "max_displacement": float(length.max()),
-        }
-        if progress is not None:
-            progress(i, len(shape_paths), path.stem)
-
-    mtl_path = neutral_path.parent / mesh.mtllib if mesh.mtllib else None
-    mtl = read_mtl(mtl_path) if mtl_path is not None and mtl_path.is_file() else {}
+    mtl_path, mtl = _read_materials(neutral_path, mesh)
     kinds = [material_kind(m) for m in mesh.material_names]
-    params = np.array(
-        [
-            [
-                float(np.mean(mtl[m].specular)) if m in mtl else KIND_SHINE[k][0],
-                float(mtl[m].shininess) if m in mtl else KIND_SHINE[k][1],
-                MATERIAL_KINDS[k],
-                0.0,
-            ]
-            for m, k in zip(mesh.material_names, kinds)
-        ],
-        dtype=np.float32,
-    )
-    landmark_path = Path(landmarks) if landmarks is not None else neutral_path.parent / "vertex_indices.json"
-    if landmarks is not None and not landmark_path.is_file():
-        raise FileNotFoundError(f"{landmark_path}: landmark file not found")
-    marks = _read_landmarks(landmark_path, n_v) if landmark_path.is_file() else None
+    landmark_path, marks = _find_landmarks(neutral_path, landmarks, len(mesh.vertices))
     vertex_kind, vertex_material = _vertex_kinds(mesh, kinds)
-    color = _vertex_colors(neutral, vertex_kind, vertex_material, mesh.material_names, marks, units)
-
-    lo, hi = neutral.min(axis=0), neutral.max(axis=0)
-    pivot_rule = "given" if pivot is not None else "bbox: centre x, min y + 0.35 height, centre z - 0.1 depth"
-    if pivot is None:
-        size, centre = hi - lo, (hi + lo) / 2
-        pivot = (centre[0], lo[1] + 0.35 * size[1], centre[2] - 0.1 * size[2])
-    pivot = np.asarray(pivot, dtype=np.float64)
-    if pivot.shape != (3,) or not np.isfinite(pivot).all():
-        raise ValueError(f"pivot: expected 3 finite numbers, got {pivot!r}")
+    color = _vertex_colors(mesh.vertices, vertex_kind, vertex_material, mesh.material_names, marks, units)
+    pivot, pivot_rule = _pivot(mesh.vertices, pivot)
 
     inputs = [neutral_path, *shape_paths] + [p for p in (mtl_path, landmark_path) if p and p.is_file()]
     settings = {
@@ -200,34 +148,21 @@ def import_rig(
         "landmarks": str(landmark_path) if marks is not None else None,
         "pivot_rule": pivot_rule,
     }
-    nnz = offsets[-1]
-    metrics = {
-        "n_vertices": n_v,
-        "n_triangles": int(len(mesh.triangles)),
-        "n_faces": int(mesh.n_faces),
-        "stored_deltas": int(nnz),
-        "dense_deltas": int(len(shape_paths) * n_v),
-        "lip_tinted_vertices": int(np.sum(np.all(np.isclose(color, KIND_COLOR["lips"], atol=0.02), axis=1))),
-        "shapes": per_shape,
-    }
     return Character(
         name=name or neutral_path.parent.name or neutral_path.stem,
         units=units,
-        vertices=neutral.astype(np.float32),
+        vertices=mesh.vertices.astype(np.float32),
         triangles=mesh.triangles.astype(np.uint32),
         triangle_material=mesh.triangle_material.astype(np.uint16),
         vertex_color=color.astype(np.float32),
         material_names=tuple(mesh.material_names),
-        material_params=params,
+        material_params=_material_params(mesh.material_names, kinds, mtl),
         pivot=pivot.astype(np.float32),
         shape_names=tuple(p.stem for p in shape_paths),
-        delta_offsets=np.asarray(offsets, dtype=np.int64),
-        delta_indices=np.concatenate(indices) if indices else np.zeros(0, np.uint32),
-        delta_positions=np.concatenate(d_pos) if d_pos else np.zeros((0, 3), np.float32),
-        delta_normals=np.concatenate(d_nrm) if d_nrm else np.zeros((0, 3), np.float32),
+        **deltas,
         metadata={
             "settings": settings,
-            "metrics": metrics,
+            "metrics": _metrics(mesh, len(shape_paths), deltas, color, per_shape),
             "input_hash": hash_inputs(*inputs, json.dumps(settings, sort_keys=True).encode()),
         },
     )
@@ -259,6 +194,57 @@ def _shape_paths(neutral: Path, folder: Path, shapes) -> list[Path]:
     return paths
 
 
+def _sparse_deltas(
+    mesh: ObjMesh, neutral_path: Path, shape_paths: list[Path], tolerance: float, progress: Progress | None
+) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+    """Read every shape and keep its stored vertices; returns the :class:`Character`'s ``delta_*`` arrays
+    (positions and normals float32, indices uint32, offsets int64) and the metrics per shape name."""
+    neutral = mesh.vertices
+    normals_of = _NormalOperator(len(neutral), mesh.triangles)
+    neutral_normals = normals_of(neutral)
+    offsets, indices, d_pos, d_nrm, per_shape = [0], [], [], [], {}
+    for i, path in enumerate(shape_paths, start=1):
+        shape = _read_shape(path, neutral_path, len(neutral))
+        delta = shape - neutral
+        d_normal = normals_of(shape) - neutral_normals
+        keep, per_shape[path.stem] = _stored_vertices(delta, d_normal, tolerance)
+        indices.append(keep.astype(np.uint32))
+        d_pos.append(delta[keep].astype(np.float32))
+        d_nrm.append(d_normal[keep].astype(np.float32))
+        offsets.append(offsets[-1] + len(keep))
+        if progress is not None:
+            progress(i, len(shape_paths), path.stem)
+    deltas = {
+        "delta_offsets": np.asarray(offsets, dtype=np.int64),
+        "delta_indices": np.concatenate(indices) if indices else np.zeros(0, np.uint32),
+        "delta_positions": np.concatenate(d_pos) if d_pos else np.zeros((0, 3), np.float32),
+        "delta_normals": np.concatenate(d_nrm) if d_nrm else np.zeros((0, 3), np.float32),
+    }
+    return deltas, per_shape
+
+
+def _read_shape(path: Path, neutral_path: Path, n_vertices: int) -> np.ndarray:
+    """(n_vertices, 3) float64 positions of a shape OBJ, or ValueError naming both files and counts."""
+    shape = read_vertices_only(path)
+    if len(shape) != n_vertices:
+        raise ValueError(
+            f"{path}: has {len(shape)} vertices but the neutral {neutral_path} has {n_vertices}; "
+            "a shape must list the neutral's vertices in the same order"
+        )
+    return shape
+
+
+def _stored_vertices(delta: np.ndarray, d_normal: np.ndarray, tolerance: float) -> tuple[np.ndarray, dict]:
+    """Vertices a shape stores, (k,) int64, and its metrics (moved, stored, max_displacement).
+
+    Stored: moved by more than ``tolerance`` or normal turned by more than ``NORMAL_TOLERANCE``.
+    """
+    length = np.linalg.norm(delta, axis=1)
+    moved = length > tolerance
+    keep = np.flatnonzero(moved | (np.linalg.norm(d_normal, axis=1) > NORMAL_TOLERANCE))
+    return keep, {"moved": int(moved.sum()), "stored": int(len(keep)), "max_displacement": float(length.max())}
+
+
 class _NormalOperator:
     """Area-weighted unit vertex normals for a fixed topology (sparse sum of face normals).
 
@@ -277,6 +263,42 @@ class _NormalOperator:
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
 
 
+def _read_materials(neutral_path: Path, mesh: ObjMesh) -> tuple[Path | None, dict[str, MtlMaterial]]:
+    """The MTL file the neutral names (None when it names none) and its materials ({} when it is missing)."""
+    mtl_path = neutral_path.parent / mesh.mtllib if mesh.mtllib else None
+    mtl = read_mtl(mtl_path) if mtl_path is not None and mtl_path.is_file() else {}
+    return mtl_path, mtl
+
+
+def _material_params(material_names: list[str], kinds: list[str], mtl: dict[str, MtlMaterial]) -> np.ndarray:
+    """(n_materials, 4) float32 [specular, shininess, kind, 0]: the MTL's where it has the material, else KIND_SHINE."""
+    return np.array(
+        [
+            [
+                float(np.mean(mtl[m].specular)) if m in mtl else KIND_SHINE[k][0],
+                float(mtl[m].shininess) if m in mtl else KIND_SHINE[k][1],
+                MATERIAL_KINDS[k],
+                0.0,
+            ]
+            for m, k in zip(material_names, kinds)
+        ],
+        dtype=np.float32,
+    )
+
+
+def _find_landmarks(
+    neutral_path: Path, landmarks: str | os.PathLike | None, n_vertices: int
+) -> tuple[Path, np.ndarray | None]:
+    """The landmark file (given, else ``vertex_indices.json`` beside the neutral) and its indices.
+
+    The indices are None when the default file is absent; a given file that is absent is an error.
+    """
+    path = Path(landmarks) if landmarks is not None else neutral_path.parent / "vertex_indices.json"
+    if landmarks is not None and not path.is_file():
+        raise FileNotFoundError(f"{path}: landmark file not found")
+    return path, _read_landmarks(path, n_vertices) if path.is_file() else None
+
+
 def _read_landmarks(path: Path, n_vertices: int) -> np.ndarray:
     """(68,) int64 vertex indices of the Multi-PIE landmarks from an ICT ``vertex_indices.json``."""
     try:
@@ -290,6 +312,36 @@ def _read_landmarks(path: Path, n_vertices: int) -> np.ndarray:
             f"got shape {marks.shape}, range {marks.min()}..{marks.max()}"
         )
     return marks
+
+
+def _pivot(vertices: np.ndarray, pivot: Sequence[float] | None) -> tuple[np.ndarray, str]:
+    """The pivot, (3,) float64, and the rule that gave it: as given, else from the bounding box."""
+    if pivot is None:
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        size, centre = hi - lo, (hi + lo) / 2
+        pivot = (centre[0], lo[1] + 0.35 * size[1], centre[2] - 0.1 * size[2])
+        rule = "bbox: centre x, min y + 0.35 height, centre z - 0.1 depth"
+    else:
+        rule = "given"
+    pivot = np.asarray(pivot, dtype=np.float64)
+    if pivot.shape != (3,) or not np.isfinite(pivot).all():
+        raise ValueError(f"pivot: expected 3 finite numbers, got {pivot!r}")
+    return pivot, rule
+
+
+def _metrics(mesh: ObjMesh, n_shapes: int, deltas: dict[str, np.ndarray], color: np.ndarray,
+             per_shape: dict[str, dict]) -> dict:
+    """Sizes of the import for ``metadata["metrics"]``: mesh, stored against dense deltas, lip tint, per shape."""
+    n_v = len(mesh.vertices)
+    return {
+        "n_vertices": n_v,
+        "n_triangles": int(len(mesh.triangles)),
+        "n_faces": int(mesh.n_faces),
+        "stored_deltas": int(deltas["delta_offsets"][-1]),
+        "dense_deltas": int(n_shapes * n_v),
+        "lip_tinted_vertices": int(np.sum(np.all(np.isclose(color, KIND_COLOR["lips"], atol=0.02), axis=1))),
+        "shapes": per_shape,
+    }
 
 
 def _vertex_kinds(mesh, kinds: list[str]) -> tuple[list[str], np.ndarray]:

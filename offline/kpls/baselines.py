@@ -26,21 +26,28 @@ class                        method
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, TypeVar
+
 import numpy as np
 
 from facepuppet.offline.kpls.model import check_inputs, check_pairs
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+_R = TypeVar("_R", bound="_Regressor")  # fit returns the estimator itself, of its own class
 
 
 class _Regressor:
     """Shared door checks: pairs at fit, fitted state and feature count at predict."""
 
-    def fit(self, X, Y):
+    def fit(self: _R, X: ArrayLike, Y: ArrayLike) -> _R:
         X, Y = check_pairs(X, Y, f"{type(self).__name__}.fit")
         self.n_features_in_ = X.shape[1]
         self._fit(X, Y)
         return self
 
-    def predict(self, X) -> np.ndarray:
+    def predict(self, X: ArrayLike) -> np.ndarray:
         """Outputs of shape (n, n_outputs), float64."""
         name = type(self).__name__
         if not hasattr(self, "n_features_in_"):
@@ -60,7 +67,7 @@ class PairRBF(_Regressor):
     smoothing : float, 0 interpolates the pairs exactly
     """
 
-    def __init__(self, kernel: str = "thin_plate_spline", smoothing: float = 1e-8):
+    def __init__(self, kernel: str = "thin_plate_spline", smoothing: float = 1e-8) -> None:
         self.kernel = kernel
         self.smoothing = smoothing
 
@@ -93,7 +100,7 @@ class LinearRetarget(_Regressor):
 class LinearPLS(_Regressor):
     """Linear PLS with ``n_components`` latent components (scikit-learn ``PLSRegression``, unscaled)."""
 
-    def __init__(self, n_components: int = 20):
+    def __init__(self, n_components: int = 20) -> None:
         self.n_components = n_components
 
     def _fit(self, X, Y):
@@ -115,7 +122,7 @@ class KernelRidgeRetarget(_Regressor):
     gamma : float or None; None gives 1 / median squared distance of the training inputs
     """
 
-    def __init__(self, alpha: float = 1e-3, gamma: float | None = None):
+    def __init__(self, alpha: float = 1e-3, gamma: float | None = None) -> None:
         self.alpha = alpha
         self.gamma = gamma
 
@@ -144,7 +151,8 @@ class PCARBFRetarget(_Regressor):
     smoothing : float, RBF smoothing
     """
 
-    def __init__(self, n_components=0.999, kernel: str = "thin_plate_spline", smoothing: float = 1e-6):
+    def __init__(self, n_components: int | float = 0.999, kernel: str = "thin_plate_spline",
+                 smoothing: float = 1e-6) -> None:
         self.n_components = n_components
         self.kernel = kernel
         self.smoothing = smoothing

@@ -9,13 +9,14 @@ blendshape correspondence (the control) and once non-linear
 
 from __future__ import annotations
 
-from facepuppet.offline.bench_data import add_data_argument, data_dir
-
+import argparse
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 
 def _add_arguments(parser) -> None:
@@ -29,8 +30,8 @@ def _add_arguments(parser) -> None:
 def _runtime_timing(source, target, frames, log) -> dict:
     from facepuppet.runtime.kpls.stage import KplsRetarget
 
-    from facepuppet.offline.kpls.model import KernelPLS
     from facepuppet.offline.kpls.commands import to_runtime
+    from facepuppet.offline.kpls.model import KernelPLS
     from facepuppet.offline.kpls.pairs import training_pairs
 
     pairs = training_pairs(source, target)
@@ -58,13 +59,13 @@ def _runtime_timing(source, target, frames, log) -> dict:
     return result
 
 
-def run_bench(args, log=print) -> dict:
+def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> dict:
     from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 
+    from facepuppet.offline.io.rig_import import import_rig
     from facepuppet.offline.kpls.cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights
     from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
-    from facepuppet.offline.io.rig_import import import_rig
 
     data = data_dir(args.data)
     ict_dir = data / "ict-facekit"
@@ -105,6 +106,6 @@ def run_bench(args, log=print) -> dict:
             "runtime_stage": runtime}
 
 
-def register_benches(register_bench) -> None:
+def register_benches(register_bench: Callable[..., None]) -> None:
     register_bench("kpls", run_bench, "kernel-PLS retargeting: cyclic error per method, fit/predict "
                    "times, runtime stage per frame", _add_arguments)

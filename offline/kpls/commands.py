@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,9 +22,12 @@ from facepuppet.runtime.tables import hash_inputs
 from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.pairs import TrainingPairs, read_pairing, training_pairs
 
+if TYPE_CHECKING:
+    from facepuppet.runtime.character import Character
 
-def to_runtime(model: KernelPLS, pairs: TrainingPairs, source, target, settings=None,
-               metrics=None) -> KplsRetarget:
+
+def to_runtime(model: KernelPLS, pairs: TrainingPairs, source: Character, target: Character,
+               settings: dict | None = None, metrics: dict | None = None) -> KplsRetarget:
     """The runtime stage of a fitted model (float32 tables, channel names of both characters)."""
     a = model.export_arrays()
     return KplsRetarget(
@@ -36,7 +41,7 @@ def to_runtime(model: KernelPLS, pairs: TrainingPairs, source, target, settings=
     )
 
 
-def parse_components(text: str):
+def parse_components(text: str) -> int | str:
     """``"auto"`` or a positive int, for ``--components``."""
     if text == "auto":
         return "auto"
@@ -49,7 +54,7 @@ def parse_components(text: str):
     return value
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "fit-retarget",
         help="fit a kernel-PLS retarget between two characters (Ouzounis et al.) -> retarget tables",
@@ -71,7 +76,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=fit_retarget_command)
 
 
-def fit_retarget_command(args: argparse.Namespace, log=print) -> int:
+def fit_retarget_command(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:
     """Run ``fit-retarget`` from parsed ``args``; returns the exit code."""
     from facepuppet.runtime.character import Character
 

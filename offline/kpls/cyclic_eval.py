@@ -20,19 +20,25 @@ Targets, and what correspondence each asks the methods to learn, are in
 
 from __future__ import annotations
 
+import os
 import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.character import Character
 
-from facepuppet.offline.kpls.model import KernelPLS
-from facepuppet.offline.kpls.dutreve_rbf import DutreveRBF, corresponding_vertices
 from facepuppet.offline.kpls.baselines import KernelRidgeRetarget, LinearPLS, LinearRetarget, PairRBF, PCARBFRetarget
+from facepuppet.offline.kpls.dutreve_rbf import DutreveRBF, corresponding_vertices
+from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.pairs import feature_matrix, feature_points, moving_vertices, pair_weights
 from facepuppet.offline.kpls.targets import stylise  # noqa: F401  (kept importable from here)
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.frames import Frame
 
 REFERENCE = "KPLS rbf"
 DUTREVE = "Dutreve spatial RBF"
@@ -52,7 +58,7 @@ def default_methods() -> dict:
     }
 
 
-def motion_weights(frames, character: Character) -> np.ndarray:
+def motion_weights(frames: Iterable[Frame], character: Character) -> np.ndarray:
     """Per-frame weights (n_frames, n_shapes) float64 of ``character`` driven by tracker frames by name."""
     frames = [f for f in frames if f.weights is not None]
     if not frames:
@@ -81,7 +87,7 @@ def cyclic_error(character: Character, motion: np.ndarray, returned: np.ndarray,
 
 def evaluate(source: Character, targets: dict, motion: np.ndarray, methods: dict | None = None,
              n_mixes: int = 300, seed: int = 0, k_source: int = 45, dutreve: bool = True,
-             log=None) -> list[dict]:
+             log: Callable[[str], None] | None = None) -> list[dict]:
     """Cycle ``motion`` of ``source`` through every target with every method.
 
     Per target, the training expressions are the source weights W of
@@ -193,7 +199,7 @@ def format_table(rows: list[dict], units: str = "", reference: str = REFERENCE, 
     return "\n".join(lines)
 
 
-def bar_plot(rows: list[dict], path, units: str = "", size=(960, 480)) -> Path:
+def bar_plot(rows: list[dict], path: str | os.PathLike, units: str = "", size: tuple[int, int] = (960, 480)) -> Path:
     """Grouped bar chart of e_d (one group per target, one bar per method), drawn with Pillow."""
     from PIL import Image, ImageDraw
 

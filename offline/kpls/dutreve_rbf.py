@@ -27,14 +27,21 @@ centres must be).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
 from facepuppet.offline.kpls.model import check_inputs
 from facepuppet.offline.kpls.pairs import moving_vertices
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
-def corresponding_vertices(a, b, idx_a: np.ndarray) -> np.ndarray:
+    from facepuppet.runtime.character import Character
+
+
+def corresponding_vertices(a: Character, b: Character, idx_a: np.ndarray) -> np.ndarray:
     """Vertices of character ``b`` (k,) int64 matching vertices ``idx_a`` of character ``a``."""
     idx_a = np.asarray(idx_a, dtype=np.int64)
     if a.n_vertices == b.n_vertices and np.array_equal(a.triangles, b.triangles):
@@ -66,14 +73,15 @@ class DutreveRBF:
     kernel : str, ``scipy.interpolate.RBFInterpolator`` kernel of both RBF networks
     """
 
-    def __init__(self, in_points, in_on_out, out_positions, out_basis=None, kernel: str = "thin_plate_spline"):
+    def __init__(self, in_points: np.ndarray, in_on_out: np.ndarray, out_positions: np.ndarray,
+                 out_basis: np.ndarray | None = None, kernel: str = "thin_plate_spline") -> None:
         self.in_points = in_points
         self.in_on_out = in_on_out
         self.out_positions = out_positions
         self.out_basis = out_basis
         self.kernel = kernel
 
-    def fit(self, X=None, Y=None) -> "DutreveRBF":
+    def fit(self, X: ArrayLike | None = None, Y: ArrayLike | None = None) -> DutreveRBF:
         """Build both RBF networks from the neutral faces; example pairs X, Y are checked, not learnt from."""
         p = check_inputs(self.in_points, "DutreveRBF: in_points")
         q = check_inputs(self.in_on_out, "DutreveRBF: in_on_out")
@@ -96,7 +104,7 @@ class DutreveRBF:
             self.to_weights_ = np.einsum("wrc,rk->wkc", pinv, self.spread_)
         return self
 
-    def predict(self, X) -> np.ndarray:
+    def predict(self, X: ArrayLike) -> np.ndarray:
         """Output displacements (n, 3 n_out) or weights (n, n_weights) for input displacements X (n, 3 k_in)."""
         if not hasattr(self, "warp_"):
             raise ValueError("DutreveRBF.predict: this model is not fitted yet; call fit() first")

@@ -31,14 +31,18 @@ With the linear kernel the scores span the same space as ordinary PLS
 from __future__ import annotations
 
 import warnings
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.linalg import solve_triangular
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
 KERNELS = ("rbf", "poly", "linear")
 
 
-def check_pairs(X, Y, who: str = "KernelPLS.fit") -> tuple[np.ndarray, np.ndarray]:
+def check_pairs(X: ArrayLike, Y: ArrayLike, who: str = "KernelPLS.fit") -> tuple[np.ndarray, np.ndarray]:
     """Training pairs as float64 2-D arrays, or ValueError saying what is wrong.
 
     Parameters
@@ -62,7 +66,7 @@ def check_pairs(X, Y, who: str = "KernelPLS.fit") -> tuple[np.ndarray, np.ndarra
     return X, Y
 
 
-def check_inputs(X, what: str) -> np.ndarray:
+def check_inputs(X: ArrayLike, what: str) -> np.ndarray:
     """Inputs as a finite float64 array of shape (n, n_features), or ValueError."""
     X = np.asarray(X, dtype=np.float64)
     if X.ndim != 2 or X.shape[1] == 0:
@@ -224,10 +228,10 @@ class KernelPLS:
     cv_errors_ : dict of int to float, mean squared CV error per count at the chosen gamma (auto only)
     """
 
-    def __init__(self, n_components="auto", kernel: str = "rbf", gamma: float | None = None,
+    def __init__(self, n_components: int | str = "auto", kernel: str = "rbf", gamma: float | None = None,
                  degree: int = 2, coef0: float = 1.0, max_components: int | None = None,
                  cv_folds: int = 5, tol: float = 1e-6, max_iter: int = 2000, random_state: int = 0,
-                 gamma_scales: tuple = (1.0, 0.1, 0.01, 0.001), solver: str = "eigh"):
+                 gamma_scales: tuple = (1.0, 0.1, 0.01, 0.001), solver: str = "eigh") -> None:
         self.n_components = n_components
         self.kernel = kernel
         self.gamma = gamma
@@ -267,7 +271,7 @@ class KernelPLS:
             return 1.0 / med if med > 0 else 1.0
         return 1.0 / X.shape[1]
 
-    def fit(self, X, Y) -> "KernelPLS":
+    def fit(self, X: ArrayLike, Y: ArrayLike) -> KernelPLS:
         """Fit on paired rows of X (n_pairs, n_features) and Y (n_pairs, n_outputs); returns self."""
         X, Y = check_pairs(X, Y)
         self._check_settings(len(X))
@@ -345,13 +349,13 @@ class KernelPLS:
         return {p: float(sse[p - 1] / Y.size) for p in range(1, p_max + 1)}
 
     # -- prediction --------------------------------------------------------
-    def centred_kernel(self, X) -> np.ndarray:
+    def centred_kernel(self, X: np.ndarray) -> np.ndarray:
         """Test kernel rows centred like the training Gram matrix, (n, n_pairs) float64."""
         Kt = self._gram(X, self.X_fit_)
         # Ouzounis eq. 8 for test rows: K_tc = (K_t − 1 1ᵀK/n)(I − 11ᵀ/n)
         return Kt - self.kernel_col_mean_[None, :] - Kt.mean(axis=1)[:, None] + self.kernel_grand_mean_
 
-    def predict(self, X) -> np.ndarray:
+    def predict(self, X: ArrayLike) -> np.ndarray:
         """Outputs of shape (n, n_outputs), float64, for inputs X (n, n_features)."""
         if not hasattr(self, "dual_coef_"):
             raise ValueError("KernelPLS.predict: this model is not fitted yet; call fit(X, Y) first")

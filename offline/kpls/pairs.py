@@ -33,15 +33,23 @@ or by a pairing file of ``source,target`` lines.
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap, canonical
 
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
-def moving_vertices(character, fraction: float = 0.05) -> np.ndarray:
+    from facepuppet.runtime.character import Character
+
+
+def moving_vertices(character: Character, fraction: float = 0.05) -> np.ndarray:
     """Vertices some shape moves by more than ``fraction`` of the largest move, (k,) int64, sorted."""
     dense = np.linalg.norm(character.delta_positions, axis=1)
     if not len(dense):
@@ -65,7 +73,7 @@ def farthest_points(points: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
     return np.asarray(chosen, dtype=np.int64)
 
 
-def feature_points(character, k: int = 45, given=None, seed: int = 0) -> np.ndarray:
+def feature_points(character: Character, k: int = 45, given: ArrayLike | None = None, seed: int = 0) -> np.ndarray:
     """Feature-point vertex indices (k,) int64: ``given`` as is, else farthest points over the moving region."""
     if given is not None:
         idx = np.asarray(given, dtype=np.int64).ravel()
@@ -76,7 +84,7 @@ def feature_points(character, k: int = 45, given=None, seed: int = 0) -> np.ndar
     return region[farthest_points(character.vertices[region].astype(np.float64), min(k, len(region)), seed)]
 
 
-def feature_matrix(character, points: np.ndarray) -> np.ndarray:
+def feature_matrix(character: Character, points: np.ndarray) -> np.ndarray:
     """F of shape (3 k, n_shapes), float64, units: feature displacements = F @ weights.
 
     Row ``3 i + j`` is axis j of feature point i.
@@ -92,7 +100,7 @@ def feature_matrix(character, points: np.ndarray) -> np.ndarray:
     return F.reshape(3 * len(points), character.n_shapes)
 
 
-def read_pairing(path) -> list[tuple[str, str]]:
+def read_pairing(path: str | os.PathLike) -> list[tuple[str, str]]:
     """``source,target`` name pairs from a text file (``#`` comments and blank lines skipped)."""
     path = Path(path)
     pairs = []
@@ -109,7 +117,8 @@ def read_pairing(path) -> list[tuple[str, str]]:
     return pairs
 
 
-def match_matrix(source_names, target_names, pairing=None) -> np.ndarray:
+def match_matrix(source_names: Sequence[str], target_names: Sequence[str],
+                 pairing: Sequence[tuple[str, str]] | None = None) -> np.ndarray:
     """M of shape (n_target, n_source), float64: target weights of each source shape at weight 1.
 
     By canonical names (:class:`ChannelMap`) or by ``pairing`` (list of
@@ -153,7 +162,7 @@ class TrainingPairs:
     matched: np.ndarray
 
 
-def pair_weights(n_shapes: int, matched, n_mixes: int = 300, max_mix: int = 6, seed: int = 0) -> np.ndarray:
+def pair_weights(n_shapes: int, matched: ArrayLike, n_mixes: int = 300, max_mix: int = 6, seed: int = 0) -> np.ndarray:
     """Source weights of the training expressions, (1 + len(matched) + n_mixes, n_shapes) float64.
 
     The neutral, each matched shape at weight 1, and ``n_mixes`` random mixes
@@ -176,7 +185,8 @@ def pair_weights(n_shapes: int, matched, n_mixes: int = 300, max_mix: int = 6, s
     return np.stack(rows)
 
 
-def training_pairs(source, target, source_points=None, target_points=None, pairing=None,
+def training_pairs(source: Character, target: Character, source_points: ArrayLike | None = None,
+                   target_points: ArrayLike | None = None, pairing: Sequence[tuple[str, str]] | None = None,
                    n_mixes: int = 300, max_mix: int = 6, seed: int = 0, k_source: int = 45,
                    k_target: int = 37) -> TrainingPairs:
     """Neutral, single matched shapes and random sparse mixes, described on each side's own feature points."""

@@ -29,7 +29,9 @@ and a sum of weighted shapes cannot.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +39,9 @@ from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_delta
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.kpls.pairs import feature_matrix, feature_points, match_matrix
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
@@ -65,7 +70,7 @@ def _centre_of_kind(character: Character, kind: str, side: float = 0.0) -> np.nd
 
 
 def stylise_warp(character: Character, eye_scale: float = 1.35, jaw_stretch: float = 0.35,
-                 taper: float = 0.12):
+                 taper: float = 0.12) -> Callable[[np.ndarray], np.ndarray]:
     """The cartoon warp f: (n, 3) -> (n, 3), units of ``character``.
 
     Enlarges each eye region by up to ``eye_scale`` with a Gaussian fall-off,
@@ -163,8 +168,8 @@ class LinearRigTarget(_Target):
 
     linear = True
 
-    def __init__(self, source: Character, target: Character, k: int = 37, points=None, pairing=None,
-                 seed: int = 0):
+    def __init__(self, source: Character, target: Character, k: int = 37, points: ArrayLike | None = None,
+                 pairing: Sequence[tuple[str, str]] | None = None, seed: int = 0) -> None:
         self.character, self.n_source = target, source.n_shapes
         self.points = feature_points(target, k, points, seed)
         M = match_matrix(source.shape_names, target.shape_names, pairing)
@@ -181,7 +186,8 @@ class ExaggeratedRigTarget(LinearRigTarget):
     linear = False
 
     def __init__(self, source: Character, target: Character, exaggeration: Exaggeration | None = None,
-                 k: int = 37, points=None, pairing=None, seed: int = 0):
+                 k: int = 37, points: ArrayLike | None = None, pairing: Sequence[tuple[str, str]] | None = None,
+                 seed: int = 0) -> None:
         super().__init__(source, target, k, points, pairing, seed)
         self.exaggeration = exaggeration or Exaggeration(scale=_typical_move(self._map))
 
@@ -199,8 +205,8 @@ class WarpedSourceTarget(_Target):
 
     linear = False
 
-    def __init__(self, source: Character, exaggeration: Exaggeration | None = None, k: int = 37, points=None,
-                 seed: int = 0, **warp_settings):
+    def __init__(self, source: Character, exaggeration: Exaggeration | None = None, k: int = 37,
+                 points: ArrayLike | None = None, seed: int = 0, **warp_settings: float) -> None:
         self.n_source = source.n_shapes
         self.matched = np.arange(source.n_shapes)
         self.character = stylise(source, name=f"{source.name} (stylised, exaggerated)", **warp_settings)

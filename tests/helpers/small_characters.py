@@ -108,7 +108,8 @@ def grid_face(extra: bool = False) -> Character:
     offsets, indices, both = sparse_deltas(np.concatenate([dense, np.zeros_like(dense)], axis=2), tolerance=1e-7)
     return Character(name="grid", units="cm", vertices=v, triangles=tris,
                      triangle_material=np.zeros(len(tris), np.uint16), vertex_color=np.full((441, 3), 0.5, np.float32),
-                     material_names=("skin",), material_params=np.array([[0.1, 10, MATERIAL_KINDS["skin"], 0]], np.float32),
+                     material_names=("skin",),
+                     material_params=np.array([[0.1, 10, MATERIAL_KINDS["skin"], 0]], np.float32),
                      pivot=np.zeros(3, np.float32), shape_names=names, delta_offsets=offsets,
                      delta_indices=indices, delta_positions=np.ascontiguousarray(both[:, :3]),
                      delta_normals=np.ascontiguousarray(both[:, 3:]))

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.offline.actuation.stabilise import find_head_markers, kabsch, stabilise
 from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix
+
+from facepuppet.offline.actuation.stabilise import find_head_markers, kabsch, stabilise
 
 
 def test_kabsch_recovers_a_known_rigid_motion():

@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from facepuppet.offline.actuation import commands as actor_commands
-from facepuppet.offline.actuation.basis import ActuationModel, class_axes, mean_shift
-from facepuppet.offline.actuation.train import train_actor
-from facepuppet.offline.io.capture import Capture, write_trc
-from facepuppet.offline.actuation.cubic_fit import evaluate, fit_polynomial
-from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.rigid import kabsch
+
+from facepuppet.offline.actuation import commands as actor_commands
+from facepuppet.offline.actuation.basis import ActuationModel, class_axes, mean_shift
+from facepuppet.offline.actuation.cubic_fit import evaluate, fit_polynomial
+from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
+from facepuppet.offline.actuation.train import train_actor
+from facepuppet.offline.io.capture import Capture, write_trc
 
 K = 6
 TRAIN = 1300
@@ -145,8 +146,8 @@ def test_ridge_on_cubic_terms_shrinks_towards_linear_and_is_chosen_by_held_out_e
     s = rng.uniform(0.0, 1.0, (300, 3))
     c = rng.normal(size=(3, 4 * 3))
     linear_truth = s @ c
-    np.testing.assert_allclose(fit_polynomial(s, linear_truth, 3, ridge_ab=1e6)[2], fit_polynomial(s, linear_truth, 1)[0],
-                               atol=1e-3)
+    np.testing.assert_allclose(fit_polynomial(s, linear_truth, 3, ridge_ab=1e6)[2],
+                               fit_polynomial(s, linear_truth, 1)[0], atol=1e-3)
     assert np.abs(fit_polynomial(s, linear_truth, 3, ridge_ab=1e6)[:2]).max() < 1e-3
     # a linear truth under heavy noise: the curvature is noise, so a ridge wins on held-out frames
     noisy = linear_truth + rng.normal(scale=1.0, size=linear_truth.shape)

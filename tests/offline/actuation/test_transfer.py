@@ -7,15 +7,23 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.offline.actuation.transfer import (align_markers, face_units, observable_shapes, read_landmarks,
-                                               read_override, retarget_actor, s_distribution, training_pairs,
-                                               umeyama)
-from facepuppet.offline.actuation.transfer_eval import transfer_error
 from facepuppet.runtime.actuation.actor import Actor
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
-from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix, vertex_normals
-from helpers.small_characters import grid_face
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix
 
+from facepuppet.offline.actuation.transfer import (
+    align_markers,
+    face_units,
+    observable_shapes,
+    read_landmarks,
+    read_override,
+    retarget_actor,
+    s_distribution,
+    training_pairs,
+    umeyama,
+)
+from facepuppet.offline.actuation.transfer_eval import transfer_error
+from helpers.small_characters import grid_face
 
 MARKER_VERTICES = np.array([30, 48, 66, 115, 140, 160, 200, 220, 245, 300, 330, 350, 390, 410])
 
@@ -200,8 +208,8 @@ def test_transfer_error_is_small_for_an_exact_pair_and_large_for_the_neutral():
 
 
 def test_trained_actor_stores_its_actuation_quantiles():
-    from facepuppet.offline.actuation.train import train_actor
     from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
+    from facepuppet.offline.actuation.train import train_actor
 
     cap, _ = synthetic_capture(n_frames=400, n_markers=12, k=3, seed=2)
     model = train_actor(cap, k=3, head_markers=["M00", "M01", "M02", "M03"])

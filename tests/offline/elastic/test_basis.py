@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from facepuppet.offline.elastic.basis import ElasticBasis, fixed_region
-from facepuppet.offline.elastic.params import ExpressionFit
 from facepuppet.offline.elastic.laplacian import bilaplacian
+from facepuppet.offline.elastic.params import ExpressionFit
 from helpers.elastic_meshes import face_points, grid
 
 

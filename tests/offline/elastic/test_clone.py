@@ -3,11 +3,15 @@
 import numpy as np
 import pytest
 
+from facepuppet.offline.elastic.basis import ElasticBasis, fixed_region
 from facepuppet.offline.elastic.clone import clone_parameters
 from facepuppet.offline.elastic.control_points import (
-    ControlPoints, propose_control_points, read_control_points, similarity_transform, write_control_points,
+    ControlPoints,
+    propose_control_points,
+    read_control_points,
+    similarity_transform,
+    write_control_points,
 )
-from facepuppet.offline.elastic.basis import ElasticBasis, fixed_region
 from helpers.elastic_meshes import face_points, grid
 
 

@@ -5,12 +5,13 @@ import argparse
 import numpy as np
 import pytest
 
+from facepuppet.runtime.elastic.model import ElasticModel
+
 from facepuppet.offline.elastic import commands as elastic_commands
+from facepuppet.offline.elastic.basis import ElasticBasis, fixed_region
 from facepuppet.offline.elastic.clone import character_with_shapes, mesh_character
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
-from facepuppet.offline.elastic.basis import ElasticBasis, fixed_region
 from facepuppet.offline.elastic.lip_line import cut_lip_line, fix_inner_lips
-from facepuppet.runtime.elastic.model import ElasticModel
 from helpers.elastic_meshes import grid, nearest
 
 SPOTS = {

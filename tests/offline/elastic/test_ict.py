@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.elastic.commands import main_front
-from facepuppet.offline.elastic.params import fit_character
+from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.elastic.laplacian import components
+from facepuppet.offline.elastic.params import fit_character
 from tests.conftest import need_shared
 
 # Relative RMS error (module docstring of elastic_params) measured with the 47 default points,

@@ -4,7 +4,11 @@ import numpy as np
 import pytest
 
 from facepuppet.offline.elastic.laplacian import (
-    bilaplacian, components, cotangent_laplacian, vertex_areas, vertex_gradients,
+    bilaplacian,
+    components,
+    cotangent_laplacian,
+    vertex_areas,
+    vertex_gradients,
 )
 from helpers.elastic_meshes import grid
 

@@ -2,8 +2,12 @@
 
 import numpy as np
 
-from facepuppet.offline.gestures.bench import (_block_bootstrap, blink_onsets, blink_onsets_hysteresis,
-                                               short_blink_onsets)
+from facepuppet.offline.gestures.bench import (
+    _block_bootstrap,
+    blink_onsets,
+    blink_onsets_hysteresis,
+    short_blink_onsets,
+)
 from facepuppet.offline.gestures.database import Take
 
 

@@ -5,11 +5,12 @@ import argparse
 import numpy as np
 import pytest
 
+from facepuppet.runtime.gestures.tables import GROUPS, load_gesture_db
+from facepuppet.runtime.recording.replay_source import open_recording
+
 from facepuppet.offline.gestures import commands as gesture_commands
 from facepuppet.offline.gestures.database import build_gesture_db, quantile_map
 from facepuppet.offline.gestures.regional_features import head_track, split_regions
-from facepuppet.runtime.gestures.tables import GROUPS, load_gesture_db
-from facepuppet.runtime.recording.replay_source import open_recording
 from tests.conftest import need_shared
 
 

@@ -5,9 +5,14 @@ import json
 import numpy as np
 import pytest
 
+from facepuppet.offline.gestures.detail_transfer import (
+    DetailTransfer,
+    detail_character,
+    marker_detail,
+    marker_region,
+    place_markers,
+)
 from facepuppet.offline.io.capture import read_c3d
-from facepuppet.offline.gestures.detail_transfer import (DetailTransfer, detail_character, marker_detail, marker_region,
-                                                place_markers)
 from tests.conftest import need_shared
 
 
@@ -84,9 +89,10 @@ def test_bad_inputs_are_refused(placed, ict_character):
 
 
 def test_detail_table_aligns_marker_tracks_with_the_database_frames(tmp_path):
-    from facepuppet.offline.gestures.detail_transfer import MarkerDetail, detail_table
     from facepuppet.runtime.gestures.layer import GROUPS, load_gesture_db
     from facepuppet.runtime.tables import save_tables
+
+    from facepuppet.offline.gestures.detail_transfer import MarkerDetail, detail_table
 
     n = [40, 30]
     arrays = {"intensity": np.zeros(70, np.float32), "features": np.zeros((70, 1), np.float32),

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from scipy.io import wavfile
 
-from facepuppet.offline.gestures.speech_intensity import FLOOR_DB, SpeechInputError, speech_intensity
 from facepuppet.runtime.gestures.layer import SILENCE_Z
+
+from facepuppet.offline.gestures.speech_intensity import FLOOR_DB, SpeechInputError, speech_intensity
 from tests.conftest import need_shared
 
 

@@ -6,8 +6,15 @@ import numpy as np
 import pytest
 
 from conftest import need_shared
-from facepuppet.offline.io.capture import (Capture, CaptureError, fill_gaps, read_capture, write_c3d, write_csv,
-                                           write_trc)
+from facepuppet.offline.io.capture import (
+    Capture,
+    CaptureError,
+    fill_gaps,
+    read_capture,
+    write_c3d,
+    write_csv,
+    write_trc,
+)
 
 
 def _capture(units="mm") -> Capture:

@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import need_shared
 from facepuppet.offline.io.mtl import read_mtl
 from facepuppet.offline.io.obj import ObjError, read_obj, read_vertices_only
-
-from conftest import need_shared
 
 SMALL = """# a comment
 mtllib mats.mtl

@@ -7,13 +7,21 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.offline.io.obj import ObjError
-from facepuppet.offline.io.rig_import import IRIS, KIND_COLOR, NORMAL_TOLERANCE, PUPIL, SCLERA, import_rig, material_kind
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.geometry import vertex_normals
 
 from conftest import need_shared
+from facepuppet.offline.io.obj import ObjError
+from facepuppet.offline.io.rig_import import (
+    IRIS,
+    KIND_COLOR,
+    NORMAL_TOLERANCE,
+    PUPIL,
+    SCLERA,
+    import_rig,
+    material_kind,
+)
 
 # 4 x 4 grid in the x-y plane facing +z: 3 x 3 quads, the top two rows skin, the bottom row teeth
 GRID = np.array([[x, y, 0.0] for y in range(4) for x in range(4)])

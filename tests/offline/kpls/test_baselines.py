@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.offline.kpls.baselines import (PairRBF, KernelRidgeRetarget, LinearPLS,
-                                                   LinearRetarget, PCARBFRetarget)
+from facepuppet.offline.kpls.baselines import KernelRidgeRetarget, LinearPLS, LinearRetarget, PairRBF, PCARBFRetarget
 
 ALL = [PairRBF, LinearRetarget, LinearPLS, KernelRidgeRetarget, PCARBFRetarget]
 

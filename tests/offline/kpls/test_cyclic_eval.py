@@ -7,16 +7,23 @@ import argparse
 import numpy as np
 import pytest
 
-from helpers.kpls_characters import SHAPES, bump_character
-from facepuppet.offline.kpls.cyclic_eval import DUTREVE, cyclic_error, evaluate, format_table, bar_plot, improvements
-from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, stylise
-from facepuppet.offline.kpls.model import KernelPLS
-from facepuppet.offline.kpls.commands import register, to_runtime
-from facepuppet.offline.kpls.pairs import (farthest_points, feature_matrix, feature_points, match_matrix,
-                                               read_pairing, training_pairs)
-from facepuppet.offline.kpls.baselines import LinearRetarget
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls.stage import KplsRetarget
+
+from facepuppet.offline.kpls.baselines import LinearRetarget
+from facepuppet.offline.kpls.commands import register, to_runtime
+from facepuppet.offline.kpls.cyclic_eval import DUTREVE, bar_plot, cyclic_error, evaluate, format_table, improvements
+from facepuppet.offline.kpls.model import KernelPLS
+from facepuppet.offline.kpls.pairs import (
+    farthest_points,
+    feature_matrix,
+    feature_points,
+    match_matrix,
+    read_pairing,
+    training_pairs,
+)
+from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, stylise
+from helpers.kpls_characters import SHAPES, bump_character
 
 SIDED = tuple(n.replace("Left", "_L").replace("Right", "_R") for n in SHAPES)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from sklearn.cross_decomposition import PLSRegression
 
-from facepuppet.offline.kpls.model import KernelPLS, kernel_matrix, nipals, centre_gram
+from facepuppet.offline.kpls.model import KernelPLS, centre_gram, kernel_matrix, nipals
 
 
 def _nonlinear(n, seed):
