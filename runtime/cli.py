@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 from importlib.metadata import entry_points
 
@@ -60,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    _configure_logging()
     try:
         if args.command in _RENDERING_COMMANDS:
             from facepuppet.runtime.render.blas_threads import BlasThreads
@@ -75,6 +77,18 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"facepuppet {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def _configure_logging() -> None:
+    """Library modules log through ``logging.getLogger(__name__)``; the command shows facepuppet's INFO
+    lines as plain text on stderr (other libraries' only from WARNING up)."""
+    ours = logging.getLogger("facepuppet")
+    if not ours.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        ours.addHandler(handler)
+        ours.setLevel(logging.INFO)
+        ours.propagate = False
 
 
 def _error(command: str, exc: BaseException, code: int) -> int:

@@ -15,7 +15,7 @@ say whether the synthesis keeps the statistics of its own source material, not
 whether it generalises. The FACEGOOD curves have no eye or brow motion and the
 marker takes give only the head, so neither has blinks. Only the speech is
 held out; the reference takes have no audio, their intensity is the proxy of
-:mod:`.gesture_db` (the take's jawOpen).
+:mod:`facepuppet.offline.gestures.database` (the take's jawOpen).
 
 Statistics (per minute of animation; synthesised: mean and spread over seeds):
 

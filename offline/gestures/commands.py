@@ -1,6 +1,6 @@
 """``facepuppet build-gestures`` and ``facepuppet synthesize-gestures`` (Ju & Lee 2008 gesture layer).
 
-``build-gestures`` assembles the reference database (:mod:`.gesture_db`);
+``build-gestures`` assembles the reference database (:mod:`facepuppet.offline.gestures.database`);
 ``synthesize-gestures`` runs :class:`~facepuppet.runtime.gestures.synth.GestureSynth`
 on a WAV frame by frame (the runtime step, with the speaker normalised over the
 whole file) and writes a session file that ``facepuppet replay`` plays;

@@ -13,7 +13,7 @@ Steps
    ``idx_to_landmark_verts``), then every marker is snapped to its nearest
    front-facing skin vertex, its *surface point*.
 2. :func:`marker_detail`: per take, the head motion is removed
-   (:func:`.stabilise.stabilise` on the forehead + nose-top markers), the
+   (:func:`facepuppet.offline.actuation.stabilise.stabilise` on the forehead + nose-top markers), the
    displacements from the take's first frame are fitted by blend weights
    (§4.1, :class:`.blend_weights.BlendWeights`) and the residual is split by
    region (``MARKER_REGIONS``); per region its principal directions

@@ -3,7 +3,7 @@
 A Live Link Face take drives the ICT head (source); it is retargeted to the
 stylised ICT head and the procedural demo head, each once as a linear
 blendshape correspondence (the control) and once non-linear
-(:mod:`.retarget_targets`), and back (:mod:`.cyclic_eval`). The exported runtime stage
+(:mod:`facepuppet.offline.kpls.targets`), and back (:mod:`.cyclic_eval`). The exported runtime stage
 (:mod:`facepuppet.runtime.kpls.stage`) is timed per frame on the same take.
 """
 

@@ -1,8 +1,8 @@
 """``facepuppet fit-retarget SOURCE.npz TARGET.npz -o retarget.npz``: fit and export a kernel-PLS retarget.
 
 SOURCE and TARGET are character tables. Training pairs come from
-:mod:`.retarget_pairs` (shapes matched by name, or ``--pairing``), the model
-from :mod:`.kpls`; the result is a ``retarget_kpls`` tables file that
+:mod:`facepuppet.offline.kpls.pairs` (shapes matched by name, or ``--pairing``), the model
+from :mod:`facepuppet.offline.kpls.model`; the result is a ``retarget_kpls`` tables file that
 ``facepuppet replay --retarget`` loads.
 """
 

@@ -2,7 +2,7 @@
 
 A source motion (weights of character A per frame) is retargeted to a target
 character B and back to A, each direction by a model fitted on that
-direction's training pairs (:mod:`.retarget_pairs`). The cyclic error
+direction's training pairs (:mod:`facepuppet.offline.kpls.pairs`). The cyclic error
 
     e_d = 1 / (N_f N_v) Σ_f Σ_v ‖v_{f,v} − v'_{f,v}‖          (eq. 11)
 
@@ -14,7 +14,7 @@ Symbols and names: v, v' ``original``, ``returned`` (vertex positions); N_f
 frames of ``motion``; N_v vertices of ``region``; e_d ``e_d``.
 
 Targets, and what correspondence each asks the methods to learn, are in
-:mod:`.retarget_targets`; the spatial baseline of Dutreve et al. is in
+:mod:`facepuppet.offline.kpls.targets`; the spatial baseline of Dutreve et al. is in
 :mod:`.dutreve_rbf`.
 """
 
@@ -91,7 +91,7 @@ def evaluate(source: Character, targets: dict, motion: np.ndarray, methods: dict
     """Cycle ``motion`` of ``source`` through every target with every method.
 
     Per target, the training expressions are the source weights W of
-    :func:`~.retarget_pairs.pair_weights` over the shapes the target matches;
+    :func:`~facepuppet.offline.kpls.pairs.pair_weights` over the shapes the target matches;
     the pairs are x = F_A w (the source's ``k_source`` feature points) and
     y = ``target.features(W)`` (the target's own feature points). The forward
     model learns x -> y, the backward model y -> w on the same pairs; a
@@ -101,7 +101,7 @@ def evaluate(source: Character, targets: dict, motion: np.ndarray, methods: dict
 
     Parameters
     ----------
-    targets : dict of name -> target of :mod:`.retarget_targets` (``features``, ``points``,
+    targets : dict of name -> target of :mod:`facepuppet.offline.kpls.targets` (``features``, ``points``,
         ``neutral_points``, ``character``, ``matched``)
     motion : ndarray of shape (n_frames, n_source_shapes), source weights
 

@@ -8,8 +8,8 @@ Paper symbols -> code names:
     a, b, c          cubic coefficients                   actor.cubic[0|1|2]   (3, K, n_markers, 3)
 
 Eq 2: x_i(s) = x_i^0 + sum_k a_ik s_k^3 + b_ik s_k^2 + c_ik s_k.
-The per-frame solve of s from markers (eq 5) is :mod:`.marker_solver`; the
-transfer table s -> character weights (§6.2) is :mod:`.actor_pair`.
+The per-frame solve of s from markers (eq 5) is :mod:`facepuppet.runtime.actuation.solver`; the
+transfer table s -> character weights (§6.2) is :mod:`facepuppet.runtime.actuation.pair`.
 """
 
 from __future__ import annotations

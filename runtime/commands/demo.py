@@ -1,7 +1,7 @@
 """``facepuppet demo``: the embedded demo, needing no data files.
 
-A procedurally generated head (:mod:`.demo_head`) plays a deterministic
-synthetic performance (:mod:`.demo_performance`) through the same frame loop
+A procedurally generated head (:mod:`facepuppet.runtime.demo.head`) plays a deterministic
+synthetic performance (:mod:`facepuppet.runtime.demo.performance`) through the same frame loop
 a live session or a replay uses. With a display it opens a window paced to
 real time; headless (no display, or ``--headless``) it renders through EGL as
 fast as it can, writes the frames and a contact sheet, and in both cases

@@ -2,13 +2,14 @@
 
 :class:`GestureLayer` is the ``gestures`` stage of the live chain, ``(frame, t) -> frame``: it steps a
 :class:`~facepuppet.runtime.gestures.synth.GestureSynth` (the two-level MRF of §5.1,
-in :mod:`.gesture_synth`) once per animation frame from the voice level and adds
+in :mod:`facepuppet.runtime.gestures.synth`) once per animation frame from the voice level and adds
 the synthesised motion to the tracked face, fills what tracking lost, or animates
 the face from the voice alone (``facepuppet run --input audio``).
 """
 
 from __future__ import annotations
 
+import logging
 import dataclasses
 import math
 
@@ -20,6 +21,8 @@ from facepuppet.runtime.geometry import euler_to_quat, quat_mul
 from facepuppet.runtime.gestures.synth import GestureSynth
 from facepuppet.runtime.gestures.tables import GESTURE_DB_SCHEMA, GROUPS, HEAD_FEATURES, LEVEL1, load_gesture_db
 from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["GESTURE_DB_SCHEMA", "GROUPS", "HEAD_FEATURES", "LEVEL1", "SILENCE_Z", "GestureSynth", "SpeakerNormaliser",
            "load_gesture_db", "GestureLayer", "VoiceOnlySource", "gesture_layer"]
@@ -159,7 +162,7 @@ class VoiceOnlySource:
         return None, 0
 
 
-def gesture_layer(path, level=None, voice_only: bool = False, seed: int = 0, log=print,
+def gesture_layer(path, level=None, voice_only: bool = False, seed: int = 0, log=logger.info,
                   n_neighbours: int = 8, detail=None) -> GestureLayer:
     """A :class:`GestureLayer` from the gesture tables at ``path`` (``--gestures`` of ``run`` and ``replay``).
 

@@ -39,7 +39,7 @@ and draws among the ``n_candidates`` best with probability ∝ exp(-dist / σ).
   take); the video-texture literature avoids short loops the same way.
 * The eyes are shown whole (``whole``, default ("eyes",)): their channels are
   the pick's residual plus that same frame's mood c·B, not the mood pick's
-  (why, measured: :mod:`.gesture_output`).
+  (why, measured: :mod:`facepuppet.runtime.gestures.output`).
 * Two levels: level 1 is lips and mood (what the voice drives directly);
   level-2 groups (brows, eyes, rest, head) are conditioned on level 1 through
   the β term: the mood c of the level-1 pick made at the previous step
@@ -67,12 +67,12 @@ h               ``history`` (default 10 frames)
 
 Indexing (why the step is < 0.1 ms): the full distance is evaluated only on a
 small candidate set per group (the successor of the last pick, its continuity
-neighbours and frames of the current intensity's bin; :mod:`.gesture_candidates`).
+neighbours and frames of the current intensity's bin; :mod:`facepuppet.runtime.gestures.candidates`).
 The weighted windows of every frame are one preallocated matrix, so a step is
 one gather, one squared difference and one matrix-vector product for all groups
 at once; the draw among the best candidates is a Gumbel-max (one random call
 for all groups), and the output is a gather of one precomputed row per group
-(its features, or for the mood group its expression c·B; :mod:`.gesture_output`)
+(its features, or for the mood group its expression c·B; :mod:`facepuppet.runtime.gestures.output`)
 summed by one product.
 About 30 NumPy calls per step, ~60-80 µs on a loaded 2-core machine.
 """
@@ -252,7 +252,7 @@ class GestureSynth:
         self._bar = np.repeat([0.0 if g == "lips" else RECENT_PENALTY for g in self.groups], M).astype(np.float32)
 
     def _output_names(self) -> tuple[str, ...]:
-        """Output channels; sets the output row tables (:func:`.gesture_output.output_table`) and ``_mood``."""
+        """Output channels; sets the output row tables (:func:`facepuppet.runtime.gestures.output.output_table`) and ``_mood``."""
         out = output_table(self.groups, self._cols, self.names, self._feats, self._basis, self.whole)
         self._mood, self._out_table, self._whole_k, self._own_table = out.mood, out.table, out.whole_k, out.own_table
         self._out_rows = np.zeros((len(self.groups), len(out.names)), np.float32)

@@ -19,11 +19,14 @@ that says what to do; the live run logs it and goes on without audio.
 
 from __future__ import annotations
 
+import logging
 import math
 import wave
 from pathlib import Path
 
 import numpy as np
+
+logger = logging.getLogger(__name__)
 
 
 class AudioUnavailable(RuntimeError):
@@ -220,7 +223,7 @@ class MicLevel:
         self.stream.close()
 
 
-def open_audio(device=None, wav=None, log=print, **meter):
+def open_audio(device=None, wav=None, log=logger.info, **meter):
     """The audio level source the run asked for, or None (with a logged message) when none can be had.
 
     ``wav`` (a path) wins over ``device``; ``device`` may be "" / None for the default input.

@@ -6,8 +6,8 @@ kind           adapter                                default port  protocol
 vmc            :class:`.vmc.VmcAdapter`               39539         VMC over OSC (§1)
 facecap        :class:`.facecap.FaceCapAdapter`       9000          Face Cap OSC (§3)
 faceosc        :class:`.faceosc.FaceOscAdapter`       8338          FaceOSC (§4)
-markers        :class:`.markers_osc.MarkersAdapter`   9763          /facepuppet/markers OSC
-livelinkface   :class:`.livelinkface_udp.LiveLinkFaceAdapter`  11111  binary UDP (§5)
+markers        :class:`facepuppet.runtime.inputs.markers.MarkersAdapter`   9763          /facepuppet/markers OSC
+livelinkface   :class:`facepuppet.runtime.inputs.livelinkface.LiveLinkFaceAdapter`  11111  binary UDP (§5)
 =============  =====================================  ============  =========================
 
 (§ = PROTOCOLS.md sections.) Every adapter has ``kind``, ``default_port``,

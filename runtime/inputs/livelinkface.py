@@ -20,7 +20,7 @@ The 61 values are the 52 ARKit weights in Apple's order
 (:data:`~facepuppet.runtime.channels.ARKIT_NAMES`), then head yaw, pitch, roll
 (radians, to ``head_rotation`` via
 :func:`~facepuppet.runtime.geometry.euler_to_quat`, as for the CSV in
-:mod:`.livelinkface_csv`), then left- and right-eye yaw, pitch, roll (not
+:mod:`facepuppet.runtime.recording.livelinkface_csv`), then left- and right-eye yaw, pitch, roll (not
 used: the eyeLook* weights carry gaze).
 
 The version field is checked first: any version but 6 is ``malformed`` (the
@@ -28,7 +28,7 @@ older engine layout has a 1-byte version and a 16-byte FrameTime and is not
 read). Also ``malformed``: a device id not starting with ``$``, a negative or
 too long name length, a count other than 61, a packet shorter or longer than
 its fields. Over ``MAX_PACKET`` bytes: ``oversized``. A non-finite value:
-``nonfinite``. Counters as in :mod:`.osc_decode`.
+``nonfinite``. Counters as in :mod:`facepuppet.runtime.inputs.osc`.
 
 ``number`` is the frame number; ``t_sender`` = (frame + sub-frame) ·
 denominator / fps seconds when fps > 0, else NaN.

@@ -141,7 +141,7 @@ class UdpSource:
     Parameters
     ----------
     adapter : object with ``kind``, ``default_port``, ``counters`` and
-        ``handle(data, t_receive) -> Frame | None`` (see :mod:`.input_kinds`)
+        ``handle(data, t_receive) -> Frame | None`` (see :mod:`facepuppet.runtime.inputs.kinds`)
     host : str, address to bind
     port : int or None, None for the adapter's default port, 0 for any free port
     allow : set of str or None, sender IP addresses accepted (None: all)

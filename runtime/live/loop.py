@@ -24,6 +24,7 @@ the labels still replay tick for tick.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import dataclass
@@ -33,6 +34,8 @@ import numpy as np
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.timing import StageTimer
+
+logger = logging.getLogger(__name__)
 
 STAGES = ("snapshot", "map", "draw_submit", "gpu_finish", "sink")
 ARRIVAL_GRID_HZ = 1000.0  # tick-label grid of a run that draws on arrival (see the module docstring)
@@ -162,7 +165,7 @@ class FrameLoop:
     stages (``counters["nonfinite_rejected"]``; NaN weights mean "not sent" and pass).
     """
 
-    def __init__(self, names, renderer, clock, sinks=(), fps: float = 60.0, log=print, target=None,
+    def __init__(self, names, renderer, clock, sinks=(), fps: float = 60.0, log=logger.info, target=None,
                  stages=(), on_tick=(), stop=None, catch_up: bool = False, idle_fps: float | None = None):
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")

@@ -25,6 +25,7 @@ time gives the same output as the live run it came from.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -33,6 +34,8 @@ from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import quat_mul
 from facepuppet.runtime.live.config import LiveConfig, region_of
 from facepuppet.runtime.live.one_euro import OneEuroFilter
+
+logger = logging.getLogger(__name__)
 
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
@@ -107,7 +110,7 @@ class LivePipeline:
 
     name = "filter"
 
-    def __init__(self, config: LiveConfig | None = None, audio_level=None, log=print, calibrate_requests=None):
+    def __init__(self, config: LiveConfig | None = None, audio_level=None, log=logger.info, calibrate_requests=None):
         self.config = config or LiveConfig()
         self.audio_level = audio_level
         self.log = log

@@ -32,11 +32,14 @@ recorded time computes what the live run did.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from facepuppet.runtime.frames import Frame
+
+logger = logging.getLogger(__name__)
 
 
 class AudioTap:
@@ -169,7 +172,7 @@ def add_stage_arguments(parser, markers: bool = True) -> None:
 
 
 def build_chain(args, character, input_kind: str | None, *, filtered: bool = True, audio_level=None,
-                calibrate_requests=None, voice_only: bool = False, label: str | None = None, log=print) -> Chain:
+                calibrate_requests=None, voice_only: bool = False, label: str | None = None, log=logger.info) -> Chain:
     """The stage chain for parsed options (``actor``, ``pair``, ``retarget``, ``elastic``, ``config``,
     ``calibrate``, ``gestures``, ``gesture_seed``), checked against the character; logs what it loaded.
 
@@ -283,7 +286,7 @@ def _load_kpls(path, shapes, log) -> KplsStage:
     return KplsStage(model)
 
 
-def make_input_adapter(kind: str, extra_names=(), log=print):
+def make_input_adapter(kind: str, extra_names=(), log=logger.info):
     """A new adapter of ``kind`` that also carries ``extra_names`` channels where its protocol can (VMC)."""
     from facepuppet.runtime.inputs.kinds import make_adapter
 

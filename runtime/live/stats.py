@@ -21,10 +21,13 @@ covers the last second, the final report the whole ring.
 
 from __future__ import annotations
 
+import logging
 import json
 import time
 
 import numpy as np
+
+logger = logging.getLogger(__name__)
 
 STAGES = ("receive_snap", "solve_map", "draw_submit", "gpu_finish", "end_to_end")
 
@@ -42,7 +45,7 @@ class LiveStats:
     clock : callable, monotonic seconds (for the periodic timing)
     """
 
-    def __init__(self, counters: dict, log=print, interval_s: float | None = 1.0, capacity: int = 1 << 17,
+    def __init__(self, counters: dict, log=logger.info, interval_s: float | None = 1.0, capacity: int = 1 << 17,
                  clock=time.monotonic):
         self.counters = counters
         self.log = log

@@ -6,9 +6,12 @@ machine, not the replay, and play no part in determinism).
 
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
+
+logger = logging.getLogger(__name__)
 
 
 class StageTimer:
@@ -64,7 +67,7 @@ class StageTimer:
                         f"{s['max_ms']:>10.3f}{s['mean_ms']:>10.3f}")
         return "\n".join(rows)
 
-    def print_summary(self, log=print) -> None:
+    def print_summary(self, log=logger.info) -> None:
         log(self.table())
 
 

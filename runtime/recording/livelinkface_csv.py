@@ -16,7 +16,7 @@ column                      becomes
 ``Left/RightEyeYaw...``     ignored: eye rotations are not channels (the rig's
                             eyeLook* shapes carry gaze)
 every other column          a weight channel, named as in the header
-                            (``JawOpen``); :mod:`.channels` maps spellings
+                            (``JawOpen``); :mod:`facepuppet.runtime.channels` maps spellings
 ==========================  =================================================
 
 Timecode ``HH:MM:SS:FF.fff`` counts 60 frames per second, ``.fff`` being the

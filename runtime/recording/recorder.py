@@ -67,7 +67,7 @@ class PacketRecorder:
         self._wake.set()
 
     def put_tick(self, k: int, t: float, frames: int, t_clock: float) -> None:
-        """Queue one TICK record (frame-loop thread; see :class:`~.session_records.Tick`). Never blocks."""
+        """Queue one TICK record (frame-loop thread; see :class:`~facepuppet.runtime.recording.records.Tick`). Never blocks."""
         if len(self._queue) >= self.capacity:
             self.counters["record_dropped"] += 1
             return
