@@ -230,19 +230,7 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
 
         weights = WeightLog()
         sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
-        counters = {"udp": source.counters}
-        if chain.filter is not None:
-            counters["pipeline"] = chain.filter.counters
-        stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
-        hooks = [stats.on_tick, *hooks]
-        if opts.vmc_out is not None:
-            sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names)
-            parts.append(sender)
-            hooks.append(sender.on_tick)
-            counters["vmc_out"] = sender.counters
-        if recorder is not None:
-            counters["record"] = recorder.counters
-            hooks.append(RecordingHook(recorder, source, chain.audio))
+        counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log)
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
                          catch_up=True, idle_fps=opts.idle_fps)
@@ -260,6 +248,24 @@ def run_live(args, log=print, stop_event: threading.Event | None = None, on_read
                 if hasattr(part, name):
                     getattr(part, name)()
                     break
+
+
+def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, log) -> tuple[dict, LiveStats, list]:
+    """The counters the stats read, the stats, and the tick hooks: stats, VMC out, the recording."""
+    counters = {"udp": source.counters}
+    if chain.filter is not None:
+        counters["pipeline"] = chain.filter.counters
+    stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
+    hooks = [stats.on_tick, *hooks]
+    if opts.vmc_out is not None:
+        sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names)
+        parts.append(sender)
+        hooks.append(sender.on_tick)
+        counters["vmc_out"] = sender.counters
+    if recorder is not None:
+        counters["record"] = recorder.counters
+        hooks.append(RecordingHook(recorder, source, chain.audio))
+    return counters, stats, hooks
 
 
 def _run_loop(loop: FrameLoop, source, duration: float | None, stop_event: threading.Event) -> LoopResult:
