@@ -101,11 +101,6 @@ BLINK_KINDS = {"blink_per_min": blink_onsets, "blink_hysteresis_per_min": blink_
                "blink_short_per_min": short_blink_onsets}
 
 
-def blink_rate(blink: np.ndarray, fps: float) -> float:
-    """Rises of ``blink`` through 0.5 per minute (every crossing)."""
-    return 60.0 * len(blink_onsets(blink)) / (len(blink) / fps)
-
-
 def autocorr(x: np.ndarray, lag: int = 5) -> float:
     vals = []
     for c in x.T:
