@@ -31,9 +31,10 @@ import math
 
 import numpy as np
 
+from facepuppet.runtime.channels import filter_region
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import quat_mul
-from facepuppet.runtime.live.config import LiveConfig, region_of
+from facepuppet.runtime.live.config import LiveConfig
 from facepuppet.runtime.live.one_euro import OneEuroFilter
 
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
@@ -62,7 +63,7 @@ class _ChannelState:
 
     def __init__(self, channels: tuple[str, ...], config: LiveConfig):
         n = len(channels)
-        regions = [region_of(c) for c in channels]
+        regions = [filter_region(c) for c in channels]
         settings = [config.filters[r] for r in regions]
         self.weights = OneEuroFilter(n, [s.min_cutoff for s in settings], [s.beta for s in settings],
                                      [s.d_cutoff for s in settings])
