@@ -183,6 +183,20 @@ class Character:
         return out
 
 
+def moving_vertices(character: Character, fraction: float = 0.05) -> np.ndarray:
+    """Vertices some shape moves by more than ``fraction`` of the largest move, (k,) int64, sorted.
+
+    The expressive part of the face (the renderer's ``"face"`` framing, the
+    retargeting's feature-point region). A character whose shapes move no
+    vertex at all (no shapes, no deltas, or only zero deltas) gives an empty
+    array; each caller says what stands in for it.
+    """
+    lengths = np.linalg.norm(character.delta_positions, axis=1)
+    if not len(lengths):
+        return np.zeros(0, np.int64)
+    return np.unique(character.delta_indices[lengths > fraction * lengths.max()]).astype(np.int64)
+
+
 def sparse_deltas(
     dense: np.ndarray, tolerance: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

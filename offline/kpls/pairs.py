@@ -39,16 +39,18 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap, canonical
+from facepuppet.runtime.character import moving_vertices
 
 
-def moving_vertices(character, fraction: float = 0.05) -> np.ndarray:
-    """Vertices some shape moves by more than ``fraction`` of the largest move, (k,) int64, sorted."""
-    dense = np.linalg.norm(character.delta_positions, axis=1)
-    if not len(dense):
-        raise ValueError(f"character {character.name!r}: has no shape deltas; nothing moves")
-    peak = np.zeros(character.n_vertices)
-    np.maximum.at(peak, character.delta_indices.astype(np.int64), dense)
-    return np.flatnonzero(peak > fraction * peak.max())
+def moving_region(character, fraction: float = 0.05) -> np.ndarray:
+    """The region retargeting works in: :func:`~facepuppet.runtime.character.moving_vertices`, (k,) int64.
+
+    Raises ValueError for a character whose shapes move nothing: it has no region to choose feature points in.
+    """
+    region = moving_vertices(character, fraction)
+    if not len(region):
+        raise ValueError(f"character {character.name!r}: its shapes move no vertex; nothing to retarget")
+    return region
 
 
 def farthest_points(points: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
@@ -72,7 +74,7 @@ def feature_points(character, k: int = 45, given=None, seed: int = 0) -> np.ndar
         if idx.size == 0 or idx.min() < 0 or idx.max() >= character.n_vertices:
             raise ValueError(f"feature_points: given indices must lie in 0..{character.n_vertices - 1}")
         return idx
-    region = moving_vertices(character)
+    region = moving_region(character)
     return region[farthest_points(character.vertices[region].astype(np.float64), min(k, len(region)), seed)]
 
 

@@ -21,6 +21,13 @@ from facepuppet.runtime.kpls.stage import KplsRetarget
 SIDED = tuple(n.replace("Left", "_L").replace("Right", "_R") for n in SHAPES)
 
 
+def test_a_character_nothing_moves_has_no_feature_points():
+    c = bump_character()
+    still = type(c)(**{**c.__dict__, "delta_positions": np.zeros_like(c.delta_positions)})
+    with pytest.raises(ValueError, match=r"character 'bumps': its shapes move no vertex; nothing to retarget"):
+        feature_points(still, 20)
+
+
 def test_feature_matrix_matches_dense_deltas_and_points_spread():
     c = bump_character()
     pts = feature_points(c, 20)
