@@ -19,7 +19,7 @@ paper uses 45 and 37).
   correspondence between the two characters' expression spaces from examples
   only, not from names or geometry at run time.
 
-Pairs (:func:`training_pairs`) are: the neutral (0 ↔ 0); every matched shape
+Pairs (:func:`expression_pairs`) are: the neutral (0 ↔ 0); every matched shape
 at weight 1 (its source weights ↔ its target weights); and random sparse
 mixes of 2–``max_mix`` matched pairs with weights uniform in (0, 1], the
 same mix on both sides, so that the learnt map sees combinations and is not a
@@ -178,16 +178,16 @@ def pair_weights(n_shapes: int, matched, n_mixes: int = 300, max_mix: int = 6, s
     return np.stack(rows)
 
 
-def training_pairs(source, target, source_points=None, target_points=None, pairing=None,
-                   n_mixes: int = 300, max_mix: int = 6, seed: int = 0, k_source: int = 45,
-                   k_target: int = 37) -> TrainingPairs:
+def expression_pairs(source, target, source_points=None, target_points=None, pairing=None,
+                     n_mixes: int = 300, max_mix: int = 6, seed: int = 0, k_source: int = 45,
+                     k_target: int = 37) -> TrainingPairs:
     """Neutral, single matched shapes and random sparse mixes, described on each side's own feature points."""
     sp = feature_points(source, k_source, source_points, seed)
     tp = feature_points(target, k_target, target_points, seed)
     M = match_matrix(source.shape_names, target.shape_names, pairing)
     matched = np.flatnonzero(M.any(axis=0))
     if len(matched) < 2:
-        raise ValueError(f"training_pairs: only {len(matched)} shapes of {source.name!r} match a shape of "
+        raise ValueError(f"expression_pairs: only {len(matched)} shapes of {source.name!r} match a shape of "
                          f"{target.name!r}; give a pairing file")
     W = pair_weights(source.n_shapes, matched, n_mixes, max_mix, seed)
     F = feature_matrix(source, sp)

@@ -13,7 +13,7 @@ from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarge
 from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.commands import register, to_runtime
 from facepuppet.offline.kpls.pairs import (farthest_points, feature_matrix, feature_points, match_matrix,
-                                               read_pairing, training_pairs)
+                                               read_pairing, expression_pairs)
 from facepuppet.offline.kpls.baselines import LinearRetarget
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls.stage import KplsRetarget
@@ -57,7 +57,7 @@ def test_shapes_pair_by_canonical_name_or_by_file(tmp_path):
 
 def test_pairs_have_their_own_feature_counts():
     a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), names=SIDED, seed=1)
-    pairs = training_pairs(a, b, n_mixes=40, k_source=15, k_target=11)
+    pairs = expression_pairs(a, b, n_mixes=40, k_source=15, k_target=11)
     assert pairs.X.shape == (1 + 8 + 40, 45) and pairs.Y.shape == (49, 8)
     assert len(pairs.target_points) == 11
     np.testing.assert_allclose(pairs.X, pairs.source_weights @ pairs.source_features.T)
@@ -170,7 +170,7 @@ def test_fit_retarget_command_and_runtime_stage_agree_with_the_offline_model(tmp
     stage = KplsRetarget.load(tmp_path / "r.npz")
     assert stage.target_names == b.shape_names and stage.kernel == "poly"
     # the same model offline
-    pairs = training_pairs(a, b, n_mixes=60, k_source=15, k_target=12)
+    pairs = expression_pairs(a, b, n_mixes=60, k_source=15, k_target=12)
     model = KernelPLS(n_components=6, kernel="poly").fit(pairs.X, pairs.Y)
     W = np.random.default_rng(5).uniform(0, 1, size=(20, 8))
     offline = model.predict(W @ pairs.source_features.T)
