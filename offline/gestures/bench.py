@@ -47,6 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
+from facepuppet.runtime.bench.registry import load_average
+
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 BLOCK_FRAMES = 60      # block length of the reference bootstrap (2 s at 30 fps)
@@ -221,13 +223,6 @@ def _goals(ref, boot, runs, noise):
     return goals
 
 
-def _loadavg() -> str:
-    try:
-        return Path("/proc/loadavg").read_text().strip()
-    except OSError:
-        return "unknown"
-
-
 def run_bench(args) -> dict:
     from facepuppet.runtime.gestures.synth import GestureSynth
     from facepuppet.runtime.gestures.tables import load_gesture_db
@@ -243,7 +238,7 @@ def run_bench(args) -> dict:
     llf = [d / "tracker/livelinkface_alex_rom_3.csv", d / "tracker/livelinkface_myslate_3.csv"]
     markers = [d / "markers/animface_jaw.c3d", d / "markers/animface_cheeks.c3d"]
     fps = 30.0
-    load_start = _loadavg()
+    load_start = load_average()
     level, z_all, stats = speech_intensity(speech[0], fps=fps, n_frames=1472)
     cut = int(0.8 * len(level))
     with tempfile.TemporaryDirectory() as tmp:
@@ -339,7 +334,7 @@ def run_bench(args) -> dict:
                   "step_us_median": float(np.median(all_steps) * 1e6),
                   "step_us_p99": float(np.percentile(all_steps, 99) * 1e6),
                   "index_build_s": float(np.median(index_s)), "db_build_s": build_s,
-                  "loadavg_start": load_start, "loadavg_end": _loadavg()},
+                  "loadavg_start": load_start, "loadavg_end": load_average()},
         "database": {"bytes": size, "frames": int(len(db["intensity"])), "takes": take_names,
                      "features": len(db.channels["features"]), "continuity_dims": synth.dims},
         "blend_solvers": blend,
