@@ -18,7 +18,7 @@ from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.kpls.model import KernelPLS
-from facepuppet.offline.kpls.pairs import TrainingPairs, read_pairing, expression_pairs
+from facepuppet.offline.kpls.pairs import TrainingPairs, expression_pairs, read_pairing
 
 
 def to_runtime(model: KernelPLS, pairs: TrainingPairs, source, target, settings=None,

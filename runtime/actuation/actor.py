@@ -21,8 +21,18 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from facepuppet.runtime.tables import (Section, TableSchema, TablesError, coerce, hash_inputs, load_tables,
-                                       naming_file, register_schema, save_tables, validate)
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    TablesError,
+    coerce,
+    hash_inputs,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 ACTOR_SCHEMA = register_schema(TableSchema(
     kind="actor",

@@ -19,8 +19,16 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from facepuppet.runtime.tables import (Section, TableSchema, coerce, load_tables, naming_file, register_schema,
-                                       save_tables, validate)
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    coerce,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 PAIR_SCHEMA = register_schema(TableSchema(
     kind="actor_pair",

@@ -30,8 +30,16 @@ from typing import Any, Mapping
 import numpy as np
 
 from facepuppet.runtime.rigid import kabsch
-from facepuppet.runtime.tables import (Section, TableSchema, TablesError, load_tables, naming_file, register_schema,
-                                       save_tables, validate)
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    TablesError,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 MUSCLE_KINDS = {"linear": 0, "sphincter": 1}
 

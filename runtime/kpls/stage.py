@@ -29,8 +29,17 @@ import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.tables import (Section, TableSchema, TablesError, coerce, load_tables, naming_file,
-                                       register_schema, save_tables, validate)
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    TablesError,
+    coerce,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 KERNEL_CODES = {"linear": 0, "rbf": 1, "poly": 2}
 

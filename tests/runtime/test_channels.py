@@ -5,8 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import (ARKIT_NAMES, CHANNEL_REGIONS, ChannelMap, canonical, filter_region,
-                                         gesture_group, pascal)
+from facepuppet.runtime.channels import (
+    ARKIT_NAMES,
+    CHANNEL_REGIONS,
+    ChannelMap,
+    canonical,
+    filter_region,
+    gesture_group,
+    pascal,
+)
 
 # The ICT-FaceKit rig's own spellings (vertex_indices.json "expressions"), written out here
 # so the test does not depend on the data kit.

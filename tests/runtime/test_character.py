@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers.kpls_characters import bump_character
 
 from facepuppet.runtime.character import Character, moving_vertices, sparse_deltas
+
+from helpers.kpls_characters import bump_character
 
 
 def moving_by_loops(character: Character, fraction: float) -> list[int]:

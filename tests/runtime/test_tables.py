@@ -364,6 +364,7 @@ def test_naming_file_names_the_file_in_refusals_about_memory():
 
 def test_a_class_refusal_on_load_names_the_file(tmp_path):
     from facepuppet.runtime.actuation.actor import Actor
+
     from helpers.small_actors import make_actor
 
     path = make_actor().save(tmp_path / "actor.npz")
@@ -374,6 +375,7 @@ def test_a_class_refusal_on_load_names_the_file(tmp_path):
 
 def test_every_table_class_refuses_non_finite_arrays_when_built():
     from facepuppet.runtime.actuation.actor import Actor
+
     from helpers.small_actors import make_actor
 
     actor = make_actor()

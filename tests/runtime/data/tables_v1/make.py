@@ -15,12 +15,14 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[2]))  # tests/, for the helpers
 
+from runtime.test_tables import tiny_character  # noqa: E402
+
 from facepuppet.runtime.actuation.pair import ActorPair  # noqa: E402
 from facepuppet.runtime.elastic.model import ElasticModel, no_muscles  # noqa: E402
+
 from helpers.gesture_dbs import small_db  # noqa: E402
 from helpers.kpls_stages import random_stage  # noqa: E402
 from helpers.small_actors import K, N, make_actor  # noqa: E402
-from runtime.test_tables import tiny_character  # noqa: E402
 
 
 def main() -> None:
