@@ -92,6 +92,40 @@ def split_side(key: str) -> tuple[str, str | None]:
     return key, None
 
 
+# The part of the face a channel moves, by the prefix of its canonical key, in the two groupings the
+# project uses. They differ on purpose, on cheeks, lips and tongue:
+# - filter region (the live One-Euro filters, runtime.live.config): the mouth is everything that moves as fast
+#   as speech, so cheeks, lips and tongue filter with it; anything else is "other".
+# - gesture group (Ju & Lee 2008 §4.2, runtime.gestures.tables GROUPS): "lips" are only the mouth and jaw
+#   channels, the P(t) that speech drives; cheeks, lips and tongue are stochastic, with everything else "rest".
+#   prefix     filter region  gesture group
+CHANNEL_REGIONS: tuple[tuple[str, str, str], ...] = (
+    ("eye", "eyes", "eyes"),
+    ("brow", "brows", "brows"),
+    ("mouth", "mouth", "lips"),
+    ("jaw", "mouth", "lips"),
+    ("lip", "mouth", "rest"),
+    ("tongue", "mouth", "rest"),
+    ("cheek", "mouth", "rest"),
+)
+_NO_REGION = ("", "other", "rest")  # a channel no prefix matches (noseSneer, a rig's own shapes)
+
+
+def _region_row(name: str) -> tuple[str, str, str]:
+    key = canonical(name)
+    return next((row for row in CHANNEL_REGIONS if key.startswith(row[0])), _NO_REGION)
+
+
+def filter_region(name: str) -> str:
+    """Live filter region of a weight channel (any spelling): ``eyes``, ``brows``, ``mouth`` or ``other``."""
+    return _region_row(name)[1]
+
+
+def gesture_group(name: str) -> str:
+    """Gesture feature group of a channel (any spelling, Ju & Lee §4.2): ``brows``, ``eyes``, ``lips`` or ``rest``."""
+    return _region_row(name)[2]
+
+
 @dataclass(frozen=True)
 class ChannelMap:
     """Linear map from source channel values to target (rig) channel values.

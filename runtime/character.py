@@ -20,7 +20,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from facepuppet.runtime.tables import Section, TableSchema, TablesError, load_tables, register_schema, save_tables
+from facepuppet.runtime.tables import (Section, TableSchema, TablesError, load_tables, naming_file, register_schema,
+                                       save_tables, validate)
 
 # Material kinds the shader knows (column 2 of ``material_params``).
 MATERIAL_KINDS = {"skin": 0, "eye": 1, "teeth": 2, "mouth": 3, "lashes": 4, "hidden": 5, "lips": 6}
@@ -106,14 +107,8 @@ class Character:
             _fail("delta_offsets", f"last offset {int(offsets[-1])} != n_deltas {len(self.delta_indices)}")
         if len(self.delta_indices) and int(self.delta_indices.max()) >= n_v:
             _fail("delta_indices", f"vertex index out of range for {n_v} vertices")
-        # Every array goes through the tables schema: dtypes, shapes, finiteness.
-        from facepuppet.runtime.tables import _resolve_dims, _check_channels
-
-        dims = _resolve_dims(CHARACTER_SCHEMA, self._arrays(), None)
-        _check_channels(CHARACTER_SCHEMA, self._channels(), dims, None)
+        validate(CHARACTER_SCHEMA, self._arrays(), self._channels())  # dtypes, shapes, finiteness
         for arr in self._arrays().values():
-            if arr.dtype.kind == "f" and not np.isfinite(arr).all():
-                _fail("arrays", "contain NaN or infinity")
             arr.setflags(write=False)
 
     # -- sizes -------------------------------------------------------------
@@ -145,26 +140,17 @@ class Character:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the character as a tables file of kind ``character``."""
-        meta = dict(self.metadata)
-        settings = dict(meta.get("settings", {}))
+        settings = dict(self.metadata.get("settings", {}))
         settings.setdefault("name", self.name)
-        return save_tables(
-            path,
-            "character",
-            self._arrays(),
-            units=self.units,
-            channels=self._channels(),
-            settings=settings,
-            input_hash=meta.get("input_hash", ""),
-            metrics=meta.get("metrics", {}),
-        )
+        return save_tables(path, "character", self._arrays(), units=self.units, channels=self._channels(),
+                           settings=settings, metadata=self.metadata)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Character":
         """Load and validate a ``character`` tables file (see :func:`load_tables`)."""
         t = load_tables(path, kind="character")
         a = t.arrays
-        try:
+        with naming_file(path):
             return cls(
                 name=str(t.settings.get("name", Path(path).stem)),
                 units=t.units,
@@ -180,14 +166,8 @@ class Character:
                 delta_indices=a["delta_indices"],
                 delta_positions=a["delta_positions"],
                 delta_normals=a["delta_normals"],
-                metadata={
-                    "settings": dict(t.settings),
-                    "metrics": dict(t.metrics),
-                    "input_hash": t.manifest.get("input_hash", ""),
-                },
+                metadata=t.metadata,
             )
-        except TablesError as exc:
-            raise TablesError(path, exc.field, exc.problem) from None
 
     # -- views -------------------------------------------------------------
     def shape_slice(self, s: int) -> slice:
@@ -201,6 +181,20 @@ class Character:
             sl = self.shape_slice(s)
             out[s, self.delta_indices[sl]] = src[sl]
         return out
+
+
+def moving_vertices(character: Character, fraction: float = 0.05) -> np.ndarray:
+    """Vertices some shape moves by more than ``fraction`` of the largest move, (k,) int64, sorted.
+
+    The expressive part of the face (the renderer's ``"face"`` framing, the
+    retargeting's feature-point region). A character whose shapes move no
+    vertex at all (no shapes, no deltas, or only zero deltas) gives an empty
+    array; each caller says what stands in for it.
+    """
+    lengths = np.linalg.norm(character.delta_positions, axis=1)
+    if not len(lengths):
+        return np.zeros(0, np.int64)
+    return np.unique(character.delta_indices[lengths > fraction * lengths.max()]).astype(np.int64)
 
 
 def sparse_deltas(

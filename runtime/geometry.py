@@ -1,4 +1,4 @@
-"""Mesh maths shared by the importer, the CPU deformation path and the renderer."""
+"""Mesh maths shared by the importer, the CPU deformation path and the renderer, and the one smoothstep."""
 
 from __future__ import annotations
 
@@ -93,6 +93,24 @@ def euler_to_quat(yaw: float, pitch: float, roll: float) -> np.ndarray:
     qx = np.array([sp_, 0.0, 0.0, cp])
     qz = np.array([0.0, 0.0, sr, cr])
     return quat_mul(quat_mul(qy, qx), qz)
+
+
+def smoothstep(e0: float, e1: float, x):
+    """Hermite step 3t² - 2t³ of t = (x - e0) / (e1 - e0) clamped to [0, 1]: 0 at ``e0``, 1 at ``e1``.
+
+    Either order of the edges; zero slope at both, the largest slope 1.5 / |e1 - e0| half way.
+
+    Parameters
+    ----------
+    e0, e1 : float, the edges, units of x
+    x : float, or ndarray of any shape, float; a float gives a float without a NumPy call (the
+        live pipeline eases with it per frame), an array gives an ndarray of its shape, float64
+    """
+    if isinstance(x, (int, float)):
+        t = min(max((x - e0) / (e1 - e0), 0.0), 1.0)
+        return t * t * (3.0 - 2.0 * t)
+    t = np.clip((np.asarray(x, dtype=np.float64) - e0) / (e1 - e0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:

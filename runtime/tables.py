@@ -9,6 +9,17 @@ the schema of its kind (which sections must exist, which dimensions must
 agree) before anything uses it. Every refusal raises :class:`TablesError`
 naming the file and the field.
 
+The contract, for each kind of table (the actor, the character, ...):
+
+* the kind declares a :class:`TableSchema` (kind name, schema version, one
+  :class:`Section` per array with its dtype and named dimensions, the
+  channel groups of the manifest) and registers it (:func:`register_schema`);
+* its class builds through :func:`coerce` (arrays to the section dtypes, for
+  classes that accept any numeric input) and :func:`validate` (the checks a
+  file gets, on arrays in memory), so a table is valid once built;
+* it writes with :func:`save_tables` and reads with :func:`load_tables`,
+  building itself inside :func:`naming_file` so its own refusals name the file.
+
 Layout of the archive::
 
     __manifest__      uint8 array, UTF-8 JSON (see below)
@@ -17,11 +28,12 @@ Layout of the archive::
 Manifest fields::
 
     format            "facepuppet-tables"
-    schema_version    int, SCHEMA_VERSION when written
+    schema_version    int, the version of the kind's TableSchema when written
     kind              "character", "actor", ... (a registered TableSchema)
     created_by        "facepuppet <version>"
     units             "cm", "mm", "m" or "" for unitless tables
     sections          {name: {"shape": [...], "dtype": "float32", "kind": "..."}}
+    dims              {named dimension: int}, e.g. {"n_vertices": 1234}
     channels          {group: [names...]}, e.g. {"shapes": ["jawOpen", ...]}
     settings          training settings (JSON object)
     input_hash        "sha256:<hex>" of the training inputs
@@ -37,15 +49,17 @@ import math
 import os
 import tempfile
 import zipfile
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 import numpy as np
 
 FORMAT_NAME = "facepuppet-tables"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 1  # the schema version of a kind that declares none
 MANIFEST_KEY = "__manifest__"
+NO_FILE = "<tables>"  # the path of a TablesError about tables in memory
 ALLOWED_UNITS = ("", "mm", "cm", "m")
 ALLOWED_DTYPES = ("float32", "float64", "int32", "int64", "uint8", "uint16", "uint32", "bool")
 
@@ -58,7 +72,7 @@ class TablesError(ValueError):
     """
 
     def __init__(self, path: str | os.PathLike | None, field_name: str, problem: str):
-        self.path = str(path) if path is not None else "<tables>"
+        self.path = str(path) if path is not None else NO_FILE
         self.field = field_name
         self.problem = problem
         super().__init__(f"{self.path}: {field_name}: {problem}")
@@ -78,29 +92,68 @@ class Section:
     kind: str = ""
     optional: bool = False
 
+    def __post_init__(self):
+        if self.dtype not in ALLOWED_DTYPES:
+            raise ValueError(f"Section dtype: expected one of {ALLOWED_DTYPES}, got {self.dtype!r}")
+        for dim in self.shape:
+            if not (isinstance(dim, int) or (isinstance(dim, str) and _dim_pattern(dim))):
+                raise ValueError(f"Section shape: expected ints and names like 'n_shapes' or 'n_shapes+1', got {dim!r}")
+
+
+def _dim_pattern(dim: str) -> bool:
+    name, _, plus = dim.partition("+")
+    return name.isidentifier() and (not plus or plus.isdigit())
+
 
 @dataclass(frozen=True)
 class TableSchema:
-    """The sections and channel groups a kind of tables must carry."""
+    """What one kind of tables file holds.
+
+    Attributes
+    ----------
+    kind : str, the manifest's ``kind``
+    sections : {name: Section}, the arrays, required unless ``optional``
+    channels : tuple of str, the channel groups the manifest must list (``channels.<group>``)
+    channel_dims : {group: named dimension}, a group's length must equal that dimension
+    version : int, the schema version written, and the newest read; a kind that changes
+        its sections raises it, so an older facepuppet refuses the new files with advice
+    """
 
     kind: str
     sections: Mapping[str, Section]
     channels: tuple[str, ...] = ()
-    # channel group -> named dimension its length must equal
     channel_dims: Mapping[str, str] = field(default_factory=dict)
+    version: int = SCHEMA_VERSION
+
+    def __post_init__(self):
+        if not (isinstance(self.version, int) and self.version >= 1):
+            raise ValueError(f"TableSchema {self.kind!r} version: expected an int >= 1, got {self.version!r}")
+        named = {str(d).partition("+")[0] for spec in self.sections.values() for d in spec.shape}
+        for group, dim in self.channel_dims.items():
+            if dim not in named:
+                raise ValueError(f"TableSchema {self.kind!r} channel_dims[{group!r}]: {dim!r} is no section's "
+                                 f"dimension")
 
 
 _SCHEMAS: dict[str, TableSchema] = {}
 
 
 def register_schema(schema: TableSchema) -> TableSchema:
-    """Make a kind of tables known to :func:`load_tables` and :func:`save_tables`."""
+    """Make a kind of tables known to :func:`load_tables` and :func:`save_tables`; returns the schema."""
     _SCHEMAS[schema.kind] = schema
     return schema
 
 
 def registered_kinds() -> tuple[str, ...]:
     return tuple(sorted(_SCHEMAS))
+
+
+def schema_of(kind: str, path: str | os.PathLike | None = None, field_name: str = "kind") -> TableSchema:
+    """The registered schema of ``kind``; TablesError naming ``path`` and ``field_name`` if there is none."""
+    schema = _SCHEMAS.get(kind) if isinstance(kind, str) else None
+    if schema is None:
+        raise TablesError(path, field_name, f"unknown kind {kind!r}; known: {', '.join(registered_kinds())}")
+    return schema
 
 
 @dataclass(frozen=True)
@@ -127,6 +180,12 @@ class Tables:
     @property
     def settings(self) -> Mapping[str, Any]:
         return self.manifest.get("settings", {})
+
+    @property
+    def metadata(self) -> dict[str, Any]:
+        """Fresh copies of settings and metrics, and the input hash: a table class's ``metadata``."""
+        return {"settings": dict(self.settings), "metrics": dict(self.metrics),
+                "input_hash": self.manifest.get("input_hash", "")}
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.arrays[name]
@@ -164,7 +223,77 @@ def _json_clean(value: Any, where: str, path) -> Any:
     raise TablesError(path, where, f"must be JSON (dict, list, str, number), got {type(value).__name__}")
 
 
-def _resolve_dims(schema: TableSchema, arrays: Mapping[str, np.ndarray], path) -> dict[str, int]:
+def coerce(schema: TableSchema, arrays: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """The given arrays as C-contiguous, read-only arrays of their sections' dtypes.
+
+    For table classes that take any numeric input (float64 from a fitter, lists
+    from a test): ``{name: array-like}`` -> ``{name: ndarray}``, one entry per
+    given name, no copy where an array already fits. Shapes are not checked
+    here; :func:`validate` does that.
+    """
+    out: dict[str, np.ndarray] = {}
+    for name, value in arrays.items():
+        spec = schema.sections.get(name)
+        if spec is None:
+            raise TablesError(None, name, f"not a section of kind {schema.kind!r}")
+        arr = np.ascontiguousarray(value, dtype=spec.dtype)
+        arr.setflags(write=False)
+        out[name] = arr
+    return out
+
+
+def validate(
+    schema: TableSchema,
+    arrays: Mapping[str, np.ndarray],
+    channels: Mapping[str, Any],
+    path: str | os.PathLike | None = None,
+) -> dict[str, int]:
+    """Check arrays and channel lists against a kind's schema; return the named dimensions.
+
+    The checks a tables file gets when saved and loaded, for tables in memory:
+    every required section is there and no unknown one; each has its section's
+    dtype and shape, the named dimensions agree across sections (and with the
+    channel lists of ``channel_dims``); float arrays are finite; every channel
+    group of the schema is listed, as non-empty, distinct strings.
+
+    Parameters
+    ----------
+    schema : TableSchema
+    arrays : {section name: ndarray}
+    channels : {group: list of str}
+    path : the file the arrays come from or go to, named in errors (None: in memory)
+
+    Returns
+    -------
+    dims : {named dimension: int}, e.g. {"n_vertices": 1234, "n_shapes": 52}
+    """
+    extra = sorted(set(arrays) - set(schema.sections))
+    if extra:
+        raise TablesError(path, extra[0], f"not a section of kind {schema.kind!r}")
+    dims = _section_dims(schema, arrays, path)
+    for name, arr in arrays.items():
+        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            raise TablesError(path, name, "contains NaN or infinity")
+    _check_channels(schema, channels, dims, path)
+    return dims
+
+
+@contextmanager
+def naming_file(path: str | os.PathLike) -> Iterator[None]:
+    """Inside it, a TablesError about tables in memory (a class's own checks) names ``path`` instead.
+
+    A table class's ``load`` builds the class inside it, so that the refusals
+    of the class's constructor name the file that was loaded.
+    """
+    try:
+        yield
+    except TablesError as exc:
+        if exc.path != NO_FILE:
+            raise
+        raise TablesError(path, exc.field, exc.problem) from None
+
+
+def _section_dims(schema: TableSchema, arrays: Mapping[str, np.ndarray], path) -> dict[str, int]:
     """Check each array against its section spec and return the named dimensions."""
     dims: dict[str, tuple[int, str]] = {}
     for name, spec in schema.sections.items():
@@ -231,9 +360,22 @@ def save_tables(
     settings: Mapping[str, Any] | None = None,
     input_hash: str = "",
     metrics: Mapping[str, Any] | None = None,
+    metadata: Mapping[str, Any] | None = None,
     compress: bool = True,
 ) -> Path:
-    """Validate and write a tables file atomically; return its path.
+    """Validate (:func:`validate`) and write a tables file atomically; return its path.
+
+    Parameters
+    ----------
+    path : where to write the ``.npz``
+    kind : a registered kind (``"character"``, ...)
+    arrays : {section name: ndarray} of the kind's sections
+    units : one of ALLOWED_UNITS
+    channels : {group: list of str}, the kind's channel groups
+    settings, input_hash, metrics : the manifest fields of the same names
+    metadata : a table class's ``metadata`` ({"settings", "metrics", "input_hash"}, any of them),
+        taken for those of ``settings``, ``input_hash`` and ``metrics`` not given
+    compress : zip-deflate the arrays
 
     The file appears under its name only once it is complete (written to a
     temporary file beside it, then renamed), so a crash never leaves half a
@@ -242,11 +384,13 @@ def save_tables(
     from facepuppet import __version__
 
     path = Path(path)
-    schema = _SCHEMAS.get(kind)
-    if schema is None:
-        raise TablesError(path, "kind", f"unknown kind {kind!r}; known: {', '.join(registered_kinds())}")
+    schema = schema_of(kind, path)
     if units not in ALLOWED_UNITS:
         raise TablesError(path, "units", f"must be one of {ALLOWED_UNITS}, got {units!r}")
+    metadata = metadata or {}
+    settings = metadata.get("settings", {}) if settings is None else settings
+    metrics = metadata.get("metrics", {}) if metrics is None else metrics
+    input_hash = input_hash or metadata.get("input_hash", "")
     clean: dict[str, np.ndarray] = {}
     for name, arr in arrays.items():
         if name == MANIFEST_KEY or not name.isidentifier():
@@ -254,18 +398,12 @@ def save_tables(
         arr = np.ascontiguousarray(arr)
         if arr.dtype.name not in ALLOWED_DTYPES:
             raise TablesError(path, name, f"dtype {arr.dtype.name} cannot be stored; use one of {ALLOWED_DTYPES}")
-        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
-            raise TablesError(path, name, "contains NaN or infinity")
         clean[name] = arr
-    extra = sorted(set(clean) - set(schema.sections))
-    if extra:
-        raise TablesError(path, extra[0], f"not a section of kind {kind!r}")
-    dims = _resolve_dims(schema, clean, path)
     channels = {k: list(v) for k, v in (channels or {}).items()}
-    _check_channels(schema, channels, dims, path)
+    dims = validate(schema, clean, channels, path)
     manifest = {
         "format": FORMAT_NAME,
-        "schema_version": SCHEMA_VERSION,
+        "schema_version": schema.version,
         "kind": kind,
         "created_by": f"facepuppet {__version__}",
         "units": units,
@@ -332,8 +470,9 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
     ------
     TablesError
         naming the file and field, for a missing, truncated, garbled or
-        pickled file, a newer schema version, another kind, or arrays whose
-        dtype or shape disagree with the manifest or the schema.
+        pickled file, a schema version newer than the kind's, another kind,
+        arrays whose dtype or shape disagree with the manifest, or arrays and
+        channels that :func:`validate` refuses.
     """
     path = Path(path)
     if not path.is_file():
@@ -362,18 +501,16 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
         version = manifest.get("schema_version")
         if not isinstance(version, int) or isinstance(version, bool) or version < 1:
             raise TablesError(path, "manifest.schema_version", f"must be a positive integer, found {version!r}")
-        if version > SCHEMA_VERSION:
-            raise TablesError(
-                path, "manifest.schema_version",
-                f"is {version}, written by a newer facepuppet ({manifest.get('created_by', '?')}); "
-                f"this one reads schema versions up to {SCHEMA_VERSION}. Upgrade facepuppet to load it.",
-            )
         file_kind = manifest.get("kind")
         if kind is not None and file_kind != kind:
             raise TablesError(path, "manifest.kind", f"expected {kind!r} tables, found {file_kind!r}")
-        schema = _SCHEMAS.get(file_kind)
-        if schema is None:
-            raise TablesError(path, "manifest.kind", f"unknown kind {file_kind!r}; known: {', '.join(registered_kinds())}")
+        schema = schema_of(file_kind, path, "manifest.kind")
+        if version > schema.version:
+            raise TablesError(
+                path, "manifest.schema_version",
+                f"is {version}, written by a newer facepuppet ({manifest.get('created_by', '?')}); "
+                f"this one reads {file_kind} schema versions up to {schema.version}. Upgrade facepuppet to load it.",
+            )
         sections = manifest.get("sections")
         if not isinstance(sections, dict):
             raise TablesError(path, "manifest.sections", "must be an object")
@@ -394,15 +531,12 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
                     f"dtype {meta.get('dtype') if isinstance(meta, dict) else '?'}, "
                     f"archive holds shape {list(arr.shape)} dtype {arr.dtype.name}",
                 )
-            if arr.dtype.kind == "f" and not np.isfinite(arr).all():
-                raise TablesError(path, name, "contains NaN or infinity")
             arr.setflags(write=False)
             arrays[name] = arr
-    dims = _resolve_dims(schema, arrays, path)
     channels = manifest.get("channels", {})
     if not isinstance(channels, dict):
         raise TablesError(path, "manifest.channels", "must be an object")
-    _check_channels(schema, channels, dims, path)
+    validate(schema, arrays, channels, path)
     units = manifest.get("units", "")
     if units not in ALLOWED_UNITS:
         raise TablesError(path, "manifest.units", f"must be one of {ALLOWED_UNITS}, found {units!r}")

@@ -294,8 +294,8 @@ def s_distribution(actor: Actor) -> tuple[np.ndarray, np.ndarray, str]:
     return np.array([0.0, 1.0]), np.vstack([lo, hi]), "bounds (table has no s_quantiles)"
 
 
-def training_pairs(actor: Actor, n_sparse: int = 400, n_dense: int = 200, levels: int = 12, seed: int = 0,
-                   low: float = 0.01, high: float = 0.99) -> tuple[np.ndarray, np.ndarray]:
+def parameter_shape_pairs(actor: Actor, n_sparse: int = 400, n_dense: int = 200, levels: int = 12,
+                          seed: int = 0, low: float = 0.01, high: float = 0.99) -> tuple[np.ndarray, np.ndarray]:
     """Parameter-shape pairs from the actor's own model over the actuations' real range.
 
     Each actuation alone at ``levels`` values from its ``low`` to its ``high`` quantile (negative
@@ -338,7 +338,7 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     ----------
     actor : Actor
     character : Character
-    s : ndarray of shape (n_frames, K), float, training actuations; None: :func:`training_pairs`
+    s : ndarray of shape (n_frames, K), float, training actuations; None: :func:`parameter_shape_pairs`
     disp : ndarray of shape (n_frames, n_markers, 3), float, actor units, head-coordinate displacements
     override : {marker index: vertex index}
     landmarks : ndarray of shape (68,), int, the character's Multi-PIE landmark vertices, or None
@@ -353,7 +353,7 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     """
     source = "given"
     if s is None or disp is None:
-        s, disp = training_pairs(actor)
+        s, disp = parameter_shape_pairs(actor)
         source = s_distribution(actor)[2]
     s, disp = np.asarray(s, np.float64), np.asarray(disp, np.float64)
     align = align_markers(actor, character, override, landmarks, snap_landmarks=snap_landmarks)

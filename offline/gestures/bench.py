@@ -49,6 +49,8 @@ from pathlib import Path
 
 import numpy as np
 
+from facepuppet.runtime.bench.registry import load_average
+
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 BLOCK_FRAMES = 60      # block length of the reference bootstrap (2 s at 30 fps)
@@ -101,11 +103,6 @@ def short_blink_onsets(blink: np.ndarray, max_frames: int = SHORT_BLINK_FRAMES) 
 
 BLINK_KINDS = {"blink_per_min": blink_onsets, "blink_hysteresis_per_min": blink_onsets_hysteresis,
                "blink_short_per_min": short_blink_onsets}
-
-
-def blink_rate(blink: np.ndarray, fps: float) -> float:
-    """Rises of ``blink`` through 0.5 per minute (every crossing)."""
-    return 60.0 * len(blink_onsets(blink)) / (len(blink) / fps)
 
 
 def autocorr(x: np.ndarray, lag: int = 5) -> float:
@@ -228,13 +225,6 @@ def _goals(ref, boot, runs, noise):
     return goals
 
 
-def _loadavg() -> str:
-    try:
-        return Path("/proc/loadavg").read_text().strip()
-    except OSError:
-        return "unknown"
-
-
 def run_bench(args: argparse.Namespace) -> dict:
     from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
     from facepuppet.runtime.gestures.synth import GestureSynth
@@ -250,7 +240,7 @@ def run_bench(args: argparse.Namespace) -> dict:
     llf = [d / "tracker/livelinkface_alex_rom_3.csv", d / "tracker/livelinkface_myslate_3.csv"]
     markers = [d / "markers/animface_jaw.c3d", d / "markers/animface_cheeks.c3d"]
     fps = 30.0
-    load_start = _loadavg()
+    load_start = load_average()
     level, z_all, stats = speech_intensity(speech[0], fps=fps, n_frames=1472)
     cut = int(0.8 * len(level))
     with tempfile.TemporaryDirectory() as tmp:
@@ -345,7 +335,7 @@ def run_bench(args: argparse.Namespace) -> dict:
                   "step_us_median": float(np.median(all_steps) * 1e6),
                   "step_us_p99": float(np.percentile(all_steps, 99) * 1e6),
                   "index_build_s": float(np.median(index_s)), "db_build_s": build_s,
-                  "loadavg_start": load_start, "loadavg_end": _loadavg()},
+                  "loadavg_start": load_start, "loadavg_end": load_average()},
         "database": {"bytes": size, "frames": int(len(db["intensity"])), "takes": take_names,
                      "features": len(db.channels["features"]), "continuity_dims": synth.dims},
         "blend_solvers": blend,

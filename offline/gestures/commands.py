@@ -354,8 +354,7 @@ def _transfer_detail(args: argparse.Namespace) -> int:
         table = detail_table(db, det, [Path(p).stem for p in args.markers], rate=rate)
         channels = {**db.channels, "detail": list(det.feature_names)}
         g = save_tables(args.gestures_out, "gesture_db", {**db.arrays, "detail_weights": table}, units=db.units,
-                        channels=channels, settings=db.settings, metrics=db.metrics,
-                        input_hash=db.manifest.get("input_hash", ""))
+                        channels=channels, metadata=db.metadata)
         rows = int(np.count_nonzero(np.abs(table).sum(1) > 0))
         print(f"{g}: gesture tables with detail weights ({rows} of {len(table)} reference frames from the "
               f"marker takes); run --gestures {g} --character {path} drives the detail shapes")

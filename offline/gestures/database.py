@@ -32,13 +32,13 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.channels import canonical, gesture_group
 from facepuppet.runtime.gestures.tables import GROUPS, HEAD_FEATURES
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.tables import hash_inputs, save_tables
 
 from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
-from facepuppet.offline.gestures.regional_features import head_track, region_of
+from facepuppet.offline.gestures.regional_features import head_track
 from facepuppet.offline.gestures.speech_intensity import speech_intensity
 
 
@@ -80,7 +80,7 @@ def read_speech_take(wav: str | os.PathLike, curves_csv: str | os.PathLike, mapp
     lips: dict[str, np.ndarray] = {}
     with open(mapping_csv, newline="") as handle:
         for row in csv.DictReader(handle):
-            if row["status"] != "valid" or region_of(row["arkit"]) != "lips":
+            if row["status"] != "valid" or gesture_group(row["arkit"]) != "lips":
                 continue
             srcs = [s for s in row["sources"].split(";") if s in col]
             if not srcs:
@@ -149,13 +149,13 @@ def assemble(takes: list[Take], n_basis: int = 6, epsilon: float = 0.1, window: 
     """
     lips = sorted({n for t in takes if "lips" in t.groups for n in t.columns})
     mood_takes = [t for t in takes if "mood" in t.groups]
-    stoch = sorted({n for t in mood_takes for n in t.columns if region_of(n) != "lips"},  # by region, then name:
-                   key=lambda n: (("brows", "eyes", "rest").index(region_of(n)), n))  # not the set's hash order
+    stoch = sorted({n for t in mood_takes for n in t.columns if gesture_group(n) != "lips"},  # by region, then name:
+                   key=lambda n: (("brows", "eyes", "rest").index(gesture_group(n)), n))  # not the set's hash order
     head = list(HEAD_FEATURES) if any("head" in t.groups for t in takes) else []
     n_b = n_basis if mood_takes else 0
     names = lips + [f"mood_{i}" for i in range(n_b)] + stoch + head
     group = ([GROUPS.index("lips")] * len(lips) + [GROUPS.index("mood")] * n_b
-             + [GROUPS.index(region_of(n)) for n in stoch] + [GROUPS.index("head")] * len(head))
+             + [GROUPS.index(gesture_group(n)) for n in stoch] + [GROUPS.index("head")] * len(head))
     N = sum(t.n_frames for t in takes)
     F = np.zeros((N, len(names)))
     avail = np.zeros((N, len(GROUPS)), bool)

@@ -48,7 +48,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.geometry import smoothstep, vertex_normals
 
 from facepuppet.offline.actuation.stabilise import stabilise
 from facepuppet.offline.actuation.transfer import umeyama
@@ -202,8 +202,7 @@ class DetailTransfer:
             if len(others):
                 tree = cKDTree(others)
                 band = min(BORDER_BAND * rad, float(tree.query(p)[0].min()))
-                x = np.clip((tree.query(verts[vx])[0] - d_own) / max(band, 1e-12), 0.0, 1.0)
-                mask = x * x * (3.0 - 2.0 * x)  # smoothstep
+                mask = smoothstep(0.0, max(band, 1e-12), tree.query(verts[vx])[0] - d_own)
             self.radius[r] = rad
             self._parts.append((r, mk, vx, RBFTransfer(rad), mask))
 

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.channels import gesture_group
 from facepuppet.runtime.gestures.layer import HEAD_FEATURES
 
 REGIONS = ("brows", "eyes", "lips", "rest")
@@ -26,21 +26,9 @@ REGIONS = ("brows", "eyes", "lips", "rest")
 STABLE_MARKERS = ("ForeHead_M", "ForeHead_L", "ForeHead_R", "NoseTop")
 
 
-def region_of(name: str) -> str:
-    """Region of an ARKit channel name (any spelling): brows, eyes, lips or rest."""
-    key = canonical(name)
-    if key.startswith("brow"):
-        return "brows"
-    if key.startswith("eye"):
-        return "eyes"
-    if key.startswith(("mouth", "jaw")):
-        return "lips"
-    return "rest"
-
-
 def split_regions(names: Sequence[str]) -> dict[str, np.ndarray]:
     """Column indices of each region, {region: ndarray of int64}; every column in exactly one."""
-    regions = [region_of(n) for n in names]
+    regions = [gesture_group(n) for n in names]
     return {r: np.array([i for i, g in enumerate(regions) if g == r], np.int64) for r in REGIONS}
 
 

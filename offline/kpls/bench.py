@@ -32,9 +32,9 @@ def _runtime_timing(source, target, frames, log) -> dict:
 
     from facepuppet.offline.kpls.commands import to_runtime
     from facepuppet.offline.kpls.model import KernelPLS
-    from facepuppet.offline.kpls.pairs import training_pairs
+    from facepuppet.offline.kpls.pairs import expression_pairs
 
-    pairs = training_pairs(source, target)
+    pairs = expression_pairs(source, target)
     model = KernelPLS(kernel="rbf").fit(pairs.X, pairs.Y)
     stage = to_runtime(model, pairs, source, target)
     import tempfile

@@ -20,7 +20,7 @@ from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.kpls.model import KernelPLS
-from facepuppet.offline.kpls.pairs import TrainingPairs, read_pairing, training_pairs
+from facepuppet.offline.kpls.pairs import TrainingPairs, expression_pairs, read_pairing
 
 if TYPE_CHECKING:
     from facepuppet.runtime.character import Character
@@ -83,8 +83,8 @@ def fit_retarget_command(args: argparse.Namespace, log: Callable[[str], None] = 
     start = time.perf_counter()
     source, target = Character.load(args.source), Character.load(args.target)
     pairing = read_pairing(args.pairing) if args.pairing is not None else None
-    pairs = training_pairs(source, target, pairing=pairing, n_mixes=args.mixes, seed=args.seed,
-                           k_source=args.source_points, k_target=args.target_points)
+    pairs = expression_pairs(source, target, pairing=pairing, n_mixes=args.mixes, seed=args.seed,
+                             k_source=args.source_points, k_target=args.target_points)
     model = KernelPLS(n_components=args.components, kernel=args.kernel).fit(pairs.X, pairs.Y)
     rms = float(np.sqrt(np.mean((model.predict(pairs.X) - pairs.Y) ** 2)))
     settings = {"kernel": args.kernel, "components": str(args.components), "n_components": model.n_components_,

@@ -34,7 +34,7 @@ from facepuppet.runtime.character import Character
 from facepuppet.offline.kpls.baselines import KernelRidgeRetarget, LinearPLS, LinearRetarget, PairRBF, PCARBFRetarget
 from facepuppet.offline.kpls.dutreve_rbf import DutreveRBF, corresponding_vertices
 from facepuppet.offline.kpls.model import KernelPLS
-from facepuppet.offline.kpls.pairs import feature_matrix, feature_points, moving_vertices, pair_weights
+from facepuppet.offline.kpls.pairs import feature_matrix, feature_points, moving_region, pair_weights
 from facepuppet.offline.kpls.targets import stylise  # noqa: F401  (kept importable from here)
 
 if TYPE_CHECKING:
@@ -78,7 +78,7 @@ def cyclic_error(character: Character, motion: np.ndarray, returned: np.ndarray,
     """
     if motion.shape != returned.shape:
         raise ValueError(f"cyclic_error: motion {motion.shape} and returned {returned.shape} differ in shape")
-    region = moving_vertices(character, 0.0) if region is None else region
+    region = moving_region(character, 0.0) if region is None else region
     D = character.dense_deltas()[:, region].reshape(character.n_shapes, -1).astype(np.float64)
     diff = (motion - returned) @ D  # v − v' per frame: the neutral cancels
     # Ouzounis eq. 11: e_d = 1/(N_f N_v) Σ_f Σ_v ‖v − v'‖
@@ -114,7 +114,7 @@ def evaluate(source: Character, targets: dict, motion: np.ndarray, methods: dict
     gamma (KPLS only, [forward, backward]).
     """
     methods = dict(methods or default_methods())
-    region = moving_vertices(source, 0.0)
+    region = moving_region(source, 0.0)
     sp = feature_points(source, k_source, None, seed)
     F_a = feature_matrix(source, sp)
     x_motion = motion @ F_a.T

@@ -33,7 +33,7 @@ import numpy as np
 from scipy.interpolate import RBFInterpolator
 
 from facepuppet.offline.kpls.model import check_inputs
-from facepuppet.offline.kpls.pairs import moving_vertices
+from facepuppet.offline.kpls.pairs import moving_region
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -46,7 +46,7 @@ def corresponding_vertices(a: Character, b: Character, idx_a: np.ndarray) -> np.
     idx_a = np.asarray(idx_a, dtype=np.int64)
     if a.n_vertices == b.n_vertices and np.array_equal(a.triangles, b.triangles):
         return idx_a
-    ra, rb = moving_vertices(a), moving_vertices(b)
+    ra, rb = moving_region(a), moving_region(b)
     pa, pb = a.vertices[ra].astype(np.float64), b.vertices[rb].astype(np.float64)
     lo_a, span_a = pa.min(0), np.ptp(pa, axis=0)
     lo_b, span_b = pb.min(0), np.ptp(pb, axis=0)

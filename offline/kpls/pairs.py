@@ -19,7 +19,7 @@ paper uses 45 and 37).
   correspondence between the two characters' expression spaces from examples
   only, not from names or geometry at run time.
 
-Pairs (:func:`training_pairs`) are: the neutral (0 ↔ 0); every matched shape
+Pairs (:func:`expression_pairs`) are: the neutral (0 ↔ 0); every matched shape
 at weight 1 (its source weights ↔ its target weights); and random sparse
 mixes of 2–``max_mix`` matched pairs with weights uniform in (0, 1], the
 same mix on both sides, so that the learnt map sees combinations and is not a
@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap, canonical
+from facepuppet.runtime.character import moving_vertices
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -49,14 +50,15 @@ if TYPE_CHECKING:
     from facepuppet.runtime.character import Character
 
 
-def moving_vertices(character: Character, fraction: float = 0.05) -> np.ndarray:
-    """Vertices some shape moves by more than ``fraction`` of the largest move, (k,) int64, sorted."""
-    dense = np.linalg.norm(character.delta_positions, axis=1)
-    if not len(dense):
-        raise ValueError(f"character {character.name!r}: has no shape deltas; nothing moves")
-    peak = np.zeros(character.n_vertices)
-    np.maximum.at(peak, character.delta_indices.astype(np.int64), dense)
-    return np.flatnonzero(peak > fraction * peak.max())
+def moving_region(character: Character, fraction: float = 0.05) -> np.ndarray:
+    """The region retargeting works in: :func:`~facepuppet.runtime.character.moving_vertices`, (k,) int64.
+
+    Raises ValueError for a character whose shapes move nothing: it has no region to choose feature points in.
+    """
+    region = moving_vertices(character, fraction)
+    if not len(region):
+        raise ValueError(f"character {character.name!r}: its shapes move no vertex; nothing to retarget")
+    return region
 
 
 def farthest_points(points: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
@@ -80,7 +82,7 @@ def feature_points(character: Character, k: int = 45, given: ArrayLike | None = 
         if idx.size == 0 or idx.min() < 0 or idx.max() >= character.n_vertices:
             raise ValueError(f"feature_points: given indices must lie in 0..{character.n_vertices - 1}")
         return idx
-    region = moving_vertices(character)
+    region = moving_region(character)
     return region[farthest_points(character.vertices[region].astype(np.float64), min(k, len(region)), seed)]
 
 
@@ -185,17 +187,17 @@ def pair_weights(n_shapes: int, matched: ArrayLike, n_mixes: int = 300, max_mix:
     return np.stack(rows)
 
 
-def training_pairs(source: Character, target: Character, source_points: ArrayLike | None = None,
-                   target_points: ArrayLike | None = None, pairing: Sequence[tuple[str, str]] | None = None,
-                   n_mixes: int = 300, max_mix: int = 6, seed: int = 0, k_source: int = 45,
-                   k_target: int = 37) -> TrainingPairs:
+def expression_pairs(source: Character, target: Character, source_points: ArrayLike | None = None,
+                     target_points: ArrayLike | None = None, pairing: Sequence[tuple[str, str]] | None = None,
+                     n_mixes: int = 300, max_mix: int = 6, seed: int = 0, k_source: int = 45,
+                     k_target: int = 37) -> TrainingPairs:
     """Neutral, single matched shapes and random sparse mixes, described on each side's own feature points."""
     sp = feature_points(source, k_source, source_points, seed)
     tp = feature_points(target, k_target, target_points, seed)
     M = match_matrix(source.shape_names, target.shape_names, pairing)
     matched = np.flatnonzero(M.any(axis=0))
     if len(matched) < 2:
-        raise ValueError(f"training_pairs: only {len(matched)} shapes of {source.name!r} match a shape of "
+        raise ValueError(f"expression_pairs: only {len(matched)} shapes of {source.name!r} match a shape of "
                          f"{target.name!r}; give a pairing file")
     W = pair_weights(source.n_shapes, matched, n_mixes, max_mix, seed)
     F = feature_matrix(source, sp)

@@ -21,7 +21,18 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from facepuppet.runtime.tables import Section, TableSchema, TablesError, hash_inputs, load_tables, register_schema, save_tables
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    TablesError,
+    coerce,
+    hash_inputs,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 ACTOR_SCHEMA = register_schema(TableSchema(
     kind="actor",
@@ -39,12 +50,6 @@ ACTOR_SCHEMA = register_schema(TableSchema(
     channels=("markers", "actuations"),
     channel_dims={"markers": "n_markers", "actuations": "n_actuations"},
 ))
-
-
-def _f32(a) -> np.ndarray:
-    out = np.ascontiguousarray(a, dtype=np.float32)
-    out.setflags(write=False)
-    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,16 +85,10 @@ class Actor:
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
-        for name in ("neutral", "cubic", "unmixing", "class_axes", "s_lower", "s_upper", "linear"):
-            if getattr(self, name) is not None:
-                object.__setattr__(self, name, _f32(getattr(self, name)))
-        for name in ("class_marker", "head_markers"):
-            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), dtype=np.int32))
+        for name, arr in coerce(ACTOR_SCHEMA, self._arrays()).items():
+            object.__setattr__(self, name, arr)
         object.__setattr__(self, "names", tuple(self.names))
-        from facepuppet.runtime.tables import _check_channels, _resolve_dims
-
-        dims = _resolve_dims(ACTOR_SCHEMA, self._arrays(), None)
-        _check_channels(ACTOR_SCHEMA, self._channels(), dims, None)
+        validate(ACTOR_SCHEMA, self._arrays(), self._channels())
         if np.any(self.s_lower > 0) or np.any(self.s_upper < 0):
             raise TablesError(None, "s_lower/s_upper", "bounds must contain s = 0 (the neutral)")
 
@@ -102,25 +101,23 @@ class Actor:
         return self.cubic.shape[1]
 
     def _arrays(self) -> dict[str, np.ndarray]:
-        arrays = {name: getattr(self, name) for name in ACTOR_SCHEMA.sections if getattr(self, name) is not None}
-        return arrays
+        return {name: getattr(self, name) for name in ACTOR_SCHEMA.sections if getattr(self, name) is not None}
 
     def _channels(self) -> dict[str, list[str]]:
         return {"markers": list(self.names), "actuations": [f"s{k + 1:02d}" for k in range(self.n_actuations)]}
 
     def save(self, path: str | os.PathLike) -> Path:
-        meta = dict(self.metadata)
         return save_tables(path, "actor", self._arrays(), units=self.units, channels=self._channels(),
-                           settings=meta.get("settings", {}), metrics=meta.get("metrics", {}),
-                           input_hash=meta.get("input_hash", "") or hash_inputs(self.cubic))
+                           metadata=self.metadata,
+                           input_hash=self.metadata.get("input_hash", "") or hash_inputs(self.cubic))
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Actor":
         t = load_tables(path, "actor")
-        return cls(names=tuple(t.channels["markers"]), units=t.units,
-                   **{name: np.array(t[name]) for name in ACTOR_SCHEMA.sections if name in t.arrays},
-                   metadata={"settings": dict(t.settings), "metrics": dict(t.metrics),
-                             "input_hash": t.manifest.get("input_hash", "")})
+        with naming_file(path):
+            return cls(names=tuple(t.channels["markers"]), units=t.units,
+                       **{name: np.array(t[name]) for name in ACTOR_SCHEMA.sections if name in t.arrays},
+                       metadata=t.metadata)
 
     def evaluate(self, s) -> np.ndarray:
         """Markers x(s) (eq 2): ndarray of shape (n_markers, 3), float64, units, head coordinates."""

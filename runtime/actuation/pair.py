@@ -19,8 +19,16 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from facepuppet.runtime.actuation.actor import _f32
-from facepuppet.runtime.tables import Section, TableSchema, load_tables, register_schema, save_tables
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    coerce,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 PAIR_SCHEMA = register_schema(TableSchema(
     kind="actor_pair",
@@ -61,13 +69,9 @@ class ActorPair:
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
-        for name in ("cubic", "similarity", "s_lower", "s_upper"):
-            object.__setattr__(self, name, _f32(getattr(self, name)))
-        object.__setattr__(self, "marker_vertices", np.ascontiguousarray(self.marker_vertices, dtype=np.int32))
-        from facepuppet.runtime.tables import _check_channels, _resolve_dims
-
-        dims = _resolve_dims(PAIR_SCHEMA, self._arrays(), None)
-        _check_channels(PAIR_SCHEMA, self._channels(), dims, None)
+        for name, arr in coerce(PAIR_SCHEMA, self._arrays()).items():
+            object.__setattr__(self, name, arr)
+        validate(PAIR_SCHEMA, self._arrays(), self._channels())
         object.__setattr__(self, "_flat", self.cubic.astype(np.float64).reshape(-1, self.cubic.shape[2]))
 
     def _arrays(self):
@@ -79,17 +83,14 @@ class ActorPair:
                 "shapes": list(self.shape_names)}
 
     def save(self, path: str | os.PathLike) -> Path:
-        meta = dict(self.metadata)
-        return save_tables(path, "actor_pair", self._arrays(), channels=self._channels(),
-                           settings=meta.get("settings", {}), metrics=meta.get("metrics", {}),
-                           input_hash=meta.get("input_hash", ""))
+        return save_tables(path, "actor_pair", self._arrays(), channels=self._channels(), metadata=self.metadata)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "ActorPair":
         t = load_tables(path, "actor_pair")
-        return cls(shape_names=tuple(t.channels["shapes"]), marker_names=tuple(t.channels["markers"]),
-                   **{name: np.array(t[name]) for name in PAIR_SCHEMA.sections},
-                   metadata={"settings": dict(t.settings), "metrics": dict(t.metrics)})
+        with naming_file(path):
+            return cls(shape_names=tuple(t.channels["shapes"]), marker_names=tuple(t.channels["markers"]),
+                       **{name: np.array(t[name]) for name in PAIR_SCHEMA.sections}, metadata=t.metadata)
 
     def weights(self, s) -> np.ndarray:
         """Character weights w(s) (n_shapes,), float32, clipped to [0, 1] (cubic of eq 2 on weights).

@@ -17,7 +17,7 @@ steps per frame.
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -26,6 +26,46 @@ from scipy.linalg.lapack import dposv as _spd_solve
 from facepuppet.runtime.actuation.actor import Actor
 
 _max, _min = np.maximum.reduce, np.minimum.reduce                   # plain ufunc reductions (no method wrapper)
+
+
+class _Subset(NamedTuple):
+    """What eq. 5 needs of one marker subset (and its weights), cached while the subset repeats (see ``_gram``)."""
+
+    ga: np.ndarray               # (3K, 3K + 1): G in the first 3K columns, the residual G phi - mt in the last
+    mw: np.ndarray               # (3K, 3 n_sub): the subset's M, weighted
+    x0: np.ndarray               # (3 n_sub,): the subset's neutral x^0
+    idx: np.ndarray              # (3 n_sub,) intp: the subset's coordinates
+    wrep: np.ndarray | None      # (3 n_sub,): per-coordinate weights, None for all 1
+    reg: float                   # lam + mu, folded into the s-block of G
+    gram: np.ndarray             # ga[:, :3K], G
+    resid: np.ndarray            # ga[:, 3K], scratch written by each iteration
+
+
+class _Point(NamedTuple):
+    """An iterate: phi(s) = [s^3, s^2, s] and views into it, so s lives in phi and nothing is copied."""
+
+    phi: np.ndarray              # (3K,)
+    s3: np.ndarray               # phi[:K]
+    s2: np.ndarray               # phi[K:2K]
+    s: np.ndarray                # phi[2K:]
+    s21: np.ndarray              # phi[K:] as (2, K): [s^2; s]
+    gphi: np.ndarray             # (3K,): G phi
+
+
+class _Work(NamedTuple):
+    """Preallocated per-iteration buffers and views of the LM step."""
+
+    jsel: np.ndarray             # (K, 3K): J^T selector [diag(3 s^2) | diag(2 s) | I]
+    jt: np.ndarray               # jsel.T
+    jga: np.ndarray              # (K, 3K + 1): jsel @ ga
+    jg: np.ndarray               # jga[:, :3K]
+    g: np.ndarray                # jga[:, 3K], the gradient J^T W r
+    h: np.ndarray                # (K, K): J^T W J (+ damping + prior)
+    hdiag: np.ndarray            # the diagonal of h, a strided view
+    d32: np.ndarray              # (2, K): the diagonals of jsel's a- and b-blocks, a strided view
+    tmp: np.ndarray              # (3K,)
+    jscale: np.ndarray           # (2, 1): [3; 2]
+    step: np.ndarray             # (K,): the step taken
 
 
 class MarkerSolver:
@@ -77,46 +117,39 @@ class MarkerSolver:
         self._jga = np.empty((k, 3 * k + 1))                         # preallocated per-iteration buffers
         self._h = np.empty((k, k))
         self._hdiag = self._h.reshape(-1)[::k + 1]
-        # the current and the trial point: (phi = [s^3, s^2, s], its blocks s^3, s^2, s, the view [s^2; s]
-        # of shape (2, K), G phi): s lives in phi, so no copies between them
-        self._points = tuple(self._point(k) for _ in range(2))
+        self._points = (self._point(k), self._point(k))             # the current and the trial point
         self._tmp = np.empty(3 * k)
         self._step = np.empty(k)
         jga = self._jga
-        self._work = (self._jsel, self._jsel.T, jga, jga[:, :3 * k], jga[:, 3 * k], self._h, self._hdiag,
-                      self._diag32, self._tmp, self._jscale, self._step)
+        self._work = _Work(jsel=self._jsel, jt=self._jsel.T, jga=jga, jg=jga[:, :3 * k], g=jga[:, 3 * k],
+                           h=self._h, hdiag=self._hdiag, d32=self._diag32, tmp=self._tmp, jscale=self._jscale,
+                           step=self._step)
         self.s = np.zeros(k)
         self.last_iterations = 0
         self.last_cost = float("nan")
         self._cache_key: bytes | None = None                       # NaN pattern (+ weights) of the cached subset
-        self._cache = None
-        self._all = None                                             # the cache entry of "all markers, weight 1"
+        self._cache: _Subset | None = None
+        self._all: _Subset | None = None                           # the cache entry of "all markers, weight 1"
         self._dense = True                                           # try the all-markers path first
 
     @staticmethod
-    def _point(k: int) -> tuple:
+    def _point(k: int) -> _Point:
         phi = np.empty(3 * k)
-        return phi, phi[:k], phi[k:2 * k], phi[2 * k:], phi[k:].reshape(2, k), np.empty(3 * k)
+        return _Point(phi=phi, s3=phi[:k], s2=phi[k:2 * k], s=phi[2 * k:], s21=phi[k:].reshape(2, k),
+                      gphi=np.empty(3 * k))
 
     def reset(self) -> None:
         """Forget the warm start (s = neutral)."""
         self.s = np.zeros(self.actor.n_actuations)
 
-    def _gram(self, present: np.ndarray, w: np.ndarray | None):
-        """Cached quantities of one marker subset (and weights) for eq. 5.
+    def _gram(self, present: np.ndarray, w: np.ndarray | None) -> _Subset:
+        """Cached quantities of one marker subset (and weights) for eq. 5 (the fields of :class:`_Subset`).
 
         Because x(s) is linear in phi(s) = [s^3, s^2, s], the Gauss-Newton
         quantities of eq. 5 reduce to (3K, 3K) products with the Gram matrix
         G = M_sub W M_sub^T, whatever the number of markers.  The damping and
         prior terms are quadratic in the s-block of phi, so they are folded
         into G: (lam + mu) is added to the diagonal of its s-block.
-
-        Returns (ga, mw, x0, idx, wrep, reg, gram, resid): ga (3K, 3K + 1) holds
-        that G in its first 3K columns, ``gram``, and the residual G phi - mt
-        in its last, ``resid`` (scratch, written by each iteration), mw the
-        weighted M_sub (3K, 3 n_sub), x0 the neutral of the subset (3 n_sub,),
-        idx the integer indices of the subset's coordinates (3 n_sub,), intp,
-        wrep the per-coordinate weights (3 n_sub,) or None, reg = lam + mu.
         """
         reg = self.damping + self.prior
         k = len(self._lo)
@@ -127,7 +160,8 @@ class MarkerSolver:
         ga = np.empty((3 * k, 3 * k + 1))
         ga[:, :3 * k] = mw @ m.T
         ga.reshape(-1)[2 * k * (3 * k + 2)::3 * k + 2][:k] += reg
-        return ga, mw, self._neutral[idx], idx, wrep, reg, ga[:, :3 * k], ga[:, 3 * k]
+        return _Subset(ga=ga, mw=mw, x0=self._neutral[idx], idx=idx, wrep=wrep, reg=reg, gram=ga[:, :3 * k],
+                       resid=ga[:, 3 * k])
 
     def solve(self, observed, weights=None, s0=None, iterations: int | None = None) -> np.ndarray:
         """Actuations s (K,), float64, that best explain the observed markers.
@@ -153,10 +187,9 @@ class MarkerSolver:
             # anywhere makes ||p - x^0||^2 NaN, so that sum doubles as the test (while frames come
             # with NaN, they go straight to the subset path until one comes complete again)
             entry = self._all
-            if entry is None or entry[5] != reg:
+            if entry is None or entry.reg != reg:
                 entry = self._all = self._gram(np.ones(n, dtype=bool), None)
-            ga, mw, x0 = entry[0], entry[1], entry[2]
-            target = flat - x0                                   # p_i - x_i^0
+            target = flat - entry.x0                             # p_i - x_i^0
             tt = float(target @ target)
         if tt != tt:
             # the cache key is the NaN pattern of the coordinates (+ the weights): when it repeats,
@@ -171,7 +204,7 @@ class MarkerSolver:
                     raise ValueError(f"MarkerSolver.solve: weights must be ({n},) finite >= 0")
                 key = nan.tobytes() + w.tobytes()
             entry = self._cache
-            if key != self._cache_key or entry[5] != reg:
+            if key != self._cache_key or entry.reg != reg:
                 present = ~nan.reshape(n, 3).any(axis=1)
                 if w is not None:
                     present &= w > 0
@@ -180,22 +213,21 @@ class MarkerSolver:
             if entry is None:
                 self.last_iterations = 0
                 return self.s.copy()
-            self._dense = weights is None and len(entry[3]) == 3 * n
-            ga, mw, x0, idx, wrep = entry[0], entry[1], entry[2], entry[3], entry[4]
-            target = flat.take(idx)
-            target -= x0
-            tt = float(target @ (target if wrep is None else target * wrep))
+            self._dense = weights is None and len(entry.idx) == 3 * n
+            target = flat.take(entry.idx)
+            target -= entry.x0
+            tt = float(target @ (target if entry.wrep is None else target * entry.wrep))
         k = len(self._lo)
         s_prev = self.s if s0 is None else np.clip(np.asarray(s0, dtype=np.float64), self._lo, self._hi)
         lam, lo, hi, tol = self.damping, self._lo, self._hi, self.tolerance
         # eq. 5 plus damping and prior: sum_i w_i ||x_i(s) - p_i||^2 + lam ||s - s_prev||^2 + mu ||s||^2
         #   = phi'G phi - 2 phi'mt + tt, with G holding lam + mu (see _gram), mt = M W p + lam [0; 0; s_prev]
-        mt = mw @ target
+        mt = entry.mw @ target
         mt[2 * k:] += lam * s_prev
         tt += lam * float(s_prev @ s_prev)
         mt2 = 2.0 * mt
-        gram, resid = entry[6], entry[7]
-        jsel, jt, jga, jg, g, h, hdiag, d32, tmp, jscale, step = self._work
+        ga, gram, resid = entry.ga, entry.gram, entry.resid
+        jsel, jt, jga, jg, g, h, hdiag, d32, tmp, jscale, step = self._work    # the fields of _Work, in order
         cur, new = self._points
         phi, s3, s2, s, s21, gphi = cur
         # every array op below is one NumPy call on a preallocated buffer: per frame the call count, not the
@@ -238,7 +270,7 @@ class MarkerSolver:
             else:
                 nu *= 10.0
         self._points = (cur, new)
-        s = cur[3].copy()
+        s = cur.s.copy()
         self.s = s
         self.last_iterations = used
         self.last_cost = max(cost, 0.0)

@@ -35,7 +35,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from facepuppet.runtime.bench.registry import peak_rss_mb, register_bench
+from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench
 
 _PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2**20 if hasattr(os, "sysconf") else 4096 / 2**20
 
@@ -163,16 +163,8 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
         "newest_frame_max_ms_per_second": [per_second[k] for k in sorted(per_second)],
         "rss_mb_per_second": [round(m, 1) for _, m in rss],
         "render_path": result.path,
-        "loadavg": _loadavg(),
+        "loadavg": load_average(),
     }
-
-
-def _loadavg() -> str:
-    try:
-        with open("/proc/loadavg") as f:
-            return " ".join(f.read().split()[:3])
-    except OSError:
-        return "n/a"
 
 
 def _percentiles(ms: np.ndarray) -> dict:

@@ -68,6 +68,14 @@ def machine_info() -> dict:
     }
 
 
+def load_average() -> str:
+    """The 1, 5 and 15-minute load averages, e.g. ``"0.52 0.61 0.70"``; ``"n/a"`` where the OS keeps none."""
+    try:
+        return " ".join(f"{v:.2f}" for v in os.getloadavg())
+    except (AttributeError, OSError):
+        return "n/a"
+
+
 def peak_rss_mb() -> float:
     """Peak resident memory of this process so far, MiB (Linux reports KiB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

@@ -16,8 +16,8 @@ import numpy as np
 
 from facepuppet.runtime.demo import head_parts as parts
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
-from facepuppet.runtime.demo.head_parts import gauss, smoothstep
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.demo.head_parts import gauss
+from facepuppet.runtime.geometry import smoothstep, vertex_normals
 
 MATERIALS = ("skin", "lips", "eye", "teeth", "mouth")
 # specular, shininess per material; the kind code comes from MATERIAL_KINDS

@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from facepuppet.runtime.geometry import smoothstep
+
 ORIGIN = np.array([0.0, -1.5, -0.5])  # ray origin of the skin surface, cm
 MOUTH_Y = -6.4  # target height of the lip line, cm
 MOUTH_HALF_WIDTH = 2.45  # x of the mouth corners, cm
@@ -50,12 +52,6 @@ class Part:
     colors: np.ndarray
     materials: np.ndarray
     params: dict = field(default_factory=dict)
-
-
-def smoothstep(e0, e1, x):
-    """Hermite step from 0 at ``e0`` to 1 at ``e1`` (either order), elementwise."""
-    t = np.clip((np.asarray(x, dtype=np.float64) - e0) / (e1 - e0), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
 
 
 def gauss(x, y, cx, cy, sx, sy):

@@ -30,7 +30,16 @@ from typing import Any, Mapping
 import numpy as np
 
 from facepuppet.runtime.rigid import kabsch
-from facepuppet.runtime.tables import Section, TableSchema, TablesError, _check_channels, _resolve_dims, load_tables, register_schema, save_tables
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    TablesError,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 MUSCLE_KINDS = {"linear": 0, "sphincter": 1}
 
@@ -78,11 +87,7 @@ class ElasticModel:
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
-        dims = _resolve_dims(ELASTIC_SCHEMA, self.arrays, None)
-        _check_channels(ELASTIC_SCHEMA, self._channels(), dims, None)
-        for name, arr in self.arrays.items():
-            if arr.dtype.kind == "f" and not np.isfinite(arr).all():
-                raise TablesError(None, name, "contains NaN or infinity")
+        dims = validate(ELASTIC_SCHEMA, self.arrays, self._channels())
         if dims["n_controls"] and int(self.arrays["basis_indices"].max(initial=0)) >= dims["n_controls"]:
             raise TablesError(None, "basis_indices", f"control index out of range for {dims['n_controls']} controls")
         if ("rigid_labels" in self.arrays) != ("rigid_anchors" in self.arrays):
@@ -177,27 +182,21 @@ class ElasticModel:
 
     # -- tables ------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> Path:
-        meta = dict(self.metadata)
-        return save_tables(
-            path, "elastic", dict(self.arrays), units=self.units, channels=self._channels(),
-            settings=meta.get("settings", {}), input_hash=meta.get("input_hash", ""), metrics=meta.get("metrics", {}),
-        )
+        return save_tables(path, "elastic", dict(self.arrays), units=self.units, channels=self._channels(),
+                           metadata=self.metadata)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "ElasticModel":
         t = load_tables(path, kind="elastic")
-        try:
+        with naming_file(path):
             return cls(
                 arrays=dict(t.arrays),
                 shape_names=tuple(t.channels["shapes"]),
                 control_names=tuple(t.channels["controls"]),
                 muscle_names=tuple(t.channels["muscles"]),
                 units=t.units,
-                metadata={"settings": dict(t.settings), "metrics": dict(t.metrics),
-                          "input_hash": t.manifest.get("input_hash", "")},
+                metadata=t.metadata,
             )
-        except TablesError as exc:
-            raise TablesError(path, exc.field, exc.problem) from None
 
 
 def no_muscles(n_controls: int) -> dict:

@@ -110,10 +110,10 @@ class LiveLinkFaceAdapter:
         )
 
 
-def encode_packet(weights, head=(0.0, 0.0, 0.0), eyes=(0.0,) * 6, number: int = 0, sub_frame: float = 0.0,
-                  fps: int = 60, denominator: int = 1, name: str = "iPhone",
-                  device_id: str = "$00000000-0000-0000-0000-000000000000") -> bytes:
-    """A version-6 packet (the layout above), for tests, benchmarks and senders.
+def encode_llf_packet(weights, head=(0.0, 0.0, 0.0), eyes=(0.0,) * 6, number: int = 0, sub_frame: float = 0.0,
+                      fps: int = 60, denominator: int = 1, name: str = "iPhone",
+                      device_id: str = "$00000000-0000-0000-0000-000000000000") -> bytes:
+    """A Live Link Face version-6 UDP packet (the layout above), for tests, benchmarks and senders.
 
     Parameters
     ----------
@@ -123,7 +123,7 @@ def encode_packet(weights, head=(0.0, 0.0, 0.0), eyes=(0.0,) * 6, number: int = 
     """
     weights = list(weights)
     if len(weights) != 52 or len(head) != 3 or len(eyes) != 6:
-        raise ValueError(f"encode_packet: expected 52 weights, 3 head and 6 eye values, got "
+        raise ValueError(f"encode_llf_packet: expected 52 weights, 3 head and 6 eye values, got "
                          f"{len(weights)}, {len(head)}, {len(eyes)}")
     uid = device_id.encode("ascii")[:37].ljust(37, b"\0")
     raw_name = name.encode("utf-8")

@@ -29,7 +29,17 @@ import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.tables import Section, TableSchema, TablesError, load_tables, register_schema, save_tables
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    TablesError,
+    coerce,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 KERNEL_CODES = {"linear": 0, "rbf": 1, "poly": 2}
 
@@ -91,17 +101,12 @@ class KplsRetarget:
         set_ = object.__setattr__
         if self.kernel not in KERNEL_CODES:
             raise TablesError(None, "kernel_params", f"kernel must be one of {tuple(KERNEL_CODES)}, got {self.kernel!r}")
-        for name in ("source_features", "train_inputs", "dual_coef", "kernel_col_mean", "target_mean"):
-            set_(self, name, np.ascontiguousarray(getattr(self, name), dtype=np.float32))
+        given = ("source_features", "train_inputs", "dual_coef", "kernel_col_mean", "target_mean")
+        for name, arr in coerce(RETARGET_KPLS_SCHEMA, {name: getattr(self, name) for name in given}).items():
+            set_(self, name, arr)
         set_(self, "source_names", tuple(self.source_names))
         set_(self, "target_names", tuple(self.target_names))
-        from facepuppet.runtime.tables import _check_channels, _resolve_dims
-
-        dims = _resolve_dims(RETARGET_KPLS_SCHEMA, self._arrays(), None)
-        _check_channels(RETARGET_KPLS_SCHEMA, self._channels(), dims, None)
-        for name, arr in self._arrays().items():
-            if not np.isfinite(arr).all():
-                raise TablesError(None, name, "contains NaN or infinity")
+        validate(RETARGET_KPLS_SCHEMA, self._arrays(), self._channels())
         # Fold the centring (eq. 8) into constants: ŷ = k B − mean(k) s + c
         B = self.dual_coef.astype(np.float64)
         s = B.sum(axis=0)
@@ -131,12 +136,10 @@ class KplsRetarget:
 
     def save(self, path: str | os.PathLike):
         """Write a ``retarget_kpls`` tables file; returns its path."""
-        meta = dict(self.metadata)
-        settings = dict(meta.get("settings", {}))
+        settings = dict(self.metadata.get("settings", {}))
         settings["kernel"] = self.kernel
         return save_tables(path, "retarget_kpls", self._arrays(), units=self.units, channels=self._channels(),
-                           settings=settings, input_hash=meta.get("input_hash", ""),
-                           metrics=meta.get("metrics", {}))
+                           settings=settings, metadata=self.metadata)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "KplsRetarget":
@@ -149,18 +152,15 @@ class KplsRetarget:
             raise TablesError(path, "kernel_params", f"kernel code must be 0, 1 or 2, found {code:g}")
         if kernels[code] == "poly" and (degree < 1 or degree != int(degree)):
             raise TablesError(path, "kernel_params", f"poly degree must be a positive integer, found {degree:g}")
-        try:
+        with naming_file(path):
             return cls(
                 source_names=tuple(t.channels["source"]), target_names=tuple(t.channels["target"]),
                 source_features=a["source_features"], train_inputs=a["train_inputs"],
                 dual_coef=a["dual_coef"], kernel_col_mean=a["kernel_col_mean"],
                 kernel_grand_mean=float(a["kernel_grand_mean"][0]), target_mean=a["target_mean"],
                 kernel=kernels[code], gamma=gamma, coef0=coef0, degree=int(degree), units=t.units,
-                metadata={"settings": dict(t.settings), "metrics": dict(t.metrics),
-                          "input_hash": t.manifest.get("input_hash", "")},
+                metadata=t.metadata,
             )
-        except TablesError as exc:
-            raise TablesError(path, exc.field, exc.problem) from None
 
     # -- per frame ---------------------------------------------------------
     def predict_features(self, x: np.ndarray) -> np.ndarray:

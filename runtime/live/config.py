@@ -100,18 +100,6 @@ class LiveConfig:
         return self.channels.get(canonical(name), self.default_channel)
 
 
-def region_of(name: str) -> str:
-    """Filter region of a weight channel: ``eyes``, ``brows``, ``mouth`` or ``other``."""
-    key = canonical(name)
-    if key.startswith("eye"):
-        return "eyes"
-    if key.startswith("brow"):
-        return "brows"
-    if key.startswith(("mouth", "jaw", "tongue", "cheek", "lip")):
-        return "mouth"
-    return "other"
-
-
 def _number(where: str, key: str, value, positive: bool = False, non_negative: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise LiveConfigError(f"{where}: key '{key}': expected a finite number, got {value!r} "

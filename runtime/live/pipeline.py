@@ -30,20 +30,15 @@ import math
 
 import numpy as np
 
+from facepuppet.runtime.channels import filter_region
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import quat_mul
-from facepuppet.runtime.live.config import LiveConfig, region_of
+from facepuppet.runtime.geometry import quat_mul, smoothstep
+from facepuppet.runtime.live.config import LiveConfig
 from facepuppet.runtime.live.one_euro import OneEuroFilter
 
 logger = logging.getLogger(__name__)
 
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
-
-
-def smoothstep(x: float) -> float:
-    """3x² - 2x³ on [0, 1] (0 below, 1 above): a ramp with zero slope at both ends, max slope 1.5."""
-    x = min(max(x, 0.0), 1.0)
-    return x * x * (3.0 - 2.0 * x)
 
 
 def nlerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
@@ -63,7 +58,7 @@ class _ChannelState:
 
     def __init__(self, channels: tuple[str, ...], config: LiveConfig):
         n = len(channels)
-        regions = [region_of(c) for c in channels]
+        regions = [filter_region(c) for c in channels]
         settings = [config.filters[r] for r in regions]
         self.weights = OneEuroFilter(n, [s.min_cutoff for s in settings], [s.beta for s in settings],
                                      [s.d_cutoff for s in settings])
@@ -160,7 +155,7 @@ class LivePipeline:
         if self.state in ("lost", "returning"):
             if self.state == "lost":
                 self.state, self._held, self._ease_start = "returning", self._out, t
-            s = smoothstep((t - self._ease_start) / self.config.ease_in_s)
+            s = smoothstep(0.0, 1.0, (t - self._ease_start) / self.config.ease_in_s)
             out = self._blend(self._held, live, s)
             if s >= 1.0:
                 self.state = "live"
@@ -237,7 +232,7 @@ class LivePipeline:
         idle = t - self._last_tick
         if idle <= self.config.timeout_s:
             if self.state == "returning":
-                s = smoothstep((t - self._ease_start) / self.config.ease_in_s)
+                s = smoothstep(0.0, 1.0, (t - self._ease_start) / self.config.ease_in_s)
                 if s >= 1.0:
                     self.state = "live"
                 return self._emit(self._blend(self._held, self._live, s), t)
@@ -248,7 +243,7 @@ class LivePipeline:
             self._cs.reset_filters()  # frames that come back start the filters afresh
         if self._lost_done:
             return None
-        e = smoothstep((idle - self.config.timeout_s) / self.config.ease_out_s)
+        e = smoothstep(0.0, 1.0, (idle - self.config.timeout_s) / self.config.ease_out_s)
         self._lost_done = e >= 1.0
         return self._emit(self._blend(self._held, self._neutral(), e), t)
 

@@ -17,7 +17,7 @@ import collections
 import threading
 
 from facepuppet.runtime.recording.session import SessionWriter
-from facepuppet.runtime.recording.records import RecordKind, encode_audio, encode_packet, encode_tick
+from facepuppet.runtime.recording.records import RecordKind, encode_audio, encode_packet_record, encode_tick
 
 
 class PacketRecorder:
@@ -82,7 +82,7 @@ class PacketRecorder:
             while q:
                 kind, t, value = q.popleft()
                 if kind == RecordKind.PACKET:
-                    write(kind, encode_packet(t, self.kind, value))
+                    write(kind, encode_packet_record(t, self.kind, value))
                     self.counters["packets_recorded"] += 1
                 elif kind == RecordKind.TICK:
                     write(kind, encode_tick(value[0], t, value[1], value[2]))

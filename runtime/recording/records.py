@@ -139,8 +139,8 @@ class Packet:
     data: bytes
 
 
-def encode_packet(t: float, kind: str, data: bytes) -> bytes:
-    """PACKET payload (see the module docstring)."""
+def encode_packet_record(t: float, kind: str, data: bytes) -> bytes:
+    """PACKET record payload: one received datagram as recorded (see the module docstring)."""
     name = kind.encode("utf-8")
     return _PACKET_HEAD.pack(b"P1", t, len(name)) + name + bytes(data)
 
@@ -173,7 +173,7 @@ def encode_tick(k: int, t: float, frames: int, t_clock: float) -> bytes:
     return _TICK.pack(b"K1", int(k), float(t), int(frames), float(t_clock))
 
 
-def decode_packet(payload: bytes) -> Packet | None:
+def decode_packet_record(payload: bytes) -> Packet | None:
     """Packet from a PACKET payload; None when it is not one this reader knows."""
     if len(payload) < _PACKET_HEAD.size or payload[:2] != b"P1":
         return None

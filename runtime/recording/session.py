@@ -41,7 +41,7 @@ from facepuppet.runtime.recording.records import (
     decode_audio,
     decode_frame,
     decode_layout,
-    decode_packet,
+    decode_packet_record,
     decode_tick,
     encode_frame,
     layout_of,
@@ -233,7 +233,7 @@ def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, paylo
         layouts[layout_id] = layout
     elif kind == RecordKind.FRAME:
         session.frames.append(decode_frame(payload, layouts))
-    elif kind == RecordKind.PACKET and (packet := decode_packet(payload)) is not None:
+    elif kind == RecordKind.PACKET and (packet := decode_packet_record(payload)) is not None:
         session.packets.append(packet)
     elif kind == RecordKind.AUDIO and (level := decode_audio(payload)) is not None:
         session.audio_levels.append(level)

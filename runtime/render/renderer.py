@@ -25,7 +25,7 @@ import moderngl
 import numpy as np
 
 from facepuppet.runtime.render.camera import frame_bounds, model_matrix
-from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.character import MATERIAL_KINDS, Character, moving_vertices
 from facepuppet.runtime.render.cpu_deform import CpuDeformer, check_weights
 from facepuppet.runtime.render.elastic_path import check_model, setup_elastic, upload_controls
 from facepuppet.runtime.geometry import bounds, vertex_normals
@@ -64,17 +64,6 @@ def vertex_materials(character: Character) -> np.ndarray:
     # Reverse order so the first triangle that names a vertex is the last write.
     out[tris[::-1].reshape(-1)] = np.repeat(per_tri[::-1], 3, axis=0)
     return out.astype(np.float32)
-
-
-def moving_vertices(character: Character, fraction: float = 0.05) -> np.ndarray:
-    """Indices of the vertices some shape moves by more than ``fraction`` of the largest displacement.
-
-    Their bounds are the expressive part of the face: the ``"face"`` framing.
-    """
-    lengths = np.linalg.norm(character.delta_positions, axis=1)
-    if not len(lengths):
-        return np.arange(character.n_vertices)
-    return np.unique(character.delta_indices[lengths > fraction * lengths.max()])
 
 
 def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
@@ -210,8 +199,9 @@ class FaceRenderer:
         kinds = c.material_params[:, 2].round().astype(int)
         tris = c.triangles[kinds[c.triangle_material] != _HIDDEN]
         used = np.unique(tris) if len(tris) else np.arange(c.n_vertices)
-        if self.framing == "face":
-            used = np.intersect1d(used, moving_vertices(c)) if c.n_shapes else used
+        if self.framing == "face":  # the part the shapes move; a character nothing moves is framed whole
+            moving = moving_vertices(c)
+            used = np.intersect1d(used, moving) if len(moving) else used
         lo, hi = bounds(c.vertices[used])
         self.camera = frame_bounds(lo, hi, self.width / self.height)
 

@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES, ChannelMap, canonical, pascal
+from facepuppet.runtime.channels import (
+    ARKIT_NAMES,
+    CHANNEL_REGIONS,
+    ChannelMap,
+    canonical,
+    filter_region,
+    gesture_group,
+    pascal,
+)
 
 # The ICT-FaceKit rig's own spellings (vertex_indices.json "expressions"), written out here
 # so the test does not depend on the data kit.
@@ -102,3 +110,18 @@ def test_dense_map_equals_a_loop_over_names():
         else:  # split unsided: browInnerUpLeft <- browInnerUp
             expected.append(by_key[key.removesuffix("Left").removesuffix("Right")])
     np.testing.assert_allclose(cmap.apply(values), expected, rtol=1e-6)
+
+
+def test_filter_regions_and_gesture_groups_of_channels():
+    names = ("EyeBlinkLeft", "browInnerUp", "jawOpen", "mouthSmile_L", "noseSneerLeft", "cheekPuff", "tongueOut",
+             "lipSuck_L")
+    assert [filter_region(n) for n in names] == ["eyes", "brows", "mouth", "mouth", "other", "mouth", "mouth", "mouth"]
+    assert [gesture_group(n) for n in names] == ["eyes", "brows", "lips", "lips", "rest", "rest", "rest", "rest"]
+
+
+def test_the_two_groupings_differ_only_on_cheeks_lips_and_tongue():
+    same = ({"eyes"}, {"brows"}, {"mouth", "lips"}, {"other", "rest"})
+    differ = {canonical(n) for n in ARKIT_NAMES if {filter_region(n), gesture_group(n)} not in same}
+    assert differ == {"cheekPuff", "cheekSquintLeft", "cheekSquintRight", "tongueOut"}
+    assert {prefix for prefix, region, group in CHANNEL_REGIONS if (region, group) == ("mouth", "rest")} == {
+        "cheek", "lip", "tongue"}

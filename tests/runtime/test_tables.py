@@ -13,10 +13,16 @@ import pytest
 from facepuppet.runtime.character import Character, sparse_deltas
 from facepuppet.runtime.tables import (
     SCHEMA_VERSION,
+    Section,
+    TableSchema,
     TablesError,
+    coerce,
     hash_inputs,
     load_tables,
+    naming_file,
+    register_schema,
     save_tables,
+    validate,
 )
 
 
@@ -252,3 +258,133 @@ def test_character_validation_names_the_field():
                      "triangle_material": np.zeros(1, np.uint16)})
     with pytest.raises(TablesError, match=r"vertex_color: axis 0 is n_vertices = 3"):
         Character(**{**c.__dict__, "vertex_color": np.zeros((3, 3), np.float32)})
+
+
+# -- the public contract: schemas, coerce, validate, naming_file ---------------------------------------------------
+
+TINY_SCHEMA = register_schema(TableSchema(
+    kind="test_tiny",
+    sections={
+        "points": Section("float32", ("n_points", 3), "positions"),
+        "offsets": Section("int64", ("n_groups+1",), "group starts"),
+        "extra": Section("uint8", ("n_points",), "a flag per point", optional=True),
+    },
+    channels=("groups",),
+    channel_dims={"groups": "n_groups"},
+    version=2,
+))
+
+
+def tiny_arrays() -> dict[str, np.ndarray]:
+    return {"points": np.zeros((5, 3), np.float32), "offsets": np.array([0, 2, 5], np.int64)}
+
+
+def test_validate_returns_the_named_dimensions():
+    dims = validate(TINY_SCHEMA, tiny_arrays(), {"groups": ["a", "b"]})
+    assert dims == {"n_points": 5, "n_groups": 2}
+    dims = validate(TINY_SCHEMA, {**tiny_arrays(), "extra": np.ones(5, np.uint8)}, {"groups": ["a", "b"]})
+    assert dims == {"n_points": 5, "n_groups": 2}
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"points": None}, r"<tables>: points: missing section \(kind 'test_tiny' requires it\)"),
+    ({"smuggled": np.zeros(3, np.float32)}, r"<tables>: smuggled: not a section of kind 'test_tiny'"),
+    ({"points": np.zeros((5, 3))}, r"points: dtype must be float32, found float64"),
+    ({"extra": np.ones(4, np.uint8)}, r"extra: axis 0 is n_points = 4, but section 'points' says n_points = 5"),
+    ({"points": np.full((5, 3), np.inf, np.float32)}, r"points: contains NaN or infinity"),
+])
+def test_validate_refuses_with_the_field(change, message):
+    arrays = {k: v for k, v in {**tiny_arrays(), **change}.items() if v is not None}
+    with pytest.raises(TablesError, match=message):
+        validate(TINY_SCHEMA, arrays, {"groups": ["a", "b"]})
+
+
+def test_validate_checks_the_channel_groups():
+    with pytest.raises(TablesError, match=r"channels.groups: missing channel name list"):
+        validate(TINY_SCHEMA, tiny_arrays(), {})
+    with pytest.raises(TablesError, match=r"channels.groups: has 3 names but n_groups = 2"):
+        validate(TINY_SCHEMA, tiny_arrays(), {"groups": ["a", "b", "c"]})
+    with pytest.raises(TablesError, match=r"in.npz: channels.groups: duplicate names \['a'\]"):
+        validate(TINY_SCHEMA, tiny_arrays(), {"groups": ["a", "a"]}, "in.npz")
+
+
+def test_coerce_casts_to_the_section_dtypes_read_only():
+    out = coerce(TINY_SCHEMA, {"points": [[1, 2, 3]] * 5, "offsets": np.array([0, 2, 5], np.int32)})
+    assert out["points"].dtype == np.float32 and out["offsets"].dtype == np.int64
+    assert out["points"].flags.c_contiguous and not out["points"].flags.writeable
+    fits = np.zeros((5, 3), np.float32)
+    assert coerce(TINY_SCHEMA, {"points": fits})["points"] is fits  # no copy where it already fits
+    with pytest.raises(TablesError, match=r"<tables>: nothing: not a section of kind 'test_tiny'"):
+        coerce(TINY_SCHEMA, {"nothing": np.zeros(1)})
+
+
+def test_sections_refuse_what_no_file_can_hold():
+    with pytest.raises(ValueError, match=r"Section dtype: expected one of .*, got 'complex64'"):
+        Section("complex64", (3,))
+    with pytest.raises(ValueError, match=r"Section shape: expected ints and names .*, got 'n-points'"):
+        Section("float32", ("n-points",))
+
+
+def test_schemas_refuse_a_bad_version_or_an_unknown_channel_dimension():
+    with pytest.raises(ValueError, match=r"TableSchema 'x' version: expected an int >= 1, got 0"):
+        TableSchema("x", {"a": Section("float32", ("n",))}, version=0)
+    with pytest.raises(ValueError, match=r"TableSchema 'x' channel_dims\['names'\]: 'm' is no section's dimension"):
+        TableSchema("x", {"a": Section("float32", ("n",))}, channels=("names",), channel_dims={"names": "m"})
+
+
+def test_a_kind_writes_its_own_schema_version_and_refuses_newer(tmp_path):
+    path = save_tables(tmp_path / "tiny.npz", "test_tiny", tiny_arrays(), channels={"groups": ["a", "b"]})
+    assert load_tables(path, "test_tiny").manifest["schema_version"] == 2
+    manifest = manifest_of(path)
+    manifest["schema_version"] = 3
+    bad = rewrite(path, tmp_path / "tiny3.npz", manifest=manifest)
+    with pytest.raises(TablesError, match=r"tiny3.npz: manifest.schema_version: is 3, .* reads test_tiny schema "
+                                          r"versions up to 2\. Upgrade facepuppet"):
+        load_tables(bad)
+
+
+def test_save_takes_a_tables_metadata_and_explicit_fields_win(tmp_path):
+    metadata = {"settings": {"a": 1}, "metrics": {"rms": 0.5}, "input_hash": "sha256:ab"}
+    path = save_tables(tmp_path / "m.npz", "test_tiny", tiny_arrays(), channels={"groups": ["a", "b"]},
+                       metadata=metadata, settings={"b": 2})
+    loaded = load_tables(path)
+    assert loaded.metadata == {"settings": {"b": 2}, "metrics": {"rms": 0.5}, "input_hash": "sha256:ab"}
+    loaded.metadata["settings"]["c"] = 3  # fresh copies: the manifest is untouched
+    assert loaded.settings == {"b": 2}
+
+
+def test_naming_file_names_the_file_in_refusals_about_memory():
+    with pytest.raises(TablesError, match=r"^some.npz: points: bad$"):
+        with naming_file("some.npz"):
+            raise TablesError(None, "points", "bad")
+    with pytest.raises(TablesError, match=r"^other.npz: points: bad$"):  # a file already named stays
+        with naming_file("some.npz"):
+            raise TablesError("other.npz", "points", "bad")
+
+
+def test_a_class_refusal_on_load_names_the_file(tmp_path):
+    from facepuppet.runtime.actuation.actor import Actor
+
+    from helpers.small_actors import make_actor
+
+    path = make_actor().save(tmp_path / "actor.npz")
+    bad = rewrite(path, tmp_path / "bounds.npz", arrays={"s_lower": np.full(4, 0.1, np.float32)})
+    with pytest.raises(TablesError, match=r"bounds.npz: s_lower/s_upper: bounds must contain s = 0"):
+        Actor.load(bad)
+
+
+def test_every_table_class_refuses_non_finite_arrays_when_built():
+    from facepuppet.runtime.actuation.actor import Actor
+
+    from helpers.small_actors import make_actor
+
+    actor = make_actor()
+    neutral = np.array(actor.neutral)
+    neutral[2, 1] = np.nan
+    with pytest.raises(TablesError, match=r"<tables>: neutral: contains NaN or infinity"):
+        Actor(**{**actor.__dict__, "neutral": neutral})
+    c = tiny_character()
+    colors = np.full((4, 3), 0.5, np.float32)
+    colors[0, 0] = np.inf
+    with pytest.raises(TablesError, match=r"<tables>: vertex_color: contains NaN or infinity"):
+        Character(**{**c.__dict__, "vertex_color": colors})

@@ -19,7 +19,7 @@ from facepuppet.offline.actuation.transfer import (
     read_override,
     retarget_actor,
     s_distribution,
-    training_pairs,
+    parameter_shape_pairs,
     umeyama,
 )
 from facepuppet.offline.actuation.transfer_eval import transfer_error
@@ -116,11 +116,11 @@ def test_retarget_actor_command_draws_the_actuations_on_the_face(tmp_path, capsy
 QUANTILES = ((0.0, 0.01, 0.5, 0.99, 1.0), [[-0.9, -0.1], [-0.8, 0.0], [0.0, 0.0], [1.0, 0.9], [1.1, 1.0]])
 
 
-def test_training_pairs_cover_the_capture_range_including_negative_s():
+def test_parameter_shape_pairs_cover_the_capture_range_including_negative_s():
     actor, _ = actor_on(grid_face(), quantiles=QUANTILES)
     levels, values, source = s_distribution(actor)
     assert source == "capture quantiles" and values.shape == (5, 2)
-    s, disp = training_pairs(actor, n_sparse=50, n_dense=50, levels=6)
+    s, disp = parameter_shape_pairs(actor, n_sparse=50, n_dense=50, levels=6)
     alone = s[1:13]                                         # actuation 0 alone, then actuation 1 alone
     np.testing.assert_allclose(alone[:6, 0], np.linspace(-0.8, 1.0, 6))
     np.testing.assert_allclose(alone[6:, 1], np.linspace(0.0, 0.9, 6))
@@ -216,5 +216,5 @@ def test_trained_actor_stores_its_actuation_quantiles():
     levels, values, source = s_distribution(model.actor_)
     assert source == "capture quantiles"
     np.testing.assert_allclose(values, np.quantile(model.s_, levels, axis=0), atol=1e-5)
-    s, _ = training_pairs(model.actor_, n_sparse=20, n_dense=20)
+    s, _ = parameter_shape_pairs(model.actor_, n_sparse=20, n_dense=20)
     assert s.min() >= values[0].min() - 1e-9 and s.max() <= values[-1].max() + 1e-9

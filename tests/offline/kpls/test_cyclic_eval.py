@@ -20,12 +20,19 @@ from facepuppet.offline.kpls.pairs import (
     feature_points,
     match_matrix,
     read_pairing,
-    training_pairs,
+    expression_pairs,
 )
 from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, stylise
 from helpers.kpls_characters import SHAPES, bump_character
 
 SIDED = tuple(n.replace("Left", "_L").replace("Right", "_R") for n in SHAPES)
+
+
+def test_a_character_nothing_moves_has_no_feature_points():
+    c = bump_character()
+    still = type(c)(**{**c.__dict__, "delta_positions": np.zeros_like(c.delta_positions)})
+    with pytest.raises(ValueError, match=r"character 'bumps': its shapes move no vertex; nothing to retarget"):
+        feature_points(still, 20)
 
 
 def test_feature_matrix_matches_dense_deltas_and_points_spread():
@@ -57,7 +64,7 @@ def test_shapes_pair_by_canonical_name_or_by_file(tmp_path):
 
 def test_pairs_have_their_own_feature_counts():
     a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), names=SIDED, seed=1)
-    pairs = training_pairs(a, b, n_mixes=40, k_source=15, k_target=11)
+    pairs = expression_pairs(a, b, n_mixes=40, k_source=15, k_target=11)
     assert pairs.X.shape == (1 + 8 + 40, 45) and pairs.Y.shape == (49, 8)
     assert len(pairs.target_points) == 11
     np.testing.assert_allclose(pairs.X, pairs.source_weights @ pairs.source_features.T)
@@ -170,7 +177,7 @@ def test_fit_retarget_command_and_runtime_stage_agree_with_the_offline_model(tmp
     stage = KplsRetarget.load(tmp_path / "r.npz")
     assert stage.target_names == b.shape_names and stage.kernel == "poly"
     # the same model offline
-    pairs = training_pairs(a, b, n_mixes=60, k_source=15, k_target=12)
+    pairs = expression_pairs(a, b, n_mixes=60, k_source=15, k_target=12)
     model = KernelPLS(n_components=6, kernel="poly").fit(pairs.X, pairs.Y)
     W = np.random.default_rng(5).uniform(0, 1, size=(20, 8))
     offline = model.predict(W @ pairs.source_features.T)

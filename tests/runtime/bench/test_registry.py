@@ -33,3 +33,16 @@ def test_bench_lists_and_refuses_unknown_names(capsys):
     assert "render" in capsys.readouterr().out
     assert bench.run(argparse.Namespace(name="nope", options=[])) == 2
     assert "no benchmark named 'nope'" in capsys.readouterr().err
+
+
+def test_load_average_is_three_numbers_or_n_a(monkeypatch):
+    monkeypatch.setattr(bench.os, "getloadavg", lambda: (1.0, 0.5, 0.254))
+    assert bench.load_average() == "1.00 0.50 0.25"
+
+    def no_load():
+        raise OSError("no load average here")
+
+    monkeypatch.setattr(bench.os, "getloadavg", no_load)
+    assert bench.load_average() == "n/a"
+    monkeypatch.delattr(bench.os, "getloadavg")
+    assert bench.load_average() == "n/a"

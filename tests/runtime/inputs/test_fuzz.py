@@ -24,7 +24,7 @@ from helpers.osc_helpers import bundle, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES, pascal
 from facepuppet.runtime.inputs.kinds import INPUT_KINDS, make_adapter
-from facepuppet.runtime.inputs.livelinkface import encode_packet
+from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.osc import UNSUPPORTED, decode
 from facepuppet.runtime.inputs.udp import UdpSource
 
@@ -54,7 +54,7 @@ def valid(kind: str, jaw: float) -> list[bytes]:
                        msg("/facepuppet/markers/frame", 1, 5, (1.0, "d"), ((MARKERS * jaw).tobytes(), "b")))]
     weights = [0.0] * 52
     weights[JAW] = jaw
-    return [encode_packet(weights, head=(0.1, 0.0, 0.0), number=9)]
+    return [encode_llf_packet(weights, head=(0.1, 0.0, 0.0), number=9)]
 
 
 def drives(kind: str, frame, jaw: float) -> bool:
@@ -88,7 +88,7 @@ def seeds(kind: str) -> list[bytes]:
         "markers": [msg("/facepuppet/markers/layout", 1, *MARKER_NAMES).dgram,
                     msg("/facepuppet/markers/frame", 1, 5, (1.0, "d"), (MARKERS.tobytes(), "b")).dgram,
                     valid("markers", 0.5)[0]],
-        "livelinkface": [encode_packet([0.5] * 52, head=(0.1, 0.2, 0.3), name="Phone")],
+        "livelinkface": [encode_llf_packet([0.5] * 52, head=(0.1, 0.2, 0.3), name="Phone")],
     }
     return out[kind]
 

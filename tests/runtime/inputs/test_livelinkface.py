@@ -11,13 +11,13 @@ from helpers.osc_helpers import counts
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.geometry import euler_to_quat
-from facepuppet.runtime.inputs.livelinkface import MAX_PACKET, LiveLinkFaceAdapter, encode_packet
+from facepuppet.runtime.inputs.livelinkface import MAX_PACKET, LiveLinkFaceAdapter, encode_llf_packet
 
 UUID = b"$" + b"A1B2C3D4-0000-1111-2222-333344445555"[:36]
 
 
 def packet(values, name=b"Actor", version=6, count=61, number=120, sub=0.5, fps=60, den=1, uuid=UUID):
-    """A packet laid out field by field as in §5, independent of encode_packet."""
+    """A packet laid out field by field as in §5, independent of encode_llf_packet."""
     return (struct.pack("<i", version) + uuid + struct.pack(">i", len(name)) + name
             + struct.pack(">ifii", number, sub, fps, den) + struct.pack(">B", count)
             + struct.pack(f">{len(values)}f", *values))
@@ -42,9 +42,9 @@ def test_jaw_open_at_arkit_index_17_and_head_rotation():
     counts(a, datagrams=1, frames=1)
 
 
-def test_encode_packet_matches_the_hand_layout():
+def test_encode_llf_packet_matches_the_hand_layout():
     v = values61(jawOpen=0.25, yaw=0.1)
-    built = encode_packet(v[:52], head=v[52:55], eyes=v[55:], number=120, sub_frame=0.5,
+    built = encode_llf_packet(v[:52], head=v[52:55], eyes=v[55:], number=120, sub_frame=0.5,
                           name="Actor", device_id=UUID.decode())
     assert built == packet(v)
     assert struct.unpack_from(">i", built, 41)[0] == 5 and built[45 + 5 + 16] == 61  # §5 offsets
@@ -98,6 +98,6 @@ def test_oversized_packet():
     counts(a, datagrams=1, oversized=1)
 
 
-def test_encode_packet_refuses_wrong_sizes():
+def test_encode_llf_packet_refuses_wrong_sizes():
     with pytest.raises(ValueError, match="expected 52 weights"):
-        encode_packet([0.0] * 51)
+        encode_llf_packet([0.0] * 51)

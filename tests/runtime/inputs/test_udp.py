@@ -14,7 +14,7 @@ from helpers.udp_helpers import poll_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.kinds import INPUT_KINDS, make_adapter
-from facepuppet.runtime.inputs.livelinkface import encode_packet
+from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.udp import UdpSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
 
@@ -133,7 +133,7 @@ def test_livelinkface_packets_over_udp(udp_sender):
     weights = [0.0] * 52
     weights[JAW] = 0.8
     with UdpSource(make_adapter("livelinkface"), port=0) as source:
-        udp_sender.sendto(encode_packet(weights, number=77), source.address)
+        udp_sender.sendto(encode_llf_packet(weights, number=77), source.address)
         frame = poll_frame(source)
         assert frame.weights[JAW] == pytest.approx(0.8) and frame.number == 77
 

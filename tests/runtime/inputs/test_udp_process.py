@@ -14,7 +14,7 @@ from helpers.udp_helpers import poll_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.kinds import make_adapter
-from facepuppet.runtime.inputs.livelinkface import encode_packet
+from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.markers import FRAME, LAYOUT
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
@@ -91,7 +91,7 @@ def test_a_full_ring_drops_and_counts_instead_of_blocking(udp_sender):
     seen = []
     with UdpProcessSource(make_adapter("livelinkface"), port=0, on_packet=lambda *a: seen.append(a),
                           ring_bytes=1 << 17) as source:
-        packet = encode_packet([0.5] * 52, number=1)
+        packet = encode_llf_packet([0.5] * 52, number=1)
         n = 2 * (1 << 17) // (len(packet) + 32) + 50  # about twice what the ring holds
         for _ in range(n):
             udp_sender.sendto(packet, source.address)
@@ -113,7 +113,7 @@ def test_markers_and_livelinkface_frames_keep_every_field(udp_sender):
         assert frame.weights is None and frame.channels is None and frame.head_rotation is None
     weights = np.linspace(0, 1, 52)
     with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
-        udp_sender.sendto(encode_packet(weights, head=(0.3, -0.2, 0.1), number=77), source.address)
+        udp_sender.sendto(encode_llf_packet(weights, head=(0.3, -0.2, 0.1), number=77), source.address)
         frame = poll_frame(source)
         np.testing.assert_allclose(frame.weights[:52], weights, atol=1e-6)
         assert frame.number == 77 and frame.head_rotation.shape == (4,)
@@ -123,7 +123,7 @@ def test_markers_and_livelinkface_frames_keep_every_field(udp_sender):
 def test_frames_read_while_the_child_writes_are_never_torn(udp_sender):
     # every frame has all 52 weights equal: a read that mixed two frames would show two values
     with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
-        packets = [encode_packet([v] * 52, number=i) for i, v in enumerate(np.linspace(0, 1, 4000))]
+        packets = [encode_llf_packet([v] * 52, number=i) for i, v in enumerate(np.linspace(0, 1, 4000))]
         taken = 0
         for i, packet in enumerate(packets):
             udp_sender.sendto(packet, source.address)

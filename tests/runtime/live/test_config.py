@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from facepuppet.runtime.live.config import (DEFAULT_FILTERS, LiveConfig, LiveConfigError, load_live_config,
-                                            region_of)
+from facepuppet.runtime.live.config import DEFAULT_FILTERS, LiveConfig, LiveConfigError, load_live_config
 
 FULL = """
 [filter.eyes]
@@ -45,11 +44,6 @@ def test_full_file_is_read_and_channels_match_any_spelling(tmp_path):
     assert cfg.channel("jawOpen").gain == 1.5 and cfg.channel("JAW_OPEN".lower()).gain == 1.0
     assert cfg.channel("jawOpen").clamp == (0.0, 0.9)
     assert cfg.channel("EyeBlinkLeft").gain == 0.5
-
-
-def test_regions():
-    assert [region_of(n) for n in ("EyeBlinkLeft", "browInnerUp", "jawOpen", "mouthSmile_L", "noseSneerLeft")] == [
-        "eyes", "brows", "mouth", "mouth", "other"]
 
 
 @pytest.mark.parametrize("text, match", [

@@ -206,3 +206,21 @@ def test_vertex_shader_deforms_like_the_cpu_deformer(egl_ctx, request, which):
     np.testing.assert_allclose(gpu_pos, cpu_pos, atol=2e-5 * max(1.0, float(np.abs(cpu_pos).max())))
     used = np.unique(c.triangles)
     np.testing.assert_allclose(gpu_nrm[used], cpu_nrm[used], atol=1e-5)
+
+
+def test_face_framing_of_a_character_nothing_moves_frames_it_whole(egl_ctx, sphere):
+    still = sphere.__class__(**{**sphere.__dict__, "delta_offsets": np.array([0, 1, 2], np.int64),
+                                "delta_indices": np.array([0, 1], np.uint32),
+                                "delta_positions": np.zeros((2, 3), np.float32),
+                                "delta_normals": np.zeros((2, 3), np.float32)})
+    cameras = []
+    for framing in ("head", "face"):
+        r = FaceRenderer(egl_ctx, still, W, H, path="cpu", framing=framing)
+        cameras.append(r.camera)
+        r.close()
+    assert egl_ctx.error == "GL_NO_ERROR"
+    np.testing.assert_array_equal(cameras[1].view, cameras[0].view)
+    np.testing.assert_array_equal(cameras[1].projection, cameras[0].projection)
+    moving = FaceRenderer(egl_ctx, sphere, W, H, path="cpu", framing="face")
+    assert not np.array_equal(moving.camera.view, cameras[0].view)  # a character whose shapes move: framed on them
+    moving.close()
