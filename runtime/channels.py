@@ -148,7 +148,7 @@ class ChannelMap:
     undriven_target: tuple[str, ...]
 
     @classmethod
-    def build(cls, source_names, target_names) -> "ChannelMap":
+    def build(cls, source_names, target_names) -> ChannelMap:
         source_names = tuple(source_names)
         target_names = tuple(target_names)
         src_index: dict[str, int] = {}

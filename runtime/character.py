@@ -14,14 +14,23 @@ which is exact at a single shape at weight 1 and close in between.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.tables import (Section, TableSchema, TablesError, load_tables, naming_file, register_schema,
-                                       save_tables, validate)
+from facepuppet.runtime.tables import (
+    Section,
+    TableSchema,
+    TablesError,
+    load_tables,
+    naming_file,
+    register_schema,
+    save_tables,
+    validate,
+)
 
 # Material kinds the shader knows (column 2 of ``material_params``).
 MATERIAL_KINDS = {"skin": 0, "eye": 1, "teeth": 2, "mouth": 3, "lashes": 4, "hidden": 5, "lips": 6}
@@ -146,7 +155,7 @@ class Character:
                            settings=settings, metadata=self.metadata)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "Character":
+    def load(cls, path: str | os.PathLike) -> Character:
         """Load and validate a ``character`` tables file (see :func:`load_tables`)."""
         t = load_tables(path, kind="character")
         a = t.arrays

@@ -49,12 +49,15 @@ import math
 import os
 import tempfile
 import zipfile
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any
 
 import numpy as np
+
+from facepuppet.runtime.errors import FacepuppetError
 
 FORMAT_NAME = "facepuppet-tables"
 SCHEMA_VERSION = 1  # the schema version of a kind that declares none
@@ -64,7 +67,7 @@ ALLOWED_UNITS = ("", "mm", "cm", "m")
 ALLOWED_DTYPES = ("float32", "float64", "int32", "int64", "uint8", "uint16", "uint32", "bool")
 
 
-class TablesError(ValueError):
+class TablesError(FacepuppetError, ValueError):
     """A tables file (or tables about to be written) is not acceptable.
 
     The message names the file and the field, what was expected and what was

@@ -15,9 +15,10 @@ transfer table s -> character weights (§6.2) is :mod:`facepuppet.runtime.actuat
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -112,7 +113,7 @@ class Actor:
                            input_hash=self.metadata.get("input_hash", "") or hash_inputs(self.cubic))
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "Actor":
+    def load(cls, path: str | os.PathLike) -> Actor:
         t = load_tables(path, "actor")
         with naming_file(path):
             return cls(names=tuple(t.channels["markers"]), units=t.units,

@@ -19,15 +19,15 @@ same calls; the window and the command are :mod:`~facepuppet.runtime.commands.ma
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.actuation.solver import MarkerSolver
+from facepuppet.runtime.character import Character
 
 PICK_RADIUS = 30.0   # pixels: a click farther than this from every marker picks nothing
 DRAG_STEPS = 8       # cursor events a scripted drag is cut into

@@ -13,9 +13,10 @@ w(s) = sum_k a_k s_k^3 + b_k s_k^2 + c_k s_k, clipped to [0, 1].
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -86,7 +87,7 @@ class ActorPair:
         return save_tables(path, "actor_pair", self._arrays(), channels=self._channels(), metadata=self.metadata)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "ActorPair":
+    def load(cls, path: str | os.PathLike) -> ActorPair:
         t = load_tables(path, "actor_pair")
         with naming_file(path):
             return cls(shape_names=tuple(t.channels["shapes"]), marker_names=tuple(t.channels["markers"]),

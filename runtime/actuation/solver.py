@@ -17,10 +17,10 @@ steps per frame.
 
 from __future__ import annotations
 
-from typing import Mapping, NamedTuple, Sequence
+from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
-
 from scipy.linalg.lapack import dposv as _spd_solve
 
 from facepuppet.runtime.actuation.actor import Actor

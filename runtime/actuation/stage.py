@@ -16,9 +16,9 @@ import numpy as np
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
+from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import matrix_to_quat
-from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.rigid import kabsch
 
 

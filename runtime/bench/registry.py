@@ -18,10 +18,10 @@ import platform
 import resource
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Callable
 
 # Runtime modules that register benchmarks when imported; each must exist and import.
 _BENCH_MODULES = ("facepuppet.runtime.bench.render", "facepuppet.runtime.bench.latency")

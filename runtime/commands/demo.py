@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink
-from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
 SHEET_CELLS = 12

@@ -13,16 +13,17 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import moderngl
 import numpy as np
 
 from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.manipulation import Manipulation, ScreenView, read_script, run_step
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.actuation.manipulation import Manipulation, ScreenView, read_script, run_step
+
 
 class PointOverlay:
     """Round dots drawn over a renderer's framebuffer (shaders/overlay.glsl, GL_POINTS, no depth test)."""
@@ -141,10 +142,10 @@ def register(subparsers) -> None:
 
 
 def _manipulate(args) -> int:
+    from facepuppet.runtime.commands.options import parse_size
     from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
     from facepuppet.runtime.render.images import save_png
     from facepuppet.runtime.render.renderer import FaceRenderer
-    from facepuppet.runtime.commands.options import parse_size
 
     width, height = parse_size(args.size)
     actor, pair, character = Actor.load(args.actor), ActorPair.load(args.pair), Character.load(args.character)

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facepuppet.runtime.demo import head_parts as parts
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.demo import head_parts as parts
 from facepuppet.runtime.demo.head_parts import gauss
 from facepuppet.runtime.geometry import smoothstep, vertex_normals
 

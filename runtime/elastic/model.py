@@ -23,9 +23,10 @@ g ``basis_gradients``, U ``controls``.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -186,7 +187,7 @@ class ElasticModel:
                            metadata=self.metadata)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "ElasticModel":
+    def load(cls, path: str | os.PathLike) -> ElasticModel:
         t = load_tables(path, kind="elastic")
         with naming_file(path):
             return cls(

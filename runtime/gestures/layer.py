@@ -9,8 +9,8 @@ the face from the voice alone (``facepuppet run --input audio``).
 
 from __future__ import annotations
 
-import logging
 import dataclasses
+import logging
 import math
 
 import numpy as np
@@ -18,9 +18,9 @@ import numpy as np
 from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat, quat_mul
+from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
 from facepuppet.runtime.gestures.synth import GestureSynth
 from facepuppet.runtime.gestures.tables import GESTURE_DB_SCHEMA, GROUPS, HEAD_FEATURES, LEVEL1, load_gesture_db
-from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
 
 logger = logging.getLogger(__name__)
 

@@ -83,8 +83,8 @@ import numpy as np
 
 from facepuppet.runtime.gestures.candidates import N_BINS, build_candidates
 from facepuppet.runtime.gestures.output import output_table
-from facepuppet.runtime.gestures.tables import GROUPS, LEVEL1
 from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
+from facepuppet.runtime.gestures.tables import GROUPS, LEVEL1
 
 RECENT_PENALTY = 1e4  # added to a recently shown candidate's distance (distances are O(1); sentinels ~1e6)
 WHOLE_GROUPS = ("eyes",)  # groups whose channels show one reference frame whole (own residual + own c·B)

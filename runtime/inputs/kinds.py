@@ -16,8 +16,8 @@ livelinkface   :class:`facepuppet.runtime.inputs.livelinkface.LiveLinkFaceAdapte
 
 from __future__ import annotations
 
-from facepuppet.runtime.inputs.faceosc import FaceOscAdapter
 from facepuppet.runtime.inputs.facecap import FaceCapAdapter
+from facepuppet.runtime.inputs.faceosc import FaceOscAdapter
 from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter
 from facepuppet.runtime.inputs.markers import MarkersAdapter
 from facepuppet.runtime.inputs.vmc import VmcAdapter

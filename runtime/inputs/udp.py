@@ -179,7 +179,7 @@ class UdpSource:
         """(host, port) actually bound; the requested ones before :meth:`start`."""
         return bound_address(self._sock, self.host, self.port)
 
-    def start(self) -> "UdpSource":
+    def start(self) -> UdpSource:
         """Bind and start the receive thread.
 
         Raises
@@ -207,7 +207,7 @@ class UdpSource:
             self._sock.close()
             self._sock = None
 
-    def __enter__(self) -> "UdpSource":
+    def __enter__(self) -> UdpSource:
         return self.start()
 
     def __exit__(self, *exc) -> None:
@@ -221,7 +221,7 @@ class UdpSource:
         while not stop.is_set():
             try:
                 data, sender, t = receive(sock, stamped, clock, own)
-            except (socket.timeout, BlockingIOError, InterruptedError):
+            except (TimeoutError, BlockingIOError, InterruptedError):
                 continue
             except OSError as exc:  # socket closed under us or a transient error (e.g. ICMP)
                 if stop.is_set():

@@ -21,12 +21,38 @@ import time
 from multiprocessing import shared_memory
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.inputs.udp_shared import (
-    CHANNELS, COMPLETED, FLAGS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION, HAS_WEIGHTS, MARKER_NAMES,
-    MAX_COUNTERS, MAX_ERRORS_LOGGED, MAX_MARKERS, MAX_WEIGHTS, NAME, NAMES_BYTES, NAMES_END, NUMBER, N_MARKERS,
-    N_WEIGHTS, READY, RECORD, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, WRAP, SharedBlock, padded,
-)
 from facepuppet.runtime.inputs.udp import POLL_TIMEOUT_S, enable_kernel_stamps, receive
+from facepuppet.runtime.inputs.udp_shared import (
+    CHANNELS,
+    COMPLETED,
+    FLAGS,
+    HAS_MARKERS,
+    HAS_ROTATION,
+    HAS_TRANSLATION,
+    HAS_WEIGHTS,
+    MARKER_NAMES,
+    MAX_COUNTERS,
+    MAX_ERRORS_LOGGED,
+    MAX_MARKERS,
+    MAX_WEIGHTS,
+    N_MARKERS,
+    N_WEIGHTS,
+    NAME,
+    NAMES_BYTES,
+    NAMES_END,
+    NUMBER,
+    READY,
+    RECORD,
+    RING_R,
+    RING_W,
+    SEQ,
+    SOURCE,
+    STOP,
+    WATCHED,
+    WRAP,
+    SharedBlock,
+    padded,
+)
 
 
 class _Writer:
@@ -170,7 +196,7 @@ def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, 
         while not ctl[STOP]:
             try:
                 data, sender, t = receive(sock, stamped, time.monotonic, own)
-            except (socket.timeout, BlockingIOError, InterruptedError):
+            except (TimeoutError, BlockingIOError, InterruptedError):
                 if os.getppid() != parent_pid:  # the parent is gone
                     break
                 continue

@@ -50,14 +50,34 @@ import sys
 import time
 from multiprocessing import shared_memory
 
-import numpy as np
-
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.udp import bind_udp, bound_address
 from facepuppet.runtime.inputs.udp_shared import (
-    CHANNELS, COMPLETED, FLAGS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION, HAS_WEIGHTS, MARKER_NAMES,
-    MAX_COUNTERS, MAX_MARKERS, MAX_WEIGHTS, NAME, NAMES_BYTES, NAMES_END, NUMBER, N_CTL, N_MARKERS, N_WEIGHTS,
-    READY, RECORD, RING_BYTES, RING_R, RING_W, SEQ, SOURCE, STOP, WATCHED, WRAP, SharedBlock, padded,
+    CHANNELS,
+    COMPLETED,
+    FLAGS,
+    HAS_MARKERS,
+    HAS_ROTATION,
+    HAS_TRANSLATION,
+    HAS_WEIGHTS,
+    MARKER_NAMES,
+    N_MARKERS,
+    N_WEIGHTS,
+    NAME,
+    NAMES_END,
+    NUMBER,
+    READY,
+    RECORD,
+    RING_BYTES,
+    RING_R,
+    RING_W,
+    SEQ,
+    SOURCE,
+    STOP,
+    WATCHED,
+    WRAP,
+    SharedBlock,
+    padded,
 )
 
 READ_TRIES = 64
@@ -113,7 +133,7 @@ class UdpProcessSource:
         """(host, port) actually bound; the requested ones before :meth:`start`."""
         return bound_address(self._sock, self.host, self.port)
 
-    def start(self) -> "UdpProcessSource":
+    def start(self) -> UdpProcessSource:
         """Bind (here, so a busy port raises here) and start the receiving process.
 
         Returns once the child runs; datagrams arriving before wait in the
@@ -190,7 +210,7 @@ class UdpProcessSource:
                 os.close(fd)
             self._wake = None
 
-    def __enter__(self) -> "UdpProcessSource":
+    def __enter__(self) -> UdpProcessSource:
         return self.start()
 
     def __exit__(self, *exc) -> None:

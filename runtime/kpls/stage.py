@@ -22,8 +22,9 @@ The stage implements the frame loop's ``Retarget`` protocol: ``target_names``
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -142,7 +143,7 @@ class KplsRetarget:
                            settings=settings, metadata=self.metadata)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "KplsRetarget":
+    def load(cls, path: str | os.PathLike) -> KplsRetarget:
         """Load and validate a ``retarget_kpls`` tables file (TablesError naming the file and field)."""
         t = load_tables(path, kind="retarget_kpls")
         a = t.arrays

@@ -33,9 +33,10 @@ must not pass silently).
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+
+import tomllib
 
 from facepuppet.runtime.channels import canonical
 

@@ -21,8 +21,8 @@ covers the last second, the final report the whole ring.
 
 from __future__ import annotations
 
-import logging
 import json
+import logging
 import time
 
 import numpy as np

@@ -37,7 +37,7 @@ class StageTimer:
             samples = self._samples[stage] = []
         samples.append(seconds)
 
-    def measure(self, stage: str) -> "_Measure":
+    def measure(self, stage: str) -> _Measure:
         """Context manager that adds the duration of its body to ``stage``."""
         return _Measure(self, stage)
 

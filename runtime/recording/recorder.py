@@ -16,8 +16,8 @@ from __future__ import annotations
 import collections
 import threading
 
-from facepuppet.runtime.recording.session import SessionWriter
 from facepuppet.runtime.recording.records import RecordKind, encode_audio, encode_packet_record, encode_tick
+from facepuppet.runtime.recording.session import SessionWriter
 
 
 class PacketRecorder:
@@ -101,7 +101,7 @@ class PacketRecorder:
             self._thread.join()
         self.writer.close()
 
-    def __enter__(self) -> "PacketRecorder":
+    def __enter__(self) -> PacketRecorder:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -90,7 +90,7 @@ class SessionWriter:
         # Magic and header go out in one write: a file is either empty or has both.
         self._write(MAGIC + _record(RecordKind.HEADER, payload))
 
-    def __enter__(self) -> "SessionWriter":
+    def __enter__(self) -> SessionWriter:
         return self
 
     def __exit__(self, *exc) -> None:

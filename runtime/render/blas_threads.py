@@ -63,7 +63,7 @@ class BlasThreads:
         self.limited: list[str] = []
         self._restore: list[tuple] = []
 
-    def __enter__(self) -> "BlasThreads":
+    def __enter__(self) -> BlasThreads:
         for path in _loaded_openblas():
             try:
                 lib = ctypes.CDLL(path)

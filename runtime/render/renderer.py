@@ -19,16 +19,16 @@ renderer times both at construction and keeps the faster, saying which.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.render.camera import frame_bounds, model_matrix
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, moving_vertices
+from facepuppet.runtime.geometry import bounds, vertex_normals
+from facepuppet.runtime.render.camera import frame_bounds, model_matrix
 from facepuppet.runtime.render.cpu_deform import CpuDeformer, check_weights
 from facepuppet.runtime.render.elastic_path import check_model, setup_elastic, upload_controls
-from facepuppet.runtime.geometry import bounds, vertex_normals
 from facepuppet.runtime.render.shader_loader import load_program
 
 DELTA_TEXTURE_WIDTH = 4096

@@ -16,9 +16,9 @@ Compile and link errors raise :class:`ShaderError` naming file and line.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from importlib.resources import files
 from pathlib import Path
-from typing import Mapping
 
 import moderngl
 
