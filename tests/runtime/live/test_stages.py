@@ -98,6 +98,31 @@ def actor_files(tmp_path_factory):
     return paths, cap, truth, actor, pair
 
 
+def marker_sender(names, pose_at):
+    """A ``send(client, stop)`` for :func:`live`: the markers layout about every 0.2 s and, every 10 ms, a
+    marker frame of ``pose_at(seconds since the start)``, (n_markers, 3) float32."""
+
+    def send(client, stop):
+        layout = OscMessageBuilder("/facepuppet/markers/layout")
+        layout.add_arg(1)
+        for name in names:
+            layout.add_arg(name, "s")
+        start, n = time.monotonic(), 0
+        while not stop.is_set():
+            if n % 20 == 0:
+                client.send(layout.build())
+            m = OscMessageBuilder("/facepuppet/markers/frame")
+            m.add_arg(1)
+            m.add_arg(n)
+            m.add_arg(time.time(), "d")
+            m.add_arg(pose_at(time.monotonic() - start).astype("<f4").tobytes(), "b")
+            client.send(m.build())
+            n += 1
+            time.sleep(0.01)
+
+    return send
+
+
 def test_markers_over_udp_are_solved_and_mapped_through_the_pair(actor_files, tmp_path):
     paths, cap, truth, actor, pair = actor_files
     probe = ActorRetarget(actor, pair)  # a near-neutral frame and the one opening the jaw most
@@ -113,25 +138,7 @@ def test_markers_over_udp_are_solved_and_mapped_through_the_pair(actor_files, tm
         expected.append(w)
     assert np.abs(expected[0] - expected[1]).max() > 0.05  # two distinguishable expressions
 
-    def send(client, stop):
-        layout = OscMessageBuilder("/facepuppet/markers/layout")
-        layout.add_arg(1)
-        for name in cap.names:
-            layout.add_arg(name, "s")
-        start, n = time.monotonic(), 0
-        while not stop.is_set():
-            if n % 20 == 0:
-                client.send(layout.build())
-            pose = poses[0] if time.monotonic() - start < 0.8 else poses[1]
-            m = OscMessageBuilder("/facepuppet/markers/frame")
-            m.add_arg(1)
-            m.add_arg(n)
-            m.add_arg(time.time(), "d")
-            m.add_arg(pose.astype("<f4").tobytes(), "b")
-            client.send(m.build())
-            n += 1
-            time.sleep(0.01)
-
+    send = marker_sender(cap.names, lambda age: poses[0] if age < 0.8 else poses[1])
     config = tmp_path / "fast.toml"
     config.write_text(NO_SMOOTHING)
     dump = tmp_path / "w.npy"
@@ -164,24 +171,7 @@ def test_markers_turn_the_head(actor_files, tmp_path):
     assert rotation_deg(out.head_rotation) == pytest.approx(20.0, abs=0.5)
     assert rotation_deg(stage(Frame(t=0.1, markers=poses[0], marker_names=cap.names), 0.1).head_rotation) < 0.5
 
-    def send(client, stop):
-        layout = OscMessageBuilder("/facepuppet/markers/layout")
-        layout.add_arg(1)
-        for name in cap.names:
-            layout.add_arg(name, "s")
-        start, n = time.monotonic(), 0
-        while not stop.is_set():
-            if n % 20 == 0:
-                client.send(layout.build())
-            m = OscMessageBuilder("/facepuppet/markers/frame")
-            m.add_arg(1)
-            m.add_arg(n)
-            m.add_arg(time.time(), "d")
-            m.add_arg(poses[0 if time.monotonic() - start < 0.6 else 1].astype("<f4").tobytes(), "b")
-            client.send(m.build())
-            n += 1
-            time.sleep(0.01)
-
+    send = marker_sender(cap.names, lambda age: poses[0] if age < 0.6 else poses[1])
     drawn = []
     config = tmp_path / "fast.toml"
     config.write_text(NO_SMOOTHING)
