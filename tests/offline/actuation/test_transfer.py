@@ -90,6 +90,7 @@ def test_override_file_is_checked(tmp_path):
     assert read_override(path, actor.names, character.n_vertices) == {0: 30}
 
 
+@pytest.mark.gl
 def test_retarget_actor_command_draws_the_actuations_on_the_face(tmp_path, capsys):
     import argparse
 

@@ -24,6 +24,7 @@ def db_path(tmp_path_factory):
     return out
 
 
+@pytest.mark.data
 def test_real_database_has_each_group_from_its_take(db_path):
     db = load_gesture_db(db_path)
     names = db.channels["features"]
@@ -40,6 +41,7 @@ def test_real_database_has_each_group_from_its_take(db_path):
     assert stoch == sorted(stoch, key=lambda n: (db["feature_group"][names.index(n)], n))
 
 
+@pytest.mark.data
 def test_synthesize_command_writes_a_replayable_session(db_path, tmp_path):
     wav = need_shared("speech", "arctic_a0007.wav")
     parser = argparse.ArgumentParser()
@@ -86,6 +88,7 @@ def test_run_input_audio_needs_gestures_and_audio():
         run_live(args)
 
 
+@pytest.mark.data
 def test_transfer_detail_writes_a_character_with_local_detail_shapes_and_gesture_tables(db_path, ict_character_path,
                                                                                        tmp_path, capsys):
     from facepuppet.runtime.character import Character
@@ -120,6 +123,7 @@ def test_transfer_detail_writes_a_character_with_local_detail_shapes_and_gesture
         args.func(args)
 
 
+@pytest.mark.gl
 def test_detail_contact_sheet_tints_where_each_shape_acts(ict_character_path):
     from facepuppet.runtime.character import Character
 

@@ -56,6 +56,7 @@ def test_nan_samples_are_refused(tmp_path):
         speech_intensity(tmp_path / "n.wav")
 
 
+@pytest.mark.data
 def test_real_speech_is_loud_in_the_middle_and_quiet_at_the_ends():
     path = need_shared("speech", "arctic_a0007.wav")
     level, z, _ = speech_intensity(path, fps=30)

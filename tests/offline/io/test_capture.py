@@ -88,6 +88,7 @@ def test_csv_without_units_and_damaged_c3d(tmp_path):
         read_capture(bad)
 
 
+@pytest.mark.data
 def test_real_takes_trc_and_c3d_agree():
     trc = read_capture(need_shared("markers", "animface_jaw.trc"))
     c3d = read_capture(need_shared("markers", "animface_jaw.c3d"))

@@ -141,6 +141,7 @@ def test_mtl_reads_kd_ks_ns(tmp_path):
         read_mtl(path)
 
 
+@pytest.mark.data
 def test_ict_neutral_matches_an_obvious_reader():
     path = need_shared("ict-facekit", "generic_neutral_mesh.obj")
     mesh = read_obj(path)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+import pytest
 from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.bench import registry as bench
@@ -14,6 +15,7 @@ def parse(argv):
     return parser.parse_args(argv)
 
 
+@pytest.mark.gl
 def test_bench_render_writes_json_for_both_paths(tmp_path):
     character_path = sphere_character().save(tmp_path / "sphere.npz")
     out = tmp_path / "bench.json"

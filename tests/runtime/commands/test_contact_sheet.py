@@ -39,6 +39,7 @@ def test_grid_size_and_labels_drawn():
         make_sheet([], columns=2)
 
 
+@pytest.mark.gl
 def test_contact_sheet_command_writes_the_grid(tmp_path, capsys):
     character_path = sphere_character().save(tmp_path / "sphere.npz")
     out = tmp_path / "sheet.png"

@@ -150,6 +150,7 @@ def test_cursor_path_picks_unprojects_and_solves(egl_ctx):
     renderer.close()
 
 
+@pytest.mark.gl
 def test_headless_script_writes_pictures_and_weights(tables, tmp_path, capsys):
     script = tmp_path / "steps.json"
     pin = f"m{nearest_marker((CENTRES[0][0] + 2.0, CENTRES[0][1])):02d}"

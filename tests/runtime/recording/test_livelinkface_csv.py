@@ -27,6 +27,7 @@ def _weight(frame, name):
     return frame.weights[frame.channels.index(name)]
 
 
+@pytest.mark.data
 def test_myslate_columns_are_taken_by_name_not_position():
     path = need_shared(*MYSLATE)
     frames = read_llf_csv(path)
@@ -44,6 +45,7 @@ def test_myslate_columns_are_taken_by_name_not_position():
     assert not any("Eye" in c and c.endswith(("Yaw", "Pitch", "Roll")) for c in frames[0].channels)
 
 
+@pytest.mark.data
 def test_myslate_timecodes_become_seconds():
     path = need_shared(*MYSLATE)
     frames = read_llf_csv(path)
@@ -61,6 +63,7 @@ def test_myslate_timecodes_become_seconds():
     assert frames[0].source == "livelinkface_csv"
 
 
+@pytest.mark.data
 def test_alex_rom_all_rows():
     path = need_shared(*ALEX)
     frames = open_recording(path)  # chosen by its header
@@ -69,6 +72,7 @@ def test_alex_rom_all_rows():
     assert max(float(f.weights.max()) for f in frames) == pytest.approx(1.0033, abs=1e-4)
 
 
+@pytest.mark.data
 def test_onto_an_ict_style_rig_jaw_and_blink_get_the_right_columns():
     path = need_shared(*MYSLATE)
     ict_names = sorted(p.stem for p in need_shared("ict-facekit").glob("*.obj") if p.stem != "generic_neutral_mesh")

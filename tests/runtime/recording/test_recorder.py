@@ -113,6 +113,7 @@ def test_replaying_a_recording_reproduces_the_live_frame_stream(tmp_path):
     assert read_session(path).skipped == {}
 
 
+@pytest.mark.gl  # the `facepuppet run --headless` it starts opens an EGL context
 def test_kill_9_mid_record_leaves_a_file_that_replays_up_to_the_last_complete_record(tmp_path):
     character = tmp_path / "sphere.npz"
     sphere_character().save(character)

@@ -138,6 +138,7 @@ def test_bad_arguments_are_refused(egl_ctx, sphere):
         r.close()
 
 
+@pytest.mark.gl
 def test_window_without_display_raises_and_headless_works(monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
