@@ -1,17 +1,21 @@
 # Quick start: `make demo` and `make test`. Both set up .venv first (system
-# libraries too, when missing and we may install them).
+# libraries too, when missing and we may install them). `make test-quick`
+# leaves out the tests marked slow (pytest -m "not slow"); `make test` runs all.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test lint setup system-deps bench clean
+.PHONY: demo test test-quick lint setup system-deps bench clean
 
 demo: $(STAMP)
 	$(VENV)/bin/facepuppet demo --out demo-out
 
 test: $(STAMP)
 	$(PY) -m pytest -q
+
+test-quick: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

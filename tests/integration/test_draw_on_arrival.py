@@ -56,6 +56,7 @@ class _Renderer:
         return np.zeros((1, 1, 3), np.uint8)
 
 
+@pytest.mark.slow  # the loop runs for 2 s of wall time
 @pytest.mark.parametrize("kind", sorted(SOURCES))
 def test_the_loop_draws_each_arriving_frame_between_rare_idle_ticks(kind, udp_sender):
     """Frames every 40 ms with an idle redraw of 2 per second: on a fixed 2 fps grid about 3 ticks

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.slow  # the module's fixture clones the repository and builds a wheel
 
 
 def run(cmd, **kw):

@@ -7,9 +7,11 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from PIL import Image
 
 
+@pytest.mark.slow
 def test_demo_opens_a_window_when_a_display_exists(x_display, tmp_path):
     env = {**os.environ, "DISPLAY": x_display}
     env.pop("WAYLAND_DISPLAY", None)

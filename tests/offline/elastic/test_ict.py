@@ -16,6 +16,8 @@ from tests.conftest import need_shared
 # median 9.8 %. Bounds leave about 1.5 points of margin.
 BOUNDS = {"jawOpen": 0.10, "eyeBlink_L": 0.115, "mouthSmile_L": 0.105, "browInnerUp_L": 0.09}
 
+pytestmark = pytest.mark.slow  # the elastic fit of the ICT head (ict_fit) takes seconds on top of the import
+
 
 @pytest.fixture(scope="session")
 def ict_fit(ict_character):

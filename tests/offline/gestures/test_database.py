@@ -88,6 +88,7 @@ def test_run_input_audio_needs_gestures_and_audio():
         run_live(args)
 
 
+@pytest.mark.slow
 @pytest.mark.data
 def test_transfer_detail_writes_a_character_with_local_detail_shapes_and_gesture_tables(db_path, ict_character_path,
                                                                                        tmp_path, capsys):

@@ -91,6 +91,7 @@ def test_identical_characters_cycle_to_zero_error():
     assert cyclic_error(c, one, np.zeros((1, 8))) == pytest.approx(moved[region].mean(), rel=1e-5)
 
 
+@pytest.mark.slow
 def test_other_morphology_cycle_table_and_plot(tmp_path):
     a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), amplitude=1.5, names=SIDED, seed=1)
     motion = np.random.default_rng(4).uniform(0, 0.8, size=(30, 8))

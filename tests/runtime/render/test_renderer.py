@@ -196,7 +196,7 @@ def moderngl_points():
     return moderngl.POINTS
 
 
-@pytest.mark.parametrize("which", ["sphere", "ict"])
+@pytest.mark.parametrize("which", ["sphere", pytest.param("ict", marks=[pytest.mark.data, pytest.mark.slow])])
 def test_vertex_shader_deforms_like_the_cpu_deformer(egl_ctx, request, which):
     from facepuppet.runtime.render.cpu_deform import CpuDeformer
 
