@@ -102,25 +102,6 @@ DATA_FIXTURES = {"ict_character_path"}  # ict_character depends on it
 # asks first, so the tests that need it are slow as a group even where their own call is short.
 SLOW_FIXTURES = {"ict_character_path"}
 
-# Tests in files that are being edited on another branch; they take these markers here until their
-# files can carry them. Keys are "path::function" (every parameter of the function); tests/test_markers.py
-# checks that each names a function that exists.
-PENDING_MARKS = {
-    "tests/runtime/test_run.py::test_run_end_to_end_python_osc_then_oscsend": ("gl", "slow"),
-    "tests/runtime/test_run.py::test_audio_file_levels_are_recorded_per_tick": ("gl",),
-    "tests/runtime/test_run.py::test_both_receivers_record_every_packet_and_see_the_calibrate_message": ("gl",),
-    "tests/runtime/live/test_stages.py::test_markers_over_udp_are_solved_and_mapped_through_the_pair": ("gl", "slow"),
-    "tests/runtime/live/test_stages.py::test_markers_turn_the_head": ("gl",),
-    "tests/runtime/live/test_stages.py::test_kpls_retarget_in_the_live_run": ("gl",),
-    "tests/runtime/live/test_stages.py::test_elastic_character_driven_by_a_muscle_channel_over_vmc": ("gl",),
-    "tests/runtime/live/test_stages.py::test_replay_of_a_live_recording_draws_the_live_weights": ("gl", "slow"),
-    "tests/runtime/live/test_stages.py::test_replay_of_a_live_gestures_run_draws_the_live_weights": ("gl", "slow"),
-    "tests/runtime/commands/test_replay.py::test_replaying_twice_gives_bit_identical_weights_and_images": ("slow",),
-    "tests/runtime/commands/test_replay.py::"
-    "test_replay_command_headless_writes_pngs_and_a_session_replays_like_its_csv": ("data",),
-}
-
-
 @pytest.hookimpl(tryfirst=True)  # before -m deselects by marker
 def pytest_collection_modifyitems(config, items):
     for item in items:
@@ -132,8 +113,6 @@ def pytest_collection_modifyitems(config, items):
             marks.add("data")
         if names & SLOW_FIXTURES:
             marks.add("slow")
-        path = item.path.resolve().relative_to(REPO).as_posix()
-        marks.update(PENDING_MARKS.get(f"{path}::{item.originalname}", ()))
         for name in sorted(marks - {m.name for m in item.iter_markers()}):
             item.add_marker(name)
 

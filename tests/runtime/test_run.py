@@ -56,6 +56,8 @@ def python_osc_jaw(client: SimpleUDPClient, jaw: float) -> None:
     client.send(b.build())
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_run_end_to_end_python_osc_then_oscsend(character, tmp_path, capsys):
     oscsend = shutil.which("oscsend")
     if oscsend is None:
@@ -113,6 +115,7 @@ def test_run_end_to_end_python_osc_then_oscsend(character, tmp_path, capsys):
     assert len(read_session(record).packets) == udp["packets"]
 
 
+@pytest.mark.gl
 def test_audio_file_levels_are_recorded_per_tick(character, tmp_path, capsys):
     rate = 48000
     samples = 0.5 * np.sin(2 * np.pi * 600 * np.arange(rate) / rate)
@@ -171,6 +174,7 @@ def test_busy_port_is_a_message_not_a_traceback(character, capsys):
     assert f"127.0.0.1:{port}" in capsys.readouterr().err
 
 
+@pytest.mark.gl
 @pytest.mark.parametrize("receiver", ["process", "thread"])
 def test_both_receivers_record_every_packet_and_see_the_calibrate_message(character, tmp_path, receiver):
     from types import SimpleNamespace

@@ -40,6 +40,7 @@ def _pngs(out_dir):
     return [p.read_bytes() for p in sorted(out_dir.glob("frame_*.png"))]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", ["gpu", "cpu"])
 def test_replaying_twice_gives_bit_identical_weights_and_images(egl_ctx, ict_character, tmp_path, path):
     csv_path = need_shared(*MYSLATE)
@@ -95,6 +96,7 @@ def _command(argv):
     return args.func(args)
 
 
+@pytest.mark.data
 def test_replay_command_headless_writes_pngs_and_a_session_replays_like_its_csv(egl_ctx, tmp_path, capsys):
     csv_path = need_shared(*MYSLATE)
     char_path = _tiny_character().save(tmp_path / "tiny.npz")

@@ -123,6 +123,8 @@ def marker_sender(names, pose_at):
     return send
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_markers_over_udp_are_solved_and_mapped_through_the_pair(actor_files, tmp_path):
     paths, cap, truth, actor, pair = actor_files
     probe = ActorRetarget(actor, pair)  # a near-neutral frame and the one opening the jaw most
@@ -156,6 +158,7 @@ def rotation_deg(q) -> float:
     return float(np.degrees(2 * np.arccos(min(1.0, abs(float(q[3]) / float(np.linalg.norm(q)))))))
 
 
+@pytest.mark.gl
 def test_markers_turn_the_head(actor_files, tmp_path):
     """The Kabsch head pose of the solve is the drawn head rotation (it used to be computed and dropped)."""
     paths, cap, truth, actor, pair = actor_files
@@ -202,6 +205,7 @@ def test_markers_need_an_actor_and_a_pair_that_fit(actor_files, tmp_path):
 
 # -- kernel PLS ----------------------------------------------------------------------------------------------------
 
+@pytest.mark.gl
 def test_kpls_retarget_in_the_live_run(tmp_path):
     from helpers.kpls_stages import random_stage as _stage
 
@@ -239,6 +243,7 @@ def elastic_with_muscle(character, name="zygomaticMajorL") -> ElasticModel:
     return ElasticModel(arrays, model.shape_names, model.control_names, (name,))
 
 
+@pytest.mark.gl
 def test_elastic_character_driven_by_a_muscle_channel_over_vmc(tmp_path):
     character = sphere_character(with_hidden=False)
     char_path = character.save(tmp_path / "sphere.npz")
@@ -283,6 +288,8 @@ def test_elastic_table_must_fit_the_character(tmp_path):
 
 # -- a live recording replayed tick for tick -----------------------------------------------------------------------
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_replay_of_a_live_recording_draws_the_live_weights(tmp_path):
     character = sphere_character()
     char_path = character.save(tmp_path / "sphere.npz")
@@ -322,6 +329,8 @@ def test_replay_of_a_live_recording_draws_the_live_weights(tmp_path):
     assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # without the pipeline: the raw frames
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_replay_of_a_live_gestures_run_draws_the_live_weights(tmp_path):
     """``run --gestures`` with a voice recorded, replayed with the same options: the same weights tick for tick."""
     import wave
