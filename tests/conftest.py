@@ -14,6 +14,9 @@ import pytest
 
 from helpers import running_test
 
+# the module-scoped fixture ``db`` (a small synthetic gesture database) for the gesture tests
+pytest_plugins = ["helpers.gesture_dbs"]
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
 ICT_DIR = SHARED_DATA / "ict-facekit"

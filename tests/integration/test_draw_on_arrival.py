@@ -5,18 +5,18 @@ from __future__ import annotations
 
 import threading
 import time
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from helpers.osc_helpers import vmc_frame
 
 from facepuppet.runtime.channels import ARKIT_NAMES
+from facepuppet.runtime.inputs.udp import UdpSource
+from facepuppet.runtime.inputs.udp_process import UdpProcessSource
+from facepuppet.runtime.inputs.vmc import VmcAdapter
 from facepuppet.runtime.live.loop import FrameLoop, WallClock
 from facepuppet.runtime.live.sinks import WeightLog
-from facepuppet.runtime.inputs.udp_process import UdpProcessSource
-from facepuppet.runtime.inputs.udp import UdpSource
-from facepuppet.runtime.inputs.vmc import VmcAdapter
+
+from helpers.osc_helpers import vmc_frame
 
 JAW = ARKIT_NAMES.index("jawOpen")
 SOURCES = {"process": UdpProcessSource, "thread": UdpSource}

@@ -6,6 +6,8 @@ import pytest
 
 from facepuppet.runtime import cli
 from facepuppet.runtime.bench import registry as bench_registry
+
+
 def test_every_listed_command_module_registers():
     parser = cli.build_parser()
     choices = parser._subparsers._group_actions[0].choices  # argparse keeps the subcommands here

@@ -16,14 +16,14 @@ import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
-from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.cli import main
-from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.commands.run import CALIBRATE_ADDRESS
-from helpers.udp_helpers import wait_for
-from facepuppet.runtime.recording.session import read_session
 from facepuppet.runtime.recording.replay_source import open_recording
+from facepuppet.runtime.recording.session import read_session
+
+from helpers.small_characters import sphere_character
+from helpers.udp_helpers import wait_for
 
 FAST_CONFIG = """
 [filter.mouth]

@@ -15,11 +15,11 @@ from facepuppet.offline.actuation.transfer import (
     align_markers,
     face_units,
     observable_shapes,
+    parameter_shape_pairs,
     read_landmarks,
     read_override,
     retarget_actor,
     s_distribution,
-    parameter_shape_pairs,
     umeyama,
 )
 from facepuppet.offline.actuation.transfer_eval import transfer_error

@@ -15,12 +15,12 @@ from facepuppet.offline.kpls.commands import register, to_runtime
 from facepuppet.offline.kpls.cyclic_eval import DUTREVE, bar_plot, cyclic_error, evaluate, format_table, improvements
 from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.pairs import (
+    expression_pairs,
     farthest_points,
     feature_matrix,
     feature_points,
     match_matrix,
     read_pairing,
-    expression_pairs,
 )
 from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, stylise
 from helpers.kpls_characters import SHAPES, bump_character

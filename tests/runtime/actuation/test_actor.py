@@ -7,6 +7,7 @@ import pytest
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.tables import TablesError
+
 from helpers.small_actors import K, make_actor
 
 

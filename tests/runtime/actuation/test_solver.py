@@ -7,6 +7,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from facepuppet.runtime.actuation.solver import MarkerSolver
+
 from helpers.small_actors import K, N, make_actor
 
 

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from facepuppet.runtime.actuation.pair import ActorPair
+from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.actuation.stage import ActorRetarget
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.actuation.solver import MarkerSolver
+
 from helpers.small_actors import K, N, make_actor
 
 

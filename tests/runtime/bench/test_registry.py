@@ -6,9 +6,12 @@ import argparse
 import json
 
 import pytest
-from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.bench import registry as bench
+
+from helpers.small_characters import sphere_character
+
+
 def parse(argv):
     parser = argparse.ArgumentParser()
     bench.register(parser.add_subparsers())

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import argparse
+
 import numpy as np
 import pytest
 from PIL import Image
-from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.commands import contact_sheet
-from facepuppet.runtime.render.images import LABEL_HEIGHT, contact_sheet as make_sheet, save_png
+from facepuppet.runtime.render.images import LABEL_HEIGHT, save_png
+from facepuppet.runtime.render.images import contact_sheet as make_sheet
+
+from helpers.small_characters import sphere_character
 
 
 def parse(module, argv):

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.demo import head_parts as parts
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.demo import head_parts as parts
 from facepuppet.runtime.demo.head import build_demo_character
 from facepuppet.runtime.geometry import vertex_normals
 

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
+from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.runtime.tables import TablesError
+
 from helpers.elastic_models import random_model
 from helpers.small_characters import sphere_character
 
@@ -32,9 +33,10 @@ def test_bad_index_is_refused():
 
 def gpu_elastic(ctx, character, model, controls):
     """Deformed positions and normals read back from face.glsl's elastic variant (transform feedback)."""
+    import moderngl
+
     from facepuppet.runtime.render.elastic_path import basis_textures, elastic_defines
     from facepuppet.runtime.render.shader_loader import load_program
-    import moderngl
 
     prog = load_program(ctx, "face.glsl", elastic_defines(model), varyings=("v_world", "v_normal"))
     textures = basis_textures(ctx, model)

@@ -7,11 +7,12 @@ import pytest
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.gestures.candidates import intensity_bin
+from facepuppet.runtime.gestures.layer import GestureLayer
 from facepuppet.runtime.gestures.synth import RECENT_PENALTY, GestureSynth
 from facepuppet.runtime.gestures.tables import load_gesture_db
-from facepuppet.runtime.gestures.layer import GestureLayer
 from facepuppet.runtime.tables import save_tables
-from helpers.gesture_dbs import db, small_db  # noqa: F401  (db is a pytest fixture)
+
+from helpers.gesture_dbs import small_db
 
 
 def test_reproduces_reference_with_sigma_zero_and_one_candidate(db):
@@ -73,8 +74,8 @@ def test_style_restricts_a_group_to_one_take(db):
 def slow_distance(synth, k, i, speech, history, mood_prev):
     """§5.1 distance of reference frame i for group k, by loops over the h preceding frames."""
     h, a = synth.h, synth._alpha[k]
-    d = sum(a / h * (speech[-1 - l] - synth._intensity[i - l]) ** 2 for l in range(h))
-    d += sum((1 - a) / h * np.sum((history[-l] - synth._desc[i - l, k]) ** 2) for l in range(1, h + 1))
+    d = sum(a / h * (speech[-1 - lag] - synth._intensity[i - lag]) ** 2 for lag in range(h))
+    d += sum((1 - a) / h * np.sum((history[-lag] - synth._desc[i - lag, k]) ** 2) for lag in range(1, h + 1))
     if synth._km >= 0:
         d += synth._beta[k] * np.sum((mood_prev - synth._moodf[i - 1]) ** 2)
     return d
@@ -84,7 +85,8 @@ def test_step_distance_matches_the_slow_definition_and_the_successor_has_no_cont
     synth = GestureSynth(db, seed=4, sigma=0.0, n_candidates=1)
     rng = np.random.default_rng(0)
     speech = list(synth._intensity[synth._pick[0] + np.arange(-synth.h + 1, 1)])  # reset's speech history
-    hist = {k: [synth._desc[synth._pick[k] + l, k] for l in range(-synth.h + 1, 1)] for k in range(len(synth.groups))}
+    hist = {k: [synth._desc[synth._pick[k] + lag, k] for lag in range(-synth.h + 1, 1)]
+            for k in range(len(synth.groups))}
     shown = {k: {int(synth._pick[k]): 0} for k in range(len(synth.groups))}  # frame -> step it was last shown
     for t, a in enumerate(rng.normal(0, 1.5, 40), 1):
         prev = synth._pick.copy()
@@ -97,7 +99,7 @@ def test_step_distance_matches_the_slow_definition_and_the_successor_has_no_cont
                     if c < len(synth._intensity)]
             d = [slow_distance(synth, k, c, speech, hist[k], mood_prev) for c in cand]
             if cand[0] == prev[k] + 1:  # the natural successor continues perfectly: speech (+ mood) term only
-                d[0] = slow_distance(synth, k, cand[0], speech, [synth._desc[cand[0] - l, k] for l in
+                d[0] = slow_distance(synth, k, cand[0], speech, [synth._desc[cand[0] - lag, k] for lag in
                                                                  range(synth.h, 0, -1)], mood_prev)
             if synth.groups[k] != "lips":  # a frame shown in the last `recent` steps is barred (not the lips)
                 d = [v + RECENT_PENALTY * (shown[k].get(c, -10 ** 9) >= t - synth.recent) for v, c in zip(d, cand)]

@@ -5,7 +5,6 @@ import pytest
 
 from facepuppet.runtime.gestures.tables import load_gesture_db
 from facepuppet.runtime.tables import TablesError, save_tables
-from helpers.gesture_dbs import db  # noqa: F401  (a pytest fixture)
 
 
 def test_loading_refuses_a_table_with_bad_take_indices(tmp_path, db):

@@ -6,19 +6,20 @@ import math
 
 import numpy as np
 import pytest
-from helpers.osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.facecap import FACECAP_ORDER, FaceCapAdapter
 
-I = {name: i for i, name in enumerate(ARKIT_NAMES)}
+from helpers.osc_helpers import bundle, counts, msg
+
+INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 
 
 def test_index_24_is_jaw_open_in_face_cap_order():
     a = FaceCapAdapter()
     f = a.handle(bundle(msg("/W", 24, 0.5)), 1.0)
-    assert f.weights[I["jawOpen"]] == 0.5 and f.source == "facecap"
-    assert np.isnan(np.delete(f.weights, I["jawOpen"])).all()
+    assert f.weights[INDEX["jawOpen"]] == 0.5 and f.source == "facecap"
+    assert np.isnan(np.delete(f.weights, INDEX["jawOpen"])).all()
     counts(a, datagrams=1, frames=1)
 
 
@@ -28,7 +29,7 @@ def test_face_cap_order_is_a_permutation_of_arkit_and_not_arkit_order():
     assert {i: FACECAP_ORDER[i] for i in spot} == spot
     f = FaceCapAdapter().handle(bundle(*(msg("/W", i, i / 100) for i in range(52))), 0.0)
     for i, name in enumerate(FACECAP_ORDER):
-        assert f.weights[I[name]] == pytest.approx(i / 100)
+        assert f.weights[INDEX[name]] == pytest.approx(i / 100)
 
 
 def test_head_rotation_degrees_quaternion_and_translation():
@@ -46,10 +47,10 @@ def test_head_rotation_degrees_quaternion_and_translation():
 def test_eye_rotations_drive_eye_look_and_w_values_win():
     a = FaceCapAdapter()
     f = a.handle(bundle(msg("/ELR", 15.0, 0.0), msg("/ERR", 0.0, 15.0)), 0.0)
-    assert f.weights[I["eyeLookDownLeft"]] == pytest.approx(0.5) and f.weights[I["eyeLookUpLeft"]] == 0
-    assert f.weights[I["eyeLookInRight"]] == pytest.approx(0.5) and f.weights[I["eyeLookOutRight"]] == 0
+    assert f.weights[INDEX["eyeLookDownLeft"]] == pytest.approx(0.5) and f.weights[INDEX["eyeLookUpLeft"]] == 0
+    assert f.weights[INDEX["eyeLookInRight"]] == pytest.approx(0.5) and f.weights[INDEX["eyeLookOutRight"]] == 0
     g = a.handle(bundle(msg("/ELR", -90.0, 0.0), msg("/W", 7, 0.25)), 1.0)  # index 7: eyeLookDownLeft
-    assert g.weights[I["eyeLookDownLeft"]] == 0.25 and g.weights[I["eyeLookUpLeft"]] == 1.0  # clamped
+    assert g.weights[INDEX["eyeLookDownLeft"]] == 0.25 and g.weights[INDEX["eyeLookUpLeft"]] == 1.0  # clamped
 
 
 def test_unbundled_frames_end_on_ht_or_on_a_repeated_index():
@@ -57,12 +58,12 @@ def test_unbundled_frames_end_on_ht_or_on_a_repeated_index():
     assert a.handle(msg("/W", 24, 0.5).dgram, 1.00) is None
     assert a.handle(msg("/W", 37, 0.2).dgram, 1.01) is None
     f = a.handle(msg("/HT", 0.0, 0.0, 1.0).dgram, 1.02)
-    assert f.weights[I["jawOpen"]] == 0.5 and f.weights[I["mouthSmileLeft"]] == pytest.approx(0.2)
+    assert f.weights[INDEX["jawOpen"]] == 0.5 and f.weights[INDEX["mouthSmileLeft"]] == pytest.approx(0.2)
     assert a.handle(msg("/W", 24, 0.6).dgram, 1.03) is None
     g = a.handle(msg("/W", 24, 0.7).dgram, 1.04)  # index 24 again: the frame holding 0.6 is complete
-    assert g.weights[I["jawOpen"]] == pytest.approx(0.6) and g.t == 1.04
+    assert g.weights[INDEX["jawOpen"]] == pytest.approx(0.6) and g.t == 1.04
     h = a.handle(msg("/HT", 0.0, 0.0, 1.0).dgram, 1.05)
-    assert h.weights[I["jawOpen"]] == pytest.approx(0.7)
+    assert h.weights[INDEX["jawOpen"]] == pytest.approx(0.7)
     counts(a, datagrams=6, frames=3)
 
 
@@ -71,7 +72,7 @@ def test_at_most_one_frame_per_receive_time():
     assert a.handle(bundle(msg("/W", 24, 0.5)), 2.0) is not None
     assert a.handle(bundle(msg("/W", 25, 0.3)), 2.0) is None  # same time: carried to the next frame
     f = a.handle(bundle(msg("/W", 24, 0.1)), 2.1)
-    assert f.weights[I["jawForward"]] == pytest.approx(0.3) and f.weights[I["jawOpen"]] == pytest.approx(0.1)
+    assert f.weights[INDEX["jawForward"]] == pytest.approx(0.3) and f.weights[INDEX["jawOpen"]] == pytest.approx(0.1)
 
 
 @pytest.mark.parametrize("message", [
@@ -91,7 +92,7 @@ def test_wrong_types_and_counts_are_malformed(message):
     a = FaceCapAdapter()
     assert a.handle(bundle(message), 0.0) is None
     f = a.handle(bundle(msg("/W", 24, 0.5), msg("/W", 24, 0.25, "extra", 3)), 1.0)  # extras ignored
-    assert f.weights[I["jawOpen"]] == 0.25
+    assert f.weights[INDEX["jawOpen"]] == 0.25
     counts(a, datagrams=2, frames=1, malformed=1)
 
 
@@ -101,7 +102,7 @@ def test_nonfinite_value_rejects_its_frame(message):
     a = FaceCapAdapter()
     assert a.handle(bundle(msg("/W", 25, 0.5), message), 0.0) is None
     f = a.handle(bundle(msg("/W", 24, 0.5)), 1.0)
-    assert np.isnan(f.weights[I["jawForward"]]) and f.head_translation is None and f.head_rotation is None
+    assert np.isnan(f.weights[INDEX["jawForward"]]) and f.head_translation is None and f.head_rotation is None
     counts(a, datagrams=2, frames=1, nonfinite=1)
 
 

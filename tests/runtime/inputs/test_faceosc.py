@@ -7,13 +7,14 @@ import math
 import numpy as np
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from helpers.osc_helpers import counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.inputs.faceosc import RESET_SPANS, SPANS, TAU_ACTIVE, FaceOscAdapter
 from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.inputs.faceosc import RESET_SPANS, SPANS, TAU_ACTIVE, FaceOscAdapter
 
-I = {name: i for i, name in enumerate(ARKIT_NAMES)}
+from helpers.osc_helpers import counts, msg
+
+INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 REST = {"mouth/height": 1.0, "mouth/width": 14.0, "eyebrow/left": 7.5, "eyebrow/right": 7.5,
         "eye/left": 2.8, "eye/right": 2.8, "jaw": 20.0, "nostrils": 6.0}
 
@@ -30,7 +31,7 @@ def frame_bundle(found=1, **gestures):
 
 
 def w(frame, name):
-    return float(frame.weights[I[name]])
+    return float(frame.weights[INDEX[name]])
 
 
 def test_first_frame_is_neutral_then_gestures_drive_channels():

@@ -20,13 +20,14 @@ import time
 import numpy as np
 import pytest
 from pythonosc.osc_packet import OscPacket
-from helpers.osc_helpers import bundle, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES, pascal
 from facepuppet.runtime.inputs.kinds import INPUT_KINDS, make_adapter
 from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.osc import UNSUPPORTED, decode
 from facepuppet.runtime.inputs.udp import UdpSource
+
+from helpers.osc_helpers import bundle, msg
 
 SEED = 3
 N_DIRECT = 16_000  # per kind: 80,000 in all

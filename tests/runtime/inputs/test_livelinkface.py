@@ -7,11 +7,12 @@ import struct
 
 import numpy as np
 import pytest
-from helpers.osc_helpers import counts
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.livelinkface import MAX_PACKET, LiveLinkFaceAdapter, encode_llf_packet
+
+from helpers.osc_helpers import counts
 
 UUID = b"$" + b"A1B2C3D4-0000-1111-2222-333344445555"[:36]
 

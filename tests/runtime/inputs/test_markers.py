@@ -6,9 +6,10 @@ import math
 
 import numpy as np
 import pytest
-from helpers.osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.inputs.markers import FRAME, LAYOUT, MAX_LAYOUTS, MAX_MARKERS, MarkersAdapter
+
+from helpers.osc_helpers import bundle, counts, msg
 
 NAMES = ("nose", "chin", "mouthL")
 POINTS = np.array([[0.0, 10.0, 5.0], [0.0, -40.0, 2.0], [np.nan, np.nan, np.nan]], dtype="<f4")

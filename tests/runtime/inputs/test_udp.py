@@ -9,8 +9,6 @@ import time
 
 import numpy as np
 import pytest
-from helpers.osc_helpers import vmc_frame
-from helpers.udp_helpers import poll_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.kinds import INPUT_KINDS, make_adapter
@@ -18,6 +16,8 @@ from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.udp import UdpSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
 
+from helpers.osc_helpers import vmc_frame
+from helpers.udp_helpers import poll_frame, wait_for
 
 JAW = ARKIT_NAMES.index("jawOpen")
 

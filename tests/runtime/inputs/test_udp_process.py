@@ -9,8 +9,6 @@ import time
 
 import numpy as np
 import pytest
-from helpers.osc_helpers import osc, vmc_frame
-from helpers.udp_helpers import poll_frame, wait_for
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.kinds import make_adapter
@@ -19,6 +17,8 @@ from facepuppet.runtime.inputs.markers import FRAME, LAYOUT
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
 
+from helpers.osc_helpers import osc, vmc_frame
+from helpers.udp_helpers import poll_frame, wait_for
 
 JAW = ARKIT_NAMES.index("jawOpen")
 
@@ -125,7 +125,7 @@ def test_frames_read_while_the_child_writes_are_never_torn(udp_sender):
     with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
         packets = [encode_llf_packet([v] * 52, number=i) for i, v in enumerate(np.linspace(0, 1, 4000))]
         taken = 0
-        for i, packet in enumerate(packets):
+        for _i, packet in enumerate(packets):
             udp_sender.sendto(packet, source.address)
             frame, _ = source.latest()
             if frame is not None:

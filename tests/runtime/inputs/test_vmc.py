@@ -7,13 +7,14 @@ import struct
 
 import numpy as np
 import pytest
-from helpers.osc_helpers import bundle, counts, msg
 
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.vmc import PRESETS, VmcAdapter
 
+from helpers.osc_helpers import bundle, counts, msg
+
 VAL, APPLY = "/VMC/Ext/Blend/Val", "/VMC/Ext/Blend/Apply"
-I = {name: i for i, name in enumerate(ARKIT_NAMES)}
+INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 
 
 def blend(*pairs):
@@ -25,8 +26,8 @@ def test_val_then_apply_gives_jaw_open_and_nan_elsewhere():
     a = VmcAdapter()
     f = a.handle(blend(("JawOpen", 0.7)), 3.5)
     assert f.channels == ARKIT_NAMES and f.source == "vmc" and f.t == 3.5
-    assert f.weights[I["jawOpen"]] == pytest.approx(0.7)
-    assert np.isnan(np.delete(f.weights, I["jawOpen"])).all()
+    assert f.weights[INDEX["jawOpen"]] == pytest.approx(0.7)
+    assert np.isnan(np.delete(f.weights, INDEX["jawOpen"])).all()
     assert f.head_rotation is None and math.isnan(f.t_sender)
     counts(a, datagrams=1, frames=1)
 
@@ -36,10 +37,10 @@ def test_values_take_effect_at_apply_in_separate_datagrams():
     assert a.handle(msg(VAL, "JawOpen", 0.3).dgram, 1.0) is None
     assert a.handle(msg(VAL, "MouthFunnel", 0.4).dgram, 1.1) is None
     f = a.handle(msg(APPLY).dgram, 1.2)
-    assert f.weights[I["jawOpen"]] == pytest.approx(0.3)
-    assert f.weights[I["mouthFunnel"]] == pytest.approx(0.4)
+    assert f.weights[INDEX["jawOpen"]] == pytest.approx(0.3)
+    assert f.weights[INDEX["mouthFunnel"]] == pytest.approx(0.4)
     g = a.handle(blend(("EyeBlinkLeft", 1.0)), 2.0)  # a new frame starts empty
-    assert np.isnan(g.weights[I["jawOpen"]]) and g.weights[I["eyeBlinkLeft"]] == 1.0
+    assert np.isnan(g.weights[INDEX["jawOpen"]]) and g.weights[INDEX["eyeBlinkLeft"]] == 1.0
     counts(a, datagrams=4, frames=2)
 
 
@@ -74,7 +75,7 @@ def test_presets_and_perfect_sync_names_map_to_arkit(name, expected):
 
 def test_every_preset_targets_arkit_channels():
     for name, targets in PRESETS.items():
-        assert targets and all(c in I for c, _ in targets), name
+        assert targets and all(c in INDEX for c, _ in targets), name
 
 
 def test_names_are_case_sensitive_and_unmapped_names_are_counted():
@@ -87,9 +88,9 @@ def test_names_are_case_sensitive_and_unmapped_names_are_counted():
 def test_perfect_sync_wins_over_presets_and_presets_combine_by_max():
     for pairs in ((("A", 1.0), ("JawOpen", 0.2)), (("JawOpen", 0.2), ("A", 1.0))):
         f = VmcAdapter().handle(blend(*pairs), 0.0)
-        assert f.weights[I["jawOpen"]] == pytest.approx(0.2)
+        assert f.weights[INDEX["jawOpen"]] == pytest.approx(0.2)
     f = VmcAdapter().handle(blend(("Joy", 0.3), ("happy", 0.6), ("Fun", 1.0)), 0.0)
-    assert f.weights[I["mouthSmileLeft"]] == pytest.approx(0.6)
+    assert f.weights[INDEX["mouthSmileLeft"]] == pytest.approx(0.6)
 
 
 def test_head_bone_is_converted_kept_and_attached_other_bones_ignored():
@@ -116,13 +117,13 @@ def test_root_ok_and_time_are_kept_extra_args_ignored():
     f = a.handle(blend(("JawOpen", 0.5)), 0.1)
     assert f.t_sender == 12.5
     extra = a.handle(bundle(msg(VAL, "JawOpen", 0.6, "surplus", 7), msg(APPLY, 1)), 0.2)
-    assert extra.weights[I["jawOpen"]] == pytest.approx(0.6)
+    assert extra.weights[INDEX["jawOpen"]] == pytest.approx(0.6)
     counts(a, datagrams=3, frames=2)
 
 
 def test_integer_values_are_accepted_as_floats():
     f = VmcAdapter().handle(blend(("JawOpen", 1)), 0.0)
-    assert f.weights[I["jawOpen"]] == 1.0
+    assert f.weights[INDEX["jawOpen"]] == 1.0
 
 
 @pytest.mark.parametrize("message", [
@@ -145,7 +146,7 @@ def test_wrong_types_and_too_few_arguments_are_malformed(message):
     a.handle(bundle(msg("/VMC/Ext/Bone/Pos", "Head", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)), 0.0)
     assert a.handle(message.dgram, 1.0) is None
     f = a.handle(blend(("JawOpen", 0.25)), 2.0)  # still works, pose unchanged
-    assert f.weights[I["jawOpen"]] == pytest.approx(0.25)
+    assert f.weights[INDEX["jawOpen"]] == pytest.approx(0.25)
     np.testing.assert_array_equal(f.head_rotation, [0, 0, 0, 1])
     counts(a, datagrams=3, frames=1, malformed=1)
 
@@ -157,7 +158,7 @@ def test_nonfinite_value_rejects_the_frame(bad):
     head = msg("/VMC/Ext/Bone/Pos", "Head", 0.0, 0.0, 0.0, 0.0, 0.0, bad, 1.0)
     assert a.handle(head.dgram, 0.5) is None
     f = a.handle(blend(("MouthFunnel", 0.1)), 1.0)
-    assert f.weights[I["mouthFunnel"]] == pytest.approx(0.1) and np.isnan(f.weights[I["jawOpen"]])
+    assert f.weights[INDEX["mouthFunnel"]] == pytest.approx(0.1) and np.isnan(f.weights[INDEX["jawOpen"]])
     assert f.head_rotation is None
     counts(a, datagrams=3, frames=1, nonfinite=2)
 
@@ -166,7 +167,7 @@ def test_unknown_addresses_are_ignored_and_counted():
     a = VmcAdapter()
     f = a.handle(bundle(msg("/VMC/Ext/Cam", "Camera", 0.0), msg("/VMC/Ext/Set/Period", 1, 1, 1, 1, 1, 1),
                         msg("/something/else"), msg(VAL, "JawOpen", 0.4), msg(APPLY)), 0.0)
-    assert f.weights[I["jawOpen"]] == pytest.approx(0.4)
+    assert f.weights[INDEX["jawOpen"]] == pytest.approx(0.4)
     counts(a, datagrams=1, frames=1, unknown_address=3)
 
 

@@ -10,6 +10,7 @@ import pytest
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.tables import TablesError, load_tables, save_tables
+
 from helpers.kpls_stages import random_stage
 
 
@@ -75,8 +76,8 @@ def test_tables_round_trip_and_damaged_files(tmp_path):
 
 
 def test_replay_command_uses_the_retarget(tmp_path, egl_ctx):
-    from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.commands.replay import register, run_replay
+    from facepuppet.runtime.demo.head import build_demo_character
 
     character = build_demo_character()
     char_path = character.save(tmp_path / "demo.npz")

@@ -11,8 +11,8 @@ import pytest
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import WeightLog
-from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.live.timing import StageTimer
+from facepuppet.runtime.recording.replay_source import ReplaySource
 
 RIG = SimpleNamespace(shape_names=("jawOpen", "eyeBlink_L", "eyeBlink_R", "cheekRaiser_L"))
 

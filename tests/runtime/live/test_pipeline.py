@@ -14,8 +14,8 @@ import pytest
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.config import ChannelSettings, FilterSettings, LiveConfig
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
-from facepuppet.runtime.live.sinks import WeightLog
 from facepuppet.runtime.live.pipeline import LivePipeline
+from facepuppet.runtime.live.sinks import WeightLog
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
 RIG = SimpleNamespace(shape_names=("jawOpen", "eyeBlink_L"))

@@ -18,14 +18,15 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
 
-from facepuppet.runtime.commands import replay, run
 from facepuppet.runtime.actuation.stage import ActorRetarget
+from facepuppet.runtime.commands import replay, run
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.recording.session import read_session
-from helpers.small_characters import sphere_character
+
 from helpers.elastic_models import random_model
+from helpers.small_characters import sphere_character
 
 NO_SMOOTHING = "\n".join(f"[filter.{r}]\nmin_cutoff = 500.0\nbeta = 0.0" for r in ("eyes", "brows", "mouth", "other",
                                                                                   "head")) + \
@@ -83,9 +84,9 @@ def vmc(client, values: dict) -> None:
 
 @pytest.fixture(scope="module")
 def actor_files(tmp_path_factory):
+    from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
     from facepuppet.offline.actuation.train import train_actor
     from facepuppet.offline.actuation.transfer import retarget_actor
-    from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
     from helpers.small_characters import grid_face
 
     tmp = tmp_path_factory.mktemp("actor")
@@ -265,7 +266,7 @@ def test_elastic_character_driven_by_a_muscle_channel_over_vmc(tmp_path):
     assert w.shape[1] == 3  # jawOpen, puff, then the muscle
     assert w[-1, 2] == pytest.approx(0.8, abs=1e-4)
     np.testing.assert_array_equal(w[:, :2], 0.0)
-    relaxed = int(np.flatnonzero((np.abs(w[:, 2]) < 1e-6))[-1])
+    relaxed = int(np.flatnonzero(np.abs(w[:, 2]) < 1e-6)[-1])
     from PIL import Image
 
     drawn = sorted(pngs.glob("frame_*.png"))  # one per tick, named by tick label

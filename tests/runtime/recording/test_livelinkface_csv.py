@@ -10,6 +10,7 @@ import pytest
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.recording.livelinkface_csv import parse_timecode, read_llf_csv
 from facepuppet.runtime.recording.replay_source import open_recording
+
 from conftest import need_shared
 
 MYSLATE = ("tracker", "livelinkface_myslate_3.csv")

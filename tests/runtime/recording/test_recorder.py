@@ -15,13 +15,14 @@ import numpy as np
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
-from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.inputs.kinds import make_adapter
-from facepuppet.runtime.recording.recorder import PacketRecorder
-from facepuppet.runtime.recording.session import read_session
-from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.inputs.udp import UdpSource
+from facepuppet.runtime.recording.recorder import PacketRecorder
+from facepuppet.runtime.recording.replay_source import open_recording
+from facepuppet.runtime.recording.session import read_session
+
+from helpers.small_characters import sphere_character
 
 
 def vmc_bundle(jaw: float, blink: float, yaw: float = 0.0) -> bytes:

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.recording.session import MAGIC, SessionWriter, read_session
 from facepuppet.runtime.recording.records import RecordKind
 from facepuppet.runtime.recording.replay_source import open_recording
+from facepuppet.runtime.recording.session import MAGIC, SessionWriter, read_session
 
 ARKIT3 = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")
 PASCAL2 = ("JawOpen", "MouthSmileLeft")

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers.small_characters import sphere_character
 
-from facepuppet.runtime.render.cpu_deform import CpuDeformer
 from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.render.cpu_deform import CpuDeformer
+
+from helpers.small_characters import sphere_character
 
 
 def reference_deform(character, weights):

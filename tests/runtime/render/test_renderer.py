@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers.small_characters import sphere_character
 
 from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
 from facepuppet.runtime.render.renderer import FaceRenderer, realistic_weights
+
+from helpers.small_characters import sphere_character
 
 W, H = 160, 120
 
@@ -96,7 +97,8 @@ def test_head_rotation_and_translation_move_the_image(egl_ctx, sphere):
     moved, _ = render(egl_ctx, sphere, [0, 0], head_translation=(0.3, 0.0, 0.0))
     assert changed(still, turned).sum() > 100  # the eyes swing round
     # translation +x (character's left) moves the silhouette right in the picture
-    cols = lambda img: np.flatnonzero(changed(img, np.broadcast_to(img[:1, :1], img.shape)).any(axis=0))
+    def cols(img):
+        return np.flatnonzero(changed(img, np.broadcast_to(img[:1, :1], img.shape)).any(axis=0))
     assert cols(moved)[0] > cols(still)[0] and cols(moved)[-1] > cols(still)[-1]
 
 
