@@ -25,6 +25,7 @@ Left and right are the subject's own, in every convention.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -148,7 +149,7 @@ class ChannelMap:
     undriven_target: tuple[str, ...]
 
     @classmethod
-    def build(cls, source_names, target_names) -> ChannelMap:
+    def build(cls, source_names: Iterable[str], target_names: Iterable[str]) -> ChannelMap:
         source_names = tuple(source_names)
         target_names = tuple(target_names)
         src_index: dict[str, int] = {}

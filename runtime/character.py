@@ -101,7 +101,7 @@ class Character:
     delta_normals: np.ndarray
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         n_v = len(self.vertices)
         if n_v == 0:
             _fail("vertices", "a character needs at least one vertex")

@@ -53,7 +53,7 @@ class Frame:
     t_sender: float = math.nan
     number: int = -1
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "t", float(self.t))
         set_(self, "weights", _frozen(self.weights, np.float32, (), "weights"))

@@ -95,7 +95,7 @@ def euler_to_quat(yaw: float, pitch: float, roll: float) -> np.ndarray:
     return quat_mul(quat_mul(qy, qx), qz)
 
 
-def smoothstep(e0: float, e1: float, x):
+def smoothstep(e0: float, e1: float, x: float | np.ndarray) -> float | np.ndarray:
     """Hermite step 3t² - 2t³ of t = (x - e0) / (e1 - e0) clamped to [0, 1]: 0 at ``e0``, 1 at ``e1``.
 
     Either order of the edges; zero slope at both, the largest slope 1.5 / |e1 - e0| half way.

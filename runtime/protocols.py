@@ -28,6 +28,7 @@ from facepuppet.runtime.frames import Frame
 class InputAdapter(Protocol):
     """Decodes one tracker protocol. ``handle`` never raises: malformed input is counted in ``counters``."""
 
+    kind: str  # the input kind (``vmc``, ``facecap``, ...): names the receive thread and bind errors
     default_port: int
     counters: dict[str, int]
 

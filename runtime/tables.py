@@ -74,7 +74,7 @@ class TablesError(FacepuppetError, ValueError):
     found.
     """
 
-    def __init__(self, path: str | os.PathLike | None, field_name: str, problem: str):
+    def __init__(self, path: str | os.PathLike | None, field_name: str, problem: str) -> None:
         self.path = str(path) if path is not None else NO_FILE
         self.field = field_name
         self.problem = problem
@@ -95,7 +95,7 @@ class Section:
     kind: str = ""
     optional: bool = False
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.dtype not in ALLOWED_DTYPES:
             raise ValueError(f"Section dtype: expected one of {ALLOWED_DTYPES}, got {self.dtype!r}")
         for dim in self.shape:
@@ -128,7 +128,7 @@ class TableSchema:
     channel_dims: Mapping[str, str] = field(default_factory=dict)
     version: int = SCHEMA_VERSION
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (isinstance(self.version, int) and self.version >= 1):
             raise ValueError(f"TableSchema {self.kind!r} version: expected an int >= 1, got {self.version!r}")
         named = {str(d).partition("+")[0] for spec in self.sections.values() for d in spec.shape}
@@ -527,7 +527,8 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
             if name not in schema.sections:
                 raise TablesError(path, name, f"not a section of kind {file_kind!r}")
             arr = _read_member(archive, members[name], path, name)
-            if not isinstance(meta, dict) or list(arr.shape) != meta.get("shape") or arr.dtype.name != meta.get("dtype"):
+            if (not isinstance(meta, dict) or list(arr.shape) != meta.get("shape")
+                    or arr.dtype.name != meta.get("dtype")):
                 raise TablesError(
                     path, name,
                     f"manifest says shape {meta.get('shape') if isinstance(meta, dict) else '?'} "

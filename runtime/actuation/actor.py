@@ -85,7 +85,7 @@ class Actor:
     linear: np.ndarray | None = None
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, arr in coerce(ACTOR_SCHEMA, self._arrays()).items():
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "names", tuple(self.names))
@@ -120,7 +120,7 @@ class Actor:
                        **{name: np.array(t[name]) for name in ACTOR_SCHEMA.sections if name in t.arrays},
                        metadata=t.metadata)
 
-    def evaluate(self, s) -> np.ndarray:
+    def evaluate(self, s: np.ndarray) -> np.ndarray:
         """Markers x(s) (eq 2): ndarray of shape (n_markers, 3), float64, units, head coordinates."""
         s = np.asarray(s, dtype=np.float64)
         if s.shape != (self.n_actuations,):

@@ -19,7 +19,7 @@ same calls; the window and the command are :mod:`~facepuppet.runtime.commands.ma
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -44,19 +44,19 @@ class ScreenView:
     width, height : int, pixels
     """
 
-    def __init__(self, view_projection: np.ndarray, width: int, height: int):
+    def __init__(self, view_projection: np.ndarray, width: int, height: int) -> None:
         self.matrix = np.asarray(view_projection, dtype=np.float64)
         self.inverse = np.linalg.inv(self.matrix)
         self.width, self.height = int(width), int(height)
 
-    def project(self, points) -> tuple[np.ndarray, np.ndarray]:
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (n, 2) float64 (x right, y down) and NDC depth (n,) of points (n, 3), character units."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         clip = np.c_[p, np.ones(len(p))] @ self.matrix.T
         ndc = clip[:, :3] / clip[:, 3:4]
         return np.c_[(ndc[:, 0] + 1) / 2 * self.width, (1 - ndc[:, 1]) / 2 * self.height], ndc[:, 2]
 
-    def unproject(self, pixel, depth: float) -> np.ndarray:
+    def unproject(self, pixel: np.ndarray, depth: float) -> np.ndarray:
         """The character-space point (3,) float64 under ``pixel`` (x, y) at NDC depth ``depth``."""
         x, y = float(pixel[0]), float(pixel[1])
         ndc = np.array([2 * x / self.width - 1, 1 - 2 * y / self.height, depth, 1.0])
@@ -90,7 +90,7 @@ class Manipulation:
     """
 
     def __init__(self, actor: Actor, pair: ActorPair, character: Character, view: ScreenView | None = None,
-                 iterations: int = 30, pick_radius: float = PICK_RADIUS, hold: float = 0.005):
+                 iterations: int = 30, pick_radius: float = PICK_RADIUS, hold: float = 0.005) -> None:
         if tuple(pair.marker_names) != tuple(actor.names) or pair.cubic.shape[1] != actor.n_actuations:
             raise ValueError(f"manipulate: the pair table was not made for this actor ({len(pair.marker_names)} "
                              f"markers, K={pair.cubic.shape[1]} vs {actor.n_markers}, K={actor.n_actuations})")
@@ -130,14 +130,14 @@ class Manipulation:
             raise ValueError(f"no marker named {name!r}; the actor has {', '.join(self.actor.names)}") from None
 
     # -- cursor events ------------------------------------------------------
-    def pick(self, cursor) -> int | None:
+    def pick(self, cursor: np.ndarray) -> int | None:
         """The marker nearest ``cursor`` (x, y pixels) on screen, or None beyond ``pick_radius``."""
         pixels, _ = self._need_view().project(self.marker_positions())
         d = np.linalg.norm(pixels - np.asarray(cursor, dtype=np.float64), axis=1)
         i = int(np.argmin(d))
         return i if d[i] <= self.pick_radius else None
 
-    def press(self, cursor) -> int | None:
+    def press(self, cursor: np.ndarray) -> int | None:
         """Start pulling the marker under ``cursor``; returns it (None: nothing picked)."""
         i = self.pick(cursor)
         if i is not None:
@@ -146,7 +146,7 @@ class Manipulation:
             self._grab = (np.asarray(cursor, dtype=np.float64) - pixels[0], float(depth[0]))
         return i
 
-    def move(self, cursor) -> bool:
+    def move(self, cursor: np.ndarray) -> bool:
         """Cursor moved to (x, y) pixels: drag target in the view plane at the marker's depth; solve. True if solved."""
         if self.dragging is None:
             return False
@@ -173,7 +173,7 @@ class Manipulation:
         self._held = self.actor.evaluate(self.s)
         self._start = (self.marker_positions()[marker], self._held[marker])
 
-    def drag_to(self, target) -> bool:
+    def drag_to(self, target: np.ndarray) -> bool:
         """Pull the dragged marker towards ``target`` (3,) character units; solve eq 5 and update the weights."""
         if self.dragging is None:
             return False
@@ -216,7 +216,7 @@ class Manipulation:
 _ACTIONS = ("pin", "unpin", "drag", "reset")
 
 
-def read_script(path: str | Path, names) -> list[dict]:
+def read_script(path: str | Path, names: Sequence[str]) -> list[dict]:
     """A manipulation script: a JSON list of steps, checked against the actor's marker names.
 
     Steps: ``{"pin": NAME}``, ``{"unpin": NAME}``, ``{"reset": true}``, ``{"drag": NAME, "to": [x, y, z]}``

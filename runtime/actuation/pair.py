@@ -69,7 +69,7 @@ class ActorPair:
     s_upper: np.ndarray
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name, arr in coerce(PAIR_SCHEMA, self._arrays()).items():
             object.__setattr__(self, name, arr)
         validate(PAIR_SCHEMA, self._arrays(), self._channels())
@@ -93,7 +93,7 @@ class ActorPair:
             return cls(shape_names=tuple(t.channels["shapes"]), marker_names=tuple(t.channels["markers"]),
                        **{name: np.array(t[name]) for name in PAIR_SCHEMA.sections}, metadata=t.metadata)
 
-    def weights(self, s) -> np.ndarray:
+    def weights(self, s: np.ndarray) -> np.ndarray:
         """Character weights w(s) (n_shapes,), float32, clipped to [0, 1] (cubic of eq 2 on weights).
 
         s is first clamped to [s_lower, s_upper]: the range the tables were fitted over, so a solve

@@ -87,7 +87,8 @@ class MarkerSolver:
     """
 
     def __init__(self, actor: Actor, iterations: int = 8, damping: float = 1e-3, prior: float = 1e-4,
-                 tolerance: float = 2e-3, cost_tolerance: float = 1e-2, bounds=None):
+                 tolerance: float = 2e-3, cost_tolerance: float = 1e-2,
+                 bounds: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         if not (isinstance(iterations, int) and iterations >= 1):
             raise ValueError(f"MarkerSolver iterations: expected an int >= 1, got {iterations!r}")
         self.actor = actor
@@ -163,7 +164,8 @@ class MarkerSolver:
         return _Subset(ga=ga, mw=mw, x0=self._neutral[idx], idx=idx, wrep=wrep, reg=reg, gram=ga[:, :3 * k],
                        resid=ga[:, 3 * k])
 
-    def solve(self, observed, weights=None, s0=None, iterations: int | None = None) -> np.ndarray:
+    def solve(self, observed: np.ndarray, weights: np.ndarray | None = None, s0: np.ndarray | None = None,
+              iterations: int | None = None) -> np.ndarray:
         """Actuations s (K,), float64, that best explain the observed markers.
 
         Parameters
@@ -278,7 +280,7 @@ class MarkerSolver:
 
     def solve_constraints(self, constraints: Sequence[tuple[int, Sequence[float]]],
                           pins: Sequence[int] | Mapping[int, Sequence[float]] = (),
-                          pin_weight: float = 10.0, hold: float = 0.0, hold_at=None,
+                          pin_weight: float = 10.0, hold: float = 0.0, hold_at: np.ndarray | None = None,
                           iterations: int = 30) -> np.ndarray:
         """Direct manipulation: drag markers to targets while pinned markers stay where they are.
 

@@ -42,7 +42,7 @@ class ActorRetarget:
 
     name = "solve"
 
-    def __init__(self, actor: Actor, pair: ActorPair, solver: MarkerSolver | None = None):
+    def __init__(self, actor: Actor, pair: ActorPair, solver: MarkerSolver | None = None) -> None:
         if tuple(pair.marker_names) != tuple(actor.names) or pair.cubic.shape[1] != actor.n_actuations:
             raise ValueError("ActorRetarget: the pair table was not made for this actor "
                              f"({len(pair.marker_names)} markers / K={pair.cubic.shape[1]} vs "

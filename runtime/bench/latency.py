@@ -194,10 +194,12 @@ def _print(name: str, r: dict) -> None:
     print(f"latency bench [{name}]: {r['frames_sent']} frames at {r['rate_hz']:g} Hz for {r['seconds']:g} s; "
           f"datagrams received {r['datagrams_received']}/{r['datagrams_sent']}, stale dropped {r['stale_dropped']}, "
           f"frames drawn {r['frames_drawn']} ({r['new_frames_drawn_per_s']:.1f}/s, {r['render_path']} path, "
-          f"{r['receiver']} receiver, draw on {r['draw']}); read >1 ms after arrival {r['waited_over_1ms']}; loadavg {r['loadavg']}")
+          f"{r['receiver']} receiver, draw on {r['draw']}); read >1 ms after arrival {r['waited_over_1ms']}; "
+          f"loadavg {r['loadavg']}")
     print(f"  receive -> GPU finished ms: p50 {e.get('p50', math.nan):.2f}  p99 {e.get('p99', math.nan):.2f}  "
           f"max {e.get('max', math.nan):.2f}; CPU before draw p99 {r['cpu_before_draw_p99_ms']:.3f} ms "
-          f"(snapshot {r['cpu_stage_p99_ms']['snapshot']:.3f}, pipeline+map {r['cpu_stage_p99_ms']['pipeline_map']:.3f})")
+          f"(snapshot {r['cpu_stage_p99_ms']['snapshot']:.3f}, "
+          f"pipeline+map {r['cpu_stage_p99_ms']['pipeline_map']:.3f})")
     st = r["stages_ms"]
     print("  stages p50/p99 ms: " + ", ".join(
         f"{name} {st[name].get('p50_ms', math.nan):.2f}/{st[name].get('p99_ms', math.nan):.2f}"
@@ -208,7 +210,8 @@ def _print(name: str, r: dict) -> None:
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("-c", "--character", required=True, help="character .npz (the ICT head for the issue's numbers)")
+    parser.add_argument("-c", "--character", required=True,
+                        help="character .npz (the ICT head for the issue's numbers)")
     parser.add_argument("--rate", type=float, default=120.0, help="frames per second sent (120)")
     parser.add_argument("--seconds", type=float, default=30.0, help="seconds of sending (30)")
     parser.add_argument("--size", default="640x480", help="render size (640x480)")

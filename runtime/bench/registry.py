@@ -39,7 +39,8 @@ _REGISTRY: dict[str, Bench] = {}
 _LOADED = False
 
 
-def register_bench(name: str, func, help: str, add_arguments=None) -> None:
+def register_bench(name: str, func: Callable[[argparse.Namespace], dict], help: str,
+                   add_arguments: Callable[[argparse.ArgumentParser], None] | None = None) -> None:
     """Add a benchmark; ``func(args)`` returns a dict written as JSON."""
     if name in _REGISTRY and _REGISTRY[name].func is not func:
         raise ValueError(f"benchmark {name!r} is registered twice")
@@ -112,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "bench", help="run a benchmark (render, ...) and write its numbers as JSON", add_help=True
     )

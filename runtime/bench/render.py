@@ -15,10 +15,14 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.bench.registry import peak_rss_mb, register_bench
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
 
 def synthetic_performance(n_frames: int, n_shapes: int, n_active: int = 10, fps: float = 60.0) -> np.ndarray:
@@ -37,7 +41,7 @@ def _stats(ms: list[float]) -> dict:
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "mean": float(a.mean())}
 
 
-def measure_path(renderer, weights: np.ndarray, warmup: int = 5) -> dict:
+def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5) -> dict:
     """Time ``renderer`` over the weight sequence; returns per-stage ms statistics and frames/s."""
     prepare, draw, readback = [], [], []
     for w in weights[:warmup]:

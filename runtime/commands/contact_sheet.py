@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.render.images import contact_sheet, save_png
+
+if TYPE_CHECKING:
+    import moderngl
 
 
 def parse_cell(text: str) -> tuple[int, int]:
@@ -22,8 +27,9 @@ def parse_cell(text: str) -> tuple[int, int]:
     return w, h
 
 
-def render_shapes(ctx, character: Character, cell=(320, 320), path: str = "auto", log=print,
-                  framing: str = "face"):
+def render_shapes(ctx: moderngl.Context, character: Character, cell: tuple[int, int] = (320, 320),
+                  path: str = "auto", log: Callable[[str], None] = print,
+                  framing: str = "face") -> list[tuple[str, np.ndarray]]:
     """Neutral, then each shape at weight 1.
 
     Returns
@@ -63,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "contact-sheet", help="render every expression shape at weight 1 into one labelled PNG grid"
     )

@@ -11,7 +11,9 @@ prints the per-stage timing summary at the end.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,23 +22,30 @@ from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
+if TYPE_CHECKING:
+    import argparse
+
+    from facepuppet.runtime.frames import Frame
+    from facepuppet.runtime.protocols import Renderer
+
 SHEET_CELLS = 12
 
 
 class SheetSink:
     """Keep ``n`` evenly spaced frames of a run of ``n_ticks`` for a contact sheet."""
 
-    def __init__(self, n_ticks: int, n: int = SHEET_CELLS, fps: float = 30.0):
+    def __init__(self, n_ticks: int, n: int = SHEET_CELLS, fps: float = 30.0) -> None:
         self.picks = set(np.linspace(0, max(n_ticks - 1, 0), n).round().astype(int).tolist())
         self.fps = fps
         self.cells: list[tuple[str, np.ndarray]] = []
 
-    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
+    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
+                renderer: Renderer) -> None:
         if tick_index in self.picks:
             self.cells.append((f"t = {t:5.2f} s", renderer.read_pixels().copy()))
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "demo",
         help="play the embedded demo (procedural head, synthetic performance); needs no data",
@@ -55,7 +64,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_demo)
 
 
-def run_demo(args, log=print) -> int:
+def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:
     """Run the ``demo`` command from parsed ``args``; returns the exit code."""
     from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.demo.performance import demo_frames

@@ -15,6 +15,7 @@ import json
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import moderngl
 import numpy as np
@@ -24,12 +25,17 @@ from facepuppet.runtime.actuation.manipulation import Manipulation, ScreenView, 
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import Character
 
+if TYPE_CHECKING:
+    import argparse
+
+    from facepuppet.runtime.render.renderer import FaceRenderer
+
 
 class PointOverlay:
     """Round dots drawn over a renderer's framebuffer (shaders/overlay.glsl, GL_POINTS, no depth test)."""
 
     def __init__(self, ctx: moderngl.Context, view_projection: np.ndarray, max_points: int = 256,
-                 point_size: float = 9.0):
+                 point_size: float = 9.0) -> None:
         from facepuppet.runtime.render.shader_loader import load_program
 
         self.ctx = ctx
@@ -40,7 +46,7 @@ class PointOverlay:
         self.vbo = ctx.buffer(reserve=max_points * 24, dynamic=True)
         self.vao = ctx.vertex_array(self.prog, [(self.vbo, "3f 3f", "in_position", "in_color")])
 
-    def draw(self, fbo, points: np.ndarray, colours: np.ndarray) -> None:
+    def draw(self, fbo: moderngl.Framebuffer, points: np.ndarray, colours: np.ndarray) -> None:
         """Draw ``points`` (n, 3) float32 in ``colours`` (n, 3) float32 into ``fbo``."""
         n = min(len(points), self.max_points)
         if n == 0:
@@ -64,26 +70,27 @@ class WindowControls:
     ``scale`` converts window (screen) coordinates to framebuffer pixels (HiDPI).
     """
 
-    def __init__(self, manipulation: Manipulation, scale=(1.0, 1.0), log: Callable[[str], None] = print):
+    def __init__(self, manipulation: Manipulation, scale: tuple[float, float] = (1.0, 1.0),
+                 log: Callable[[str], None] = print) -> None:
         self.m = manipulation
         self.scale = np.asarray(scale, dtype=np.float64)
         self.cursor = np.zeros(2)
         self.dirty = True
         self.log = log
 
-    def install(self, window) -> None:
+    def install(self, window: Any) -> None:
         import glfw
 
         glfw.set_cursor_pos_callback(window, self.on_cursor_pos)
         glfw.set_mouse_button_callback(window, self.on_mouse_button)
         glfw.set_key_callback(window, self.on_key)
 
-    def on_cursor_pos(self, window, x: float, y: float) -> None:
+    def on_cursor_pos(self, window: Any, x: float, y: float) -> None:
         self.cursor = np.array([x, y]) * self.scale
         if self.m.move(self.cursor):
             self.dirty = True
 
-    def on_mouse_button(self, window, button: int, action: int, mods: int) -> None:
+    def on_mouse_button(self, window: Any, button: int, action: int, mods: int) -> None:
         import glfw
 
         pin = button == glfw.MOUSE_BUTTON_RIGHT or (button == glfw.MOUSE_BUTTON_LEFT and mods & glfw.MOD_SHIFT)
@@ -102,7 +109,7 @@ class WindowControls:
             self.m.release()
             self.dirty = True
 
-    def on_key(self, window, key: int, scancode: int, action: int, mods: int) -> None:
+    def on_key(self, window: Any, key: int, scancode: int, action: int, mods: int) -> None:
         import glfw
 
         if action != glfw.PRESS:
@@ -114,14 +121,14 @@ class WindowControls:
             glfw.set_window_should_close(window, True)
 
 
-def draw_frame(renderer, overlay: PointOverlay, m: Manipulation) -> None:
+def draw_frame(renderer: FaceRenderer, overlay: PointOverlay, m: Manipulation) -> None:
     """The face at the current weights and the markers over it."""
     renderer.draw(m.weights)
     overlay.draw(renderer.fbo, *m.overlay_points())
 
 
 # -- the command ------------------------------------------------------------
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``manipulate`` to the ``facepuppet`` parser."""
     p = subparsers.add_parser(
         "manipulate", help="pull and pin points of the face (actor + pair tables) in a window, or by a script",

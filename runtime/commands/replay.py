@@ -22,7 +22,9 @@ weights, gestures included.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,8 +35,11 @@ from facepuppet.runtime.live.sinks import PngSink, WeightLog
 from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, build_chain, make_input_adapter
 from facepuppet.runtime.recording.replay_source import ReplaySource, open_recording
 
+if TYPE_CHECKING:
+    import argparse
 
-def register(subparsers) -> None:
+
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "replay",
         help="play a recorded session or Live Link Face CSV on a character",
@@ -60,7 +65,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_replay)
 
 
-def run_replay(args, log=print) -> int:
+def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:
     """Run the ``replay`` command from parsed ``args``; returns the exit code."""
     from facepuppet.runtime.recording.ticked_source import TickedSource, read_live_recording
     from facepuppet.runtime.render.gl_context import create_context

@@ -37,9 +37,11 @@ from __future__ import annotations
 import signal
 import sys
 import threading
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,12 +53,17 @@ from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, mak
 from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.live.vmc_out import VmcSender
 
+if TYPE_CHECKING:
+    import argparse
+
+    from facepuppet.runtime.live.loop import TickInfo
+
 CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
 RECEIVERS = ("process", "thread")
 THREAD_SWITCH_INTERVAL_S = 0.0005  # GIL switch interval while a receive *thread* shares the loop's process
 
 
-def register(subparsers) -> None:
+def register(subparsers: argparse._SubParsersAction) -> None:
     from facepuppet.runtime.inputs.kinds import INPUT_KINDS
 
     p = subparsers.add_parser(
@@ -165,8 +172,9 @@ def _open_source(args, adapter, opts: _Options, recorder):
                      watch=CALIBRATE_ADDRESS)
 
 
-def run_live(args, log=print, stop_event: threading.Event | None = None, on_ready=None,
-             hooks=()) -> LiveRunResult:
+def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_event: threading.Event | None = None,
+             on_ready: Callable[[tuple[str, int]], None] | None = None,
+             hooks: Sequence[Callable[[TickInfo], None]] = ()) -> LiveRunResult:
     """Run a live session from parsed ``args`` (see :func:`register`) and return what it did.
 
     ``stop_event`` set from another thread ends the run at the next tick;
@@ -331,7 +339,7 @@ def _bind_calibrate_key(target, pipeline) -> None:
     glfw.set_key_callback(target.window, on_key)
 
 
-def run_command(args, log=print) -> int:
+def run_command(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:
     """The ``run`` command: returns the exit code (errors are mapped to exit codes in ``cli.main``)."""
     result = run_live(args, log=log)
     loop = result.loop

@@ -21,7 +21,8 @@ from facepuppet.runtime.geometry import smoothstep, vertex_normals
 
 MATERIALS = ("skin", "lips", "eye", "teeth", "mouth")
 # specular, shininess per material; the kind code comes from MATERIAL_KINDS
-_MATERIAL_LOOK = {"skin": (0.25, 18.0), "lips": (0.35, 30.0), "eye": (0.8, 80.0), "teeth": (0.5, 40.0), "mouth": (0.0, 1.0)}
+_MATERIAL_LOOK = {"skin": (0.25, 18.0), "lips": (0.35, 30.0), "eye": (0.8, 80.0), "teeth": (0.5, 40.0),
+                  "mouth": (0.0, 1.0)}
 JAW_OPEN_ANGLE = np.radians(16.0)
 _SIDES = {"Left": 1.0, "Right": -1.0}
 
@@ -159,24 +160,34 @@ def _sided_shapes(head: _Head, side: float) -> dict:
     def vec(*c):
         return np.stack([side * c[0] * one, c[1] * one, c[2] * one], -1)
 
+    def arch(a):  # 1 mid-lid, 0 at the corners
+        return np.cos(np.clip(a / parts.LID_CORNER, -1, 1) * np.pi / 2)
+
     shapes = {
-        "eyeBlink": _lids(head, side, lambda a: up(a, False) - np.radians(3), lambda a: up(a, False) + 0.15 * opening(a)),
-        "eyeWide": _lids(head, side, lambda a: up(a, True) + np.radians(22) * np.cos(np.clip(a / parts.LID_CORNER, -1, 1) * np.pi / 2)),
-        "eyeSquint": _lids(head, side, lambda a: up(a, True) - 0.15 * opening(a), lambda a: up(a, False) + 0.4 * opening(a))
+        "eyeBlink": _lids(head, side, lambda a: up(a, False) - np.radians(3),
+                          lambda a: up(a, False) + 0.15 * opening(a)),
+        "eyeWide": _lids(head, side, lambda a: up(a, True) + np.radians(22) * arch(a)),
+        "eyeSquint": _lids(head, side, lambda a: up(a, True) - 0.15 * opening(a),
+                           lambda a: up(a, False) + 0.4 * opening(a))
         + _skin_field(head, gauss(sx, y, 3.4, -1.0, 1.4, 0.9)[:, None] * vec(0.0, 0.35, 0.15)),
         "eyeLookUp": _eye_turn(head, side, pitch=np.radians(24))
-        + _lids(head, side, lambda a: up(a, True) + np.radians(6) * np.cos(np.clip(a / parts.LID_CORNER, -1, 1) * np.pi / 2)),
+        + _lids(head, side, lambda a: up(a, True) + np.radians(6) * arch(a)),
         "eyeLookDown": _eye_turn(head, side, pitch=-np.radians(24))
         + _lids(head, side, lambda a: up(a, True) - 0.35 * opening(a), lambda a: 1.15 * up(a, False)),
         "eyeLookIn": _eye_turn(head, side, yaw=-side * np.radians(28)),
         "eyeLookOut": _eye_turn(head, side, yaw=side * np.radians(28)),
-        "mouthSmile": _skin_field(head, corner[:, None] * vec(0.4, 0.75, -0.22) + cheek[:, None] * vec(0.1, 0.35, 0.25)),
-        "mouthFrown": _skin_field(head, corner[:, None] * vec(0.15, -0.65, -0.1) + gauss(sx, rel, 1.8, -2.0, 1.5, 1.2)[:, None] * vec(0, -0.2, 0)),
+        "mouthSmile": _skin_field(head, corner[:, None] * vec(0.4, 0.75, -0.22)
+                                  + cheek[:, None] * vec(0.1, 0.35, 0.25)),
+        "mouthFrown": _skin_field(head, corner[:, None] * vec(0.15, -0.65, -0.1)
+                                  + gauss(sx, rel, 1.8, -2.0, 1.5, 1.2)[:, None] * vec(0, -0.2, 0)),
         "mouthDimple": _skin_field(head, corner[:, None] * vec(0.35, 0.0, -0.45)),
         "mouthStretch": _skin_field(head, corner[:, None] * vec(0.55, -0.35, -0.2)),
-        "mouthPress": _skin_field(head, gauss(sx, rel, 1.3, 0.0, 1.5, 0.8)[:, None] * vec(0, 0, -0.25) - (rel * gauss(sx, rel, 1.3, 0.0, 1.5, 0.8))[:, None] * vec(0, 0.25, 0)),
-        "mouthLowerDown": _skin_field(head, (head.skin.params["lower"] * gauss(sx, rel, 1.2, -0.4, 1.4, 0.9))[:, None] * vec(0, -0.5, 0.05)),
-        "mouthUpperUp": _skin_field(head, (~head.skin.params["lower"] * gauss(sx, rel, 1.2, 0.4, 1.4, 0.9))[:, None] * vec(0, 0.5, 0.05)),
+        "mouthPress": _skin_field(head, gauss(sx, rel, 1.3, 0.0, 1.5, 0.8)[:, None] * vec(0, 0, -0.25)
+                                  - (rel * gauss(sx, rel, 1.3, 0.0, 1.5, 0.8))[:, None] * vec(0, 0.25, 0)),
+        "mouthLowerDown": _skin_field(head, (head.skin.params["lower"] * gauss(sx, rel, 1.2, -0.4, 1.4, 0.9))[:, None]
+                                      * vec(0, -0.5, 0.05)),
+        "mouthUpperUp": _skin_field(head, (~head.skin.params["lower"] * gauss(sx, rel, 1.2, 0.4, 1.4, 0.9))[:, None]
+                                    * vec(0, 0.5, 0.05)),
         "browDown": _skin_field(head, brow[:, None] * vec(-0.25, -0.5, 0.12)),
         "browOuterUp": _skin_field(head, gauss(sx, y, 4.4, 2.7, 1.5, 1.3)[:, None] * vec(0, 0.75, 0)),
         "cheekSquint": _skin_field(head, cheek[:, None] * vec(0.05, 0.4, 0.15)),
@@ -212,10 +223,13 @@ def _expression_fields(head: _Head) -> dict:
         "mouthRight": _skin_field(head, np.stack([-0.8 * lips, zero, zero], -1)),
         "mouthRollLower": _skin_field(head, (lower * lips)[:, None] * np.array([0.0, 0.15, -0.35])),
         "mouthRollUpper": _skin_field(head, (~lower * lips)[:, None] * np.array([0.0, -0.15, -0.35])),
-        "mouthShrugLower": _skin_field(head, (lower * gauss(x, rel, 0, -1.2, 2.2, 1.4))[:, None] * np.array([0.0, 0.35, 0.2])),
+        "mouthShrugLower": _skin_field(head, (lower * gauss(x, rel, 0, -1.2, 2.2, 1.4))[:, None]
+                                       * np.array([0.0, 0.35, 0.2])),
         "mouthShrugUpper": _skin_field(head, (~lower * lips)[:, None] * np.array([0.0, 0.25, 0.1])),
-        "browInnerUp": _skin_field(head, (gauss(x, y, 1.3, 2.6, 1.3, 1.3) + gauss(x, y, -1.3, 2.6, 1.3, 1.3))[:, None] * np.array([0.0, 0.7, 0.05])),
-        "cheekPuff": _skin_field(head, (gauss(np.abs(x), rel, 3.0, 0.9, 1.5, 1.6))[:, None] * np.stack([0.6 * np.sign(x), zero, 0.45 + zero], -1)),
+        "browInnerUp": _skin_field(head, (gauss(x, y, 1.3, 2.6, 1.3, 1.3) + gauss(x, y, -1.3, 2.6, 1.3, 1.3))[:, None]
+                                   * np.array([0.0, 0.7, 0.05])),
+        "cheekPuff": _skin_field(head, (gauss(np.abs(x), rel, 3.0, 0.9, 1.5, 1.6))[:, None]
+                                 * np.stack([0.6 * np.sign(x), zero, 0.45 + zero], -1)),
     })
     # the mouth bag hangs from the lips: its rim follows them, deeper rings its own (jaw) motion
     bag, params = head.ranges["bag"], head.pieces["bag"].params

@@ -54,7 +54,7 @@ class Part:
     params: dict = field(default_factory=dict)
 
 
-def gauss(x, y, cx, cy, sx, sy):
+def gauss(x: np.ndarray, y: np.ndarray, cx: float, cy: float, sx: float, sy: float) -> np.ndarray:
     """Unnormalised 2-D Gaussian bump, 1 at (cx, cy)."""
     return np.exp(-(((x - cx) / sx) ** 2) - ((y - cy) / sy) ** 2)
 
@@ -287,7 +287,7 @@ def lid_points(side: float, alpha: np.ndarray, beta: np.ndarray, s: np.ndarray, 
     return eye_centre(side) + radius[:, None] * local
 
 
-def lid_elevation(alpha, s, upper: bool, margin=None):
+def lid_elevation(alpha: np.ndarray, s: np.ndarray, upper: bool, margin: np.ndarray | None = None) -> np.ndarray:
     """Elevation of lid vertices with parameters (alpha, s) for a given margin elevation."""
     m = lid_margin(alpha, upper) if margin is None else margin
     far = LID_TOP if upper else -LID_TOP

@@ -166,7 +166,8 @@ def demo_curves(duration: float = 12.0, rate: float = 60.0, seed: int = 0) -> De
     nod = np.zeros(n)
     for moment in stresses:
         nod += 0.07 * _pulse(t, moment - 0.08, 0.15, 0.05, 0.3)
-    yaw = 0.12 * np.sin(2 * np.pi * 0.11 * t + phase[0]) + 0.04 * np.sin(2 * np.pi * 0.31 * t + phase[1]) + 0.3 * gaze[:, 0]
+    yaw = (0.12 * np.sin(2 * np.pi * 0.11 * t + phase[0]) + 0.04 * np.sin(2 * np.pi * 0.31 * t + phase[1])
+           + 0.3 * gaze[:, 0])
     pitch = 0.05 * np.sin(2 * np.pi * 0.17 * t + phase[2]) + nod - 0.1 * gaze[:, 1]
     roll = 0.04 * np.sin(2 * np.pi * 0.13 * t + phase[3])
     rotation = np.array([euler_to_quat(a, b, c) for a, b, c in zip(yaw, pitch, roll)], dtype=np.float32)

@@ -54,10 +54,13 @@ ELASTIC_SCHEMA = register_schema(
             "control_vertices": Section("int64", ("n_controls",), "vertex index of each control point"),
             "control_positions": Section("float32", ("n_controls", 3), "neutral control-point positions"),
             "params": Section("float32", ("n_shapes", "n_controls", 3), "expression parameters, eq. 6"),
-            "muscle_params": Section("float32", ("n_muscles", "n_controls", 3), "control displacement per unit contraction"),
+            "muscle_params": Section("float32", ("n_muscles", "n_controls", 3),
+                                     "control displacement per unit contraction"),
             "muscle_kinds": Section("uint8", ("n_muscles",), "0 linear, 1 sphincter"),
-            "muscle_points": Section("float32", ("n_muscles", 2, 3), "linear: attachment, insertion; sphincter: centre, (lx, ly, 0)"),
-            "muscle_ranges": Section("float32", ("n_muscles", 4), "linear: Rs, Rf, Ω (rad), strength; sphincter: lx, ly, strength, 0"),
+            "muscle_points": Section("float32", ("n_muscles", 2, 3),
+                                     "linear: attachment, insertion; sphincter: centre, (lx, ly, 0)"),
+            "muscle_ranges": Section("float32", ("n_muscles", 4),
+                                     "linear: Rs, Rf, Ω (rad), strength; sphincter: lx, ly, strength, 0"),
             "rigid_labels": Section("int32", ("n_vertices",), "rigid part of each vertex, -1 for none", optional=True),
             "rigid_anchors": Section("uint8", ("n_rigid", "n_controls"), "controls each part's transform is fitted to",
                                      optional=True),
@@ -87,7 +90,7 @@ class ElasticModel:
     units: str = "cm"
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         dims = validate(ELASTIC_SCHEMA, self.arrays, self._channels())
         if dims["n_controls"] and int(self.arrays["basis_indices"].max(initial=0)) >= dims["n_controls"]:
             raise TablesError(None, "basis_indices", f"control index out of range for {dims['n_controls']} controls")
@@ -101,7 +104,8 @@ class ElasticModel:
                 raise TablesError(None, "rigid_anchors", "each rigid part needs at least 3 anchor controls")
 
     def _channels(self) -> dict:
-        return {"shapes": list(self.shape_names), "controls": list(self.control_names), "muscles": list(self.muscle_names)}
+        return {"shapes": list(self.shape_names), "controls": list(self.control_names),
+                "muscles": list(self.muscle_names)}
 
     # -- sizes -------------------------------------------------------------
     @property
@@ -126,29 +130,31 @@ class ElasticModel:
         return tuple(self.shape_names) + tuple(self.muscle_names)
 
     # -- per frame ---------------------------------------------------------
-    def blend(self, weights) -> np.ndarray:
+    def blend(self, weights: np.ndarray) -> np.ndarray:
         """Control displacements of blended expressions, U = Σ_s w_s P_s (eq. 7), (n_c, 3) float32."""
         w = np.asarray(weights, np.float32)
         if w.shape != (len(self.shape_names),):
-            raise ValueError(f"weights: expected shape ({len(self.shape_names)},) in elastic shape order, got {w.shape}")
+            raise ValueError(f"weights: expected shape ({len(self.shape_names)},) in elastic shape order, "
+                             f"got {w.shape}")
         return np.tensordot(w, self.arrays["params"], axes=1)  # Yano & Harada eq. 7
 
-    def contract(self, contractions) -> np.ndarray:
+    def contract(self, contractions: np.ndarray) -> np.ndarray:
         """Control displacements of muscle contractions, Σ_m c_m Q_m (§6), (n_c, 3) float32."""
         c = np.asarray(contractions, np.float32)
         if c.shape != (len(self.muscle_names),):
             raise ValueError(f"contractions: expected shape ({len(self.muscle_names)},) in muscle order, got {c.shape}")
         return np.tensordot(c, self.arrays["muscle_params"], axes=1)
 
-    def controls(self, values) -> np.ndarray:
+    def controls(self, values: np.ndarray) -> np.ndarray:
         """Control displacements from one vector of all channels (shapes then muscles), (n_c, 3) float32."""
         v = np.asarray(values, np.float32)
         n_s = len(self.shape_names)
         if v.shape != (len(self.channel_names),):
-            raise ValueError(f"values: expected shape ({len(self.channel_names)},) (shapes then muscles), got {v.shape}")
+            raise ValueError(f"values: expected shape ({len(self.channel_names)},) (shapes then muscles), "
+                             f"got {v.shape}")
         return self.blend(v[:n_s]) + self.contract(v[n_s:])
 
-    def rigid_transforms(self, controls) -> np.ndarray:
+    def rigid_transforms(self, controls: np.ndarray) -> np.ndarray:
         """Per rigid part, [R | t] fitted (Kabsch) to its displaced anchor controls, (n_rigid, 3, 4) float32."""
         u = np.asarray(controls, np.float32)
         out = np.zeros((self.n_rigid, 3, 4), np.float32)
@@ -159,7 +165,8 @@ class ElasticModel:
             out[p, :, :3], out[p, :, 3] = r, t
         return out
 
-    def deform(self, controls, rest_positions, rest_normals) -> tuple[np.ndarray, np.ndarray]:
+    def deform(self, controls: np.ndarray, rest_positions: np.ndarray,
+               rest_normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """CPU reference of the vertex shader: positions and unit normals, (n, 3) float32 each."""
         u = np.asarray(controls, np.float32)
         if u.shape != (self.n_controls, 3):
@@ -168,7 +175,8 @@ class ElasticModel:
         picked = u[a["basis_indices"].astype(np.int64)]  # (n, k, 3)
         n0 = np.asarray(rest_normals, np.float32)
         n0 = n0 / np.maximum(np.linalg.norm(n0, axis=1, keepdims=True), 1e-12)
-        positions = np.asarray(rest_positions, np.float32) + np.einsum("vk,vkc->vc", a["basis_weights"], picked)  # eq. 5
+        positions = (np.asarray(rest_positions, np.float32)
+                     + np.einsum("vk,vkc->vc", a["basis_weights"], picked))  # eq. 5
         along = np.einsum("vc,vkc->vk", n0, picked)
         normals = n0 - np.einsum("vk,vkc->vc", along, a["basis_gradients"])
         if self.n_rigid:

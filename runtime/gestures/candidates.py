@@ -17,7 +17,7 @@ from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z
 N_BINS = 24       # intensity bins of the speech candidates, over [SILENCE_Z, -SILENCE_Z]
 
 
-def intensity_bin(a):
+def intensity_bin(a: np.ndarray) -> np.ndarray:
     """Bin (0 .. N_BINS - 1) of normalised intensities ``a`` (z-score), int array."""
     return np.clip(((np.asarray(a) - SILENCE_Z) / (-2 * SILENCE_Z) * N_BINS).astype(int), 0, N_BINS - 1)
 

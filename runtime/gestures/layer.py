@@ -12,6 +12,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,6 +23,9 @@ from facepuppet.runtime.geometry import euler_to_quat, quat_mul
 from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
 from facepuppet.runtime.gestures.synth import GestureSynth
 from facepuppet.runtime.gestures.tables import GESTURE_DB_SCHEMA, GROUPS, HEAD_FEATURES, LEVEL1, load_gesture_db
+
+if TYPE_CHECKING:
+    import os
 
 logger = logging.getLogger(__name__)
 
@@ -53,7 +58,9 @@ class GestureLayer:
 
     name = "gestures"
 
-    def __init__(self, synth: GestureSynth, fps: float, mode: str = "add", level=None, detail=None):
+    def __init__(self, synth: GestureSynth, fps: float, mode: str = "add",
+                 level: Callable[[float], float] | None = None,
+                 detail: tuple[Sequence[str], np.ndarray] | None = None) -> None:
         if mode not in ("add", "voice"):
             raise ValueError(f"GestureLayer.mode: expected 'add' or 'voice', got {mode!r}")
         if not fps > 0:
@@ -148,7 +155,7 @@ class VoiceOnlySource:
 
     address = ("voice", 0)
 
-    def __init__(self, duration: float | None = None):
+    def __init__(self, duration: float | None = None) -> None:
         self.duration = duration
         self.counters: dict = {}
 
@@ -158,12 +165,13 @@ class VoiceOnlySource:
     def stop(self) -> None:
         pass
 
-    def latest(self, t: float):
+    def latest(self, t: float) -> tuple[Frame | None, int]:
         return None, 0
 
 
-def gesture_layer(path, level=None, voice_only: bool = False, seed: int = 0, log=logger.info,
-                  n_neighbours: int = 8, detail=None) -> GestureLayer:
+def gesture_layer(path: str | os.PathLike, level: Callable[[float], float] | None = None, voice_only: bool = False,
+                  seed: int = 0, log: Callable[[str], None] = logger.info, n_neighbours: int = 8,
+                  detail: tuple[Sequence[str], np.ndarray] | None = None) -> GestureLayer:
     """A :class:`GestureLayer` from the gesture tables at ``path`` (``--gestures`` of ``run`` and ``replay``).
 
     n_neighbours : continuity jump candidates per reference frame (fewer: a cheaper step)

@@ -24,6 +24,7 @@ the β term (the eyes pick is conditioned on the mood track), as in §5.1.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -46,7 +47,8 @@ class GestureOutput:
     own_table: np.ndarray
 
 
-def output_table(groups, cols, feature_names, feats: np.ndarray, basis: np.ndarray, whole) -> GestureOutput:
+def output_table(groups: Sequence[str], cols: Sequence[np.ndarray], feature_names: Sequence[str], feats: np.ndarray,
+                 basis: np.ndarray, whole: Sequence[str]) -> GestureOutput:
     """Output channels and the per-(group, frame) rows the picks add.
 
     Parameters

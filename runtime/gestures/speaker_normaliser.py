@@ -25,7 +25,7 @@ class SpeakerNormaliser:
     """
 
     def __init__(self, mean_db: float = -30.0, std_db: float = 8.0, gate_db: float = -60.0,
-                 rate: float = 0.002):
+                 rate: float = 0.002) -> None:
         self.mean_db, self.var_db, self.gate_db, self.rate = float(mean_db), float(std_db) ** 2, gate_db, rate
 
     def __call__(self, level_db: float) -> float:

@@ -79,12 +79,18 @@ About 30 NumPy calls per step, ~60-80 µs on a loaded 2-core machine.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from facepuppet.runtime.gestures.candidates import N_BINS, build_candidates
 from facepuppet.runtime.gestures.output import output_table
 from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
 from facepuppet.runtime.gestures.tables import GROUPS, LEVEL1
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.tables import Tables
 
 RECENT_PENALTY = 1e4  # added to a recently shown candidate's distance (distances are O(1); sentinels ~1e6)
 WHOLE_GROUPS = ("eyes",)  # groups whose channels show one reference frame whole (own residual + own c·B)
@@ -122,10 +128,11 @@ class GestureSynth:
         reference moment; () sums the mood pick's c·B into every channel, the paper's plain composition)
     """
 
-    def __init__(self, db, seed: int = 0, style=None, history: int = 10, alpha=None, beta: float = 0.5,
-                 sigma: float = 0.01, n_candidates: int = 3, n_neighbours: int = 8, n_speech: int = 6,
-                 variance: float = 0.95, max_dims: int = 8, normaliser: SpeakerNormaliser | None = None,
-                 recent: int = 150, whole=WHOLE_GROUPS):
+    def __init__(self, db: Tables, seed: int = 0, style: Mapping[str, str] | None = None, history: int = 10,
+                 alpha: float | Mapping[str, float] | None = None, beta: float = 0.5, sigma: float = 0.01,
+                 n_candidates: int = 3, n_neighbours: int = 8, n_speech: int = 6, variance: float = 0.95,
+                 max_dims: int = 8, normaliser: SpeakerNormaliser | None = None, recent: int = 150,
+                 whole: Sequence[str] = WHOLE_GROUPS) -> None:
         if (history < 1 or n_candidates < 1 or sigma < 0 or not 0 < variance <= 1 or beta < 0
                 or recent < 0):
             raise ValueError(f"GestureSynth: expected history >= 1, n_candidates >= 1, sigma >= 0, beta >= 0, "
@@ -252,7 +259,8 @@ class GestureSynth:
         self._bar = np.repeat([0.0 if g == "lips" else RECENT_PENALTY for g in self.groups], M).astype(np.float32)
 
     def _output_names(self) -> tuple[str, ...]:
-        """Output channels; sets the output row tables (:func:`facepuppet.runtime.gestures.output.output_table`) and ``_mood``."""
+        """Output channels; sets the output row tables (:func:`facepuppet.runtime.gestures.output.output_table`)
+        and ``_mood``."""
         out = output_table(self.groups, self._cols, self.names, self._feats, self._basis, self.whole)
         self._mood, self._out_table, self._whole_k, self._own_table = out.mood, out.table, out.whole_k, out.own_table
         self._out_rows = np.zeros((len(self.groups), len(out.names)), np.float32)
@@ -279,9 +287,9 @@ class GestureSynth:
         # ring buffers of length 2h, written twice so that [pos : pos + h] is the history in order
         self._z_hist = np.zeros((G, 2 * h, self._desc.shape[2]), np.float32)
         self._a_hist = np.zeros(2 * h, np.float32)
-        for i, l in enumerate(range(-h + 1, 1)):
-            self._z_hist[:, i] = self._z_hist[:, i + h] = self._desc_w.take(self._pick + l + self._goff_n, 0)
-            self._a_hist[i] = self._a_hist[i + h] = self._intensity[self._pick[0] + l]
+        for i, offset in enumerate(range(-h + 1, 1)):  # frames before the start pick, oldest first
+            self._z_hist[:, i] = self._z_hist[:, i + h] = self._desc_w.take(self._pick + offset + self._goff_n, 0)
+            self._a_hist[i] = self._a_hist[i + h] = self._intensity[self._pick[0] + offset]
         self._apos = self._zpos = 0
         self._t = 0
         self._seen[:] = -(self.recent + 1)          # nothing shown yet

@@ -12,7 +12,14 @@ take of the frame and which groups that take provides.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from facepuppet.runtime.tables import Section, TableSchema, TablesError, load_tables, register_schema
+
+if TYPE_CHECKING:
+    import os
+
+    from facepuppet.runtime.tables import Tables
 
 GROUPS = ("lips", "mood", "brows", "eyes", "rest", "head")
 LEVEL1 = ("lips", "mood")
@@ -37,7 +44,7 @@ GESTURE_DB_SCHEMA = register_schema(TableSchema(
 ))
 
 
-def load_gesture_db(path):
+def load_gesture_db(path: str | os.PathLike) -> Tables:
     """Load and check a ``gesture_db`` tables file; TablesError naming the field otherwise."""
     db = load_tables(path, kind="gesture_db")
     if list(db.channels["groups"]) != list(GROUPS):

@@ -22,9 +22,14 @@ from __future__ import annotations
 import logging
 import math
 import wave
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import os
 
 logger = logging.getLogger(__name__)
 
@@ -44,7 +49,8 @@ class LevelMeter:
     floor_db : float, dBFS, the level of silence (and the start value)
     """
 
-    def __init__(self, sample_rate: float, attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0):
+    def __init__(self, sample_rate: float, attack_s: float = 0.01, release_s: float = 0.3,
+                 floor_db: float = -60.0) -> None:
         for name, v in (("sample_rate", sample_rate), ("attack_s", attack_s), ("release_s", release_s)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"LevelMeter {name}: expected a positive number, got {v!r}")
@@ -80,7 +86,7 @@ class LevelMeter:
         return self.level_db
 
 
-def read_wav(path, stereo: str = "mix", finite: bool = False) -> tuple[np.ndarray, int]:
+def read_wav(path: str | os.PathLike, stereo: str = "mix", finite: bool = False) -> tuple[np.ndarray, int]:
     """Samples of a WAV file as float64 in [-1, 1], shape (n,), and the rate (Hz).
 
     int16, int32, uint8 and float32/64 files are read (scipy.io.wavfile); integer
@@ -139,8 +145,8 @@ class WavLevel:
     ``t_prev`` is the time of the previous call (tick times, seconds from 0).
     """
 
-    def __init__(self, path, attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0,
-                 loop: bool = False):
+    def __init__(self, path: str | os.PathLike, attack_s: float = 0.01, release_s: float = 0.3,
+                 floor_db: float = -60.0, loop: bool = False) -> None:
         self.path = Path(path)
         self.samples, self.sample_rate = read_wav(self.path)
         self.meter = LevelMeter(self.sample_rate, attack_s, release_s, floor_db)
@@ -187,8 +193,8 @@ class MicLevel:
         or the stream cannot be opened.
     """
 
-    def __init__(self, device=None, sample_rate: float | None = None, block_s: float = 0.01,
-                 attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0):
+    def __init__(self, device: int | str | None = None, sample_rate: float | None = None, block_s: float = 0.01,
+                 attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0) -> None:
         try:
             import sounddevice as sd
         except (ImportError, OSError) as exc:  # OSError: the PortAudio library is missing
@@ -223,7 +229,8 @@ class MicLevel:
         self.stream.close()
 
 
-def open_audio(device=None, wav=None, log=logger.info, **meter):
+def open_audio(device: int | str | None = None, wav: str | os.PathLike | None = None,
+               log: Callable[[str], None] = logger.info, **meter: float) -> WavLevel | MicLevel | None:
     """The audio level source the run asked for, or None (with a logged message) when none can be had.
 
     ``wav`` (a path) wins over ``device``; ``device`` may be "" / None for the default input.

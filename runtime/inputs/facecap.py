@@ -93,7 +93,7 @@ class FaceCapAdapter(OscAdapter):
     kind = "facecap"
     default_port = 9000
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__()
         n = len(ARKIT_NAMES)
         self._weights = [math.nan] * n
@@ -108,7 +108,7 @@ class FaceCapAdapter(OscAdapter):
         self._is_bundle = False
         self._last_emit_t = math.nan
 
-    def handle(self, data: bytes, t_receive: float):
+    def handle(self, data: bytes, t_receive: float) -> Frame | None:
         self._is_bundle = data[:8] == b"#bundle\x00"
         return super().handle(data, t_receive)
 

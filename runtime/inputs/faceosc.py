@@ -85,7 +85,7 @@ class RunningNeutral:
     rest : "low", "high" or "mid", the side the gesture rests on
     """
 
-    def __init__(self, rest: str, span: float):
+    def __init__(self, rest: str, span: float) -> None:
         self.rest = rest
         self.span = span
         self.value = math.nan
@@ -119,7 +119,7 @@ class FaceOscAdapter(OscAdapter):
     kind = "faceosc"
     default_port = 8338
 
-    def __init__(self, mirrored: bool = False):
+    def __init__(self, mirrored: bool = False) -> None:
         super().__init__()
         self.mirrored = mirrored
         self._neutral = {key: RunningNeutral(rest, SPANS[key]) for key, rest in _GESTURES.values()}

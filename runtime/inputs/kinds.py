@@ -16,11 +16,16 @@ livelinkface   :class:`facepuppet.runtime.inputs.livelinkface.LiveLinkFaceAdapte
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from facepuppet.runtime.inputs.facecap import FaceCapAdapter
 from facepuppet.runtime.inputs.faceosc import FaceOscAdapter
 from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter
 from facepuppet.runtime.inputs.markers import MarkersAdapter
 from facepuppet.runtime.inputs.vmc import VmcAdapter
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.protocols import InputAdapter
 
 INPUT_KINDS: dict[str, type] = {
     "vmc": VmcAdapter,
@@ -31,7 +36,7 @@ INPUT_KINDS: dict[str, type] = {
 }
 
 
-def make_adapter(kind: str):
+def make_adapter(kind: str) -> InputAdapter:
     """A new adapter for input kind ``kind``.
 
     Raises

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -61,7 +62,7 @@ class LiveLinkFaceAdapter:
     kind = "livelinkface"
     default_port = 11111
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
         self.device_name = ""
 
@@ -110,8 +111,9 @@ class LiveLinkFaceAdapter:
         )
 
 
-def encode_llf_packet(weights, head=(0.0, 0.0, 0.0), eyes=(0.0,) * 6, number: int = 0, sub_frame: float = 0.0,
-                      fps: int = 60, denominator: int = 1, name: str = "iPhone",
+def encode_llf_packet(weights: Sequence[float], head: Sequence[float] = (0.0, 0.0, 0.0),
+                      eyes: Sequence[float] = (0.0,) * 6, number: int = 0, sub_frame: float = 0.0, fps: int = 60,
+                      denominator: int = 1, name: str = "iPhone",
                       device_id: str = "$00000000-0000-0000-0000-000000000000") -> bytes:
     """A Live Link Face version-6 UDP packet (the layout above), for tests, benchmarks and senders.
 

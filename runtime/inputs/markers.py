@@ -53,7 +53,7 @@ class MarkersAdapter(OscAdapter):
     kind = "markers"
     default_port = 9763
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__()
         self.layouts: dict[int, tuple[str, ...]] = {}
 

@@ -51,6 +51,7 @@ internal_error    an exception inside the adapter's own code (a bug); the
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterable
 
 from facepuppet.runtime.frames import Frame
 
@@ -184,7 +185,7 @@ def _message(data: bytes, start: int, end: int) -> tuple[str, list] | None:
     return address, params
 
 
-def as_float(value) -> float | None:
+def as_float(value: object) -> float | None:
     """``value`` as a float when it is an OSC float or integer argument, else None."""
     kind = type(value)
     if kind is float:
@@ -215,7 +216,7 @@ def finite32(value: float) -> bool:
     return abs(value) <= FLOAT32_MAX
 
 
-def all_finite(values) -> bool:
+def all_finite(values: Iterable[float]) -> bool:
     """True when every value is finite and fits float32."""
     return all(abs(v) <= FLOAT32_MAX for v in values)
 
@@ -232,7 +233,7 @@ class OscAdapter:
     default_port: int = 0
     max_datagram: int = MAX_UDP_PAYLOAD
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
         self._pending: Frame | None = None
 

@@ -42,8 +42,13 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.protocols import InputAdapter
 
 RECV_BUFFER = 65536
 POLL_TIMEOUT_S = 0.05  # how often the thread looks at the stop flag while idle
@@ -82,7 +87,7 @@ def receive_stamped(sock: socket.socket) -> tuple[bytes, tuple, float, float]:
     return data, sender, t_read, t_read
 
 
-def receive(sock: socket.socket, stamped: bool, clock, own: dict) -> tuple[bytes, tuple, float]:
+def receive(sock: socket.socket, stamped: bool, clock: Callable[[], float], own: dict) -> tuple[bytes, tuple, float]:
     """One datagram: (data, sender, receive time in seconds).
 
     With ``stamped`` the time is the kernel's arrival stamp and a read later
@@ -153,8 +158,9 @@ class UdpSource:
         in :attr:`watched`
     """
 
-    def __init__(self, adapter, host: str = "127.0.0.1", port: int | None = None,
-                 allow: set[str] | None = None, on_packet=None, clock=time.monotonic, watch: bytes | None = None):
+    def __init__(self, adapter: InputAdapter, host: str = "127.0.0.1", port: int | None = None,
+                 allow: set[str] | None = None, on_packet: Callable[[bytes, float, tuple], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic, watch: bytes | None = None) -> None:
         self.adapter = adapter
         self.host = host
         self.port = adapter.default_port if port is None else int(port)
@@ -210,7 +216,7 @@ class UdpSource:
     def __enter__(self) -> UdpSource:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     def _run(self) -> None:

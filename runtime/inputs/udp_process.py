@@ -48,7 +48,9 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from multiprocessing import shared_memory
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.udp import bind_udp, bound_address
@@ -80,6 +82,9 @@ from facepuppet.runtime.inputs.udp_shared import (
     padded,
 )
 
+if TYPE_CHECKING:
+    from facepuppet.runtime.protocols import InputAdapter
+
 READ_TRIES = 64
 START_TIMEOUT_S = 30.0  # a spawned interpreter importing NumPy on a loaded 2-core machine
 
@@ -100,8 +105,9 @@ class UdpProcessSource:
         address) in :attr:`watched`, without shipping every datagram to this process as ``on_packet`` does
     """
 
-    def __init__(self, adapter, host: str = "127.0.0.1", port: int | None = None,
-                 allow: set[str] | None = None, on_packet=None, ring_bytes: int = RING_BYTES, watch=None):
+    def __init__(self, adapter: InputAdapter, host: str = "127.0.0.1", port: int | None = None,
+                 allow: set[str] | None = None, on_packet: Callable[[bytes, float, tuple], None] | None = None,
+                 ring_bytes: int = RING_BYTES, watch: bytes | None = None) -> None:
         if ring_bytes % 16 or ring_bytes < 1 << 17:
             raise ValueError(f"UdpProcessSource ring_bytes: expected a multiple of 16 of at least {1 << 17}, "
                              f"got {ring_bytes!r}")
@@ -213,7 +219,7 @@ class UdpProcessSource:
     def __enter__(self) -> UdpProcessSource:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     @property

@@ -34,7 +34,7 @@ NAME = struct.Struct("<I")
 class SharedBlock:
     """Views of the shared block: control words, times, pose, counters, weights, markers, name log, ring."""
 
-    def __init__(self, shm: shared_memory.SharedMemory, ring_bytes: int):
+    def __init__(self, shm: shared_memory.SharedMemory, ring_bytes: int) -> None:
         self.shm = shm
         self.ring_bytes = ring_bytes
         buf = shm.buf

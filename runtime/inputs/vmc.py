@@ -45,6 +45,7 @@ position (x, y, z) becomes (-x, y, z) and a rotation (x, y, z, w) becomes
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -93,7 +94,7 @@ PRESETS: dict[str, tuple[tuple[str, float], ...]] = {
 _CACHE_LIMIT = 1024  # name lookups remembered (bounded: a hostile sender can invent names)
 
 
-def unity_to_ours(position, rotation) -> tuple[np.ndarray, np.ndarray]:
+def unity_to_ours(position: Sequence[float], rotation: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     """Unity (left-handed, x right) position/rotation (x, y, z, w) in our axes (x left); float32."""
     px, py, pz = position
     qx, qy, qz, qw = rotation
@@ -121,7 +122,7 @@ class VmcAdapter(OscAdapter):
     kind = "vmc"
     default_port = 39539
 
-    def __init__(self, extra_names=()):
+    def __init__(self, extra_names: Iterable[str] = ()) -> None:
         super().__init__()
         self.counters["unmapped_name"] = 0
         # extra channels after the 52 ARKit ones, matched by exact name (e.g. an elastic character's muscles)

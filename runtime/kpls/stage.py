@@ -24,7 +24,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,6 +41,9 @@ from facepuppet.runtime.tables import (
     save_tables,
     validate,
 )
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 KERNEL_CODES = {"linear": 0, "rbf": 1, "poly": 2}
 
@@ -98,10 +101,11 @@ class KplsRetarget:
     units: str = ""
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         set_ = object.__setattr__
         if self.kernel not in KERNEL_CODES:
-            raise TablesError(None, "kernel_params", f"kernel must be one of {tuple(KERNEL_CODES)}, got {self.kernel!r}")
+            raise TablesError(None, "kernel_params",
+                              f"kernel must be one of {tuple(KERNEL_CODES)}, got {self.kernel!r}")
         given = ("source_features", "train_inputs", "dual_coef", "kernel_col_mean", "target_mean")
         for name, arr in coerce(RETARGET_KPLS_SCHEMA, {name: getattr(self, name) for name in given}).items():
             set_(self, name, arr)
@@ -135,7 +139,7 @@ class KplsRetarget:
     def _channels(self) -> dict[str, list[str]]:
         return {"source": list(self.source_names), "target": list(self.target_names)}
 
-    def save(self, path: str | os.PathLike):
+    def save(self, path: str | os.PathLike) -> Path:
         """Write a ``retarget_kpls`` tables file; returns its path."""
         settings = dict(self.metadata.get("settings", {}))
         settings["kernel"] = self.kernel

@@ -35,10 +35,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import tomllib
 
 from facepuppet.runtime.channels import canonical
+
+if TYPE_CHECKING:
+    import os
 
 REGIONS = ("eyes", "brows", "mouth", "other", "head")
 
@@ -173,7 +177,7 @@ def parse_live_config(data: dict, where: str = "<config>") -> LiveConfig:
     )
 
 
-def load_live_config(path) -> LiveConfig:
+def load_live_config(path: str | os.PathLike) -> LiveConfig:
     """Read and check a TOML config file.
 
     Raises

@@ -27,13 +27,19 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.timing import StageTimer
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.protocols import FrameSource, Renderer, Sink, Stage
+    from facepuppet.runtime.render.gl_context import GLTarget
 
 logger = logging.getLogger(__name__)
 
@@ -44,7 +50,7 @@ ARRIVAL_GRID_HZ = 1000.0  # tick-label grid of a run that draws on arrival (see 
 class RecordedClock:
     """Recorded time that advances at once: ``wait_until(t)`` never sleeps."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._now = 0.0
 
     def start(self) -> None:
@@ -69,7 +75,8 @@ class WallClock:
     sleep : callable taking seconds (default ``time.sleep``)
     """
 
-    def __init__(self, monotonic=time.monotonic, sleep=time.sleep):
+    def __init__(self, monotonic: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
         self._monotonic = monotonic
         self._sleep = sleep
         self._origin = monotonic()
@@ -106,7 +113,7 @@ class TickInfo:
 
     __slots__ = ("k", "t", "raw", "frame", "weights", "rotation", "translation", "stamps")
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.k, self.t, self.raw, self.frame, self.weights = 0, 0.0, None, None, None
         self.rotation = self.translation = None
         self.stamps = (0.0,) * 5
@@ -165,8 +172,11 @@ class FrameLoop:
     stages (``counters["nonfinite_rejected"]``; NaN weights mean "not sent" and pass).
     """
 
-    def __init__(self, names, renderer, clock, sinks=(), fps: float = 60.0, log=logger.info, target=None,
-                 stages=(), on_tick=(), stop=None, catch_up: bool = False, idle_fps: float | None = None):
+    def __init__(self, names: Sequence[str], renderer: Renderer, clock: RecordedClock | WallClock,
+                 sinks: Sequence[Sink] = (), fps: float = 60.0, log: Callable[[str], None] = logger.info,
+                 target: GLTarget | None = None, stages: Sequence[Stage] = (),
+                 on_tick: Sequence[Callable[[TickInfo], None]] = (), stop: Callable[[], bool] | None = None,
+                 catch_up: bool = False, idle_fps: float | None = None) -> None:
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
         if idle_fps is not None and not (isinstance(idle_fps, (int, float)) and 0 < idle_fps <= fps):
@@ -204,7 +214,8 @@ class FrameLoop:
             self.log(head + ("\n" + report if report else "; every channel matched"))
         return cmap
 
-    def run(self, source, duration: float | None = None, ticks=None) -> LoopResult:
+    def run(self, source: FrameSource, duration: float | None = None,
+            ticks: Sequence[int] | None = None) -> LoopResult:
         """Tick from t = 0 until the first tick at or after ``duration`` (default: the source's ``duration``).
 
         With neither, runs until the window closes. ``ticks``, a sequence of

@@ -29,7 +29,7 @@ import math
 import numpy as np
 
 
-def smoothing_factor(cutoff, dt):
+def smoothing_factor(cutoff: float | np.ndarray, dt: float | np.ndarray) -> float | np.ndarray:
     """α = 1 / (1 + τ / T_e) with τ = 1 / (2π f_c) (Casiez et al. 2012, eq. 1 and §4)."""
     tau = 1.0 / (2.0 * np.pi * cutoff)
     return 1.0 / (1.0 + tau / dt)
@@ -57,7 +57,8 @@ class OneEuroFilter:
     finite sample of a channel passes through unchanged and starts its state.
     """
 
-    def __init__(self, n: int, min_cutoff=1.0, beta=0.0, d_cutoff=1.0):
+    def __init__(self, n: int, min_cutoff: float | np.ndarray = 1.0, beta: float | np.ndarray = 0.0,
+                 d_cutoff: float | np.ndarray = 1.0) -> None:
         if not (isinstance(n, (int, np.integer)) and n >= 0):
             raise ValueError(f"OneEuroFilter n: expected a non-negative int, got {n!r}")
         self.n = int(n)
@@ -75,7 +76,7 @@ class OneEuroFilter:
         self.dx_hat.fill(0.0)
         self._ready = self.n == 0
 
-    def filter(self, x, dt: float) -> np.ndarray:
+    def filter(self, x: np.ndarray, dt: float) -> np.ndarray:
         """Filter one sample per channel.
 
         Parameters

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -105,7 +106,9 @@ class LivePipeline:
 
     name = "filter"
 
-    def __init__(self, config: LiveConfig | None = None, audio_level=None, log=logger.info, calibrate_requests=None):
+    def __init__(self, config: LiveConfig | None = None, audio_level: Callable[[float], float] | None = None,
+                 log: Callable[[str], None] = logger.info,
+                 calibrate_requests: Callable[[], int] | None = None) -> None:
         self.config = config or LiveConfig()
         self.audio_level = audio_level
         self.log = log

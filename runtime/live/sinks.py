@@ -10,19 +10,30 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import os
+
+    from facepuppet.runtime.frames import Frame
+    from facepuppet.runtime.live.loop import TickInfo
+    from facepuppet.runtime.live.stages import AudioTap
+    from facepuppet.runtime.protocols import FrameSource, Renderer
+    from facepuppet.runtime.recording.recorder import PacketRecorder
 
 
 class PngSink:
     """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``renderer.read_pixels()``."""
 
-    def __init__(self, out_dir):
+    def __init__(self, out_dir: str | os.PathLike) -> None:
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.paths: list[Path] = []
 
-    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
+    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
+                renderer: Renderer) -> None:
         from PIL import Image
 
         path = self.out_dir / f"frame_{tick_index:05d}.png"
@@ -39,11 +50,12 @@ class WeightLog:
     times : ndarray of shape (n_ticks,), float64, seconds
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._rows: list[np.ndarray] = []
         self._times: list[float] = []
 
-    def consume(self, tick_index: int, t: float, weights, frame, renderer) -> None:
+    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
+                renderer: Renderer) -> None:
         self._rows.append(np.array(weights, dtype=np.float32, copy=True))
         self._times.append(t)
 
@@ -72,14 +84,14 @@ class RecordingHook:
     The datagrams behind the frame a tick took reach the recorder before that tick's TICK record.
     """
 
-    def __init__(self, recorder, source, audio=None):
+    def __init__(self, recorder: PacketRecorder, source: FrameSource, audio: AudioTap | None = None) -> None:
         self.recorder = recorder
         self.source = source
         self.audio = audio
         self._deliver = getattr(source, "deliver_packets", None)
         self._ticks = hasattr(source, "frames_taken")
 
-    def __call__(self, info) -> None:
+    def __call__(self, info: TickInfo) -> None:
         if self._deliver is not None:
             self._deliver()
         if self.audio is not None:

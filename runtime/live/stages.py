@@ -34,10 +34,21 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
+
+if TYPE_CHECKING:
+    import argparse
+
+    import moderngl
+
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.kpls.stage import KplsRetarget
+    from facepuppet.runtime.protocols import InputAdapter, Renderer
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +68,7 @@ class AudioTap:
 
     name = "audio"
 
-    def __init__(self, level):
+    def __init__(self, level: Callable[[float], float]) -> None:
         self.source = level
         self.value = math.nan
 
@@ -73,7 +84,7 @@ class AudioTap:
 class RecordedLevels:
     """The audio levels a live recording kept, one per tick time: a level callable for :class:`AudioTap`."""
 
-    def __init__(self, levels):
+    def __init__(self, levels: Iterable[tuple[float, float]]) -> None:
         self._by_t = {float(t): float(v) for t, v in levels}
 
     def __call__(self, t: float) -> float:
@@ -93,7 +104,7 @@ class KplsStage:
 
     name = "kpls"
 
-    def __init__(self, model):
+    def __init__(self, model: KplsRetarget) -> None:
         self.model = model
         self.channels = tuple(model.target_names)
 
@@ -136,7 +147,8 @@ class Chain:
         draw = "draw(elastic)" if self.elastic is not None else "draw"
         return "stages: " + "→".join([self.input, *(s.name for s in self.stages), "map", draw])
 
-    def renderer(self, ctx, character, width: int, height: int, path: str, target_fbo, log):
+    def renderer(self, ctx: moderngl.Context, character: Character, width: int, height: int, path: str,
+                 target_fbo: moderngl.Framebuffer | None, log: Callable[[str], None]) -> Renderer:
         """The renderer the loop draws with (an :class:`~facepuppet.runtime.render.elastic_path.ElasticDraw`
         with ``--elastic``)."""
         from facepuppet.runtime.render.renderer import FaceRenderer
@@ -150,7 +162,7 @@ class Chain:
         return ElasticDraw(r, self.elastic)
 
 
-def add_stage_arguments(parser, markers: bool = True) -> None:
+def add_stage_arguments(parser: argparse.ArgumentParser, markers: bool = True) -> None:
     """The options of the stage chain, shared by ``run`` and ``replay``."""
     if markers:
         parser.add_argument("--actor", type=Path, default=None, metavar="ACTOR.npz",
@@ -171,8 +183,10 @@ def add_stage_arguments(parser, markers: bool = True) -> None:
     parser.add_argument("--gesture-seed", type=int, default=0, help="seed of the gesture synthesis (default 0)")
 
 
-def build_chain(args, character, input_kind: str | None, *, filtered: bool = True, audio_level=None,
-                calibrate_requests=None, voice_only: bool = False, label: str | None = None, log=logger.info) -> Chain:
+def build_chain(args: argparse.Namespace, character: Character, input_kind: str | None, *, filtered: bool = True,
+                audio_level: Callable[[float], float] | None = None,
+                calibrate_requests: Callable[[], int] | None = None, voice_only: bool = False,
+                label: str | None = None, log: Callable[[str], None] = logger.info) -> Chain:
     """The stage chain for parsed options (``actor``, ``pair``, ``retarget``, ``elastic``, ``config``,
     ``calibrate``, ``gestures``, ``gesture_seed``), checked against the character; logs what it loaded.
 
@@ -286,7 +300,8 @@ def _load_kpls(path, shapes, log) -> KplsStage:
     return KplsStage(model)
 
 
-def make_input_adapter(kind: str, extra_names=(), log=logger.info):
+def make_input_adapter(kind: str, extra_names: Sequence[str] = (),
+                       log: Callable[[str], None] = logger.info) -> InputAdapter:
     """A new adapter of ``kind`` that also carries ``extra_names`` channels where its protocol can (VMC)."""
     from facepuppet.runtime.inputs.kinds import make_adapter
 

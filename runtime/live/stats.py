@@ -24,8 +24,13 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.live.loop import TickInfo
 
 logger = logging.getLogger(__name__)
 
@@ -45,8 +50,8 @@ class LiveStats:
     clock : callable, monotonic seconds (for the periodic timing)
     """
 
-    def __init__(self, counters: dict, log=logger.info, interval_s: float | None = 1.0, capacity: int = 1 << 17,
-                 clock=time.monotonic):
+    def __init__(self, counters: dict, log: Callable[[str], None] = logger.info, interval_s: float | None = 1.0,
+                 capacity: int = 1 << 17, clock: Callable[[], float] = time.monotonic) -> None:
         self.counters = counters
         self.log = log
         self.interval_s = interval_s
@@ -59,7 +64,7 @@ class LiveStats:
         self._offset = 0.0 if same else time.monotonic() - time.perf_counter()
         self.ticks = 0
 
-    def on_tick(self, info) -> None:
+    def on_tick(self, info: TickInfo) -> None:
         """FrameLoop ``on_tick`` hook."""
         self.ticks += 1
         if info.raw is not None:

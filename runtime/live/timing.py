@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -26,7 +27,7 @@ class StageTimer:
     path (no allocation beyond a list append), or ``with timer.measure("draw"):``.
     """
 
-    def __init__(self, stages=(), clock=time.perf_counter):
+    def __init__(self, stages: Sequence[str] = (), clock: Callable[[], float] = time.perf_counter) -> None:
         self.now = clock
         self._samples: dict[str, list[float]] = {name: [] for name in stages}
 
@@ -67,7 +68,7 @@ class StageTimer:
                         f"{s['max_ms']:>10.3f}{s['mean_ms']:>10.3f}")
         return "\n".join(rows)
 
-    def print_summary(self, log=logger.info) -> None:
+    def print_summary(self, log: Callable[[str], None] = logger.info) -> None:
         log(self.table())
 
 

@@ -23,12 +23,17 @@ from __future__ import annotations
 
 import socket
 import struct
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from facepuppet.runtime.channels import pascal
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.live.loop import TickInfo
 
 MAX_BUNDLE = 1500
 _BUNDLE_HEAD = 16  # "#bundle\0" + 8-byte time tag
@@ -64,7 +69,7 @@ class VmcSender:
     counters : dict: ``bundles_sent``, ``send_errors``
     """
 
-    def __init__(self, host: str, port: int, names, max_bundle: int = MAX_BUNDLE):
+    def __init__(self, host: str, port: int, names: Sequence[str], max_bundle: int = MAX_BUNDLE) -> None:
         self.address = (host, int(port))
         self.names = tuple(pascal(n) for n in names)
         self.counters = {"bundles_sent": 0, "send_errors": 0}
@@ -95,7 +100,8 @@ class VmcSender:
                 at += 4 + m.size
         self._sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
 
-    def send(self, weights, rotation=None, translation=None) -> None:
+    def send(self, weights: np.ndarray, rotation: np.ndarray | None = None,
+             translation: np.ndarray | None = None) -> None:
         """Send one tick: weights (n,) float, rotation (4,) (x, y, z, w) or None (identity),
         translation (3,) or None (zero). Send errors are counted, never raised."""
         w = np.nan_to_num(np.asarray(weights, dtype=np.float64), nan=0.0)
@@ -111,7 +117,7 @@ class VmcSender:
             except OSError:
                 self.counters["send_errors"] += 1
 
-    def on_tick(self, info) -> None:
+    def on_tick(self, info: TickInfo) -> None:
         """FrameLoop ``on_tick`` hook: send what this tick drew."""
         self.send(info.weights, info.rotation, info.translation)
 

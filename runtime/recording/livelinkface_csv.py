@@ -33,11 +33,15 @@ from __future__ import annotations
 import csv
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
+
+if TYPE_CHECKING:
+    import os
 
 SOURCE = "livelinkface_csv"
 TIMECODE_FPS = 60.0
@@ -64,7 +68,7 @@ def parse_timecode(text: str, fps: float = TIMECODE_FPS) -> tuple[float, int]:
     return whole + ff / fps, int(whole * fps) + int(ff)
 
 
-def read_llf_csv(path, fps: float = TIMECODE_FPS) -> list[Frame]:
+def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Frame]:
     """Frames of a Live Link Face CSV recording.
 
     Parameters

@@ -15,9 +15,13 @@ from __future__ import annotations
 
 import collections
 import threading
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.recording.records import RecordKind, encode_audio, encode_packet_record, encode_tick
 from facepuppet.runtime.recording.session import SessionWriter
+
+if TYPE_CHECKING:
+    import os
 
 
 class PacketRecorder:
@@ -36,8 +40,8 @@ class PacketRecorder:
     counters : dict: ``packets_recorded``, ``audio_recorded``, ``ticks_recorded``, ``record_dropped`` (queue full)
     """
 
-    def __init__(self, path, kind: str, info: dict | None = None, capacity: int = 8192,
-                 fsync_every_s: float | None = 1.0, overwrite: bool = False):
+    def __init__(self, path: str | os.PathLike, kind: str, info: dict | None = None, capacity: int = 8192,
+                 fsync_every_s: float | None = 1.0, overwrite: bool = False) -> None:
         self.kind = kind
         self.capacity = int(capacity)
         self.writer = SessionWriter(path, info={"recording": "live packets", "input": kind, **(info or {})},
@@ -50,7 +54,7 @@ class PacketRecorder:
         self._thread = threading.Thread(target=self._drain, name="facepuppet-recorder", daemon=True)
         self._thread.start()
 
-    def put(self, data: bytes, t_receive: float, sender=None) -> None:
+    def put(self, data: bytes, t_receive: float, sender: tuple | None = None) -> None:
         """Queue one datagram (receive thread; an ``on_packet`` callback). Never blocks."""
         if len(self._queue) >= self.capacity:
             self.counters["record_dropped"] += 1
@@ -67,7 +71,8 @@ class PacketRecorder:
         self._wake.set()
 
     def put_tick(self, k: int, t: float, frames: int, t_clock: float) -> None:
-        """Queue one TICK record (frame-loop thread; see :class:`~facepuppet.runtime.recording.records.Tick`). Never blocks."""
+        """Queue one TICK record (frame-loop thread; see :class:`~facepuppet.runtime.recording.records.Tick`).
+        Never blocks."""
         if len(self._queue) >= self.capacity:
             self.counters["record_dropped"] += 1
             return
@@ -104,5 +109,5 @@ class PacketRecorder:
     def __enter__(self) -> PacketRecorder:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

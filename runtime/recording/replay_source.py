@@ -10,11 +10,19 @@ question from their own slots.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.recording.livelinkface_csv import looks_like_llf_csv, read_llf_csv
 from facepuppet.runtime.recording.session import MAGIC, read_session
+
+if TYPE_CHECKING:
+    import os
+
+    from facepuppet.runtime.protocols import InputAdapter
+    from facepuppet.runtime.recording.records import Packet
 
 
 class ReplaySource:
@@ -29,7 +37,7 @@ class ReplaySource:
     clock and a CSV starting at 0 replay alike.
     """
 
-    def __init__(self, frames):
+    def __init__(self, frames: Iterable[Frame]) -> None:
         self.frames = list(frames)
         if not self.frames:
             raise ValueError("ReplaySource: expected at least one frame, got none")
@@ -72,7 +80,8 @@ class ReplaySource:
         self._next = 0
 
 
-def decode_packets(packets, make_adapter=None) -> list[tuple[int, Frame]]:
+def decode_packets(packets: Iterable[Packet],
+                   make_adapter: Callable[[str], InputAdapter] | None = None) -> list[tuple[int, Frame]]:
     """(packet index, frame) for each packet that completes a frame, decoded as the live run did.
 
     Each packet goes, in recorded order and with its recorded receive time,
@@ -93,7 +102,7 @@ def decode_packets(packets, make_adapter=None) -> list[tuple[int, Frame]]:
     return decoded
 
 
-def frames_from_packets(packets) -> list[Frame]:
+def frames_from_packets(packets: Iterable[Packet]) -> list[Frame]:
     """The frames a live run decoded from its packets, decoded again.
 
     Each packet goes, in recorded order and with its recorded receive time,
@@ -106,7 +115,7 @@ def frames_from_packets(packets) -> list[Frame]:
     return [frame for _, frame in decode_packets(packets)]
 
 
-def open_recording(path) -> list[Frame]:
+def open_recording(path: str | os.PathLike) -> list[Frame]:
     """Frames of a recording: a session file (by its magic) or a Live Link Face CSV (by its header).
 
     A live recording (PACKET records, ``run --record``) gives the frames its

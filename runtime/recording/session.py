@@ -68,8 +68,8 @@ class SessionWriter:
     Not thread-safe: one thread writes.
     """
 
-    def __init__(self, path, info: dict | None = None, fsync_every_s: float | None = 1.0,
-                 overwrite: bool = False):
+    def __init__(self, path: str | os.PathLike, info: dict | None = None, fsync_every_s: float | None = 1.0,
+                 overwrite: bool = False) -> None:
         from facepuppet import __version__
 
         self.path = Path(path)
@@ -93,7 +93,7 @@ class SessionWriter:
     def __enter__(self) -> SessionWriter:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def write_frame(self, frame: Frame) -> None:
@@ -164,7 +164,7 @@ class Session:
     ticks: list[Tick] = field(default_factory=list)
 
 
-def read_session(path) -> Session:
+def read_session(path: str | os.PathLike) -> Session:
     """Read a session file, keeping every complete record before a torn or corrupt one.
 
     Parameters
@@ -212,7 +212,8 @@ def read_session(path) -> Session:
                     problem = f"corrupt record of kind {kind}: {exc}"
         if problem is not None:
             session.complete = False
-            session.tail_error = f"{path}: {problem} at byte offset {offset}; kept the {session.n_records} records before it"
+            session.tail_error = (f"{path}: {problem} at byte offset {offset}; "
+                                  f"kept the {session.n_records} records before it")
             warnings.warn(session.tail_error, stacklevel=2)
             break
         session.n_records += 1

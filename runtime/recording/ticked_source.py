@@ -20,10 +20,17 @@ applied live with that tick's (older) frame, here with the next one.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
+
+if TYPE_CHECKING:
+    import os
+
+    from facepuppet.runtime.protocols import InputAdapter
 
 CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
 
@@ -50,7 +57,8 @@ class LiveRecording:
     audio_levels: list = field(default_factory=list)
 
 
-def read_live_recording(path, make_adapter) -> LiveRecording | None:
+def read_live_recording(path: str | os.PathLike,
+                        make_adapter: Callable[[str], InputAdapter]) -> LiveRecording | None:
     """Decode a live recording with ``make_adapter(kind)``; None when ``path`` is not one (no PACKET records).
 
     Raises
@@ -96,7 +104,7 @@ class TickedSource:
         receiver's count of them, as the filter stage read it)
     """
 
-    def __init__(self, recording: LiveRecording):
+    def __init__(self, recording: LiveRecording) -> None:
         if not recording.ticks:
             raise ValueError("TickedSource: the recording has no TICK records (recorded before they existed)")
         self.recording = recording

@@ -56,7 +56,7 @@ class BlasThreads:
     limited : list of str, the libraries whose thread count was set (empty when none was found)
     """
 
-    def __init__(self, n: int = 1):
+    def __init__(self, n: int = 1) -> None:
         if int(n) < 1:
             raise ValueError(f"BlasThreads n: expected a positive thread count, got {n!r}")
         self.n = int(n)
@@ -80,7 +80,7 @@ class BlasThreads:
             self.limited.append(path.rsplit("/", 1)[-1])
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def close(self) -> None:

@@ -28,7 +28,8 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.
     return m.astype(np.float32)
 
 
-def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+def look_at(eye: np.ndarray, target: np.ndarray,
+            up: np.ndarray | tuple[float, float, float] = (0.0, 1.0, 0.0)) -> np.ndarray:
     """View matrix of a camera at ``eye`` looking at ``target``."""
     eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
     forward = target - eye
@@ -42,7 +43,8 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     return m.astype(np.float32)
 
 
-def model_matrix(rotation=None, translation=None, pivot=(0.0, 0.0, 0.0)) -> np.ndarray:
+def model_matrix(rotation: np.ndarray | None = None, translation: np.ndarray | None = None,
+                 pivot: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
     """Head pose: rotate about ``pivot`` by quaternion (x, y, z, w), then translate.
 
     ``x' = R (x - pivot) + pivot + translation``; units are the character's.
@@ -79,7 +81,8 @@ class Camera:
 
 
 def frame_bounds(
-    lo, hi, aspect: float, fov_y_deg: float = 27.0, margin: float = 1.12, elevation_deg: float = 8.0
+    lo: np.ndarray, hi: np.ndarray, aspect: float, fov_y_deg: float = 27.0, margin: float = 1.12,
+    elevation_deg: float = 8.0,
 ) -> Camera:
     """Camera on +z looking along -z at the box [lo, hi], fitting it with a margin.
 

@@ -20,7 +20,7 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.geometry import vertex_normals
 
 
-def check_weights(weights, n_shapes: int) -> np.ndarray:
+def check_weights(weights: np.ndarray, n_shapes: int) -> np.ndarray:
     """Weights as (n_shapes,) float32, or ValueError saying what came."""
     w = np.asarray(weights, dtype=np.float32)
     if w.shape != (n_shapes,):
@@ -74,7 +74,7 @@ class CpuDeformer:
         deltas of the span vertices, spans concatenated in order
     """
 
-    def __init__(self, character: Character, max_gap: int = 64):
+    def __init__(self, character: Character, max_gap: int = 64) -> None:
         self.character = character
         n = character.n_vertices
         rest = np.empty((n, 6), dtype=np.float32)
@@ -130,7 +130,7 @@ class CpuDeformer:
             flat[6 * a:6 * b] = block[p:q]
         return out
 
-    def deform(self, weights) -> tuple[np.ndarray, np.ndarray]:
+    def deform(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Deformed positions and unit normals.
 
         Parameters

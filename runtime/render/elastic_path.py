@@ -9,6 +9,9 @@ for rigid parts such as the lower teeth, one 3 × 4 transform per part) and
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
 import moderngl
 import numpy as np
 
@@ -16,6 +19,9 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.runtime.render.shader_loader import load_program
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
 ELASTIC_TEXTURE_WIDTH = 4096
 
@@ -69,7 +75,8 @@ def check_model(character: Character, model: ElasticModel) -> ElasticModel:
     return model
 
 
-def setup_elastic(ctx: moderngl.Context, character: Character, model: ElasticModel, make_vao) -> dict:
+def setup_elastic(ctx: moderngl.Context, character: Character, model: ElasticModel,
+                  make_vao: Callable[[moderngl.Program, moderngl.Buffer], moderngl.VertexArray]) -> dict:
     """GL objects of the elastic path: program, rest vertex buffer, VAO, basis textures.
 
     ``make_vao(prog, vbo)`` is the renderer's VAO builder (same attribute layout as its other paths).
@@ -81,10 +88,11 @@ def setup_elastic(ctx: moderngl.Context, character: Character, model: ElasticMod
     prog["u_basis_index"].value = 1
     if model.n_rigid:
         prog["u_rigid_label"].value = 2
-    return {"prog": prog, "vao": make_vao(prog, vbo), "vbo": vbo, "textures": basis_textures(ctx, model), "model": model}
+    return {"prog": prog, "vao": make_vao(prog, vbo), "vbo": vbo, "textures": basis_textures(ctx, model),
+            "model": model}
 
 
-def upload_controls(state: dict, controls) -> None:
+def upload_controls(state: dict, controls: np.ndarray) -> None:
     """Write the frame's control displacements, (n_controls, 3) float32, into the uniform array."""
     model = state["model"]
     u = np.ascontiguousarray(controls, dtype=np.float32)
@@ -111,7 +119,7 @@ class ElasticDraw:
     path : str, "elastic"
     """
 
-    def __init__(self, renderer, model):
+    def __init__(self, renderer: FaceRenderer, model: ElasticModel) -> None:
         if renderer.path != "elastic":
             raise ValueError(f"ElasticDraw: the renderer must use the 'elastic' path, not {renderer.path!r}")
         self.renderer = renderer
@@ -119,7 +127,8 @@ class ElasticDraw:
         self.shape_names = tuple(model.channel_names)
         self.path = "elastic"
 
-    def draw(self, values, head_rotation=None, head_translation=None) -> None:
+    def draw(self, values: np.ndarray, head_rotation: np.ndarray | None = None,
+             head_translation: np.ndarray | None = None) -> None:
         """Draw channel values, ndarray (n_shapes + n_muscles,) float32: U = Σ w P + Σ c Q, then the basis."""
         self.renderer.prepare_controls(self.model.controls(values), head_rotation, head_translation)
         self.renderer.submit()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import moderngl
 
@@ -28,7 +29,7 @@ class GLTarget:
     headless : bool
     """
 
-    def __init__(self, ctx: moderngl.Context, window=None):
+    def __init__(self, ctx: moderngl.Context, window: Any = None) -> None:
         self.ctx = ctx
         self.window = window
         self.headless = window is None

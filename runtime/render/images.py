@@ -13,7 +13,7 @@ _SHEET_BACKGROUND = (24, 25, 28)
 _LABEL_COLOR = (225, 225, 225)
 
 
-def check_rgb(image, name: str = "image") -> np.ndarray:
+def check_rgb(image: np.ndarray, name: str = "image") -> np.ndarray:
     """An image as (h, w, 3) uint8, or ValueError saying what came."""
     a = np.asarray(image)
     if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8 or a.shape[0] == 0 or a.shape[1] == 0:

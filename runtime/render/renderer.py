@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -30,6 +31,9 @@ from facepuppet.runtime.render.camera import frame_bounds, model_matrix
 from facepuppet.runtime.render.cpu_deform import CpuDeformer, check_weights
 from facepuppet.runtime.render.elastic_path import check_model, setup_elastic, upload_controls
 from facepuppet.runtime.render.shader_loader import load_program
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.elastic.model import ElasticModel
 
 DELTA_TEXTURE_WIDTH = 4096
 MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights
@@ -146,13 +150,13 @@ class FaceRenderer:
         width: int = 1280,
         height: int = 720,
         path: str = "auto",
-        target_fbo=None,
-        background=(0.16, 0.17, 0.19),
+        target_fbo: moderngl.Framebuffer | None = None,
+        background: tuple[float, float, float] = (0.16, 0.17, 0.19),
         log: Callable[[str], None] = print,
         cull_back_faces: bool = True,
         framing: str = "head",
-        elastic=None,
-    ):
+        elastic: ElasticModel | None = None,
+    ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
         self.framing = framing
@@ -277,7 +281,8 @@ class FaceRenderer:
         return best, report
 
     # -- per frame ---------------------------------------------------------
-    def prepare(self, weights, head_rotation=None, head_translation=None) -> None:
+    def prepare(self, weights: np.ndarray, head_rotation: np.ndarray | None = None,
+                head_translation: np.ndarray | None = None) -> None:
         """The CPU side of a frame: pose, active weights or CPU deformation, uploads."""
         w = check_weights(weights, self.character.n_shapes)
         self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
@@ -291,10 +296,12 @@ class FaceRenderer:
             cpu["vbo"].orphan()
             cpu["vbo"].write(out)
 
-    def prepare_controls(self, controls, head_rotation=None, head_translation=None) -> None:
+    def prepare_controls(self, controls: np.ndarray, head_rotation: np.ndarray | None = None,
+                         head_translation: np.ndarray | None = None) -> None:
         """The CPU side of an elastic frame from control displacements, (n_controls, 3) float32."""
         if self.path != "elastic":
-            raise ValueError(f"prepare_controls: only the 'elastic' path takes control displacements (path is {self.path!r})")
+            raise ValueError("prepare_controls: only the 'elastic' path takes control displacements "
+                             f"(path is {self.path!r})")
         self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
         upload_controls(self._elastic, controls)
 
@@ -339,7 +346,8 @@ class FaceRenderer:
             state["vao"].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
             self.ctx.disable(moderngl.BLEND)
 
-    def draw(self, weights, head_rotation=None, head_translation=None) -> None:
+    def draw(self, weights: np.ndarray, head_rotation: np.ndarray | None = None,
+             head_translation: np.ndarray | None = None) -> None:
         """Render one frame.
 
         Parameters
@@ -360,7 +368,8 @@ class FaceRenderer:
         data = self.fbo.read(viewport=(0, 0, self.width, self.height), components=3, alignment=1)
         return np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, 3)[::-1].copy()
 
-    def project(self, points, head_rotation=None, head_translation=None) -> np.ndarray:
+    def project(self, points: np.ndarray, head_rotation: np.ndarray | None = None,
+                head_translation: np.ndarray | None = None) -> np.ndarray:
         """Pixel coordinates (x right, y down) of character-space points, (n, 2) float64."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         m = self.camera.view_projection @ model_matrix(head_rotation, head_translation, self.character.pivot)

@@ -19,8 +19,12 @@ import re
 from collections.abc import Mapping
 from importlib.resources import files
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import moderngl
+
+if TYPE_CHECKING:
+    import os
 
 DEFAULT_VERSION = "#version 330 core"
 
@@ -86,7 +90,8 @@ def _expand(src: _Source, name: str, stack: tuple[str, ...], lines: list[str] | 
 
 
 def preprocess(
-    name: str, stage: str, defines: Mapping[str, object] | None = None, search_path=None
+    name: str, stage: str, defines: Mapping[str, object] | None = None,
+    search_path: str | os.PathLike | None = None,
 ) -> tuple[str, dict[int, str]]:
     """Source of one stage of a program file.
 
@@ -138,7 +143,7 @@ def load_program(
     ctx: moderngl.Context,
     name: str,
     defines: Mapping[str, object] | None = None,
-    search_path=None,
+    search_path: str | os.PathLike | None = None,
     varyings: tuple[str, ...] = (),
 ) -> moderngl.Program:
     """Compile and link the program in shader file ``name``.
