@@ -33,11 +33,10 @@ must not pass silently).
 from __future__ import annotations
 
 import math
+import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
-
-import tomllib
 
 from facepuppet.runtime.channels import canonical
 

@@ -193,7 +193,8 @@ def test_wrong_shape_against_schema_is_refused(saved, tmp_path):
     manifest["sections"]["vertex_color"]["shape"] = [5, 3]
     bad = rewrite(saved, tmp_path / "dims.npz", manifest=manifest,
                   arrays={"vertex_color": np.zeros((5, 3), np.float32)})
-    with pytest.raises(TablesError, match=r"vertex_color: axis 0 is n_vertices = 5, but section 'vertices' says n_vertices = 4"):
+    with pytest.raises(TablesError,
+                       match=r"vertex_color: axis 0 is n_vertices = 5, but section 'vertices' says n_vertices = 4"):
         load_tables(bad)
 
 

@@ -46,7 +46,8 @@ def test_grid_size_and_labels_drawn():
 def test_contact_sheet_command_writes_the_grid(tmp_path, capsys):
     character_path = sphere_character().save(tmp_path / "sphere.npz")
     out = tmp_path / "sheet.png"
-    args = parse(contact_sheet, ["contact-sheet", str(character_path), "-o", str(out), "--cell", "64x48", "--columns", "2", "--path", "gpu"])
+    args = parse(contact_sheet, ["contact-sheet", str(character_path), "-o", str(out), "--cell", "64x48",
+                                 "--columns", "2", "--path", "gpu"])
     assert args.func(args) == 0
     sheet = np.asarray(Image.open(out))
     # neutral + 2 shapes = 3 cells in 2 columns -> 2 rows

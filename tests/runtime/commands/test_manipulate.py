@@ -254,7 +254,8 @@ def test_window_callbacks_drag_a_point_on_a_real_glfw_window(x_display):
     env.pop("WAYLAND_DISPLAY", None)
     code = ("import runpy, sys; sys.path.insert(0, sys.argv[2]); "
             "runpy.run_path(sys.argv[1])['window_scenario']()")
-    result = subprocess.run([sys.executable, "-c", code, str(Path(__file__)), str(next(p for p in Path(__file__).resolve().parents if p.name == "tests"))], env=env,
+    tests = next(p for p in Path(__file__).resolve().parents if p.name == "tests")
+    result = subprocess.run([sys.executable, "-c", code, str(Path(__file__)), str(tests)], env=env,
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "window scenario: ok" in result.stdout

@@ -30,7 +30,8 @@ def _replay(ctx, character, frames, out_dir, path):
 
     renderer = FaceRenderer(ctx, character, W, H, path=path, log=lambda s: None)
     weights, messages = WeightLog(), []
-    loop = FrameLoop(character.shape_names, renderer, RecordedClock(), sinks=[weights, PngSink(out_dir)], log=messages.append)
+    loop = FrameLoop(character.shape_names, renderer, RecordedClock(), sinks=[weights, PngSink(out_dir)],
+                     log=messages.append)
     result = loop.run(ReplaySource(frames), duration=(N_TICKS - 1) / 60)
     renderer.close()
     assert ctx.error == "GL_NO_ERROR"

@@ -173,7 +173,8 @@ def test_stage_timer_summary():
 def test_default_duration_reaches_the_last_frame():
     frames = [_frame(0.0, 0.1), _frame(0.1, 0.2), _frame(0.25, 0.3)]  # the last falls between ticks
     src, log = ReplaySource(frames), WeightLog()
-    result = FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(src)
+    loop = FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None)
+    result = loop.run(src)
     assert result.n_ticks == 4 and result.counters["frames_received"] == 3 and src.done(0.3)
     assert log.array[-1, 0] == np.float32(0.3)
 

@@ -69,7 +69,8 @@ def test_missing_file_and_missing_include(egl_ctx, shader_dir):
 
 def test_include_cycle_is_an_error(egl_ctx, shader_dir):
     (shader_dir / "deeper.glsl").write_text('#include "common.glsl"\n')
-    with pytest.raises(ShaderError, match=r"include cycle .*main\.glsl -> common\.glsl -> deeper\.glsl -> common\.glsl"):
+    cycle = r"include cycle .*main\.glsl -> common\.glsl -> deeper\.glsl -> common\.glsl"
+    with pytest.raises(ShaderError, match=cycle):
         load_program(egl_ctx, "main.glsl", search_path=shader_dir)
 
 
@@ -78,7 +79,8 @@ def test_bad_define_name_is_refused(egl_ctx, shader_dir):
         load_program(egl_ctx, "main.glsl", {"1BAD": 1}, search_path=shader_dir)
 
 
-@pytest.mark.parametrize("defines", [None, {"GPU_DEFORM": 1, "MAX_ACTIVE": 8, "N_VERTICES": 100, "DELTA_TEXTURE_WIDTH": 4096}])
+@pytest.mark.parametrize("defines", [None, {"GPU_DEFORM": 1, "MAX_ACTIVE": 8, "N_VERTICES": 100,
+                                            "DELTA_TEXTURE_WIDTH": 4096}])
 def test_packaged_face_program_builds_in_both_variants(egl_ctx, defines):
     prog = load_program(egl_ctx, "face.glsl", defines)
     assert "u_model" in prog and "u_eye" in prog
