@@ -212,7 +212,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         late = SimpleNamespace(source=None)  # the filter reads the source's calibrate count once it exists
         chain = build_chain(args, character, adapter_kind, audio_level=audio.level if audio is not None else None,
                             calibrate_requests=lambda: getattr(late.source, "watched", 0),
-                            voice_only=opts.voice_only, label=args.input, log=log)
+                            voice_only=opts.voice_only, label="voice" if opts.voice_only else args.input, log=log)
         log(chain.describe())
         adapter = None if opts.voice_only else make_input_adapter(args.input, chain.extra_names, log=log)
         recorder = None

@@ -154,6 +154,7 @@ class VoiceOnlySource:
     """
 
     address = ("voice", 0)
+    frames_taken = 0  # never a frame: a recording's TICK records say so, and replay ticks as the run did
 
     def __init__(self, duration: float | None = None) -> None:
         self.duration = duration

@@ -59,12 +59,13 @@ class LiveRecording:
 
 def read_live_recording(path: str | os.PathLike,
                         make_adapter: Callable[[str], InputAdapter]) -> LiveRecording | None:
-    """Decode a live recording with ``make_adapter(kind)``; None when ``path`` is not one (no PACKET records).
+    """Decode a live recording with ``make_adapter(kind)``; None when ``path`` is not one (no PACKET or TICK
+    records). A run whose tracker sent nothing (or ``--input audio``) has ticks and no frames: it replays too.
 
     Raises
     ------
     ValueError
-        naming the file when its packets decode to no frame.
+        naming the file when its packets decode to no frame and it has no ticks.
     """
     from facepuppet.runtime.recording.session import MAGIC, read_session
 
@@ -75,7 +76,7 @@ def read_live_recording(path: str | os.PathLike,
     with warnings.catch_warnings():
         warnings.simplefilter("always")
         session = read_session(path)
-    if session.frames or not session.packets:
+    if session.frames or not (session.packets or session.ticks):
         return None
     from facepuppet.runtime.recording.replay_source import decode_packets
 
@@ -83,7 +84,7 @@ def read_live_recording(path: str | os.PathLike,
     decoded = decode_packets(session.packets, make_adapter)
     frames = [frame for _, frame in decoded]
     frame_packets = [i for i, _ in decoded]
-    if not frames:
+    if not frames and not session.ticks:
         raise ValueError(f"{path}: the recorded packets decode to no frame")
     return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header),
                          list(session.audio_levels))

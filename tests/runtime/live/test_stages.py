@@ -330,24 +330,28 @@ def test_replay_of_a_live_recording_draws_the_live_weights(tmp_path):
     assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # without the pipeline: the raw frames
 
 
+def voice_wav(path, seconds: float = 2.5, rate: int = 16000):
+    """A 220 Hz tone switched on and off at 1.5 Hz: a voice level that comes and goes."""
+    import wave
+
+    t = np.arange(int(seconds * rate)) / rate
+    voice = (0.5 * np.sin(2 * np.pi * 220 * t) * (np.sin(2 * np.pi * 1.5 * t) > 0)).astype(np.float32)
+    with wave.open(str(path), "wb") as w:
+        w.setnchannels(1), w.setsampwidth(2), w.setframerate(rate)
+        w.writeframes((voice * 32767).astype("<i2").tobytes())
+    return path
+
+
 @pytest.mark.gl
 @pytest.mark.slow
 def test_replay_of_a_live_gestures_run_draws_the_live_weights(tmp_path):
     """``run --gestures`` with a voice recorded, replayed with the same options: the same weights tick for tick."""
-    import wave
-
     from helpers.gesture_dbs import small_db
 
     small_db(tmp_path / "gestures.npz")
     character = dataclasses.replace(sphere_character(), shape_names=("jawOpen", "browInnerUp"))  # brows: gestures
     char_path = character.save(tmp_path / "sphere.npz")
-    rate = 16000
-    t = np.arange(int(2.5 * rate)) / rate
-    voice = (0.5 * np.sin(2 * np.pi * 220 * t) * (np.sin(2 * np.pi * 1.5 * t) > 0)).astype(np.float32)
-    wav = tmp_path / "voice.wav"
-    with wave.open(str(wav), "wb") as w:
-        w.setnchannels(1), w.setsampwidth(2), w.setframerate(rate)
-        w.writeframes((voice * 32767).astype("<i2").tobytes())
+    wav = voice_wav(tmp_path / "voice.wav")
 
     def send(client, stop):
         start = time.monotonic()
@@ -380,3 +384,25 @@ def test_replay_of_a_live_gestures_run_draws_the_live_weights(tmp_path):
                                       "4", "--dump-weights", str(replay_w)])
     assert replay.run_replay(other_seed, log=logs.append) == 0
     assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # the gestures are in what was compared
+
+
+@pytest.mark.gl
+def test_replay_of_a_voice_only_run_draws_the_live_weights(tmp_path):
+    """``run --input audio --gestures`` records ticks and no packets; its replay is the live run, tick for tick."""
+    from helpers.gesture_dbs import small_db
+
+    small_db(tmp_path / "gestures.npz")
+    char_path = sphere_character().save(tmp_path / "sphere.npz")
+    record, replay_w = tmp_path / "voice.fps", tmp_path / "replay.npy"
+    result, logs = live(["-c", str(char_path), "--input", "audio", "--gestures", str(tmp_path / "gestures.npz"),
+                         "--audio-file", str(voice_wav(tmp_path / "voice.wav", seconds=1.0)), "--record", str(record)],
+                        lambda client, stop: None, tmp_path)
+    assert "stages: voice→audio→filter→gestures→map→draw" in logs
+    live_weights = result.weights.array
+    assert np.ptp(live_weights[:, 0]) > 0.05  # the jaw follows the voice
+    logs = []
+    args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
+                                "--gestures", str(tmp_path / "gestures.npz"), "--dump-weights", str(replay_w)])
+    assert replay.run_replay(args, log=logs.append) == 0
+    assert "stages: replay(audio)→audio→gestures→map→draw" in logs
+    np.testing.assert_array_equal(np.load(replay_w), live_weights)
