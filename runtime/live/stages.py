@@ -47,8 +47,10 @@ if TYPE_CHECKING:
     import moderngl
 
     from facepuppet.runtime.character import Character
+    from facepuppet.runtime.elastic.model import ElasticModel
     from facepuppet.runtime.kpls.stage import KplsRetarget
-    from facepuppet.runtime.protocols import InputAdapter, Renderer
+    from facepuppet.runtime.live.pipeline import LivePipeline
+    from facepuppet.runtime.protocols import InputAdapter, Renderer, Stage
 
 logger = logging.getLogger(__name__)
 
@@ -135,12 +137,12 @@ class Chain:
     """
 
     input: str
-    stages: tuple = ()
-    names: tuple = ()
-    filter: object = None
-    audio: object = None
-    elastic: object = None
-    extra_names: tuple = field(default_factory=tuple)
+    stages: tuple[Stage, ...] = ()
+    names: tuple[str, ...] = ()
+    filter: LivePipeline | None = None
+    audio: AudioTap | None = None
+    elastic: ElasticModel | None = None
+    extra_names: tuple[str, ...] = field(default_factory=tuple)
 
     def describe(self) -> str:
         """``stages: vmc→filter→gestures→map→draw`` (``draw(elastic)`` on the elastic path)."""
