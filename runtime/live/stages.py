@@ -165,7 +165,10 @@ class Chain:
 
 
 def add_stage_arguments(parser: argparse.ArgumentParser, markers: bool = True) -> None:
-    """The options of the stage chain, shared by ``run`` and ``replay``."""
+    """The options of the stage chain, shared by ``run`` and ``replay`` (one group in ``--help``)."""
+    parser = parser.add_argument_group(
+        "stage chain", "what turns input frames into what is drawn; the same options give the same chain in run "
+        "and replay (audio, solve, filter, gestures, kpls, then map and draw)")
     if markers:
         parser.add_argument("--actor", type=Path, default=None, metavar="ACTOR.npz",
                             help="actor table (train-actor): markers input is solved to actuations s")
