@@ -140,6 +140,8 @@ class ChannelMap:
     matrix : ndarray of shape (n_target, n_source), float32
     unmatched_source : tuple of str, source channels the rig has no shape for
     undriven_target : tuple of str, rig shapes no source channel drives
+    identity : bool, the matrix is the identity (the source's channels are the rig's, in order: a
+        solve or kernel-PLS stage writes them so); :meth:`apply` then copies instead of multiplying
     """
 
     source_names: tuple[str, ...]
@@ -147,6 +149,7 @@ class ChannelMap:
     matrix: np.ndarray
     unmatched_source: tuple[str, ...]
     undriven_target: tuple[str, ...]
+    identity: bool = False
 
     @classmethod
     def build(cls, source_names: Iterable[str], target_names: Iterable[str]) -> ChannelMap:
@@ -181,7 +184,8 @@ class ChannelMap:
         unmatched = tuple(n for i, n in enumerate(source_names) if i not in used)
         undriven = tuple(n for t, n in enumerate(target_names) if not m[t].any())
         m.setflags(write=False)
-        return cls(source_names, target_names, m, unmatched, undriven)
+        identity = m.shape[0] == m.shape[1] and bool(np.array_equal(m, np.eye(len(m), dtype=np.float32)))
+        return cls(source_names, target_names, m, unmatched, undriven, identity)
 
     def apply(self, source_values: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Target values (n_target,) float32 from source values (n_source,).
@@ -189,6 +193,11 @@ class ChannelMap:
         NaN in a source channel (missing data) counts as 0 for the target.
         """
         values = np.nan_to_num(np.asarray(source_values, dtype=np.float32), nan=0.0)
+        if self.identity:
+            if out is None:
+                return values
+            np.copyto(out, values)
+            return out
         return np.matmul(self.matrix, values, out=out)
 
     def report(self) -> str:

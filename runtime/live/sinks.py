@@ -8,7 +8,6 @@ VMC output is :mod:`facepuppet.runtime.live.vmc_out`; the live stats are
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -95,7 +94,6 @@ class RecordingHook:
         if self._deliver is not None:
             self._deliver()
         if self.audio is not None:
-            level = self.audio.value
-            self.recorder.put_audio(info.t, level if math.isfinite(level) else math.nan)
+            self.recorder.put_audio(info.t, self.audio.value)
         if self._ticks:
             self.recorder.put_tick(info.k, info.t, self.source.frames_taken, info.stamps[0])

@@ -125,3 +125,15 @@ def test_the_two_groupings_differ_only_on_cheeks_lips_and_tongue():
     assert differ == {"cheekPuff", "cheekSquintLeft", "cheekSquintRight", "tongueOut"}
     assert {prefix for prefix, region, group in CHANNEL_REGIONS if (region, group) == ("mouth", "rest")} == {
         "cheek", "lip", "tongue"}
+
+
+def test_a_map_onto_the_same_names_copies_and_matches_the_matrix_product():
+    names = ("jawOpen", "eyeBlinkLeft", "browInnerUp")
+    same = ChannelMap.build(names, names)
+    assert same.identity and not ChannelMap.build(names, names[::-1]).identity
+    assert not ChannelMap.build(("eyeBlinkLeft", "eyeBlinkRight"), ("eyeBlink",)).identity
+    values = np.array([0.3, np.nan, -0.25], np.float32)
+    out = np.full(3, 7.0, np.float32)
+    assert same.apply(values, out=out) is out
+    np.testing.assert_array_equal(out, same.matrix @ np.nan_to_num(values))  # the copy is the product
+    np.testing.assert_array_equal(same.apply(values), np.array([0.3, 0.0, -0.25], np.float32))
