@@ -11,7 +11,10 @@ Every tick sends, over one UDP socket:
 
 The bundles are built once with python-osc's builders (time tag "immediately")
 and only the big-endian float32 argument bytes are patched per tick, so a tick
-costs one ``struct.pack_into`` per value and one ``sendto`` per bundle.
+costs one ``struct.pack_into`` per value and one ``send`` per bundle.
+
+**Socket.** Connected to the destination at start: the kernel binds it to the local address that
+routes there (the loopback for 127.0.0.1), never to 0.0.0.0, and drops whatever comes from anyone else.
 
 **Axes.** Ours are right-handed, x to the character's left; VMC's are Unity's
 (left-handed, x to the avatar's right): a position (x, y, z) is sent as
@@ -98,7 +101,14 @@ class VmcSender:
                 if len(self._slots) < len(self.names):
                     self._slots.append((gi, at + m.size))  # the value is the message's last 4 bytes
                 at += 4 + m.size
+        # Connected, so the kernel binds it to the address that routes to the destination (the loopback
+        # for 127.0.0.1), never to 0.0.0.0, and drops datagrams from anyone but the destination.
         self._sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.connect(self.address)
+        except OSError as exc:
+            self._sock.close()
+            raise OSError(f"--vmc-out {host}:{port}: cannot send there: {exc.strerror or exc}") from exc
 
     def send(self, weights: np.ndarray, rotation: np.ndarray | None = None,
              translation: np.ndarray | None = None) -> None:
@@ -112,7 +122,7 @@ class VmcSender:
         struct.pack_into(">7f", self._head, self._head_at, -px, py, pz, qx, -qy, -qz, qw)  # mirror x
         for d in self.datagrams:
             try:
-                self._sock.sendto(d, self.address)
+                self._sock.send(d)
                 self.counters["bundles_sent"] += 1
             except OSError:
                 self.counters["send_errors"] += 1
