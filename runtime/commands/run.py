@@ -15,7 +15,8 @@ it onto the rig and draws. Around that loop:
   (:mod:`~facepuppet.runtime.recording.recorder`); ``facepuppet replay FILE`` re-decodes it.
 * ``--audio [DEVICE]`` / ``--audio-file WAV``: the audio level (dBFS) on every
   drawn frame; no device is a message, not an error.
-* ``--vmc-out HOST:PORT``: the rig weights and head pose as VMC, every tick.
+* ``--vmc-out HOST:PORT``: the face as VMC perfect sync + VRM 0.x presets and the head pose, every tick
+  (:mod:`~facepuppet.runtime.live.vmc_out`); ``--vmc-extra`` adds the rig's channels outside ARKit.
 * ``--stats``: counters and per-stage latency once a second and at exit.
 * Parameter spaces (:mod:`~facepuppet.runtime.live.stages`): ``--input markers``
   with ``--actor``/``--pair`` (marker solve, Shin & Lee), ``--retarget`` (kernel
@@ -80,7 +81,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="measure the microphone level (default input device, or DEVICE by name or number)")
     p.add_argument("--audio-file", type=Path, default=None, metavar="WAV", help="a WAV file as the audio input")
     p.add_argument("--record", type=Path, default=None, metavar="FILE", help="record packets and audio levels")
-    p.add_argument("--vmc-out", default=None, metavar="HOST:PORT", help="send the rig weights and head as VMC")
+    p.add_argument("--vmc-out", default=None, metavar="HOST:PORT",
+                   help="send the face and head as VMC: the 52 ARKit shapes (perfect sync), the VRM 0.x presets "
+                        "derived from them, the head bone")
+    p.add_argument("--vmc-extra", action="store_true",
+                   help="with --vmc-out, also send the character's channels outside ARKit (e.g. CheekRaiserLeft)")
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL (no window)")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
@@ -144,6 +149,8 @@ def _check_options(args, default_port) -> _Options:
     loop_fps, idle_fps = (ARRIVAL_GRID_HZ, args.fps) if arrival else (args.fps, None)
     host, port = ("127.0.0.1", default_port) if args.listen is None else parse_host_port(args.listen, "--listen")
     vmc_out = parse_host_port(args.vmc_out) if args.vmc_out else None
+    if getattr(args, "vmc_extra", False) and vmc_out is None:
+        raise ValueError("--vmc-extra: needs --vmc-out HOST:PORT")
     return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out)
 
 
@@ -266,7 +273,8 @@ def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, 
     stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
     hooks = [stats.on_tick, *hooks]
     if opts.vmc_out is not None:
-        sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names)
+        sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names, extra=getattr(args, "vmc_extra", False))
+        log(sender.describe())
         parts.append(sender)
         hooks.append(sender.on_tick)
         counters["vmc_out"] = sender.counters

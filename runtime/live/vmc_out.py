@@ -1,13 +1,29 @@
-"""``--vmc-out HOST:PORT``: the retargeted weights and head pose sent as VMC (PROTOCOLS.md §1).
+"""``--vmc-out HOST:PORT``: the character's weights and head pose sent as VMC (PROTOCOLS.md §1).
 
-Every tick sends, over one UDP socket:
+Every tick sends, over one UDP socket, bundles of at most ``max_bundle`` bytes
+(1,200, as VirtualMotionCapture does), each a complete OSC bundle:
 
-* one bundle with ``/VMC/Ext/Bone/Pos s "Head" f px py pz qx qy qz qw``;
-* the character's channels as ``/VMC/Ext/Blend/Val s Name f value``, names in
-  PascalCase (:func:`~facepuppet.runtime.channels.pascal`: the perfect-sync
-  spelling, case-sensitive), split over as many bundles as keep each under
-  ``max_bundle`` bytes (1,500 by default; VirtualMotionCapture itself stays
-  under 1,200), with one ``/VMC/Ext/Blend/Apply`` at the end of the last.
+1. the status bundle: ``/VMC/Ext/OK i 1 i 3 i 0 i tracking`` (loaded,
+   calibrated, normal mode; tracking 1 once a frame is drawn, 0 before),
+   ``/VMC/Ext/T f seconds`` (since the sender started), ``/VMC/Ext/Root/Pos
+   s "root"`` at the origin, and ``/VMC/Ext/Bone/Pos s "Head" f px py pz qx qy
+   qz qw``;
+2. the blend bundles, ``/VMC/Ext/Blend/Val s Name f value`` each:
+
+   * the 52 ARKit shapes, every tick, in the PascalCase of perfect sync
+     (``EyeBlinkLeft`` … ``TongueOut``), the rig's channels folded into them as
+     :func:`facepuppet.runtime.vrm_names.fold_to_arkit` says (split
+     ``browInnerUp_L/_R`` by their max; a shape the rig lacks is 0);
+   * the 17 VRM 0.x presets (``Blink``, ``Blink_L``, ``Blink_R``, ``A`` …
+     ``O``, ``Joy``, ``LookUp`` …, ``Neutral``) derived from those 52 by
+     :func:`facepuppet.runtime.vrm_names.vrm0_from_arkit`;
+   * with ``extra=True`` (``--vmc-extra``), the rig's channels outside ARKit
+     (``CheekRaiserLeft``, ``PupilDilateRight``) under their PascalCase names;
+
+   split greedily over as many bundles as keep each within ``max_bundle``,
+   with one ``/VMC/Ext/Blend/Apply`` at the end of the last.
+
+Values are clipped to [0, 1] (a BlendShapeProxy value); NaN is sent as 0.
 
 The bundles are built once with python-osc's builders (time tag "immediately")
 and only the big-endian float32 argument bytes are patched per tick, so a tick
@@ -26,7 +42,8 @@ from __future__ import annotations
 
 import socket
 import struct
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -34,13 +51,15 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from facepuppet.runtime.channels import pascal
+from facepuppet.runtime.vrm_names import PERFECT_SYNC_NAMES, VRM0_PRESETS, fold_to_arkit, vrm0_from_arkit
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
 
-MAX_BUNDLE = 1500
+MAX_BUNDLE = 1200
 _BUNDLE_HEAD = 16  # "#bundle\0" + 8-byte time tag
 _F32 = struct.Struct(">f")
+_I32 = struct.Struct(">i")
 
 
 def _message(address: str, *args):
@@ -57,52 +76,85 @@ def _bundle(messages: list) -> bytes:
     return builder.build().dgram
 
 
+def _split(messages: list, max_bundle: int) -> list[list]:
+    """Messages in order, grouped greedily so that each group's bundle is at most ``max_bundle`` bytes."""
+    groups, current, size = [], [], _BUNDLE_HEAD
+    for m in messages:
+        if current and size + 4 + m.size > max_bundle:  # each element costs 4 (size prefix) + its length
+            groups.append(current)
+            current, size = [], _BUNDLE_HEAD
+        current.append(m)
+        size += 4 + m.size
+    groups.append(current)
+    return groups
+
+
 class VmcSender:
-    """Send weights and the head pose as VMC bundles.
+    """Send a character's weights and head pose as VMC bundles (see the module doc).
 
     Parameters
     ----------
     host, port : where to send (UDP)
-    names : sequence of n str, the character's channel names (sent in PascalCase)
-    max_bundle : int, bytes; every datagram stays strictly below this
+    names : sequence of n str, the character's channel names, any spelling
+    max_bundle : int, bytes; every datagram is at most this long
+    extra : bool, also send the channels outside ARKit (``--vmc-extra``)
+    clock : callable returning seconds, for ``/VMC/Ext/T`` when :meth:`send` gets no time
 
     Attributes
     ----------
-    datagrams : list of bytearray, the bundles sent each tick (head first, Apply in the last)
+    sent_names : tuple of str, the Blend/Val names sent each tick, in order (52 ARKit, 17 presets, extras)
+    held_back : tuple of str, the rig's channels outside ARKit not sent (no ``extra``, or a name
+        that clashes with one already sent)
+    datagrams : list of bytearray, the bundles sent each tick (status first, Apply in the last)
     counters : dict: ``bundles_sent``, ``send_errors``
     """
 
-    def __init__(self, host: str, port: int, names: Sequence[str], max_bundle: int = MAX_BUNDLE) -> None:
+    def __init__(self, host: str, port: int, names: Sequence[str], max_bundle: int = MAX_BUNDLE,
+                 extra: bool = False, clock: Callable[[], float] = time.monotonic) -> None:
         self.address = (host, int(port))
-        self.names = tuple(pascal(n) for n in names)
+        names = tuple(names)
+        self._n = len(names)
+        self._first, self._second, extras = fold_to_arkit(names)
+        taken = set(PERFECT_SYNC_NAMES) | set(VRM0_PRESETS)
+        sent_extras, held = [], []
+        for i in extras:
+            name = pascal(names[i])
+            if extra and name not in taken:
+                sent_extras.append(i)
+                taken.add(name)
+            else:
+                held.append(names[i])
+        self._extras = np.array(sent_extras, dtype=np.intp)
+        self.sent_names = PERFECT_SYNC_NAMES + VRM0_PRESETS + tuple(pascal(names[i]) for i in sent_extras)
+        self.held_back = tuple(held)
+        self._extra = extra
         self.counters = {"bundles_sent": 0, "send_errors": 0}
-        head = _message("/VMC/Ext/Bone/Pos", ("Head", "s"), *[(0.0, "f")] * 7)
-        self._head = bytearray(_bundle([head]))
-        self._head_at = len(self._head) - 7 * 4  # the 7 floats end the only message
-        vals = [_message("/VMC/Ext/Blend/Val", (n, "s"), (0.0, "f")) for n in self.names]
-        apply = _message("/VMC/Ext/Blend/Apply")
-        # greedy split: each element costs 4 (size prefix) + its length
-        groups, current, size = [], [], _BUNDLE_HEAD
-        for m in vals + [apply]:
-            if current and size + 4 + m.size >= max_bundle:
-                groups.append(current)
-                current, size = [], _BUNDLE_HEAD
-            current.append(m)
-            size += 4 + m.size
-        groups.append(current)
-        self.datagrams = [self._head] + [bytearray(_bundle(g)) for g in groups]
-        if any(len(d) >= max_bundle for d in self.datagrams):
+        self._clock = clock
+        self._t0 = clock()
+        self._values = np.zeros(len(self.sent_names))
+        self._padded = np.zeros(self._n + 1)  # the rig's values and a 0 for ARKit shapes it lacks
+
+        status = [
+            _message("/VMC/Ext/OK", (1, "i"), (3, "i"), (0, "i"), (0, "i")),
+            _message("/VMC/Ext/T", (0.0, "f")),
+            _message("/VMC/Ext/Root/Pos", ("root", "s"), *[(0.0, "f")] * 6, (1.0, "f")),
+            _message("/VMC/Ext/Bone/Pos", ("Head", "s"), *[(0.0, "f")] * 7),
+        ]
+        self._status = bytearray(_bundle(status))
+        offsets = self._offsets(status)
+        self._tracking_at = offsets[0] + status[0].size - 4  # the OK message's last int
+        self._t_at = offsets[1] + status[1].size - 4
+        self._head_at = offsets[3] + status[3].size - 7 * 4  # the 7 floats end the Head message
+
+        vals = [_message("/VMC/Ext/Blend/Val", (name, "s"), (0.0, "f")) for name in self.sent_names]
+        groups = _split(vals + [_message("/VMC/Ext/Blend/Apply")], max_bundle)
+        self.datagrams = [self._status] + [bytearray(_bundle(g)) for g in groups]
+        if any(len(d) > max_bundle for d in self.datagrams):
             raise ValueError(f"--vmc-out: a channel name is too long to fit a {max_bundle}-byte bundle")
-        # (datagram index, byte offset of the value) of each channel, in order
-        self._slots = []
-        for gi, g in enumerate(groups, start=1):
-            at = _BUNDLE_HEAD
-            for m in g:
-                if len(self._slots) < len(self.names):
-                    self._slots.append((gi, at + m.size))  # the value is the message's last 4 bytes
-                at += 4 + m.size
-        # Connected, so the kernel binds it to the address that routes to the destination (the loopback
-        # for 127.0.0.1), never to 0.0.0.0, and drops datagrams from anyone but the destination.
+        # (datagram index, byte offset of the value) of each Val, in order: the value is the message's last 4 bytes
+        self._slots = [(gi, at + m.size - 4) for gi, g in enumerate(groups, start=1)
+                       for at, m in zip(self._offsets(g), g) if m.address != "/VMC/Ext/Blend/Apply"]
+
         self._sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self._sock.connect(self.address)
@@ -110,16 +162,41 @@ class VmcSender:
             self._sock.close()
             raise OSError(f"--vmc-out {host}:{port}: cannot send there: {exc.strerror or exc}") from exc
 
+    @staticmethod
+    def _offsets(messages: list) -> list[int]:
+        """Byte offset of each message inside the bundle built from ``messages``."""
+        out, at = [], _BUNDLE_HEAD
+        for m in messages:
+            out.append(at + 4)
+            at += 4 + m.size
+        return out
+
+    def values(self, weights: np.ndarray) -> np.ndarray:
+        """The Blend/Val values of ``weights`` (n,) float, in :attr:`sent_names` order (float64, in [0, 1])."""
+        padded = self._padded
+        padded[:-1] = weights
+        np.nan_to_num(padded, copy=False, nan=0.0)
+        np.clip(padded, 0.0, 1.0, out=padded)
+        out = self._values
+        arkit = np.maximum(padded[self._first], padded[self._second])
+        n_arkit, n_presets = len(PERFECT_SYNC_NAMES), len(VRM0_PRESETS)
+        out[:n_arkit] = arkit
+        out[n_arkit:n_arkit + n_presets] = vrm0_from_arkit(arkit)
+        out[n_arkit + n_presets:] = padded[self._extras]
+        return out
+
     def send(self, weights: np.ndarray, rotation: np.ndarray | None = None,
-             translation: np.ndarray | None = None) -> None:
+             translation: np.ndarray | None = None, t: float | None = None, tracking: bool = True) -> None:
         """Send one tick: weights (n,) float, rotation (4,) (x, y, z, w) or None (identity),
-        translation (3,) or None (zero). Send errors are counted, never raised."""
-        w = np.nan_to_num(np.asarray(weights, dtype=np.float64), nan=0.0)
-        for (gi, at), v in zip(self._slots, w):
+        translation (3,) or None (zero), ``t`` seconds for ``/VMC/Ext/T`` (None: since the sender
+        started), ``tracking`` for the OK message. Send errors are counted, never raised."""
+        for (gi, at), v in zip(self._slots, self.values(weights).tolist()):
             _F32.pack_into(self.datagrams[gi], at, v)
         px, py, pz = (0.0, 0.0, 0.0) if translation is None else (float(c) for c in translation)
         qx, qy, qz, qw = (0.0, 0.0, 0.0, 1.0) if rotation is None else (float(c) for c in rotation)
-        struct.pack_into(">7f", self._head, self._head_at, -px, py, pz, qx, -qy, -qz, qw)  # mirror x
+        struct.pack_into(">7f", self._status, self._head_at, -px, py, pz, qx, -qy, -qz, qw)  # mirror x
+        _F32.pack_into(self._status, self._t_at, self._clock() - self._t0 if t is None else t)
+        _I32.pack_into(self._status, self._tracking_at, 1 if tracking else 0)
         for d in self.datagrams:
             try:
                 self._sock.send(d)
@@ -128,8 +205,20 @@ class VmcSender:
                 self.counters["send_errors"] += 1
 
     def on_tick(self, info: TickInfo) -> None:
-        """FrameLoop ``on_tick`` hook: send what this tick drew."""
-        self.send(info.weights, info.rotation, info.translation)
+        """FrameLoop ``on_tick`` hook: send what this tick drew (tracking once a frame is on screen)."""
+        self.send(info.weights, info.rotation, info.translation, tracking=info.frame is not None)
+
+    def describe(self) -> str:
+        """One line for the start of a run: what goes out, in how many bundles, what is held back."""
+        n_extra = len(self.sent_names) - 52 - len(VRM0_PRESETS)
+        line = (f"vmc-out: {self.address[0]}:{self.address[1]}, 52 ARKit (perfect sync) + "
+                f"{len(VRM0_PRESETS)} VRM presets" + (f" + {n_extra} extra" if n_extra else "")
+                + f", {len(self.datagrams)} bundles a tick")
+        if self.held_back:
+            shown = ", ".join(self.held_back[:6]) + (" …" if len(self.held_back) > 6 else "")
+            why = "their names clash with one sent" if self._extra else "not ARKit; --vmc-extra sends them"
+            line += f"; not sent ({why}): {shown}"
+        return line
 
     def close(self) -> None:
         self._sock.close()

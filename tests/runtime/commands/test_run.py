@@ -157,11 +157,43 @@ def test_the_receivers_count_calibrate_messages_and_only_those(udp_sender, recei
     ("--allow", "10.0.0.300", "--allow: expected comma-separated IP addresses, got '10.0.0.300'"),
     ("--vmc-out", "127.0.0.1", "--vmc-out: expected HOST:PORT"),
     ("--fps", "0", "--fps: expected a positive number"),
+    ("--vmc-extra", "--draw=tick", "--vmc-extra: needs --vmc-out HOST:PORT"),
 ])
 def test_bad_options_exit_2_with_a_message(character, capsys, option, value, match):
     code = main(["run", "-c", str(character), "--input", "vmc", "--headless", "--duration", "0.1", option, value])
     assert code == 2
     assert match in capsys.readouterr().err
+
+
+@pytest.mark.gl
+def test_run_vmc_out_sends_perfect_sync_and_presets_and_says_so(character, capsys):
+    """Issue 12 §2 end to end: the sphere's jawOpen goes out as JawOpen with the 51 other ARKit names and the
+    presets; its own shape "puff" is held back without --vmc-extra, and the start line says so."""
+    from pythonosc.osc_bundle import OscBundle
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(0.0)
+        code = main(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{free_udp_port()}",
+                     "--headless", "--duration", "0.5", "--size", "64x48", "--draw", "tick", "--fps", "20",
+                     "--vmc-out", f"127.0.0.1:{receiver.getsockname()[1]}"])
+        datagrams = []
+        while True:
+            try:
+                datagrams.append(receiver.recv(65536))
+            except BlockingIOError:
+                break
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "vmc-out: 127.0.0.1:" in out and "52 ARKit (perfect sync) + 17 VRM presets" in out
+    assert "not sent (not ARKit; --vmc-extra sends them): puff" in out
+    assert datagrams and all(len(d) <= 1200 for d in datagrams)
+    messages = [(m.address, m.params) for d in datagrams for m in OscBundle(d)]
+    end = max(i for i, (a, _) in enumerate(messages) if a == "/VMC/Ext/Blend/Apply")
+    start = max(i for i, (a, _) in enumerate(messages[:end]) if a == "/VMC/Ext/OK")
+    names = [p[0] for a, p in messages[start:end] if a == "/VMC/Ext/Blend/Val"]
+    assert len(names) == len(set(names)) == 69 and {"JawOpen", "TongueOut", "A", "Blink_L"} <= set(names)
+    assert "Puff" not in names
 
 
 def test_busy_port_is_a_message_not_a_traceback(character, capsys):

@@ -1,4 +1,6 @@
-"""VMC output as an independent receiver sees it: liblo's oscdump on 127.0.0.1."""
+"""VMC output as independent receivers see it on 127.0.0.1: liblo's oscdump (a subprocess) and a UDP socket
+read with python-osc. The expected values are worked out here from the documented rules (perfect-sync
+PascalCase, split sides folded by their max, the VRM 0.x preset table), never read back from the sender."""
 
 from __future__ import annotations
 
@@ -60,43 +62,159 @@ def oscdump_capture(make_sender, send, tmp_path, min_applies=1, timeout_s=10.0) 
 
 
 def last_tick(messages):
-    """Messages of the last complete tick: from the Head bone before the last Apply to that Apply."""
+    """Messages of the last complete tick: from the OK before the last Apply to that Apply."""
     end = max(i for i, (a, _) in enumerate(messages) if a == "/VMC/Ext/Blend/Apply")
-    start = max(i for i, (a, _) in enumerate(messages[:end]) if a == "/VMC/Ext/Bone/Pos")
+    start = max(i for i, (a, _) in enumerate(messages[:end]) if a == "/VMC/Ext/OK")
     return messages[start:end + 1]
 
 
-def test_oscdump_sees_pascal_case_names_values_apply_last_and_the_head(tmp_path):
-    names = ("jawOpen", "eyeBlink_L", "mouthSmile_R", "browInnerUp")
-    weights = np.array([0.5, 0.25, 0.875, 0.125])
+# ICT-FaceKit's 57 shape names (the data kit's ict-facekit/*.obj): ARKit with _L/_R, browInnerUp and
+# cheekPuff split, no tongueOut, four shapes outside ARKit
+ICT_NAMES = (
+    "PupilDilate_L", "PupilDilate_R", "browDown_L", "browDown_R", "browInnerUp_L", "browInnerUp_R",
+    "browOuterUp_L", "browOuterUp_R", "cheekPuff_L", "cheekPuff_R", "cheekRaiser_L", "cheekRaiser_R",
+    "cheekSquint_L", "cheekSquint_R", "eyeBlink_L", "eyeBlink_R", "eyeLookDown_L", "eyeLookDown_R",
+    "eyeLookIn_L", "eyeLookIn_R", "eyeLookOut_L", "eyeLookOut_R", "eyeLookUp_L", "eyeLookUp_R",
+    "eyeSquint_L", "eyeSquint_R", "eyeWide_L", "eyeWide_R", "jawForward", "jawLeft", "jawOpen", "jawRight",
+    "mouthClose", "mouthDimple_L", "mouthDimple_R", "mouthFrown_L", "mouthFrown_R", "mouthFunnel", "mouthLeft",
+    "mouthLowerDown_L", "mouthLowerDown_R", "mouthPress_L", "mouthPress_R", "mouthPucker", "mouthRight",
+    "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper", "mouthSmile_L", "mouthSmile_R",
+    "mouthStretch_L", "mouthStretch_R", "mouthUpperUp_L", "mouthUpperUp_R", "noseSneer_L", "noseSneer_R",
+)
+PRESETS = ("Blink", "Blink_L", "Blink_R", "A", "I", "U", "E", "O", "Joy", "Angry", "Sorrow", "Fun",
+           "LookUp", "LookDown", "LookLeft", "LookRight", "Neutral")
+
+
+def ict_weights(seed=3):
+    """Distinct weights in [0.05, 0.95] for the ICT names, the two sides of the split shapes unequal."""
+    w = np.random.default_rng(seed).uniform(0.05, 0.95, len(ICT_NAMES))
+    return dict(zip(ICT_NAMES, w)), w
+
+
+def expected_blend(by_name: dict) -> dict:
+    """What a perfect-sync + VRM 0.x receiver should get for ICT weights, from the documented rules."""
+    def sided(base):
+        return by_name[base + "_L"], by_name[base + "_R"]
+
+    want = {}
+    for key in ARKIT_NAMES:
+        name = key[0].upper() + key[1:]
+        if key in ("browInnerUp", "cheekPuff"):
+            want[name] = max(sided(key))  # split sides folded by their max
+        elif key == "tongueOut":
+            want[name] = 0.0  # ICT has none
+        elif key.endswith(("Left", "Right")) and key not in ("jawLeft", "jawRight", "mouthLeft", "mouthRight"):
+            base = key[:-4] if key.endswith("Left") else key[:-5]
+            want[name] = by_name[base + ("_L" if key.endswith("Left") else "_R")]
+        else:
+            want[name] = by_name[key]
+
+    def mean(base):
+        return (want[base + "Left"] + want[base + "Right"]) / 2
+
+    def clip(v):
+        return min(max(v, 0.0), 1.0)
+
+    left, right = want["EyeBlinkLeft"], want["EyeBlinkRight"]
+    want.update({
+        "Blink": min(left, right), "Blink_L": left - min(left, right), "Blink_R": right - min(left, right),
+        "A": clip(want["JawOpen"] - 0.5 * want["MouthFunnel"] - 0.5 * want["MouthPucker"]),
+        "I": clip(mean("MouthStretch") - 0.5 * want["MouthPucker"]),
+        "U": clip(want["MouthPucker"] - 0.5 * want["JawOpen"]),
+        "E": clip(0.5 * mean("MouthLowerDown") + 0.5 * mean("MouthStretch") - 0.5 * want["MouthFunnel"]),
+        "O": want["MouthFunnel"], "Joy": mean("MouthSmile"), "Angry": mean("BrowDown"),
+        "Sorrow": 0.5 * want["BrowInnerUp"] + 0.5 * mean("MouthFrown"), "Fun": mean("CheekSquint"),
+        "LookUp": mean("EyeLookUp"), "LookDown": mean("EyeLookDown"),
+        "LookLeft": (want["EyeLookOutLeft"] + want["EyeLookInRight"]) / 2,
+        "LookRight": (want["EyeLookInLeft"] + want["EyeLookOutRight"]) / 2, "Neutral": 0.0,
+    })
+    return want
+
+
+def test_oscdump_gets_the_52_perfect_sync_names_once_the_presets_and_the_status(tmp_path):
+    """Issue 12 §2: ICT's split and extra shapes went out as BrowInnerUpLeft, CheekRaiserLeft ...; BrowInnerUp,
+    CheekPuff and TongueOut never did."""
+    by_name, weights = ict_weights()
     rotation = np.array([0.0, math.sin(0.2), 0.0, math.cos(0.2)])
-    tick = last_tick(oscdump_capture(lambda port: VmcSender("127.0.0.1", port, names),
-                                     lambda sender: sender.send(weights, rotation, [1.0, 2.0, 3.0]), tmp_path))
-    head, *vals, apply = tick
+    tick = last_tick(oscdump_capture(lambda port: VmcSender("127.0.0.1", port, ICT_NAMES),
+                                     lambda sender: sender.send(weights, rotation, [1.0, 2.0, 3.0], t=12.5),
+                                     tmp_path))
+    ok, t, root, head, *vals, apply = tick
+    assert ok == ("/VMC/Ext/OK", [1, 3, 0, 1])  # loaded, calibrated, normal mode, tracking
+    assert t == ("/VMC/Ext/T", [12.5])
+    assert root == ("/VMC/Ext/Root/Pos", ["root", 0, 0, 0, 0, 0, 0, 1])
     assert head[0] == "/VMC/Ext/Bone/Pos" and head[1][0] == "Head"
     np.testing.assert_allclose(head[1][1:], [-1.0, 2.0, 3.0, 0.0, -math.sin(0.2), 0.0, math.cos(0.2)], atol=1e-6)
     assert apply == ("/VMC/Ext/Blend/Apply", [])
-    assert [v[1][0] for v in vals] == ["JawOpen", "EyeBlinkLeft", "MouthSmileRight", "BrowInnerUp"]
     assert all(v[0] == "/VMC/Ext/Blend/Val" for v in vals)
-    np.testing.assert_allclose([v[1][1] for v in vals], weights, atol=1e-6)
+    names = [v[1][0] for v in vals]
+    pascal_arkit = [n[0].upper() + n[1:] for n in ARKIT_NAMES]
+    assert sorted(names) == sorted(pascal_arkit + list(PRESETS))  # each exactly once, nothing else
+    assert not {"BrowInnerUpLeft", "CheekPuffRight", "CheekRaiserLeft", "PupilDilateRight"} & set(names)
+    got = {v[1][0]: v[1][1] for v in vals}
+    want = expected_blend(by_name)
+    for name in want:
+        assert got[name] == pytest.approx(want[name], abs=1e-6), name
 
 
-def test_many_channels_split_into_bundles_under_1500_bytes_all_arriving(tmp_path):
+def test_python_osc_receiver_gets_complete_bundles_within_1200_bytes_apply_at_the_end():
+    by_name, weights = ict_weights(seed=11)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(5.0)
+        sender = VmcSender("127.0.0.1", receiver.getsockname()[1], ICT_NAMES, extra=True)
+        try:
+            sender.send(weights)
+            n = len(sender.datagrams)
+            datagrams = [receiver.recv(65536) for _ in range(n)]
+        finally:
+            sender.close()
+    assert n >= 3 and all(len(d) <= 1200 for d in datagrams)
+    bundles = [OscBundle(d) for d in datagrams]  # python-osc refuses anything but a complete bundle
+    messages = [[(m.address, m.params) for m in b] for b in bundles]
+    applies = [(i, j) for i, ms in enumerate(messages) for j, (a, _) in enumerate(ms) if a == "/VMC/Ext/Blend/Apply"]
+    assert applies == [(n - 1, len(messages[-1]) - 1)]  # one Apply, last in the last bundle
+    assert [a for a, _ in messages[0]] == ["/VMC/Ext/OK", "/VMC/Ext/T", "/VMC/Ext/Root/Pos", "/VMC/Ext/Bone/Pos"]
+    vals = [p for ms in messages[1:] for a, p in ms if a == "/VMC/Ext/Blend/Val"]
+    got = dict(vals)
+    assert len(got) == len(vals) == 52 + 17 + 4  # names unique; --vmc-extra adds ICT's four non-ARKit shapes
+    want = expected_blend(by_name)
+    want.update({"CheekRaiserLeft": by_name["cheekRaiser_L"], "CheekRaiserRight": by_name["cheekRaiser_R"],
+                 "PupilDilateLeft": by_name["PupilDilate_L"], "PupilDilateRight": by_name["PupilDilate_R"]})
+    assert set(got) == set(want)
+    for name in want:
+        assert got[name] == pytest.approx(want[name], abs=1e-6), name
+
+
+def test_extras_only_with_vmc_extra_and_said_at_start():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        port = receiver.getsockname()[1]
+        plain = VmcSender("127.0.0.1", port, ICT_NAMES)
+        extra = VmcSender("127.0.0.1", port, ICT_NAMES + ("Blink", "myShape"), extra=True)
+        plain.close()
+        extra.close()
+    assert len(plain.sent_names) == 69 and "CheekRaiserLeft" not in plain.sent_names
+    assert plain.held_back == ("PupilDilate_L", "PupilDilate_R", "cheekRaiser_L", "cheekRaiser_R")
+    assert "not sent (not ARKit; --vmc-extra sends them): PupilDilate_L" in plain.describe()
+    assert extra.sent_names[69:] == ("PupilDilateLeft", "PupilDilateRight", "CheekRaiserLeft", "CheekRaiserRight",
+                                     "MyShape")
+    assert extra.held_back == ("Blink",)  # would clash with the preset
+    assert extra.sent_names.count("Blink") == 1
+
+
+def test_many_long_channels_split_into_bundles_within_1200_bytes_all_arriving(tmp_path):
     names = tuple(ARKIT_NAMES) + tuple(f"customExpressionWithALongName{i:03d}" for i in range(60))
     weights = np.linspace(0.0, 1.0, len(names))
 
     def make_sender(port):
-        sender = VmcSender("127.0.0.1", port, names)
-        assert len(sender.datagrams) >= 4 and all(len(d) < MAX_BUNDLE for d in sender.datagrams)
-        sender.send(weights)
-        parsed = [OscBundle(bytes(d)) for d in sender.datagrams]
-        applies = [i for i, b in enumerate(parsed) for m in b if m.address == "/VMC/Ext/Blend/Apply"]
-        assert applies == [len(parsed) - 1]  # one Apply, in the last bundle
+        sender = VmcSender("127.0.0.1", port, names, extra=True)
+        assert len(sender.datagrams) >= 5 and all(len(d) <= MAX_BUNDLE == 1200 for d in sender.datagrams)
         return sender
 
     tick = last_tick(oscdump_capture(make_sender, lambda sender: sender.send(weights), tmp_path))
     vals = {args[0]: args[1] for address, args in tick if address == "/VMC/Ext/Blend/Val"}
-    assert len(vals) == len(names)
+    assert len(vals) == len(names) + 17
     assert vals["TongueOut"] == pytest.approx(weights[51], abs=1e-6)
     assert vals["CustomExpressionWithALongName059"] == pytest.approx(1.0, abs=1e-6)
 
@@ -106,11 +224,13 @@ def test_nan_weights_are_sent_as_zero_and_send_errors_are_counted():
         receiver.bind(("127.0.0.1", 0))  # someone listens: no ICMP "port unreachable" to count
         sender = VmcSender("127.0.0.1", receiver.getsockname()[1], ("jawOpen",))
         sender.send(np.array([np.nan]))
-        assert OscBundle(bytes(sender.datagrams[1])).content(0).params == ["JawOpen", 0.0]
-        assert sender.counters == {"bundles_sent": 2, "send_errors": 0}
+        params = [m.params for m in OscBundle(bytes(sender.datagrams[1])) if m.address == "/VMC/Ext/Blend/Val"]
+        assert ["JawOpen", 0.0] in params
+        n = len(sender.datagrams)
+        assert sender.counters == {"bundles_sent": n, "send_errors": 0}
         sender.close()
         sender.send(np.array([0.5]))  # closed socket: counted, not raised
-        assert sender.counters["send_errors"] == 2
+        assert sender.counters == {"bundles_sent": n, "send_errors": n}
 
 
 def test_host_port_parsing():
