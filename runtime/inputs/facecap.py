@@ -28,11 +28,19 @@ clamped to [0, 1]. ``/W`` values for the same channels in the same frame win.
 
 **Frame rule.** Values accumulate per frame and a frame carries only what
 arrived for it (NaN elsewhere); head pose and eye rotations persist until
-replaced. A frame is complete
+replaced. Whatever the bundling (one bundle a frame, a frame split over two
+bundles, no bundles at all), a frame is complete
 
-* at the end of a bundle (a bundle is one frame), or, for unbundled messages,
-* on ``/HT`` (Face Cap sends it once per frame), or when a ``/W`` index comes a
-  second time (a new frame has begun: the previous one is emitted first).
+* on ``/HT`` (Face Cap sends it once per frame), or
+* when a ``/W`` index comes a second time (a new frame has begun: the previous
+  one is emitted first), or
+* at the end of a bundle once all 52 ``/W`` indices have arrived (nothing more
+  can come for that frame).
+
+The end of a bundle alone does not end a frame: a frame split over two
+bundles is emitted once, whole, not as two halves each with the other's
+channels missing. The state is the adapter's own: each receiver (thread or
+process) decodes with its own adapter, one per source.
 
 At most one frame is emitted per distinct receive time; values that complete
 at an already-used time go out with the next frame. A non-finite value
@@ -120,8 +128,7 @@ class FaceCapAdapter(OscAdapter):
             if v is not None:
                 self.head_translation = np.array(v, dtype=np.float32)
                 self._dirty = True
-            if not self._is_bundle:
-                self._emit(self._complete(t))
+            self._frame_ends(t)
         elif address == "/HR":
             v = self._vector(params, 3)
             if v is not None:
@@ -164,8 +171,8 @@ class FaceCapAdapter(OscAdapter):
         if value is None or not 0 <= index < len(FACECAP_ORDER):
             self._count("malformed")
             return
-        if self._seen[index] and not self._is_bundle:
-            self._emit(self._complete(t))  # the index came again: a new frame has begun
+        if self._seen[index]:
+            self._frame_ends(t)  # the index came again: a new frame has begun
         self._seen[index] = True
         if not finite32(value):
             self._poisoned = True
@@ -173,8 +180,13 @@ class FaceCapAdapter(OscAdapter):
         self._weights[_TO_ARKIT[index]] = value
         self._dirty = True
 
+    def _frame_ends(self, t: float) -> None:
+        frame = self._complete(t)
+        if frame is not None:  # None (nothing new, or the time already used) must not drop an emitted frame
+            self._emit(frame)
+
     def _end_datagram(self, t: float) -> Frame | None:
-        return self._complete(t) if self._is_bundle else None
+        return self._complete(t) if self._is_bundle and all(self._seen) else None
 
     def _complete(self, t: float) -> Frame | None:
         """The frame accumulated so far (None if empty, poisoned or at an already-used time)."""
