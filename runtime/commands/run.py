@@ -200,6 +200,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
     character = Character.load(args.character)
     stop_event = stop_event or threading.Event()
     parts: list = []  # things to close, in reverse order
+    signals = _sigint_sets(stop_event).__enter__()  # from here on a SIGTERM or Ctrl-C ends the run cleanly
+    parts.append(signals)
     try:
         # One BLAS thread: OpenBLAS workers and llvmpipe's rasteriser threads fighting over 2 cores made
         # the CPU deformation take 100-600 ms now and then (see blas_threads); also for the path choice.
@@ -313,20 +315,28 @@ class _LiveCounters(dict):
 
 
 class _sigint_sets:
-    """Within the block (main thread only), Ctrl-C sets ``event`` instead of raising."""
+    """Within the block (main thread only), Ctrl-C (SIGINT) and SIGTERM set ``event`` instead of ending the
+    process: the loop stops at its next tick and the run closes its recording and prints its final stats."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self, event: threading.Event):
         self.event = event
-        self.previous = None
+        self.previous: dict = {}
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            self.previous = signal.signal(signal.SIGINT, lambda *_: self.event.set())
+            for signum in self.SIGNALS:
+                self.previous[signum] = signal.signal(signum, lambda *_: self.event.set())
         return self
 
     def __exit__(self, *exc):
-        if self.previous is not None:
-            signal.signal(signal.SIGINT, self.previous)
+        for signum, previous in self.previous.items():
+            signal.signal(signum, previous)
+        self.previous = {}
+
+    def close(self) -> None:
+        self.__exit__()
 
 
 def _bind_calibrate_key(target, pipeline) -> None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import select
 import socket
 import sys
 import time
@@ -53,6 +54,8 @@ from facepuppet.runtime.inputs.udp_shared import (
     SharedBlock,
     padded,
 )
+
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 class _Writer:
@@ -165,18 +168,45 @@ class _Writer:
 
 def child_main() -> None:
     """Entry point of the receiving process: its arguments come pickled on stdin."""
-    shm_name, ring_bytes, fd, family, adapter, allow, want_packets, parent_pid, watch, wake_fd = \
-        pickle.load(sys.stdin.buffer)
+    (shm_name, ring_bytes, fd, family, adapter, allow, want_packets, parent_pid, watch, wake_fd, alive_fd,
+     deathsig) = pickle.load(sys.stdin.buffer)
+    if deathsig:
+        die_with_parent()
+    if os.getppid() != parent_pid:  # the parent died before we got here
+        return
     _child(shm_name, ring_bytes, socket.socket(family, socket.SOCK_DGRAM, fileno=fd), adapter, allow, want_packets,
-           parent_pid, watch, wake_fd)
+           parent_pid, watch, wake_fd, alive_fd)
+
+
+def die_with_parent() -> bool:
+    """Ask the kernel to kill this process when its parent dies (Linux ``PR_SET_PDEATHSIG``); False elsewhere.
+
+    The "parent" is the thread that started us, so the parent sets ``deathsig`` only when it starts the child
+    from its main thread; the ``alive_fd`` pipe covers every other case.
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+        import signal
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
 
 
 def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, want_packets: bool,
-           parent_pid: int, watch: bytes | None = None, wake_fd: int | None = None) -> None:
+           parent_pid: int, watch: str | None = None, wake_fd: int | None = None,
+           alive_fd: int | None = None) -> None:
     """The receiving process: read, stamp, filter, copy for on_packet, decode, publish, wake; never raises.
 
     ``wake_fd``, the non-blocking write end of the parent's pipe, gets a byte
     after each published frame (a full pipe means the parent is awake anyway).
+    ``alive_fd`` is the read end of a pipe whose write end only the parent
+    holds: it becomes readable (end of file) the moment the parent is gone,
+    however it ended, and the child polls it with the socket before every read,
+    so a flooded socket cannot keep the child (and the port) alive.
     """
     shm = shared_memory.SharedMemory(name=shm_name)
     try:  # the parent owns (and unlinks) the block: this process must not have it tracked as its own
@@ -192,13 +222,23 @@ def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, 
     sock.settimeout(POLL_TIMEOUT_S)
     writer.publish_counters()
     ctl[READY] = 1
+    poller = select.poll()
+    poller.register(sock.fileno(), select.POLLIN)
+    if alive_fd is not None:
+        poller.register(alive_fd, select.POLLIN)
+    poll_ms = int(POLL_TIMEOUT_S * 1000)
     try:
         while not ctl[STOP]:
+            events = poller.poll(poll_ms)
+            if alive_fd is not None and any(fd == alive_fd for fd, _ in events):
+                break  # the parent is gone (its end of the pipe closed)
+            if not events:
+                if os.getppid() != parent_pid:  # no pipe (or not yet noticed): the parent is gone
+                    break
+                continue
             try:
                 data, sender, t = receive(sock, stamped, time.monotonic, own)
             except (TimeoutError, BlockingIOError, InterruptedError):
-                if os.getppid() != parent_pid:  # the parent is gone
-                    break
                 continue
             except OSError as exc:
                 own["internal_error"] += 1

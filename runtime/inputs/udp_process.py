@@ -47,6 +47,7 @@ import select
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from multiprocessing import shared_memory
@@ -132,6 +133,7 @@ class UdpProcessSource:
         self._names_pos = 0
         self._final: dict[str, int] | None = None
         self._wake: tuple[int, int] | None = None   # pipe (read, write): a byte per published frame
+        self._alive: tuple[int, int] | None = None  # pipe (read: the child's, write: held here until stop)
         self._watched_final = 0
 
     @property
@@ -163,16 +165,20 @@ class UdpProcessSource:
         self._wake = os.pipe()
         for fd in self._wake:
             os.set_blocking(fd, False)   # the child never waits on a full pipe; the parent drains
+        self._alive = os.pipe()   # only this process holds the write end: its death closes it (the child leaves)
+        # PR_SET_PDEATHSIG follows the starting *thread*: asked for only from the main thread
+        deathsig = threading.current_thread() is threading.main_thread()
         # A fresh interpreter (not fork: this process may hold a GL context and threads; not
         # multiprocessing's spawn: it re-imports the caller's __main__), given the socket by descriptor.
         self._process = subprocess.Popen(
             [sys.executable, "-c", "from facepuppet.runtime.inputs.udp_child import child_main; child_main()"],
-            stdin=subprocess.PIPE, pass_fds=(sock.fileno(), self._wake[1]))
+            stdin=subprocess.PIPE, pass_fds=(sock.fileno(), self._wake[1], self._alive[0]))
+        os.close(self._alive[0])
         try:
             self._process.stdin.write(pickle.dumps((self._shm.name, self.ring_bytes, sock.fileno(), sock.family,
                                                     self.adapter, self.allow, self.on_packet is not None,
                                                     os.getpid(), self.watch,
-                                                    self._wake[1])))
+                                                    self._wake[1], self._alive[0], deathsig)))
             self._process.stdin.close()
         except (OSError, pickle.PicklingError) as exc:
             self.stop()
@@ -192,6 +198,9 @@ class UdpProcessSource:
         if self._process is not None:
             if shared is not None:
                 shared.ctl[STOP] = 1
+            if self._alive is not None:
+                os.close(self._alive[1])  # the child sees the pipe close at once
+                self._alive = None
             try:
                 self._process.wait(timeout=5.0)
             except subprocess.TimeoutExpired:
@@ -215,6 +224,9 @@ class UdpProcessSource:
             for fd in self._wake:
                 os.close(fd)
             self._wake = None
+        if self._alive is not None:
+            os.close(self._alive[1])
+            self._alive = None
 
     def __enter__(self) -> UdpProcessSource:
         return self.start()
