@@ -58,7 +58,7 @@ if TYPE_CHECKING:
 
     from facepuppet.runtime.live.loop import TickInfo
 
-CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
+CALIBRATE_ADDRESS = "/facepuppet/calibrate"  # the receivers count decoded OSC messages to it
 RECEIVERS = ("process", "thread")
 THREAD_SWITCH_INTERVAL_S = 0.0005  # GIL switch interval while a receive *thread* shares the loop's process
 

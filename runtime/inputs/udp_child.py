@@ -3,7 +3,7 @@
 Started as ``python -c "from facepuppet.runtime.inputs.udp_child import child_main; child_main()"``
 with its arguments pickled on stdin and the bound socket passed by descriptor.
 It reads each datagram with its kernel arrival stamp, drops senders outside
-``allow``, counts datagrams containing the watched bytes, copies accepted
+``allow``, counts the OSC messages to the watched address, copies accepted
 datagrams into the ring when the parent has an ``on_packet``, decodes with the
 adapter and publishes the frame (seqlock) and the counters into the shared
 block laid out by :class:`~facepuppet.runtime.inputs.udp_shared.SharedBlock`. It never
@@ -22,7 +22,14 @@ import time
 from multiprocessing import shared_memory
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.inputs.udp import POLL_TIMEOUT_S, enable_kernel_stamps, receive
+from facepuppet.runtime.inputs.udp import (
+    POLL_TIMEOUT_S,
+    count_messages,
+    enable_kernel_stamps,
+    receive,
+    sender_allowed,
+    watch_needle,
+)
 from facepuppet.runtime.inputs.udp_shared import (
     CHANNELS,
     COMPLETED,
@@ -219,6 +226,7 @@ def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, 
     writer = _Writer(shared, adapter)
     own, ctl, handle = writer.own, shared.ctl, adapter.handle
     stamped = enable_kernel_stamps(sock)
+    needle = watch_needle(watch)
     sock.settimeout(POLL_TIMEOUT_S)
     writer.publish_counters()
     ctl[READY] = 1
@@ -247,11 +255,11 @@ def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, 
                 continue
             try:
                 own["packets"] += 1
-                if allow is not None and sender[0] not in allow:
+                if allow is not None and not sender_allowed(sender[0], allow):
                     own["filtered_sender"] += 1
                 else:
-                    if watch is not None and watch in data:
-                        ctl[WATCHED] += 1
+                    if watch is not None:
+                        ctl[WATCHED] += count_messages(data, watch, needle)
                     if want_packets:
                         writer.put_packet(data, t, sender)
                     frame = handle(data, t)

@@ -54,7 +54,7 @@ from multiprocessing import shared_memory
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.inputs.udp import bind_udp, bound_address
+from facepuppet.runtime.inputs.udp import bind_udp, bound_address, normalise_allow
 from facepuppet.runtime.inputs.udp_shared import (
     CHANNELS,
     COMPLETED,
@@ -102,22 +102,23 @@ class UdpProcessSource:
     on_packet : callable(data bytes, t_receive float, sender (host, port)) or None, called
         on the thread that calls :meth:`deliver_packets` / :meth:`stop`
     ring_bytes : int, size of the datagram ring for ``on_packet`` (a multiple of 16, >= 128 KiB)
-    watch : bytes or None: the child counts accepted datagrams containing the bytes (e.g. an OSC
-        address) in :attr:`watched`, without shipping every datagram to this process as ``on_packet`` does
+    watch : str or None, an OSC address: the child counts the decoded OSC messages with exactly this
+        address (bundles included) in accepted datagrams in :attr:`watched`, without shipping every
+        datagram to this process as ``on_packet`` does
     """
 
     def __init__(self, adapter: InputAdapter, host: str = "127.0.0.1", port: int | None = None,
                  allow: set[str] | None = None, on_packet: Callable[[bytes, float, tuple], None] | None = None,
-                 ring_bytes: int = RING_BYTES, watch: bytes | None = None) -> None:
+                 ring_bytes: int = RING_BYTES, watch: str | None = None) -> None:
         if ring_bytes % 16 or ring_bytes < 1 << 17:
             raise ValueError(f"UdpProcessSource ring_bytes: expected a multiple of 16 of at least {1 << 17}, "
                              f"got {ring_bytes!r}")
         self.ring_bytes = int(ring_bytes)
-        self.watch = None if watch is None else bytes(watch)
+        self.watch = None if watch is None else str(watch)
         self.adapter = adapter
         self.host = host
         self.port = adapter.default_port if port is None else int(port)
-        self.allow = None if allow is None else frozenset(allow)
+        self.allow = normalise_allow(allow)
         self.on_packet = on_packet
         self.last_error: BaseException | None = None
         self.rcvbuf_bytes = 0
@@ -236,7 +237,7 @@ class UdpProcessSource:
 
     @property
     def watched(self) -> int:
-        """Accepted datagrams that contained ``watch`` so far (a count that only grows)."""
+        """OSC messages to ``watch`` accepted so far (a count that only grows)."""
         shared = self._shared
         return int(shared.ctl[WATCHED]) if shared is not None else self._watched_final
 
