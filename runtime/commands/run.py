@@ -103,11 +103,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 @dataclass
 class LiveRunResult:
-    """What one live run did: the loop result, the stats, the per-tick weights and the parts' counters."""
+    """What one live run did: the loop result, the stats, the per-tick weights (only when kept: ``--dump-weights``
+    or ``keep_weights``; None otherwise) and the parts' counters."""
 
     loop: LoopResult
     stats: LiveStats
-    weights: WeightLog
+    weights: WeightLog | None
     counters: dict
     path: str
     address: tuple
@@ -174,12 +175,13 @@ def _open_source(args, adapter, opts: _Options, recorder):
 
 def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_event: threading.Event | None = None,
              on_ready: Callable[[tuple[str, int]], None] | None = None,
-             hooks: Sequence[Callable[[TickInfo], None]] = ()) -> LiveRunResult:
+             hooks: Sequence[Callable[[TickInfo], None]] = (), keep_weights: bool = False) -> LiveRunResult:
     """Run a live session from parsed ``args`` (see :func:`register`) and return what it did.
 
     ``stop_event`` set from another thread ends the run at the next tick;
     ``on_ready(address)`` is called once the socket is bound, before the first tick;
-    ``hooks`` are extra FrameLoop ``on_tick`` callables (benchmarks).
+    ``hooks`` are extra FrameLoop ``on_tick`` callables (benchmarks). Each tick's weights are kept
+    (``LiveRunResult.weights``) only with ``--dump-weights`` or ``keep_weights``: a show runs for hours.
 
     Raises
     ------
@@ -238,8 +240,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         if not target.headless and chain.filter is not None:
             _bind_calibrate_key(target, chain.filter)
 
-        weights = WeightLog()
-        sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
+        weights = WeightLog() if keep_weights or getattr(args, "dump_weights", None) is not None else None
+        sinks = ([weights] if weights is not None else []) + ([PngSink(args.out)] if args.out is not None else [])
         counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log)
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,

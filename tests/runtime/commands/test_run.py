@@ -210,6 +210,7 @@ def test_both_receivers_record_every_packet_and_see_the_calibrate_message(charac
     assert "waited_over_1ms" in udp
     assert result.counters["pipeline"]["calibrations"] >= 1  # the calibrate message reached the pipeline
     assert len(read_session(record).packets) == 81
+    assert result.weights is None  # no --dump-weights: no per-tick weight log (a show runs for hours)
 
 
 def test_unknown_receiver_is_refused(character):
