@@ -42,7 +42,10 @@ from facepuppet.runtime.inputs.udp_shared import (
     MAX_COUNTERS,
     MAX_ERRORS_LOGGED,
     MAX_MARKERS,
+    MAX_NAME_RECORD,
     MAX_WEIGHTS,
+    META_BYTES,
+    META_END,
     N_MARKERS,
     N_WEIGHTS,
     NAME,
@@ -51,6 +54,7 @@ from facepuppet.runtime.inputs.udp_shared import (
     NUMBER,
     READY,
     RECORD,
+    RELOG_AFTER,
     RING_R,
     RING_W,
     SEQ,
@@ -63,10 +67,11 @@ from facepuppet.runtime.inputs.udp_shared import (
 )
 
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
+MAX_IDS = 256  # names the child remembers the ring position of
 
 
 class _Writer:
-    """The child's side: names log, counters, slot, ring."""
+    """The child's side: names ring, counter-name and error log, counters, slot, datagram ring."""
 
     def __init__(self, shared: SharedBlock, adapter):
         self.shared, self.adapter = shared, adapter
@@ -74,37 +79,57 @@ class _Writer:
         self.counter_index: dict[str, int] = {}
         self.errors_logged = 0
         self.own = {"packets": 0, "filtered_sender": 0, "internal_error": 0, "waited_over_1ms": 0,
-                    "frame_too_large": 0, "packets_ring_dropped": 0, "names_full": 0}
+                    "frame_too_large": 0, "packets_ring_dropped": 0, "names_full": 0, "names_too_large": 0}
 
     def log(self, kind: str, key, value) -> bool:
-        """Append one name record; False (counted) when the log is full."""
+        """Append one record to the counter-name and error log; False (counted) when it is full."""
         payload = json.dumps([kind, key, value]).encode()
-        ctl, pos = self.shared.ctl, self.shared.ctl[NAMES_END]
-        if pos + 4 + len(payload) > NAMES_BYTES:
+        ctl, pos = self.shared.ctl, self.shared.ctl[META_END]
+        if pos + 4 + len(payload) > META_BYTES:
             self.own["names_full"] += 1
             return False
-        NAME.pack_into(self.shared.names, pos, len(payload))
-        self.shared.names[pos + 4:pos + 4 + len(payload)] = payload
-        ctl[NAMES_END] = pos + 4 + len(payload)  # published after the bytes
+        NAME.pack_into(self.shared.meta, pos, len(payload))
+        self.shared.meta[pos + 4:pos + 4 + len(payload)] = payload
+        ctl[META_END] = pos + 4 + len(payload)  # published after the bytes
         return True
 
     def error(self, exc: BaseException) -> None:
-        """Log an error for ``last_error`` (the first MAX_ERRORS_LOGGED only: the log must keep room for names)."""
+        """Log an error for ``last_error`` (the first MAX_ERRORS_LOGGED only: the log is bounded)."""
         if self.errors_logged < MAX_ERRORS_LOGGED:
             self.errors_logged += 1
             self.log("error", 0, repr(exc)[:500])
 
     def name_id(self, kind: str, value) -> int | None:
+        """The id of ``value`` (its record's absolute position in the names ring), written when new or old."""
         if value is None:
             return -1
         key = (kind, value)
+        ctl = self.shared.ctl
         i = self.ids.get(key)
-        if i is None:
-            i = len(self.ids)
-            if not self.log(kind, i, list(value) if isinstance(value, tuple) else value):
-                return None
-            self.ids[key] = i
-        return i
+        if i is not None and ctl[NAMES_END] - i <= RELOG_AFTER:
+            return i
+        payload = json.dumps([kind, list(value) if isinstance(value, tuple) else value],
+                             ensure_ascii=False).encode()
+        n = NAME.size + len(payload)
+        if n > MAX_NAME_RECORD:
+            self.own["names_too_large"] += 1
+            return None
+        pos = ctl[NAMES_END]
+        p = pos % NAMES_BYTES
+        if p + n > NAMES_BYTES:  # a record is contiguous: go on at the ring's start
+            pos += NAMES_BYTES - p
+            p = 0
+        names = self.shared.names
+        NAME.pack_into(names, p, len(payload))
+        names[p + NAME.size:p + n] = payload
+        ctl[NAMES_END] = pos + n  # published after the bytes
+        if len(self.ids) >= MAX_IDS:  # forget what the ring has overwritten (or everything)
+            end = pos + n
+            self.ids = {k: v for k, v in self.ids.items() if end - v <= RELOG_AFTER}
+            if len(self.ids) >= MAX_IDS:
+                self.ids = {}
+        self.ids[key] = pos
+        return pos
 
     def publish_counters(self) -> None:
         merged = dict(self.adapter.counters)

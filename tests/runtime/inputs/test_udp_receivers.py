@@ -79,3 +79,35 @@ def test_normalise_host():
     assert normalise_host("127.0.0.2") == "127.0.0.2"
     assert normalise_host("0:0::1") == "::1"
     assert normalise_host("not an address") == "not an address"
+
+
+def layout_and_frame(layout_id: int, names: list[str], number: int) -> tuple[bytes, bytes]:
+    import numpy as np
+
+    from facepuppet.runtime.inputs.markers import FRAME, LAYOUT
+
+    points = np.arange(3 * len(names), dtype="<f4").reshape(-1, 3) + number
+    return osc(LAYOUT, layout_id, *names), osc(FRAME, layout_id, number, (0.5, "d"), (points.tobytes(), "b"))
+
+
+def test_a_flood_of_new_marker_layouts_never_shuts_out_the_next_one(receiver, udp_sender):
+    from facepuppet.runtime.inputs.markers import MarkersAdapter
+
+    with receiver(MarkersAdapter(), port=0) as source:
+        def accepted(layout_id: int, names: list[str], number: int) -> bool:
+            layout, frame = layout_and_frame(layout_id, names, number)
+            udp_sender.sendto(layout, source.address)
+            udp_sender.sendto(frame, source.address)
+            got = poll_frame(source)  # each frame is taken before the next layout is sent
+            return got.marker_names == tuple(names) and got.number == number
+
+        # the attack: 48 layouts of 1,000 distinct 24-character names (~1.2 MB of names, more than the old log)
+        # while a steady layout (re-declared each time, as a bridge does) keeps being drawn
+        steady = [f"steady_{i}" for i in range(30)]
+        for k in range(48):
+            assert accepted(k, [f"attack{k:04d}_marker_{i:06d}" for i in range(1000)], k)
+            assert accepted(999, steady, 10_000 + k)
+        # then a mocap bridge's ordinary layouts: every one gets in
+        taken = sum(accepted(1000 + k, [f"bridge{k}_m{i}" for i in range(200)], 5000 + k) for k in range(40))
+        assert taken == 40
+        assert source.counters.get("names_full", 0) == 0 and source.counters["internal_error"] == 0
