@@ -44,7 +44,7 @@ import socket
 import struct
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
@@ -138,7 +138,7 @@ def normalise_host(host: str) -> str:
     return str(ip)
 
 
-def normalise_allow(allow) -> frozenset[str] | None:
+def normalise_allow(allow: Iterable[str] | None) -> frozenset[str] | None:
     """The ``allow`` set in :func:`normalise_host` spelling (None stays None)."""
     return None if allow is None else frozenset(normalise_host(str(h)) for h in allow)
 
