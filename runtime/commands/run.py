@@ -59,7 +59,7 @@ if TYPE_CHECKING:
 
     from facepuppet.runtime.live.loop import TickInfo
 
-CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
+CALIBRATE_ADDRESS = "/facepuppet/calibrate"  # the receivers count decoded OSC messages to it
 RECEIVERS = ("process", "thread")
 THREAD_SWITCH_INTERVAL_S = 0.0005  # GIL switch interval while a receive *thread* shares the loop's process
 
@@ -108,11 +108,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 @dataclass
 class LiveRunResult:
-    """What one live run did: the loop result, the stats, the per-tick weights and the parts' counters."""
+    """What one live run did: the loop result, the stats, the per-tick weights (only when kept: ``--dump-weights``
+    or ``keep_weights``; None otherwise) and the parts' counters."""
 
     loop: LoopResult
     stats: LiveStats
-    weights: WeightLog
+    weights: WeightLog | None
     counters: dict
     path: str
     address: tuple
@@ -181,12 +182,13 @@ def _open_source(args, adapter, opts: _Options, recorder):
 
 def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_event: threading.Event | None = None,
              on_ready: Callable[[tuple[str, int]], None] | None = None,
-             hooks: Sequence[Callable[[TickInfo], None]] = ()) -> LiveRunResult:
+             hooks: Sequence[Callable[[TickInfo], None]] = (), keep_weights: bool = False) -> LiveRunResult:
     """Run a live session from parsed ``args`` (see :func:`register`) and return what it did.
 
     ``stop_event`` set from another thread ends the run at the next tick;
     ``on_ready(address)`` is called once the socket is bound, before the first tick;
-    ``hooks`` are extra FrameLoop ``on_tick`` callables (benchmarks).
+    ``hooks`` are extra FrameLoop ``on_tick`` callables (benchmarks). Each tick's weights are kept
+    (``LiveRunResult.weights``) only with ``--dump-weights`` or ``keep_weights``: a show runs for hours.
 
     Raises
     ------
@@ -207,6 +209,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
     character = Character.load(args.character)
     stop_event = stop_event or threading.Event()
     parts: list = []  # things to close, in reverse order
+    signals = _sigint_sets(stop_event).__enter__()  # from here on a SIGTERM or Ctrl-C ends the run cleanly
+    parts.append(signals)
     try:
         # One BLAS thread: OpenBLAS workers and llvmpipe's rasteriser threads fighting over 2 cores made
         # the CPU deformation take 100-600 ms now and then (see blas_threads); also for the path choice.
@@ -243,8 +247,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         if not target.headless and chain.filter is not None:
             _bind_calibrate_key(target, chain.filter)
 
-        weights = WeightLog()
-        sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
+        weights = WeightLog() if keep_weights or getattr(args, "dump_weights", None) is not None else None
+        sinks = ([weights] if weights is not None else []) + ([PngSink(args.out)] if args.out is not None else [])
         counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log)
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
@@ -321,20 +325,28 @@ class _LiveCounters(dict):
 
 
 class _sigint_sets:
-    """Within the block (main thread only), Ctrl-C sets ``event`` instead of raising."""
+    """Within the block (main thread only), Ctrl-C (SIGINT) and SIGTERM set ``event`` instead of ending the
+    process: the loop stops at its next tick and the run closes its recording and prints its final stats."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self, event: threading.Event):
         self.event = event
-        self.previous = None
+        self.previous: dict = {}
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
-            self.previous = signal.signal(signal.SIGINT, lambda *_: self.event.set())
+            for signum in self.SIGNALS:
+                self.previous[signum] = signal.signal(signum, lambda *_: self.event.set())
         return self
 
     def __exit__(self, *exc):
-        if self.previous is not None:
-            signal.signal(signal.SIGINT, self.previous)
+        for signum, previous in self.previous.items():
+            signal.signal(signum, previous)
+        self.previous = {}
+
+    def close(self) -> None:
+        self.__exit__()
 
 
 def _bind_calibrate_key(target, pipeline) -> None:

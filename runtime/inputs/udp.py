@@ -38,14 +38,17 @@ Which address to bind is the caller's choice (the ``run`` command defaults to
 
 from __future__ import annotations
 
+import functools
+import ipaddress
 import socket
 import struct
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.inputs import osc
 
 if TYPE_CHECKING:
     from facepuppet.runtime.protocols import InputAdapter
@@ -103,6 +106,49 @@ def receive(sock: socket.socket, stamped: bool, clock: Callable[[], float], own:
     return data, sender, clock()
 
 
+def watch_needle(address: str | None) -> bytes | None:
+    """The bytes every OSC message to ``address`` contains (the address and its first padding byte)."""
+    return None if address is None else address.encode("utf-8") + b"\x00"
+
+
+def count_messages(data: bytes, address: str, needle: bytes) -> int:
+    """OSC messages addressed exactly ``address`` in ``data`` (bundles unpacked); 0 for anything else.
+
+    ``needle`` (:func:`watch_needle`) is a cheap first test: only a datagram containing it is decoded.
+    A datagram that merely carries the bytes (a Live Link Face device name, a string argument) counts 0.
+    """
+    if needle not in data:
+        return 0
+    messages = osc.decode(data)
+    if not messages:
+        return 0
+    return sum(1 for a, _ in messages if a == address)
+
+
+@functools.lru_cache(maxsize=512)
+def normalise_host(host: str) -> str:
+    """An IP address in one canonical spelling: IPv4-mapped IPv6 (``::ffff:127.0.0.2``) as IPv4, IPv6
+    compressed and lower-case; anything that is not an address is returned unchanged."""
+    try:
+        ip = ipaddress.ip_address(host)
+    except ValueError:
+        return host
+    if ip.version == 6 and ip.ipv4_mapped is not None:
+        return str(ip.ipv4_mapped)
+    return str(ip)
+
+
+def normalise_allow(allow: Iterable[str] | None) -> frozenset[str] | None:
+    """The ``allow`` set in :func:`normalise_host` spelling (None stays None)."""
+    return None if allow is None else frozenset(normalise_host(str(h)) for h in allow)
+
+
+def sender_allowed(host: str, allow: frozenset[str]) -> bool:
+    """Whether a sender's ``host`` is in ``allow`` (normalised: an IPv4 sender on a dual-stack socket
+    arrives as ``::ffff:a.b.c.d``)."""
+    return host in allow or normalise_host(host) in allow
+
+
 def bind_udp(host: str, port: int, kind: str, stamps: bool = False) -> tuple[socket.socket, int]:
     """A UDP socket bound to host:port with a large receive buffer: (socket, buffer bytes granted).
 
@@ -149,26 +195,27 @@ class UdpSource:
         ``handle(data, t_receive) -> Frame | None`` (see :mod:`facepuppet.runtime.inputs.kinds`)
     host : str, address to bind
     port : int or None, None for the adapter's default port, 0 for any free port
-    allow : set of str or None, sender IP addresses accepted (None: all)
+    allow : set of str or None, sender IP addresses accepted (None: all); IPv4-mapped IPv6 addresses
+        (``::ffff:a.b.c.d``) and their IPv4 spelling match each other
     on_packet : callable(data bytes, t_receive float, sender (host, port)) or None, called on the
         receive thread (the recorder's ``put``: must not block)
     clock : callable() -> float seconds, the receive-time clock; with the default
         (``time.monotonic``) the kernel's arrival stamp is used where there is one
-    watch : bytes or None: accepted datagrams containing the bytes (e.g. an OSC address) are counted
-        in :attr:`watched`
+    watch : str or None, an OSC address: the decoded OSC messages with exactly this address (bundles
+        included) in accepted datagrams are counted in :attr:`watched`
     """
 
     def __init__(self, adapter: InputAdapter, host: str = "127.0.0.1", port: int | None = None,
                  allow: set[str] | None = None, on_packet: Callable[[bytes, float, tuple], None] | None = None,
-                 clock: Callable[[], float] = time.monotonic, watch: bytes | None = None) -> None:
+                 clock: Callable[[], float] = time.monotonic, watch: str | None = None) -> None:
         self.adapter = adapter
         self.host = host
         self.port = adapter.default_port if port is None else int(port)
-        self.allow = None if allow is None else frozenset(allow)
+        self.allow = normalise_allow(allow)
         self.on_packet = on_packet
         self.clock = clock
-        self.watch = None if watch is None else bytes(watch)
-        self.watched = 0  # accepted datagrams containing ``watch`` (only the receive thread writes it)
+        self.watch = None if watch is None else str(watch)
+        self.watched = 0  # OSC messages to ``watch`` accepted (only the receive thread writes it)
         self.last_error: BaseException | None = None
         self._own = {"packets": 0, "filtered_sender": 0, "internal_error": 0, "waited_over_1ms": 0}
         self.rcvbuf_bytes = 0  # kernel receive buffer granted (getsockopt), 0 before start
@@ -223,6 +270,7 @@ class UdpSource:
         sock, stop, own = self._sock, self._stop, self._own
         allow, on_packet, handle, clock, watch = self.allow, self.on_packet, self.adapter.handle, self.clock, \
             self.watch
+        needle = watch_needle(watch)
         stamped = clock is time.monotonic and enable_kernel_stamps(sock)
         while not stop.is_set():
             try:
@@ -237,11 +285,11 @@ class UdpSource:
                 continue
             try:
                 own["packets"] += 1
-                if allow is not None and sender[0] not in allow:
+                if allow is not None and not sender_allowed(sender[0], allow):
                     own["filtered_sender"] += 1
                     continue
-                if watch is not None and watch in data:
-                    self.watched += 1
+                if watch is not None:
+                    self.watched += count_messages(data, watch, needle)
                 if on_packet is not None:
                     on_packet(data, t, sender)
                 frame = handle(data, t)

@@ -32,8 +32,10 @@ Same interface as :class:`UdpSource`: ``start()``/``stop()``, ``address``,
 The slot is a seqlock: the child makes the sequence odd, writes, makes it even;
 the reader copies and retries when the sequence moved (at most ``READ_TRIES``
 times, then takes nothing this tick and counts ``snapshot_busy``). Names (channel
-tuples, marker names, sources, counter names, the last error) go through an
-append-only log in the same memory, written before the slot that uses them.
+tuples, marker names, sources) go through a ring in the same memory, written
+before the slot that uses them and named by their position in it, so old marker
+layouts are overwritten and new ones always get in; counter names and the last
+error go through a small append-only log.
 Ordering relies on stores becoming visible in program order (x86-64's model).
 The child's side is :mod:`~facepuppet.runtime.inputs.udp_child`.
 """
@@ -47,13 +49,14 @@ import select
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from multiprocessing import shared_memory
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.inputs.udp import bind_udp, bound_address
+from facepuppet.runtime.inputs.udp import bind_udp, bound_address, normalise_allow
 from facepuppet.runtime.inputs.udp_shared import (
     CHANNELS,
     COMPLETED,
@@ -63,9 +66,11 @@ from facepuppet.runtime.inputs.udp_shared import (
     HAS_TRANSLATION,
     HAS_WEIGHTS,
     MARKER_NAMES,
+    META_END,
     N_MARKERS,
     N_WEIGHTS,
     NAME,
+    NAMES_BYTES,
     NAMES_END,
     NUMBER,
     READY,
@@ -76,6 +81,7 @@ from facepuppet.runtime.inputs.udp_shared import (
     SEQ,
     SOURCE,
     STOP,
+    VALID_FOR,
     WATCHED,
     WRAP,
     SharedBlock,
@@ -86,6 +92,7 @@ if TYPE_CHECKING:
     from facepuppet.runtime.protocols import InputAdapter
 
 READ_TRIES = 64
+MAX_CACHED_NAMES = 256  # names (channel tuples, marker layouts, sources) kept here; the oldest goes first
 START_TIMEOUT_S = 30.0  # a spawned interpreter importing NumPy on a loaded 2-core machine
 
 class UdpProcessSource:
@@ -101,22 +108,23 @@ class UdpProcessSource:
     on_packet : callable(data bytes, t_receive float, sender (host, port)) or None, called
         on the thread that calls :meth:`deliver_packets` / :meth:`stop`
     ring_bytes : int, size of the datagram ring for ``on_packet`` (a multiple of 16, >= 128 KiB)
-    watch : bytes or None: the child counts accepted datagrams containing the bytes (e.g. an OSC
-        address) in :attr:`watched`, without shipping every datagram to this process as ``on_packet`` does
+    watch : str or None, an OSC address: the child counts the decoded OSC messages with exactly this
+        address (bundles included) in accepted datagrams in :attr:`watched`, without shipping every
+        datagram to this process as ``on_packet`` does
     """
 
     def __init__(self, adapter: InputAdapter, host: str = "127.0.0.1", port: int | None = None,
                  allow: set[str] | None = None, on_packet: Callable[[bytes, float, tuple], None] | None = None,
-                 ring_bytes: int = RING_BYTES, watch: bytes | None = None) -> None:
+                 ring_bytes: int = RING_BYTES, watch: str | None = None) -> None:
         if ring_bytes % 16 or ring_bytes < 1 << 17:
             raise ValueError(f"UdpProcessSource ring_bytes: expected a multiple of 16 of at least {1 << 17}, "
                              f"got {ring_bytes!r}")
         self.ring_bytes = int(ring_bytes)
-        self.watch = None if watch is None else bytes(watch)
+        self.watch = None if watch is None else str(watch)
         self.adapter = adapter
         self.host = host
         self.port = adapter.default_port if port is None else int(port)
-        self.allow = None if allow is None else frozenset(allow)
+        self.allow = normalise_allow(allow)
         self.on_packet = on_packet
         self.last_error: BaseException | None = None
         self.rcvbuf_bytes = 0
@@ -132,6 +140,7 @@ class UdpProcessSource:
         self._names_pos = 0
         self._final: dict[str, int] | None = None
         self._wake: tuple[int, int] | None = None   # pipe (read, write): a byte per published frame
+        self._alive: tuple[int, int] | None = None  # pipe (read: the child's, write: held here until stop)
         self._watched_final = 0
 
     @property
@@ -163,16 +172,20 @@ class UdpProcessSource:
         self._wake = os.pipe()
         for fd in self._wake:
             os.set_blocking(fd, False)   # the child never waits on a full pipe; the parent drains
+        self._alive = os.pipe()   # only this process holds the write end: its death closes it (the child leaves)
+        # PR_SET_PDEATHSIG follows the starting *thread*: asked for only from the main thread
+        deathsig = threading.current_thread() is threading.main_thread()
         # A fresh interpreter (not fork: this process may hold a GL context and threads; not
         # multiprocessing's spawn: it re-imports the caller's __main__), given the socket by descriptor.
         self._process = subprocess.Popen(
             [sys.executable, "-c", "from facepuppet.runtime.inputs.udp_child import child_main; child_main()"],
-            stdin=subprocess.PIPE, pass_fds=(sock.fileno(), self._wake[1]))
+            stdin=subprocess.PIPE, pass_fds=(sock.fileno(), self._wake[1], self._alive[0]))
+        os.close(self._alive[0])
         try:
             self._process.stdin.write(pickle.dumps((self._shm.name, self.ring_bytes, sock.fileno(), sock.family,
                                                     self.adapter, self.allow, self.on_packet is not None,
                                                     os.getpid(), self.watch,
-                                                    self._wake[1])))
+                                                    self._wake[1], self._alive[0], deathsig)))
             self._process.stdin.close()
         except (OSError, pickle.PicklingError) as exc:
             self.stop()
@@ -192,6 +205,9 @@ class UdpProcessSource:
         if self._process is not None:
             if shared is not None:
                 shared.ctl[STOP] = 1
+            if self._alive is not None:
+                os.close(self._alive[1])  # the child sees the pipe close at once
+                self._alive = None
             try:
                 self._process.wait(timeout=5.0)
             except subprocess.TimeoutExpired:
@@ -215,6 +231,9 @@ class UdpProcessSource:
             for fd in self._wake:
                 os.close(fd)
             self._wake = None
+        if self._alive is not None:
+            os.close(self._alive[1])
+            self._alive = None
 
     def __enter__(self) -> UdpProcessSource:
         return self.start()
@@ -224,7 +243,7 @@ class UdpProcessSource:
 
     @property
     def watched(self) -> int:
-        """Accepted datagrams that contained ``watch`` so far (a count that only grows)."""
+        """OSC messages to ``watch`` accepted so far (a count that only grows)."""
         shared = self._shared
         return int(shared.ctl[WATCHED]) if shared is not None else self._watched_final
 
@@ -297,32 +316,55 @@ class UdpProcessSource:
 
     def _frame(self, copy: tuple) -> Frame:
         flags, channels, marker_names, source, number, times, pose, weights, markers = copy
-        names = self._names
-        if (("channels", channels) not in names or ("markers", marker_names) not in names
-                or ("source", source) not in names):
-            self._read_names()
-        return Frame(t=times[0], source=names[("source", source)], channels=names[("channels", channels)],
+        name = self._name
+        return Frame(t=times[0], source=name("source", source), channels=name("channels", channels),
                      weights=weights, head_rotation=pose[:4] if flags & HAS_ROTATION else None,
                      head_translation=pose[4:7] if flags & HAS_TRANSLATION else None, audio_level=times[2],
-                     markers=markers, marker_names=names[("markers", marker_names)], t_sender=times[1],
+                     markers=markers, marker_names=name("markers", marker_names), t_sender=times[1],
                      number=number)
 
-    def _read_names(self) -> None:
-        """Take the log's records written since the last read."""
+    def _name(self, kind: str, i: int):
+        """The name (channel tuple, marker names, source) the child wrote at ring position ``i``.
+
+        Positions are never reused, so what is cached stays right; a record the child may have
+        overwritten since (a flood of new layouts between the frame and this read) raises.
+        """
+        if i == -1:
+            return None
+        key = (kind, i)
+        value = self._names.get(key)
+        if value is not None:
+            return value
         shared = self._shared
-        end = shared.ctl[NAMES_END]
+        names, ctl = shared.names, shared.ctl
+        if i < 0 or i >= ctl[NAMES_END] or ctl[NAMES_END] - i > VALID_FOR:
+            raise RuntimeError(f"names ring: record {i} is gone (written up to {ctl[NAMES_END]})")
+        p = i % NAMES_BYTES
+        (n,) = NAME.unpack_from(names, p)
+        payload = bytes(names[p + NAME.size:p + NAME.size + n]) if p + NAME.size + n <= NAMES_BYTES else b""
+        if ctl[NAMES_END] - i > VALID_FOR:  # overwritten while we copied
+            raise RuntimeError(f"names ring: record {i} was overwritten while read")
+        found_kind, value = json.loads(payload)
+        if found_kind != kind:
+            raise RuntimeError(f"names ring: record {i} is {found_kind!r}, expected {kind!r}")
+        value = tuple(value) if isinstance(value, list) else value
+        if len(self._names) >= MAX_CACHED_NAMES:
+            del self._names[next(iter(self._names))]  # the oldest
+        self._names[key] = value
+        return value
+
+    def _read_names(self) -> None:
+        """Take the counter names and errors the child logged since the last read."""
+        shared = self._shared
+        end = shared.ctl[META_END]
         while self._names_pos < end:
-            (n,) = NAME.unpack_from(shared.names, self._names_pos)
-            kind, key, value = json.loads(bytes(shared.names[self._names_pos + 4:self._names_pos + 4 + n]))
+            (n,) = NAME.unpack_from(shared.meta, self._names_pos)
+            kind, key, value = json.loads(bytes(shared.meta[self._names_pos + 4:self._names_pos + 4 + n]))
             self._names_pos += 4 + n
             if kind == "counter":
                 self._counter_names[key] = value
             elif kind == "error":
                 self.last_error = RuntimeError(value)
-            else:
-                self._names[(kind, key)] = tuple(value) if isinstance(value, list) else value
-        self._names.setdefault(("channels", -1), None)
-        self._names.setdefault(("markers", -1), None)
 
     def deliver_packets(self) -> None:
         """Hand every datagram in the ring to ``on_packet`` (its errors are counted, never raised).
@@ -361,7 +403,8 @@ class UdpProcessSource:
     @property
     def counters(self) -> dict[str, int]:
         """The child's counters (adapter's merged with packets, filtered_sender, internal_error,
-        waited_over_1ms, frame_too_large, packets_ring_dropped, names_full) plus snapshot_busy,
+        waited_over_1ms, frame_too_large, packets_ring_dropped, names_full (the counter-name and error log
+        is full), names_too_large (one name record over MAX_NAME_RECORD)) plus snapshot_busy,
         stale_dropped and rcvbuf_bytes; ``internal_error`` adds both processes'."""
         merged = dict(self._final) if self._shared is None and self._final is not None else (
             self._read_counters() if self._shared is not None else {})

@@ -45,6 +45,7 @@ logger = logging.getLogger(__name__)
 
 STAGES = ("snapshot", "map", "draw_submit", "gpu_finish", "sink")
 ARRIVAL_GRID_HZ = 1000.0  # tick-label grid of a run that draws on arrival (see the module docstring)
+MAX_CHANNEL_MAPS = 64  # channel maps cached (one per distinct channel tuple); the oldest goes first
 
 
 class RecordedClock:
@@ -154,6 +155,7 @@ class FrameLoop:
     sinks : sequence of Sink, each with ``consume(tick_index, t, weights, frame, renderer)``
     fps : float, ticks per second of recorded time
     log : callable taking one str; the channel-map report goes here, once per distinct channel tuple
+        (the last MAX_CHANNEL_MAPS tuples' maps are cached; an older tuple seen again is reported again)
     target : GLTarget or None; when it has a window (``headless`` False) each
         tick polls events, stops on ``should_close()`` and swaps buffers
     stages : sequence of Stage (:func:`~facepuppet.runtime.live.stages.build_chain`), run in order every
@@ -206,6 +208,8 @@ class FrameLoop:
         """The cached map for a channel tuple; built (and its report logged) on first sight."""
         cmap = self._maps.get(channels)
         if cmap is None:
+            if len(self._maps) >= MAX_CHANNEL_MAPS:  # a sender whose channel set keeps changing: bounded
+                del self._maps[next(iter(self._maps))]
             cmap = self._maps[channels] = ChannelMap.build(channels, self.shape_names)
             n_driven = len(self.shape_names) - len(cmap.undriven_target)
             head = (f"channel map ({source or 'source'}): {len(channels)} source channels -> "

@@ -24,12 +24,16 @@ if TYPE_CHECKING:
 
 
 class PngSink:
-    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``renderer.read_pixels()``."""
+    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``renderer.read_pixels()``.
+
+    Keeps no list of what it wrote (a long run writes many): ``written`` counts, ``last_path`` is the newest.
+    """
 
     def __init__(self, out_dir: str | os.PathLike) -> None:
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        self.paths: list[Path] = []
+        self.written = 0
+        self.last_path: Path | None = None
 
     def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
                 renderer: Renderer) -> None:
@@ -37,11 +41,13 @@ class PngSink:
 
         path = self.out_dir / f"frame_{tick_index:05d}.png"
         Image.fromarray(np.ascontiguousarray(renderer.read_pixels())).save(path)
-        self.paths.append(path)
+        self.written += 1
+        self.last_path = path
 
 
 class WeightLog:
-    """Keep each tick's rig weights (for tests and offline analysis).
+    """Keep each tick's rig weights (``--dump-weights``, tests and offline analysis; it grows with every tick,
+    so a live run has one only when asked).
 
     Attributes
     ----------

@@ -53,3 +53,37 @@ def test_load_average_is_three_numbers_or_n_a(monkeypatch):
     assert bench.load_average() == "n/a"
     monkeypatch.delattr(bench.os, "getloadavg")
     assert bench.load_average() == "n/a"
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_bench_soak_runs_short_and_reports_the_rss_series_and_slope(tmp_path):
+    character_path = sphere_character().save(tmp_path / "sphere.npz")
+    out = tmp_path / "soak.json"
+    args = parse(["bench", "soak", "--json", str(out), "-c", str(character_path), "--seconds", "8", "--cycle", "4",
+                  "--sample-s", "0.5", "--size", "64x48", "--quiet"])
+    assert args.func(args) == 0
+    r = json.loads(out.read_text())["results"]
+    assert r["seconds"] == 8.0 and r["warmup_s"] == pytest.approx(8 / 3) and r["goal_mb_per_hour"] == 1.0
+    series = r["rss_mb"]
+    assert len(series) >= 6 and all(p["mb"] > 0 for p in series)
+    assert [p["t_s"] for p in series] == sorted(p["t_s"] for p in series)
+    assert isinstance(r["rss_slope_mb_per_hour"], float) and isinstance(r["passed"], bool)
+    assert r["passed"] == (r["rss_slope_mb_per_hour"] < 1.0)
+    assert r["sent"]["calibrations"] == 4  # at 10 % and 90 % of each of the two cycles
+    assert r["counters"]["pipeline"]["calibrations"] >= 1  # the calibrate messages reached the run
+    assert r["counters"]["pipeline"]["tracking_lost"] >= 1  # the silent stretch of each cycle
+    assert r["counters"]["record"]["packets_recorded"] > 0 and r["record_bytes"] > 0
+    # the sender's frames arrive (3 datagrams each), and its calibrate messages
+    sent = 3 * r["sent"]["frames"] + r["sent"]["calibrations"]
+    assert sent / 2 < r["counters"]["udp"]["packets"] <= sent  # the last few may be unread when the run stops
+
+
+def test_soak_slope_and_phases():
+    from facepuppet.runtime.bench.soak import phase, slope_per_hour
+
+    series = [(t, 100.0 + 2.0 * t / 3600) for t in range(0, 600, 10)]  # 2 MB per hour, exactly
+    assert slope_per_hour(series, 60.0) == pytest.approx(2.0)
+    assert slope_per_hour(series[:2], 0.0) != slope_per_hour(series[:2], 0.0)  # NaN: too few samples
+    assert [phase(t, 60.0) for t in (0, 29.9, 30, 39.9, 40, 49.9, 50, 59.9)] == \
+        ["move", "move", "idle", "idle", "loss", "loss", "move", "move"]

@@ -204,8 +204,8 @@ def test_the_child_leaves_when_the_parent_is_gone(tmp_path):
     wait_for(gone, "the orphaned child to exit")
 
 
-def test_watched_bytes_are_counted_without_on_packet_and_without_callbacks(udp_sender):
-    with UdpProcessSource(VmcAdapter(), port=0, watch=b"/facepuppet/calibrate\x00") as source:
+def test_watched_messages_are_counted_without_on_packet_and_without_callbacks(udp_sender):
+    with UdpProcessSource(VmcAdapter(), port=0, watch="/facepuppet/calibrate") as source:
         udp_sender.sendto(vmc_frame(0.2), source.address)
         poll_frame(source)
         assert source.watched == 0

@@ -61,7 +61,7 @@ def live(argv, send, tmp_path, hooks=()):
 
     logs: list[str] = []
     try:
-        result = run.run_live(args, log=logs.append, on_ready=on_ready, hooks=hooks)
+        result = run.run_live(args, log=logs.append, on_ready=on_ready, hooks=hooks, keep_weights=True)
     finally:
         stop.set()
         for t in threads:
