@@ -21,6 +21,7 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.tables import TablesError, load_tables
+
 from helpers.tables_bombs import inflating_section, padded_manifest, read_manifest, with_manifest
 
 V1 = Path(__file__).parent / "data" / "tables_v1"
