@@ -31,11 +31,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from facepuppet.runtime.errors import InputFileError
+
 UNITS = ("mm", "cm", "m")
 DEFAULT_MAX_GAP = 10  # frames
 
 
-class CaptureError(ValueError):
+class CaptureError(InputFileError):
     """A capture file cannot be read; names the file and the line or field."""
 
     def __init__(self, path: str | os.PathLike, where: str, problem: str) -> None:

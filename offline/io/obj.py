@@ -26,10 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
+from facepuppet.runtime.errors import InputFileError
+
 __all__ = ["ObjError", "ObjMesh", "read_obj", "read_vertices_only"]
 
 
-class ObjError(ValueError):
+class ObjError(InputFileError):
     """An OBJ file cannot be read; the message names the file and, where known, the line."""
 
     def __init__(self, path: str | os.PathLike, line: int | None, problem: str) -> None:

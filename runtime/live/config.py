@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.errors import InputFileError
 
 if TYPE_CHECKING:
     import os
@@ -46,7 +47,7 @@ if TYPE_CHECKING:
 REGIONS = ("eyes", "brows", "mouth", "other", "head")
 
 
-class LiveConfigError(ValueError):
+class LiveConfigError(InputFileError):
     """A config file that cannot be used: the message names the file, the key and the problem."""
 
 

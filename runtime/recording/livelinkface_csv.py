@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
 
@@ -95,7 +96,7 @@ def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Fra
         reader = csv.reader(f)
         header = next(reader, None)
         if header is None:
-            raise ValueError(f"{path}: empty file, expected a Live Link Face CSV header")
+            raise InputFileError(f"{path}: empty file, expected a Live Link Face CSV header")
         header = [h.strip() for h in header]
         index = _column_index(path, header)
         channel_cols = [i for i, name in enumerate(header)
@@ -110,13 +111,13 @@ def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Fra
             if not row or (len(row) == 1 and not row[0].strip()):
                 continue  # blank line (e.g. at the end)
             if len(row) != len(header):
-                raise ValueError(f"{path}, line {line}: {len(row)} cells, the header has {len(header)} columns")
+                raise InputFileError(f"{path}, line {line}: {len(row)} cells, the header has {len(header)} columns")
             try:
                 t_abs, number = parse_timecode(row[tc_col], fps)
             except ValueError as exc:
-                raise ValueError(f"{path}, line {line}, column 'Timecode': {exc}") from None
+                raise InputFileError(f"{path}, line {line}, column 'Timecode': {exc}") from None
             if prev is not None and t_abs < prev:
-                raise ValueError(
+                raise InputFileError(
                     f"{path}, line {line}, column 'Timecode': {row[tc_col]} goes back in time "
                     f"({t_abs:.4f} s after {prev:.4f} s); rows must be in time order"
                 )
@@ -133,7 +134,7 @@ def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Fra
                 head_rotation=rotation, t_sender=t_abs, number=number,
             ))
     if not frames:
-        raise ValueError(f"{path}: no data rows after the header")
+        raise InputFileError(f"{path}: no data rows after the header")
     return frames
 
 
@@ -141,10 +142,11 @@ def _column_index(path: Path, header: list[str]) -> dict[str, int]:
     index: dict[str, int] = {}
     for i, name in enumerate(header):
         if name in index:
-            raise ValueError(f"{path}, line 1: column {name!r} appears twice (columns {index[name] + 1} and {i + 1})")
+            raise InputFileError(f"{path}, line 1: column {name!r} appears twice "
+                                 f"(columns {index[name] + 1} and {i + 1})")
         index[name] = i
     if "Timecode" not in index:
-        raise ValueError(f"{path}, line 1: no 'Timecode' column; expected a Live Link Face CSV header, "
+        raise InputFileError(f"{path}, line 1: no 'Timecode' column; expected a Live Link Face CSV header, "
                          f"found columns {header[:4]}...")
     return index
 
@@ -153,7 +155,7 @@ def _number(path: Path, line: int, header: list[str], row: list[str], col: int) 
     try:
         return float(row[col])
     except ValueError:
-        raise ValueError(
+        raise InputFileError(
             f"{path}, line {line}, column {header[col]!r}: expected a number, found {row[col]!r}"
         ) from None
 

@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.recording.livelinkface_csv import looks_like_llf_csv, read_llf_csv
 from facepuppet.runtime.recording.session import MAGIC, read_session
@@ -142,14 +143,15 @@ def open_recording(path: str | os.PathLike) -> list[Frame]:
             frames = frames_from_packets(session.packets)
             if frames:
                 return frames
-            raise ValueError(f"{path}: the recorded packets decode to no frame")
+            raise InputFileError(f"{path}: the recorded packets decode to no frame")
         if not session.frames:
-            raise ValueError(f"{path}: session file holds no complete frame ({session.tail_error or 'none written'})")
+            raise InputFileError(f"{path}: session file holds no complete frame "
+                                 f"({session.tail_error or 'none written'})")
         return session.frames
     first_line = head.split(b"\n", 1)[0].decode("utf-8", errors="replace")
     if looks_like_llf_csv(first_line):
         return read_llf_csv(path)
-    raise ValueError(
+    raise InputFileError(
         f"{path}: not a recording facepuppet can replay (expected a session file starting with {MAGIC!r} "
         f"or a Live Link Face CSV whose header has Timecode and BlendShapeCount; found {head[:24]!r})"
     )

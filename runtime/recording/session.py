@@ -31,6 +31,7 @@ import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.recording.records import (
     RESERVED_KINDS,
@@ -185,7 +186,7 @@ def read_session(path: str | os.PathLike) -> Session:
     path = Path(path)
     data = path.read_bytes()
     if data[: len(MAGIC)] != MAGIC:
-        raise ValueError(
+        raise InputFileError(
             f"{path}: not a facepuppet session file (expected magic {MAGIC!r}, found {data[:len(MAGIC)]!r})"
         )
     session = Session(path=path, header={}, frames=[], complete=True, n_records=0)
