@@ -193,4 +193,8 @@ def load_live_config(path: str | os.PathLike) -> LiveConfig:
             data = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise LiveConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise LiveConfigError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason}); TOML is UTF-8") from None
+    except RecursionError:
+        raise LiveConfigError(f"{path}: not a config facepuppet can read: arrays or tables nest too deep") from None
     return parse_live_config(data, str(path))

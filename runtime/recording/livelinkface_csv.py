@@ -31,7 +31,10 @@ are allowed (the replay keeps the later row).
 from __future__ import annotations
 
 import csv
+import io
+import math
 import re
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -92,7 +95,15 @@ def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Fra
         a row with the wrong number of cells, or no data rows.
     """
     path = Path(path)
-    with open(path, newline="", encoding="utf-8-sig") as f:
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise InputFileError(f"{path}, line {line}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    out_of_range = 0
+    first_bad = ""
+    with io.StringIO(text, newline="") as f:
         reader = csv.reader(f)
         header = next(reader, None)
         if header is None:
@@ -124,17 +135,29 @@ def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Fra
             prev = t_abs
             if t0 is None:
                 t0 = t_abs
-            weights = np.array([_number(path, line, header, row, i) for i in channel_cols], dtype=np.float32)
+            values = [_number(path, line, header, row, i) for i in channel_cols]
+            with np.errstate(over="ignore"):  # beyond float32: inf, counted here, dropped by the loop
+                weights = np.array(values, dtype=np.float32)
             rotation = None
             if head_cols is not None:
                 yaw, pitch, roll = (_number(path, line, header, row, i) for i in head_cols)
-                rotation = euler_to_quat(yaw, pitch, roll)
+                if all(math.isfinite(a) for a in (yaw, pitch, roll)):
+                    rotation = euler_to_quat(yaw, pitch, roll)
+                else:
+                    out_of_range += 1  # the row's pose is unknown: no head rotation (counted below)
+                    first_bad = first_bad or f"line {line}"
+            if not np.isfinite(weights).all():
+                out_of_range += 1
+                first_bad = first_bad or f"line {line}"
             frames.append(Frame(
                 t=t_abs - t0, source=SOURCE, channels=channels, weights=weights,
                 head_rotation=rotation, t_sender=t_abs, number=number,
             ))
     if not frames:
         raise InputFileError(f"{path}: no data rows after the header")
+    if out_of_range:
+        warnings.warn(f"{path}: {out_of_range} rows hold NaN, infinite or out-of-range numbers (first at "
+                      f"{first_bad}); the frame loop drops those frames", UserWarning, stacklevel=2)
     return frames
 
 

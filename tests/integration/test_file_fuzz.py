@@ -191,3 +191,32 @@ def test_every_mutant_of_a_small_real_file_is_read_or_refused_naming_the_file(tm
     assert read is not None
     findings = check_reader(read, real, tmp_path, suffix, SEED + READERS.index(name), extra=extra())
     assert not findings, f"{len(findings)} findings for {name}:\n" + "\n".join(findings[:15])
+
+
+def _head_lines(path: Path, n: int) -> bytes:
+    """The first ``n`` lines of a kit file (a real file, cut short so each case reads quickly)."""
+    with open(path, "rb") as handle:
+        return b"".join(handle.readline() for _ in range(n))
+
+
+KIT = {  # name: (path under ../shared/data, how much of it, reader name in _readers)
+    "markers/animface_jaw.trc": (60, "trc"),
+    "markers/animface_jaw.c3d": (None, "c3d"),
+    "tracker/livelinkface_myslate_3.csv": (40, "live link face csv"),
+    "speech/arctic_a0007.wav": (None, "wav int16"),
+    "mediapipe/canonical_face_model.obj": (None, "obj"),
+    "ict-facekit/ICTFaceModelMaterial.mtl": (None, "mtl"),
+}
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("name", sorted(KIT))
+def test_every_mutant_of_a_data_kit_file_is_read_or_refused_naming_the_file(tmp_path, name):
+    from conftest import need_shared
+
+    path = need_shared(*name.split("/"))
+    lines, reader = KIT[name]
+    real = path.read_bytes() if lines is None else _head_lines(path, lines)
+    read, _, suffix, _ = _readers(tmp_path)[reader]
+    findings = check_reader(read, real, tmp_path, suffix, SEED, n=5)
+    assert not findings, f"{len(findings)} findings for {name}:\n" + "\n".join(findings[:15])
