@@ -199,6 +199,10 @@ def _vertex_rows(scan: _Scan) -> tuple[np.ndarray, np.ndarray | None]:
     rows, counts = _floats(scan, _V, "v", (3, 4, 6, 7))
     if len(rows) == 0:
         raise ObjError(scan.path, None, "no vertices ('v' lines) in the file")
+    too_big = np.abs(rows[:, :3]) > np.finfo(np.float32).max
+    if too_big.any():  # a character stores float32 positions
+        line = int(np.flatnonzero(scan.code == _V)[np.argmax(too_big.any(axis=1))])
+        raise ObjError(scan.path, line + 1, f"coordinate beyond the float32 range in '{scan.text(line)}'")
     colors = None
     with6, with7 = counts == 6, counts == 7
     if with6.any() or with7.any():
