@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.input_files import regular_file
 
 __all__ = ["ObjError", "ObjMesh", "read_obj", "read_vertices_only"]
 
@@ -98,11 +99,8 @@ class _Scan:
 
 
 def _scan(path: str | os.PathLike) -> _Scan:
-    path = str(path)
-    try:
-        data = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: OBJ file not found") from None
+    path = str(regular_file(path, "OBJ file"))
+    data = Path(path).read_bytes()
     if b"\r" in data:
         data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
     buf = np.frombuffer(data + b"\n", dtype=np.uint8)

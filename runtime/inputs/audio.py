@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
     import os
@@ -115,7 +116,7 @@ def read_wav(path: str | os.PathLike, stereo: str = "mix", finite: bool = False)
 
     if stereo not in ("mix", "refuse"):
         raise ValueError(f"read_wav stereo: expected 'mix' or 'refuse', got {stereo!r}")
-    path = Path(path)
+    path = regular_file(path, "WAV file")
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

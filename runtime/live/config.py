@@ -35,11 +35,11 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
     import os
@@ -187,7 +187,7 @@ def load_live_config(path: str | os.PathLike) -> LiveConfig:
     FileNotFoundError
         when the file does not exist.
     """
-    path = Path(path)
+    path = regular_file(path, "TOML config file")
     try:
         with open(path, "rb") as f:
             data = tomllib.load(f)

@@ -43,6 +43,7 @@ import numpy as np
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
     import os
@@ -94,7 +95,7 @@ def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Fra
         column, a malformed or backwards timecode, a cell that is not a number,
         a row with the wrong number of cells, or no data rows.
     """
-    path = Path(path)
+    path = regular_file(path, "Live Link Face CSV")
     raw = path.read_bytes()
     try:
         text = raw.decode("utf-8-sig")

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Iterable
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.input_files import regular_file
 from facepuppet.runtime.recording.livelinkface_csv import looks_like_llf_csv, read_llf_csv
 from facepuppet.runtime.recording.session import MAGIC, read_session
 
@@ -132,7 +132,7 @@ def open_recording(path: str | os.PathLike) -> list[Frame]:
     FileNotFoundError
         when it does not exist.
     """
-    path = Path(path)
+    path = regular_file(path, "recording (session file or Live Link Face CSV)")
     with open(path, "rb") as f:
         head = f.read(4096)
     if head.startswith(MAGIC):

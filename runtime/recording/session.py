@@ -23,6 +23,7 @@ record before a torn or corrupt one and says where it stopped.
 from __future__ import annotations
 
 import json
+import math
 import os
 import struct
 import time
@@ -33,6 +34,7 @@ from pathlib import Path
 
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.input_files import regular_file
 from facepuppet.runtime.recording.records import (
     RESERVED_KINDS,
     Layout,
@@ -183,7 +185,7 @@ def read_session(path: str | os.PathLike) -> Session:
     ValueError
         when the file does not start with the session magic.
     """
-    path = Path(path)
+    path = regular_file(path, "session file")
     data = path.read_bytes()
     if data[: len(MAGIC)] != MAGIC:
         raise InputFileError(
@@ -219,7 +221,36 @@ def read_session(path: str | os.PathLike) -> Session:
             break
         session.n_records += 1
         offset = start + length
+    _check_header(path, session.header)
     return session
+
+
+def _number_field(value: object) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            and value > 0)
+
+
+_INFO_FIELDS = {  # the header's info fields a reader uses: (check, what it must be)
+    "fps": (_number_field, "a positive number"),
+    "idle_fps": (lambda v: v is None or _number_field(v), "a positive number or null"),
+    "input": (lambda v: isinstance(v, str), "a string"),
+}
+
+
+def _check_header(path: Path, header: object) -> None:
+    """The HEADER record, when one was read, is an object whose ``info`` fields have the types readers use."""
+    if not isinstance(header, dict):
+        raise InputFileError(f"{path}: session header: expected a JSON object, found {type(header).__name__}")
+    if "info" not in header:
+        return
+    info = header["info"]
+    if not isinstance(info, dict):
+        raise InputFileError(f"{path}: session header field 'info': expected a JSON object, found "
+                             f"{type(info).__name__} {str(info)[:40]!r}")
+    for key, (ok, what) in _INFO_FIELDS.items():
+        if key in info and not ok(info[key]):
+            raise InputFileError(f"{path}: session header field 'info.{key}': expected {what}, found "
+                                 f"{str(info[key])[:40]!r}")
 
 
 def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, payload: bytes, first: bool) -> None:

@@ -10,13 +10,16 @@ traceback, a refusal without the path, a RuntimeWarning) is a finding.
 from __future__ import annotations
 
 import re
+import struct
 import warnings
+import zlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 
 from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.recording.session import MAGIC
 
 TOKEN = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?|[A-Za-z_][A-Za-z_0-9]*")
 SWAPS = (b"abc", b"1e300", b"-1", b"nan", b"", b"\xff\xfe", b"[]", b"null", b"0", b"99999999999999999999",
@@ -88,3 +91,10 @@ def check_reader(read: Callable[[Path], object], real: bytes, where: Path, suffi
             findings.append(f"{label}: {problem}")
         path.unlink()
     return findings
+
+
+def swap_session_header(data: bytes, header_payload: bytes) -> bytes:
+    """The session with its HEADER record's payload replaced (length and CRC made valid)."""
+    length, _, kind = struct.unpack_from("<IIB", data, len(MAGIC))
+    rest = data[len(MAGIC) + 9 + length:]
+    return MAGIC + struct.pack("<IIB", len(header_payload), zlib.crc32(header_payload), kind) + header_payload + rest

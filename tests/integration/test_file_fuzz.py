@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import io
 import json
-import struct
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +25,9 @@ from facepuppet.runtime.inputs.audio import read_wav
 from facepuppet.runtime.live.config import load_live_config
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.recording.replay_source import open_recording
-from facepuppet.runtime.recording.session import MAGIC, SessionWriter
+from facepuppet.runtime.recording.session import SessionWriter
 
-from helpers.file_fuzz import check_reader
+from helpers.file_fuzz import check_reader, swap_session_header
 from helpers.tables_bombs import read_manifest, with_manifest
 
 V1 = Path(__file__).resolve().parents[1] / "runtime" / "data" / "tables_v1"
@@ -45,13 +43,6 @@ def session_bytes(tmp: Path, info: dict | None = None) -> bytes:
                                      weights=np.array([i / 20, 0.5], np.float32),
                                      head_rotation=np.array([0, 0, 0, 1], np.float32)))
     return path.read_bytes()
-
-
-def swap_session_header(data: bytes, header_payload: bytes) -> bytes:
-    """The session with its HEADER record's payload replaced (length and CRC made valid)."""
-    length, _, kind = struct.unpack_from("<IIB", data, len(MAGIC))
-    rest = data[len(MAGIC) + 9 + length:]
-    return MAGIC + struct.pack("<IIB", len(header_payload), zlib.crc32(header_payload), kind) + header_payload + rest
 
 
 def header_swaps(data: bytes):
