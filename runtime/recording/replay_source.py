@@ -26,22 +26,36 @@ if TYPE_CHECKING:
     from facepuppet.runtime.recording.records import Packet
 
 
+DEFAULT_MAX_GAP_S = 10.0  # a recording pausing longer than this is cut (replay --max-gap)
+
+
 class ReplaySource:
     """Recorded frames delivered by recorded time.
 
     Parameters
     ----------
     frames : sequence of Frame, in non-decreasing ``t`` order (at least one)
+    max_gap : float, seconds; a pause between two frames longer than this is cut to
+        this length (a frame at t = 1e300, a timecode jumping by hours), counted in
+        ``gaps`` and ``cut_s``. ``math.inf`` keeps every pause.
 
     Times passed to :meth:`latest` and :meth:`done` are seconds since the first
     frame (``frames[0].t`` is time 0), so a session recorded on a monotonic
-    clock and a CSV starting at 0 replay alike.
+    clock and a CSV starting at 0 replay alike; after a cut gap they are the
+    recording's times less the seconds cut before them.
+
+    Attributes
+    ----------
+    gaps : list of (frame index, seconds), each pause that was cut, with its recorded length
+    cut_s : float, seconds cut in all
     """
 
-    def __init__(self, frames: Iterable[Frame]) -> None:
+    def __init__(self, frames: Iterable[Frame], max_gap: float = DEFAULT_MAX_GAP_S) -> None:
         self.frames = list(frames)
         if not self.frames:
             raise ValueError("ReplaySource: expected at least one frame, got none")
+        if not max_gap > 0:
+            raise ValueError(f"ReplaySource max_gap: expected a positive number of seconds, got {max_gap!r}")
         for i in range(1, len(self.frames)):
             if self.frames[i].t < self.frames[i - 1].t:
                 raise ValueError(
@@ -49,8 +63,25 @@ class ReplaySource:
                     f"after t={self.frames[i - 1].t}"
                 )
         self.t0 = self.frames[0].t
-        self._times = [f.t - self.t0 for f in self.frames]
+        self.gaps: list[tuple[int, float]] = []
+        self.cut_s = 0.0
+        self._times = [0.0]
+        for i in range(1, len(self.frames)):
+            step = self.frames[i].t - self.frames[i - 1].t
+            if step > max_gap:
+                self.gaps.append((i, step))
+                self.cut_s += step - max_gap
+                step = max_gap
+            self._times.append(self._times[-1] + step)
         self._next = 0
+
+    def describe_gaps(self) -> str:
+        """One line about the cut pauses ("" when none was cut)."""
+        if not self.gaps:
+            return ""
+        longest = max(g for _, g in self.gaps)
+        return (f"cut {len(self.gaps)} pauses longer than the gap limit (first at frame {self.gaps[0][0]}, "
+                f"longest {longest:.6g} s, {self.cut_s:.6g} s cut in all)")
 
     @property
     def duration(self) -> float:

@@ -79,3 +79,19 @@ def test_replay_of_a_crc_valid_but_malformed_header_is_refused_naming_the_file(t
     path.write_bytes(swap_session_header(path.read_bytes(), json.dumps(header).encode()))
     rc, err = replay(capsys, str(path))
     assert rc == 2 and f"{path}: session header" in err, err
+
+
+@pytest.mark.gl
+def test_replay_of_a_frame_at_1e300_ends_after_the_gap_limit_and_says_so(tmp_path, capsys):
+    path = tmp_path / "far.fps"
+    with SessionWriter(path, info={"fps": 60, "input": "vmc"}) as writer:
+        for t in (0.0, 1 / 60, 1e300):
+            writer.write_frame(Frame(t=t, source="vmc", channels=("jawOpen",), weights=np.array([0.5], np.float32)))
+    rc = main(["replay", str(path), "-c", str(CHARACTER), "--headless", "--fps", "5", "--size", "64x64",
+               "--max-gap", "2"])
+    out = capsys.readouterr()
+    text = out.out + out.err
+    assert rc == 0, text
+    assert "replay: cut 1 pauses longer than the gap limit (first at frame 2, longest 1e+300 s" in text
+    assert "--max-gap SECONDS changes the limit (2 s)" in text
+    assert "replay: 12 ticks at 5 fps" in text  # ticks at 0, 0.2, ..., 2.2 s: the first past 2.017 s ends it
