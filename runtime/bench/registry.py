@@ -24,7 +24,8 @@ from importlib.metadata import entry_points
 from pathlib import Path
 
 # Runtime modules that register benchmarks when imported; each must exist and import.
-_BENCH_MODULES = ("facepuppet.runtime.bench.render", "facepuppet.runtime.bench.latency")
+_BENCH_MODULES = ("facepuppet.runtime.bench.render", "facepuppet.runtime.bench.latency",
+                  "facepuppet.runtime.bench.tables_bombs")
 
 
 @dataclass(frozen=True)

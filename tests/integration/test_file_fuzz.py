@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.bench.tables_bombs import read_manifest, with_manifest
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.audio import read_wav
@@ -28,7 +29,6 @@ from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.recording.session import SessionWriter
 
 from helpers.file_fuzz import check_reader, swap_session_header
-from helpers.tables_bombs import read_manifest, with_manifest
 
 V1 = Path(__file__).resolve().parents[1] / "runtime" / "data" / "tables_v1"
 SEED = 17

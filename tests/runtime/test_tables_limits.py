@@ -19,10 +19,9 @@ import pytest
 from facepuppet.runtime import tables as tables_mod
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
+from facepuppet.runtime.bench.tables_bombs import inflating_section, padded_manifest, read_manifest, with_manifest
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.tables import TablesError, load_tables
-
-from helpers.tables_bombs import inflating_section, padded_manifest, read_manifest, with_manifest
 
 V1 = Path(__file__).parent / "data" / "tables_v1"
 BOMB_BYTES = 96 << 20  # the tests' bomb: ~100 kB on disk, 96 MiB inflated
