@@ -215,6 +215,11 @@ def _sparse_deltas(
     for i, path in enumerate(shape_paths, start=1):
         shape = _read_shape(path, neutral_path, len(neutral))
         delta = shape - neutral
+        too_far = np.abs(delta) > np.finfo(np.float32).max
+        if too_far.any():  # each file is within float32, their difference is not: a character stores float32
+            vertex = int(np.argmax(too_far.any(axis=1)))
+            raise ObjError(path, None, f"moves vertex {vertex} by {delta[vertex].tolist()}, beyond the float32 range "
+                                       f"a character stores")
         d_normal = normals_of(shape) - neutral_normals
         keep, per_shape[path.stem] = _stored_vertices(delta, d_normal, tolerance)
         indices.append(keep.astype(np.uint32))

@@ -237,11 +237,9 @@ def test_a_neutral_without_faces_is_refused_naming_it(rig):
         import_rig(root / "neutral.obj", root / "shapes")
 
 
-def test_the_characters_own_refusal_names_the_neutral_not_tables(rig):
-    """Each file is within float32, but the shape's delta (-6e38) is not: the Character refuses it."""
+def test_a_shape_moving_a_vertex_beyond_float32_is_refused_naming_the_shape(rig):
+    """Each file is within float32, but the shape's delta (-6e38) is not (it was '<tables>: delta_positions')."""
     import warnings
-
-    from facepuppet.runtime.tables import TablesError
 
     root, _ = rig
     near_max = GRID.copy()
@@ -250,7 +248,7 @@ def test_the_characters_own_refusal_names_the_neutral_not_tables(rig):
     near_max[5] = (-3e38, 0, 0)
     (root / "shapes" / "jawOpen.obj").write_text(obj_text(near_max))
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        with pytest.raises(TablesError, match=r"neutral\.obj: delta") as caught:
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(ObjError, match=r"jawOpen\.obj: moves vertex 5 by \[-6e\+38, 0\.0, 0\.0\], beyond the "
+                                           r"float32 range"):
             import_rig(root / "neutral.obj", root / "shapes")
-    assert "<tables>" not in str(caught.value)
