@@ -5,6 +5,8 @@ error                  raised when                                          exit
 =====================  ==================================================  =========
 FacepuppetError        base of the project's own errors                     2
 TablesError            a tables file is missing, corrupt or does not fit     2
+InputFileError         any other input file (recording, capture, mesh,      2
+                       audio, config) is unreadable or malformed
 NotFittedError         a fitter is used before ``fit``                      2
 GLUnavailable          no OpenGL context (no display, no EGL)               3
 =====================  ==================================================  =========
@@ -22,3 +24,10 @@ class FacepuppetError(Exception):
 
 class NotFittedError(FacepuppetError, ValueError):
     """A fitter's ``predict``/``transform``/``export`` was called before ``fit``."""
+
+
+class InputFileError(FacepuppetError, ValueError):
+    """An input file (recording, marker capture, mesh, WAV, config) cannot be read; the message names it.
+
+    A ValueError too, so callers that caught the readers' ValueErrors still do.
+    """

@@ -43,10 +43,10 @@ Manifest fields::
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import math
 import os
+import re
 import tempfile
 import zipfile
 from collections.abc import Iterator, Mapping
@@ -441,23 +441,163 @@ def save_tables(
     return path
 
 
-def _read_member(archive: zipfile.ZipFile, member: str, path, field_name: str) -> np.ndarray:
+MAX_MANIFEST_BYTES = 4 << 20  # a manifest is a few kB; 4 MiB is far beyond any real one
+MAX_MANIFEST_DEPTH = 32  # nesting of JSON objects and lists in a manifest
+MAX_SECTION_BYTES = 1 << 30  # one section's array; the largest real table (ICT deltas) is ~7 MB
+READ_CHUNK = 1 << 20  # decompress members this much at a time
+
+
+def _member_stream(archive: zipfile.ZipFile, member: str, path, field_name: str):
+    """Open one archive member for streaming; TablesError on a damaged archive."""
     try:
-        raw = archive.read(member)
-    except (zipfile.BadZipFile, OSError, EOFError) as exc:
+        return archive.open(member)
+    except Exception as exc:  # BadZipFile, NotImplementedError (encrypted/unknown method), OSError
         raise TablesError(path, field_name, f"cannot be read, the file is damaged ({exc})") from None
-    except Exception as exc:  # zlib.error and friends on garbled data
-        raise TablesError(path, field_name, f"cannot be read, the file is damaged ({exc})") from None
+
+
+def _read_exact(stream, buffer: memoryview, path, field_name: str) -> None:
+    """Fill ``buffer`` from ``stream`` in chunks of at most READ_CHUNK bytes."""
+    done = 0
+    total = len(buffer)
     try:
-        return np.lib.format.read_array(io.BytesIO(raw), allow_pickle=False)
-    except ValueError as exc:
-        if "pickle" in str(exc).lower() or "object" in str(exc).lower():
-            raise TablesError(
-                path, field_name, "holds pickled Python objects; tables files are never unpickled"
-            ) from None
+        while done < total:
+            got = stream.readinto(buffer[done:done + min(READ_CHUNK, total - done)])
+            if not got:
+                raise TablesError(path, field_name, f"ends after {done} of {total} bytes; truncated?")
+            done += got
+    except TablesError:
+        raise
+    except Exception as exc:  # zlib.error, BadZipFile (CRC), EOFError on garbled data
+        raise TablesError(path, field_name, f"cannot be read, the file is damaged ({exc})") from None
+
+
+def _read_header(stream, path, field_name: str) -> tuple[tuple[int, ...], bool, np.dtype]:
+    """The ``.npy`` header of a member: (shape, fortran order, dtype); never unpickles."""
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(stream)
+        elif version in ((2, 0), (3, 0)):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(stream)
+        else:
+            raise ValueError(f"unsupported .npy version {version}")
+    except Exception as exc:  # ValueError on a bad header, zlib.error on garbled data
         raise TablesError(path, field_name, f"is not a valid array ({exc})") from None
-    except Exception as exc:
-        raise TablesError(path, field_name, f"is not a valid array ({exc})") from None
+    if dtype.hasobject:
+        raise TablesError(path, field_name, "holds pickled Python objects; tables files are never unpickled")
+    return shape, fortran, dtype
+
+
+def _read_member(archive: zipfile.ZipFile, member: str, path, field_name: str, *,
+                 expect: tuple[list, str] | None = None, limit: int | None = None) -> np.ndarray:
+    """One member's array, decompressed in bounded chunks.
+
+    ``expect`` is the (shape, dtype) the manifest declares: the member's
+    header must agree before its data is read. ``limit`` bounds the bytes
+    the array may hold. The zip entry's declared size must be the header
+    plus the data, so a member that would inflate past it is refused unread.
+    """
+    limit = MAX_SECTION_BYTES if limit is None else limit
+    declared = archive.getinfo(member).file_size
+    if declared > limit + 4096:
+        raise TablesError(path, field_name, f"declares {declared} bytes uncompressed, more than the "
+                                            f"limit of {limit} bytes")
+    with _member_stream(archive, member, path, field_name) as stream:
+        shape, fortran, dtype = _read_header(stream, path, field_name)
+        if expect is not None and (list(shape) != expect[0] or dtype.name != expect[1]):
+            raise TablesError(path, field_name,
+                              f"manifest says shape {expect[0]} dtype {expect[1]}, "
+                              f"archive holds shape {list(shape)} dtype {dtype.name}")
+        count = math.prod(shape)
+        nbytes = count * dtype.itemsize
+        if nbytes > limit:
+            raise TablesError(path, field_name, f"shape {list(shape)} {dtype.name} is {nbytes} bytes, more than "
+                                                f"the limit of {limit} bytes")
+        header = stream.tell() if stream.seekable() else None
+        if header is not None and declared != header + nbytes:
+            raise TablesError(path, field_name, f"the archive entry holds {declared} bytes, but a {list(shape)} "
+                                                f"{dtype.name} array needs {header + nbytes}")
+        arr = np.empty(count, dtype=dtype)
+        _read_exact(stream, memoryview(arr.view(np.uint8).reshape(-1)), path, field_name)
+        try:
+            if stream.read(1):
+                raise TablesError(path, field_name, "holds more bytes than its array")
+        except TablesError:
+            raise
+        except Exception as exc:  # CRC check at the end of the entry
+            raise TablesError(path, field_name, f"cannot be read, the file is damaged ({exc})") from None
+    if fortran:
+        return arr.reshape(shape[::-1]).transpose()
+    return arr.reshape(shape)
+
+
+def _json_depth(raw: bytes) -> int:
+    """How deeply objects and lists nest in JSON text (strings left out), without parsing it."""
+    bare = re.sub(rb'"(?:[^"\\]|\\.)*"', b"", raw)
+    opens = np.frombuffer(bare, dtype=np.uint8)
+    step = np.isin(opens, np.frombuffer(b"[{", np.uint8)).astype(np.int64)
+    step -= np.isin(opens, np.frombuffer(b"]}", np.uint8))
+    return int(np.cumsum(step).max(initial=0))
+
+
+def _parse_manifest(archive: zipfile.ZipFile, member: str, path) -> dict:
+    """The manifest member, size- and depth-checked before it is parsed."""
+    raw = _read_member(archive, member, path, "manifest", limit=MAX_MANIFEST_BYTES)
+    if raw.dtype != np.uint8 or raw.ndim != 1:
+        raise TablesError(path, "manifest", f"must be a uint8 byte string, found {raw.dtype} {raw.shape}")
+    blob = raw.tobytes()
+    depth = _json_depth(blob)
+    if depth > MAX_MANIFEST_DEPTH:
+        raise TablesError(path, "manifest", f"nests {depth} levels deep; at most {MAX_MANIFEST_DEPTH} allowed")
+    try:
+        manifest = json.loads(blob.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:  # ValueError: JSON, and over-long ints
+        raise TablesError(path, "manifest", f"is not valid UTF-8 JSON ({exc})") from None
+    if not isinstance(manifest, dict):
+        raise TablesError(path, "manifest", "must be a JSON object")
+    return manifest
+
+
+def _short(value: Any) -> str:
+    """A manifest value for a message: its repr, cut short (a 5000-digit int has no str())."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 64:
+        return f"an integer of {value.bit_length()} bits"
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+_MANIFEST_TYPES = {  # field: (types, what a message calls them)
+    "format": (str, "a string"),
+    "kind": (str, "a string"),
+    "created_by": (str, "a string"),
+    "units": (str, "a string"),
+    "input_hash": (str, "a string"),
+    "sections": (dict, "an object"),
+    "dims": (dict, "an object"),
+    "channels": (dict, "an object"),
+    "settings": (dict, "an object"),
+    "metrics": (dict, "an object"),
+}
+
+
+def _check_manifest_fields(manifest: Mapping[str, Any], path) -> None:
+    """Each known top-level field of the manifest, where present, has its JSON type."""
+    if manifest.get("format") != FORMAT_NAME:
+        raise TablesError(path, "manifest.format", f"must be {FORMAT_NAME!r}, found {_short(manifest.get('format'))}")
+    version = manifest.get("schema_version")
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        raise TablesError(path, "manifest.schema_version", f"must be a positive integer, found {_short(version)}")
+    for name, (types, what) in _MANIFEST_TYPES.items():
+        if name in manifest and not isinstance(manifest[name], types):
+            raise TablesError(path, f"manifest.{name}", f"must be {what}, found {type(manifest[name]).__name__} "
+                                                       f"{_short(manifest[name])}")
+    for name, meta in manifest.get("sections", {}).items():
+        if not (isinstance(meta, dict) and isinstance(meta.get("shape"), list)
+                and all(isinstance(d, int) and not isinstance(d, bool) and 0 <= d < 1 << 62 for d in meta["shape"])
+                and meta.get("dtype") in ALLOWED_DTYPES):
+            raise TablesError(path, f"manifest.sections.{name}",
+                              f"must be {{\"shape\": [ints >= 0], \"dtype\": one of {ALLOWED_DTYPES}}}, "
+                              f"found {_short(meta)}")
 
 
 def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
@@ -490,28 +630,17 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
         members = {name[:-4] if name.endswith(".npy") else name: name for name in archive.namelist()}
         if MANIFEST_KEY not in members:
             raise TablesError(path, "manifest", "missing (not a facepuppet tables file)")
-        raw = _read_member(archive, members[MANIFEST_KEY], path, "manifest")
-        if raw.dtype != np.uint8 or raw.ndim != 1:
-            raise TablesError(path, "manifest", f"must be a uint8 byte string, found {raw.dtype} {raw.shape}")
-        try:
-            manifest = json.loads(raw.tobytes().decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise TablesError(path, "manifest", f"is not valid UTF-8 JSON ({exc})") from None
-        if not isinstance(manifest, dict):
-            raise TablesError(path, "manifest", "must be a JSON object")
-        if manifest.get("format") != FORMAT_NAME:
-            raise TablesError(path, "manifest.format", f"must be {FORMAT_NAME!r}, found {manifest.get('format')!r}")
-        version = manifest.get("schema_version")
-        if not isinstance(version, int) or isinstance(version, bool) or version < 1:
-            raise TablesError(path, "manifest.schema_version", f"must be a positive integer, found {version!r}")
+        manifest = _parse_manifest(archive, members[MANIFEST_KEY], path)
+        _check_manifest_fields(manifest, path)
+        version = manifest["schema_version"]
         file_kind = manifest.get("kind")
         if kind is not None and file_kind != kind:
-            raise TablesError(path, "manifest.kind", f"expected {kind!r} tables, found {file_kind!r}")
+            raise TablesError(path, "manifest.kind", f"expected {kind!r} tables, found {_short(file_kind)}")
         schema = schema_of(file_kind, path, "manifest.kind")
         if version > schema.version:
             raise TablesError(
                 path, "manifest.schema_version",
-                f"is {version}, written by a newer facepuppet ({manifest.get('created_by', '?')}); "
+                f"is {_short(version)}, written by a newer facepuppet ({manifest.get('created_by', '?')}); "
                 f"this one reads {file_kind} schema versions up to {schema.version}. Upgrade facepuppet to load it.",
             )
         sections = manifest.get("sections")
@@ -520,21 +649,16 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
         for name in members:
             if name != MANIFEST_KEY and name not in sections:
                 raise TablesError(path, name, "is in the archive but not listed in the manifest")
-        arrays: dict[str, np.ndarray] = {}
-        for name, meta in sections.items():
+        for name in sections:
             if name not in members:
                 raise TablesError(path, name, "listed in the manifest but missing from the archive")
             if name not in schema.sections:
                 raise TablesError(path, name, f"not a section of kind {file_kind!r}")
-            arr = _read_member(archive, members[name], path, name)
-            if (not isinstance(meta, dict) or list(arr.shape) != meta.get("shape")
-                    or arr.dtype.name != meta.get("dtype")):
-                raise TablesError(
-                    path, name,
-                    f"manifest says shape {meta.get('shape') if isinstance(meta, dict) else '?'} "
-                    f"dtype {meta.get('dtype') if isinstance(meta, dict) else '?'}, "
-                    f"archive holds shape {list(arr.shape)} dtype {arr.dtype.name}",
-                )
+        # The declared shapes must fit the schema before any data is read: zero-byte views stand in.
+        _section_dims(schema, {name: _placeholder(meta) for name, meta in sections.items()}, path)
+        arrays: dict[str, np.ndarray] = {}
+        for name, meta in sections.items():
+            arr = _read_member(archive, members[name], path, name, expect=(meta["shape"], meta["dtype"]))
             arr.setflags(write=False)
             arrays[name] = arr
     channels = manifest.get("channels", {})
@@ -545,3 +669,9 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
     if units not in ALLOWED_UNITS:
         raise TablesError(path, "manifest.units", f"must be one of {ALLOWED_UNITS}, found {units!r}")
     return Tables(kind=file_kind, arrays=arrays, manifest=manifest, path=str(path))
+
+
+def _placeholder(meta: Mapping[str, Any]) -> np.ndarray:
+    """A zero-byte array with the declared shape and dtype of a section (for checks before reading)."""
+    return np.lib.stride_tricks.as_strided(np.zeros(1, dtype=meta["dtype"]), shape=tuple(meta["shape"]),
+                                           strides=(0,) * len(meta["shape"]), writeable=False)

@@ -31,11 +31,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from facepuppet.runtime.errors import InputFileError
+
 UNITS = ("mm", "cm", "m")
 DEFAULT_MAX_GAP = 10  # frames
 
 
-class CaptureError(ValueError):
+class CaptureError(InputFileError):
     """A capture file cannot be read; names the file and the line or field."""
 
     def __init__(self, path: str | os.PathLike, where: str, problem: str) -> None:
@@ -75,14 +77,20 @@ class Capture:
     filled: int = 0
 
     def __post_init__(self) -> None:
-        m = np.asarray(self.markers, dtype=np.float32)
         where = self.source or "capture"
+        with np.errstate(over="ignore"):  # a value beyond float32 becomes inf, refused below
+            m = np.asarray(self.markers, dtype=np.float32)
         if m.ndim != 3 or m.shape[2] != 3 or m.shape[0] < 1 or m.shape[1] < 1:
             raise CaptureError(where, "markers", f"expected shape (n_frames, n_markers, 3), got {m.shape}")
-        if len(self.names) != m.shape[1] or len(set(self.names)) != len(self.names):
-            raise CaptureError(where, "names", f"expected {m.shape[1]} distinct names, got {len(self.names)}")
+        if len(self.names) != m.shape[1]:
+            raise CaptureError(where, "names", f"expected {m.shape[1]} names, one per marker, got {len(self.names)}")
+        if len(set(self.names)) != len(self.names):
+            dup = sorted({n for n in self.names if list(self.names).count(n) > 1})
+            raise CaptureError(where, "names", f"marker names must be distinct; repeated: {dup[:5]}")
         if np.isinf(m).any():
-            raise CaptureError(where, "markers", "contains infinity")
+            frame, marker, _ = np.argwhere(np.isinf(m))[0]
+            raise CaptureError(where, "markers", f"infinite or beyond float32 range (frame {frame}, marker "
+                                                 f"{self.names[marker]!r})")
         if not (math.isfinite(self.rate) and self.rate > 0):
             raise CaptureError(where, "rate", f"expected a positive frame rate, got {self.rate!r}")
         if self.units not in UNITS:
@@ -116,7 +124,8 @@ def fill_gaps(markers: np.ndarray, names: Sequence[str],
     long_gaps : list of Gap left as NaN (too long, or touching the start/end)
     n_filled : int, number of (frame, marker) samples filled
     """
-    out = np.array(markers, dtype=np.float32, copy=True)
+    with np.errstate(over="ignore"):  # beyond float32: inf, which Capture refuses naming the marker
+        out = np.array(markers, dtype=np.float32, copy=True)
     missing = np.isnan(out).any(axis=2)
     out[missing] = np.nan
     gaps: list[Gap] = []
@@ -131,7 +140,8 @@ def fill_gaps(markers: np.ndarray, names: Sequence[str],
                 continue
             a, b = out[start - 1, j], out[stop, j]
             t = (np.arange(1, length + 1, dtype=np.float32) / (length + 1))[:, None]
-            out[start:stop, j] = a + t * (b - a)
+            with np.errstate(over="ignore", invalid="ignore"):  # absurd samples: inf, refused by Capture
+                out[start:stop, j] = a + t * (b - a)
             n_filled += length
     return out, gaps, n_filled
 
@@ -189,6 +199,9 @@ def read_trc(path: str | os.PathLike, max_gap: int = DEFAULT_MAX_GAP) -> Capture
     names = [c.strip() for c in lines[3].split("\t")[2:] if c.strip()]
     if len(names) != n_markers:
         raise CaptureError(path, "line 4", f"NumMarkers is {n_markers} but {len(names)} marker names follow")
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise CaptureError(path, "line 4", f"marker names must be distinct; repeated: {dup[:5]}")
     rows = []
     width = 2 + 3 * n_markers
     for number, line in enumerate(lines[5:], start=6):
@@ -246,13 +259,14 @@ def read_c3d(path: str | os.PathLike, max_gap: int = DEFAULT_MAX_GAP) -> Capture
 
     path = Path(path)
     try:
-        with open(path, "rb") as handle, warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with open(path, "rb") as handle, warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")  # kept, and said below with the file's name
             reader = c3d.Reader(handle)
             names = [str(n).strip() for n in reader.point_labels]
             units_param = reader.get("POINT:UNITS")
             units = _units(path, "POINT:UNITS", units_param.string_value if units_param else "")
             rate = float(reader.point_rate)
+            declared = int(reader.header.last_frame) - int(reader.header.first_frame) + 1
             frames = [points[:, :4].copy() for _, points, _ in reader.read_frames()]
     except CaptureError:
         raise
@@ -260,6 +274,13 @@ def read_c3d(path: str | os.PathLike, max_gap: int = DEFAULT_MAX_GAP) -> Capture
         raise CaptureError(path, "file", f"not a readable C3D file ({type(exc).__name__}: {exc})") from None
     if not frames:
         raise CaptureError(path, "data", "no frames")
+    if declared > len(frames):
+        raise CaptureError(path, "data", f"the header declares {declared} frames but the file holds {len(frames)}; "
+                                         f"truncated?")
+    said = [" ".join(str(w.message).split()) for w in caught if "No analog data" not in str(w.message)]
+    if said:  # the package's warnings do not name the file: one line, with it
+        warnings.warn(f"{path}: {len(said)} warnings reading the C3D file, first: {said[0]}", UserWarning,
+                      stacklevel=2)
     data = np.stack(frames).astype(np.float64)
     markers = data[:, :, :3]
     markers[data[:, :, 3] < 0] = np.nan
@@ -294,8 +315,13 @@ def read_csv(path: str | os.PathLike, max_gap: int = DEFAULT_MAX_GAP, units: str
     """Read our plain CSV layout (see the module docstring)."""
     path = Path(path)
     meta: dict[str, tuple[int, str]] = {}
-    with open(path, newline="", encoding="utf-8") as handle:
-        lines = handle.read().splitlines()
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise CaptureError(path, f"line {line}", f"not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    lines = text.splitlines()
     start = 0
     while start < len(lines) and lines[start].startswith("#"):
         key, _, value = lines[start][1:].partition(":")
@@ -344,7 +370,11 @@ def read_csv(path: str | os.PathLike, max_gap: int = DEFAULT_MAX_GAP, units: str
                 raise CaptureError(path, f"line {meta['rate'][0]}", f"rate not a number: {meta['rate'][1]!r}") from None
         elif "time" in [h.lower() for h in lead] and len(table) > 1:
             t = table[:, [h.lower() for h in lead].index("time")]
-            rate = 1.0 / float(np.median(np.diff(t)))
+            step = float(np.median(np.diff(t))) if np.isfinite(t).all() else math.nan
+            if not (step > 0 and math.isfinite(1.0 / step)):
+                raise CaptureError(path, "time column", f"cannot give the frame rate: the median step between "
+                                                        f"rows is {step!r} s (expected a positive time step)")
+            rate = 1.0 / step
         else:
             raise CaptureError(path, "header", "no '# rate:' line and no time column to infer the frame rate")
     markers = table[:, len(lead):].reshape(len(table), len(names), 3)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
+
+from facepuppet.runtime.input_files import regular_file
 
 from facepuppet.offline.io.obj import ObjError
 
@@ -40,11 +41,8 @@ def read_mtl(path: str | os.PathLike) -> dict[str, MtlMaterial]:
     ObjError
         a value that is not a finite number, or a value before any ``newmtl`` (naming file and line).
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: MTL file not found") from None
+    path = regular_file(path, "MTL file")
+    text = path.read_text(encoding="utf-8", errors="replace")
     materials: dict[str, MtlMaterial] = {}
     current: dict | None = None
     for number, line in enumerate(text.splitlines(), start=1):

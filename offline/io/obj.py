@@ -26,10 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
+from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.input_files import regular_file
+
 __all__ = ["ObjError", "ObjMesh", "read_obj", "read_vertices_only"]
 
 
-class ObjError(ValueError):
+class ObjError(InputFileError):
     """An OBJ file cannot be read; the message names the file and, where known, the line."""
 
     def __init__(self, path: str | os.PathLike, line: int | None, problem: str) -> None:
@@ -96,11 +99,8 @@ class _Scan:
 
 
 def _scan(path: str | os.PathLike) -> _Scan:
-    path = str(path)
-    try:
-        data = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: OBJ file not found") from None
+    path = str(regular_file(path, "OBJ file"))
+    data = Path(path).read_bytes()
     if b"\r" in data:
         data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
     buf = np.frombuffer(data + b"\n", dtype=np.uint8)
@@ -197,6 +197,10 @@ def _vertex_rows(scan: _Scan) -> tuple[np.ndarray, np.ndarray | None]:
     rows, counts = _floats(scan, _V, "v", (3, 4, 6, 7))
     if len(rows) == 0:
         raise ObjError(scan.path, None, "no vertices ('v' lines) in the file")
+    too_big = np.abs(rows[:, :3]) > np.finfo(np.float32).max
+    if too_big.any():  # a character stores float32 positions
+        line = int(np.flatnonzero(scan.code == _V)[np.argmax(too_big.any(axis=1))])
+        raise ObjError(scan.path, line + 1, f"coordinate beyond the float32 range in '{scan.text(line)}'")
     colors = None
     with6, with7 = counts == 6, counts == 7
     if with6.any() or with7.any():

@@ -27,10 +27,10 @@ import numpy as np
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.geometry import incidence_matrix
-from facepuppet.runtime.tables import hash_inputs
+from facepuppet.runtime.tables import hash_inputs, naming_file
 
 from facepuppet.offline.io.mtl import MtlMaterial, read_mtl
-from facepuppet.offline.io.obj import ObjMesh, read_obj, read_vertices_only
+from facepuppet.offline.io.obj import ObjError, ObjMesh, read_obj, read_vertices_only
 
 __all__ = ["import_rig", "material_kind", "NORMAL_TOLERANCE", "KIND_WORDS"]
 
@@ -128,6 +128,8 @@ def import_rig(
     shape_paths = _shape_paths(neutral_path, shapes_dir, shapes)
 
     mesh = read_obj(neutral_path)
+    if len(mesh.triangles) == 0:
+        raise ObjError(neutral_path, None, "no faces ('f' lines): a character needs a surface")
     deltas, per_shape = _sparse_deltas(mesh, neutral_path, shape_paths, tolerance, progress)
 
     mtl_path, mtl = _read_materials(neutral_path, mesh)
@@ -148,8 +150,15 @@ def import_rig(
         "landmarks": str(landmark_path) if marks is not None else None,
         "pivot_rule": pivot_rule,
     }
+    with naming_file(neutral_path):  # the character's own refusals name the neutral OBJ, not "<tables>"
+        return _character(name or neutral_path.parent.name or neutral_path.stem, units, mesh, color, kinds, mtl,
+                          pivot, shape_paths, deltas, settings, per_shape, inputs)
+
+
+def _character(name, units, mesh, color, kinds, mtl, pivot, shape_paths, deltas, settings, per_shape,
+               inputs) -> Character:
     return Character(
-        name=name or neutral_path.parent.name or neutral_path.stem,
+        name=name,
         units=units,
         vertices=mesh.vertices.astype(np.float32),
         triangles=mesh.triangles.astype(np.uint32),
@@ -206,6 +215,11 @@ def _sparse_deltas(
     for i, path in enumerate(shape_paths, start=1):
         shape = _read_shape(path, neutral_path, len(neutral))
         delta = shape - neutral
+        too_far = np.abs(delta) > np.finfo(np.float32).max
+        if too_far.any():  # each file is within float32, their difference is not: a character stores float32
+            vertex = int(np.argmax(too_far.any(axis=1)))
+            raise ObjError(path, None, f"moves vertex {vertex} by {delta[vertex].tolist()}, beyond the float32 range "
+                                       f"a character stores")
         d_normal = normals_of(shape) - neutral_normals
         keep, per_shape[path.stem] = _stored_vertices(delta, d_normal, tolerance)
         indices.append(keep.astype(np.uint32))

@@ -21,6 +21,8 @@ from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import matrix_to_quat
 from facepuppet.runtime.rigid import kabsch
 
+MAX_COORDINATE = 1e6  # capture units (mm: a kilometre): a marker beyond it is a damaged sample, not a face
+
 
 class ActorRetarget:
     """The ``solve`` stage (a :class:`~facepuppet.runtime.protocols.Stage`): marker frame -> weights frame.
@@ -37,7 +39,9 @@ class ActorRetarget:
     s : ndarray of shape (K,), float64, the last solved actuations
     head_rotation : ndarray of shape (4,), float64, quaternion (x, y, z, w) in the character's axes: the
         last frame's head rotation away from the actor's neutral (identity before any frame)
-    counters : dict, ``frames``, ``no_markers``, ``no_head_pose``
+    counters : dict, ``frames``, ``no_markers``, ``no_head_pose``; ``out_of_range``: frames with a marker
+        coordinate beyond ``MAX_COORDINATE`` or infinite (those markers are treated as occluded);
+        ``no_solution``: frames whose head fit or solve came out non-finite (skipped, previous weights kept)
     """
 
     name = "solve"
@@ -52,7 +56,7 @@ class ActorRetarget:
         self.solver = solver or MarkerSolver(actor)
         self.target_names = tuple(pair.shape_names)
         self.s = np.zeros(actor.n_actuations)
-        self.counters = {"frames": 0, "no_markers": 0, "no_head_pose": 0}
+        self.counters = {"frames": 0, "no_markers": 0, "no_head_pose": 0, "out_of_range": 0, "no_solution": 0}
         self._names: tuple[str, ...] | None = None
         self._index: np.ndarray | None = None
         self._head = np.asarray(actor.head_markers, dtype=np.int64)
@@ -80,15 +84,27 @@ class ActorRetarget:
         obs = np.full((self.actor.n_markers, 3), np.nan)
         ok = index >= 0
         obs[ok] = frame.markers[index[ok]]
+        with np.errstate(invalid="ignore"):  # NaN (occluded) compares False, quietly
+            absurd = (np.abs(obs) > MAX_COORDINATE).any(axis=1)
+        if absurd.any():  # counted once per frame here, where the bad values enter; never warned about
+            self.counters["out_of_range"] += 1
+            obs[absurd] = np.nan
         head_visible = ~np.isnan(obs[self._head]).any(axis=1)
         if head_visible.sum() < 3:
             self.counters["no_head_pose"] += 1
             return None
         h = self._head[head_visible]
-        r, t = kabsch(self._neutral[h], obs[h])
-        # r takes capture axes to head axes, so the head turned by r^T; in the character's axes A r^T A^T
-        self.head_rotation = matrix_to_quat(self._axes @ r.T @ self._axes.T)
-        return obs @ r.T + t
+        with np.errstate(all="ignore"):
+            try:
+                r, t = kabsch(self._neutral[h], obs[h])
+            except np.linalg.LinAlgError:
+                r = t = None
+            if r is None or not (np.isfinite(r).all() and np.isfinite(t).all()):
+                self.counters["no_solution"] += 1
+                return None
+            # r takes capture axes to head axes, so the head turned by r^T; in the character's axes A r^T A^T
+            self.head_rotation = matrix_to_quat(self._axes @ r.T @ self._axes.T)
+            return obs @ r.T + t
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
         """The stage: the character's weights and head rotation for a new marker frame, else None.
@@ -111,5 +127,11 @@ class ActorRetarget:
         if obs is None or np.isnan(obs).all():
             self.counters["no_markers"] += obs is not None
             return None
-        self.s = self.solver.solve(obs)
-        return self.pair.weights(self.s)
+        with np.errstate(all="ignore"):
+            s = self.solver.solve(obs)
+            weights = self.pair.weights(s)
+        if not (np.isfinite(s).all() and np.isfinite(weights).all()):
+            self.counters["no_solution"] += 1
+            return None
+        self.s = s
+        return weights

@@ -33,7 +33,7 @@ from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink, WeightLog
 from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, build_chain, make_input_adapter
-from facepuppet.runtime.recording.replay_source import ReplaySource, open_recording
+from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
 
 if TYPE_CHECKING:
     import argparse
@@ -55,6 +55,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     p.add_argument("--duration", type=float, default=None, help="seconds to play (default: the whole recording)")
+    p.add_argument("--max-gap", type=_gap_seconds, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
+                   help=f"cut a pause between recorded frames longer than this to this length, and say so "
+                        f"(default {DEFAULT_MAX_GAP_S:g}; 'inf' keeps every pause)")
     p.add_argument("--stats", action="store_true", help="also print the counters and timings as one JSON line")
     p.add_argument("--pipeline", action="store_true",
                    help="run the filter stage (filters, calibration, tracking loss) as `run` does "
@@ -63,6 +66,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="save the weights drawn at every tick, (n_ticks, n_channels) float32")
     add_stage_arguments(p)
     p.set_defaults(func=run_replay)
+
+
+def _gap_seconds(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds (or inf), got {text!r}")
+    return value
 
 
 def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:
@@ -122,8 +132,12 @@ def _source(args, live, fps, log):
                 f"{len(live.frames)} frames) on {args.character}")
             return source, source.ticks, live_fps
     fps = 60.0 if fps is None else fps
-    source = ReplaySource(live.frames if live is not None else open_recording(args.session))
+    source_limit = getattr(args, "max_gap", DEFAULT_MAX_GAP_S)
+    source = ReplaySource(live.frames if live is not None else open_recording(args.session), max_gap=source_limit)
     log(f"replay: {args.session} ({len(source.frames)} frames, {source.duration:.2f} s) on {args.character}")
+    if source.gaps:
+        log(f"replay: {source.describe_gaps()}; --max-gap SECONDS changes the limit ({source_limit:g} s), "
+            f"--max-gap inf keeps them")
     return source, None, fps
 
 

@@ -21,12 +21,15 @@ from __future__ import annotations
 
 import logging
 import math
-import wave
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
     import os
@@ -70,10 +73,12 @@ class LevelMeter:
             x = x.mean(axis=1)
         if x.size == 0:
             return self.floor_db
-        ms = float(np.dot(x, x)) / x.size
+        with np.errstate(all="ignore"):
+            ms = float(np.dot(x, x)) / x.size
         if not (ms > 0 and math.isfinite(ms)):
             return self.floor_db
-        return max(10.0 * math.log10(ms), self.floor_db)  # 20 log10(rms)
+        # 20 log10(rms), within [floor, 0 dBFS]: samples beyond full scale are clipping, not louder speech
+        return min(max(10.0 * math.log10(ms), self.floor_db), 0.0)
 
     def process(self, samples: np.ndarray) -> float:
         """Smoothed level (dBFS) after one more block; a block of 0 samples leaves it as it is."""
@@ -96,11 +101,14 @@ def read_wav(path: str | os.PathLike, stereo: str = "mix", finite: bool = False)
     ----------
     path : str or Path, a WAV file
     stereo : "mix" (average the channels) or "refuse" (ValueError for more than one channel)
-    finite : bool, refuse NaN or infinite samples (ValueError) instead of passing them on
+    finite : bool, refuse NaN or infinite samples (InputFileError) instead of reading them as silence
+
+    Without ``finite``, NaN or infinite samples read as 0 and float samples beyond
+    full scale are clipped to +-1; one warning, naming the file, says how many.
 
     Raises
     ------
-    ValueError
+    InputFileError (a ValueError)
         naming the file when it is not a WAV file scipy can read, has an unsupported sample
         type, has several channels with ``stereo="refuse"``, or non-finite samples with ``finite``.
     """
@@ -108,27 +116,45 @@ def read_wav(path: str | os.PathLike, stereo: str = "mix", finite: bool = False)
 
     if stereo not in ("mix", "refuse"):
         raise ValueError(f"read_wav stereo: expected 'mix' or 'refuse', got {stereo!r}")
-    path = Path(path)
+    path = regular_file(path, "WAV file")
     try:
-        rate, data = wavfile.read(path)
-    except (ValueError, wave.Error, EOFError) as exc:
-        raise ValueError(f"{path}: not a readable WAV file ({exc})") from None
-    if data.dtype.kind == "f":
-        x = data.astype(np.float64)
-    elif data.dtype == np.uint8:
-        x = (data.astype(np.float64) - 128.0) / 128.0
-    elif data.dtype.kind == "i":
-        x = data.astype(np.float64) / float(-np.iinfo(data.dtype).min)
-    else:
-        raise ValueError(f"{path}: WAV sample type {data.dtype} is not supported (expected int16/int32/uint8/float)")
-    if x.ndim == 2:
-        if stereo == "refuse" and x.shape[1] > 1:
-            raise ValueError(f"{path}: expected a mono WAV, found {x.shape[1]} channels "
-                             f"(convert it to mono, or pass stereo='mix' / --stereo mix to average them)")
-        x = x.mean(axis=1)
-    if finite and not np.isfinite(x).all():
-        bad = int(np.count_nonzero(~np.isfinite(x)))
-        raise ValueError(f"{path}: {bad} samples are NaN or infinite; expected finite audio")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            rate, data = wavfile.read(path)
+    except (FileNotFoundError, IsADirectoryError, PermissionError):
+        raise
+    except Exception as exc:  # scipy raises ValueError, struct.error, EOFError, ... on damaged files
+        raise InputFileError(f"{path}: not a readable WAV file ({type(exc).__name__}: {exc})") from None
+    if caught:  # scipy's own warnings (e.g. a short data chunk) do not name the file: say it once, with it
+        warnings.warn(f"{path}: {caught[0].message}", UserWarning, stacklevel=2)
+    if not (isinstance(rate, int) and rate > 0):
+        raise InputFileError(f"{path}: WAV sample rate must be a positive integer, found {rate!r}")
+    with np.errstate(all="ignore"):  # garbled float data: counted below, not warned about per sample
+        if data.dtype.kind == "f":
+            x = data.astype(np.float64)
+        elif data.dtype == np.uint8:
+            x = (data.astype(np.float64) - 128.0) / 128.0
+        elif data.dtype.kind == "i":
+            x = data.astype(np.float64) / float(-np.iinfo(data.dtype).min)
+        else:
+            raise InputFileError(f"{path}: WAV sample type {data.dtype} is not supported "
+                                 f"(expected int16/int32/uint8/float)")
+        if x.ndim == 2:
+            if stereo == "refuse" and x.shape[1] > 1:
+                raise InputFileError(f"{path}: expected a mono WAV, found {x.shape[1]} channels "
+                                     f"(convert it to mono, or pass stereo='mix' / --stereo mix to average them)")
+            x = x.mean(axis=1)
+    bad = ~np.isfinite(x)
+    n_bad = int(np.count_nonzero(bad))
+    if finite and n_bad:
+        raise InputFileError(f"{path}: {n_bad} samples are NaN or infinite; expected finite audio")
+    if n_bad:
+        x[bad] = 0.0
+    n_over = int(np.count_nonzero(np.abs(x) > 1.0))
+    if n_bad or n_over:
+        np.clip(x, -1.0, 1.0, out=x)
+        warnings.warn(f"{path}: {n_bad} samples NaN or infinite (read as silence), {n_over} beyond full scale "
+                      f"(clipped to +-1); the level is measured on the cleaned samples", UserWarning, stacklevel=2)
     return x, int(rate)
 
 

@@ -35,10 +35,11 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
     import os
@@ -46,7 +47,7 @@ if TYPE_CHECKING:
 REGIONS = ("eyes", "brows", "mouth", "other", "head")
 
 
-class LiveConfigError(ValueError):
+class LiveConfigError(InputFileError):
     """A config file that cannot be used: the message names the file, the key and the problem."""
 
 
@@ -186,10 +187,14 @@ def load_live_config(path: str | os.PathLike) -> LiveConfig:
     FileNotFoundError
         when the file does not exist.
     """
-    path = Path(path)
+    path = regular_file(path, "TOML config file")
     try:
         with open(path, "rb") as f:
             data = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise LiveConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise LiveConfigError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason}); TOML is UTF-8") from None
+    except RecursionError:
+        raise LiveConfigError(f"{path}: not a config facepuppet can read: arrays or tables nest too deep") from None
     return parse_live_config(data, str(path))

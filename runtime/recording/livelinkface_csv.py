@@ -31,14 +31,19 @@ are allowed (the replay keeps the later row).
 from __future__ import annotations
 
 import csv
+import io
+import math
 import re
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
     import os
@@ -90,12 +95,20 @@ def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Fra
         column, a malformed or backwards timecode, a cell that is not a number,
         a row with the wrong number of cells, or no data rows.
     """
-    path = Path(path)
-    with open(path, newline="", encoding="utf-8-sig") as f:
+    path = regular_file(path, "Live Link Face CSV")
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise InputFileError(f"{path}, line {line}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    out_of_range = 0
+    first_bad = ""
+    with io.StringIO(text, newline="") as f:
         reader = csv.reader(f)
         header = next(reader, None)
         if header is None:
-            raise ValueError(f"{path}: empty file, expected a Live Link Face CSV header")
+            raise InputFileError(f"{path}: empty file, expected a Live Link Face CSV header")
         header = [h.strip() for h in header]
         index = _column_index(path, header)
         channel_cols = [i for i, name in enumerate(header)
@@ -110,30 +123,42 @@ def read_llf_csv(path: str | os.PathLike, fps: float = TIMECODE_FPS) -> list[Fra
             if not row or (len(row) == 1 and not row[0].strip()):
                 continue  # blank line (e.g. at the end)
             if len(row) != len(header):
-                raise ValueError(f"{path}, line {line}: {len(row)} cells, the header has {len(header)} columns")
+                raise InputFileError(f"{path}, line {line}: {len(row)} cells, the header has {len(header)} columns")
             try:
                 t_abs, number = parse_timecode(row[tc_col], fps)
             except ValueError as exc:
-                raise ValueError(f"{path}, line {line}, column 'Timecode': {exc}") from None
+                raise InputFileError(f"{path}, line {line}, column 'Timecode': {exc}") from None
             if prev is not None and t_abs < prev:
-                raise ValueError(
+                raise InputFileError(
                     f"{path}, line {line}, column 'Timecode': {row[tc_col]} goes back in time "
                     f"({t_abs:.4f} s after {prev:.4f} s); rows must be in time order"
                 )
             prev = t_abs
             if t0 is None:
                 t0 = t_abs
-            weights = np.array([_number(path, line, header, row, i) for i in channel_cols], dtype=np.float32)
+            values = [_number(path, line, header, row, i) for i in channel_cols]
+            with np.errstate(over="ignore"):  # beyond float32: inf, counted here, dropped by the loop
+                weights = np.array(values, dtype=np.float32)
             rotation = None
             if head_cols is not None:
                 yaw, pitch, roll = (_number(path, line, header, row, i) for i in head_cols)
-                rotation = euler_to_quat(yaw, pitch, roll)
+                if all(math.isfinite(a) for a in (yaw, pitch, roll)):
+                    rotation = euler_to_quat(yaw, pitch, roll)
+                else:
+                    out_of_range += 1  # the row's pose is unknown: no head rotation (counted below)
+                    first_bad = first_bad or f"line {line}"
+            if not np.isfinite(weights).all():
+                out_of_range += 1
+                first_bad = first_bad or f"line {line}"
             frames.append(Frame(
                 t=t_abs - t0, source=SOURCE, channels=channels, weights=weights,
                 head_rotation=rotation, t_sender=t_abs, number=number,
             ))
     if not frames:
-        raise ValueError(f"{path}: no data rows after the header")
+        raise InputFileError(f"{path}: no data rows after the header")
+    if out_of_range:
+        warnings.warn(f"{path}: {out_of_range} rows hold NaN, infinite or out-of-range numbers (first at "
+                      f"{first_bad}); the frame loop drops those frames", UserWarning, stacklevel=2)
     return frames
 
 
@@ -141,10 +166,11 @@ def _column_index(path: Path, header: list[str]) -> dict[str, int]:
     index: dict[str, int] = {}
     for i, name in enumerate(header):
         if name in index:
-            raise ValueError(f"{path}, line 1: column {name!r} appears twice (columns {index[name] + 1} and {i + 1})")
+            raise InputFileError(f"{path}, line 1: column {name!r} appears twice "
+                                 f"(columns {index[name] + 1} and {i + 1})")
         index[name] = i
     if "Timecode" not in index:
-        raise ValueError(f"{path}, line 1: no 'Timecode' column; expected a Live Link Face CSV header, "
+        raise InputFileError(f"{path}, line 1: no 'Timecode' column; expected a Live Link Face CSV header, "
                          f"found columns {header[:4]}...")
     return index
 
@@ -153,7 +179,7 @@ def _number(path: Path, line: int, header: list[str], row: list[str], col: int) 
     try:
         return float(row[col])
     except ValueError:
-        raise ValueError(
+        raise InputFileError(
             f"{path}, line {line}, column {header[col]!r}: expected a number, found {row[col]!r}"
         ) from None
 

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Iterable
-from pathlib import Path
 from typing import TYPE_CHECKING
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.input_files import regular_file
 from facepuppet.runtime.recording.livelinkface_csv import looks_like_llf_csv, read_llf_csv
 from facepuppet.runtime.recording.session import MAGIC, read_session
 
@@ -25,22 +26,36 @@ if TYPE_CHECKING:
     from facepuppet.runtime.recording.records import Packet
 
 
+DEFAULT_MAX_GAP_S = 10.0  # a recording pausing longer than this is cut (replay --max-gap)
+
+
 class ReplaySource:
     """Recorded frames delivered by recorded time.
 
     Parameters
     ----------
     frames : sequence of Frame, in non-decreasing ``t`` order (at least one)
+    max_gap : float, seconds; a pause between two frames longer than this is cut to
+        this length (a frame at t = 1e300, a timecode jumping by hours), counted in
+        ``gaps`` and ``cut_s``. ``math.inf`` keeps every pause.
 
     Times passed to :meth:`latest` and :meth:`done` are seconds since the first
     frame (``frames[0].t`` is time 0), so a session recorded on a monotonic
-    clock and a CSV starting at 0 replay alike.
+    clock and a CSV starting at 0 replay alike; after a cut gap they are the
+    recording's times less the seconds cut before them.
+
+    Attributes
+    ----------
+    gaps : list of (frame index, seconds), each pause that was cut, with its recorded length
+    cut_s : float, seconds cut in all
     """
 
-    def __init__(self, frames: Iterable[Frame]) -> None:
+    def __init__(self, frames: Iterable[Frame], max_gap: float = DEFAULT_MAX_GAP_S) -> None:
         self.frames = list(frames)
         if not self.frames:
             raise ValueError("ReplaySource: expected at least one frame, got none")
+        if not max_gap > 0:
+            raise ValueError(f"ReplaySource max_gap: expected a positive number of seconds, got {max_gap!r}")
         for i in range(1, len(self.frames)):
             if self.frames[i].t < self.frames[i - 1].t:
                 raise ValueError(
@@ -48,8 +63,25 @@ class ReplaySource:
                     f"after t={self.frames[i - 1].t}"
                 )
         self.t0 = self.frames[0].t
-        self._times = [f.t - self.t0 for f in self.frames]
+        self.gaps: list[tuple[int, float]] = []
+        self.cut_s = 0.0
+        self._times = [0.0]
+        for i in range(1, len(self.frames)):
+            step = self.frames[i].t - self.frames[i - 1].t
+            if step > max_gap:
+                self.gaps.append((i, step))
+                self.cut_s += step - max_gap
+                step = max_gap
+            self._times.append(self._times[-1] + step)
         self._next = 0
+
+    def describe_gaps(self) -> str:
+        """One line about the cut pauses ("" when none was cut)."""
+        if not self.gaps:
+            return ""
+        longest = max(g for _, g in self.gaps)
+        return (f"cut {len(self.gaps)} pauses longer than the gap limit (first at frame {self.gaps[0][0]}, "
+                f"longest {longest:.6g} s, {self.cut_s:.6g} s cut in all)")
 
     @property
     def duration(self) -> float:
@@ -131,7 +163,7 @@ def open_recording(path: str | os.PathLike) -> list[Frame]:
     FileNotFoundError
         when it does not exist.
     """
-    path = Path(path)
+    path = regular_file(path, "recording (session file or Live Link Face CSV)")
     with open(path, "rb") as f:
         head = f.read(4096)
     if head.startswith(MAGIC):
@@ -142,14 +174,15 @@ def open_recording(path: str | os.PathLike) -> list[Frame]:
             frames = frames_from_packets(session.packets)
             if frames:
                 return frames
-            raise ValueError(f"{path}: the recorded packets decode to no frame")
+            raise InputFileError(f"{path}: the recorded packets decode to no frame")
         if not session.frames:
-            raise ValueError(f"{path}: session file holds no complete frame ({session.tail_error or 'none written'})")
+            raise InputFileError(f"{path}: session file holds no complete frame "
+                                 f"({session.tail_error or 'none written'})")
         return session.frames
     first_line = head.split(b"\n", 1)[0].decode("utf-8", errors="replace")
     if looks_like_llf_csv(first_line):
         return read_llf_csv(path)
-    raise ValueError(
+    raise InputFileError(
         f"{path}: not a recording facepuppet can replay (expected a session file starting with {MAGIC!r} "
         f"or a Live Link Face CSV whose header has Timecode and BlendShapeCount; found {head[:24]!r})"
     )

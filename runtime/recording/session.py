@@ -17,12 +17,16 @@ all; their length is in the record header) and counts them in
 Crash safety: :class:`SessionWriter` writes each record with one ``os.write``
 on an unbuffered descriptor opened with ``O_APPEND``, so a ``kill -9`` can at
 worst lose or tear the last record; :func:`read_session` keeps every complete
-record before a torn or corrupt one and says where it stopped.
+record before a torn tail and says where it stopped. A damaged record in the
+middle (a flipped bit) is skipped: reading resumes at the next offset where a
+whole record verifies (known kind, length within the file, CRC), and the
+bytes skipped are counted.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import struct
 import time
@@ -31,7 +35,9 @@ import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.input_files import regular_file
 from facepuppet.runtime.recording.records import (
     RESERVED_KINDS,
     Layout,
@@ -150,6 +156,8 @@ class Session:
     packets : list of Packet, the received datagrams of a live recording, in file order
     audio_levels : list of (t, level_db) float pairs, the audio levels of a live recording
     ticks : list of Tick, the drawn ticks of a live recording (recordings made since TICK existed)
+    skipped_bytes : int, bytes skipped over damaged records in the middle of the file
+    damaged : list of (byte offset, bytes skipped), each damaged stretch that reading resynchronised past
     """
 
     path: Path
@@ -162,6 +170,8 @@ class Session:
     packets: list[Packet] = field(default_factory=list)
     audio_levels: list[tuple[float, float]] = field(default_factory=list)
     ticks: list[Tick] = field(default_factory=list)
+    skipped_bytes: int = 0
+    damaged: list[tuple[int, int]] = field(default_factory=list)
 
 
 def read_session(path: str | os.PathLike) -> Session:
@@ -174,18 +184,19 @@ def read_session(path: str | os.PathLike) -> Session:
     Returns
     -------
     Session ; ``complete`` is False (and one warning is issued) when the last
-    record is torn (short or bad CRC, as after a crash) or a record in the
-    middle is corrupt; ``tail_error`` names the byte offset.
+    record is torn (short or bad CRC, as after a crash) or records in the
+    middle were damaged and skipped (``skipped_bytes``, ``damaged``);
+    ``tail_error`` says what and at which byte offsets.
 
     Raises
     ------
     ValueError
         when the file does not start with the session magic.
     """
-    path = Path(path)
+    path = regular_file(path, "session file")
     data = path.read_bytes()
     if data[: len(MAGIC)] != MAGIC:
-        raise ValueError(
+        raise InputFileError(
             f"{path}: not a facepuppet session file (expected magic {MAGIC!r}, found {data[:len(MAGIC)]!r})"
         )
     session = Session(path=path, header={}, frames=[], complete=True, n_records=0)
@@ -193,32 +204,102 @@ def read_session(path: str | os.PathLike) -> Session:
     offset = len(MAGIC)
     end = len(data)
     while offset < end:
-        problem = None
-        if end - offset < _RECORD_HEAD.size:
-            problem = f"torn record header ({end - offset} of {_RECORD_HEAD.size} bytes)"
-        else:
-            length, crc, kind = _RECORD_HEAD.unpack_from(data, offset)
-            start = offset + _RECORD_HEAD.size
-            payload = data[start:start + length]
-            if len(payload) < length:
-                problem = f"torn record ({len(payload)} of {length} payload bytes)"
-            elif zlib.crc32(payload) != crc:
-                where = "last record" if start + length == end else "record in the middle of the file"
-                problem = f"CRC mismatch in the {where}"
-            else:
-                try:
-                    _apply_record(session, layouts, kind, payload, first=offset == len(MAGIC))
-                except ValueError as exc:
-                    problem = f"corrupt record of kind {kind}: {exc}"
-        if problem is not None:
-            session.complete = False
+        problem, next_offset = _next_record(session, layouts, data, offset)
+        if problem is None:
+            session.n_records += 1
+            offset = next_offset
+            continue
+        session.complete = False
+        found = _resync(data, offset + 1)
+        if found is None:  # nothing valid after it: a torn or corrupt tail (as after a crash)
             session.tail_error = (f"{path}: {problem} at byte offset {offset}; "
                                   f"kept the {session.n_records} records before it")
-            warnings.warn(session.tail_error, stacklevel=2)
             break
-        session.n_records += 1
-        offset = start + length
+        session.skipped_bytes += found - offset
+        session.damaged.append((offset, found - offset))
+        offset = found
+    if session.damaged:
+        first = session.damaged[0][0]
+        resumed = (f"{path}: {len(session.damaged)} damaged stretches ({session.skipped_bytes} bytes, at least "
+                   f"{len(session.damaged)} records) skipped, the first at byte offset {first}; reading resumed "
+                   f"at the next valid record each time and kept {session.n_records} records")
+        session.tail_error = resumed + ("; " + session.tail_error if session.tail_error else "")
+    if not session.complete:
+        warnings.warn(session.tail_error, stacklevel=2)
+    _check_header(path, session.header)
     return session
+
+
+def _next_record(session: Session, layouts: dict[int, Layout], data: bytes, offset: int
+                 ) -> tuple[str | None, int]:
+    """Apply the record at ``offset``: (None, offset of the next record), or (what is wrong with it, offset)."""
+    end = len(data)
+    if end - offset < _RECORD_HEAD.size:
+        return f"torn record header ({end - offset} of {_RECORD_HEAD.size} bytes)", offset
+    length, crc, kind = _RECORD_HEAD.unpack_from(data, offset)
+    start = offset + _RECORD_HEAD.size
+    payload = data[start:start + length]
+    if len(payload) < length:
+        return f"torn record ({len(payload)} of {length} payload bytes)", offset
+    if zlib.crc32(payload) != crc:
+        where = "last record" if start + length == end else "record in the middle of the file"
+        return f"CRC mismatch in the {where}", offset
+    try:
+        _apply_record(session, layouts, kind, payload, first=offset == len(MAGIC))
+    except ValueError as exc:
+        return f"corrupt record of kind {kind}: {exc}", offset
+    return None, start + length
+
+
+_KINDS = frozenset(int(k) for k in RecordKind)
+
+
+def _resync(data: bytes, offset: int) -> int | None:
+    """Offset of the first record at or after ``offset`` whose kind is known and whose length and CRC check.
+
+    The format is length-prefixed and CRC'd, so a damaged record is skipped by
+    scanning for the next place where a whole record verifies (a random match
+    needs a known kind byte, a length within the file and a 32-bit CRC).
+    """
+    end = len(data)
+    head = _RECORD_HEAD.size
+    for at in range(offset, end - head + 1):
+        if data[at + 8] not in _KINDS or data[at + 8] == RecordKind.HEADER:
+            continue
+        length, crc, _ = _RECORD_HEAD.unpack_from(data, at)
+        if length > end - at - head:
+            continue
+        if zlib.crc32(data[at + head:at + head + length]) == crc:
+            return at
+    return None
+
+
+def _number_field(value: object) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            and value > 0)
+
+
+_INFO_FIELDS = {  # the header's info fields a reader uses: (check, what it must be)
+    "fps": (_number_field, "a positive number"),
+    "idle_fps": (lambda v: v is None or _number_field(v), "a positive number or null"),
+    "input": (lambda v: isinstance(v, str), "a string"),
+}
+
+
+def _check_header(path: Path, header: object) -> None:
+    """The HEADER record, when one was read, is an object whose ``info`` fields have the types readers use."""
+    if not isinstance(header, dict):
+        raise InputFileError(f"{path}: session header: expected a JSON object, found {type(header).__name__}")
+    if "info" not in header:
+        return
+    info = header["info"]
+    if not isinstance(info, dict):
+        raise InputFileError(f"{path}: session header field 'info': expected a JSON object, found "
+                             f"{type(info).__name__} {str(info)[:40]!r}")
+    for key, (ok, what) in _INFO_FIELDS.items():
+        if key in info and not ok(info[key]):
+            raise InputFileError(f"{path}: session header field 'info.{key}': expected {what}, found "
+                                 f"{str(info[key])[:40]!r}")
 
 
 def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, payload: bytes, first: bool) -> None:

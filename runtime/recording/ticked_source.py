@@ -22,10 +22,10 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
     import os
@@ -69,7 +69,7 @@ def read_live_recording(path: str | os.PathLike,
     """
     from facepuppet.runtime.recording.session import MAGIC, read_session
 
-    path = Path(path)
+    path = regular_file(path, "recording (session file or Live Link Face CSV)")
     with open(path, "rb") as f:
         if f.read(len(MAGIC)) != MAGIC:
             return None

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import logging
 import os
+from collections.abc import Callable
 from typing import Any
 
 import moderngl
 
 from facepuppet.runtime.errors import FacepuppetError
+
+logger = logging.getLogger(__name__)
 
 EGL_HELP = (
     "headless OpenGL needs libEGL and Mesa's drivers; install them with "
@@ -70,13 +74,38 @@ def display_available() -> bool:
 
 
 def _glfw_init() -> bool:
+    """Start glfw; False (with the reason in ``_glfw_problem``) when there is no display it can open.
+
+    glfw's own error reports go to ``_glfw_errors`` instead of the console (pyGLFW
+    would print them as raw Python warnings); callers say what happened in one line.
+    """
+    global _glfw_problem
     if not display_available():
+        _glfw_problem = "no display (DISPLAY and WAYLAND_DISPLAY are unset)"
         return False
     try:
         import glfw
-    except Exception:  # no glfw shared library: treat as no display
+    except Exception as exc:  # no glfw shared library: treat as no display
+        _glfw_problem = f"glfw is not available ({exc})"
         return False
-    return bool(glfw.init())
+    _glfw_errors.clear()
+    glfw.set_error_callback(_glfw_error)
+    if glfw.init():
+        return True
+    shown = os.environ.get("WAYLAND_DISPLAY") or os.environ.get("DISPLAY")
+    why = _glfw_errors[-1] if _glfw_errors else "glfw.init failed"
+    _glfw_problem = f"the display {shown!r} could not be opened ({why})"
+    return False
+
+
+_glfw_errors: list[str] = []
+_glfw_problem = ""
+
+
+def _glfw_error(code: int, description: bytes) -> None:
+    text = description.decode("utf-8", "replace") if isinstance(description, bytes) else str(description)
+    del _glfw_errors[:-7]  # the few latest; glfw reports once per failing call, never per frame
+    _glfw_errors.append(f"GLFW {code}: {text}")
 
 
 def _window(width: int, height: int, title: str) -> GLTarget:
@@ -104,7 +133,8 @@ def _egl() -> GLTarget:
 
 
 def create_context(
-    headless: bool | None = None, width: int = 1280, height: int = 720, title: str = "facepuppet"
+    headless: bool | None = None, width: int = 1280, height: int = 720, title: str = "facepuppet",
+    log: Callable[[str], None] | None = None,
 ) -> GLTarget:
     """Make an OpenGL 3.3+ context.
 
@@ -115,6 +145,8 @@ def create_context(
         display). None: a window if a display exists and glfw starts, else EGL.
     width, height : int, window size in pixels (ignored headless)
     title : str, window title
+    log : where the one line goes when ``headless=None`` falls back to EGL (default: this module's
+        logger, at WARNING)
 
     Raises
     ------
@@ -123,10 +155,14 @@ def create_context(
     if headless is False:
         if not _glfw_init():
             raise GLUnavailable(
-                "a window was asked for but there is no display (DISPLAY / WAYLAND_DISPLAY unset "
-                "or glfw could not start); run with --headless to render offscreen through EGL"
+                f"a window was asked for but {_glfw_problem}; run with --headless to render offscreen through EGL"
             )
         return _window(width, height, title)
-    if headless is None and _glfw_init():
-        return _window(width, height, title)
+    if headless is None:
+        if _glfw_init():
+            return _window(width, height, title)
+        target = _egl()
+        (log or logger.warning)(f"{_glfw_problem}: no window, rendering offscreen through EGL "
+                                f"(pass --headless to ask for that)")
+        return target
     return _egl()

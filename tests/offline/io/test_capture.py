@@ -95,3 +95,60 @@ def test_real_takes_trc_and_c3d_agree():
     assert trc.markers.shape == (1590, 41, 3) and trc.units == c3d.units == "cm" and trc.rate == 60.0
     assert trc.names == c3d.names and trc.names[0] == "ForeHead_M"
     np.testing.assert_allclose(trc.markers, c3d.markers, atol=1e-5)
+
+
+def test_csv_with_a_constant_time_column_is_refused_naming_it(tmp_path):
+    path = tmp_path / "still.csv"
+    path.write_text("# units: mm\ntime,a_x,a_y,a_z\n0.5,1,2,3\n0.5,1,2,3\n0.5,1,2,4\n", encoding="utf-8")
+    with pytest.raises(CaptureError, match=r"still\.csv: time column: cannot give the frame rate"):
+        read_capture(path)
+
+
+def test_csv_that_is_not_utf8_is_refused_naming_file_and_line(tmp_path):
+    path = tmp_path / "latin.csv"
+    path.write_bytes(b"# units: mm\n# rate: 60\na_x,a_y,a_z\n1,2,3\n1,2,\xe93\n")
+    with pytest.raises(CaptureError, match=r"latin\.csv: line 5: not UTF-8 text"):
+        read_capture(path)
+
+
+def test_trc_with_a_repeated_marker_name_says_which(tmp_path):
+    cap = _capture("mm")
+    path = write_trc(tmp_path / "dup.trc", cap)
+    lines = path.read_text(encoding="utf-8").split("\n")
+    lines[3] = lines[3].replace("\td\t", "\tb\t")
+    path.write_text("\n".join(lines), encoding="utf-8")
+    with pytest.raises(CaptureError, match=r"dup\.trc: line 4: marker names must be distinct; repeated: \['b'\]"):
+        read_capture(path)
+
+
+@pytest.mark.parametrize("writer", [write_trc, write_csv])
+def test_a_value_beyond_float32_is_refused_by_name_without_a_runtime_warning(tmp_path, writer):
+    import warnings
+
+    path = writer(tmp_path / f"huge.{writer.__name__[6:]}", _capture("mm"))
+    text = path.read_text(encoding="utf-8")
+    lines = text.split("\n")
+    row = 8 if writer is write_trc else 4
+    cells = lines[row].split("\t" if writer is write_trc else ",")
+    cells[-1] = "1e300"
+    lines[row] = ("\t" if writer is write_trc else ",").join(cells)
+    path.write_text("\n".join(lines), encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(CaptureError, match=r"huge\.\w+: markers: infinite or beyond float32 range \(frame \d+, "
+                                               r"marker 'e'\)"):
+            read_capture(path)
+
+
+def test_a_truncated_c3d_is_refused_saying_how_many_frames_it_lost(tmp_path):
+    pytest.importorskip("c3d")
+    cap = _capture("mm")
+    whole = write_c3d(tmp_path / "whole.c3d", cap)
+    data = whole.read_bytes()
+    frame_bytes = cap.n_markers * 4 * 4  # float C3D: x, y, z, residual per marker
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes(data[:len(data) - 10 * frame_bytes])  # about ten frames (the file ends in block padding)
+    with pytest.raises(CaptureError, match=r"cut\.c3d: data: the header declares 30 frames but the file holds "
+                                           r"(\d+); truncated\?") as caught:
+        read_capture(cut)
+    assert 15 < int(caught.value.problem.split("holds ")[1].split(";")[0]) < 30

@@ -216,3 +216,39 @@ def test_ict_materials_and_colours(ict_character):
     for rgb in (SCLERA, IRIS, PUPIL):
         share = np.mean(np.all(np.abs(ch.vertex_color[eye_vertices] - rgb) < 1e-6, axis=1))
         assert 0.01 < share < 0.9, rgb
+
+
+def test_a_coordinate_beyond_float32_names_file_and_line(rig):
+    root, _ = rig
+    text = obj_text(GRID).splitlines()
+    text[3] = "v 1e39 0 0"
+    (root / "neutral.obj").write_text("\n".join(text) + "\n")
+    with pytest.raises(ObjError, match=r"neutral\.obj:4: coordinate beyond the float32 range in 'v 1e39 0 0'"):
+        import_rig(root / "neutral.obj", root / "shapes")
+
+
+def test_a_neutral_without_faces_is_refused_naming_it(rig):
+    root, _ = rig
+    text = [line for line in obj_text(GRID).splitlines() if not line.startswith("f ")]
+    (root / "neutral.obj").write_text("\n".join(text) + "\n")
+    for shape in ("jawOpen", "eyeBlink_L"):
+        (root / "shapes" / f"{shape}.obj").write_text("\n".join(text) + "\n")
+    with pytest.raises(ObjError, match=r"neutral\.obj: no faces \('f' lines\)"):
+        import_rig(root / "neutral.obj", root / "shapes")
+
+
+def test_a_shape_moving_a_vertex_beyond_float32_is_refused_naming_the_shape(rig):
+    """Each file is within float32, but the shape's delta (-6e38) is not (it was '<tables>: delta_positions')."""
+    import warnings
+
+    root, _ = rig
+    near_max = GRID.copy()
+    near_max[5] = (3e38, 0, 0)
+    (root / "neutral.obj").write_text(obj_text(near_max))
+    near_max[5] = (-3e38, 0, 0)
+    (root / "shapes" / "jawOpen.obj").write_text(obj_text(near_max))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(ObjError, match=r"jawOpen\.obj: moves vertex 5 by \[-6e\+38, 0\.0, 0\.0\], beyond the "
+                                           r"float32 range"):
+            import_rig(root / "neutral.obj", root / "shapes")

@@ -105,9 +105,41 @@ def test_read_wav_refuses_stereo_and_non_finite_samples_when_asked(tmp_path):
     s[10] = np.nan
     bad = tmp_path / "nan.wav"
     wavfile.write(bad, RATE, s)
-    assert np.isnan(read_wav(bad)[0][10])
+    with pytest.warns(UserWarning, match=r"nan\.wav: 1 samples NaN or infinite \(read as silence\)"):
+        assert read_wav(bad)[0][10] == 0.0  # cleaned, and said once
     with pytest.raises(ValueError, match="nan.wav: 1 samples are NaN"):
         read_wav(bad, finite=True)
     u8 = tmp_path / "u8.wav"
     wavfile.write(u8, RATE, np.array([0, 128, 255], np.uint8))
     np.testing.assert_allclose(read_wav(u8)[0], [-1.0, 0.0, 127 / 128])
+
+
+def test_a_wav_truncated_to_30_bytes_is_refused_naming_the_file(tmp_path):
+    from facepuppet.runtime.errors import InputFileError
+    from facepuppet.runtime.inputs.audio import read_wav
+
+    whole = tmp_path / "whole.wav"
+    wavfile.write(whole, RATE, (sine(0.25, 0.1) * 32767).astype(np.int16))
+    cut = tmp_path / "cut.wav"
+    cut.write_bytes(whole.read_bytes()[:30])
+    with pytest.raises(InputFileError, match=r"cut\.wav: not a readable WAV file"):
+        read_wav(cut)
+
+
+def test_a_float_wav_of_1e30_samples_reads_at_most_full_scale_and_says_so_once(tmp_path):
+    import warnings
+
+    from facepuppet.runtime.inputs.audio import WavLevel
+
+    loud = tmp_path / "loud.wav"
+    s = np.full(RATE // 2, 1e30, np.float32)
+    s[::2] = -1e30
+    s[5] = np.inf
+    wavfile.write(loud, RATE, s)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        level = WavLevel(loud, attack_s=0.001)
+        levels = [level.level(t) for t in np.arange(1, 40) * 0.01]
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and "loud.wav: 1 samples NaN or infinite" in said[0] and "beyond full scale" in said[0]
+    assert max(levels) <= 0.0 and max(levels) > -1.0  # clipped full scale: 0 dBFS, not 600

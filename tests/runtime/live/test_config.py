@@ -68,3 +68,17 @@ def test_errors_name_the_file_the_key_and_what_was_expected(tmp_path, text, matc
 def test_missing_file_is_file_not_found(tmp_path):
     with pytest.raises(FileNotFoundError):
         load_live_config(tmp_path / "absent.toml")
+
+
+def test_a_5000_deep_array_is_refused_naming_the_file(tmp_path):
+    path = tmp_path / "deep.toml"
+    path.write_text("[channels.jawOpen]\nclamp = " + "[" * 5000 + "]" * 5000 + "\n", encoding="utf-8")
+    with pytest.raises(LiveConfigError, match=r"deep\.toml: not a config facepuppet can read: .*nest too deep"):
+        load_live_config(path)
+
+
+def test_a_config_that_is_not_utf8_is_refused_naming_the_file(tmp_path):
+    path = tmp_path / "latin.toml"
+    path.write_bytes(b"# r\xe9glages\n[tracking_loss]\ntimeout_s = 0.5\n")
+    with pytest.raises(LiveConfigError, match=r"latin\.toml: not UTF-8 text \(byte 3"):
+        load_live_config(path)

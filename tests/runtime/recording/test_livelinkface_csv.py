@@ -135,3 +135,32 @@ def test_timecode_parsing():
     assert parse_timecode("13:13:04:31.652")[0] == pytest.approx(13 * 3600 + 13 * 60 + 4 + 31.652 / 60)
     with pytest.raises(ValueError, match="expected a timecode"):
         parse_timecode("1.5")
+
+
+def _llf_text(rows: list[str]) -> str:
+    return "Timecode,BlendShapeCount,JawOpen,EyeBlinkLeft,HeadYaw,HeadPitch,HeadRoll\n" + "\n".join(rows) + "\n"
+
+
+def test_a_csv_that_is_not_utf8_is_refused_naming_file_and_line(tmp_path):
+    from facepuppet.runtime.errors import InputFileError
+
+    path = tmp_path / "latin.csv"
+    path.write_bytes(_llf_text(["10:00:00:00.000,61,0.1,0.2,0,0,0", "10:00:00:01.000,61,0.\xe9,0.2,0,0,0"])
+                     .encode("latin-1"))
+    with pytest.raises(InputFileError, match=r"latin\.csv, line 3: not UTF-8 text"):
+        read_llf_csv(path)
+
+
+def test_a_1e300_cell_is_counted_once_not_warned_about_by_numpy(tmp_path):
+    import warnings
+
+    path = tmp_path / "huge.csv"
+    path.write_text(_llf_text([f"10:00:00:{i:02d}.000,61,{'1e300' if i in (2, 4) else '0.5'},0.2,0,0,0"
+                               for i in range(6)]), encoding="utf-8")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        frames = read_llf_csv(path)
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and "huge.csv: 2 rows hold NaN, infinite or out-of-range numbers (first at line 4)" in said[0]
+    assert not any(issubclass(w.category, RuntimeWarning) for w in caught)
+    assert [f.is_finite() for f in frames] == [True, True, False, True, False, True]

@@ -128,7 +128,7 @@ def _last_record_size(data: bytes) -> int:
     return size
 
 
-def test_bad_crc_in_the_middle_stops_there_and_names_the_offset(tmp_path):
+def test_bad_crc_in_the_middle_skips_that_record_and_reads_on(tmp_path):
     frames = _frames(8)
     path = tmp_path / "s.fps"
     _write(path, frames)
@@ -137,13 +137,30 @@ def test_bad_crc_in_the_middle_stops_there_and_names_the_offset(tmp_path):
     off = len(MAGIC)
     for _ in range(5):
         off += 9 + struct.unpack_from("<I", data, off)[0]
+    size = 9 + struct.unpack_from("<I", data, off)[0]
     data[off + 9 + 10] ^= 0xFF  # flip a payload byte of that record
     path.write_bytes(bytes(data))
-    with pytest.warns(UserWarning, match=f"CRC mismatch in the record in the middle of the file at byte offset {off}"):
+    with pytest.warns(UserWarning, match=rf"s\.fps: 1 damaged stretches \({size} bytes, at least 1 records\) "
+                                         rf"skipped, the first at byte offset {off}"):
         s = read_session(path)
-    assert not s.complete and str(off) in s.tail_error
-    assert s.n_records == 5
-    assert [f.number for f in s.frames] == [0, 1]
+    assert not s.complete and s.skipped_bytes == size and s.damaged == [(off, size)]
+    assert [f.number for f in s.frames] == [0, 1, 3, 4, 5, 6, 7]
+    assert all(_same(a, b) for a, b in zip([f for f in frames if f.number != 2], s.frames))
+
+
+def test_one_flipped_bit_in_the_middle_of_a_long_take_loses_one_record_not_half(tmp_path):
+    """The issue's case: 867 records, one bit flipped in the middle kept 433; now all but the damaged one."""
+    frames = _frames(865)
+    path = tmp_path / "long.fps"
+    _write(path, frames)
+    clean = read_session(path)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x10
+    path.write_bytes(bytes(data))
+    with pytest.warns(UserWarning, match="damaged stretches"):
+        s = read_session(path)
+    assert s.n_records == clean.n_records - 1 and len(s.frames) >= len(clean.frames) - 1
+    assert 0 < s.skipped_bytes < 200
 
 
 def test_reserved_kinds_are_skipped_unknown_kinds_are_corruption(tmp_path):

@@ -1,0 +1,213 @@
+"""File fuzz: every reader, on truncations, bit flips and type swaps of real files, refuses in our own words.
+
+A reader may read a mutant or refuse it with a FacepuppetError (or a
+subclass) whose message names the file; a traceback of any other type, a
+refusal that loses the path, or a NumPy RuntimeWarning on the console is a
+finding. Cases are seeded (the same on every run) and few: the whole module
+takes a few seconds. The small files are made by the project's own writers
+where it has one (tables, sessions, TRC, C3D, CSV markers), by hand in the
+format otherwise; the data kit's files follow in the ``data`` tests.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.bench.tables_bombs import read_manifest, with_manifest
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.inputs.audio import read_wav
+from facepuppet.runtime.live.config import load_live_config
+from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
+from facepuppet.runtime.recording.replay_source import open_recording
+from facepuppet.runtime.recording.session import SessionWriter
+
+from helpers.file_fuzz import check_reader, swap_session_header
+
+V1 = Path(__file__).resolve().parents[1] / "runtime" / "data" / "tables_v1"
+SEED = 17
+
+
+def session_bytes(tmp: Path, info: dict | None = None) -> bytes:
+    path = tmp / "take.fps"
+    with SessionWriter(path, info=info if info is not None else {"fps": 60, "input": "vmc"},
+                       overwrite=True) as writer:
+        for i in range(20):
+            writer.write_frame(Frame(t=i / 60, source="vmc", channels=("jawOpen", "eyeBlinkLeft"),
+                                     weights=np.array([i / 20, 0.5], np.float32),
+                                     head_rotation=np.array([0, 0, 0, 1], np.float32)))
+    return path.read_bytes()
+
+
+def header_swaps(data: bytes):
+    header = {"format": "facepuppet session", "created": "now", "facepuppet_version": "0", "info": {"fps": 60}}
+    cases = [[1, 2], "text", 3, None]
+    cases += [{**header, "info": v} for v in ("a string", [1], 5, None)]
+    cases += [{**header, "info": {"fps": v}} for v in (None, [60], "abc", -1, 1e300, {"a": 1})]
+    for case in cases:
+        yield f"header {case!r}", swap_session_header(data, json.dumps(case).encode())
+    yield "header not UTF-8", swap_session_header(data, b"\xff\xfe{}")
+
+
+def llf_csv_bytes() -> bytes:
+    names = ["EyeBlinkLeft", "JawOpen", "MouthSmileLeft", "HeadYaw", "HeadPitch", "HeadRoll"]
+    lines = ["Timecode,BlendShapeCount," + ",".join(names)]
+    for i in range(12):
+        lines.append(f"10:20:30:{i}.{i * 7 % 1000:03d},61," + ",".join(f"{(i + k) % 10 / 10:.3f}"
+                                                                        for k in range(len(names))))
+    return ("\n".join(lines) + "\n").encode()
+
+
+def toml_bytes() -> bytes:
+    return b"""[filter.eyes]
+min_cutoff = 3.0
+beta = 1.5
+[filter.head]
+min_cutoff = 1.0
+[tracking_loss]
+timeout_s = 0.5
+ease_out_s = 0.6
+[calibration]
+capture_s = 0.5
+[channels.jawOpen]
+gain = 1.3
+clamp = [0.0, 1.0]
+"""
+
+
+def wav_bytes(dtype: str) -> bytes:
+    from scipy.io import wavfile
+
+    t = np.arange(800) / 8000
+    tone = 0.3 * np.sin(2 * np.pi * 220 * t)
+    samples = (tone * 32767).astype(np.int16) if dtype == "int16" else tone.astype(np.float32)
+    buf = io.BytesIO()
+    wavfile.write(buf, 8000, samples)
+    return buf.getvalue()
+
+
+def obj_bytes() -> bytes:
+    return b"""mtllib face.mtl
+o face
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+vt 0 0
+vt 1 0
+vt 1 1
+vt 0 1
+usemtl M_Face
+f 1/1 2/2 3/3
+usemtl M_Teeth
+f 1/1 3/3 4/4
+"""
+
+
+def mtl_bytes() -> bytes:
+    return b"""newmtl M_Face
+Kd 0.8 0.6 0.5
+Ks 0.1 0.1 0.1
+Ns 16
+newmtl M_Teeth
+Kd 0.9 0.9 0.9
+Ns 32
+"""
+
+
+def capture():
+    from facepuppet.offline.io.capture import Capture
+
+    rng = np.random.default_rng(3)
+    markers = rng.normal(size=(15, 5, 3)).astype(np.float32)
+    markers[4, 2] = np.nan
+    return Capture(markers=markers, names=tuple(f"M{i}" for i in range(5)), rate=60.0, units="mm")
+
+
+def capture_bytes(tmp: Path, kind: str) -> bytes:
+    from facepuppet.offline.io import capture as cap
+
+    path = tmp / f"take.{kind}"
+    {"trc": cap.write_trc, "c3d": cap.write_c3d, "csv": cap.write_csv}[kind](path, capture())
+    return path.read_bytes()
+
+
+def tables_swaps(src: Path, tmp: Path):
+    manifest = read_manifest(src)
+    for key in sorted(manifest):
+        for value in ([1], 2.5, "s", None, {"a": [1]}):
+            forged = dict(manifest, **{key: value})
+            out = with_manifest(src, tmp / "swap.npz", json.dumps(forged).encode())
+            yield f"manifest {key} = {value!r}", out.read_bytes()
+
+
+def _readers(tmp: Path):
+    """{name: (read, real bytes, suffix, extra cases)}, built lazily per test."""
+    pytest.importorskip("c3d")
+    from facepuppet.offline.io.capture import read_c3d, read_csv, read_trc
+    from facepuppet.offline.io.mtl import read_mtl
+    from facepuppet.offline.io.obj import read_obj
+
+    return {
+        "tables(character)": (Character.load, (V1 / "character.npz").read_bytes(), ".npz",
+                              lambda: tables_swaps(V1 / "character.npz", tmp)),
+        "tables(actor)": (Actor.load, (V1 / "actor.npz").read_bytes(), ".npz",
+                          lambda: tables_swaps(V1 / "actor.npz", tmp)),
+        "session": (open_recording, session_bytes(tmp), ".fps", lambda: header_swaps(session_bytes(tmp))),
+        "trc": (read_trc, capture_bytes(tmp, "trc"), ".trc", tuple),
+        "c3d": (read_c3d, capture_bytes(tmp, "c3d"), ".c3d", tuple),
+        "csv markers": (read_csv, capture_bytes(tmp, "csv"), ".csv", tuple),
+        "obj": (read_obj, obj_bytes(), ".obj", tuple),
+        "mtl": (read_mtl, mtl_bytes(), ".mtl", tuple),
+        "wav int16": (read_wav, wav_bytes("int16"), ".wav", tuple),
+        "wav float": (read_wav, wav_bytes("float32"), ".wav", tuple),
+        "toml config": (load_live_config, toml_bytes(), ".toml", tuple),
+        "live link face csv": (read_llf_csv, llf_csv_bytes(), ".csv", tuple),
+    }
+
+
+READERS = ["tables(character)", "tables(actor)", "session", "trc", "c3d", "csv markers", "obj", "mtl",
+           "wav int16", "wav float", "toml config", "live link face csv"]
+
+
+@pytest.mark.parametrize("name", READERS)
+def test_every_mutant_of_a_small_real_file_is_read_or_refused_naming_the_file(tmp_path, name):
+    read, real, suffix, extra = _readers(tmp_path)[name]
+    assert read is not None
+    findings = check_reader(read, real, tmp_path, suffix, SEED + READERS.index(name), extra=extra())
+    assert not findings, f"{len(findings)} findings for {name}:\n" + "\n".join(findings[:15])
+
+
+def _head_lines(path: Path, n: int) -> bytes:
+    """The first ``n`` lines of a kit file (a real file, cut short so each case reads quickly)."""
+    with open(path, "rb") as handle:
+        return b"".join(handle.readline() for _ in range(n))
+
+
+KIT = {  # name: (path under ../shared/data, how much of it, reader name in _readers)
+    "markers/animface_jaw.trc": (60, "trc"),
+    "markers/animface_jaw.c3d": (None, "c3d"),
+    "tracker/livelinkface_myslate_3.csv": (40, "live link face csv"),
+    "speech/arctic_a0007.wav": (None, "wav int16"),
+    "mediapipe/canonical_face_model.obj": (None, "obj"),
+    "ict-facekit/ICTFaceModelMaterial.mtl": (None, "mtl"),
+}
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("name", sorted(KIT))
+def test_every_mutant_of_a_data_kit_file_is_read_or_refused_naming_the_file(tmp_path, name):
+    from conftest import need_shared
+
+    path = need_shared(*name.split("/"))
+    lines, reader = KIT[name]
+    real = path.read_bytes() if lines is None else _head_lines(path, lines)
+    read, _, suffix, _ = _readers(tmp_path)[reader]
+    findings = check_reader(read, real, tmp_path, suffix, SEED, n=5)
+    assert not findings, f"{len(findings)} findings for {name}:\n" + "\n".join(findings[:15])
