@@ -121,7 +121,10 @@ def test_other_morphology_cycle_table_and_plot(tmp_path):
     assert {r["method"] for r in rows} == {"KPLS rbf", "linear", DUTREVE}
     imp = improvements(rows)["other"]["linear"]
     errs = {r["method"]: r["e_d"] for r in rows if r["target"] == "other"}
-    assert imp == pytest.approx(100 * (errs["linear"] - errs["KPLS rbf"]) / errs["linear"])
+    if errs["linear"] > 1e-9 * max(errs.values()):
+        assert imp == pytest.approx(100 * (errs["linear"] - errs["KPLS rbf"]) / errs["linear"])
+    else:  # the linear map is exact on a linear correspondence: no ratio to print
+        assert imp is None
     assert "KPLS rbf" in format_table(rows, "cm")
     png = bar_plot(rows, tmp_path / "bars.png", "cm")
     from PIL import Image
@@ -208,3 +211,14 @@ def test_fit_retarget_command_and_runtime_stage_agree_with_the_offline_model(tmp
                                atol=1e-3)
     with pytest.raises(SystemExit):
         parser.parse_args(["fit-retarget", "a", "b", "-o", "r", "--components", "0"])
+
+
+def test_table_prints_n_a_where_a_method_has_zero_error():
+    rows = [{"target": "same", "method": "KPLS rbf", "e_d": 5.2e-5, "e_target": 1e-4},
+            {"target": "same", "method": "linear regression", "e_d": 1e-19, "e_target": 2e-4},
+            {"target": "same", "method": "RBF on pairs", "e_d": 1e-4, "e_target": 0.0}]
+    assert improvements(rows)["same"]["linear regression"] is None
+    assert improvements(rows)["same"]["RBF on pairs"] == pytest.approx(48.0)
+    table = format_table(rows)
+    assert "0.0000 (n/a)" in table.splitlines()[3] and "(+48%)" in table.splitlines()[4]
+    assert "0.0000 (n/a)" in format_table(rows, key="e_target").splitlines()[4]
