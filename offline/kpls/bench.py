@@ -13,10 +13,14 @@ import argparse
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.offline.bench_data import add_data_argument, data_dir
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.character import Character
 
 
 def _add_arguments(parser) -> None:
@@ -27,7 +31,7 @@ def _add_arguments(parser) -> None:
     parser.add_argument("--plot", type=Path, default=Path("kpls_cyclic.png"), help="bar plot PNG to write")
 
 
-def real_take_channels(source, targets: dict, frames, log) -> dict:
+def real_take_channels(source: Character, targets: dict, frames: list, log: Callable[[str], None]) -> dict:
     """The "real take, source vs retargeted channels" table: ``fit-retarget``'s default fit per target.
 
     For each target, the take's source channels mapped by name onto the target (what the retarget
