@@ -168,14 +168,19 @@ def _dutreve_pair(source: Character, target, sp: np.ndarray, region: np.ndarray)
 
 
 def improvements(rows: list[dict], reference: str = REFERENCE) -> dict:
-    """{target: {method: 100 (e_method − e_ref) / e_method}}, percent, as the paper reports them."""
+    """{target: {method: 100 (e_method − e_ref) / e_method}}, percent, as the paper reports them.
+
+    None (printed "n/a") where the method's error is zero: below 1e-9 of the target's largest
+    error, i.e. rounding, where the ratio is meaningless (it printed -526179663866110 %).
+    """
     out: dict = {}
     for target in dict.fromkeys(r["target"] for r in rows):
         errs = {r["method"]: r["e_d"] for r in rows if r["target"] == target}
         ref = errs.get(reference)
         if ref is None:
             continue
-        out[target] = {m: (100.0 * (e - ref) / e if e > 0 else 0.0) for m, e in errs.items() if m != reference}
+        zero = 1e-9 * max(errs.values())
+        out[target] = {m: (100.0 * (e - ref) / e if e > zero else None) for m, e in errs.items() if m != reference}
     return out
 
 
@@ -193,8 +198,9 @@ def format_table(rows: list[dict], units: str = "", reference: str = REFERENCE, 
     for m in methods:
         cells = []
         for t in targets:
-            pct = imp.get(t, {}).get(m)
-            cells.append(f"{errs[(t, m)]:.4f}" + (f" ({pct:+.0f}%)" if pct is not None else "       "))
+            pct = imp.get(t, {}).get(m, "")
+            note = "       " if pct == "" else " (n/a) " if pct is None else f" ({pct:+.0f}%)"
+            cells.append(f"{errs[(t, m)]:.4f}" + note)
         lines.append(f"{m:<20}" + "".join(f"{c:>{width}}" for c in cells))
     return "\n".join(lines)
 

@@ -31,6 +31,7 @@ With the linear kernel the scores span the same space as ordinary PLS
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -40,6 +41,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 KERNELS = ("rbf", "poly", "linear")
+AUTO_KERNELS = ("linear", "rbf", "poly")  # tried by kernel="auto", in this order (ties go to the first)
 
 
 def check_pairs(X: ArrayLike, Y: ArrayLike, who: str = "KernelPLS.fit") -> tuple[np.ndarray, np.ndarray]:
@@ -198,7 +200,9 @@ class KernelPLS:
     ----------
     n_components : int or "auto"; "auto" picks the count with the lowest
         cross-validated squared error among 1..max_components
-    kernel : "rbf", "poly" or "linear"
+    kernel : "rbf", "poly", "linear" or "auto"; "auto" cross-validates each of
+        :data:`AUTO_KERNELS` (rbf at every width of ``gamma_scales``) and keeps the
+        lowest error; needs ``n_components="auto"`` or a count every kernel reaches
     gamma : float or None; None gives 1 / median squared distance between
         training inputs (rbf) or 1 / n_features (poly)
     degree : int, poly kernel degree
@@ -225,7 +229,10 @@ class KernelPLS:
     kernel_col_mean_ : ndarray of shape (n_pairs,), centring term of test kernels
     kernel_grand_mean_ : float, centring term
     y_mean_ : ndarray of shape (n_outputs,)
-    cv_errors_ : dict of int to float, mean squared CV error per count at the chosen gamma (auto only)
+    kernel_ : str, the kernel used ("auto" resolved)
+    cv_errors_ : dict of int to float, mean squared CV error per count at the chosen kernel and gamma
+        (auto only); counts some fold cannot reach (its Gram matrix exhausted) are left out, never inf
+    cv_scores_ : dict of str to float, lowest CV error of each kernel (and rbf width) tried (auto only)
     """
 
     def __init__(self, n_components: int | str = "auto", kernel: str = "rbf", gamma: float | None = None,
@@ -247,8 +254,8 @@ class KernelPLS:
 
     # -- fitting -----------------------------------------------------------
     def _check_settings(self, n: int) -> None:
-        if self.kernel not in KERNELS:
-            raise ValueError(f"KernelPLS: kernel must be one of {KERNELS}, got {self.kernel!r}")
+        if self.kernel not in (*KERNELS, "auto"):
+            raise ValueError(f"KernelPLS: kernel must be one of {(*KERNELS, 'auto')}, got {self.kernel!r}")
         nc = self.n_components
         if nc != "auto":
             if not isinstance(nc, (int, np.integer)) or isinstance(nc, bool) or nc < 1:
@@ -258,12 +265,12 @@ class KernelPLS:
                                  f"at most {n - 1} (centring removes one dimension)")
 
     def _gram(self, A, B):
-        return kernel_matrix(A, B, self.kernel, self.gamma_, self.coef0, self.degree)
+        return kernel_matrix(A, B, self.kernel_, self.gamma_, self.coef0, self.degree)
 
-    def _scale(self, X: np.ndarray) -> float:
+    def _scale(self, X: np.ndarray, kernel: str) -> float:
         if self.gamma is not None:
             return float(self.gamma)
-        if self.kernel == "rbf":
+        if kernel == "rbf":
             sq = kernel_matrix(X, X, "linear", 0, 0, 1)
             d = np.diag(sq)
             dist = d[:, None] + d[None, :] - 2 * sq
@@ -271,26 +278,52 @@ class KernelPLS:
             return 1.0 / med if med > 0 else 1.0
         return 1.0 / X.shape[1]
 
-    def fit(self, X: ArrayLike, Y: ArrayLike) -> KernelPLS:
-        """Fit on paired rows of X (n_pairs, n_features) and Y (n_pairs, n_outputs); returns self."""
+    def candidates(self) -> list[tuple[str, float]]:
+        """(kernel, gamma scale) pairs the fit cross-validates (one, with nothing to choose)."""
+        kernels = AUTO_KERNELS if self.kernel == "auto" else (self.kernel,)
+        out = []
+        for kernel in kernels:
+            widths = self.gamma_scales if (kernel == "rbf" and self.gamma is None
+                                           and self.n_components == "auto") else (1.0,)
+            out += [(kernel, float(scale)) for scale in widths]
+        return out if (len(out) > 1 or self.n_components == "auto") else []
+
+    def fit(self, X: ArrayLike, Y: ArrayLike, progress: Callable[[str], None] | None = None) -> KernelPLS:
+        """Fit on paired rows of X (n_pairs, n_features) and Y (n_pairs, n_outputs); returns self.
+
+        ``progress`` is called with a short note after each cross-validation fold (``cv_folds``
+        calls per entry of :meth:`candidates`), so a long fit can show how far it is.
+        """
         X, Y = check_pairs(X, Y)
         self._check_settings(len(X))
         self.X_fit_ = X
         self.y_mean_ = Y.mean(axis=0)
-        base = self._scale(X)
-        if self.n_components == "auto":
-            # components (and, for rbf without a given gamma, the kernel width) by cross-validation
-            scales = self.gamma_scales if (self.kernel == "rbf" and self.gamma is None) else (1.0,)
+        candidates = self.candidates()
+        if candidates:
+            # kernel, width and components by cross-validation; a fixed count is scored at that count
             best = None
-            for scale in scales:
-                self.gamma_ = base * scale
-                errors = self._cross_validate(self._gram(X, X), Y)
-                p = min(errors, key=errors.get)
+            self.cv_scores_ = {}
+            for kernel, scale in candidates:
+                self.kernel_, self.gamma_ = kernel, self._scale(X, kernel) * scale
+                label = kernel if kernel != "rbf" or len(self.gamma_scales) == 1 or self.gamma is not None \
+                    else f"rbf x{scale:g}"
+                errors = self._cross_validate(self._gram(X, X), Y, progress, label)
+                if self.n_components == "auto":
+                    p = min(errors, key=errors.get)
+                else:
+                    p = int(self.n_components)
+                    if p not in errors:
+                        continue
+                self.cv_scores_[label] = errors[p]
                 if best is None or errors[p] < best[0]:
-                    best = (errors[p], self.gamma_, p, errors)
-            _, self.gamma_, p, self.cv_errors_ = best
+                    best = (errors[p], kernel, self.gamma_, p, errors)
+            if best is None:
+                raise ValueError(f"KernelPLS: no kernel of {AUTO_KERNELS} reaches {self.n_components} "
+                                 f"components on every cross-validation fold (use fewer components)")
+            _, self.kernel_, self.gamma_, p, self.cv_errors_ = best
         else:
-            self.gamma_ = base
+            self.kernel_ = self.kernel
+            self.gamma_ = self._scale(X, self.kernel)
             p = int(self.n_components)
         K = self._gram(X, X)
         Kc, self.kernel_col_mean_, self.kernel_grand_mean_ = centre_gram(K)
@@ -304,10 +337,13 @@ class KernelPLS:
         self.n_components_ = p
         return self
 
-    def _cross_validate(self, K: np.ndarray, Y: np.ndarray) -> dict[int, float]:
+    def _cross_validate(self, K: np.ndarray, Y: np.ndarray, progress: Callable[[str], None] | None = None,
+                        label: str = "") -> dict[int, float]:
         """Mean squared error per component count over ``cv_folds`` folds (one NIPALS per fold).
 
-        Counts a fold could not reach (its Gram matrix exhausted earlier) get an infinite error.
+        Only counts every fold reaches are scored: a fold whose Gram matrix is exhausted after q
+        components (its training pairs span fewer dimensions) cannot support more, so the search
+        stops at the smallest such q. Every score returned is finite.
         """
         n = len(K)
         folds = np.array_split(np.random.default_rng(self.random_state).permutation(n),
@@ -317,7 +353,8 @@ class KernelPLS:
             p_max = min(int(self.max_components), p_max)
         p_max = max(1, p_max)
         sse = np.zeros(p_max)
-        for test in folds:
+        reached = p_max
+        for number, test in enumerate(folds, 1):
             train = np.setdiff1d(np.arange(n), test)
             Kc, col_mean, grand = centre_gram(K[np.ix_(train, train)])
             y_mean = Y[train].mean(0)
@@ -326,27 +363,31 @@ class KernelPLS:
             Ktc = Kt - col_mean[None, :] - Kt.mean(1)[:, None] + grand
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                T, U = nipals(Kc, Yc, p_max, self.tol, self.max_iter, self.solver)
+                T, U = nipals(Kc, Yc, reached, self.tol, self.max_iter, self.solver)
             q = T.shape[1]
-            sse[q:] = np.inf
-            if q == 0:
-                continue
             # Tᵀ K U is upper triangular (Gram deflation, eq. 9), so the leading p × p block of its
             # inverse is the inverse of its leading block, and eq. 10 with the first p components is
             # a running sum: Ŷ_p = Σ_{j<p} (K_tc U R⁻¹)_{:, j} (Tᵀ Y)_j
             R = np.triu(T.T @ Kc @ U)
-            try:
-                Rinv = solve_triangular(R, np.eye(q))
-            except (np.linalg.LinAlgError, ValueError):
-                sse[:] = np.inf
-                continue
-            A, TY = Ktc @ U @ Rinv, T.T @ Yc
+            diag = np.abs(np.diag(R))
+            # a count whose leading block is singular is unsupported too
+            ok = diag > 1e-12 * max(float(diag.max(initial=0.0)), 1e-300)
+            q = int(np.argmin(ok)) if not ok.all() else q
+            reached = min(reached, q)
+            if reached == 0:
+                break
+            Rinv = solve_triangular(R[:q, :q], np.eye(q))
+            A, TY = Ktc @ U[:, :q] @ Rinv, T[:, :q].T @ Yc
             pred = np.broadcast_to(y_mean, Y[test].shape).copy()
-            for p in range(q):
+            for p in range(reached):
                 pred += np.outer(A[:, p], TY[p])  # Ouzounis eq. 10 with the first p + 1 components
                 sse[p] += ((pred - Y[test]) ** 2).sum()
-        sse[~np.isfinite(sse)] = np.inf
-        return {p: float(sse[p - 1] / Y.size) for p in range(1, p_max + 1)}
+            if progress is not None:
+                progress(f"{label} fold {number}/{len(folds)}")
+        if reached == 0:
+            raise ValueError("KernelPLS: cross-validation found no component: a fold's training pairs do "
+                             "not vary (give more, or more varied, pairs)")
+        return {p: float(sse[p - 1] / Y.size) for p in range(1, reached + 1)}
 
     # -- prediction --------------------------------------------------------
     def centred_kernel(self, X: np.ndarray) -> np.ndarray:
@@ -373,6 +414,6 @@ class KernelPLS:
         return {
             "train_inputs": self.X_fit_, "dual_coef": self.dual_coef_,
             "kernel_col_mean": self.kernel_col_mean_, "kernel_grand_mean": self.kernel_grand_mean_,
-            "target_mean": self.y_mean_, "kernel": self.kernel, "gamma": self.gamma_,
+            "target_mean": self.y_mean_, "kernel": self.kernel_, "gamma": self.gamma_,
             "coef0": float(self.coef0), "degree": int(self.degree),
         }

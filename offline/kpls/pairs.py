@@ -20,10 +20,17 @@ paper uses 45 and 37).
   only, not from names or geometry at run time.
 
 Pairs (:func:`expression_pairs`) are: the neutral (0 ↔ 0); every matched shape
-at weight 1 (its source weights ↔ its target weights); and random sparse
-mixes of 2–``max_mix`` matched pairs with weights uniform in (0, 1], the
-same mix on both sides, so that the learnt map sees combinations and is not a
-lookup of single shapes.
+alone at weights 0.25, 0.5, 0.75 and 1 (its source weights ↔ its target
+weights); and random mixes of 2–``max_mix`` matched pairs with many small
+weights and a few large ones, the same mix on both sides, so that the learnt
+map sees each channel's whole range and the combinations real takes have, and
+is not a lookup of single shapes at full weight.
+
+The correspondence these pairs define is linear (y = M w for x = F_A w), so
+with feature points that see every shape (:func:`covering_points`) the
+cross-validated kernel of ``fit-retarget`` is the linear one and the retarget
+reproduces the by-name mapping; a non-linear kernel pays off only for a
+non-linear correspondence (:mod:`facepuppet.offline.kpls.targets`).
 
 Shapes are matched by name through :func:`facepuppet.runtime.channels.canonical`
 (:class:`~facepuppet.runtime.channels.ChannelMap`: ``eyeBlink_L`` ↔
@@ -75,15 +82,61 @@ def farthest_points(points: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
     return np.asarray(chosen, dtype=np.int64)
 
 
-def feature_points(character: Character, k: int = 45, given: ArrayLike | None = None, seed: int = 0) -> np.ndarray:
-    """Feature-point vertex indices (k,) int64: ``given`` as is, else farthest points over the moving region."""
+def shape_peaks(character: Character) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per shape, the vertices it moves and the length of each move: [(indices (m,) int64, lengths (m,))]."""
+    out = []
+    for s in range(character.n_shapes):
+        sl = character.shape_slice(s)
+        out.append((character.delta_indices[sl].astype(np.int64),
+                    np.linalg.norm(character.delta_positions[sl].astype(np.float64), axis=1)))
+    return out
+
+
+def covering_points(character: Character, share: float = 0.5) -> np.ndarray:
+    """Vertices (c,) int64 such that every shape moves one of them by >= ``share`` of its largest move.
+
+    Greedy over the shapes in order: a shape none of the points chosen so far sees well enough adds
+    the vertex it moves most. Farthest-point sampling alone can miss a small region (the ICT head's
+    left eyelid: 0.025 cm of eyeBlink_L's 1.78 cm seen by 45 farthest points), and a shape the
+    feature points do not see cannot be retargeted by any method.
+    """
+    chosen: list[int] = []
+    for idx, length in shape_peaks(character):
+        if not len(length) or length.max() <= 0:
+            continue
+        seen = length[np.isin(idx, chosen)]
+        if not len(seen) or seen.max() < share * length.max():
+            chosen.append(int(idx[np.argmax(length)]))
+    return np.asarray(chosen, dtype=np.int64)
+
+
+def feature_points(character: Character, k: int = 45, given: ArrayLike | None = None, seed: int = 0,
+                   cover: bool = True) -> np.ndarray:
+    """Feature-point vertex indices (>= k,) int64: ``given`` as is, else points over the moving region.
+
+    With ``cover``, the :func:`covering_points` (one per shape not yet seen) come first and
+    farthest-point sampling over the moving region fills up to ``k``; when the shapes need more
+    than ``k`` points to be seen, all of them are kept (the runtime cost does not depend on the
+    count: the stage folds the feature matrix into its training inputs).
+    """
     if given is not None:
         idx = np.asarray(given, dtype=np.int64).ravel()
         if idx.size == 0 or idx.min() < 0 or idx.max() >= character.n_vertices:
             raise ValueError(f"feature_points: given indices must lie in 0..{character.n_vertices - 1}")
         return idx
     region = moving_region(character)
-    return region[farthest_points(character.vertices[region].astype(np.float64), min(k, len(region)), seed)]
+    pts = character.vertices[region].astype(np.float64)
+    if not cover:
+        return region[farthest_points(pts, min(k, len(region)), seed)]
+    chosen = list(covering_points(character))
+    if not chosen:
+        chosen = [int(region[np.random.default_rng(seed).integers(len(region))])]
+    dist = np.linalg.norm(pts[:, None, :] - character.vertices[chosen].astype(np.float64)[None], axis=2).min(1)
+    while len(chosen) < min(k, len(region)):
+        nxt = int(np.argmax(dist))
+        chosen.append(int(region[nxt]))
+        dist = np.minimum(dist, np.linalg.norm(pts - pts[nxt], axis=1))
+    return np.asarray(list(dict.fromkeys(chosen)), dtype=np.int64)
 
 
 def feature_matrix(character: Character, points: np.ndarray) -> np.ndarray:
@@ -164,34 +217,43 @@ class TrainingPairs:
     matched: np.ndarray
 
 
-def pair_weights(n_shapes: int, matched: ArrayLike, n_mixes: int = 300, max_mix: int = 6, seed: int = 0) -> np.ndarray:
-    """Source weights of the training expressions, (1 + len(matched) + n_mixes, n_shapes) float64.
+AMPLITUDES = (0.25, 0.5, 0.75, 1.0)
 
-    The neutral, each matched shape at weight 1, and ``n_mixes`` random mixes
-    of 2..``max_mix`` matched shapes with weights uniform in [0.05, 1).
+
+def pair_weights(n_shapes: int, matched: ArrayLike, n_mixes: int = 300, max_mix: int = 24, seed: int = 0,
+                 amplitudes: Sequence[float] = AMPLITUDES) -> np.ndarray:
+    """Source weights of the training expressions, (1 + len(amplitudes) len(matched) + n_mixes, n_shapes).
+
+    The neutral; each matched shape alone at every weight of ``amplitudes`` (so each channel's whole
+    range [0, 1] is in the pairs, not only its end); and ``n_mixes`` random mixes of
+    2..``max_mix`` matched shapes with weights u², u uniform in [0, 1): many small weights and a few
+    large ones at once, as in a real take (a Live Link Face frame of speech has 15–30 channels
+    above 0.01, most of them small).
     """
     matched = np.asarray(matched, dtype=np.int64)
     if len(matched) < 2:
         raise ValueError(f"pair_weights: needs at least 2 matched shapes, got {len(matched)}")
     rng = np.random.default_rng(seed)
     rows = [np.zeros(n_shapes)]
-    for s in matched:
-        w = np.zeros(n_shapes)
-        w[s] = 1.0
-        rows.append(w)
+    for a in amplitudes:
+        for s in matched:
+            w = np.zeros(n_shapes)
+            w[s] = a
+            rows.append(w)
     for _ in range(n_mixes):
         w = np.zeros(n_shapes)
-        pick = rng.choice(matched, size=int(rng.integers(2, min(max_mix, len(matched)) + 1)), replace=False)
-        w[pick] = rng.uniform(0.05, 1.0, size=len(pick))
+        pick = rng.choice(matched, size=int(rng.integers(2, max(2, min(max_mix, len(matched))) + 1)),
+                          replace=False)
+        w[pick] = rng.uniform(0.0, 1.0, size=len(pick)) ** 2
         rows.append(w)
     return np.stack(rows)
 
 
 def expression_pairs(source: Character, target: Character, source_points: ArrayLike | None = None,
                      target_points: ArrayLike | None = None, pairing: Sequence[tuple[str, str]] | None = None,
-                     n_mixes: int = 300, max_mix: int = 6, seed: int = 0, k_source: int = 45,
+                     n_mixes: int = 300, max_mix: int = 24, seed: int = 0, k_source: int = 45,
                      k_target: int = 37) -> TrainingPairs:
-    """Neutral, single matched shapes and random sparse mixes, described on each side's own feature points."""
+    """Neutral, each matched shape over its range, and random mixes, on each side's own feature points."""
     sp = feature_points(source, k_source, source_points, seed)
     tp = feature_points(target, k_target, target_points, seed)
     M = match_matrix(source.shape_names, target.shape_names, pairing)

@@ -14,6 +14,8 @@ U (TᵀKU)⁻¹TᵀY) ``dual_coef``; k̄ ``kernel_col_mean``; k̿
 constant vectors when loaded, so a frame costs one (n, n_source) matrix-vector
 product, one exp (rbf), one (n,) @ (n, m) product and a few vector ops; the feature
 matrix F is folded into the training inputs (X F) when loaded, so weights go in directly.
+With the linear kernel the whole of eq. 10 is linear in the weights and folds into one
+(n_target, n_channels) matrix per channel tuple.
 
 The stage implements the frame loop's ``Retarget`` protocol: ``target_names``
 (the target character's shapes in order) and ``apply(frame) -> weights``.
@@ -196,14 +198,22 @@ class KplsRetarget:
         y += self._offset
         return y
 
-    def _folded(self, channels: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-        """(X F M, Mᵀ FᵀF M) for a channel tuple, M its :class:`ChannelMap` matrix; cached."""
+    def _folded(self, channels: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """(X F M, Mᵀ FᵀF M, G) for a channel tuple, M its :class:`ChannelMap` matrix; cached.
+
+        G (n_target, n_channels) is the whole of eq. 10 for the linear kernel, which is linear in
+        the weights: ŷ = Bᵀ A v − s (1ᵀ A v)/n + c with A = X F M, so ŷ = G v + c (None otherwise).
+        """
         folded = self._maps.get(channels)
         if folded is None:
             M = self.source_map(channels).matrix.astype(np.float64)
+            A = self._train_by_source.astype(np.float64) @ M
+            G = None
+            if self._code == 0:
+                B = self.dual_coef.astype(np.float64)
+                G = (B.T @ A - np.outer(self._coef_sum.astype(np.float64), A.mean(axis=0))).astype(np.float32)
             folded = self._maps[channels] = (
-                (self._train_by_source.astype(np.float64) @ M).astype(np.float32),
-                (M.T @ self._source_gram.astype(np.float64) @ M).astype(np.float32),
+                A.astype(np.float32), (M.T @ self._source_gram.astype(np.float64) @ M).astype(np.float32), G,
             )
         return folded
 
@@ -220,8 +230,12 @@ class KplsRetarget:
         """
         if frame.weights is None:
             return None
-        by_channel, gram = self._folded(frame.channels)
+        by_channel, gram, linear = self._folded(frame.channels)
         v = frame.weights
         if np.isnan(v).any():
             v = np.where(np.isnan(v), np.float32(0.0), v)
+        if linear is not None:  # linear kernel: eq. 10 folded into one (n_target, n_channels) product
+            y = linear @ v
+            y += self._offset
+            return y
         return self._predict(by_channel @ v, float(v @ gram @ v))

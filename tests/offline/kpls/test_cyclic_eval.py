@@ -15,12 +15,15 @@ from facepuppet.offline.kpls.commands import register, to_runtime
 from facepuppet.offline.kpls.cyclic_eval import DUTREVE, bar_plot, cyclic_error, evaluate, format_table, improvements
 from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.pairs import (
+    covering_points,
     expression_pairs,
     farthest_points,
     feature_matrix,
     feature_points,
     match_matrix,
+    pair_weights,
     read_pairing,
+    shape_peaks,
 )
 from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, stylise
 from helpers.kpls_characters import SHAPES, bump_character
@@ -62,10 +65,25 @@ def test_shapes_pair_by_canonical_name_or_by_file(tmp_path):
         match_matrix(SHAPES, SIDED, [("nope", "jawOpen")])
 
 
+def test_feature_points_see_every_shape_and_pairs_cover_each_range():
+    # a shape whose patch is small and tucked between others: farthest points alone miss it
+    c = bump_character()
+    for idx, length in shape_peaks(c):
+        pts = feature_points(c, 6)
+        seen = length[np.isin(idx, pts)]
+        assert len(seen) and seen.max() >= 0.5 * length.max()
+    assert set(covering_points(c).tolist()) <= set(feature_points(c, 6).tolist())
+    W = pair_weights(8, np.arange(8), n_mixes=50)
+    for s in range(8):
+        alone = W[(W > 0).sum(1) == 1]
+        assert sorted(alone[alone[:, s] > 0, s]) == [0.25, 0.5, 0.75, 1.0]
+    assert (W > 0).sum(1).max() > 6  # mixes as busy as a real frame, not only pairs and triples
+
+
 def test_pairs_have_their_own_feature_counts():
     a, b = bump_character(), bump_character(scale=(1.3, 0.8, 1.0), names=SIDED, seed=1)
     pairs = expression_pairs(a, b, n_mixes=40, k_source=15, k_target=11)
-    assert pairs.X.shape == (1 + 8 + 40, 45) and pairs.Y.shape == (49, 8)
+    assert pairs.X.shape == (1 + 4 * 8 + 40, 45) and pairs.Y.shape == (73, 8)  # each shape at 4 weights
     assert len(pairs.target_points) == 11
     np.testing.assert_allclose(pairs.X, pairs.source_weights @ pairs.source_features.T)
     np.testing.assert_array_equal(pairs.X[0], 0)
@@ -103,7 +121,10 @@ def test_other_morphology_cycle_table_and_plot(tmp_path):
     assert {r["method"] for r in rows} == {"KPLS rbf", "linear", DUTREVE}
     imp = improvements(rows)["other"]["linear"]
     errs = {r["method"]: r["e_d"] for r in rows if r["target"] == "other"}
-    assert imp == pytest.approx(100 * (errs["linear"] - errs["KPLS rbf"]) / errs["linear"])
+    if errs["linear"] > 1e-9 * max(errs.values()):
+        assert imp == pytest.approx(100 * (errs["linear"] - errs["KPLS rbf"]) / errs["linear"])
+    else:  # the linear map is exact on a linear correspondence: no ratio to print
+        assert imp is None
     assert "KPLS rbf" in format_table(rows, "cm")
     png = bar_plot(rows, tmp_path / "bars.png", "cm")
     from PIL import Image
@@ -190,3 +211,14 @@ def test_fit_retarget_command_and_runtime_stage_agree_with_the_offline_model(tmp
                                atol=1e-3)
     with pytest.raises(SystemExit):
         parser.parse_args(["fit-retarget", "a", "b", "-o", "r", "--components", "0"])
+
+
+def test_table_prints_n_a_where_a_method_has_zero_error():
+    rows = [{"target": "same", "method": "KPLS rbf", "e_d": 5.2e-5, "e_target": 1e-4},
+            {"target": "same", "method": "linear regression", "e_d": 1e-19, "e_target": 2e-4},
+            {"target": "same", "method": "RBF on pairs", "e_d": 1e-4, "e_target": 0.0}]
+    assert improvements(rows)["same"]["linear regression"] is None
+    assert improvements(rows)["same"]["RBF on pairs"] == pytest.approx(48.0)
+    table = format_table(rows)
+    assert "0.0000 (n/a)" in table.splitlines()[3] and "(+48%)" in table.splitlines()[4]
+    assert "0.0000 (n/a)" in format_table(rows, key="e_target").splitlines()[4]

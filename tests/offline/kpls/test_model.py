@@ -26,8 +26,9 @@ def test_rbf_kpls_recovers_a_nonlinear_map_better_than_linear_pls():
     assert mse_k < 0.01 * np.var(Yt)
     assert kpls.n_components_ in kpls.cv_errors_
     assert kpls.cv_errors_[kpls.n_components_] == min(kpls.cv_errors_.values())
-    # the search range is wide enough that the chosen count is not its upper end
-    assert 1 <= kpls.n_components_ < max(kpls.cv_errors_)
+    # every count scored is one all folds support: finite scores only, from 1 up without gaps
+    assert all(np.isfinite(v) for v in kpls.cv_errors_.values())
+    assert sorted(kpls.cv_errors_) == list(range(1, max(kpls.cv_errors_) + 1))
 
 
 def test_cv_running_sum_matches_a_refit_per_count():
@@ -114,3 +115,28 @@ def test_bad_inputs_get_clear_errors():
         KernelPLS(2).predict(X)
     with pytest.raises(ValueError, match="X has 2 features, the model was fitted on 3"):
         KernelPLS(2).fit(X, Y).predict(X[:, :2])
+
+
+def test_cross_validation_skips_counts_a_fold_cannot_support_instead_of_scoring_them_inf():
+    # a linear kernel on inputs spanning 6 dimensions: every fold's Gram matrix is exhausted after 6
+    # components, long before the n - fold - 1 counts the fold sizes would allow
+    rng = np.random.default_rng(3)
+    W = rng.uniform(0, 1, size=(80, 6))
+    X = W @ rng.normal(size=(6, 20))
+    m = KernelPLS(kernel="linear").fit(X, W)
+    assert max(m.cv_errors_) == 6 and all(np.isfinite(v) for v in m.cv_errors_.values())
+    np.testing.assert_allclose(m.predict(X), W, atol=1e-8)
+
+
+def test_auto_kernel_picks_the_linear_kernel_for_a_linear_map_and_rbf_for_a_curved_one():
+    rng = np.random.default_rng(4)
+    W = rng.uniform(0, 1, size=(120, 5))
+    X = W @ rng.normal(size=(5, 12))
+    m = KernelPLS(kernel="auto").fit(X, W)
+    assert m.kernel_ == "linear" and set(m.cv_scores_) >= {"linear", "poly", "rbf x1"}
+    assert m.cv_scores_["linear"] == min(m.cv_scores_.values())
+    Xn, Yn = _nonlinear(160, 0)
+    assert KernelPLS(kernel="auto").fit(Xn, Yn).kernel_ != "linear"
+    notes = []
+    KernelPLS(kernel="auto", cv_folds=3).fit(X, W, progress=notes.append)
+    assert len(notes) == 3 * (2 + len(KernelPLS().gamma_scales))  # one note per fold per candidate

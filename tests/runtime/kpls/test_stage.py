@@ -42,6 +42,20 @@ def test_per_frame_path_matches_the_plain_reference(kernel):
         np.testing.assert_allclose(got, _reference(stage, w), rtol=1e-4, atol=1e-4)
 
 
+@pytest.mark.parametrize("kernel", ["rbf", "poly", "linear"])
+def test_apply_with_its_folded_channel_map_matches_the_plain_reference(kernel):
+    # the linear kernel's eq. 10 folds into one (n_target, n_channels) matrix per channel tuple
+    stage = random_stage(kernel)
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        w = rng.uniform(0, 1, 3)
+        frame = Frame(t=0.0, channels=("eyeBlinkRight", "jawOpen", "eyeBlinkLeft"),
+                      weights=w[[2, 0, 1]].astype(np.float32))
+        got = stage.apply(frame)
+        assert got.dtype == np.float32 and got.shape == (4,)
+        np.testing.assert_allclose(got, _reference(stage, w), rtol=1e-4, atol=1e-4)
+
+
 def test_apply_maps_frame_channels_by_name_and_skips_frames_without_weights():
     stage = random_stage()
     w = np.array([0.3, 0.8, 0.1], np.float32)
