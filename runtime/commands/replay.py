@@ -84,8 +84,11 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     chain = build_chain(args, character, kind, filtered=filtered, audio_level=levels,
                         calibrate_requests=(lambda: source.watched) if isinstance(source, TickedSource) else None,
                         voice_only=kind == "audio", label=f"replay({kind or 'frames'})", log=log)
-    if live is not None and chain.extra_names:  # decode again, with the muscle names
-        live = read_live_recording(args.session, lambda k: make_input_adapter(k, chain.extra_names, log=log))
+    units = getattr(args, "marker_units", None)
+    if live is not None and (chain.extra_names or (kind == "markers" and (units or chain.marker_units))):
+        # decode again, with the muscle names / converting marker frames to the actor's units
+        live = read_live_recording(args.session, lambda k: make_input_adapter(
+            k, chain.extra_names, log=log, marker_units=units, to_units=chain.marker_units))
         source, ticks, fps = _source(args, live, getattr(args, "fps", None), lambda s: None)
     log(chain.describe())
     target = create_context(headless=True if args.headless else None, width=width, height=height,

@@ -149,7 +149,8 @@ def _check_options(args, default_port) -> _Options:
 
 def _record_info(args, opts: _Options) -> dict:
     """The header facts of ``--record``: enough for ``replay`` to rebuild the same chain."""
-    options = ("config", "calibrate", "actor", "pair", "retarget", "elastic", "gestures", "gesture_seed")
+    options = ("config", "calibrate", "actor", "pair", "marker_units", "retarget", "elastic", "gestures",
+               "gesture_seed")
     return {"character": str(args.character), "listen": f"{opts.host}:{opts.port}", "fps": opts.loop_fps,
             "idle_fps": opts.idle_fps,
             "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
@@ -214,7 +215,9 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                             calibrate_requests=lambda: getattr(late.source, "watched", 0),
                             voice_only=opts.voice_only, label="voice" if opts.voice_only else args.input, log=log)
         log(chain.describe())
-        adapter = None if opts.voice_only else make_input_adapter(args.input, chain.extra_names, log=log)
+        adapter = None if opts.voice_only else make_input_adapter(
+            args.input, chain.extra_names, log=log, marker_units=getattr(args, "marker_units", None),
+            to_units=chain.marker_units)
         recorder = None
         if args.record is not None:
             recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts))
