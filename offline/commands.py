@@ -32,7 +32,10 @@ def register_benches(register_bench: Callable[..., None]) -> None:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the offline commands to the ``facepuppet`` parser."""
+    """Add the offline commands to the ``facepuppet`` parser (and let ``replay`` read marker captures)."""
+    from facepuppet.offline.io import capture_replay
+
+    capture_replay.register()
     _register_import_rig(subparsers)
     for module in _modules(_COMMAND_MODULES):
         module.register(subparsers)

@@ -21,10 +21,10 @@ weights, gestures included.
 
 from __future__ import annotations
 
+import argparse
 import json
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,9 +35,6 @@ from facepuppet.runtime.live.sinks import PngSink, WeightLog
 from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, build_chain, make_input_adapter
 from facepuppet.runtime.recording.replay_source import ReplaySource, open_recording
 
-if TYPE_CHECKING:
-    import argparse
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -46,7 +43,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Play a recording (session file or Live Link Face CSV) on a character through "
                     "the frame loop, on recorded time.",
     )
-    p.add_argument("session", type=Path, help="session file (.fps) or Live Link Face CSV")
+    p.add_argument("session", type=Path,
+                   help="session file (.fps), Live Link Face CSV, or a marker take (.trc/.c3d/.csv, with "
+                        "--actor/--pair)")
     p.add_argument("-c", "--character", type=Path, required=True, help="character .npz")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL, as fast as possible")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
@@ -56,9 +55,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     p.add_argument("--duration", type=float, default=None, help="seconds to play (default: the whole recording)")
     p.add_argument("--stats", action="store_true", help="also print the counters and timings as one JSON line")
-    p.add_argument("--pipeline", action="store_true",
-                   help="run the filter stage (filters, calibration, tracking loss) as `run` does "
-                        "(implied by --config and --calibrate)")
+    p.add_argument("--pipeline", action=argparse.BooleanOptionalAction, default=None,
+                   help="run the filter stage (filters, calibration, tracking loss) as `run` does; default: on for "
+                        "a live recording (run --record) and a marker take, so the replay draws what the live run "
+                        "drew, off for other recordings; implied by --config and --calibrate; --no-pipeline plays "
+                        "the raw frames")
     p.add_argument("--dump-weights", type=Path, default=None, metavar="FILE.npy",
                    help="save the weights drawn at every tick, (n_ticks, n_channels) float32")
     add_stage_arguments(p)
@@ -77,13 +78,19 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     character = Character.load(args.character)
     live = read_live_recording(args.session, lambda kind: make_input_adapter(kind, (), log=lambda s: None))
     kind = live.header.get("info", {}).get("input") if live is not None else None
-    filtered = bool(getattr(args, "pipeline", False) or getattr(args, "config", None) is not None
-                    or getattr(args, "calibrate", False))
+    take = _marker_take(args.session) if live is None else None
+    if take is not None:
+        kind = take.kind
+    filtered = _filtered(args, live, take, log)
     levels = RecordedLevels(live.audio_levels) if live is not None and live.audio_levels else None
-    source, ticks, fps = _source(args, live, fps, log)
+    if take is None:
+        source, ticks, fps = _source(args, live, fps, log)
     chain = build_chain(args, character, kind, filtered=filtered, audio_level=levels,
-                        calibrate_requests=(lambda: source.watched) if isinstance(source, TickedSource) else None,
+                        calibrate_requests=(lambda: source.watched) if take is None and isinstance(source, TickedSource)
+                        else None,
                         voice_only=kind == "audio", label=f"replay({kind or 'frames'})", log=log)
+    if take is not None:
+        source, ticks, fps = _take_source(args, take, chain.marker_units, fps, log)
     units = getattr(args, "marker_units", None)
     if live is not None and (chain.extra_names or (kind == "markers" and (units or chain.marker_units))):
         # decode again, with the muscle names / converting marker frames to the actor's units
@@ -127,6 +134,60 @@ def _source(args, live, fps, log):
     fps = 60.0 if fps is None else fps
     source = ReplaySource(live.frames if live is not None else open_recording(args.session))
     log(f"replay: {args.session} ({len(source.frames)} frames, {source.duration:.2f} s) on {args.character}")
+    return source, None, fps
+
+
+def _filtered(args, live, take, log) -> bool:
+    """Whether the replay runs the filter stage: asked for, implied, or (by default) a live run's or a take's."""
+    asked = getattr(args, "pipeline", None)
+    implied = getattr(args, "config", None) is not None or bool(getattr(args, "calibrate", False))
+    if asked is False:
+        if implied:
+            raise ValueError("--no-pipeline: --config and --calibrate configure the filter stage; drop them or it")
+        return False
+    if asked or implied:
+        return True
+    reproducing = (live is not None and bool(live.ticks)) or take is not None
+    if live is not None and live.ticks:
+        recorded = live.header.get("info", {}).get("options", {}) or {}
+        lacking = [f"--{name.replace('_', '-')} {value}" if value not in ("True", "False") else f"--{name}"
+                   for name, value in recorded.items()
+                   if value not in (None, "False", "0") and getattr(args, name, None) in (None, False, 0)]
+        log("replay: a live recording: the filter stage runs as in the live run (--no-pipeline: the raw frames)"
+            + (f"; the live run also had {' '.join(lacking)}: give the same to reproduce it" if lacking else ""))
+    return reproducing
+
+
+def _marker_take(path: Path):
+    """The recording a registered reader (a marker capture: TRC, C3D, CSV) makes of ``path``, or None."""
+    from facepuppet.runtime.recording.readers import find_reader
+
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4096)
+    except IsADirectoryError:
+        return None
+    reader = find_reader(path, head)
+    return reader.read(path) if reader is not None else None
+
+
+def _take_source(args, take, to_units, fps, log):
+    """(frame source, None, ticks per second) of a marker take, its positions in the actor's units."""
+    from facepuppet.runtime.frames import Frame
+    from facepuppet.runtime.inputs.markers import UNIT_METRES
+
+    units = getattr(args, "marker_units", None) or take.units
+    frames = take.frames
+    note = ""
+    if units in UNIT_METRES and to_units in UNIT_METRES and units != to_units:
+        factor = np.float32(UNIT_METRES[units] / UNIT_METRES[to_units])
+        frames = [Frame(t=f.t, source=f.source, markers=f.markers * factor, marker_names=f.marker_names,
+                        t_sender=f.t_sender, number=f.number) for f in frames]
+        note = f", converted {units} -> {to_units}"
+    source = ReplaySource(frames)
+    fps = 60.0 if fps is None else fps
+    log(f"replay: {args.session} ({take.description}{note}; {source.duration:.2f} s) on {args.character}, "
+        "through the solve as --input markers")
     return source, None, fps
 
 
