@@ -240,7 +240,8 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
         from facepuppet.runtime.live.config import LiveConfig, load_live_config
         from facepuppet.runtime.live.pipeline import LivePipeline
 
-        config = load_live_config(opt("config")) if opt("config") is not None else LiveConfig()
+        known = (*shapes, *chain.names, *chain.extra_names, *(kpls.model.source_names if kpls is not None else ()))
+        config = load_live_config(opt("config"), known) if opt("config") is not None else LiveConfig()
         chain.filter = LivePipeline(config, audio_level=level, log=log, calibrate_requests=calibrate_requests)
         if opt("calibrate"):
             chain.filter.request_calibration()
