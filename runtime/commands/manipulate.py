@@ -200,8 +200,10 @@ def _run_script(m, steps, renderer, overlay, target, out: Path, save_png) -> Non
             save_png(out / f"step_{n:02d}.png", renderer.read_pixels())
             target.swap()
         records.append(run_step(m, step, draw))
-    (out / "manipulate.json").write_text(json.dumps({"markers": list(m.actor.names),
-                                                     "shapes": list(m.pair.shape_names), "steps": records}))
+    from facepuppet.runtime.outputs import write_atomic
+
+    text = json.dumps({"markers": list(m.actor.names), "shapes": list(m.pair.shape_names), "steps": records})
+    write_atomic(out / "manipulate.json", lambda temp: temp.write_text(text))
     print(f"manipulate: {len(steps)} steps in {time.perf_counter() - started:.2f} s; PNGs and manipulate.json "
           f"in {out}")
 

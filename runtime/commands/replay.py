@@ -205,7 +205,9 @@ def _report(args, result, path: str, fps: float, source, weights, log) -> None:
         log(json.dumps({"n_ticks": result.n_ticks, "path": path, "counters": c,
                         "timings_ms": result.timings}, sort_keys=True))
     if getattr(args, "dump_weights", None) is not None:
-        np.save(args.dump_weights, weights.array)
+        from facepuppet.runtime.outputs import write_atomic
+
+        write_atomic(args.dump_weights, lambda temp: np.save(temp, weights.array))
         log(f"replay: wrote the weights of {result.n_ticks} ticks to {args.dump_weights}")
     if args.out is not None:
         log(f"replay: wrote {result.n_ticks} PNGs to {args.out}")

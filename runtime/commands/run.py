@@ -220,7 +220,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
             to_units=chain.marker_units)
         recorder = None
         if args.record is not None:
-            recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts))
+            recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts),
+                                      overwrite=bool(getattr(args, "force", False)))
             parts.append(recorder)
         source = late.source = _open_source(args, adapter, opts, recorder)
         if opts.voice_only:
@@ -356,7 +357,9 @@ def run_command(args: argparse.Namespace, log: Callable[[str], None] = print) ->
     if args.stats:
         result.stats.final()
     if args.dump_weights is not None:
-        np.save(args.dump_weights, result.weights.array)
+        from facepuppet.runtime.outputs import write_atomic
+
+        write_atomic(args.dump_weights, lambda temp: np.save(temp, result.weights.array))
         log(f"run: wrote the weights of {loop.n_ticks} ticks to {args.dump_weights}")
     if args.out is not None:
         log(f"run: wrote {loop.n_ticks} PNGs to {args.out}")
