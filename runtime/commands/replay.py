@@ -33,6 +33,7 @@ from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink, WeightLog
 from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, build_chain, make_input_adapter
+from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.replay_source import ReplaySource, open_recording
 
 
@@ -107,9 +108,11 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         renderer = chain.renderer(target.ctx, character, width, height, args.path, screen, log)
         sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
         clock = RecordedClock() if target.headless else WallClock()
+        progress = Progress("replay", total=_expected_ticks(args, source, ticks, fps), unit="ticks")
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
-                         stages=chain.stages)
-        result = loop.run(source, duration=args.duration, ticks=ticks)
+                         stages=chain.stages, on_tick=[lambda info: progress.update(info.k + 1)])
+        with progress:           # on a terminal: ticks done, rate, time left (quiet when piped)
+            result = loop.run(source, duration=args.duration, ticks=ticks)
     finally:
         if renderer is not None:
             renderer.close()
@@ -135,6 +138,16 @@ def _source(args, live, fps, log):
     source = ReplaySource(live.frames if live is not None else open_recording(args.session))
     log(f"replay: {args.session} ({len(source.frames)} frames, {source.duration:.2f} s) on {args.character}")
     return source, None, fps
+
+
+def _expected_ticks(args, source, ticks, fps: float) -> int | None:
+    """How many ticks the replay will draw, for the progress line (None when unknown)."""
+    if ticks is not None:
+        return len(ticks)
+    seconds = getattr(source, "duration", None)
+    if args.duration is not None:
+        seconds = args.duration if seconds is None else min(seconds, args.duration)
+    return None if seconds is None else int(seconds * fps) + 1
 
 
 def _filtered(args, live, take, log) -> bool:
