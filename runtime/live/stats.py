@@ -36,6 +36,8 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
+#: values that are settings or levels, not counts: shown without a change
+GAUGES = frozenset({"rcvbuf_bytes"})
 STAGES = ("receive_snap", "solve_map", "draw_submit", "gpu_finish", "end_to_end")
 
 
@@ -124,8 +126,10 @@ class LiveStats:
                 if not (v or k in ("received", "frames_received")):
                     continue
                 item = f"{k}={v}"
-                if before is not None and isinstance(v, (int, float)) and not isinstance(v, bool):
-                    item += f" (+{v - before.get(k, 0):g})"
+                if (before is not None and isinstance(v, (int, float)) and not isinstance(v, bool)
+                        and k not in GAUGES):
+                    delta = v - before.get(k, 0)
+                    item += f" (+{delta})" if isinstance(delta, int) else f" (+{delta:g})"
                 shown.append(item)
             if shown:
                 groups.append(f"{group}: {' '.join(shown)}")

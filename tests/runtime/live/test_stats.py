@@ -23,3 +23,13 @@ def test_periodic_lines_print_totals_and_the_last_second_labelled():
     assert "received=165 (+45)" in lines[2]           # the total and the last second, both there
     stats.final()
     assert "stats (whole run): counters total: udp: received=165" in lines[3]
+
+
+def test_a_gauge_is_shown_without_a_change():
+    now = [0.0]
+    counters = {"udp": {"received": 3, "rcvbuf_bytes": 8388608}}
+    lines: list[str] = []
+    stats = LiveStats(counters, log=lines.append, interval_s=1.0, clock=lambda: now[0])
+    now[0] = 1.0
+    stats.on_tick(TickInfo())
+    assert "rcvbuf_bytes=8388608 |" in lines[0] + " |" and "received=3 (+3)" in lines[0]
