@@ -157,3 +157,14 @@ def test_synthesize_gestures_onto_an_existing_output_is_refused_and_force_replac
     assert cli.main(["synthesize-gestures", str(db), str(wav), "-o", str(out), "--force"]) == 0
     assert len(read_session(out).frames) > 10
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.npz", "speech.wav", "take.fps"]   # no temp left
+
+
+@pytest.mark.gl
+def test_the_demo_default_folder_follows_the_policy(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    argv = ["demo", "--headless", "--duration", "0.3", "--fps", "10", "--size", "64x48", "--no-frames"]
+    assert cli.main(argv) == 0 and (tmp_path / "demo-out" / "contact_sheet.png").is_file()
+    capsys.readouterr()
+    assert cli.main(argv) == 2
+    assert "--out (default) demo-out: the folder exists and is not empty; pass --force" in capsys.readouterr().err
+    assert cli.main(argv + ["--force"]) == 0
