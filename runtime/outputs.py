@@ -112,10 +112,21 @@ def check_path(flag: str, kind: str, path: Path, force: bool) -> None:
         raise OutputError(f"{flag} {path}: the folder {parent} is not writable")
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _umask()   # read once, at import: os.umask can only be read by setting it
+
+
 def _temp_beside(path: Path) -> Path:
-    """A new, empty temporary file in ``path``'s folder, with the same suffix (readers pick formats by it)."""
+    """A new, empty temporary file in ``path``'s folder, with the same suffix (readers pick formats by it),
+    with the permissions a plain ``open(path, "w")`` would give (mkstemp's are 0600)."""
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix or ".tmp", dir=path.parent or ".")
     os.close(fd)
+    os.chmod(name, 0o666 & ~_UMASK)
     return Path(name)
 
 

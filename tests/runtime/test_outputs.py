@@ -168,3 +168,11 @@ def test_the_demo_default_folder_follows_the_policy(tmp_path, monkeypatch, capsy
     assert cli.main(argv) == 2
     assert "--out (default) demo-out: the folder exists and is not empty; pass --force" in capsys.readouterr().err
     assert cli.main(argv + ["--force"]) == 0
+
+
+def test_atomic_files_get_the_permissions_of_a_plain_write(tmp_path):
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    with atomic_path(tmp_path / "atomic.txt") as temp:
+        temp.write_text("x")
+    assert (tmp_path / "atomic.txt").stat().st_mode & 0o777 == plain.stat().st_mode & 0o777
