@@ -99,19 +99,25 @@ def actor_files(tmp_path_factory):
     return paths, cap, truth, actor, pair
 
 
-def marker_sender(names, pose_at):
-    """A ``send(client, stop)`` for :func:`live`: the markers layout about every 0.2 s and, every 10 ms, a
-    marker frame of ``pose_at(seconds since the start)``, (n_markers, 3) float32."""
+def marker_sender(names, pose_at, units=None):
+    """A ``send(client, stop)`` for :func:`live`: the markers layout about every 0.2 s (with
+    ``/facepuppet/markers/units`` when ``units``) and, every 10 ms, a marker frame of ``pose_at(seconds since
+    the start)``, (n_markers, 3) float32."""
 
     def send(client, stop):
         layout = OscMessageBuilder("/facepuppet/markers/layout")
         layout.add_arg(1)
         for name in names:
             layout.add_arg(name, "s")
+        declare = OscMessageBuilder("/facepuppet/markers/units")
+        declare.add_arg(1)
+        declare.add_arg(units or "", "s")
         start, n = time.monotonic(), 0
         while not stop.is_set():
             if n % 20 == 0:
                 client.send(layout.build())
+                if units:
+                    client.send(declare.build())
             m = OscMessageBuilder("/facepuppet/markers/frame")
             m.add_arg(1)
             m.add_arg(n)
@@ -153,6 +159,28 @@ def test_markers_over_udp_are_solved_and_mapped_through_the_pair(actor_files, tm
     assert result.counters["udp"]["malformed"] == 0 and result.loop.counters["frames_received"] > 20
     assert np.abs(w - expected[0]).max(axis=1).min() < 1e-3, "the first pose was never drawn"
     np.testing.assert_allclose(w[-1], expected[1], atol=1e-3)
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_markers_in_mm_to_an_actor_in_cm_over_udp(actor_files, tmp_path):
+    """Declared mm frames are converted to the actor's cm; undeclared ones are warned about, once."""
+    paths, cap, truth, actor, pair = actor_files
+    pose = cap.markers[int(np.argmax(np.ptp(cap.markers, axis=(1, 2))))].astype(np.float32)
+    stage = ActorRetarget(actor, pair)
+    for _ in range(40):
+        expected = stage.apply(Frame(t=0.0, markers=pose, marker_names=cap.names))
+    config = tmp_path / "fast.toml"
+    config.write_text(NO_SMOOTHING)
+    base = ["-c", str(paths["character"]), "--input", "markers", "--actor", str(paths["actor"]), "--pair",
+            str(paths["pair"]), "--duration", "1.0", "--config", str(config)]
+    result, logs = live(base, marker_sender(cap.names, lambda age: pose * 10, units="mm"), tmp_path)
+    np.testing.assert_allclose(result.weights.array[-1], expected, atol=1e-3)
+    assert not any("other units" in line for line in logs)
+    result, logs = live(base, marker_sender(cap.names, lambda age: pose * 10), tmp_path)
+    assert sum("are they in other units?" in line for line in logs) == 1
+    result, logs = live(base + ["--marker-units", "mm"], marker_sender(cap.names, lambda age: pose * 10), tmp_path)
+    np.testing.assert_allclose(result.weights.array[-1], expected, atol=1e-3)
 
 
 def rotation_deg(q) -> float:
