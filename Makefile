@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed-stamp
 .PHONY: demo test test-quick lint setup system-deps bench clean
 
 demo: $(STAMP)
-	$(VENV)/bin/facepuppet demo --out demo-out
+	$(VENV)/bin/facepuppet demo --out demo-out --force
 
 test: $(STAMP)
 	$(PY) -m pytest -q

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -32,7 +31,10 @@ def register_benches(register_bench: Callable[..., None]) -> None:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the offline commands to the ``facepuppet`` parser."""
+    """Add the offline commands to the ``facepuppet`` parser (and let ``replay`` read marker captures)."""
+    from facepuppet.offline.io import capture_replay
+
+    capture_replay.register()
     _register_import_rig(subparsers)
     for module in _modules(_COMMAND_MODULES):
         module.register(subparsers)
@@ -58,26 +60,27 @@ def _register_import_rig(subparsers) -> None:
 
 
 def _import_rig(args: argparse.Namespace) -> int:
+    from facepuppet.runtime.progress import Progress
+
     from facepuppet.offline.io.rig_import import import_rig
 
     start = time.perf_counter()
-    tty = sys.stderr.isatty()
+    bar = Progress("import-rig", unit="shapes")
 
     def progress(i: int, n: int, name: str) -> None:
-        line = f"[{i}/{n}] {name}"
-        print(f"\r{line:<60}" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
+        bar.total = n
+        bar.update(i, note=name)
 
-    character = import_rig(
-        args.neutral,
-        args.shapes_dir,
-        tolerance=args.tolerance,
-        name=args.name,
-        units=args.units,
-        landmarks=args.landmarks,
-        progress=progress,
-    )
-    if tty:
-        print(file=sys.stderr)
+    with bar:
+        character = import_rig(
+            args.neutral,
+            args.shapes_dir,
+            tolerance=args.tolerance,
+            name=args.name,
+            units=args.units,
+            landmarks=args.landmarks,
+            progress=progress,
+        )
     out = character.save(args.output)
     seconds = time.perf_counter() - start
     metrics = character.metadata["metrics"]

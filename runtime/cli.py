@@ -40,6 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
         importlib.import_module(name).register(sub)
     for ep in entry_points(group="facepuppet.commands"):
         ep.load()(sub)
+    from facepuppet.runtime.outputs import add_output_policy
+
+    for command in sub.choices.values():   # one policy for every command's outputs (runtime/outputs.py)
+        add_output_policy(command)
     return parser
 
 
@@ -63,6 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     _configure_logging()
     try:
+        from facepuppet.runtime.outputs import check_outputs
+
+        check_outputs(args)   # an output that exists (without --force) is refused before any work
         if args.command in _RENDERING_COMMANDS:
             from facepuppet.runtime.render.blas_threads import BlasThreads
 

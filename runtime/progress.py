@@ -93,6 +93,17 @@ class Progress:
         """Add ``n`` steps done."""
         self.update(self.done + n, note)
 
+    def write(self, text: str) -> None:
+        """Print ``text`` as a line of its own (always, terminal or not: a result, not progress); a drawn
+        progress line is cleared first and drawn again below it."""
+        if self.enabled and self._drawn_at is not None and not self._closed:
+            self.stream.write("\r" + " " * self._width + "\r" + text + "\n")
+            self._width = 0
+            self._draw("", end="")
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
     def close(self, note: str = "") -> None:
         """Draw the final line and end it (once); nothing when disabled."""
         if self._closed:

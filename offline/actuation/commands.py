@@ -52,13 +52,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     r.set_defaults(func=_retarget_actor)
 
 
-def _progress():
-    tty = sys.stderr.isatty()
+TRAIN_STAGES = ("stabilise", "actuation", "cubic")
 
+
+def _progress(bar):
+    """The trainer's ``progress(stage, fraction, message)`` on a :class:`Progress` over its stages: a stage
+    starting (fraction 0) is the line's note; what a stage reports (fraction > 0) is a line of its own."""
     def show(stage: str, fraction: float, message: str) -> None:
-        line = f"[{stage:<9} {int(100 * fraction):>3d}%] {message}"
-        print(f"\r{line:<100}" if tty and fraction < 1 else line, end="" if tty and fraction < 1 else "\n",
-              file=sys.stderr, flush=True)
+        done = TRAIN_STAGES.index(stage) if stage in TRAIN_STAGES else bar.done
+        if fraction <= 0:
+            bar.update(done, note=f"{stage}: {message}")
+            return
+        bar.write(f"  {stage}: {message}")
+        bar.update(done + min(fraction, 1.0), note=stage)
     return show
 
 
@@ -72,8 +78,11 @@ def _train_actor(args: argparse.Namespace) -> int:
           f"{capture.units}; {capture.filled} samples filled, {len(capture.gaps)} long gaps"
           + "".join(f"\n  long gap: {g.marker} frames {g.start}..{g.start + g.length - 1}" for g in capture.gaps[:10]),
           file=sys.stderr)
-    model = train_actor(capture, k=args.k, progress=_progress(), head_markers=args.head_markers,
-                        neutral_frame=args.neutral_frame)
+    from facepuppet.runtime.progress import Progress
+
+    with Progress("train-actor", total=len(TRAIN_STAGES), unit="stages") as bar:
+        model = train_actor(capture, k=args.k, progress=_progress(bar), head_markers=args.head_markers,
+                            neutral_frame=args.neutral_frame)
     out = model.actor_.save(args.output)
     print(f"{out}: written, {time.perf_counter() - start:.2f} s\n{model.summary()}")
     if args.pictures:

@@ -19,9 +19,11 @@ import numpy as np
 
 from facepuppet.runtime.rigid import kabsch
 
-__all__ = ["Stabilised", "kabsch", "find_head_markers", "stabilise"]
+__all__ = ["HeadChoice", "Stabilised", "choose_head_markers", "find_head_markers", "kabsch", "stabilise"]
 
 DEFAULT_N_HEAD = 4
+#: millimetres per capture unit
+MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 # A take is "already head-fixed" when the head markers move less than this
 # fraction of their spread (RMS over the take) -- 0.1 mm on a 10 cm face.
 HEAD_FIXED_TOLERANCE = 1e-3
@@ -41,6 +43,7 @@ class Stabilised:
     rms_residual : float, RMS distance of the head markers to the reference after alignment, units
     max_angle_deg : float, largest head rotation relative to the reference frame, degrees
     bad_frames : tuple of int, frames with fewer than 3 visible head markers (pose copied from a neighbour)
+    choice : HeadChoice or None, how the head markers were found (None when they were given)
     """
 
     markers: np.ndarray
@@ -51,6 +54,7 @@ class Stabilised:
     rms_residual: float
     max_angle_deg: float
     bad_frames: tuple[int, ...] = ()
+    choice: HeadChoice | None = None
 
     def summary(self) -> str:
         if self.head_fixed:
@@ -60,11 +64,58 @@ class Stabilised:
                                                     if self.bad_frames else ""))
 
 
-def find_head_markers(markers: np.ndarray, n: int = DEFAULT_N_HEAD) -> tuple[int, ...]:
-    """The ``n`` markers whose mutual distances vary least over the take.
+@dataclass(frozen=True)
+class HeadChoice:
+    """The automatic choice of head markers.
 
-    Greedy: start from the pair with the steadiest distance, then add the
-    marker with the smallest mean distance deviation to those already chosen.
+    Attributes
+    ----------
+    markers : tuple of int, the chosen marker indices, sorted
+    rigidity_mm : float, the largest SD over the take of a distance between two chosen markers, mm
+    stillness_mm : float, median over the other markers of their RMS motion in the head frame the set gives, mm
+    rigid : bool, ``rigidity_mm`` <= :data:`RIGID_WARN_MM`
+    """
+
+    markers: tuple[int, ...]
+    rigidity_mm: float
+    stillness_mm: float
+    rigid: bool
+
+    def describe(self, names: Sequence[str]) -> str:
+        text = (f"head markers (found): {', '.join(names[i] for i in self.markers)}; rigidity: distance SD "
+                f"up to {self.rigidity_mm:.2f} mm over the take")
+        if not self.rigid:
+            text += (f"; warning: not rigid (over {RIGID_WARN_MM:g} mm): head motion and expression mix; "
+                     "name rigid markers with --head-markers")
+        return text
+
+
+#: a head-marker set whose mutual distances vary more than this (SD, mm) is not rigid enough: warn
+RIGID_WARN_MM = 1.0
+#: stillness of a head frame: this quantile over the other markers of their RMS motion in it (the still ones)
+STILL_QUANTILE = 0.25
+#: head frames this much less still than the stillest still compete on rigidity
+STILL_RATIO = 1.5
+
+
+def choose_head_markers(markers: np.ndarray, n: int = DEFAULT_N_HEAD, mm_per_unit: float = 1.0) -> HeadChoice:
+    """The rigid set of ``n`` head markers: mutual distances that vary least over the take.
+
+    Candidates: from each marker, grow a set greedily by the marker whose
+    distances to the set vary least (its largest SD to a member); a set's
+    rigidity is the largest SD of a distance within it. A cluster that moves
+    as one (a brow lifting) is rigid too, but in its frame every other marker
+    carries its motion; so among the candidates rigid enough
+    (:data:`RIGID_WARN_MM`; or the most rigid when none is), those whose head
+    frame leaves the still part of the face stillest (the
+    :data:`STILL_QUANTILE` quantile of the other markers' RMS motion, within
+    :data:`STILL_RATIO` of the best) remain, and the most rigid of them is the head.
+
+    Parameters
+    ----------
+    markers : ndarray of shape (n_frames, n_markers, 3), float, capture units, NaN = occluded
+    n : int, the set's size (at least 3)
+    mm_per_unit : float, millimetres per capture unit (for the report and the warning)
     """
     m = np.asarray(markers, dtype=np.float64)
     n_markers = m.shape[1]
@@ -72,21 +123,60 @@ def find_head_markers(markers: np.ndarray, n: int = DEFAULT_N_HEAD) -> tuple[int
         raise ValueError(f"head markers: need at least 3 markers and n >= 3, got {n_markers} markers, n={n}")
     n = min(n, n_markers)
     dist = np.linalg.norm(m[:, :, None, :] - m[:, None, :, :], axis=-1)
-    spread = np.nanstd(dist, axis=0)
+    spread = np.nanstd(dist, axis=0) * mm_per_unit
     spread[np.isnan(spread)] = np.inf
-    np.fill_diagonal(spread, np.inf)
-    i, j = np.unravel_index(np.argmin(spread), spread.shape)
-    chosen = [int(i), int(j)]
-    while len(chosen) < n:
-        score = spread[:, chosen].mean(axis=1)
-        score[chosen] = np.inf
-        chosen.append(int(np.argmin(score)))
-    return tuple(sorted(chosen))
+    np.fill_diagonal(spread, 0.0)
+    candidates = set()
+    for seed in range(n_markers):
+        chosen = [seed]
+        while len(chosen) < n:
+            score = spread[:, chosen].max(axis=1)
+            score[chosen] = np.inf
+            chosen.append(int(np.argmin(score)))
+        candidates.add(tuple(sorted(chosen)))
+    rigidity = {c: float(spread[np.ix_(c, c)].max()) for c in candidates}
+    best = min(rigidity.values())
+    close = sorted(c for c in candidates if rigidity[c] <= max(RIGID_WARN_MM, best))
+    still = {c: _stillness(m, c) * mm_per_unit for c in close}
+    stillest = min(still.values())
+    pick = min((c for c in close if still[c] <= STILL_RATIO * stillest), key=lambda c: (rigidity[c], still[c]))
+    return HeadChoice(pick, rigidity[pick], still[pick], rigidity[pick] <= RIGID_WARN_MM)
+
+
+def _stillness(m: np.ndarray, head: tuple[int, ...]) -> float:
+    """Median over the markers outside ``head`` of their RMS motion in the head frame ``head`` gives, units."""
+    h = m[:, list(head)]
+    full = ~np.isnan(h).any(axis=(1, 2))
+    if full.sum() < 2:
+        return np.inf
+    frames, hf = m[full], h[full]
+    ref = hf[0]
+    rot, trans = kabsch(np.broadcast_to(ref, hf.shape), hf)
+    aligned = frames @ np.swapaxes(rot, 1, 2) + trans[:, None, :]
+    others = np.setdiff1d(np.arange(m.shape[1]), head)
+    if not len(others):
+        return 0.0
+    a = aligned[:, others]
+    motion = np.sqrt(np.nanmean(np.sum((a - np.nanmean(a, axis=0)) ** 2, axis=2), axis=0))
+    return float(np.nanquantile(motion, STILL_QUANTILE))
+
+
+def rigidity_mm(markers: np.ndarray, head: Sequence[int], mm_per_unit: float = 1.0) -> float:
+    """The largest SD over the take of a distance between two of the ``head`` markers, mm (0 for one marker)."""
+    h = np.asarray(markers, dtype=np.float64)[:, list(head)]
+    dist = np.linalg.norm(h[:, :, None, :] - h[:, None, :, :], axis=-1)
+    sd = np.nanstd(dist, axis=0)
+    return float(np.nanmax(sd) * mm_per_unit) if np.isfinite(sd).any() else float("nan")
+
+
+def find_head_markers(markers: np.ndarray, n: int = DEFAULT_N_HEAD) -> tuple[int, ...]:
+    """The ``n`` markers of :func:`choose_head_markers` (indices, sorted)."""
+    return choose_head_markers(markers, n).markers
 
 
 def stabilise(markers: np.ndarray, names: Sequence[str], head_markers: Sequence[str | int] | None = None,
               reference_frame: int = 0,
-              n_head: int = DEFAULT_N_HEAD) -> Stabilised:
+              n_head: int = DEFAULT_N_HEAD, mm_per_unit: float = 1.0) -> Stabilised:
     """Express a take in head coordinates.
 
     Parameters
@@ -96,11 +186,14 @@ def stabilise(markers: np.ndarray, names: Sequence[str], head_markers: Sequence[
     head_markers : sequence of str (names) or int (indices), or None to find them
     reference_frame : int, the frame whose head pose defines head coordinates
     n_head : int, how many head markers to find when none are given
+    mm_per_unit : float, millimetres per capture unit (the found set's rigidity is reported in mm)
     """
     m = np.asarray(markers, dtype=np.float64)
     names = list(names)
+    choice = None
     if head_markers is None:
-        idx = find_head_markers(m, n_head)
+        choice = choose_head_markers(m, n_head, mm_per_unit)
+        idx = choice.markers
     else:
         idx = []
         for h in head_markers:
@@ -146,5 +239,6 @@ def stabilise(markers: np.ndarray, names: Sequence[str], head_markers: Sequence[
     rms = float(np.sqrt(np.nanmean(np.sum((aligned - ref) ** 2, axis=2))))
     if explained < HEAD_FIXED_TOLERANCE * spread:
         return Stabilised(m.astype(np.float32), np.tile(np.eye(3), (n_frames, 1, 1)), np.zeros((n_frames, 3)),
-                          tuple(idx), True, rms, float(angles.max()), tuple(bad))
-    return Stabilised(out.astype(np.float32), rot, trans, tuple(idx), False, rms, float(angles.max()), tuple(bad))
+                          tuple(idx), True, rms, float(angles.max()), tuple(bad), choice)
+    return Stabilised(out.astype(np.float32), rot, trans, tuple(idx), False, rms, float(angles.max()), tuple(bad),
+                      choice)

@@ -19,7 +19,7 @@ from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.actuation.basis import ActuationModel, k_report, neutral_frame
 from facepuppet.offline.actuation.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
-from facepuppet.offline.actuation.stabilise import stabilise
+from facepuppet.offline.actuation.stabilise import MM_PER_UNIT, rigidity_mm, stabilise
 from facepuppet.offline.io.capture import Capture
 
 Progress = Callable[[str, float, str], None]
@@ -82,7 +82,10 @@ class ActorModel:
         t0 = time.perf_counter()
         say("stabilise", 0.0, f"{n} frames x {capture.n_markers} markers")
         reference = self.neutral_frame if self.neutral_frame is not None else 0
-        stab = stabilise(capture.markers, capture.names, self.head_markers, reference_frame=reference)
+        stab = stabilise(capture.markers, capture.names, self.head_markers, reference_frame=reference,
+                         mm_per_unit=MM_PER_UNIT[capture.units])
+        if stab.choice is not None:
+            say("stabilise", 0.5, stab.choice.describe(capture.names))
         say("stabilise", 1.0, stab.summary())
         markers = stab.markers.astype(np.float64)
         neutral = self.neutral_frame if self.neutral_frame is not None else neutral_frame(markers)
@@ -120,7 +123,8 @@ class ActorModel:
         settings = {"k": int(self.k), "bandwidth": self.bandwidth, "handover_power": self.handover_power,
                     "random_state": self.random_state, "neutral_frame": int(neutral), "ridge_ab": ridge_ab,
                     "head_markers": [capture.names[i] for i in stab.head_markers],
-                    "head_fixed": bool(stab.head_fixed), "source": capture.source, "rate": capture.rate}
+                    "head_fixed": bool(stab.head_fixed), "source": capture.source, "rate": capture.rate,
+                    "head_markers_found": stab.choice is not None}
         train_rms = float(np.sqrt(np.mean(np.sum(
             ((np.concatenate([s ** 3, s ** 2, s], 1) @ cubic.reshape(-1, y.shape[1])) - y).reshape(
                 len(y), -1, 3) ** 2, axis=2))))
@@ -130,6 +134,8 @@ class ActorModel:
             "preprocess_s": t1 - t0, "ica_s": t2 - t1, "fit_s": t3 - t2, "train_s": t3 - t0,
             "train_rms": train_rms, "holdout": errors, "k_report": k_rows, "ridge_ab_table": ridge_table,
             "head_rms_residual": stab.rms_residual, "head_max_angle_deg": stab.max_angle_deg,
+            "head_rigidity_mm": (stab.choice.rigidity_mm if stab.choice is not None
+                                 else rigidity_mm(capture.markers, stab.head_markers, MM_PER_UNIT[capture.units])),
             "gaps_left": len(capture.gaps), "samples_filled": int(capture.filled),
             # the actuations' real range, for transfer training pairs (offline/actuation/transfer.py)
             "s_quantiles": {"levels": list(S_QUANTILE_LEVELS),
@@ -161,7 +167,8 @@ class ActorModel:
             f"actor: {a.n_markers} markers, {m['n_classes']} marker classes, K = {a.n_actuations}, {a.units}",
             f"  frames: {m['n_training_frames']} of {m['n_frames']} used (complete); neutral frame "
             f"{a.metadata['settings']['neutral_frame']}; "
-            f"head markers {', '.join(a.metadata['settings']['head_markers'])}",
+            f"head markers {', '.join(a.metadata['settings']['head_markers'])} "
+            f"(rigidity: distance SD up to {m['head_rigidity_mm']:.2f} mm)",
             f"  head: {self.stabilised_.summary()}",
             f"  time: preprocess {m['preprocess_s']:.2f} s, ICA {m['ica_s']:.2f} s, cubic fit {m['fit_s']:.2f} s",
             f"  held-out RMS marker error: linear {h['linear_rms']:.4f}, cubic {h['cubic_rms']:.4f}, cubic with "

@@ -88,9 +88,13 @@ def _fit(args: argparse.Namespace) -> int:
         marks = json.loads(Path(landmarks).read_text(encoding="utf-8"))["idx_to_landmark_verts"]
         points = ict_control_points(marks, character.vertices, character.triangles, main_front(character))
     model, basis, report = fit_character(character, points, k=args.k, fixed_ratio=args.fixed_ratio)
-    out = model.save(args.output)
-    if args.save_controls:
-        write_control_points(args.save_controls, points)
+    from facepuppet.runtime.outputs import OutputSet
+
+    with OutputSet() as outputs:        # both files, or neither
+        model.save(outputs.path(args.output))
+        if args.save_controls:
+            write_control_points(outputs.path(args.save_controls), points)
+    out = Path(args.output)
     print(f"{out}: {len(points.names)} control points, k={args.k}, basis {report['basis_seconds']:.2f} s; "
           f"relative error median {100 * report['median_relative']:.1f}% worst {100 * report['worst_relative']:.1f}% "
           f"(truncation adds {100 * report['truncation_added_median']:.2f}% median); "
@@ -106,6 +110,11 @@ def _fit(args: argparse.Namespace) -> int:
             print(path)
         print(overlay(ctx, character, model, args.pictures / "controls_and_muscles.png"))
     return 0
+
+
+def _clone_character_path(args: argparse.Namespace) -> Path:
+    """clone-elastic's second output: the target character, beside -o as STEM_character.npz."""
+    return Path(args.output).with_name(Path(args.output).stem + "_character.npz")
 
 
 def _clone(args: argparse.Namespace) -> int:
@@ -148,8 +157,12 @@ def _clone(args: argparse.Namespace) -> int:
         pos, _ = model.deform(model.blend(w), target.vertices, np.tile([0, 0, 1.0], (target.n_vertices, 1)))
         basis_shapes[name] = pos - target.vertices
     character = character_with_shapes(target, basis_shapes)
-    out = model.save(args.output)
-    char_out = character.save(Path(args.output).with_name(Path(args.output).stem + "_character.npz"))
+    from facepuppet.runtime.outputs import OutputSet
+
+    out, char_out = Path(args.output), _clone_character_path(args)
+    with OutputSet() as outputs:        # the elastic table and its character, or neither
+        model.save(outputs.path(out))
+        character.save(outputs.path(char_out))
     print(f"{out}: cloned {len(model.shape_names)} expressions onto {target.n_vertices} vertices; character {char_out}")
     if args.pictures:
         from facepuppet.runtime.render.gl_context import create_context
@@ -185,4 +198,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--k", type=int, default=DEFAULT_K)
     c.add_argument("--fixed-ratio", type=float, default=DEFAULT_FIXED_RATIO)
     c.add_argument("--pictures", type=Path, help="folder for the cloned-expression sheet and overlay")
-    c.set_defaults(func=_clone)
+    c.set_defaults(func=_clone, derived_outputs=lambda args: [_clone_character_path(args)])

@@ -263,7 +263,10 @@ def run_bench(args: argparse.Namespace) -> dict:
     ref_takes = [read_llf_take(p, z_all[:cut], fps) for p in llf]
     take_names = list(db.channels["takes"])
     frame_take = np.asarray(db["frame_take"])
+    from facepuppet.runtime.progress import Progress
+
     runs, steps, index_s, occupancy = [], [], [], []
+    bar = Progress("bench gestures", total=args.seeds * len(drive), unit="steps")
     for seed in range(args.seed, args.seed + args.seeds):
         t0 = time.perf_counter()
         synth = GestureSynth(db, seed=seed, normaliser=SpeakerNormaliser(*stats, rate=0.0), **extra)
@@ -276,13 +279,17 @@ def run_bench(args: argparse.Namespace) -> dict:
             out[i] = synth.step(float(v))
             st[i] = time.perf_counter() - s0
             eyes[i] = synth.pick("eyes")
+            if i % 256 == 0:
+                bar.update((seed - args.seed) * len(drive) + i, note=f"seed {seed}")
         steps.append(st)
         runs.append((out, synth.run_lengths))
+        bar.update((seed - args.seed + 1) * len(drive), note=f"seed {seed}")
         share = np.bincount(frame_take[eyes], minlength=len(take_names)) / len(eyes)
         occupancy.append({"eyes_share_per_take": {n: float(v) for n, v in zip(take_names, share) if v > 0},
                           "eyes_distinct_frames": int(len(np.unique(eyes))),
                           "eyes_max_visits_of_one_frame": int(np.bincount(eyes).max())})
     names = list(synth.out_names)
+    bar.close()
     stoch = [n for n in names if n.startswith(("brow", "eye", "cheek", "nose"))]
     blink = "eyeBlinkLeft"
     per_take = {t.name: _stats(np.column_stack([t.columns[n] for n in stoch]), t.columns[blink], t.intensity, fps)

@@ -59,7 +59,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--history", type=int, default=10, help="history h in frames (default 10)")
     s.add_argument("--stereo", choices=("refuse", "mix"), default="refuse", help="stereo WAV: refuse or mix")
     s.add_argument("--pictures", type=Path, default=None, help="also draw intensity + tracks as PNG here")
-    s.add_argument("--overwrite", action="store_true", help="replace an existing session file")
+    s.add_argument("--force", "--overwrite", dest="force", action="store_true",
+                   help="replace an existing session file / picture (default: refuse, before any work)")
     s.set_defaults(func=_synthesize)
 
     t = subparsers.add_parser(
@@ -86,7 +87,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     t.add_argument("--pictures", type=Path, default=None, help="also render a contact sheet of the shapes here")
     t.add_argument("--picture-weight", type=float, default=3.0,
                    help="weight of each detail shape in the pictures (a shape is 1 std of its feature; default 3)")
-    t.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    t.add_argument("--force", "--overwrite", dest="force", action="store_true",
+                   help="replace existing output files (default: refuse, before any work)")
     t.set_defaults(func=_transfer_detail)
 
 
@@ -139,14 +141,16 @@ def _build(args: argparse.Namespace) -> int:
 def _synthesize(args: argparse.Namespace) -> int:
     from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.gestures.layer import GestureLayer
+    from facepuppet.runtime.outputs import atomic_path
     from facepuppet.runtime.recording.session import SessionWriter
 
     synth, level, tracks, seconds = synthesize(args.database, args.speech, args.seed, parse_style(args.style),
                                                args.sigma, args.candidates, args.history, args.stereo)
     fps = float(synth_fps(args.database))
     layer = GestureLayer(synth, fps=fps, mode="voice")
-    with SessionWriter(args.output, info={"generator": "synthesize-gestures", "speech": str(args.speech),
-                                          "seed": args.seed, "style": args.style}, overwrite=args.overwrite) as w:
+    with atomic_path(args.output) as temp, SessionWriter(
+            temp, info={"generator": "synthesize-gestures", "speech": str(args.speech), "seed": args.seed,
+                        "style": args.style}, overwrite=True) as w:   # the whole session, or none
         for i, row in enumerate(tracks):
             synth.additions[:] = row
             f = layer.compose(None, i / fps)
@@ -203,9 +207,12 @@ def plot_tracks(path: str | os.PathLike, level_db: np.ndarray, tracks: np.ndarra
         x = left + s * fps * (width - left - 10) / max(n - 1, 1)
         d.line([(x, y_axis - 5), (x, y_axis)], fill="black")
         d.text((x - 3, y_axis + 2), f"{s}s", fill="black")
+    from facepuppet.runtime.outputs import atomic_path
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    img.save(path)
+    with atomic_path(path) as temp:
+        img.save(temp, format="PNG")
     return path
 
 
@@ -320,28 +327,40 @@ def render_detail_sheet(character: Character, names: Sequence[str], weight: floa
     return contact_sheet(frames, columns)
 
 
-def _refuse_existing(path, overwrite: bool) -> None:
-    if path is not None and Path(path).exists() and not overwrite:
-        raise ValueError(f"{path}: exists; pass --overwrite to replace it")
-
-
 def _transfer_detail(args: argparse.Namespace) -> int:
     from facepuppet.runtime.character import Character
     from facepuppet.runtime.gestures.tables import load_gesture_db
+    from facepuppet.runtime.outputs import OutputSet, check_path
     from facepuppet.runtime.tables import save_tables
 
     from facepuppet.offline.gestures.detail_transfer import detail_table
 
     if (args.gestures is None) != (args.gestures_out is None):
         raise ValueError("--gestures and --gestures-out go together (read one database, write its copy)")
-    for path in (args.output, args.gestures_out):
-        _refuse_existing(path, args.overwrite)
+    for flag, path in (("--output", args.output), ("--gestures-out", args.gestures_out)):
+        if path is not None:       # (cli.main checked already; again for direct callers)
+            check_path(flag, "file", Path(path), args.force)
     if args.per_region < 1 or args.step < 1:
         raise ValueError(f"--per-region and --step: expected >= 1, got {args.per_region}, {args.step}")
+    if not (args.picture_weight > 0):
+        raise ValueError(f"--picture-weight: expected a positive number, got {args.picture_weight}")
+    if args.radius is not None and not (args.radius > 0):
+        raise ValueError(f"--radius: expected a positive number, got {args.radius}")
+    # every input read and checked before the work, and every output written at the end, together
     character = Character.load(args.character)
-    out, det, tr, rate = transfer_detail(character, args.markers, load_landmarks(args.landmarks), args.per_region,
+    landmarks = load_landmarks(args.landmarks)
+    db = load_gesture_db(args.gestures) if args.gestures is not None else None
+    out, det, tr, rate = transfer_detail(character, args.markers, landmarks, args.per_region,
                                          args.basis, args.window, args.step, args.radius)
-    path = out.save(args.output)
+    table = detail_table(db, det, [Path(p).stem for p in args.markers], rate=rate) if db is not None else None
+    sheet = render_detail_sheet(out, det.feature_names, args.picture_weight) if args.pictures is not None else None
+    with OutputSet() as outputs:
+        out.save(outputs.path(args.output))
+        if db is not None:
+            channels = {**db.channels, "detail": list(det.feature_names)}
+            save_tables(outputs.path(args.gestures_out), "gesture_db", {**db.arrays, "detail_weights": table},
+                        units=db.units, channels=channels, metadata=db.metadata)
+    path = Path(args.output)
     dense = out.dense_deltas()[character.n_shapes:]
     print(f"{path}: {out.n_vertices} vertices, {out.n_shapes} shapes ({len(det.feature_names)} detail), "
           f"{path.stat().st_size / 1e6:.1f} MB")
@@ -349,12 +368,8 @@ def _transfer_detail(args: argparse.Namespace) -> int:
         m = np.linalg.norm(d, axis=1)
         print(f"  {name}: {np.count_nonzero(m > 1e-5)} vertices moved, max {m.max():.4f} {out.units} "
               f"at weight 1 (1 std of the feature)")
-    if args.gestures is not None:
-        db = load_gesture_db(args.gestures)
-        table = detail_table(db, det, [Path(p).stem for p in args.markers], rate=rate)
-        channels = {**db.channels, "detail": list(det.feature_names)}
-        g = save_tables(args.gestures_out, "gesture_db", {**db.arrays, "detail_weights": table}, units=db.units,
-                        channels=channels, metadata=db.metadata)
+    if db is not None:
+        g = Path(args.gestures_out)
         rows = int(np.count_nonzero(np.abs(table).sum(1) > 0))
         print(f"{g}: gesture tables with detail weights ({rows} of {len(table)} reference frames from the "
               f"marker takes); run --gestures {g} --character {path} drives the detail shapes")
@@ -362,6 +377,5 @@ def _transfer_detail(args: argparse.Namespace) -> int:
         from facepuppet.runtime.render.images import save_png
 
         args.pictures.mkdir(parents=True, exist_ok=True)
-        sheet = render_detail_sheet(out, det.feature_names, args.picture_weight)
         print(f"wrote {save_png(args.pictures / 'detail_shapes.png', sheet)}")
     return 0

@@ -29,6 +29,7 @@ from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.geometry import incidence_matrix
 from facepuppet.runtime.tables import hash_inputs, naming_file
 
+from facepuppet.offline.io.mesh_format import refuse_non_obj
 from facepuppet.offline.io.mtl import MtlMaterial, read_mtl
 from facepuppet.offline.io.obj import ObjError, ObjMesh, read_obj, read_vertices_only
 
@@ -125,7 +126,10 @@ def import_rig(
         raise ValueError(f"tolerance: expected a finite number >= 0, got {tolerance!r}")
     if not neutral_path.is_file():
         raise FileNotFoundError(f"{neutral_path}: neutral OBJ not found")
+    refuse_non_obj(neutral_path, "the neutral")
     shape_paths = _shape_paths(neutral_path, shapes_dir, shapes)
+    for shape in shape_paths:
+        refuse_non_obj(shape, "a shape")
 
     mesh = read_obj(neutral_path)
     if len(mesh.triangles) == 0:

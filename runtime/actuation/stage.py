@@ -8,9 +8,22 @@ mapped to the character's weights through the pair table (§6.2). The Kabsch
 rotation is the head's turn away from the actor's neutral; carried into the
 character's axes through the pair's similarity, it becomes the frame's head
 rotation, so the character's head turns with the performer's.
+
+A new layout (marker-name tuple) is checked once against the actor's names:
+names the actor lacks and actor markers the layout lacks are reported once;
+a layout that shares fewer than the solve needs (:meth:`ActorRetarget.needs`:
+3 of the actor's head markers for the pose and ceil(K / 3) others, three
+coordinates each, for K actuations) is refused, its frames counted in
+``layout_refused``. The first usable frame of each layout is also checked for
+scale: when its shared markers spread more than 3x more or less than the
+actor's neutral (frames in mm to an actor in cm), the stage warns once.
 """
 
 from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -22,6 +35,9 @@ from facepuppet.runtime.geometry import matrix_to_quat
 from facepuppet.runtime.rigid import kabsch
 
 MAX_COORDINATE = 1e6  # capture units (mm: a kilometre): a marker beyond it is a damaged sample, not a face
+logger = logging.getLogger(__name__)
+#: how far (as a ratio either way) a frame's marker spread may be from the actor's before a warning
+SCALE_WARN_RATIO = 3.0
 
 
 class ActorRetarget:
@@ -32,6 +48,7 @@ class ActorRetarget:
     actor : Actor
     pair : ActorPair, made for this actor (same markers and K)
     solver : MarkerSolver or None (default settings)
+    log : callable taking one line: the layout reports and the scale warning
 
     Attributes
     ----------
@@ -39,14 +56,15 @@ class ActorRetarget:
     s : ndarray of shape (K,), float64, the last solved actuations
     head_rotation : ndarray of shape (4,), float64, quaternion (x, y, z, w) in the character's axes: the
         last frame's head rotation away from the actor's neutral (identity before any frame)
-    counters : dict, ``frames``, ``no_markers``, ``no_head_pose``; ``out_of_range``: frames with a marker
-        coordinate beyond ``MAX_COORDINATE`` or infinite (those markers are treated as occluded);
+    counters : dict, ``frames``, ``no_markers``, ``no_head_pose``, ``layout_refused``; ``out_of_range``: frames
+        with a marker coordinate beyond ``MAX_COORDINATE`` or infinite (those markers are treated as occluded);
         ``no_solution``: frames whose head fit or solve came out non-finite (skipped, previous weights kept)
     """
 
     name = "solve"
 
-    def __init__(self, actor: Actor, pair: ActorPair, solver: MarkerSolver | None = None) -> None:
+    def __init__(self, actor: Actor, pair: ActorPair, solver: MarkerSolver | None = None,
+                 log: Callable[[str], None] = logger.warning) -> None:
         if tuple(pair.marker_names) != tuple(actor.names) or pair.cubic.shape[1] != actor.n_actuations:
             raise ValueError("ActorRetarget: the pair table was not made for this actor "
                              f"({len(pair.marker_names)} markers / K={pair.cubic.shape[1]} vs "
@@ -56,9 +74,14 @@ class ActorRetarget:
         self.solver = solver or MarkerSolver(actor)
         self.target_names = tuple(pair.shape_names)
         self.s = np.zeros(actor.n_actuations)
-        self.counters = {"frames": 0, "no_markers": 0, "no_head_pose": 0, "out_of_range": 0, "no_solution": 0}
+        self.counters = {"frames": 0, "no_markers": 0, "no_head_pose": 0, "layout_refused": 0,
+                         "out_of_range": 0, "no_solution": 0}
+        self.log = log
         self._names: tuple[str, ...] | None = None
         self._index: np.ndarray | None = None
+        self._refused = False
+        self._checked: set[tuple[str, ...]] = set()      # layouts reported (bounded: see _order)
+        self._scaled: set[tuple[str, ...]] = set()
         self._head = np.asarray(actor.head_markers, dtype=np.int64)
         self._neutral = actor.neutral.astype(np.float64)
         self.head_rotation = np.array([0.0, 0.0, 0.0, 1.0])
@@ -67,20 +90,75 @@ class ActorRetarget:
         scale = abs(np.linalg.det(linear)) ** (1.0 / 3.0)
         self._axes = linear / scale if scale > 0 else np.eye(3)
 
+    def needs(self) -> tuple[int, int]:
+        """(head markers, other markers) a layout must share with the actor for the solve."""
+        return 3, max(1, math.ceil(self.actor.n_actuations / 3))
+
     def _order(self, names) -> np.ndarray:
         """Frame marker index of each actor marker (-1 when the frame lacks it), cached per name tuple."""
         if names != self._names:
             lookup = {n: i for i, n in enumerate(names)}
             self._index = np.array([lookup.get(n, -1) for n in self.actor.names])
             self._names = names
+            self._refused = self._check_layout(names, self._index)
         return self._index
+
+    def _check_layout(self, names: tuple[str, ...], index: np.ndarray) -> bool:
+        """Report a new layout's unmatched and missing names once; True when it shares too few to solve."""
+        head = np.zeros(self.actor.n_markers, bool)
+        head[self._head] = True
+        shared_head = int(np.sum(index[head] >= 0))
+        shared_other = int(np.sum(index[~head] >= 0))
+        need_head, need_other = self.needs()
+        refused = shared_head < need_head or shared_other < need_other
+        if names in self._checked:
+            return refused
+        if len(self._checked) >= 64:           # a sender cycling layouts: keep the set bounded
+            self._checked.clear()
+        self._checked.add(names)
+        known = set(self.actor.names)
+        unmatched = [n for n in names if n not in known]
+        missing = [n for n, i in zip(self.actor.names, index) if i < 0]
+        if refused:
+            self.log(f"markers: layout of {len(names)} markers refused: it shares {shared_head} of the actor's "
+                     f"{len(self._head)} head markers and {shared_other} others with the actor; the solve needs "
+                     f"{need_head} head markers and {need_other} others (K = {self.actor.n_actuations})"
+                     + _names_line(unmatched, missing))
+        elif unmatched or missing:
+            self.log(f"markers: layout of {len(names)} markers matches {len(names) - len(unmatched)} of the "
+                     f"actor's {self.actor.n_markers}" + _names_line(unmatched, missing))
+        return refused
+
+    def _check_scale(self, names: tuple[str, ...], obs: np.ndarray) -> None:
+        """Warn once per layout when the frame's spread is off from the actor neutral's by more than 3x."""
+        if names in self._scaled:
+            return
+        if len(self._scaled) >= 64:
+            self._scaled.clear()
+        self._scaled.add(names)
+        ok = ~np.isnan(obs).any(axis=1)
+        if ok.sum() < 3:
+            return
+        spread = lambda x: float(np.sqrt(np.mean(np.sum((x - x.mean(axis=0)) ** 2, axis=1))))  # noqa: E731
+        ours, theirs = spread(obs[ok]), spread(self._neutral[ok])
+        if not (ours > 0 and theirs > 0):
+            return
+        ratio = ours / theirs
+        if ratio > SCALE_WARN_RATIO or ratio < 1 / SCALE_WARN_RATIO:
+            self.log(f"markers: warning: the frames spread {ratio:.3g}x the actor's neutral ({self.actor.units}): "
+                     f"are they in other units? declare them (/facepuppet/markers/units, or --marker-units "
+                     f"mm|cm|m) and the run converts them to {self.actor.units}")
 
     def observed(self, frame: Frame) -> np.ndarray | None:
         """The frame's markers in the actor's order and head coordinates, (n_markers, 3) float64; None if unusable."""
         if frame.markers is None:
             return None
         names = frame.marker_names or tuple(self.actor.names[:len(frame.markers)])
-        index = self._order(tuple(names))
+        names = tuple(names)
+        index = self._order(names)
+        if self._refused:
+            self.counters["layout_refused"] += 1
+            return None
         obs = np.full((self.actor.n_markers, 3), np.nan)
         ok = index >= 0
         obs[ok] = frame.markers[index[ok]]
@@ -89,6 +167,7 @@ class ActorRetarget:
         if absurd.any():  # counted once per frame here, where the bad values enter; never warned about
             self.counters["out_of_range"] += 1
             obs[absurd] = np.nan
+        self._check_scale(names, obs)
         head_visible = ~np.isnan(obs[self._head]).any(axis=1)
         if head_visible.sum() < 3:
             self.counters["no_head_pose"] += 1
@@ -135,3 +214,10 @@ class ActorRetarget:
             return None
         self.s = s
         return weights
+
+
+def _names_line(unmatched: list[str], missing: list[str], shown: int = 8) -> str:
+    def some(names):
+        return ", ".join(names[:shown]) + (f", ... ({len(names)} in all)" if len(names) > shown else "")
+    return ((f"; not the actor's (ignored): {some(unmatched)}" if unmatched else "")
+            + (f"; the actor's, not in the layout: {some(missing)}" if missing else ""))

@@ -96,9 +96,14 @@ def run(args: argparse.Namespace) -> int:
     bench = registry[args.name]
     parser = argparse.ArgumentParser(prog=f"facepuppet bench {bench.name}", description=bench.help)
     parser.add_argument("--json", metavar="OUT.json", help="write the results as JSON here")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     if bench.add_arguments:
         bench.add_arguments(parser)
     options = parser.parse_args(args.options)
+    if options.json:
+        from facepuppet.runtime.outputs import check_path
+
+        check_path("--json", "file", Path(options.json), options.force)   # before the benchmark runs
     started = time.time()
     results = bench.func(options)
     report = {
@@ -109,7 +114,10 @@ def run(args: argparse.Namespace) -> int:
         "results": results,
     }
     if options.json:
-        Path(options.json).write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
+        from facepuppet.runtime.outputs import write_atomic
+
+        text = json.dumps(report, indent=2, sort_keys=True) + "\n"
+        write_atomic(options.json, lambda temp: temp.write_text(text))
         print(f"wrote {options.json}")
     return 0
 

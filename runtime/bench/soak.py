@@ -70,7 +70,7 @@ def send(host: str, port: int, rate: float, seconds: float, cycle_s: float) -> d
     n = len(ARKIT_NAMES)
     phases = np.arange(n) * 0.37
     held = 0.5 + 0.5 * np.sin(phases)
-    sent = {"frames": 0, "calibrations": 0}
+    sent = {"frames": 0, "calibrations": 0, "datagrams": 0}
     next_calibration = 0
     start = time.monotonic()
     k = 0
@@ -97,6 +97,7 @@ def send(host: str, port: int, rate: float, seconds: float, cycle_s: float) -> d
             sender.send(weights, euler_to_quat(yaw, 0.0, 0.0), (0.0, 0.0, 0.0))
             sent["frames"] += 1
     finally:
+        sent["datagrams"] = sender.counters["bundles_sent"] + sent["calibrations"]
         sender.close()
         cal_sock.close()
     return sent
@@ -194,7 +195,7 @@ def bench_soak(args: argparse.Namespace) -> dict:
             p.unlink()
         workdir.rmdir()
     sent_lines = sender_out[0].strip().splitlines() if sender_out and sender_out[0].strip() else []
-    sent = dict(zip(("frames", "calibrations"), map(int, sent_lines[-1].split()))) if sent_lines else {}
+    sent = dict(zip(("frames", "calibrations", "datagrams"), map(int, sent_lines[-1].split()))) if sent_lines else {}
     slope = slope_per_hour(rss, warmup_s)
     out = {
         "seconds": seconds,
@@ -254,7 +255,7 @@ register_bench(
 if __name__ == "__main__":
     if len(sys.argv) == 7 and sys.argv[1] == "--send":
         done = send(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5]), float(sys.argv[6]))
-        print(done["frames"], done["calibrations"], flush=True)
+        print(done["frames"], done["calibrations"], done["datagrams"], flush=True)
     else:
         print("usage: python -m facepuppet.runtime.bench.soak --send HOST PORT RATE SECONDS CYCLE", file=sys.stderr)
         raise SystemExit(2)

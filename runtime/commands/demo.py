@@ -84,6 +84,14 @@ def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> in
     target = create_context(headless=True if args.headless else None, width=width, height=height,
                             title="facepuppet demo")
     out = args.out if args.out is not None else (Path("demo-out") if target.headless else None)
+    if args.out is None and out is not None:   # the default folder follows the output policy too
+        from facepuppet.runtime.outputs import check_path
+
+        try:
+            check_path("--out (default)", "dir", out, bool(getattr(args, "force", False)))
+        except Exception:
+            target.close()
+            raise
     log(f"demo: {'headless (EGL)' if target.headless else 'window'}, {target.ctx.info['GL_RENDERER']}, "
         f"{width}x{height} at {args.fps:g} fps" + (f", writing to {out}" if out else ""))
     renderer = None

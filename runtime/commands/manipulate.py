@@ -159,6 +159,7 @@ def _manipulate(args) -> int:
     steps = read_script(args.script, actor.names) if args.script else None
     if args.headless and steps is None:
         raise ValueError("--headless needs --script (there is no window to click in)")
+    out = (args.out or _default_out(args)) if steps is not None else None
     target = create_context(headless=True if args.headless else None, width=width, height=height,
                             title="facepuppet manipulate")
     if target.headless and steps is None:
@@ -179,7 +180,7 @@ def _manipulate(args) -> int:
         overlay = PointOverlay(target.ctx, vp)
         m = Manipulation(actor, pair, character, ScreenView(vp, width, height))
         if steps is not None:
-            _run_script(m, steps, renderer, overlay, target, args.out or Path("manipulate-out"), save_png)
+            _run_script(m, steps, renderer, overlay, target, out, save_png)
         else:
             _interactive(m, renderer, overlay, target)
     finally:
@@ -188,6 +189,15 @@ def _manipulate(args) -> int:
                 obj.release() if obj is overlay else obj.close()
         target.close()
     return 0
+
+
+def _default_out(args) -> Path:
+    """``manipulate-out``, under the output policy (refused when not empty, unless --force)."""
+    from facepuppet.runtime.outputs import check_path
+
+    out = Path("manipulate-out")
+    check_path("--out (default)", "dir", out, bool(getattr(args, "force", False)))
+    return out
 
 
 def _run_script(m, steps, renderer, overlay, target, out: Path, save_png) -> None:
@@ -200,8 +210,10 @@ def _run_script(m, steps, renderer, overlay, target, out: Path, save_png) -> Non
             save_png(out / f"step_{n:02d}.png", renderer.read_pixels())
             target.swap()
         records.append(run_step(m, step, draw))
-    (out / "manipulate.json").write_text(json.dumps({"markers": list(m.actor.names),
-                                                     "shapes": list(m.pair.shape_names), "steps": records}))
+    from facepuppet.runtime.outputs import write_atomic
+
+    text = json.dumps({"markers": list(m.actor.names), "shapes": list(m.pair.shape_names), "steps": records})
+    write_atomic(out / "manipulate.json", lambda temp: temp.write_text(text))
     print(f"manipulate: {len(steps)} steps in {time.perf_counter() - started:.2f} s; PNGs and manipulate.json "
           f"in {out}")
 

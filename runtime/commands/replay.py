@@ -21,10 +21,10 @@ weights, gestures included.
 
 from __future__ import annotations
 
+import argparse
 import json
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,10 +33,8 @@ from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink, WeightLog
 from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, build_chain, make_input_adapter
+from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
-
-if TYPE_CHECKING:
-    import argparse
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -46,7 +44,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Play a recording (session file or Live Link Face CSV) on a character through "
                     "the frame loop, on recorded time.",
     )
-    p.add_argument("session", type=Path, help="session file (.fps) or Live Link Face CSV")
+    p.add_argument("session", type=Path,
+                   help="session file (.fps), Live Link Face CSV, or a marker take (.trc/.c3d/.csv, with "
+                        "--actor/--pair)")
     p.add_argument("-c", "--character", type=Path, required=True, help="character .npz")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL, as fast as possible")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
@@ -59,9 +59,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"cut a pause between recorded frames longer than this to this length, and say so "
                         f"(default {DEFAULT_MAX_GAP_S:g}; 'inf' keeps every pause)")
     p.add_argument("--stats", action="store_true", help="also print the counters and timings as one JSON line")
-    p.add_argument("--pipeline", action="store_true",
-                   help="run the filter stage (filters, calibration, tracking loss) as `run` does "
-                        "(implied by --config and --calibrate)")
+    p.add_argument("--pipeline", action=argparse.BooleanOptionalAction, default=None,
+                   help="run the filter stage (filters, calibration, tracking loss) as `run` does; default: on for "
+                        "a live recording (run --record) and a marker take, so the replay draws what the live run "
+                        "drew, off for other recordings; implied by --config and --calibrate; --no-pipeline plays "
+                        "the raw frames")
     p.add_argument("--dump-weights", type=Path, default=None, metavar="FILE.npy",
                    help="save the weights drawn at every tick, (n_ticks, n_channels) float32")
     add_stage_arguments(p)
@@ -87,15 +89,24 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     character = Character.load(args.character)
     live = read_live_recording(args.session, lambda kind: make_input_adapter(kind, (), log=lambda s: None))
     kind = live.header.get("info", {}).get("input") if live is not None else None
-    filtered = bool(getattr(args, "pipeline", False) or getattr(args, "config", None) is not None
-                    or getattr(args, "calibrate", False))
+    take = _marker_take(args.session) if live is None else None
+    if take is not None:
+        kind = take.kind
+    filtered = _filtered(args, live, take, log)
     levels = RecordedLevels(live.audio_levels) if live is not None and live.audio_levels else None
-    source, ticks, fps = _source(args, live, fps, log)
+    if take is None:
+        source, ticks, fps = _source(args, live, fps, log)
     chain = build_chain(args, character, kind, filtered=filtered, audio_level=levels,
-                        calibrate_requests=(lambda: source.watched) if isinstance(source, TickedSource) else None,
+                        calibrate_requests=(lambda: source.watched) if take is None and isinstance(source, TickedSource)
+                        else None,
                         voice_only=kind == "audio", label=f"replay({kind or 'frames'})", log=log)
-    if live is not None and chain.extra_names:  # decode again, with the muscle names
-        live = read_live_recording(args.session, lambda k: make_input_adapter(k, chain.extra_names, log=log))
+    if take is not None:
+        source, ticks, fps = _take_source(args, take, chain.marker_units, fps, log)
+    units = getattr(args, "marker_units", None)
+    if live is not None and (chain.extra_names or (kind == "markers" and (units or chain.marker_units))):
+        # decode again, with the muscle names / converting marker frames to the actor's units
+        live = read_live_recording(args.session, lambda k: make_input_adapter(
+            k, chain.extra_names, log=log, marker_units=units, to_units=chain.marker_units))
         source, ticks, fps = _source(args, live, getattr(args, "fps", None), lambda s: None)
     log(chain.describe())
     target = create_context(headless=True if args.headless else None, width=width, height=height,
@@ -107,9 +118,11 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         renderer = chain.renderer(target.ctx, character, width, height, args.path, screen, log)
         sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
         clock = RecordedClock() if target.headless else WallClock()
+        progress = Progress("replay", total=_expected_ticks(args, source, ticks, fps), unit="ticks")
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
-                         stages=chain.stages)
-        result = loop.run(source, duration=args.duration, ticks=ticks)
+                         stages=chain.stages, on_tick=[lambda info: progress.update(info.k + 1)])
+        with progress:           # on a terminal: ticks done, rate, time left (quiet when piped)
+            result = loop.run(source, duration=args.duration, ticks=ticks)
     finally:
         if renderer is not None:
             renderer.close()
@@ -141,6 +154,70 @@ def _source(args, live, fps, log):
     return source, None, fps
 
 
+def _expected_ticks(args, source, ticks, fps: float) -> int | None:
+    """How many ticks the replay will draw, for the progress line (None when unknown)."""
+    if ticks is not None:
+        return len(ticks)
+    seconds = getattr(source, "duration", None)
+    if args.duration is not None:
+        seconds = args.duration if seconds is None else min(seconds, args.duration)
+    return None if seconds is None else int(seconds * fps) + 1
+
+
+def _filtered(args, live, take, log) -> bool:
+    """Whether the replay runs the filter stage: asked for, implied, or (by default) a live run's or a take's."""
+    asked = getattr(args, "pipeline", None)
+    implied = getattr(args, "config", None) is not None or bool(getattr(args, "calibrate", False))
+    if asked is False:
+        if implied:
+            raise ValueError("--no-pipeline: --config and --calibrate configure the filter stage; drop them or it")
+        return False
+    if asked or implied:
+        return True
+    reproducing = (live is not None and bool(live.ticks)) or take is not None
+    if live is not None and live.ticks:
+        recorded = live.header.get("info", {}).get("options", {}) or {}
+        lacking = [f"--{name.replace('_', '-')} {value}" if value not in ("True", "False") else f"--{name}"
+                   for name, value in recorded.items()
+                   if value not in (None, "False", "0") and getattr(args, name, None) in (None, False, 0)]
+        log("replay: a live recording: the filter stage runs as in the live run (--no-pipeline: the raw frames)"
+            + (f"; the live run also had {' '.join(lacking)}: give the same to reproduce it" if lacking else ""))
+    return reproducing
+
+
+def _marker_take(path: Path):
+    """The recording a registered reader (a marker capture: TRC, C3D, CSV) makes of ``path``, or None."""
+    from facepuppet.runtime.recording.readers import find_reader
+
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4096)
+    except IsADirectoryError:
+        return None
+    reader = find_reader(path, head)
+    return reader.read(path) if reader is not None else None
+
+
+def _take_source(args, take, to_units, fps, log):
+    """(frame source, None, ticks per second) of a marker take, its positions in the actor's units."""
+    from facepuppet.runtime.frames import Frame
+    from facepuppet.runtime.inputs.markers import UNIT_METRES
+
+    units = getattr(args, "marker_units", None) or take.units
+    frames = take.frames
+    note = ""
+    if units in UNIT_METRES and to_units in UNIT_METRES and units != to_units:
+        factor = np.float32(UNIT_METRES[units] / UNIT_METRES[to_units])
+        frames = [Frame(t=f.t, source=f.source, markers=f.markers * factor, marker_names=f.marker_names,
+                        t_sender=f.t_sender, number=f.number) for f in frames]
+        note = f", converted {units} -> {to_units}"
+    source = ReplaySource(frames)
+    fps = 60.0 if fps is None else fps
+    log(f"replay: {args.session} ({take.description}{note}; {source.duration:.2f} s) on {args.character}, "
+        "through the solve as --input markers")
+    return source, None, fps
+
+
 def _report(args, result, path: str, fps: float, source, weights, log) -> None:
     c = result.counters
     log(f"replay: {result.n_ticks} ticks at {fps:g} fps, {path} path; frames received "
@@ -155,7 +232,9 @@ def _report(args, result, path: str, fps: float, source, weights, log) -> None:
         log(json.dumps({"n_ticks": result.n_ticks, "path": path, "counters": c,
                         "timings_ms": result.timings}, sort_keys=True))
     if getattr(args, "dump_weights", None) is not None:
-        np.save(args.dump_weights, weights.array)
+        from facepuppet.runtime.outputs import write_atomic
+
+        write_atomic(args.dump_weights, lambda temp: np.save(temp, weights.array))
         log(f"replay: wrote the weights of {result.n_ticks} ticks to {args.dump_weights}")
     if args.out is not None:
         log(f"replay: wrote {result.n_ticks} PNGs to {args.out}")

@@ -157,7 +157,8 @@ def _check_options(args, default_port) -> _Options:
 
 def _record_info(args, opts: _Options) -> dict:
     """The header facts of ``--record``: enough for ``replay`` to rebuild the same chain."""
-    options = ("config", "calibrate", "actor", "pair", "retarget", "elastic", "gestures", "gesture_seed")
+    options = ("config", "calibrate", "actor", "pair", "marker_units", "retarget", "elastic", "gestures",
+               "gesture_seed")
     return {"character": str(args.character), "listen": f"{opts.host}:{opts.port}", "fps": opts.loop_fps,
             "idle_fps": opts.idle_fps,
             "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
@@ -225,10 +226,13 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                             calibrate_requests=lambda: getattr(late.source, "watched", 0),
                             voice_only=opts.voice_only, label="voice" if opts.voice_only else args.input, log=log)
         log(chain.describe())
-        adapter = None if opts.voice_only else make_input_adapter(args.input, chain.extra_names, log=log)
+        adapter = None if opts.voice_only else make_input_adapter(
+            args.input, chain.extra_names, log=log, marker_units=getattr(args, "marker_units", None),
+            to_units=chain.marker_units)
         recorder = None
         if args.record is not None:
-            recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts))
+            recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts),
+                                      overwrite=bool(getattr(args, "force", False)))
             parts.append(recorder)
         source = late.source = _open_source(args, adapter, opts, recorder)
         if opts.voice_only:
@@ -373,7 +377,9 @@ def run_command(args: argparse.Namespace, log: Callable[[str], None] = print) ->
     if args.stats:
         result.stats.final()
     if args.dump_weights is not None:
-        np.save(args.dump_weights, result.weights.array)
+        from facepuppet.runtime.outputs import write_atomic
+
+        write_atomic(args.dump_weights, lambda temp: np.save(temp, result.weights.array))
         log(f"run: wrote the weights of {loop.n_ticks} ticks to {args.dump_weights}")
     if args.out is not None:
         log(f"run: wrote {loop.n_ticks} PNGs to {args.out}")

@@ -38,6 +38,7 @@ Which address to bind is the caller's choice (the ``run`` command defaults to
 
 from __future__ import annotations
 
+import errno
 import functools
 import ipaddress
 import socket
@@ -174,8 +175,20 @@ def bind_udp(host: str, port: int, kind: str, stamps: bool = False) -> tuple[soc
     except OSError as exc:
         sock.close()
         raise OSError(exc.errno, f"cannot listen for {kind} input on {host}:{port}: "
-                                 f"{exc.strerror or exc} (is another program using this port?)") from exc
+                                 f"{exc.strerror or exc}{_bind_hint(exc.errno, host)}") from exc
     return sock, rcvbuf
+
+
+def _bind_hint(code: int | None, host: str) -> str:
+    """Why a bind failed, in words, by its errno."""
+    if code == errno.EADDRNOTAVAIL:
+        return (f" ({host} is not an address of this machine: listen on 127.0.0.1, on 0.0.0.0 for every "
+                "interface, or on one of this machine's own addresses)")
+    if code == errno.EADDRINUSE:
+        return " (another program, or a previous run, is using this port)"
+    if code == errno.EACCES:
+        return " (ports below 1024 need privileges; choose a higher --listen port)"
+    return ""
 
 
 def bound_address(sock: socket.socket | None, host: str, port: int) -> tuple[str, int]:

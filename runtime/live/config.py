@@ -32,12 +32,14 @@ must not pass silently).
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.channels import ARKIT_NAMES, canonical, split_side
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.input_files import regular_file
 
@@ -143,8 +145,24 @@ def _channel(where: str, key: str, value: dict, base: ChannelSettings) -> Channe
     return ChannelSettings(gain, clamp)
 
 
-def parse_live_config(data: dict, where: str = "<config>") -> LiveConfig:
-    """LiveConfig from an already parsed TOML document; ``where`` names it in errors."""
+def _check_channel(where: str, name: str, known: dict[str, str]) -> None:
+    """A ``[channels.NAME]`` must name a known channel (any spelling, or one side of an unsided one)."""
+    key = canonical(name)
+    if key in known or split_side(key)[0] in known:
+        return
+    close = difflib.get_close_matches(key, list(known), n=3, cutoff=0.75)
+    hint = (f"; did you mean {' or '.join(known[c] for c in close)}?" if close
+            else "; expected an ARKit name (jawOpen, eyeBlinkLeft, ...) or one of the character's shapes")
+    raise LiveConfigError(f"{where}: key 'channels.{name}': no channel of that name{hint}")
+
+
+def parse_live_config(data: dict, where: str = "<config>", known_channels: Iterable[str] | None = None) -> LiveConfig:
+    """LiveConfig from an already parsed TOML document; ``where`` names it in errors.
+
+    ``known_channels``: the names a ``[channels.NAME]`` may use besides ARKit's 52 (the character's shapes,
+    the elastic muscles); any other name is an error listing the close matches.
+    """
+    known = {canonical(n): n for n in (*ARKIT_NAMES, *(known_channels or ()))}
     _table(where, "<top>", data, ("filter", "tracking_loss", "calibration", "channels", "default_channel"))
     cfg = LiveConfig(path=where)
     filters = dict(DEFAULT_FILTERS)
@@ -164,6 +182,7 @@ def parse_live_config(data: dict, where: str = "<config>") -> LiveConfig:
         default_channel = _channel(where, "default_channel", data["default_channel"], default_channel)
     channels = {}
     for name, values in _table(where, "channels", data.get("channels", {}), None).items():
+        _check_channel(where, name, known)
         channels[canonical(name)] = _channel(where, f"channels.{name}", values, default_channel)
     return replace(
         cfg,
@@ -177,13 +196,13 @@ def parse_live_config(data: dict, where: str = "<config>") -> LiveConfig:
     )
 
 
-def load_live_config(path: str | os.PathLike) -> LiveConfig:
-    """Read and check a TOML config file.
+def load_live_config(path: str | os.PathLike, known_channels: Iterable[str] | None = None) -> LiveConfig:
+    """Read and check a TOML config file (``known_channels`` as :func:`parse_live_config`).
 
     Raises
     ------
     LiveConfigError
-        naming the file and key (bad TOML, wrong type, out of range, unknown key).
+        naming the file and key (bad TOML, wrong type, out of range, unknown key or channel).
     FileNotFoundError
         when the file does not exist.
     """
@@ -197,4 +216,4 @@ def load_live_config(path: str | os.PathLike) -> LiveConfig:
         raise LiveConfigError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason}); TOML is UTF-8") from None
     except RecursionError:
         raise LiveConfigError(f"{path}: not a config facepuppet can read: arrays or tables nest too deep") from None
-    return parse_live_config(data, str(path))
+    return parse_live_config(data, str(path), known_channels)

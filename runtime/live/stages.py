@@ -134,6 +134,7 @@ class Chain:
     audio : AudioTap or None
     elastic : ElasticModel or None, the elastic path's tables
     extra_names : tuple of str, input channel names beyond the trackers' own (muscles)
+    marker_units : str or None, the units the solve wants marker frames in (the actor's), None without one
     """
 
     input: str
@@ -143,6 +144,7 @@ class Chain:
     audio: AudioTap | None = None
     elastic: ElasticModel | None = None
     extra_names: tuple[str, ...] = field(default_factory=tuple)
+    marker_units: str | None = None
 
     def describe(self) -> str:
         """``stages: vmc→filter→gestures→map→draw`` (``draw(elastic)`` on the elastic path)."""
@@ -174,6 +176,9 @@ def add_stage_arguments(parser: argparse.ArgumentParser, markers: bool = True) -
                             help="actor table (train-actor): markers input is solved to actuations s")
         parser.add_argument("--pair", type=Path, default=None, metavar="PAIR.npz",
                             help="pair table (retarget-actor): actuations s -> the character's weights")
+        parser.add_argument("--marker-units", choices=("mm", "cm", "m"), default=None,
+                            help="units of marker frames whose layout declares none (/facepuppet/markers/units); "
+                                 "frames are converted to the actor's units (default: taken to be the actor's)")
     parser.add_argument("--retarget", type=Path, default=None, metavar="RETARGET.npz",
                         help="kernel-PLS retarget tables (fit-retarget): the source channels -> the character's "
                              "shapes, instead of matching channel names")
@@ -229,12 +234,14 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
         stages.append(chain.audio)
     if solve is not None:
         stages.append(solve)
+        chain.marker_units = solve.actor.units
     level = chain.audio.level if chain.audio is not None else None
     if filtered:
         from facepuppet.runtime.live.config import LiveConfig, load_live_config
         from facepuppet.runtime.live.pipeline import LivePipeline
 
-        config = load_live_config(opt("config")) if opt("config") is not None else LiveConfig()
+        known = (*shapes, *chain.names, *chain.extra_names, *(kpls.model.source_names if kpls is not None else ()))
+        config = load_live_config(opt("config"), known) if opt("config") is not None else LiveConfig()
         chain.filter = LivePipeline(config, audio_level=level, log=log, calibrate_requests=calibrate_requests)
         if opt("calibrate"):
             chain.filter.request_calibration()
@@ -286,7 +293,7 @@ def _load_solve(actor_path, pair_path, retarget_path, shapes, input_kind, log):
                          f"character ({len(shapes)}) in order; make it with retarget-actor for this character")
     actor = Actor.load(actor_path)
     try:
-        stage = ActorRetarget(actor, pair)
+        stage = ActorRetarget(actor, pair, log=log)
     except ValueError as exc:
         raise ValueError(f"--actor {actor_path} / --pair {pair_path}: {exc}") from None
     log(f"actor: {actor_path} ({actor.n_markers} markers, K={actor.n_actuations}) -> pair {pair_path}")
@@ -306,10 +313,23 @@ def _load_kpls(path, shapes, log) -> KplsStage:
 
 
 def make_input_adapter(kind: str, extra_names: Sequence[str] = (),
-                       log: Callable[[str], None] = logger.info) -> InputAdapter:
-    """A new adapter of ``kind`` that also carries ``extra_names`` channels where its protocol can (VMC)."""
+                       log: Callable[[str], None] = logger.info, *, marker_units: str | None = None,
+                       to_units: str | None = None) -> InputAdapter:
+    """A new adapter of ``kind`` that also carries ``extra_names`` channels where its protocol can (VMC).
+
+    For ``markers``: ``marker_units`` are the frames' units where a layout declares none
+    (``--marker-units``), ``to_units`` the units the solve wants (the actor's); frames are converted.
+    """
     from facepuppet.runtime.inputs.kinds import make_adapter
 
+    if kind == "markers" and (marker_units is not None or to_units is not None):
+        from facepuppet.runtime.inputs.markers import UNIT_METRES, MarkersAdapter
+
+        if to_units is not None and to_units not in UNIT_METRES:
+            log(f"note: the actor's units {to_units!r} are not one of {', '.join(UNIT_METRES)}; "
+                "marker frames are not converted")
+            to_units = None
+        return MarkersAdapter(units=marker_units, to_units=to_units)
     if extra_names and kind == "vmc":
         from facepuppet.runtime.inputs.vmc import VmcAdapter
 

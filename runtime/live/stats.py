@@ -20,6 +20,8 @@ a streaming histogram per stage (:class:`~facepuppet.runtime.live.timing.Duratio
 nothing grows in a long run. The per-second line covers the last second; the
 final report covers the whole run (exact while the ring holds every sample, from
 the histograms, within 1 %, once it has wrapped).
+Counters are shown as totals since the start, and on the per-second line also
+with their change over the last second: ``received=1234 (+60/1 s)``.
 """
 
 from __future__ import annotations
@@ -39,6 +41,8 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
+#: values that are settings or levels, not counts: shown without a change
+GAUGES = frozenset({"rcvbuf_bytes"})
 STAGES = ("receive_snap", "solve_map", "draw_submit", "gpu_finish", "end_to_end")
 
 
@@ -67,6 +71,7 @@ class LiveStats:
         self._n = 0  # total samples ever written
         self._window_start = 0
         self._next_report = clock() + (interval_s or 0)
+        self._last_counters: dict = {}
         same = time.get_clock_info("perf_counter").implementation == time.get_clock_info("monotonic").implementation
         self._offset = 0.0 if same else time.monotonic() - time.perf_counter()
         self.ticks = 0
@@ -89,7 +94,10 @@ class LiveStats:
             self._n += 1
         if self.interval_s and self.clock() >= self._next_report:
             self._next_report += self.interval_s
-            self.log(self.line(self.latency(since=self._window_start), "last 1 s"))
+            now = self.counter_snapshot()
+            self.log(self.line(self.latency(since=self._window_start), f"last {self.interval_s:g} s",
+                               previous=self._last_counters))
+            self._last_counters = now
             self._window_start = self._n
 
     def latency(self, since: int = 0) -> dict:
@@ -126,15 +134,33 @@ class LiveStats:
     def counter_snapshot(self) -> dict:
         return {group: dict(values) for group, values in self.counters.items()}
 
-    def line(self, latency: dict, label: str) -> str:
+    def line(self, latency: dict, label: str, previous: dict | None = None) -> str:
+        """One stats line: counters (totals; with ``previous``, a snapshot, also the change since it) and
+        latencies over the window ``label`` names."""
         groups = []
         for group, values in self.counters.items():
-            shown = " ".join(f"{k}={v}" for k, v in values.items() if v or k in ("received", "frames_received"))
+            before = None if previous is None else previous.get(group, {})
+            shown = []
+            for k, v in values.items():
+                if not (v or k in ("received", "frames_received")):
+                    continue
+                item = f"{k}={v}"
+                if (before is not None and isinstance(v, (int, float)) and not isinstance(v, bool)
+                        and k not in GAUGES):
+                    delta = v - before.get(k, 0)
+                    item += f" (+{delta})" if isinstance(delta, int) else f" (+{delta:g})"
+                shown.append(item)
             if shown:
-                groups.append(f"{group}: {shown}")
+                groups.append(f"{group}: {' '.join(shown)}")
         lat = " ".join(f"{name} {v['p50_ms']:.2f}/{v['p99_ms']:.2f}" for name, v in latency.items() if v["n"])
-        return (f"stats ({label}): " + " | ".join(groups)
-                + (f" || latency ms p50/p99 (n={latency['end_to_end']['n']}): {lat}" if lat else ""))
+        if previous is None:
+            head = f"stats ({label}): counters total"
+            lat_label = "latency ms p50/p99"
+        else:
+            head = f"stats: counters total since start (+ change in the {label})"
+            lat_label = f"latency ms p50/p99 in the {label}"
+        return (f"{head}: " + " | ".join(groups)
+                + (f" || {lat_label} (n={latency['end_to_end']['n']}): {lat}" if lat else ""))
 
     def summary(self) -> dict:
         """Counters and latency over the whole run (JSON-serialisable)."""

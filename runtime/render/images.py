@@ -23,8 +23,12 @@ def check_rgb(image: np.ndarray, name: str = "image") -> np.ndarray:
 
 def save_png(path: str | os.PathLike, rgb: np.ndarray) -> Path:
     """Write ``rgb`` (ndarray of shape (h, w, 3), uint8, top row first) as a PNG; returns the path."""
+    from facepuppet.runtime.outputs import atomic_path
+
     path = Path(path)
-    Image.fromarray(check_rgb(rgb, str(path))).save(path, format="PNG")
+    image = Image.fromarray(check_rgb(rgb, str(path)))
+    with atomic_path(path) as temp:       # never a half-written PNG under the final name
+        image.save(temp, format="PNG")
     return path
 
 

@@ -61,3 +61,21 @@ def test_unknown_total_and_long_estimates():
     clock.t += 4000
     q.update(1)
     assert q.line().endswith("~10 h 00 min left")
+
+
+def test_write_prints_a_line_above_the_progress_line_terminal_or_not():
+    import io
+
+    quiet = io.StringIO()
+    p = Progress("job", total=4, stream=quiet, enabled=False)
+    p.update(2)
+    p.write("head markers: A, B, C")
+    assert quiet.getvalue() == "head markers: A, B, C\n"         # a result line even when not a terminal
+    shown = io.StringIO()
+    t = [0.0]
+    p = Progress("job", total=4, stream=shown, enabled=True, clock=lambda: t[0])
+    p.update(1)
+    p.write("a result")
+    lines = shown.getvalue().split("\n")
+    assert lines[0].endswith("a result") and lines[0].startswith("\rjob: 1/4")   # cleared, then the text
+    assert lines[1].startswith("\rjob: 1/4")                                    # the progress line again

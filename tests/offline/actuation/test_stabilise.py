@@ -7,6 +7,7 @@ import pytest
 
 from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix
 
+from conftest import need_shared
 from facepuppet.offline.actuation.stabilise import find_head_markers, kabsch, stabilise
 
 
@@ -54,3 +55,65 @@ def test_stabilise_bad_inputs():
         stabilise(moved, [f"m{i}" for i in range(8)], head_markers=["nose", "m1", "m2"])
     with pytest.raises(ValueError, match="at least 3 distinct markers"):
         stabilise(moved, [f"m{i}" for i in range(8)], head_markers=[0, 1])
+
+
+# The kit's takes are in cm; the data README names the forehead markers + NoseTop as the rigid set
+SKULL = ("ForeHead_M", "ForeHead_L", "ForeHead_R", "NoseTop")
+BROW = ("Leyebrow_M", "Leyebrow_Inside", "Leyebrow_Outside", "Eyebrow_Center")
+CHEEK_CHIN = ("Lcheek_Up", "Lcheek_Down", "Lcheek_Outside", "Chin")
+
+
+def _moving_cluster(take, cluster, amplitude_cm, tilt_deg):
+    """The take with ``cluster`` made one rigid piece that slides ``amplitude_cm`` up and down on the skull
+    and tilts by up to ``tilt_deg`` about its centre.
+
+    In the skull's frame (the README's rigid set) the cluster keeps its shape of frame 0 exactly and moves
+    by a known offset, so its mutual distances vary less than any real marker set's; carried back into
+    the capture frame with the take's own head motion.
+    """
+    from facepuppet.offline.io.capture import read_capture
+
+    capture = read_capture(need_shared("markers", f"animface_{take}.trc"))
+    m = capture.markers.astype(np.float64)
+    ref = stabilise(m, capture.names, head_markers=list(SKULL))
+    head = m @ np.swapaxes(ref.rotation, 1, 2) + ref.translation[:, None, :]
+    idx = [capture.names.index(n) for n in cluster]
+    t = np.arange(len(m)) / capture.rate
+    wave = np.sin(2 * np.pi * 0.4 * t)
+    shape = head[0, idx] - head[0, idx].mean(axis=0)
+    tilt = np.stack([quat_to_matrix(euler_to_quat(np.radians(tilt_deg) * w, 0.0, 0.0)) for w in wave])
+    head[:, idx] = (head[0, idx].mean(axis=0) + shape @ np.swapaxes(tilt, 1, 2)
+                    + np.c_[np.zeros_like(t), amplitude_cm * wave, np.zeros_like(t)][:, None, :])
+    back = (head - ref.translation[:, None, :]) @ ref.rotation   # capture = R^T (head - t)
+    return capture, back, idx, ref
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("take, cluster", [("jaw", BROW), ("cheeks", CHEEK_CHIN)])
+def test_found_head_markers_are_the_skull_not_a_cluster_that_moves_as_one(take, cluster):
+    from facepuppet.offline.actuation.stabilise import choose_head_markers
+
+    capture, moved, idx, ref = _moving_cluster(take, cluster, amplitude_cm=0.5, tilt_deg=8.0)
+    choice = choose_head_markers(moved, 4, mm_per_unit=10.0)
+    assert not set(choice.markers) & set(idx), [capture.names[i] for i in choice.markers]
+    assert choice.rigid and choice.rigidity_mm < 1.0
+    out = stabilise(moved, capture.names, mm_per_unit=10.0)
+    assert out.choice == choice
+    # the head motion removed is the skull's (within 0.5 deg), not the cluster's slide
+    assert abs(out.max_angle_deg - ref.max_angle_deg) < 0.5
+    text = choice.describe(capture.names)
+    assert text.startswith("head markers (found): ") and "rigidity: distance SD up to" in text
+    assert "warning" not in text
+
+
+@pytest.mark.data
+def test_head_markers_that_are_not_rigid_are_reported_with_a_warning():
+    from facepuppet.offline.actuation.stabilise import RIGID_WARN_MM, choose_head_markers
+    from facepuppet.offline.io.capture import read_capture
+
+    capture = read_capture(need_shared("markers", "animface_jaw.trc"))
+    noisy = capture.markers + np.random.default_rng(0).normal(scale=0.15, size=capture.markers.shape)  # 1.5 mm
+    choice = choose_head_markers(noisy, 4, mm_per_unit=10.0)
+    # two markers each jittered by 1.5 mm per axis: their distance varies by about 1.5 * sqrt(2) mm
+    assert choice.rigidity_mm > RIGID_WARN_MM and not choice.rigid
+    assert "warning: not rigid" in choice.describe(capture.names) and "--head-markers" in choice.describe(capture.names)

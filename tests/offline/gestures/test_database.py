@@ -7,6 +7,7 @@ import pytest
 
 from facepuppet.runtime.gestures.tables import GROUPS, load_gesture_db
 from facepuppet.runtime.recording.replay_source import open_recording
+from facepuppet.runtime.tables import TablesError
 
 from facepuppet.offline.gestures import commands as gesture_commands
 from facepuppet.offline.gestures.database import build_gesture_db, quantile_map
@@ -120,8 +121,18 @@ def test_transfer_detail_writes_a_character_with_local_detail_shapes_and_gesture
     layer = gesture_layer(g_out, voice_only=True, log=lambda *_: None)
     frame = layer(None, 0.0)
     assert frame.channels[-4:] == names
-    with pytest.raises(ValueError, match="exists; pass --overwrite"):
+    with pytest.raises(ValueError, match="exists; pass --force"):
         args.func(args)
+    # a later argument that is wrong (--gestures names a character, not gesture tables): nothing is written
+    out2, g_out2 = tmp_path / "detail2.npz", tmp_path / "g_detail2.npz"
+    bad = parser.parse_args(["transfer-detail", str(ict_character_path), "--markers",
+                             str(need_shared("markers", "animface_jaw.c3d")), "--landmarks",
+                             str(ict / "vertex_indices.json"), "-o", str(out2), "--per-region", "1", "--step", "4",
+                             "--window", "11", "--gestures", str(ict_character_path), "--gestures-out", str(g_out2)])
+    with pytest.raises(TablesError, match="gesture_db"):
+        bad.func(bad)
+    assert not out2.exists() and not g_out2.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]    # no temporary file left
 
 
 @pytest.mark.gl

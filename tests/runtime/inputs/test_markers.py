@@ -106,3 +106,44 @@ def test_unknown_addresses_empty_and_truncated():
     for n in range(1, len(data)):
         assert a.handle(data[:n], 1.0 + n) is None
     counts(a, datagrams=len(data) + 2, unknown_address=1, malformed=len(data))
+
+
+def test_declared_units_are_converted_into_the_units_asked_for():
+    from facepuppet.runtime.inputs.markers import UNITS
+
+    a = MarkersAdapter(to_units="cm")
+    a.handle(bundle(layout(), msg(UNITS, 1, "mm")), 0.0)
+    f = a.handle(frame().dgram, 0.1)
+    np.testing.assert_allclose(f.markers, POINTS / 10)          # mm -> cm; NaN stays NaN
+    a.handle(msg(UNITS, 1, "m").dgram, 0.2)                      # a new declaration replaces the old
+    np.testing.assert_allclose(a.handle(frame().dgram, 0.3).markers, POINTS * 100)
+    counts(a, datagrams=4, frames=2)
+
+
+def test_marker_units_option_is_the_default_and_a_declaration_overrides_it():
+    from facepuppet.runtime.inputs.markers import UNITS
+
+    a = MarkersAdapter(units="mm", to_units="m")
+    a.handle(layout().dgram, 0.0)
+    np.testing.assert_allclose(a.handle(frame().dgram, 0.1).markers, POINTS / 1000)
+    a.handle(msg(UNITS, 1, "cm").dgram, 0.2)
+    np.testing.assert_allclose(a.handle(frame().dgram, 0.3).markers, POINTS / 100)
+    b = MarkersAdapter()                                         # nobody asked for units: as sent
+    b.handle(bundle(layout(), msg(UNITS, 1, "mm")), 0.0)
+    np.testing.assert_array_equal(b.handle(frame().dgram, 0.1).markers, POINTS)
+
+
+@pytest.mark.parametrize("message", [msg("/facepuppet/markers/units", 1, "inch"),
+                                     msg("/facepuppet/markers/units", 2, "mm"),   # undeclared layout
+                                     msg("/facepuppet/markers/units", 1)])
+def test_bad_units_messages_are_counted_as_malformed(message):
+    a = MarkersAdapter(to_units="cm")
+    a.handle(layout().dgram, 0.0)
+    assert a.handle(message.dgram, 0.1) is None
+    np.testing.assert_array_equal(a.handle(frame().dgram, 0.2).markers, POINTS)
+    counts(a, datagrams=3, frames=1, malformed=1)
+
+
+def test_unknown_units_are_refused_when_the_adapter_is_made():
+    with pytest.raises(ValueError, match="units must be one of mm, cm, m, got 'inch'"):
+        MarkersAdapter(units="inch")

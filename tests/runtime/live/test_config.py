@@ -82,3 +82,26 @@ def test_a_config_that_is_not_utf8_is_refused_naming_the_file(tmp_path):
     path.write_bytes(b"# r\xe9glages\n[tracking_loss]\ntimeout_s = 0.5\n")
     with pytest.raises(LiveConfigError, match=r"latin\.toml: not UTF-8 text \(byte 3"):
         load_live_config(path)
+
+
+def test_a_misspelt_channel_is_an_error_naming_the_close_matches(tmp_path):
+    path = tmp_path / "typo.toml"
+    path.write_text("[channels.jawOpne]\ngain = 1.3\n")
+    with pytest.raises(LiveConfigError, match=r"typo.toml: key 'channels.jawOpne': no channel of that name; "
+                                              r"did you mean jawOpen\?"):
+        load_live_config(path)
+    path.write_text("[channels.EyeBlinkLeftt]\ngain = 1.3\n")
+    with pytest.raises(LiveConfigError, match=r"did you mean eyeBlinkLeft"):
+        load_live_config(path)
+    path.write_text("[channels.zzzz]\ngain = 1.3\n")
+    with pytest.raises(LiveConfigError, match=r"'channels.zzzz': no channel of that name; expected an ARKit name"):
+        load_live_config(path)
+
+
+def test_channels_of_the_character_and_sides_of_unsided_arkit_channels_are_known(tmp_path):
+    path = tmp_path / "ok.toml"
+    path.write_text("[channels.browInnerUp_L]\ngain = 1.1\n[channels.cheekRaiser_R]\ngain = 0.9\n")
+    with pytest.raises(LiveConfigError, match="cheekRaiser_R"):
+        load_live_config(path)                                   # not ARKit, and no character named it
+    cfg = load_live_config(path, known_channels=("cheekRaiser_L", "cheekRaiser_R"))
+    assert cfg.channel("cheekRaiser_R").gain == 0.9 and cfg.channel("browInnerUp_L").gain == 1.1

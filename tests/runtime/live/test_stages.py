@@ -99,19 +99,25 @@ def actor_files(tmp_path_factory):
     return paths, cap, truth, actor, pair
 
 
-def marker_sender(names, pose_at):
-    """A ``send(client, stop)`` for :func:`live`: the markers layout about every 0.2 s and, every 10 ms, a
-    marker frame of ``pose_at(seconds since the start)``, (n_markers, 3) float32."""
+def marker_sender(names, pose_at, units=None):
+    """A ``send(client, stop)`` for :func:`live`: the markers layout about every 0.2 s (with
+    ``/facepuppet/markers/units`` when ``units``) and, every 10 ms, a marker frame of ``pose_at(seconds since
+    the start)``, (n_markers, 3) float32."""
 
     def send(client, stop):
         layout = OscMessageBuilder("/facepuppet/markers/layout")
         layout.add_arg(1)
         for name in names:
             layout.add_arg(name, "s")
+        declare = OscMessageBuilder("/facepuppet/markers/units")
+        declare.add_arg(1)
+        declare.add_arg(units or "", "s")
         start, n = time.monotonic(), 0
         while not stop.is_set():
             if n % 20 == 0:
                 client.send(layout.build())
+                if units:
+                    client.send(declare.build())
             m = OscMessageBuilder("/facepuppet/markers/frame")
             m.add_arg(1)
             m.add_arg(n)
@@ -155,6 +161,28 @@ def test_markers_over_udp_are_solved_and_mapped_through_the_pair(actor_files, tm
     np.testing.assert_allclose(w[-1], expected[1], atol=1e-3)
 
 
+@pytest.mark.gl
+@pytest.mark.slow
+def test_markers_in_mm_to_an_actor_in_cm_over_udp(actor_files, tmp_path):
+    """Declared mm frames are converted to the actor's cm; undeclared ones are warned about, once."""
+    paths, cap, truth, actor, pair = actor_files
+    pose = cap.markers[int(np.argmax(np.ptp(cap.markers, axis=(1, 2))))].astype(np.float32)
+    stage = ActorRetarget(actor, pair)
+    for _ in range(40):
+        expected = stage.apply(Frame(t=0.0, markers=pose, marker_names=cap.names))
+    config = tmp_path / "fast.toml"
+    config.write_text(NO_SMOOTHING)
+    base = ["-c", str(paths["character"]), "--input", "markers", "--actor", str(paths["actor"]), "--pair",
+            str(paths["pair"]), "--duration", "1.0", "--config", str(config)]
+    result, logs = live(base, marker_sender(cap.names, lambda age: pose * 10, units="mm"), tmp_path)
+    np.testing.assert_allclose(result.weights.array[-1], expected, atol=1e-3)
+    assert not any("other units" in line for line in logs)
+    result, logs = live(base, marker_sender(cap.names, lambda age: pose * 10), tmp_path)
+    assert sum("are they in other units?" in line for line in logs) == 1
+    result, logs = live(base + ["--marker-units", "mm"], marker_sender(cap.names, lambda age: pose * 10), tmp_path)
+    np.testing.assert_allclose(result.weights.array[-1], expected, atol=1e-3)
+
+
 def rotation_deg(q) -> float:
     return float(np.degrees(2 * np.arccos(min(1.0, abs(float(q[3]) / float(np.linalg.norm(q)))))))
 
@@ -186,6 +214,45 @@ def test_markers_turn_the_head(actor_files, tmp_path):
     angles = [rotation_deg(q) for q in drawn if q is not None]
     assert angles and min(angles) < 1.0, "the neutral pose was never drawn"
     assert angles[-1] == pytest.approx(20.0, abs=1.0), "the head did not turn with the markers"
+
+
+@pytest.mark.gl
+def test_replay_of_a_marker_take_plays_it_through_the_solve(actor_files, tmp_path):
+    import dataclasses as dc
+
+    from facepuppet.offline.io import capture_replay
+    from facepuppet.offline.io.capture import write_c3d, write_csv, write_trc
+
+    capture_replay.register()                       # as the facepuppet command does when it loads offline
+    paths, cap, truth, actor, pair = actor_files     # the actor is in cm
+    short = dc.replace(cap, markers=cap.markers[:300])
+    in_mm = dc.replace(short, markers=short.markers * 10, units="mm")
+    stage = ActorRetarget(actor, pair)              # the reference: the solve stage on every frame in order
+    expected = np.array([stage.apply(Frame(t=i / 60, markers=m, marker_names=cap.names))
+                         for i, m in enumerate(short.markers)])
+    assert np.ptp(expected, axis=0).max() > 0.05    # the take moves the face
+    takes = [write_trc(tmp_path / "take.trc", short), write_c3d(tmp_path / "take.c3d", in_mm),
+             write_csv(tmp_path / "take.csv", in_mm)]
+    for take in takes:
+        out = tmp_path / f"{take.suffix[1:]}.npy"
+        logs: list[str] = []
+        args = parser().parse_args(["replay", str(take), "-c", str(paths["character"]), "--headless", "--size",
+                                    "32x32", "--actor", str(paths["actor"]), "--pair", str(paths["pair"]),
+                                    "--no-pipeline", "--dump-weights", str(out)])
+        assert replay.run_replay(args, log=logs.append) == 0
+        assert "stages: replay(markers)→solve→map→draw" in logs
+        assert any("marker take, 300 frames x 20 markers" in line for line in logs)
+        got = np.load(out)
+        assert len(got) == 300, take
+        np.testing.assert_allclose(got, expected, atol=2e-3, err_msg=str(take))   # mm takes converted to cm
+    args = parser().parse_args(["replay", str(takes[0]), "-c", str(paths["character"]), "--headless", "--size",
+                                "32x32", "--actor", str(paths["actor"]), "--pair", str(paths["pair"])])
+    logs = []
+    assert replay.run_replay(args, log=logs.append) == 0        # by default as the live markers input: filtered
+    assert "stages: replay(markers)→solve→filter→map→draw" in logs
+    args = parser().parse_args(["replay", str(takes[0]), "-c", str(paths["character"]), "--headless"])
+    with pytest.raises(ValueError, match="--input markers: needs --actor ACTOR.npz and --pair PAIR.npz"):
+        replay.run_replay(args, log=lambda s: None)
 
 
 def test_markers_need_an_actor_and_a_pair_that_fit(actor_files, tmp_path):
@@ -325,9 +392,42 @@ def test_replay_of_a_live_recording_draws_the_live_weights(tmp_path):
     np.testing.assert_array_equal(replayed, live_weights)
 
     raw = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
-                               "--dump-weights", str(replay_w)])
+                               "--no-pipeline", "--dump-weights", str(replay_w)])
     assert replay.run_replay(raw, log=logs.append) == 0
     assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # without the pipeline: the raw frames
+    logs = []
+    plain = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40"])
+    assert replay.run_replay(plain, log=logs.append) == 0         # the options the live run had are named
+    note = next(line for line in logs if "the filter stage runs as in the live run" in line)
+    assert f"--config {config}" in note and "--calibrate" in note
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_replay_of_a_live_recording_reproduces_it_by_default(tmp_path):
+    char_path = sphere_character().save(tmp_path / "sphere.npz")
+
+    def send(client, stop):
+        start = time.monotonic()
+        while not stop.is_set():
+            age = time.monotonic() - start
+            vmc(client, {"JawOpen": 0.5 + 0.4 * np.sin(9 * age), "EyeBlinkLeft": 0.5 + 0.5 * np.sin(23 * age)})
+            time.sleep(0.008)
+
+    record, replay_w = tmp_path / "take.fps", tmp_path / "replay.npy"
+    result, _ = live(["-c", str(char_path), "--input", "vmc", "--duration", "1.0", "--record", str(record)],
+                     send, tmp_path)
+    live_weights = result.weights.array              # run always filters (default One Euro settings)
+    args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
+                                "--dump-weights", str(replay_w)])
+    logs: list[str] = []
+    assert replay.run_replay(args, log=logs.append) == 0
+    assert any("stages: replay(vmc)→filter→map→draw" == line for line in logs)
+    assert np.abs(live_weights).max() > 0.1
+    np.testing.assert_array_equal(np.load(replay_w), live_weights)
+    with pytest.raises(ValueError, match="--no-pipeline: --config and --calibrate configure the filter stage"):
+        replay.run_replay(parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless",
+                                               "--no-pipeline", "--calibrate"]), log=lambda s: None)
 
 
 def voice_wav(path, seconds: float = 2.5, rate: int = 16000):
@@ -404,5 +504,5 @@ def test_replay_of_a_voice_only_run_draws_the_live_weights(tmp_path):
     args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
                                 "--gestures", str(tmp_path / "gestures.npz"), "--dump-weights", str(replay_w)])
     assert replay.run_replay(args, log=logs.append) == 0
-    assert "stages: replay(audio)→audio→gestures→map→draw" in logs
+    assert "stages: replay(audio)→audio→filter→gestures→map→draw" in logs   # the live chain, by default
     np.testing.assert_array_equal(np.load(replay_w), live_weights)
