@@ -103,6 +103,21 @@ def send(host: str, port: int, rate: float, seconds: float, cycle_s: float) -> d
     return sent
 
 
+def rss_parts_mb() -> dict[str, float]:
+    """RSS split as the kernel counts it (``/proc/self/status``): anonymous (heap, driver buffers), file-backed
+    (mapped libraries) and shared memory (the receiver's block), in MiB; empty where the file is absent."""
+    parts = {}
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                if key in ("RssAnon", "RssFile", "RssShmem"):
+                    parts[key[3:].lower()] = round(int(value.split()[0]) / 1024, 3)
+    except OSError:
+        pass
+    return parts
+
+
 def slope_per_hour(series: list[tuple[float, float]], after_s: float) -> float:
     """Least-squares slope of ``(t seconds, MB)`` samples at ``t >= after_s``, in MB per hour (NaN if < 3)."""
     pts = np.array([p for p in series if p[0] >= after_s], dtype=np.float64).reshape(-1, 2)
@@ -152,6 +167,7 @@ def bench_soak(args: argparse.Namespace) -> dict:
     procs: list[subprocess.Popen] = []
     sender_out: list[str] = []
     rss: list[tuple[float, float]] = []
+    parts: list[dict[str, float]] = []
     traced: list[tuple[float, float]] = []
     t0 = [0.0]
     next_sample = [0.0]
@@ -176,6 +192,7 @@ def bench_soak(args: argparse.Namespace) -> dict:
             return
         next_sample[0] += sample_s
         rss.append((round(now, 2), round(rss_mb(), 3)))
+        parts.append(rss_parts_mb())
         if args.tracemalloc:
             traced.append((round(now, 2), round(tracemalloc.get_traced_memory()[0] / 2**20, 4)))
         if not args.quiet:
@@ -209,7 +226,7 @@ def bench_soak(args: argparse.Namespace) -> dict:
         "sent": sent,
         "counters": result.counters,
         "record_bytes": record_bytes,
-        "rss_mb": [{"t_s": t, "mb": m} for t, m in rss],
+        "rss_mb": [{"t_s": t, "mb": m, **p} for (t, m), p in zip(rss, parts)],
         "rss_slope_mb_per_hour": slope,
         "goal_mb_per_hour": GOAL_MB_PER_HOUR,
         "passed": bool(math.isfinite(slope) and slope < GOAL_MB_PER_HOUR),
