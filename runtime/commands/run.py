@@ -35,6 +35,7 @@ stops it cleanly; either way the final stats are printed.
 
 from __future__ import annotations
 
+import argparse
 import signal
 import sys
 import threading
@@ -55,8 +56,6 @@ from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.live.vmc_out import VmcSender
 
 if TYPE_CHECKING:
-    import argparse
-
     from facepuppet.runtime.live.loop import TickInfo
 
 CALIBRATE_ADDRESS = "/facepuppet/calibrate"  # the receivers count decoded OSC messages to it
@@ -86,6 +85,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "derived from them, the head bone")
     p.add_argument("--vmc-extra", action="store_true",
                    help="with --vmc-out, also send the character's channels outside ARKit (e.g. CheekRaiserLeft)")
+    p.add_argument("--vmc-presets", action=argparse.BooleanOptionalAction, default=True,
+                   help="with --vmc-out, also send the VRM 0.x presets (Blink, A, I, U, E, O, ...; default on); "
+                        "--no-vmc-presets for a perfect-sync avatar whose preset clips move the same shapes")
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL (no window)")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
@@ -152,6 +154,8 @@ def _check_options(args, default_port) -> _Options:
     vmc_out = parse_host_port(args.vmc_out) if args.vmc_out else None
     if getattr(args, "vmc_extra", False) and vmc_out is None:
         raise ValueError("--vmc-extra: needs --vmc-out HOST:PORT")
+    if not getattr(args, "vmc_presets", True) and vmc_out is None:
+        raise ValueError("--no-vmc-presets: needs --vmc-out HOST:PORT")
     return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out)
 
 
@@ -281,7 +285,8 @@ def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, 
     stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
     hooks = [stats.on_tick, *hooks]
     if opts.vmc_out is not None:
-        sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names, extra=getattr(args, "vmc_extra", False))
+        sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names, extra=getattr(args, "vmc_extra", False),
+                            presets=getattr(args, "vmc_presets", True))
         log(sender.describe())
         parts.append(sender)
         hooks.append(sender.on_tick)

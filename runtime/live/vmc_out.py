@@ -98,6 +98,8 @@ class VmcSender:
     names : sequence of n str, the character's channel names, any spelling
     max_bundle : int, bytes; every datagram is at most this long
     extra : bool, also send the channels outside ARKit (``--vmc-extra``)
+    presets : bool, send the VRM 0.x presets (default; ``--no-vmc-presets`` leaves them out for a perfect-sync
+        avatar whose ``Blink``/vowel clips drive the same mesh shapes as the 52, which would add up twice)
     clock : callable returning seconds, for ``/VMC/Ext/T`` when :meth:`send` gets no time
 
     Attributes
@@ -110,7 +112,7 @@ class VmcSender:
     """
 
     def __init__(self, host: str, port: int, names: Sequence[str], max_bundle: int = MAX_BUNDLE,
-                 extra: bool = False, clock: Callable[[], float] = time.monotonic) -> None:
+                 extra: bool = False, clock: Callable[[], float] = time.monotonic, presets: bool = True) -> None:
         self.address = (host, int(port))
         names = tuple(names)
         self._n = len(names)
@@ -125,7 +127,9 @@ class VmcSender:
             else:
                 held.append(names[i])
         self._extras = np.array(sent_extras, dtype=np.intp)
-        self.sent_names = PERFECT_SYNC_NAMES + VRM0_PRESETS + tuple(pascal(names[i]) for i in sent_extras)
+        self._n_presets = len(VRM0_PRESETS) if presets else 0
+        self.sent_names = (PERFECT_SYNC_NAMES + (VRM0_PRESETS if presets else ())
+                           + tuple(pascal(names[i]) for i in sent_extras))
         self.held_back = tuple(held)
         self._extra = extra
         self.counters = {"bundles_sent": 0, "send_errors": 0}
@@ -179,9 +183,10 @@ class VmcSender:
         np.clip(padded, 0.0, 1.0, out=padded)
         out = self._values
         arkit = np.maximum(padded[self._first], padded[self._second])
-        n_arkit, n_presets = len(PERFECT_SYNC_NAMES), len(VRM0_PRESETS)
+        n_arkit, n_presets = len(PERFECT_SYNC_NAMES), self._n_presets
         out[:n_arkit] = arkit
-        out[n_arkit:n_arkit + n_presets] = vrm0_from_arkit(arkit)
+        if n_presets:
+            out[n_arkit:n_arkit + n_presets] = vrm0_from_arkit(arkit)
         out[n_arkit + n_presets:] = padded[self._extras]
         return out
 
@@ -210,9 +215,10 @@ class VmcSender:
 
     def describe(self) -> str:
         """One line for the start of a run: what goes out, in how many bundles, what is held back."""
-        n_extra = len(self.sent_names) - 52 - len(VRM0_PRESETS)
+        n_extra = len(self.sent_names) - 52 - self._n_presets
+        presets = f"{self._n_presets} VRM presets" if self._n_presets else "no VRM presets (--no-vmc-presets)"
         line = (f"vmc-out: {self.address[0]}:{self.address[1]}, 52 ARKit (perfect sync) + "
-                f"{len(VRM0_PRESETS)} VRM presets" + (f" + {n_extra} extra" if n_extra else "")
+                f"{presets}" + (f" + {n_extra} extra" if n_extra else "")
                 + f", {len(self.datagrams)} bundles a tick")
         if self.held_back:
             shown = ", ".join(self.held_back[:6]) + (" …" if len(self.held_back) > 6 else "")

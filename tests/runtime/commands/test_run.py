@@ -158,6 +158,7 @@ def test_the_receivers_count_calibrate_messages_and_only_those(udp_sender, recei
     ("--vmc-out", "127.0.0.1", "--vmc-out: expected HOST:PORT"),
     ("--fps", "0", "--fps: expected a positive number"),
     ("--vmc-extra", "--draw=tick", "--vmc-extra: needs --vmc-out HOST:PORT"),
+    ("--no-vmc-presets", "--draw=tick", "--no-vmc-presets: needs --vmc-out HOST:PORT"),
 ])
 def test_bad_options_exit_2_with_a_message(character, capsys, option, value, match):
     code = main(["run", "-c", str(character), "--input", "vmc", "--headless", "--duration", "0.1", option, value])

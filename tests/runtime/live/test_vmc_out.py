@@ -203,6 +203,24 @@ def test_extras_only_with_vmc_extra_and_said_at_start():
     assert extra.sent_names.count("Blink") == 1
 
 
+def test_presets_can_be_left_out_for_a_perfect_sync_avatar(tmp_path):
+    names = tuple(ARKIT_NAMES)
+    weights = np.linspace(0.0, 1.0, len(names))
+    sender_args = {}
+
+    def make_sender(port):
+        sender = VmcSender("127.0.0.1", port, names, presets=False)
+        sender_args["line"] = sender.describe()
+        return sender
+
+    tick = last_tick(oscdump_capture(make_sender, lambda sender: sender.send(weights), tmp_path))
+    vals = {args[0]: args[1] for address, args in tick if address == "/VMC/Ext/Blend/Val"}
+    assert len(vals) == 52 and not {"Blink", "Blink_L", "A", "Neutral"} & set(vals)
+    assert vals["EyeBlinkLeft"] == pytest.approx(weights[ARKIT_NAMES.index("eyeBlinkLeft")], abs=1e-6)
+    assert ("/VMC/Ext/Blend/Apply", []) in [(a, list(p)) for a, p in tick]
+    assert "no VRM presets (--no-vmc-presets)" in sender_args["line"]
+
+
 def test_many_long_channels_split_into_bundles_within_1200_bytes_all_arriving(tmp_path):
     names = tuple(ARKIT_NAMES) + tuple(f"customExpressionWithALongName{i:03d}" for i in range(60))
     weights = np.linspace(0.0, 1.0, len(names))
