@@ -94,6 +94,11 @@ class ActorRetarget:
         """(head markers, other markers) a layout must share with the actor for the solve."""
         return 3, max(1, math.ceil(self.actor.n_actuations / 3))
 
+    def accepts_layout(self, names: tuple[str, ...]) -> bool:
+        """Whether frames of this marker layout can be solved (reported once, as a live layout would be)."""
+        self._order(tuple(names))
+        return not self._refused
+
     def _order(self, names) -> np.ndarray:
         """Frame marker index of each actor marker (-1 when the frame lacks it), cached per name tuple."""
         if names != self._names:

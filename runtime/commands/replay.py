@@ -101,6 +101,7 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
                         else None,
                         voice_only=kind == "audio", label=f"replay({kind or 'frames'})", log=log)
     if take is not None:
+        _check_take_layouts(args.session, take, chain)
         source, ticks, fps = _take_source(args, take, chain.marker_units, fps, log)
     units = getattr(args, "marker_units", None)
     if live is not None and (chain.extra_names or (kind == "markers" and (units or chain.marker_units))):
@@ -196,6 +197,17 @@ def _marker_take(path: Path):
         return None
     reader = find_reader(path, head)
     return reader.read(path) if reader is not None else None
+
+
+def _check_take_layouts(path: Path, take, chain) -> None:
+    """Refuse a marker take none of whose layouts the solve can use, before drawing a neutral face to its end."""
+    solve = next((stage for stage in chain.stages if getattr(stage, "name", None) == "solve"), None)
+    if solve is None:
+        return
+    layouts = {tuple(f.marker_names) for f in take.frames if f.marker_names is not None}
+    if layouts and not any(solve.accepts_layout(names) for names in layouts):
+        raise ValueError(f"{path}: the actor's markers are not in this take (its marker layout is refused, "
+                         "see above): train the actor on a take with these marker names, or rename them")
 
 
 def _take_source(args, take, to_units, fps, log):

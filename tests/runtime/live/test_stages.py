@@ -253,6 +253,13 @@ def test_replay_of_a_marker_take_plays_it_through_the_solve(actor_files, tmp_pat
     args = parser().parse_args(["replay", str(takes[0]), "-c", str(paths["character"]), "--headless"])
     with pytest.raises(ValueError, match="--input markers: needs --actor ACTOR.npz and --pair PAIR.npz"):
         replay.run_replay(args, log=lambda s: None)
+    renamed = write_trc(tmp_path / "renamed.trc", dc.replace(short, names=tuple(f"Sub1:{n}" for n in short.names)))
+    args = parser().parse_args(["replay", str(renamed), "-c", str(paths["character"]), "--headless", "--size",
+                                "32x32", "--actor", str(paths["actor"]), "--pair", str(paths["pair"])])
+    logs = []
+    with pytest.raises(ValueError, match=r"renamed\.trc: the actor's markers are not in this take"):
+        replay.run_replay(args, log=logs.append)             # refused before drawing a neutral face to its end
+    assert any("layout of 20 markers refused" in line for line in logs)
 
 
 def test_markers_need_an_actor_and_a_pair_that_fit(actor_files, tmp_path):
