@@ -170,8 +170,10 @@ def _dutreve_pair(source: Character, target, sp: np.ndarray, region: np.ndarray)
 def improvements(rows: list[dict], reference: str = REFERENCE) -> dict:
     """{target: {method: 100 (e_method − e_ref) / e_method}}, percent, as the paper reports them.
 
-    None (printed "n/a") where the method's error is zero: below 1e-9 of the target's largest
-    error, i.e. rounding, where the ratio is meaningless (it printed -526179663866110 %).
+    None (printed "n/a") where the method's error is zero: below 1e-9 of the reference's error (or,
+    where the reference is itself zero, of the target's median error), i.e. rounding, where the ratio
+    is meaningless (it printed -526179663866110 %). The median, not the largest: one method that blows
+    up (1e13) must not turn every other comparison in its column into "n/a".
     """
     out: dict = {}
     for target in dict.fromkeys(r["target"] for r in rows):
@@ -179,8 +181,10 @@ def improvements(rows: list[dict], reference: str = REFERENCE) -> dict:
         ref = errs.get(reference)
         if ref is None:
             continue
-        zero = 1e-9 * max(errs.values())
-        out[target] = {m: (100.0 * (e - ref) / e if e > zero else None) for m, e in errs.items() if m != reference}
+        finite = [e for e in errs.values() if np.isfinite(e)]
+        zero = 1e-9 * (ref if ref > 0 else float(np.median(finite)) if finite else 0.0)
+        out[target] = {m: (100.0 * (e - ref) / e if e > zero and np.isfinite(e) else None)
+                       for m, e in errs.items() if m != reference}
     return out
 
 

@@ -222,3 +222,14 @@ def test_table_prints_n_a_where_a_method_has_zero_error():
     table = format_table(rows)
     assert "0.0000 (n/a)" in table.splitlines()[3] and "(+48%)" in table.splitlines()[4]
     assert "0.0000 (n/a)" in format_table(rows, key="e_target").splitlines()[4]
+
+
+def test_one_method_blowing_up_does_not_turn_its_column_into_n_a():
+    rows = [{"target": "demo", "method": "KPLS rbf", "e_d": 0.0361, "e_target": 0.0046},
+            {"target": "demo", "method": "linear PLS", "e_d": 0.0550, "e_target": 0.0333},
+            {"target": "demo", "method": "Dutreve spatial RBF", "e_d": 8.2e13, "e_target": 0.43}]
+    imp = improvements(rows)["demo"]
+    assert imp["linear PLS"] == pytest.approx(100 * (0.0550 - 0.0361) / 0.0550)
+    assert imp["Dutreve spatial RBF"] == pytest.approx(100.0)
+    assert "(+34%)" in format_table(rows).splitlines()[3]
+
