@@ -100,13 +100,24 @@ def covering_points(character: Character, share: float = 0.5) -> np.ndarray:
     left eyelid: 0.025 cm of eyeBlink_L's 1.78 cm seen by 45 farthest points), and a shape the
     feature points do not see cannot be retargeted by any method.
     """
+    pos = character.vertices.astype(np.float64)
+    eps = 1e-6 * float(np.linalg.norm(pos.max(0) - pos.min(0)))
     chosen: list[int] = []
     for idx, length in shape_peaks(character):
         if not len(length) or length.max() <= 0:
             continue
         seen = length[np.isin(idx, chosen)]
-        if not len(seen) or seen.max() < share * length.max():
-            chosen.append(int(idx[np.argmax(length)]))
+        if len(seen) and seen.max() >= share * length.max():
+            continue
+        # the most-moved vertex not lying on a chosen one: a seam's duplicate vertex (same place, another
+        # index) as a second feature point would make every RBF over the points singular
+        for j in np.argsort(-length, kind="stable"):
+            if length[j] < share * length.max():
+                break
+            v = int(idx[j])
+            if not chosen or np.linalg.norm(pos[chosen] - pos[v], axis=1).min() > eps:
+                chosen.append(v)
+                break
     return np.asarray(chosen, dtype=np.int64)
 
 

@@ -233,3 +233,18 @@ def test_one_method_blowing_up_does_not_turn_its_column_into_n_a():
     assert imp["Dutreve spatial RBF"] == pytest.approx(100.0)
     assert "(+34%)" in format_table(rows).splitlines()[3]
 
+
+
+def test_feature_points_never_sit_on_one_place_twice():
+    """The demo head has seam vertices (two indices, one position): two feature points there made the
+    Dutreve RBF over them singular (its cyclic error 8e13 cm in bench kpls)."""
+    from scipy.spatial.distance import pdist
+
+    from facepuppet.runtime.demo.head import build_demo_character
+
+    from facepuppet.offline.kpls.pairs import feature_points
+
+    demo = build_demo_character()
+    points = feature_points(demo, 45)
+    size = float(np.linalg.norm(np.ptp(demo.vertices, axis=0)))
+    assert pdist(demo.vertices[points].astype(np.float64)).min() > 1e-6 * size
