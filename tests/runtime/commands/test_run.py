@@ -23,7 +23,7 @@ from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.recording.session import read_session
 
 from helpers.small_characters import sphere_character
-from helpers.udp_helpers import wait_for
+from helpers.udp_helpers import free_udp_port, wait_for
 
 FAST_CONFIG = """
 [filter.mouth]
@@ -38,12 +38,6 @@ def character(tmp_path_factory):
     path = tmp_path_factory.mktemp("run") / "sphere.npz"
     sphere_character().save(path)
     return path
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def python_osc_jaw(client: SimpleUDPClient, jaw: float) -> None:

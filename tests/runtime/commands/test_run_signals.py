@@ -24,6 +24,7 @@ from facepuppet.runtime.recording.session import read_session
 
 from helpers.osc_helpers import vmc_frame
 from helpers.small_characters import sphere_character
+from helpers.udp_helpers import free_udp_port
 
 pytestmark = pytest.mark.gl  # the run draws headless (EGL)
 
@@ -36,12 +37,6 @@ def character(tmp_path_factory):
     path = tmp_path_factory.mktemp("signals") / "sphere.npz"
     sphere_character().save(path)
     return path
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Flood:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import socket
 import threading
 import time
 
@@ -27,6 +26,7 @@ from facepuppet.runtime.recording.session import read_session
 
 from helpers.elastic_models import random_model
 from helpers.small_characters import sphere_character
+from helpers.udp_helpers import free_udp_port
 
 NO_SMOOTHING = "\n".join(f"[filter.{r}]\nmin_cutoff = 500.0\nbeta = 0.0" for r in ("eyes", "brows", "mouth", "other",
                                                                                   "head")) + \
@@ -39,12 +39,6 @@ def parser() -> argparse.ArgumentParser:
     run.register(sub)
     replay.register(sub)
     return p
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def live(argv, send, tmp_path, hooks=()):

@@ -19,13 +19,9 @@ from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.commands.options import parse_host_port
 from facepuppet.runtime.live.vmc_out import MAX_BUNDLE, VmcSender
 
+from helpers.udp_helpers import free_udp_port
+
 LINE = re.compile(r'^\S+ (?P<address>/\S+)(?: (?P<types>\S+))?(?: (?P<args>.*))?$')  # time tag, address, ...
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def oscdump_capture(make_sender, send, tmp_path, min_applies=1, timeout_s=10.0) -> list[tuple[str, list]]:
