@@ -140,8 +140,21 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
         f"(setup {time.perf_counter() - t0:.1f} s)")
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1, user_api="blas"):  # small matrices: threaded BLAS only contends
-        rows = evaluate(ict, targets, motion, n_mixes=args.mixes, log=log)
+    from facepuppet.runtime.progress import Progress
+
+    from facepuppet.offline.kpls.cyclic_eval import default_methods
+
+    # one row per (target, method) fit, the spatial Dutreve method included; the rows' lines are results
+    with Progress("bench kpls: cyclic error", len(targets) * (len(default_methods()) + 1), unit="fits") as bar:
+        def row_done(line: str) -> None:
+            if bar.enabled:
+                bar.write(line)
+            else:
+                log(line)
+            bar.advance()
+
+        with threadpool_limits(limits=1, user_api="blas"):  # small matrices: threaded BLAS only contends
+            rows = evaluate(ict, targets, motion, n_mixes=args.mixes, log=row_done)
     table = format_table(rows, ict.units)
     log(table)
     target_table = format_table(rows, ict.units, key="e_target")
