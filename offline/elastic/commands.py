@@ -84,7 +84,8 @@ def _fit(args: argparse.Namespace) -> int:
     else:
         landmarks = args.landmarks or character.metadata.get("settings", {}).get("landmarks")
         if not landmarks:
-            raise SystemExit("fit-elastic: give --controls FILE or --landmarks vertex_indices.json (68 landmarks)")
+            raise ValueError(f"fit-elastic: {args.character} has no landmarks: give --controls FILE or "
+                             "--landmarks vertex_indices.json (the 68 landmarks of ICT-FaceKit)")
         marks = json.loads(Path(landmarks).read_text(encoding="utf-8"))["idx_to_landmark_verts"]
         points = ict_control_points(marks, character.vertices, character.triangles, main_front(character))
     model, basis, report = fit_character(character, points, k=args.k, fixed_ratio=args.fixed_ratio)
@@ -128,13 +129,24 @@ def _clone(args: argparse.Namespace) -> int:
     src_points = ControlPoints(names, source.arrays["control_vertices"])
     if args.correspondences and args.correspondences.exists():
         points = read_control_points(args.correspondences, target.n_vertices)
+    elif target.n_vertices == source.n_vertices and args.target.suffix.lower() != ".obj":
+        # the source's topology (a variant of the same rig: import-rig keeps the vertex order), so each
+        # control point stays on its vertex
+        points = src_points
+        print(f"clone-elastic: {args.target} has the source's {target.n_vertices} vertices: taken as the same "
+              "topology, each control point on the same vertex (give --correspondences FILE otherwise)")
+        if args.correspondences:
+            write_control_points(args.correspondences, points)
+            print(f"{args.correspondences}: the correspondences used written")
     else:
         if args.target.suffix.lower() == ".obj":
             anchors = MEDIAPIPE_ANCHORS
         elif str(args.target) == "demo":
             anchors = demo_anchors(target)
         else:
-            raise SystemExit("clone-elastic: --correspondences FILE is needed for this target")
+            raise ValueError(f"clone-elastic: {args.target} has {target.n_vertices} vertices, not the source's "
+                             f"{source.n_vertices}, and no proposal of correspondences for it is built in (the "
+                             "MediaPipe face OBJ and 'demo' have one): give --correspondences FILE")
         src_pos = source.arrays["control_positions"].astype(np.float64)
         src_anchor = np.stack([src_pos[[src_points.index(n) for n in POINT_ANCHORS[a]]].mean(0) for a in ANCHOR_NAMES])
         points = propose_control_points(src_pos, src_anchor, target.vertices,

@@ -59,14 +59,22 @@ def test_fit_then_clone_commands_recover_known_parameters(tmp_path):
                "--correspondences", tmp_path / "points.json", "--fixed-ratio", 1.4) == 0
     cloned = ElasticModel.load(tmp_path / "c.npz")
     np.testing.assert_allclose(cloned.arrays["params"], 2.0 * model.arrays["params"], atol=1e-4)
-    with pytest.raises(SystemExit, match="--correspondences FILE is needed"):
-        cli("clone-elastic", tmp_path / "e.npz", tmp_path / "big.npz", "-o", tmp_path / "d.npz")
+    # The same topology (the source's vertex count: a variant of the rig) needs no correspondences: each
+    # control point stays on its vertex, which is what points.json says here.
+    assert cli("clone-elastic", tmp_path / "e.npz", tmp_path / "big.npz", "-o", tmp_path / "d.npz",
+               "--fixed-ratio", 1.4) == 0
+    same = ElasticModel.load(tmp_path / "d.npz")
+    np.testing.assert_allclose(same.arrays["params"], cloned.arrays["params"], atol=1e-6)
+    v2, tris2 = grid(13)                           # another topology, no built-in proposal: named, exit 2
+    mesh_character(v2, tris2, "other").save(tmp_path / "other.npz")
+    with pytest.raises(ValueError, match=r"other\.npz has 169 vertices, not the source's 289.*--correspondences"):
+        cli("clone-elastic", tmp_path / "e.npz", tmp_path / "other.npz", "-o", tmp_path / "o.npz")
 
 
 def test_fit_command_needs_controls_or_landmarks(tmp_path):
     v, tris = grid(9)
     mesh_character(v, tris, "grid").save(tmp_path / "g.npz")
-    with pytest.raises(SystemExit, match="give --controls FILE or --landmarks"):
+    with pytest.raises(ValueError, match=r"g\.npz has no landmarks: give --controls FILE or --landmarks"):
         cli("fit-elastic", tmp_path / "g.npz", "-o", tmp_path / "e.npz")
 
 
