@@ -82,6 +82,7 @@ class ActorRetarget:
         self._refused = False
         self._checked: set[tuple[str, ...]] = set()      # layouts reported (bounded: see _order)
         self._scaled: set[tuple[str, ...]] = set()
+        self._scale_pending = False  # the current layout's first usable frame is still to be checked for units
         self._head = np.asarray(actor.head_markers, dtype=np.int64)
         self._neutral = actor.neutral.astype(np.float64)
         self.head_rotation = np.array([0.0, 0.0, 0.0, 1.0])
@@ -106,6 +107,7 @@ class ActorRetarget:
             self._index = np.array([lookup.get(n, -1) for n in self.actor.names])
             self._names = names
             self._refused = self._check_layout(names, self._index)
+            self._scale_pending = names not in self._scaled
         return self._index
 
     def _check_layout(self, names: tuple[str, ...], index: np.ndarray) -> bool:
@@ -135,9 +137,13 @@ class ActorRetarget:
         return refused
 
     def _check_scale(self, names: tuple[str, ...], obs: np.ndarray) -> None:
-        """Warn once per layout when the frame's spread is off from the actor neutral's by more than 3x."""
-        if names in self._scaled:
+        """Warn once per layout when the frame's spread is off from the actor neutral's by more than 3x.
+
+        Checked on a layout's first frame only (``_order`` arms it when the layout changes): nothing per frame.
+        """
+        if not self._scale_pending:
             return
+        self._scale_pending = False
         if len(self._scaled) >= 64:
             self._scaled.clear()
         self._scaled.add(names)
