@@ -15,12 +15,20 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from facepuppet.runtime.character_parts import (
+    PART_CHANNELS,
+    PART_SECTIONS,
+    Expressions,
+    Layout,
+    Look,
+    Skeleton,
+)
 from facepuppet.runtime.tables import (
     Section,
     TableSchema,
@@ -51,9 +59,13 @@ CHARACTER_SCHEMA = register_schema(
             "delta_indices": Section("uint32", ("n_deltas",), "moved vertex per delta"),
             "delta_positions": Section("float32", ("n_deltas", 3), "position delta"),
             "delta_normals": Section("float32", ("n_deltas", 3), "normal delta"),
+            # glTF / VRM parts (runtime.character_parts), each all or nothing; absent for OBJ rigs.
+            **{name: spec for part in PART_SECTIONS.values() for name, spec in part.items()},
         },
         channels=("shapes", "materials"),
-        channel_dims={"shapes": "n_shapes", "materials": "n_materials"},
+        channel_dims={"shapes": "n_shapes", "materials": "n_materials",
+                      **{group: dim for group, (_, dim) in PART_CHANNELS.items() if dim}},
+        version=2,  # 2: the optional skeleton, look, expressions and layout parts
     )
 )
 
@@ -82,7 +94,10 @@ class Character:
     delta_indices : ndarray of shape (n_deltas,), uint32
     delta_positions : ndarray of shape (n_deltas, 3), float32, units
     delta_normals : ndarray of shape (n_deltas, 3), float32
-    metadata : dict, settings/metrics/input hash carried into the manifest
+    metadata : dict, settings/metrics/input hash carried into the manifest; ``settings["source"]``
+        says where a glTF/VRM character came from (format, VRM meta, the extension JSON kept for export)
+    skeleton, look, expressions, layout : the optional parts a glTF / VRM avatar brings
+        (:mod:`facepuppet.runtime.character_parts`); None for an OBJ rig
     """
 
     name: str
@@ -100,6 +115,10 @@ class Character:
     delta_positions: np.ndarray
     delta_normals: np.ndarray
     metadata: Mapping[str, Any] = field(default_factory=dict)
+    skeleton: Skeleton | None = None
+    look: Look | None = None
+    expressions: Expressions | None = None
+    layout: Layout | None = None
 
     def __post_init__(self) -> None:
         n_v = len(self.vertices)
@@ -117,6 +136,14 @@ class Character:
         if len(self.delta_indices) and int(self.delta_indices.max()) >= n_v:
             _fail("delta_indices", f"vertex index out of range for {n_v} vertices")
         validate(CHARACTER_SCHEMA, self._arrays(), self._channels())  # dtypes, shapes, finiteness
+        if self.skeleton is not None:
+            self.skeleton.check(n_v)
+        if self.look is not None:
+            self.look.check(n_v, len(self.material_names))
+        if self.expressions is not None:
+            self.expressions.check(self.n_shapes)
+        if self.layout is not None:
+            self.layout.check(n_v, len(self.triangles), len(self.material_names))
         for arr in self._arrays().values():
             arr.setflags(write=False)
 
@@ -142,15 +169,69 @@ class Character:
             "delta_indices": self.delta_indices,
             "delta_positions": self.delta_positions,
             "delta_normals": self.delta_normals,
+            **self._part_arrays(),
         }
 
+    def _part_arrays(self) -> dict[str, np.ndarray]:
+        out = {}
+        if (k := self.skeleton) is not None:
+            out.update(node_parent=k.parent, node_rest=k.rest_local, vertex_nodes=k.vertex_nodes,
+                       vertex_weights=k.vertex_weights)
+        if (lk := self.look) is not None:
+            out.update(uv=lk.uv, material_base_color=lk.base_color, material_emissive=lk.emissive,
+                       material_alpha=lk.alpha, material_shading=lk.shading, material_texture=lk.texture,
+                       material_uv_transform=lk.uv_transform, texture_info=lk.texture_info,
+                       texture_pixels=lk.texture_pixels)
+        if (e := self.expressions) is not None:
+            out.update(expression_offsets=e.offsets, expression_bind_shape=e.bind_shape,
+                       expression_bind_weight=e.bind_weight, expression_flags=e.flags)
+        if (lay := self.layout) is not None:
+            out.update(primitives=lay.primitives)
+        return out
+
     def _channels(self) -> dict[str, list[str]]:
-        return {"shapes": list(self.shape_names), "materials": list(self.material_names)}
+        channels = {"shapes": list(self.shape_names), "materials": list(self.material_names)}
+        if self.skeleton is not None:
+            channels["nodes"] = list(self.skeleton.names)
+        if self.look is not None:
+            channels["textures"] = list(self.look.texture_names)
+        if self.expressions is not None:
+            channels["expressions"] = list(self.expressions.names)
+        if self.layout is not None:
+            channels["meshes"] = list(self.layout.mesh_names)
+        return channels
+
+    @property
+    def n_expressions(self) -> int:
+        return 0 if self.expressions is None else self.expressions.n_expressions
+
+    @property
+    def source(self) -> Mapping[str, Any]:
+        """Where a glTF/VRM character came from (``settings["source"]``: format, meta, …); {} for others."""
+        return self.metadata.get("settings", {}).get("source", {})
+
+    @property
+    def credits(self) -> str:
+        """The attribution its licence asks for (VRM meta / glTF asset), one line; "" when none is known."""
+        return str(self.source.get("credits", ""))
+
+    def with_parts(self, **changes: Any) -> Character:
+        """A copy with some fields replaced (``dataclasses.replace``; validated again)."""
+        return replace(self, **changes)
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the character as a tables file of kind ``character``."""
         settings = dict(self.metadata.get("settings", {}))
         settings.setdefault("name", self.name)
+        parts = {}
+        if self.skeleton is not None:
+            parts["bones"] = dict(self.skeleton.bones)
+        if self.expressions is not None:
+            parts["expression_presets"] = list(self.expressions.presets)
+        if parts:
+            settings["parts"] = parts
+        else:
+            settings.pop("parts", None)
         return save_tables(path, "character", self._arrays(), units=self.units, channels=self._channels(),
                            settings=settings, metadata=self.metadata)
 
@@ -176,6 +257,7 @@ class Character:
                 delta_positions=a["delta_positions"],
                 delta_normals=a["delta_normals"],
                 metadata=t.metadata,
+                **_load_parts(a, t.channels, t.settings.get("parts", {})),
             )
 
     # -- views -------------------------------------------------------------
@@ -190,6 +272,42 @@ class Character:
             sl = self.shape_slice(s)
             out[s, self.delta_indices[sl]] = src[sl]
         return out
+
+
+def _load_parts(a: Mapping[str, np.ndarray], channels: Mapping[str, list], parts: Mapping[str, Any]) -> dict:
+    """The optional parts present in loaded arrays; a part with only some of its sections is refused."""
+    out: dict[str, Any] = {}
+    for part, sections in PART_SECTIONS.items():
+        have = [name for name in sections if name in a]
+        if not have:
+            continue
+        if len(have) != len(sections):
+            missing = sorted(set(sections) - set(have))
+            _fail(missing[0], f"missing: the {part} part has {', '.join(have)} but not {', '.join(missing)}")
+        group = next(g for g, (p, _) in PART_CHANNELS.items() if p == part)
+        if group not in channels:
+            _fail(f"channels.{group}", f"missing: the {part} part needs its name list")
+        names = tuple(channels[group])
+        if part == "skeleton":
+            bones = parts.get("bones", {})
+            if not isinstance(bones, Mapping):
+                _fail("settings.parts.bones", "must be an object of bone name -> node index")
+            out["skeleton"] = Skeleton(names, a["node_parent"], a["node_rest"], a["vertex_nodes"],
+                                       a["vertex_weights"], dict(bones))
+        elif part == "look":
+            out["look"] = Look(a["uv"], a["material_base_color"], a["material_emissive"], a["material_alpha"],
+                               a["material_shading"], a["material_texture"], a["material_uv_transform"],
+                               names, a["texture_info"], a["texture_pixels"])
+        elif part == "expressions":
+            presets = parts.get("expression_presets", [""] * len(names))
+            if not (isinstance(presets, list) and all(isinstance(p, str) for p in presets)):
+                _fail("settings.parts.expression_presets", "must be a list of strings")
+            out["expressions"] = Expressions(names, tuple(presets), a["expression_offsets"],
+                                             a["expression_bind_shape"], a["expression_bind_weight"],
+                                             a["expression_flags"])
+        else:
+            out["layout"] = Layout(names, a["primitives"])
+    return out
 
 
 def moving_vertices(character: Character, fraction: float = 0.05) -> np.ndarray:

@@ -10,7 +10,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character import Character, sparse_deltas
+from facepuppet.runtime.character import CHARACTER_SCHEMA, Character, sparse_deltas
 from facepuppet.runtime.tables import (
     SCHEMA_VERSION,
     Section,
@@ -98,7 +98,7 @@ def test_round_trip_keeps_every_array_and_the_manifest(saved):
     assert loaded.material_names == original.material_names
     assert loaded.units == "cm" and loaded.name == "quad"
     manifest = load_tables(saved).manifest
-    assert manifest["schema_version"] == SCHEMA_VERSION
+    assert manifest["schema_version"] == CHARACTER_SCHEMA.version == 2  # 2: optional glTF parts
     assert manifest["kind"] == "character"
     assert manifest["sections"]["vertices"] == {
         "shape": [4, 3], "dtype": "float32", "kind": "neutral vertex positions"
@@ -168,7 +168,7 @@ def test_plain_pickle_file_is_refused(tmp_path):
 
 def test_newer_schema_version_is_refused_with_advice(saved, tmp_path):
     manifest = manifest_of(saved)
-    manifest["schema_version"] = SCHEMA_VERSION + 1
+    manifest["schema_version"] = CHARACTER_SCHEMA.version + 1
     bad = rewrite(saved, tmp_path / "newer.npz", manifest=manifest)
     with pytest.raises(TablesError, match=r"newer.npz: manifest.schema_version: .*newer facepuppet"):
         load_tables(bad)
