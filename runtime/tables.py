@@ -47,7 +47,6 @@ import json
 import math
 import os
 import re
-import tempfile
 import zipfile
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -58,6 +57,7 @@ from typing import Any
 import numpy as np
 
 from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.outputs import atomic_path
 
 FORMAT_NAME = "facepuppet-tables"
 SCHEMA_VERSION = 1  # the schema version of a kind that declares none
@@ -427,17 +427,11 @@ def save_tables(
     blob = json.dumps(manifest, indent=1, sort_keys=True).encode("utf-8")
     payload = {MANIFEST_KEY: np.frombuffer(blob, dtype=np.uint8), **clean}
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            (np.savez_compressed if compress else np.savez)(handle, **payload)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    # atomic, with the permissions a plain open() would give (a bare mkstemp file is 0600)
+    with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+        (np.savez_compressed if compress else np.savez)(handle, **payload)
+        handle.flush()
+        os.fsync(handle.fileno())
     return path
 
 

@@ -389,3 +389,13 @@ def test_every_table_class_refuses_non_finite_arrays_when_built():
     colors[0, 0] = np.inf
     with pytest.raises(TablesError, match=r"<tables>: vertex_color: contains NaN or infinity"):
         Character(**{**c.__dict__, "vertex_color": colors})
+
+
+def test_a_saved_table_has_the_permissions_a_plain_file_would(tmp_path):
+    # save_tables wrote through a bare mkstemp file and so left every table 0600 (unreadable by a show
+    # machine's other accounts); it must give what open() gives under the same umask.
+    plain = tmp_path / "plain.bin"
+    plain.write_bytes(b"")
+    saved = tiny_character().save(tmp_path / "perm.npz")
+    assert saved.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left behind
