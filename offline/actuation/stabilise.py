@@ -44,6 +44,7 @@ class Stabilised:
     max_angle_deg : float, largest head rotation relative to the reference frame, degrees
     bad_frames : tuple of int, frames with fewer than 3 visible head markers (pose copied from a neighbour)
     choice : HeadChoice or None, how the head markers were found (None when they were given)
+    mm_per_unit : float, millimetres per capture unit (the summary reports the residual in mm)
     """
 
     markers: np.ndarray
@@ -55,12 +56,13 @@ class Stabilised:
     max_angle_deg: float
     bad_frames: tuple[int, ...] = ()
     choice: HeadChoice | None = None
+    mm_per_unit: float = 1.0
 
     def summary(self) -> str:
         if self.head_fixed:
             return f"capture is already head-fixed (head markers move < {HEAD_FIXED_TOLERANCE:.0e} of their spread)"
         return (f"head motion removed: up to {self.max_angle_deg:.2f} deg, head-marker RMS residual "
-                f"{self.rms_residual:.4f} units" + (f", {len(self.bad_frames)} frames without a pose"
+                f"{self.rms_residual * self.mm_per_unit:.3f} mm" + (f", {len(self.bad_frames)} frames without a pose"
                                                     if self.bad_frames else ""))
 
 
@@ -239,6 +241,6 @@ def stabilise(markers: np.ndarray, names: Sequence[str], head_markers: Sequence[
     rms = float(np.sqrt(np.nanmean(np.sum((aligned - ref) ** 2, axis=2))))
     if explained < HEAD_FIXED_TOLERANCE * spread:
         return Stabilised(m.astype(np.float32), np.tile(np.eye(3), (n_frames, 1, 1)), np.zeros((n_frames, 3)),
-                          tuple(idx), True, rms, float(angles.max()), tuple(bad), choice)
+                          tuple(idx), True, rms, float(angles.max()), tuple(bad), choice, mm_per_unit)
     return Stabilised(out.astype(np.float32), rot, trans, tuple(idx), False, rms, float(angles.max()), tuple(bad),
-                      choice)
+                      choice, mm_per_unit)

@@ -117,3 +117,16 @@ def test_head_markers_that_are_not_rigid_are_reported_with_a_warning():
     # two markers each jittered by 1.5 mm per axis: their distance varies by about 1.5 * sqrt(2) mm
     assert choice.rigidity_mm > RIGID_WARN_MM and not choice.rigid
     assert "warning: not rigid" in choice.describe(capture.names) and "--head-markers" in choice.describe(capture.names)
+
+
+def test_the_summary_gives_the_residual_in_millimetres_for_any_capture_unit():
+    # It printed "0.0123 units" whatever the capture was in; the same take in cm and in mm must
+    # report the same residual in mm.
+    _, moved = _take()
+    noisy = moved + np.random.default_rng(2).normal(scale=0.01, size=moved.shape)
+    names = [f"m{i}" for i in range(8)]
+    in_mm = stabilise(noisy, names, head_markers=[0, 1, 2, 3], mm_per_unit=1.0)
+    in_cm = stabilise(noisy / 10.0, names, head_markers=[0, 1, 2, 3], mm_per_unit=10.0)
+    expected = f"{in_mm.rms_residual:.3f} mm"
+    assert expected in in_mm.summary() and expected in in_cm.summary()
+    assert "units" not in in_cm.summary()
