@@ -39,7 +39,7 @@ import struct
 import urllib.parse
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -87,7 +87,7 @@ class GltfFile:
     external: list = field(default_factory=list)  # the external files read, for the input hash
 
     # -- errors and JSON fields -------------------------------------------
-    def fail(self, where: str, problem: str):
+    def fail(self, where: str, problem: str) -> NoReturn:
         raise GltfError(self.path, where, problem)
 
     def items(self, key: str) -> list:

@@ -310,9 +310,10 @@ class _Reader:
             mesh = f.obj("meshes", m, f"nodes[{i}].mesh")
             mw = f"meshes[{m}]"
             mesh_name = mesh.get("name") if isinstance(mesh.get("name"), str) and mesh["name"] else f"mesh{m}"
-            unique = mesh_name
+            unique, copy = mesh_name, 1
             while unique in out["mesh_names"]:
-                unique = f"{mesh_name}#{out['mesh_names'].count(mesh_name) + 2}"
+                copy += 1
+                unique = f"{mesh_name}#{copy}"
             mesh_index = len(out["mesh_names"])
             out["mesh_names"].append(unique)
             out["instance_of_mesh"].setdefault(m, []).append((mesh_index, s))
@@ -978,7 +979,7 @@ def print_summary(character: Character, seconds: float, out: Path, stream: Any =
     neck = "neck" + ("" if "neck" in bones else " (not found)")
     print(f"{out}: character '{character.name}' from {src.get('format')} {src.get('file')}: "
           f"{character.n_vertices} vertices, {len(character.triangles)} triangles, "
-          f"{m.get('n_meshes')} meshes / {m.get('n_primitives')} primitives, m"
+          f"{m.get('n_meshes')} meshes / {m.get('n_primitives')} primitives, metres"
           f"{', turned 180° about +Y (VRM 0.x faces -Z)' if src.get('turned_y180') else ''}\n"
           f"  shapes: {character.n_shapes}; expressions: {character.n_expressions}; "
           f"nodes: {m.get('n_nodes')} ({m.get('n_joints')} joints used); textures: {m.get('n_textures')}; "
