@@ -106,8 +106,8 @@ def read_gltf(path: str | os.PathLike, *, name: str | None = None, progress: Pro
     path = Path(path)
     f = read_gltf_file(path)
     reader = _Reader(f)
-    character = reader.read(name, progress)
-    return character
+    with np.errstate(all="ignore"):  # overflow shows as non-finite values, refused by name below
+        return reader.read(name, progress)
 
 
 class _Reader:
@@ -145,6 +145,14 @@ class _Reader:
         vertices = geo["vertices"]
         if not np.isfinite(vertices).all() or np.abs(vertices).max() > np.finfo(np.float32).max:
             f.fail("nodes", "the node transforms take vertices beyond the float32 range")
+        for where, arr in (("morph targets", deltas["delta_positions"]), ("morph targets", deltas["delta_normals"]),
+                           ("materials", look.base_color), ("materials", look.emissive), ("materials", look.alpha),
+                           ("materials", look.shading), ("materials", look.uv_transform),
+                           ("TEXCOORD_0", look.uv), ("COLOR_0", geo["colors"]),
+                           ("skins", skeleton.rest_local), ("skins", skeleton.vertex_weights)):
+            if not np.isfinite(arr).all():
+                f.fail(where, "values beyond the float32 range (or NaN) after transforming; a character stores "
+                              "finite float32")
         pivot, pivot_rule = self._pivot(skeleton, vertices)
         meta = self._meta()
         source = {
@@ -693,8 +701,12 @@ class _Reader:
             sampler = [0, 0, 0, 0]
             if "sampler" in tex:
                 s = f.obj("samplers", tex["sampler"], f"{w}.sampler")
-                sampler = [f.get(s, k, int, f"samplers[{tex['sampler']}]", d)
-                           for k, d in (("magFilter", 0), ("minFilter", 0), ("wrapS", 0), ("wrapT", 0))]
+                sampler = []
+                for k, allowed in (("magFilter", _MAG), ("minFilter", _MIN), ("wrapS", _WRAP), ("wrapT", _WRAP)):
+                    v = f.get(s, k, int, f"samplers[{tex['sampler']}]", 0)
+                    if v and v not in allowed:
+                        f.fail(f"samplers[{tex['sampler']}].{k}", f"{v} is not one of {sorted(allowed)}")
+                    sampler.append(v)
             h, wd = rgba.shape[:2]
             base = img.get("name") if isinstance(img.get("name"), str) and img["name"] else f"image{src}"
             n, k = base, 1
@@ -903,6 +915,9 @@ class _Reader:
                 "bbox: centre x, min y + 0.35 height, centre z - 0.1 depth")
 
 
+_MAG = frozenset({9728, 9729})
+_MIN = frozenset({9728, 9729, 9984, 9985, 9986, 9987})
+_WRAP = frozenset({33071, 33648, 10497})
 _MODES = {0: "points", 1: "lines", 2: "line loop", 3: "line strip", 4: "triangles", 5: "triangle strip",
           6: "triangle fan"}
 

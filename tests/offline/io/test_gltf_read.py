@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import struct
+import warnings
 
 import numpy as np
 import pytest
@@ -469,3 +470,28 @@ def test_cli_import_rig_obj_without_a_shapes_folder_is_a_character_without_shape
     (tmp_path / "head.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     assert main(["import-rig", str(tmp_path / "head.obj"), "-o", str(tmp_path / "head.npz")]) == 0
     assert Character.load(tmp_path / "head.npz").n_shapes == 0
+
+
+@pytest.mark.parametrize("case", ["translation", "cutoff", "sampler"])
+def test_numbers_beyond_float32_or_int32_are_refused_without_numpy_warnings(tmp_path, case):
+    # found by the file fuzz: a 1e300 translation overflowed in the matrix product (RuntimeWarning), a
+    # 1e300 alphaCutoff in the float32 cast, a 20-digit sampler code was an OverflowError traceback
+    b = GltfBuilder()
+    prim = triangle(b)
+    if case == "translation":
+        b.doc["nodes"] = [{"children": [1], "translation": [1e300, 0, 0]}, {"mesh": 0, "scale": [1e300, 1, 1]}]
+        want = r"nodes: the node transforms"
+    else:
+        png = io.BytesIO()
+        Image.fromarray(np.zeros((1, 1, 4), np.uint8), "RGBA").save(png, "PNG")
+        b.doc.update(images=[{"bufferView": b.view(png.getvalue())}], textures=[{"source": 0, "sampler": 0}],
+                     samplers=[{"magFilter": 99999999999999999999 if case == "sampler" else 9728}],
+                     materials=[{"alphaCutoff": 1e300 if case == "cutoff" else 0.5,
+                                 "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}])
+        prim["material"] = 0
+        want = r"samplers\[0\]\.magFilter: 99999999999999999999 is not one of" if case == "sampler" else \
+            r"materials: values beyond the float32 range"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(GltfError, match=want):
+            read_gltf(glb(tmp_path, b))
