@@ -63,16 +63,17 @@ class GltfError(InputFileError):
 
 
 def is_gltf_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` looks like glTF: GLB magic, a ``.gltf``/``.glb``/``.vrm`` name, or JSON text."""
+    """Whether ``path`` is glTF: a ``.gltf``/``.glb``/``.vrm`` name, GLB magic, or glTF JSON text."""
+    from facepuppet.offline.io.mesh_format import sniff_mesh_format
+
     path = Path(path)
     if path.suffix.lower() in (".gltf", ".glb", ".vrm"):
         return True
     try:
-        with open(path, "rb") as handle:
-            head = handle.read(64)
+        found = sniff_mesh_format(path)
     except OSError:
         return False
-    return head[:4] == GLB_MAGIC or head.lstrip()[:1] == b"{"
+    return found is not None and found.startswith("glTF")
 
 
 @dataclass

@@ -200,18 +200,12 @@ def glb_bytes(tmp: Path) -> bytes:
 
 
 def glb_json_swaps(tmp: Path):
-    from helpers.gltf_writer import write_glb
-
     doc, blob = glb_parts()
-
-    def repack(text: bytes) -> bytes:
-        return _glb_with_json(text, blob)
-
-    yield from repacked_json_swaps(json.dumps(doc).encode(), repack, SEED, n=40)
-    assert write_glb  # the writer pads the same way (_glb_with_json keeps raw text, even if not JSON)
+    yield from repacked_json_swaps(json.dumps(doc).encode(), lambda text: _glb_with_json(text, blob), SEED, n=40)
 
 
 def _glb_with_json(text: bytes, blob: bytes) -> bytes:
+    """A GLB around raw JSON text (kept as it is, even when it is no longer JSON) and the BIN chunk."""
     import struct
 
     text += b" " * (-len(text) % 4)
