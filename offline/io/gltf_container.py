@@ -52,6 +52,8 @@ COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 512
 N_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 #: The largest accessor the reader decodes (elements); far beyond any avatar, far below an allocation bomb.
 MAX_ELEMENTS = 50_000_000
+#: The largest external image file read (bytes).
+MAX_IMAGE_BYTES = 256 * 1024 * 1024
 
 
 class GltfError(InputFileError):
@@ -155,14 +157,18 @@ class GltfFile:
             data = self.bin_chunk
             source = "the GLB BIN chunk"
         else:
-            data, source = self.read_uri(uri, f"{where}.uri")
+            data, source = self.read_uri(uri, f"{where}.uri", limit=length)
         if len(data) < length:
             self.fail(f"{where}.byteLength", f"{length} bytes declared but {source} has only {len(data)}")
         self._buffers[i] = data[:length]
         return self._buffers[i]
 
-    def read_uri(self, uri: str, where: str) -> tuple[bytes, str]:
-        """The bytes of a ``data:`` URI or of a relative file beside the glTF (see the module doc)."""
+    def read_uri(self, uri: str, where: str, limit: int = MAX_IMAGE_BYTES) -> tuple[bytes, str]:
+        """The bytes of a ``data:`` URI or of a relative file beside the glTF (see the module doc).
+
+        An external file is read only up to ``limit`` bytes (a buffer's declared byteLength), so a
+        .gltf naming a huge file beside it costs no more than it declares.
+        """
         if uri.startswith("data:"):
             head, sep, payload = uri.partition(",")
             if not sep or not head.endswith(";base64"):
@@ -180,7 +186,11 @@ class GltfFile:
         if Path(rel).is_absolute() or not target.is_relative_to(folder):
             self.fail(where, f"{uri[:80]!r}: the file must be inside the folder of the glTF ({folder})")
         try:
-            data = target.read_bytes()
+            with open(target, "rb") as handle:
+                data = handle.read(limit + 1)
+            if len(data) > limit and limit == MAX_IMAGE_BYTES:
+                self.fail(where, f"{uri[:80]!r}: larger than {MAX_IMAGE_BYTES} bytes")
+            data = data[:limit]
         except OSError as exc:
             self.fail(where, f"{uri[:80]!r}: cannot read {target}: {exc.strerror or exc}")
         self.external.append(target)

@@ -611,6 +611,8 @@ class _Reader:
                 tw = f"{w}.pbrMetallicRoughness.baseColorTexture"
                 t = f.get(info, "index", int, tw)
                 f.obj("textures", t, f"{tw}.index")
+                if f.get(info, "texCoord", int, tw, 0) != 0:
+                    self.warn(f"{tw}.texCoord: TEXCOORD_{info['texCoord']} asked for; only TEXCOORD_0 is read")
                 if t not in textures:
                     textures[t] = len(textures)
                 texture[i] = textures[t]
