@@ -495,3 +495,24 @@ def test_numbers_beyond_float32_or_int32_are_refused_without_numpy_warnings(tmp_
         warnings.simplefilter("error")
         with pytest.raises(GltfError, match=want):
             read_gltf(glb(tmp_path, b))
+
+
+def test_a_rotated_joint_turns_positions_morph_deltas_and_normal_deltas(tmp_path):
+    # joint turned +90 degrees about +Y, (x, y, z) -> (z, y, -x); identity inverse bind: the rest pose turns
+    b = GltfBuilder()
+    s = float(np.sqrt(0.5))
+    prim = triangle(b)
+    prim["attributes"]["NORMAL"] = b.accessor(np.tile(np.float32([0, 0, 1]), (3, 1)))
+    prim["attributes"]["JOINTS_0"] = b.accessor(np.zeros((3, 4), np.uint16))
+    prim["attributes"]["WEIGHTS_0"] = b.accessor(np.tile(np.float32([1, 0, 0, 0]), (3, 1)))
+    prim["targets"] = [{"POSITION": b.accessor(np.array([[1, 0, 0], [0, 0, 0], [0, 0, 0]], np.float32)),
+                        "NORMAL": b.accessor(np.array([[0, 1, -1], [0, 0, 0], [0, 0, 0]], np.float32))}]
+    b.doc["nodes"] = [{"mesh": 0, "skin": 0}, {"name": "j", "rotation": [0, s, 0, s]}]
+    b.doc["skins"] = [{"joints": [1]}]
+    b.doc["scenes"] = [{"nodes": [0, 1]}]
+    c = read_gltf(glb(tmp_path, b))
+    np.testing.assert_allclose(c.vertices, [[0, 0, 0], [0, 0, -1], [0, 1, 0]], atol=1e-6)
+    np.testing.assert_array_equal(c.delta_indices, [0])
+    np.testing.assert_allclose(c.delta_positions, [[0, 0, -1]], atol=1e-6)
+    # normal (0, 0, 1) -> (1, 0, 0); with the target's delta (0, 1, 0) -> (0, 1, 0): delta (-1, 1, 0)
+    np.testing.assert_allclose(c.delta_normals, [[-1, 1, 0]], atol=1e-6)
