@@ -342,7 +342,10 @@ class _Reader:
                 targets = f.get(prim, "targets", list, pw, [])
                 key = json.dumps([attrs, targets], sort_keys=True)
                 if key not in groups:
-                    g = self._vertices(attrs, targets, pw, skin, s, prim)
+                    siblings = [(f"{mw}.primitives[{q}]", pr) for q, pr in enumerate(prims)
+                                if isinstance(pr, dict) and pr.get("mode", 4) == 4
+                                and json.dumps([pr.get("attributes"), pr.get("targets", [])], sort_keys=True) == key]
+                    g = self._vertices(attrs, targets, pw, skin, s, siblings)
                     groups[key] = (n_v, len(g["positions"]))
                     out["vertices"].append(g["positions"])
                     out["normals"].append(g["normals"])
@@ -419,7 +422,9 @@ class _Reader:
             ibm = np.tile(np.eye(4), (len(joints), 1, 1))
         return {"joints": stored, "matrices": self.world[stored] @ ibm, "where": w}
 
-    def _vertices(self, attrs: dict, targets: list, pw: str, skin: dict | None, node: int, prim: dict) -> dict:
+    def _vertices(self, attrs: dict, targets: list, pw: str, skin: dict | None, node: int,
+                  siblings: list[tuple[str, dict]]) -> dict:
+        """The vertices of the primitives ``siblings`` (all sharing these attributes) in the stored frame."""
         f = self.f
         aw = f"{pw}.attributes"
         if "POSITION" not in attrs:
@@ -471,8 +476,8 @@ class _Reader:
         if np.any(np.abs(det) < 1e-12):
             f.fail(pw, "a vertex's skinning or node transform is singular (zero scale)")
         normal_m = np.linalg.inv(lin).transpose(0, 2, 1)
-        # computed normals use this primitive's triangles (the first of those sharing the vertices)
-        tri = self._indices(prim, pw, n) if normals is None else None
+        # computed normals: over the triangles of every primitive sharing these vertices
+        tri = np.concatenate([self._indices(pr, w, n) for w, pr in siblings]) if normals is None else None
         if normals is not None:
             nrm = _unit(np.einsum("vij,vj->vi", normal_m, normals))
         else:

@@ -516,3 +516,20 @@ def test_a_rotated_joint_turns_positions_morph_deltas_and_normal_deltas(tmp_path
     np.testing.assert_allclose(c.delta_positions, [[0, 0, -1]], atol=1e-6)
     # normal (0, 0, 1) -> (1, 0, 0); with the target's delta (0, 1, 0) -> (0, 1, 0): delta (-1, 1, 0)
     np.testing.assert_allclose(c.delta_normals, [[-1, 1, 0]], atol=1e-6)
+
+
+def test_computed_normals_of_shared_vertices_use_every_primitive_over_them(tmp_path):
+    # two primitives (two materials) over one quad's four vertices; a target lifts vertex 3 in z, which
+    # only the second primitive's triangle touches: its normals turn, so normal deltas are stored there
+    b = GltfBuilder()
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    pos = b.accessor(quad)
+    lift = b.accessor(np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0.5]], np.float32))
+    prims = [{"attributes": {"POSITION": pos}, "targets": [{"POSITION": lift}], "material": m,
+              "indices": b.accessor(np.array(t, np.uint16))} for m, t in ((0, [0, 1, 2]), (1, [0, 2, 3]))]
+    b.doc.update(meshes=[{"primitives": prims}], nodes=[{"mesh": 0}], scenes=[{"nodes": [0]}],
+                 materials=[{"name": "a"}, {"name": "b"}])
+    c = read_gltf(glb(tmp_path, b))
+    assert c.n_vertices == 4
+    turned = set(c.delta_indices[np.linalg.norm(c.delta_normals, axis=1) > 0.1].tolist())
+    assert turned == {0, 2, 3}  # the second triangle's corners (vertex 1 is only on the first, flat one)
