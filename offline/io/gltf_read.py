@@ -29,9 +29,9 @@ joint.
 
 Shapes: one per distinct morph-target name (``extras.targetNames`` of the
 primitive, else of the mesh, else ``<mesh name>.<index>``); the same name on
-two meshes is one shape. Only vertices a target moves (or whose normal it
-turns) are stored. The mesh's default ``weights`` are not baked into the
-neutral; they are kept in ``source["default_weights"]``.
+two meshes is one shape. Only vertices a target moves (or whose unit normal
+it turns by more than the OBJ import's ``NORMAL_TOLERANCE``) are stored.
+The mesh's default ``weights`` are not baked into the neutral; they are kept in ``source["default_weights"]``.
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ from facepuppet.runtime.tables import TablesError, hash_inputs, naming_file
 from facepuppet.runtime.vrm_names import VRM0_PRESETS, VRM1_FROM_VRM0
 
 from facepuppet.offline.io.gltf_container import GltfError, GltfFile, read_gltf_file
+from facepuppet.offline.io.rig_import import NORMAL_TOLERANCE
 
 __all__ = ["read_gltf", "SUPPORTED_EXTENSIONS", "GltfError"]
 
@@ -498,7 +499,7 @@ class _Reader:
                 dnw = _vertex_normals(world + dpw, tri) - nrm
             else:
                 dnw = np.zeros((n, 3))
-            dnw[np.linalg.norm(dnw, axis=1) < 1e-6] = 0.0
+            dnw[np.linalg.norm(dnw, axis=1) <= NORMAL_TOLERANCE] = 0.0  # as the OBJ import: not stored
             out_targets.append((dpw, dnw))
         return {"positions": world, "normals": nrm, "uv": uv, "colors": colors, "nodes": nodes,
                 "weights": weights, "targets": out_targets}
