@@ -69,11 +69,10 @@ __all__ = ["read_gltf", "SUPPORTED_EXTENSIONS", "GltfError"]
 
 #: Extensions whose meaning the reader honours (may be required).
 SUPPORTED_EXTENSIONS = frozenset({"KHR_materials_unlit", "KHR_texture_transform", "KHR_mesh_quantization",
-                                  "VRM", "VRMC_vrm", "VRMC_materials_mtoon"})
+                                  "KHR_materials_emissive_strength", "VRM", "VRMC_vrm", "VRMC_materials_mtoon"})
 #: Used-only extensions that carry nothing the character needs (no warning): VRM's physics and constraints
 #: are kept in the raw VRM JSON for export.
-QUIET_EXTENSIONS = frozenset({"VRMC_springBone", "VRMC_node_constraint", "VRMC_vrm_animation",
-                              "KHR_materials_emissive_strength"})
+QUIET_EXTENSIONS = frozenset({"VRMC_springBone", "VRMC_node_constraint", "VRMC_vrm_animation"})
 TURN_Y180 = np.diag([-1.0, 1.0, -1.0, 1.0])
 _VRM0_BY_LOWER = {p.lower(): p for p in VRM0_PRESETS}
 _VRM0_FROM_VRM1 = {v: k for k, v in VRM1_FROM_VRM0.items()}
@@ -610,6 +609,10 @@ class _Reader:
             alpha[i] = (ALPHA_MODES[mode], cutoff)
             shading[i, 1] = 1.0 if f.get(m, "doubleSided", bool, w, False) else 0.0
             ext = _ext(m)
+            strength = ext.get("KHR_materials_emissive_strength")
+            if isinstance(strength, dict):
+                emissive[i] *= f.get(strength, "emissiveStrength", float, f"{w}.extensions."
+                                     "KHR_materials_emissive_strength", 1.0)
             if "KHR_materials_unlit" in ext:
                 shading[i, 0] = SHADING["unlit"]
             if "baseColorTexture" in pbr:

@@ -217,7 +217,8 @@ def test_colors_u16_vec4_and_materials_textures_samplers(tmp_path):
              "index": 0, "extensions": {"KHR_texture_transform": {"offset": [0.5, 0], "rotation": 0.25,
                                                                    "scale": [2, 3]}}}},
          "extensions": {"KHR_materials_unlit": {}}},
-        {"name": "b", "alphaMode": "BLEND", "pbrMetallicRoughness": {"baseColorTexture": {"index": 1}}}]
+        {"name": "b", "alphaMode": "BLEND", "pbrMetallicRoughness": {"baseColorTexture": {"index": 1}},
+         "emissiveFactor": [0.5, 0.25, 0], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4}}}]
     prim["material"] = 0
     b.doc["meshes"][0]["primitives"].append(dict(prim, material=1))
     b.doc["extensionsUsed"] = ["KHR_materials_unlit", "KHR_texture_transform"]
@@ -228,7 +229,7 @@ def test_colors_u16_vec4_and_materials_textures_samplers(tmp_path):
     np.testing.assert_allclose(lk.base_color, [[0.5, 0.25, 1, 1], [1, 1, 1, 1]])
     np.testing.assert_allclose(lk.alpha, [[ALPHA_MODES["MASK"], 0.3], [ALPHA_MODES["BLEND"], 0.5]])
     assert lk.shading[0, 0] == SHADING["unlit"] and lk.shading[0, 1] == 1 and lk.shading[1, 0] == SHADING["lit"]
-    np.testing.assert_allclose(lk.emissive[0], [0.1, 0, 0])
+    np.testing.assert_allclose(lk.emissive, [[0.1, 0, 0], [2, 1, 0]])  # factor x KHR_materials_emissive_strength
     np.testing.assert_allclose(lk.uv_transform[0], [0.5, 0, 0.25, 2, 3])
     np.testing.assert_allclose(lk.uv_transform[1], [0, 0, 0, 1, 1])
     assert lk.texture_names == ("px", "image1") and list(lk.texture) == [0, 1]
@@ -346,13 +347,15 @@ def test_vrm1_expressions_overrides_humanoid_mtoon_not_turned(tmp_path):
 def test_vrm0_mtoon_shade_colour_and_range_in_vrm1_terms(tmp_path):
     b = GltfBuilder()
     vrm_triangle(b, 0)
-    b.doc["materials"] = [{"name": "Face"}]
+    b.doc["materials"] = [{"name": "Flat"}, {"name": "Face"}, {"name": "Pbr"}]  # matched by name, not order
     b.doc["meshes"][0]["primitives"][0]["material"] = 0
     b.doc["extensions"] = {"VRM": {"materialProperties": [{
         "name": "Face", "shader": "VRM/MToon", "floatProperties": {"_ShadeShift": 0.0, "_ShadeToony": 0.9},
-        "vectorProperties": {"_ShadeColor": [0.5, 1.0, 0.0, 1]}}]}}
+        "vectorProperties": {"_ShadeColor": [0.5, 1.0, 0.0, 1]}}, {"name": "Flat", "shader": "VRM/UnlitTexture"},
+        {"name": "Pbr", "shader": "VRM_USE_GLTFSHADER"}]}}
     c = read_gltf(glb(tmp_path, b, "t.vrm"))
-    row = c.look.shading[0]
+    assert c.look.shading[0, 0] == SHADING["unlit"] and c.look.shading[2, 0] == SHADING["lit"]
+    row = c.look.shading[1]
     # 0.x range [shift, lerp(1, shift, toony)] = [0, 0.1]: toony (2 - 0.1) / 2 = 0.95, shift -0.05
     np.testing.assert_allclose(row[[0, 5, 6]], [SHADING["toon"], -0.05, 0.95], atol=1e-6)
     np.testing.assert_allclose(row[2:5], [((0.5 + 0.055) / 1.055) ** 2.4, 1.0, 0.0], atol=1e-6)  # sRGB -> linear
