@@ -43,12 +43,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _register_import_rig(subparsers) -> None:
     p = subparsers.add_parser(
         "import-rig",
-        help="blendshape rig (neutral OBJ + folder of shape OBJs) -> character table",
+        help="blendshape rig (neutral OBJ + folder of shape OBJs, or a glTF/GLB/VRM avatar) -> character table",
         description="Import a neutral OBJ and a folder of OBJ shapes with the same vertex order "
-        "as a character table (.npz): triangulated mesh, materials, sparse float32 deltas.",
+        "as a character table (.npz): triangulated mesh, materials, sparse float32 deltas. "
+        "Or import a glTF 2.0 / GLB / VRM 0.x / VRM 1.0 avatar (the format is found from the file: GLB magic, "
+        "else JSON): meshes, skin, morph targets, materials and textures, VRM expressions, humanoid and meta.",
     )
-    p.add_argument("neutral", type=Path, help="neutral mesh OBJ")
-    p.add_argument("shapes_dir", type=Path, help="folder of shape OBJs (the neutral is skipped if inside)")
+    p.add_argument("neutral", type=Path, help="neutral mesh OBJ, or a .gltf/.glb/.vrm file")
+    p.add_argument("shapes_dir", type=Path, nargs="?",
+                   help="folder of shape OBJs (the neutral is skipped if inside); none: a character without "
+                        "shapes. Not given for glTF/VRM")
     p.add_argument("-o", "--output", type=Path, required=True, help="character table to write (.npz)")
     p.add_argument("--units", choices=("cm", "mm", "m"), default="cm", help="units of the OBJ files (default cm)")
     p.add_argument("--name", help="character name (default: the neutral's folder name)")
@@ -62,8 +66,11 @@ def _register_import_rig(subparsers) -> None:
 def _import_rig(args: argparse.Namespace) -> int:
     from facepuppet.runtime.progress import Progress
 
+    from facepuppet.offline.io.gltf_container import is_gltf_file
     from facepuppet.offline.io.rig_import import import_rig
 
+    if args.neutral.is_file() and is_gltf_file(args.neutral):
+        return _import_gltf(args)
     start = time.perf_counter()
     bar = Progress("import-rig", unit="shapes")
 
@@ -97,4 +104,28 @@ def _import_rig(args: argparse.Namespace) -> int:
         f"({100.0 * stored / max(dense, 1):.1f}%)\n"
         f"  file {out.stat().st_size / 1e6:.2f} MB, {seconds:.2f} s"
     )
+    return 0
+
+
+def _import_gltf(args: argparse.Namespace) -> int:
+    from facepuppet.runtime.progress import Progress
+
+    from facepuppet.offline.io.gltf_read import print_summary, read_gltf
+
+    if args.shapes_dir is not None:
+        raise ValueError(f"{args.shapes_dir}: a glTF/VRM file carries its own morph targets; give no shapes folder")
+    for flag, value, default in (("--units", args.units, "cm"), ("--landmarks", args.landmarks, None)):
+        if value != default:
+            raise ValueError(f"{flag}: not used for glTF/VRM (glTF is in metres, landmarks are ICT's)")
+    start = time.perf_counter()
+    bar = Progress("import-rig", unit="meshes")
+
+    def progress(i: int, n: int, name: str) -> None:
+        bar.total = n
+        bar.update(i, note=name)
+
+    with bar:
+        character = read_gltf(args.neutral, name=args.name, progress=progress)
+    out = character.save(args.output)
+    print_summary(character, time.perf_counter() - start, out)
     return 0

@@ -79,7 +79,7 @@ def material_kind(name: str) -> str:
 
 def import_rig(
     neutral_path: str | os.PathLike,
-    shapes_dir: str | os.PathLike,
+    shapes_dir: str | os.PathLike | None,
     *,
     shapes: Sequence[str | os.PathLike] | None = None,
     tolerance: float = 1e-5,
@@ -94,7 +94,8 @@ def import_rig(
     Parameters
     ----------
     neutral_path : path of the neutral OBJ (quads/polygons are fan-triangulated)
-    shapes_dir : folder of shape OBJs; every ``*.obj`` in it except the neutral, sorted by name
+    shapes_dir : folder of shape OBJs; every ``*.obj`` in it except the neutral, sorted by name;
+        None: a character without shapes (a static mesh; the glTF import writes these too)
     shapes : optional explicit shape files (relative to ``shapes_dir``; ".obj" may be left out)
     tolerance : float, units; a vertex moving no more than this (and whose normal turns less
         than ``NORMAL_TOLERANCE``) is not stored for that shape
@@ -119,7 +120,8 @@ def import_rig(
         no shapes, a shape whose vertex count differs from the neutral's (names both files and
         counts), bad numbers (:class:`~facepuppet.offline.io.obj.ObjError`, names file and line).
     """
-    neutral_path, shapes_dir = Path(neutral_path), Path(shapes_dir)
+    neutral_path = Path(neutral_path)
+    shapes_dir = Path(shapes_dir) if shapes_dir is not None else None
     if units not in UNITS_PER_CM:
         raise ValueError(f"units: expected one of {sorted(UNITS_PER_CM)}, got {units!r}")
     if not (tolerance >= 0 and np.isfinite(tolerance)):
@@ -127,7 +129,9 @@ def import_rig(
     if not neutral_path.is_file():
         raise FileNotFoundError(f"{neutral_path}: neutral OBJ not found")
     refuse_non_obj(neutral_path, "the neutral")
-    shape_paths = _shape_paths(neutral_path, shapes_dir, shapes)
+    if shapes_dir is None and shapes:
+        raise ValueError("shapes: an explicit list of shapes needs a shapes folder")
+    shape_paths = [] if shapes_dir is None else _shape_paths(neutral_path, shapes_dir, shapes)
     for shape in shape_paths:
         refuse_non_obj(shape, "a shape")
 
@@ -146,7 +150,7 @@ def import_rig(
     inputs = [neutral_path, *shape_paths] + [p for p in (mtl_path, landmark_path) if p and p.is_file()]
     settings = {
         "neutral": str(neutral_path),
-        "shapes_dir": str(shapes_dir),
+        "shapes_dir": str(shapes_dir) if shapes_dir is not None else None,
         "shape_files": [p.name for p in shape_paths],
         "tolerance": float(tolerance),
         "normal_tolerance": NORMAL_TOLERANCE,

@@ -93,6 +93,17 @@ def check_reader(read: Callable[[Path], object], real: bytes, where: Path, suffi
     return findings
 
 
+def repacked_json_swaps(doc_json: bytes, repack: Callable[[bytes], bytes], seed: int,
+                        n: int = 12) -> Iterator[tuple[str, bytes]]:
+    """Type swaps of a container's JSON part, each packed again by ``repack`` (valid lengths around it).
+
+    For GLB: a swap inside the JSON chunk of the raw file only ever breaks the chunk length; repacked,
+    the swap reaches the reader's JSON field checks.
+    """
+    for label, text in type_swaps(doc_json, np.random.default_rng(seed), n):
+        yield f"JSON {label}", repack(text)
+
+
 def swap_session_header(data: bytes, header_payload: bytes) -> bytes:
     """The session with its HEADER record's payload replaced (length and CRC made valid)."""
     length, _, kind = struct.unpack_from("<IIB", data, len(MAGIC))

@@ -28,7 +28,7 @@ from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.recording.session import SessionWriter
 
-from helpers.file_fuzz import check_reader, swap_session_header
+from helpers.file_fuzz import check_reader, repacked_json_swaps, swap_session_header
 
 V1 = Path(__file__).resolve().parents[1] / "runtime" / "data" / "tables_v1"
 SEED = 17
@@ -147,10 +147,86 @@ def tables_swaps(src: Path, tmp: Path):
             yield f"manifest {key} = {value!r}", out.read_bytes()
 
 
+def glb_parts() -> tuple[dict, bytes]:
+    """A small VRM 0.x GLB's JSON and BIN: skinned triangle, two morph targets (one sparse), a PNG texture,
+    expressions, humanoid, MToon; made with the tests' own writer."""
+    from PIL import Image
+
+    from helpers.gltf_writer import GltfBuilder
+
+    b = GltfBuilder()
+    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    sparse = b.sparse(np.array([1], np.uint16), np.array([[0, 0, 0.5]], np.float32))
+    png = io.BytesIO()
+    Image.fromarray(np.array([[[255, 0, 0, 255], [0, 0, 255, 128]]], np.uint8), "RGBA").save(png, "PNG")
+    prim = {"attributes": {"POSITION": b.accessor(tri, minmax=True),
+                           "NORMAL": b.accessor(np.tile(np.float32([0, 0, 1]), (3, 1))),
+                           "TEXCOORD_0": b.accessor(np.array([[0, 0], [65535, 0], [0, 65535]], np.uint16),
+                                                    normalized=True),
+                           "JOINTS_0": b.accessor(np.array([[0, 1, 0, 0]] * 3, np.uint8)),
+                           "WEIGHTS_0": b.accessor(np.array([[0.5, 0.5, 0, 0]] * 3, np.float32))},
+            "indices": b.accessor(np.array([0, 1, 2], np.uint16)), "material": 0,
+            "targets": [{"POSITION": b.accessor(None, kind="VEC3", dtype="float32", count=3, sparse=sparse)},
+                        {"POSITION": b.accessor(tri * np.float32(0.1))}]}
+    b.doc.update(
+        scene=0, scenes=[{"nodes": [0, 1]}], extensionsUsed=["VRM", "KHR_texture_transform"],
+        nodes=[{"mesh": 0, "skin": 0, "name": "body"}, {"name": "hips", "children": [2], "translation": [0, 1, 0]},
+               {"name": "head", "rotation": [0, 0, 0.6, 0.8], "scale": [1, 2, 1]}],
+        skins=[{"joints": [1, 2], "inverseBindMatrices": b.accessor(
+            np.tile(np.eye(4, dtype=np.float32).reshape(1, 16), (2, 1)), kind="MAT4")}],
+        meshes=[{"name": "face", "primitives": [prim], "extras": {"targetNames": ["blink", "wide"]}}],
+        materials=[{"name": "skin", "alphaMode": "MASK", "pbrMetallicRoughness": {"baseColorTexture": {
+            "index": 0, "extensions": {"KHR_texture_transform": {"scale": [2, 2]}}}}}],
+        images=[{"bufferView": b.view(png.getvalue()), "mimeType": "image/png"}],
+        samplers=[{"magFilter": 9728}], textures=[{"source": 0, "sampler": 0}],
+        extensions={"VRM": {
+            "meta": {"title": "t", "author": "a", "licenseName": "CC0"},
+            "humanoid": {"humanBones": [{"bone": "hips", "node": 1}, {"bone": "head", "node": 2}]},
+            "materialProperties": [{"name": "skin", "shader": "VRM/MToon",
+                                    "floatProperties": {"_ShadeShift": 0.1, "_ShadeToony": 0.5},
+                                    "vectorProperties": {"_ShadeColor": [0.5, 0.5, 0.5, 1]}}],
+            "blendShapeMaster": {"blendShapeGroups": [
+                {"name": "Blink", "presetName": "blink", "binds": [{"mesh": 0, "index": 0, "weight": 100}]},
+                {"name": "x", "presetName": "unknown", "isBinary": True,
+                 "binds": [{"mesh": 0, "index": 1, "weight": 40}]}]}}})
+    return dict(b.doc, buffers=[{"byteLength": len(b.blob)}]), b.padded_blob()
+
+
+def glb_bytes(tmp: Path) -> bytes:
+    from helpers.gltf_writer import write_glb
+
+    doc, blob = glb_parts()
+    return write_glb(tmp / "avatar.vrm", doc, blob).read_bytes()
+
+
+def glb_json_swaps(tmp: Path):
+    doc, blob = glb_parts()
+    yield from repacked_json_swaps(json.dumps(doc).encode(), lambda text: _glb_with_json(text, blob), SEED, n=40)
+
+
+def _glb_with_json(text: bytes, blob: bytes) -> bytes:
+    """A GLB around raw JSON text (kept as it is, even when it is no longer JSON) and the BIN chunk."""
+    import struct
+
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(blob), 0x004E4942) + blob
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def gltf_json_bytes() -> bytes:
+    import base64
+
+    doc, blob = glb_parts()
+    doc["buffers"] = [{"byteLength": len(blob), "uri": "data:application/gltf-buffer;base64,"
+                       + base64.b64encode(blob).decode()}]
+    return json.dumps(doc).encode()
+
+
 def _readers(tmp: Path):
     """{name: (read, real bytes, suffix, extra cases)}, built lazily per test."""
     pytest.importorskip("c3d")
     from facepuppet.offline.io.capture import read_c3d, read_csv, read_trc
+    from facepuppet.offline.io.gltf_read import read_gltf
     from facepuppet.offline.io.mtl import read_mtl
     from facepuppet.offline.io.obj import read_obj
 
@@ -169,11 +245,13 @@ def _readers(tmp: Path):
         "wav float": (read_wav, wav_bytes("float32"), ".wav", tuple),
         "toml config": (load_live_config, toml_bytes(), ".toml", tuple),
         "live link face csv": (read_llf_csv, llf_csv_bytes(), ".csv", tuple),
+        "glb/vrm": (read_gltf, glb_bytes(tmp), ".vrm", lambda: glb_json_swaps(tmp)),
+        "gltf json": (read_gltf, gltf_json_bytes(), ".gltf", tuple),
     }
 
 
 READERS = ["tables(character)", "tables(actor)", "session", "trc", "c3d", "csv markers", "obj", "mtl",
-           "wav int16", "wav float", "toml config", "live link face csv"]
+           "wav int16", "wav float", "toml config", "live link face csv", "glb/vrm", "gltf json"]
 
 
 @pytest.mark.parametrize("name", READERS)
@@ -197,6 +275,9 @@ KIT = {  # name: (path under ../shared/data, how much of it, reader name in _rea
     "speech/arctic_a0007.wav": (None, "wav int16"),
     "mediapipe/canonical_face_model.obj": (None, "obj"),
     "ict-facekit/ICTFaceModelMaterial.mtl": (None, "mtl"),
+    "gltf/Godette_vrm_v4.vrm": (None, "glb/vrm"),
+    "gltf/subdivision_shapekey_modifier_vrm1.vrm": (None, "glb/vrm"),
+    "gltf/SimpleMorph.gltf": (None, "gltf json"),
 }
 
 

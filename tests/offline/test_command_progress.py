@@ -47,6 +47,25 @@ def test_import_rig_progress_on_a_terminal_only(tmp_path, monkeypatch, capsys, t
 
 
 @pytest.mark.parametrize("terminal", [True, False])
+def test_import_rig_gltf_progress_per_mesh_on_a_terminal_only(tmp_path, monkeypatch, capsys, terminal):
+    from helpers.gltf_writer import GltfBuilder
+
+    b = GltfBuilder()
+    pos = b.accessor(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32))
+    b.doc.update(meshes=[{"name": f"m{i}", "primitives": [{"attributes": {"POSITION": pos}}]} for i in range(3)],
+                 nodes=[{"mesh": i} for i in range(3)], scenes=[{"nodes": [0, 1, 2]}])
+    err = Terminal() if terminal else io.StringIO()
+    monkeypatch.setattr(sys, "stderr", err)
+    assert cli.main(["import-rig", str(b.write_glb(tmp_path / "a.glb")), "-o", str(tmp_path / "c.npz")]) == 0
+    text = err.getvalue()
+    if terminal:
+        assert "\rimport-rig: " in text and "3/3 meshes" in text and text.endswith("\n")
+    else:
+        assert "\r" not in text and "import-rig:" not in text
+    assert "9 vertices, 3 triangles" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("terminal", [True, False])
 def test_train_actor_progress_and_its_reports(tmp_path, monkeypatch, terminal):
     from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
     from facepuppet.offline.io.capture import write_trc
