@@ -218,7 +218,8 @@ def test_round_trip_into_run_input_livelinkface(tmp_path):
                     sender.send(w, rotation, t=i / 60)
                     sent.append(float(np.float32(jaw)))
                     # explicit synchronisation: the next packet only once a tick has taken this one
-                    wait_for(lambda n=len(sent): len(taken) >= n, f"the run to take packet {i}")
+                    n_sent = len(sent)
+                    wait_for(lambda n=n_sent: len(taken) >= n, f"the run to take packet {i}")
             finally:
                 sender.close()
                 stop.set()
