@@ -360,3 +360,37 @@ def test_run_video_frames_are_the_ticks_and_the_audio_file_is_the_sound(characte
     if draw == "tick":
         np.testing.assert_allclose(times, np.arange(n_ticks) / 20, atol=1e-9)
     assert abs(durations["audio"] - durations["video"]) <= 1 / 20
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.gl
+def test_replay_of_a_live_run_drawn_on_arrival_keeps_its_tick_times_and_counts_ticks(character, tmp_path,
+                                                                                      capsys, monkeypatch):
+    """A live recording drawn on arrival has tick labels on a 1 kHz grid: the replay's video puts each frame at
+    its label, and the progress line counts ticks drawn (it used to show the label: '501/11 ticks')."""
+    import re
+
+    from helpers.udp_helpers import free_udp_port
+
+    record = tmp_path / "live.fps"
+    assert main(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{free_udp_port()}",
+                 "--headless", "--duration", "0.5", "--size", "32x32", "--fps", "20", "--record", str(record)]) == 0
+    capsys.readouterr()
+    err = _Terminal()
+    monkeypatch.setattr(sys, "stderr", err)
+    video = tmp_path / "replay.mp4"
+    assert main(["replay", str(record), "-c", str(character), "--headless", "--size", "32x32",
+                 "--video", str(video)]) == 0
+    out = capsys.readouterr().out
+    n_ticks = int(re.search(r"replay: (\d+) ticks", out).group(1))
+    assert n_ticks >= 2 and f"{n_ticks}/{n_ticks} ticks (100%)" in err.getvalue()
+    done = [int(m) for m in re.findall(r"(\d+)/\d+ ticks", err.getvalue())]
+    assert max(done) == n_ticks
+    images, times, _ = decode(video)
+    assert len(images) == n_ticks
+    steps = np.diff(np.array(times) * 1000)
+    assert np.all(steps >= 1 - 1e-6) and steps.max() > 1.5  # labels in ms, not one frame per millisecond
