@@ -275,6 +275,9 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         if opts.video is not None:
             video = VideoSink(opts.video, opts.loop_fps)
             log(opts.video.describe(opts.loop_fps))
+            if args.audio is not None and opts.video.audio is None:
+                log("video: the microphone's sound is not recorded into the video (only its level is measured); "
+                    "--audio-file WAV gives the video a sound track")
             parts.append(video)
             sinks.append(video)
         counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log)

@@ -159,7 +159,8 @@ class LlfSender:
                 f"{self.subject!r}: 52 ARKit weights, head and eye yaw/pitch/roll, one packet a tick")
         if self.missing:
             shown = ", ".join(self.missing[:6]) + (" …" if len(self.missing) > 6 else "")
-            line += f"; {len(self.missing)} ARKit shapes the character lacks are sent as 0: {shown}"
+            n = len(self.missing)
+            line += f"; {n} ARKit shape{'s' if n > 1 else ''} the character lacks sent as 0: {shown}"
         return line
 
     def close(self) -> None:

@@ -21,8 +21,15 @@ its wheel, so no system FFmpeg is needed. What is written:
   =========  ===============================  ====================================
 
   4:2:0 formats need an even width and height: an odd ``--size`` is refused.
-  H.264 is encoded with CRF 18 and preset ``veryfast`` (x264's output does not
-  depend on its thread count, so the same frames give the same file).
+  H.264 is encoded with CRF 18 and preset ``veryfast``, without x264's
+  macroblock-tree rate control: with it, the same frames encoded twice in one
+  process came out different now and then (found by the determinism test: its
+  SIMD path depends on memory it did not write; with ``no-asm`` or ``mbtree=0``
+  the output is always the same). VP9 with CRF 24 at
+  libvpx's realtime speed (8), which a live run can afford; ProRes 4444 with
+  ``prores_ks`` profile 4444 (large files, about 47 ms a 1280x720 frame on two
+  cores: ``facepuppet bench video --alpha``). The same frames give the same
+  decoded frames with each (encoder threads included; tested).
 * **Sound** (``--audio-file WAV``): the WAV's samples, mixed to mono
   (:func:`~facepuppet.runtime.inputs.audio.read_wav`), resampled to 48 kHz,
   from the first tick's time on, cut or padded with silence to the video's
@@ -65,7 +72,7 @@ if TYPE_CHECKING:
     from facepuppet.runtime.protocols import Renderer
 
 AUDIO_RATE = 48000
-H264_OPTIONS = {"crf": "18", "preset": "veryfast"}
+H264_OPTIONS = {"crf": "18", "preset": "veryfast", "x264-params": "mbtree=0"}  # mbtree: see the module doc
 
 #: suffix -> (container format, opaque codec, alpha codec or None, audio codec)
 CONTAINERS: dict[str, tuple[str, str, str | None, str]] = {

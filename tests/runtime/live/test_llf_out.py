@@ -251,7 +251,7 @@ def test_run_llf_out_sends_one_packet_a_tick_and_says_so(tmp_path, receiver, cap
     out = capsys.readouterr().out
     assert code == 0, out
     assert "llf-out: 127.0.0.1:" in out and "subject 'facepuppet'" in out
-    assert "51 ARKit shapes the character lacks are sent as 0" in out  # the sphere: jawOpen and its own "puff"
+    assert "51 ARKit shapes the character lacks sent as 0" in out  # the sphere: jawOpen and its own "puff"
     n_ticks = int(out.split("run: ")[-1].split(" ticks")[0])
     datagrams = drain(receiver)
     assert len(datagrams) == n_ticks == 11

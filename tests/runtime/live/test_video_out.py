@@ -394,3 +394,20 @@ def test_replay_of_a_live_run_drawn_on_arrival_keeps_its_tick_times_and_counts_t
     assert len(images) == n_ticks
     steps = np.diff(np.array(times) * 1000)
     assert np.all(steps >= 1 - 1e-6) and steps.max() > 1.5  # labels in ms, not one frame per millisecond
+
+
+@pytest.mark.parametrize("suffix, channels", [(".mp4", 3), (".webm", 3), (".webm", 4), (".mov", 4)])
+def test_the_same_frames_give_the_same_decoded_frames(tmp_path, suffix, channels):
+    """Every codec's output depends on the frames only (encoder threads included), however often it runs in one
+    process (x264's macroblock-tree rate control did not: it changed with what the process did before)."""
+    decoded = []
+    for run in "abcdef":
+        sink = VideoSink(plan_video(tmp_path / f"{run}{suffix}", 96, 64), 30.0)
+        for k in range(20):
+            sink.write(k, pattern(k, 64, 96, channels))
+        sink.close()
+        decoded.append(decode(tmp_path / f"{run}{suffix}", alpha=channels == 4)[0])
+        decode(tmp_path / f"a{suffix}", alpha=channels == 4)  # what a process does in between counts
+    assert len(decoded[0]) == 20
+    for other in decoded[1:]:
+        assert all(np.array_equal(a, b) for a, b in zip(decoded[0], other, strict=True))
