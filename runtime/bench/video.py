@@ -30,8 +30,9 @@ def _stats(ms: list[float]) -> dict:
     return {"p50": float(np.median(a)), "p99": float(np.percentile(a, 99)), "mean": float(a.mean()), "n": len(a)}
 
 
-def _frames(width: int, height: int, n: int) -> list[np.ndarray]:
-    """``n`` frames of the demo head, rendered headless at ``width`` x ``height``, (h, w, 3) uint8."""
+def _frames(width: int, height: int, n: int, info: dict) -> list[np.ndarray]:
+    """``n`` frames of the demo head, rendered headless at ``width`` x ``height``, (h, w, 3) uint8; the GL
+    renderer's name goes into ``info``."""
     from facepuppet.runtime.bench.render import synthetic_performance
     from facepuppet.runtime.demo.head import build_demo_character
     from facepuppet.runtime.geometry import euler_to_quat
@@ -41,6 +42,7 @@ def _frames(width: int, height: int, n: int) -> list[np.ndarray]:
     character = build_demo_character()
     weights = synthetic_performance(n, character.n_shapes, n_active=12, fps=30.0)
     target = create_context(headless=True, width=width, height=height)
+    info["gl_renderer"] = target.ctx.info.get("GL_RENDERER")
     try:
         renderer = FaceRenderer(target.ctx, character, width, height, path="cpu")
         try:
@@ -133,7 +135,7 @@ def bench_video(args: argparse.Namespace) -> dict:
     results: dict = {"size": f"{width}x{height}", "load_average_before": load_average()}
     with tempfile.TemporaryDirectory(prefix="facepuppet-bench-video-") as d, BlasThreads(1):
         folder = Path(d)
-        frames = _frames(width, height, min(args.frames, 60))
+        frames = _frames(width, height, min(args.frames, 60), results)
         encodes = [_encode(frames, args.frames, ".mp4", False, folder)]
         if args.alpha:
             encodes.append(_encode(frames, max(args.frames // 4, 10), ".webm", True, folder))
