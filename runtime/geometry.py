@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -93,6 +95,22 @@ def euler_to_quat(yaw: float, pitch: float, roll: float) -> np.ndarray:
     qx = np.array([sp_, 0.0, 0.0, cp])
     qz = np.array([0.0, 0.0, sr, cr])
     return quat_mul(quat_mul(qy, qx), qz)
+
+
+def quat_to_euler(q: np.ndarray) -> tuple[float, float, float]:
+    """(yaw, pitch, roll) radians of a quaternion (x, y, z, w): the inverse of :func:`euler_to_quat`.
+
+    With R = Ry(yaw) · Rx(pitch) · Rz(roll): R[1, 2] = -sin(pitch), R[1, 0] / R[1, 1] = tan(roll),
+    R[0, 2] / R[2, 2] = tan(yaw); pitch in [-pi/2, pi/2]. ``q`` need not be unit length.
+    """
+    x, y, z, w = (float(c) for c in q)
+    n = x * x + y * y + z * z + w * w
+    s = 2.0 / n if n > 0 else 0.0
+    r12 = s * (y * z - w * x)
+    r10, r11 = s * (x * y + w * z), 1.0 - s * (x * x + z * z)
+    r02, r22 = s * (x * z + w * y), 1.0 - s * (x * x + y * y)
+    pitch = math.asin(min(max(-r12, -1.0), 1.0))
+    return math.atan2(r02, r22), pitch, math.atan2(r10, r11)
 
 
 def smoothstep(e0: float, e1: float, x: float | np.ndarray) -> float | np.ndarray:

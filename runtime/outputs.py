@@ -1,7 +1,7 @@
 """One policy for what a command writes: refuse what exists, check first, write atomically.
 
 Every command's output options (``-o/--output``, ``--record``, ``--dump-weights``,
-``--json``, ``--save-controls``, ``--gestures-out``: files; ``--out``, ``--pictures``:
+``--json``, ``--save-controls``, ``--gestures-out``, ``--video``: files; ``--out``, ``--pictures``:
 folders) follow the same rules:
 
 * an existing output file, or an existing non-empty output folder, is refused
@@ -37,7 +37,7 @@ from facepuppet.runtime.errors import FacepuppetError
 #: option dest -> what it names
 OUTPUT_OPTIONS: dict[str, str] = {
     "output": "file", "record": "file", "dump_weights": "file", "json": "file", "save_controls": "file",
-    "gestures_out": "file", "out": "dir", "pictures": "dir",
+    "gestures_out": "file", "video": "file", "out": "dir", "pictures": "dir",
 }
 
 

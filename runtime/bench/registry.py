@@ -25,7 +25,8 @@ from pathlib import Path
 
 # Runtime modules that register benchmarks when imported; each must exist and import.
 _BENCH_MODULES = ("facepuppet.runtime.bench.render", "facepuppet.runtime.bench.latency",
-                  "facepuppet.runtime.bench.soak", "facepuppet.runtime.bench.tables_bombs")
+                  "facepuppet.runtime.bench.soak", "facepuppet.runtime.bench.tables_bombs",
+                  "facepuppet.runtime.bench.video")
 
 
 @dataclass(frozen=True)

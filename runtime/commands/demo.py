@@ -5,7 +5,8 @@ synthetic performance (:mod:`facepuppet.runtime.demo.performance`) through the s
 a live session or a replay uses. With a display it opens a window paced to
 real time; headless (no display, or ``--headless``) it renders through EGL as
 fast as it can, writes the frames and a contact sheet, and in both cases
-prints the per-stage timing summary at the end.
+prints the per-stage timing summary at the end. ``--video FILE`` also encodes every
+tick (:mod:`~facepuppet.runtime.live.video_out`), with ``--audio-file WAV`` as its sound.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink
+from facepuppet.runtime.live.video_out import VideoSink, add_video_arguments, plan_video_from_args
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
 if TYPE_CHECKING:
@@ -61,6 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic performance (default 0)")
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     p.add_argument("--no-frames", action="store_true", help="write only the contact sheet, not every frame")
+    add_video_arguments(p, audio_help="with --video, the sound track")
     p.set_defaults(func=run_demo)
 
 
@@ -75,6 +78,9 @@ def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> in
     width, height = parse_size(args.size)
     if not (args.fps > 0) or not (args.duration > 0):
         raise ValueError(f"--fps and --duration must be positive, got {args.fps} and {args.duration}")
+    if getattr(args, "audio_file", None) is not None and getattr(args, "video", None) is None:
+        raise ValueError("--audio-file: in the demo it is the sound track of --video FILE; give --video too")
+    video_plan = plan_video_from_args(args, width, height)
     started = time.perf_counter()
     character = build_demo_character()
     frames = demo_frames(duration=args.duration, rate=60.0, seed=args.seed)
@@ -94,7 +100,7 @@ def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> in
             raise
     log(f"demo: {'headless (EGL)' if target.headless else 'window'}, {target.ctx.info['GL_RENDERER']}, "
         f"{width}x{height} at {args.fps:g} fps" + (f", writing to {out}" if out else ""))
-    renderer = None
+    renderer = video = None
     try:
         screen = None if target.headless else target.ctx.screen
         renderer = FaceRenderer(target.ctx, character, width, height, path=args.path, target_fbo=screen, log=log)
@@ -103,10 +109,26 @@ def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> in
         sinks = [sheet]
         if out is not None and not args.no_frames:
             sinks.append(PngSink(out))
+        progress = None
+        if video_plan is not None:
+            from facepuppet.runtime.progress import Progress
+
+            progress = Progress(f"demo --video {video_plan.path.name}", total=n_ticks, unit="frames")
+            video = VideoSink(video_plan, args.fps, progress=progress)
+            log(video_plan.describe(args.fps))
+            sinks.append(video)
         clock = RecordedClock() if target.headless else WallClock()
         loop = FrameLoop(character.shape_names, renderer, clock, sinks=sinks, fps=args.fps, log=log, target=target)
         log("stages: demo performance→map→draw")
         result = loop.run(ReplaySource(frames), duration=args.duration)
+        if progress is not None:
+            progress.close()
+        if video is not None:
+            video.close()
+    except BaseException:
+        if video is not None:
+            video.abort()
+        raise
     finally:
         if renderer is not None:
             renderer.close()
@@ -121,6 +143,8 @@ def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> in
     log(f"demo: {result.n_ticks} ticks, {renderer.path} deformation path; frames received "
         f"{c['frames_received']}, stale dropped {c['stale_dropped']}"
         + (f"; {result.n_ticks} PNG frames in {out}" if out is not None and not args.no_frames else ""))
+    if video is not None:
+        log(f"demo: {video.frames} video frames ({video.duration:.2f} s) in {video_plan.path}")
     log("per-stage timing (ms):")
     log(result.timer.table())
     log(f"demo: done in {time.perf_counter() - started:.1f} s")

@@ -17,6 +17,12 @@ The stage chain is ``run``'s, built by the same function
 adds the filter stage as ``run`` has it. The audio levels a live recording kept
 (one per tick) feed the ``audio`` stage, so the same options give the live run's
 weights, gestures included.
+
+``--video FILE`` encodes the drawn ticks (:mod:`~facepuppet.runtime.live.video_out`; the
+same recording gives the same frames), with ``--audio-file WAV`` as the sound
+(a recording keeps audio levels, not samples). ``--llf-out HOST:PORT`` sends each
+tick as a Live Link Face packet (:mod:`~facepuppet.runtime.live.llf_out`); the
+replay is then paced to real time even headless, as a receiver expects.
 """
 
 from __future__ import annotations
@@ -29,10 +35,12 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.commands.options import parse_size
+from facepuppet.runtime.commands.options import parse_host_port, parse_size
+from facepuppet.runtime.live.llf_out import LlfSender
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink, WeightLog
 from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, build_chain, make_input_adapter
+from facepuppet.runtime.live.video_out import VideoSink, add_video_arguments, plan_video_from_args
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
 
@@ -66,6 +74,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "the raw frames")
     p.add_argument("--dump-weights", type=Path, default=None, metavar="FILE.npy",
                    help="save the weights drawn at every tick, (n_ticks, n_channels) float32")
+    p.add_argument("--llf-out", default=None, metavar="HOST:PORT",
+                   help="send each tick as a Live Link Face packet (the phone's UDP format) there, paced to real "
+                        "time")
+    add_video_arguments(p, audio_help="with --video, the sound track (a recording keeps audio levels, not samples)")
     add_stage_arguments(p)
     p.set_defaults(func=run_replay)
 
@@ -86,6 +98,10 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     fps = getattr(args, "fps", None)
     if fps is not None and not (fps > 0):
         raise ValueError(f"--fps: expected a positive number, got {fps}")
+    llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
+    if getattr(args, "audio_file", None) is not None and getattr(args, "video", None) is None:
+        raise ValueError("--audio-file: in a replay it is the sound track of --video FILE; give --video too")
+    video_plan = plan_video_from_args(args, width, height)
     character = Character.load(args.character)
     live = read_live_recording(args.session, lambda kind: make_input_adapter(kind, (), log=lambda s: None))
     kind = live.header.get("info", {}).get("input") if live is not None else None
@@ -112,19 +128,38 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     log(chain.describe())
     target = create_context(headless=True if args.headless else None, width=width, height=height,
                             title=f"facepuppet replay {args.session.name}")
-    renderer = None
+    renderer = video = llf = None
     weights = WeightLog()
     try:
         screen = None if target.headless else target.ctx.screen
         renderer = chain.renderer(target.ctx, character, width, height, args.path, screen, log)
         sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
-        clock = RecordedClock() if target.headless else WallClock()
-        progress = Progress("replay", total=_expected_ticks(args, source, ticks, fps), unit="ticks")
+        if video_plan is not None:
+            video = VideoSink(video_plan, fps)
+            log(video_plan.describe(fps))
+            sinks.append(video)
+        total = _expected_ticks(args, source, ticks, fps)
+        progress = Progress("replay" if video is None else f"replay --video {video_plan.path.name}", total=total,
+                            unit="ticks")
+        hooks = [lambda info: progress.update(info.k + 1 if ticks is None else progress.done + 1)]
+        if llf_out is not None:
+            llf = LlfSender(llf_out[0], llf_out[1], chain.names)
+            log(llf.describe() + " (paced to real time)")
+            hooks.append(llf.on_tick)
+        clock = RecordedClock() if target.headless and llf is None else WallClock()
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
-                         stages=chain.stages, on_tick=[lambda info: progress.update(info.k + 1)])
+                         stages=chain.stages, on_tick=hooks)
         with progress:           # on a terminal: ticks done, rate, time left (quiet when piped)
             result = loop.run(source, duration=args.duration, ticks=ticks)
+        if video is not None:
+            video.close()
+    except BaseException:
+        if video is not None:
+            video.abort()
+        raise
     finally:
+        if llf is not None:
+            llf.close()
         if renderer is not None:
             renderer.close()
         target.close()
@@ -250,3 +285,7 @@ def _report(args, result, path: str, fps: float, source, weights, log) -> None:
         log(f"replay: wrote the weights of {result.n_ticks} ticks to {args.dump_weights}")
     if args.out is not None:
         log(f"replay: wrote {result.n_ticks} PNGs to {args.out}")
+    if getattr(args, "video", None) is not None:
+        log(f"replay: wrote {result.n_ticks} video frames to {args.video}")
+    if getattr(args, "llf_out", None):
+        log(f"replay: sent {result.n_ticks} Live Link Face packets to {args.llf_out}")

@@ -17,6 +17,10 @@ it onto the rig and draws. Around that loop:
   drawn frame; no device is a message, not an error.
 * ``--vmc-out HOST:PORT``: the face as VMC perfect sync + VRM 0.x presets and the head pose, every tick
   (:mod:`~facepuppet.runtime.live.vmc_out`); ``--vmc-extra`` adds the rig's channels outside ARKit.
+* ``--llf-out HOST:PORT``: the face and head as Live Link Face packets, every tick
+  (:mod:`~facepuppet.runtime.live.llf_out`), for Unreal's Live Link and anything that reads the phone.
+* ``--video FILE``: the drawn ticks encoded as a video (:mod:`~facepuppet.runtime.live.video_out`),
+  with ``--audio-file`` as its sound track.
 * ``--stats``: counters and per-stage latency once a second and at exit.
 * Parameter spaces (:mod:`~facepuppet.runtime.live.stages`): ``--input markers``
   with ``--actor``/``--pair`` (marker solve, Shin & Lee), ``--retarget`` (kernel
@@ -49,10 +53,12 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.commands.options import parse_allow, parse_host_port, parse_size
+from facepuppet.runtime.live.llf_out import LlfSender
 from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, WallClock
 from facepuppet.runtime.live.sinks import PngSink, RecordingHook, WeightLog
 from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, make_input_adapter
 from facepuppet.runtime.live.stats import LiveStats
+from facepuppet.runtime.live.video_out import VideoPlan, VideoSink, add_video_arguments, plan_video_from_args
 from facepuppet.runtime.live.vmc_out import VmcSender
 
 if TYPE_CHECKING:
@@ -88,6 +94,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vmc-presets", action=argparse.BooleanOptionalAction, default=True,
                    help="with --vmc-out, also send the VRM 0.x presets (Blink, A, I, U, E, O, ...; default on); "
                         "--no-vmc-presets for a perfect-sync avatar whose preset clips move the same shapes")
+    p.add_argument("--llf-out", default=None, metavar="HOST:PORT",
+                   help="send the face and head as Live Link Face packets (the phone's UDP format; Unreal's Live "
+                        "Link listens on port 11111)")
+    add_video_arguments(p, audio_help=None)
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL (no window)")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
@@ -135,6 +145,8 @@ class _Options:
     port: int
     allow: set | None
     vmc_out: tuple | None
+    llf_out: tuple | None = None
+    video: VideoPlan | None = None
 
 
 def _check_options(args, default_port) -> _Options:
@@ -156,7 +168,10 @@ def _check_options(args, default_port) -> _Options:
         raise ValueError("--vmc-extra: needs --vmc-out HOST:PORT")
     if not getattr(args, "vmc_presets", True) and vmc_out is None:
         raise ValueError("--no-vmc-presets: needs --vmc-out HOST:PORT")
-    return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out)
+    llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
+    video = plan_video_from_args(args, width, height)
+    return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out,
+                    llf_out, video)
 
 
 def _record_info(args, opts: _Options) -> dict:
@@ -257,6 +272,14 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
 
         weights = WeightLog() if keep_weights or getattr(args, "dump_weights", None) is not None else None
         sinks = ([weights] if weights is not None else []) + ([PngSink(args.out)] if args.out is not None else [])
+        if opts.video is not None:
+            video = VideoSink(opts.video, opts.loop_fps)
+            log(opts.video.describe(opts.loop_fps))
+            if args.audio is not None and opts.video.audio is None:
+                log("video: the microphone's sound is not recorded into the video (only its level is measured); "
+                    "--audio-file WAV gives the video a sound track")
+            parts.append(video)
+            sinks.append(video)
         counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log)
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
@@ -269,6 +292,11 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         counters["loop"] = result.counters
         return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address,
                              chain.describe())
+    except BaseException:
+        for part in parts:   # a failed run leaves no half-written video
+            if hasattr(part, "abort"):
+                part.abort()
+        raise
     finally:
         for part in reversed(parts):
             for name in ("stop", "close"):
@@ -291,6 +319,12 @@ def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, 
         parts.append(sender)
         hooks.append(sender.on_tick)
         counters["vmc_out"] = sender.counters
+    if opts.llf_out is not None:
+        llf = LlfSender(opts.llf_out[0], opts.llf_out[1], chain.names)
+        log(llf.describe())
+        parts.append(llf)
+        hooks.append(llf.on_tick)
+        counters["llf_out"] = llf.counters
     if recorder is not None:
         counters["record"] = recorder.counters
         hooks.append(RecordingHook(recorder, source, chain.audio))
@@ -390,4 +424,6 @@ def run_command(args: argparse.Namespace, log: Callable[[str], None] = print) ->
         log(f"run: wrote {loop.n_ticks} PNGs to {args.out}")
     if args.record is not None:
         log(f"run: recorded to {args.record}")
+    if getattr(args, "video", None) is not None:
+        log(f"run: wrote {loop.n_ticks} video frames to {args.video}")
     return 0
