@@ -12,7 +12,6 @@ import pytest
 
 from facepuppet.runtime.character import CHARACTER_SCHEMA, Character, sparse_deltas
 from facepuppet.runtime.tables import (
-    SCHEMA_VERSION,
     Section,
     TableSchema,
     TablesError,
