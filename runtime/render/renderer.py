@@ -35,6 +35,7 @@ from facepuppet.runtime.geometry import bounds, vertex_normals
 from facepuppet.runtime.render.camera import frame_bounds, model_matrix
 from facepuppet.runtime.render.cpu_deform import CpuDeformer, check_weights
 from facepuppet.runtime.render.elastic_path import check_model, setup_elastic, upload_controls
+from facepuppet.runtime.render.options import FRAMINGS
 from facepuppet.runtime.render.parts_path import (
     CpuSkinner,
     HeadPose,
@@ -55,9 +56,6 @@ if TYPE_CHECKING:
 DELTA_TEXTURE_WIDTH = 4096
 MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights
 PATHS = ("auto", "gpu", "cpu", "elastic")
-# "body": the camera fits every drawn vertex; "head": the vertices that follow the humanoid head bone
-# (every drawn vertex for a character without one: a head rig); "face": what expressions move (contact sheets).
-FRAMINGS = ("body", "head", "face")
 _JOINT_UNIT, _TEXTURE_UNIT = 2, 3
 _HIDDEN = MATERIAL_KINDS["hidden"]
 _TWO_SIDED = (MATERIAL_KINDS["lashes"],)
@@ -149,6 +147,8 @@ class FaceRenderer:
     background : tuple of 3 float, display RGB 0..1
     transparent : bool, clear to alpha 0: :meth:`read_pixels` gives RGBA (straight alpha, alpha 0 where
         nothing is drawn); blending keeps alpha right (separate alpha blend function)
+    credits : str or None, a line drawn in the bottom-left corner over every frame (the attribution a
+        licence asks for, ``Character.credits``); None or "" draws nothing
     msaa : int, samples of the offscreen framebuffer (0 or 1: none; capped at the context's maximum);
         a window's samples are the window's (``create_context(samples=...)``)
     log : callable(str), receives the one-line path report
@@ -182,6 +182,7 @@ class FaceRenderer:
         elastic: ElasticModel | None = None,
         transparent: bool = False,
         msaa: int = 0,
+        credits: str | None = None,
     ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
@@ -232,6 +233,7 @@ class FaceRenderer:
         if path in ("auto", "cpu"):
             self._cpu = self._setup_cpu()
         self._pose = np.eye(4, dtype=np.float32)
+        self._label = self._setup_label(credits) if credits else None
         if path == "auto":
             self.path, self.path_report = self._choose_path()
             log(self.path_report)
@@ -314,6 +316,36 @@ class FaceRenderer:
             if self._head_pose.available:
                 skinner = CpuSkinner(self.character, self._head_pose.moved_nodes)
         return {"prog": prog, "vao": self._vao(prog, vbo), "vbo": vbo, "deformer": deformer, "skinner": skinner}
+
+    def _setup_label(self, text: str) -> dict:
+        """The credits label: a Pillow-rendered RGBA texture on a quad in the bottom-left corner."""
+        from facepuppet.runtime.render.images import label_image
+
+        ctx = self.ctx
+        image = label_image(text, scale=2 if self.height >= 600 else 1)
+        h, w = image.shape[:2]
+        tex = ctx.texture((w, h), 4, np.ascontiguousarray(image[::-1]).tobytes())  # GL rows bottom first
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        margin = 8
+        x0, y0 = -1 + 2 * margin / self.width, -1 + 2 * margin / self.height
+        x1, y1 = x0 + 2 * w / self.width, y0 + 2 * h / self.height
+        quad = np.array([[x0, y0, 0, 0], [x1, y0, 1, 0], [x1, y1, 1, 1], [x0, y1, 0, 1]], np.float32)
+        prog = load_program(ctx, "text_overlay.glsl")
+        vbo = ctx.buffer(quad.tobytes())
+        ibo = ctx.buffer(np.array([0, 1, 2, 0, 2, 3], np.uint32).tobytes())
+        vao = ctx.vertex_array(prog, [(vbo, "2f 2f", "in_position", "in_uv")], index_buffer=ibo,
+                               index_element_size=4)
+        return {"prog": prog, "vbo": vbo, "ibo": ibo, "vao": vao, "texture": tex, "size": (w, h)}
+
+    def _draw_label(self) -> None:
+        label = self._label
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.ctx.enable(moderngl.BLEND)
+        label["texture"].use(0)
+        label["prog"]["u_label"].value = 0
+        label["vao"].render(moderngl.TRIANGLES)
+        self.ctx.disable(moderngl.BLEND)
+        self.ctx.enable(moderngl.DEPTH_TEST)
 
     def _bind_parts(self, prog) -> None:
         prog["Material"].binding = 0
@@ -433,7 +465,13 @@ class FaceRenderer:
                                moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         if self.parts:
             self._submit_groups(state["vao"])
-            return
+        else:
+            self._submit_kinds(state)
+        if self._label is not None:
+            self._draw_label()
+
+    def _submit_kinds(self, state: dict) -> None:
+        """A character without parts: one-sided kinds culled, then two-sided cards (lashes) blended."""
         culled = self.n_one_sided_indices
         if culled:
             self.ctx.front_face = "ccw"
@@ -529,6 +567,10 @@ class FaceRenderer:
                     state["joints"].release()
         for obj in self._textures + self._materials:
             obj.release()
+        if self._label is not None:
+            for obj in self._label.values():
+                if hasattr(obj, "release"):
+                    obj.release()
         self._attr_vbo.release()
         self._ibo.release()
         if self._own_fbo:
