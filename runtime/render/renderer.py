@@ -58,7 +58,10 @@ MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the 
 PATHS = ("auto", "gpu", "cpu", "elastic")
 _JOINT_UNIT, _TEXTURE_UNIT = 2, 3
 _HIDDEN = MATERIAL_KINDS["hidden"]
-_TWO_SIDED = (MATERIAL_KINDS["lashes"],)
+# Thin layers drawn two-sided and blended after the surfaces, in this order (each over the ones before).
+_TWO_SIDED = (MATERIAL_KINDS["occlusion"], MATERIAL_KINDS["film"], MATERIAL_KINDS["lashes"])
+# Opacity of the thin layers (vertex_opacity): lashes at the root, the eye occlusion at the lids, films.
+LASH_ROOT_OPACITY, OCCLUSION_OPACITY, FILM_OPACITY = 0.9, 0.6, 0.22
 
 
 def realistic_weights(n_shapes: int, n_active: int = 10) -> np.ndarray:
@@ -87,8 +90,46 @@ def vertex_materials(character: Character) -> np.ndarray:
     return out.astype(np.float32)
 
 
+def vertex_opacity(character: Character) -> np.ndarray:
+    """Per-vertex opacity (n_vertices,) float32: 1 on surfaces; on the thin layers a fade with a distance
+    ``d``, ``s = (d - d_min) / (d_90 - d_min)`` clipped to [0, 1] (units cancel):
+
+    * lashes: ``LASH_ROOT_OPACITY (1 - s)^3``, ``d`` to the nearest eye vertex: dense at the lid margin,
+      fading to the tips (the cards carry no strand texture here; drawn at one opacity, the lower lash
+      card lying on the cheek read as a grey band under every ICT eye);
+    * occlusion: ``OCCLUSION_OPACITY (1 - s)^2``, ``d`` to the nearest skin vertex: the soft shadow the
+      lids cast on the eye, clear over the iris;
+    * film (lacrimal fluid, eye blend): ``FILM_OPACITY``, a faint wet layer with a highlight.
+    """
+    from scipy.spatial import cKDTree
+
+    c = character
+    kinds = c.material_params[:, 2].round().astype(int)
+    out = np.ones(c.n_vertices, np.float32)
+    tri_kind = kinds[c.triangle_material]
+    trees = {}
+    for name, near in (("skin", ("skin", "lips")), ("eye", ("eye",))):
+        verts = np.unique(c.triangles[np.isin(tri_kind, [MATERIAL_KINDS[k] for k in near])])
+        trees[name] = cKDTree(c.vertices[verts]) if len(verts) else None
+    for kind, opacity, power, near in ((MATERIAL_KINDS["lashes"], LASH_ROOT_OPACITY, 3.0, "eye"),
+                                       (MATERIAL_KINDS["occlusion"], OCCLUSION_OPACITY, 2.0, "skin"),
+                                       (MATERIAL_KINDS["film"], FILM_OPACITY, 0.0, "skin")):
+        v = np.unique(c.triangles[tri_kind == kind])
+        tree = trees[near]
+        if not len(v):
+            continue
+        if tree is None or power == 0.0:  # no eye to measure from (a lash card alone): one opacity
+            out[v] = opacity
+            continue
+        d, _ = tree.query(c.vertices[v])
+        lo, hi = float(d.min()), float(np.percentile(d, 90))
+        s = np.clip((d - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+        out[v] = opacity * (1.0 - s) ** power
+    return out
+
+
 def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
-    """Triangles not of kind ``hidden``, one-sided kinds first.
+    """Triangles not of kind ``hidden``, one-sided kinds first, then the thin layers in ``_TWO_SIDED`` order.
 
     Returns
     -------
@@ -98,8 +139,8 @@ def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
     """
     kinds = character.material_params[:, 2].round().astype(int)[character.triangle_material]
     one_sided = character.triangles[(kinds != _HIDDEN) & ~np.isin(kinds, _TWO_SIDED)]
-    two_sided = character.triangles[np.isin(kinds, _TWO_SIDED)]
-    tris = np.ascontiguousarray(np.vstack([one_sided, two_sided]), dtype=np.uint32)
+    two_sided = [character.triangles[kinds == k] for k in _TWO_SIDED]
+    tris = np.ascontiguousarray(np.vstack([one_sided, *two_sided]), dtype=np.uint32)
     return tris, len(one_sided)
 
 
@@ -266,7 +307,7 @@ class FaceRenderer:
             self.n_indices = len(tris) * 3
             self.n_one_sided_indices = 0
             return
-        attrs = np.hstack([c.vertex_color, vertex_materials(c)]).astype(np.float32)
+        attrs = np.hstack([c.vertex_color, vertex_materials(c), vertex_opacity(c)[:, None]]).astype(np.float32)
         self._attr_vbo = ctx.buffer(attrs.tobytes())
         tris, n_one_sided = visible_triangles(c)
         self._ibo = ctx.buffer(tris.tobytes())
@@ -363,7 +404,8 @@ class FaceRenderer:
             )
         return self.ctx.vertex_array(
             prog,
-            [(vbo, "3f 3f", "in_position", "in_normal"), (self._attr_vbo, "3f 3f", "in_color", "in_material")],
+            [(vbo, "3f 3f", "in_position", "in_normal"),
+             (self._attr_vbo, "3f 3f 1f", "in_color", "in_material", "in_opacity")],
             index_buffer=self._ibo,
             index_element_size=4,
         )
@@ -479,9 +521,12 @@ class FaceRenderer:
             state["vao"].render(moderngl.TRIANGLES, vertices=culled)
         self.ctx.disable(moderngl.CULL_FACE)
         if self.n_indices > culled:
-            # Thin two-sided cards (lashes) last, blended over the finished surfaces.
+            # Thin two-sided layers (eye occlusion, films, lashes) last, blended over the finished surfaces,
+            # without writing depth so that each shows through the ones drawn after it.
             self.ctx.enable(moderngl.BLEND)
+            self.fbo.depth_mask = False
             state["vao"].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
+            self.fbo.depth_mask = True
             self.ctx.disable(moderngl.BLEND)
 
     def _submit_groups(self, vao) -> None:
