@@ -262,7 +262,8 @@ class FaceRenderer:
         self._setup_camera()
         self._setup_buffers()
         self._gpu = self._cpu = self._elastic = None
-        self._textures = make_textures(ctx, look_of(character)) if self.parts else []
+        self._look = look_of(character) if self.parts else None
+        self._textures = make_textures(ctx, self._look) if self.parts else []
         self._materials = [ctx.buffer(material_block(character, m)) for m in range(len(character.material_names))] \
             if self.parts else []
         if path == "elastic":
@@ -538,7 +539,7 @@ class FaceRenderer:
             blended.sort(key=lambda g: -float(np.dot(g.centre - eye, g.centre - eye)))
         ctx.front_face = "ccw"
         culling = None
-        look = look_of(self.character)
+        look = self._look
         for g in [g for g in groups if not g.blend] + blended:
             if g.cull != culling:
                 (ctx.enable if g.cull else ctx.disable)(moderngl.CULL_FACE)
@@ -591,7 +592,10 @@ class FaceRenderer:
 
     def project(self, points: np.ndarray, head_rotation: np.ndarray | None = None,
                 head_translation: np.ndarray | None = None) -> np.ndarray:
-        """Pixel coordinates (x right, y down) of character-space points, (n, 2) float64."""
+        """Pixel coordinates (x right, y down) of character-space points, (n, 2) float64.
+
+        The pose is the renderer's model matrix: for a character whose skeleton turns the head
+        (a humanoid head bone) only ``head_translation`` applies; the points are not skinned."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if self.parts and self._head_pose.available:  # the skeleton turns the head, not the whole character
             head_rotation = None

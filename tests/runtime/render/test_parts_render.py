@@ -263,3 +263,18 @@ def test_a_character_without_a_head_bone_turns_whole_about_its_pivot(egl_ctx):
     rest, _ = draw(egl_ctx, c, framing="body")
     turned, _ = draw(egl_ctx, c, rotation=turn, framing="body")
     assert (np.abs(rest.astype(int) - turned.astype(int)).sum(axis=2) > 24).sum() > 100
+
+
+@pytest.mark.parametrize("path", ["gpu", "cpu"])
+def test_a_skeleton_without_a_look_draws_its_vertex_colours_and_turns_its_head(egl_ctx, path):
+    from dataclasses import replace
+
+    c = replace(figure(morph=False), look=None)
+    turn = np.array([0, np.sin(np.radians(15)), 0, np.cos(np.radians(15))])
+    rest, r = draw(egl_ctx, c, path=path, framing="body", size=(80, 160))
+    turned, _ = draw(egl_ctx, c, rotation=turn, path=path, framing="body", size=(80, 160))
+    x, y = r.project([[0, 0.7, 0.1]]).astype(int)[0]
+    assert rest[y, x, 2] > rest[y, x, 0] + 60             # the blue body, lit
+    diff = np.abs(rest.astype(int) - turned.astype(int)).sum(axis=2) > 24
+    _, y_neck = r.project([[0, 1.45, 0]]).astype(int)[0]
+    assert diff[:y_neck].sum() > 40 and diff[y_neck + 10:].sum() == 0
