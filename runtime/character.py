@@ -40,8 +40,11 @@ from facepuppet.runtime.tables import (
     validate,
 )
 
-# Material kinds the shader knows (column 2 of ``material_params``).
-MATERIAL_KINDS = {"skin": 0, "eye": 1, "teeth": 2, "mouth": 3, "lashes": 4, "hidden": 5, "lips": 6}
+# Material kinds the shader knows (column 2 of ``material_params``). "occlusion" (a dark soft shadow over
+# the eye, fading from the lids) and "film" (a thin wet see-through layer: lacrimal fluid, eye blend) are
+# drawn blended over the finished surfaces; "hidden" is not drawn.
+MATERIAL_KINDS = {"skin": 0, "eye": 1, "teeth": 2, "mouth": 3, "lashes": 4, "hidden": 5, "lips": 6,
+                  "occlusion": 7, "film": 8}
 
 CHARACTER_SCHEMA = register_schema(
     TableSchema(

@@ -14,6 +14,7 @@ in vec3 in_position;   // neutral (GPU path) or already deformed (CPU path), cha
 in vec3 in_normal;     // neutral or deformed, not necessarily unit length
 in vec3 in_color;      // albedo, linear RGB
 in vec3 in_material;   // kind code, specular, shininess
+in float in_opacity;   // 1 on surfaces; the fade of a thin layer (renderer.vertex_opacity)
 
 uniform mat4 u_model;           // head pose about the pivot
 uniform mat4 u_view_projection;
@@ -22,6 +23,7 @@ out vec3 v_world;
 out vec3 v_normal;
 out vec3 v_color;
 flat out vec3 v_material;
+out float v_opacity;
 
 void main() {
     vec3 position = in_position;
@@ -38,6 +40,7 @@ void main() {
     v_normal = mat3(u_model) * normalize(normal);
     v_color = in_color;
     v_material = in_material;
+    v_opacity = in_opacity;
     gl_Position = u_view_projection * world;
 }
 #endif
@@ -51,6 +54,7 @@ in vec3 v_world;
 in vec3 v_normal;
 in vec3 v_color;
 flat in vec3 v_material;
+in float v_opacity;
 
 out vec4 f_color;
 
@@ -61,7 +65,7 @@ void main() {
     if (dot(n, v) < 0.0) n = -n;
     int kind = int(v_material.x + 0.5);
     vec3 color = shade(v_color, kind, v_material.y, v_material.z, n, v);
-    // Lash cards are untextured strips: drawn last, half see-through, they read as a lash line.
-    f_color = vec4(to_display(color), kind == KIND_LASHES ? LASH_OPACITY : 1.0);
+    // Thin layers (lashes, eye occlusion, films) are drawn last, see-through by their per-vertex opacity.
+    f_color = vec4(to_display(color), v_opacity);
 }
 #endif

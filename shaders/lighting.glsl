@@ -8,7 +8,8 @@ const int KIND_TEETH = 2;
 const int KIND_MOUTH = 3;
 const int KIND_LASHES = 4;
 const int KIND_LIPS = 6;
-const float LASH_OPACITY = 0.55;
+const int KIND_OCCLUSION = 7;
+const int KIND_FILM = 8;
 
 // Directions point towards the lights, in world space (camera looks along -z).
 const vec3 KEY_DIR = vec3(0.45, 0.55, 0.70);
@@ -57,6 +58,12 @@ vec3 shade(vec3 albedo, int kind, float specular, float shininess, vec3 n, vec3 
     } else if (kind == KIND_LASHES) {
         albedo = min(albedo, vec3(0.06, 0.05, 0.045));
         specular = 0.05;
+    } else if (kind == KIND_OCCLUSION) {
+        return albedo * 0.2;  // a shadow: no light of its own
+    } else if (kind == KIND_FILM) {
+        wrap = 0.3;
+        specular = max(specular, 0.6);
+        shininess = max(shininess, 60.0);
     } else if (kind == KIND_LIPS) {
         wrap = 0.3;
         specular = max(specular, 0.3);

@@ -39,9 +39,12 @@ NORMAL_TOLERANCE = 1e-4
 UNITS_PER_CM = {"cm": 1.0, "mm": 10.0, "m": 0.01}
 
 # First match wins, in this order; a name matching none is skin. "cornea" is
-# hidden, not eye: it is a transparent shell and, drawn opaque, would cover the iris.
+# hidden, not eye: it is a transparent shell and, drawn opaque, would cover the iris. The eye's thin
+# layers (ICT: eye occlusion, lacrimal fluid, eye blend) are drawn blended (renderer: vertex_opacity).
 KIND_WORDS = (
-    ("hidden", ("blend", "occlusion", "lacrimal", "tear", "cornea")),
+    ("hidden", ("cornea",)),
+    ("occlusion", ("occlusion",)),
+    ("film", ("blend", "lacrimal", "tear")),
     ("eye", ("sclera", "iris", "pupil", "eyeball")),
     ("teeth", ("teeth", "tooth")),
     ("mouth", ("gum", "tongue", "mouth")),
@@ -56,12 +59,15 @@ KIND_COLOR = {
     "mouth": (0.55, 0.18, 0.20),
     "lashes": (0.05, 0.04, 0.04),
     "hidden": (0.5, 0.5, 0.5),
+    "occlusion": (0.03, 0.02, 0.02),
+    "film": (0.80, 0.60, 0.56),
 }
 SCLERA, IRIS, PUPIL = (0.92, 0.90, 0.86), (0.25, 0.15, 0.08), (0.02, 0.02, 0.02)
 IRIS_DEG, PUPIL_DEG = 25.0, 10.0
 # [specular, shininess] when there is no MTL entry
 KIND_SHINE = {"skin": (0.05, 18), "lips": (0.15, 24), "eye": (0.6, 60), "teeth": (0.4, 40),
-              "mouth": (0.3, 30), "lashes": (0.0, 1), "hidden": (0.0, 1)}  # fmt: skip
+              "mouth": (0.3, 30), "lashes": (0.0, 1), "hidden": (0.0, 1),
+              "occlusion": (0.0, 1), "film": (0.6, 60)}  # fmt: skip
 LIP_OUTER = slice(48, 60)  # Multi-PIE 68: outer lip contour; 48 and 54 are the mouth corners
 LIP_DEPTH_CM, LIP_EDGE_CM = 1.0, 0.3
 

@@ -3,12 +3,18 @@
 Per path (gpu, cpu) and per frame:
 
 * prepare: the CPU work before the draw call (active weight list and uniform
-  upload, or NumPy deformation and vertex upload),
-* draw: issuing the draw call and waiting for it (``ctx.finish()``),
-* readback: reading the frame back (what ``--headless --out`` pays).
+  upload, joint matrices of the head pose, or NumPy deformation, skinning and
+  vertex upload),
+* submit: issuing the draw calls (CPU; one per material group with parts),
+* draw: issuing the draw calls and waiting for them (``ctx.finish()``),
+* readback: reading the frame back (what ``--headless --out`` pays; with MSAA
+  it includes the resolve).
 
 The weights are a deterministic synthetic performance: sinusoids of
-different periods on ~10 channels, the rest at zero.
+different periods on ~10 channels, the rest at zero; the head turns
+(a slow sinusoidal yaw and pitch), so a character with a skeleton is skinned
+every frame (``--no-pose`` keeps it still). MSAA as the commands draw
+(``--msaa``, default 4).
 """
 
 from __future__ import annotations
@@ -41,23 +47,37 @@ def _stats(ms: list[float]) -> dict:
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "mean": float(a.mean())}
 
 
-def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5) -> dict:
-    """Time ``renderer`` over the weight sequence; returns per-stage ms statistics and frames/s."""
-    prepare, draw, readback = [], [], []
-    for w in weights[:warmup]:
-        renderer.draw(w)
+def head_poses(n_frames: int, fps: float = 60.0, degrees: float = 20.0) -> np.ndarray:
+    """Quaternions (n_frames, 4) (x, y, z, w): a slow yaw (period 3 s) and pitch (period 4.1 s)."""
+    from facepuppet.runtime.geometry import euler_to_quat
+
+    t = np.arange(n_frames) / fps
+    yaw = np.radians(degrees) * np.sin(2 * np.pi * t / 3.0)
+    pitch = np.radians(degrees / 2) * np.sin(2 * np.pi * t / 4.1)
+    return np.array([euler_to_quat(y, p, 0.0) for y, p in zip(yaw, pitch)], np.float64)
+
+
+def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5,
+                 poses: np.ndarray | None = None) -> dict:
+    """Time ``renderer`` over the weight sequence (and head poses); per-stage ms statistics and frames/s."""
+    prepare, submit, draw, readback = [], [], [], []
+    pose = (lambda i: None) if poses is None else (lambda i: poses[i % len(poses)])  # noqa: E731
+    for i, w in enumerate(weights[:warmup]):
+        renderer.draw(w, head_rotation=pose(i))
         renderer.finish()
     start = time.perf_counter()
-    for w in weights:
+    for i, w in enumerate(weights):
         t0 = time.perf_counter()
-        renderer.prepare(w)
+        renderer.prepare(w, head_rotation=pose(i))
         t1 = time.perf_counter()
         renderer.submit()
+        ts = time.perf_counter()
         renderer.finish()
         t2 = time.perf_counter()
         renderer.read_pixels()
         t3 = time.perf_counter()
         prepare.append((t1 - t0) * 1e3)
+        submit.append((ts - t1) * 1e3)
         draw.append((t2 - t1) * 1e3)
         readback.append((t3 - t2) * 1e3)
     total = time.perf_counter() - start
@@ -67,6 +87,7 @@ def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5) -
         "frames_per_s": len(weights) / render_s,
         "frames_per_s_with_readback": len(weights) / total,
         "cpu_prepare_ms": _stats(prepare),
+        "cpu_submit_ms": _stats(submit),
         "draw_finish_ms": _stats(draw),
         "readback_ms": _stats(readback),
         "peak_rss_mb": peak_rss_mb(),
@@ -80,6 +101,8 @@ def bench_render(args: argparse.Namespace) -> dict:
 
     character = Character.load(args.character)
     weights = synthetic_performance(args.frames, character.n_shapes, n_active=args.active)
+    poses = None if getattr(args, "no_pose", False) else head_poses(args.frames)
+    msaa = int(getattr(args, "msaa", 4))
     target = create_context(headless=True)
     ctx = target.ctx
     results = {
@@ -90,17 +113,21 @@ def bench_render(args: argparse.Namespace) -> dict:
         "n_active": min(args.active, character.n_shapes),
         "width": args.width,
         "height": args.height,
+        "parts": [p for p in ("skeleton", "look", "expressions") if getattr(character, p) is not None],
+        "n_textures": len(character.look.texture_names) if character.look is not None else 0,
+        "head_pose": poses is not None,
         "gl_renderer": ctx.info.get("GL_RENDERER"),
         "gl_version": ctx.info.get("GL_VERSION"),
         "paths": {},
     }
     try:
         for path in ("gpu", "cpu"):
-            renderer = FaceRenderer(ctx, character, args.width, args.height, path=path)
-            results["paths"][path] = measure_path(renderer, weights)
+            renderer = FaceRenderer(ctx, character, args.width, args.height, path=path, msaa=msaa)
+            results["msaa"] = renderer.samples
+            results["paths"][path] = measure_path(renderer, weights, poses=poses)
             renderer.close()
         reports = []
-        renderer = FaceRenderer(ctx, character, args.width, args.height, path="auto", log=reports.append)
+        renderer = FaceRenderer(ctx, character, args.width, args.height, path="auto", log=reports.append, msaa=msaa)
         results["auto_choice"] = renderer.path
         results["auto_report"] = renderer.path_report
         renderer.close()
@@ -114,14 +141,16 @@ def bench_render(args: argparse.Namespace) -> dict:
 def _print_table(r: dict) -> None:
     print(
         f"render bench: {r['character']} ({r['n_vertices']} vertices, {r['n_triangles']} triangles, "
-        f"{r['n_shapes']} shapes) at {r['width']}x{r['height']} on {r['gl_renderer']}"
+        f"{r['n_shapes']} shapes; parts: {', '.join(r['parts']) or 'none'}) at {r['width']}x{r['height']}, "
+        f"MSAA {r['msaa']}x, head {'turning' if r['head_pose'] else 'still'}, on {r['gl_renderer']}"
     )
-    print(f"{'path':<5} {'fps':>7} {'fps+read':>9} {'cpu med':>8} {'cpu p99':>8} {'draw med':>9} "
+    print(f"{'path':<5} {'fps':>7} {'fps+read':>9} {'cpu med':>8} {'cpu p99':>8} {'sub med':>8} {'draw med':>9} "
           f"{'draw p99':>9} {'read med':>9} {'rss MB':>7}")
     for path, p in r["paths"].items():
         print(
             f"{path:<5} {p['frames_per_s']:7.1f} {p['frames_per_s_with_readback']:9.1f} "
             f"{p['cpu_prepare_ms']['median']:8.3f} {p['cpu_prepare_ms']['p99']:8.3f} "
+            f"{p['cpu_submit_ms']['median']:8.3f} "
             f"{p['draw_finish_ms']['median']:9.2f} {p['draw_finish_ms']['p99']:9.2f} "
             f"{p['readback_ms']['median']:9.2f} {p['peak_rss_mb']:7.0f}"
         )
@@ -135,6 +164,9 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=int, default=720)
     parser.add_argument("--active", type=int, default=10,
                         help="shapes animated at once (10; a live ARKit tracker drives nearly all of them)")
+    parser.add_argument("--msaa", type=int, default=4, help="multisamples (4, as the commands draw; 0 = off)")
+    parser.add_argument("--no-pose", action="store_true",
+                        help="keep the head still (default: it turns, so a skeleton is skinned every frame)")
 
 
 register_bench(

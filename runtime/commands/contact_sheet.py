@@ -29,16 +29,18 @@ def parse_cell(text: str) -> tuple[int, int]:
 
 def render_shapes(ctx: moderngl.Context, character: Character, cell: tuple[int, int] = (320, 320),
                   path: str = "auto", log: Callable[[str], None] = print,
-                  framing: str = "face") -> list[tuple[str, np.ndarray]]:
+                  framing: str = "face", **picture: object) -> list[tuple[str, np.ndarray]]:
     """Neutral, then each shape at weight 1.
+
+    ``picture``: more FaceRenderer options (background, transparent, msaa).
 
     Returns
     -------
-    list of (label, ndarray of shape (cell_h, cell_w, 3), uint8)
+    list of (label, ndarray of shape (cell_h, cell_w, 3) (RGBA (…, 4) when transparent), uint8)
     """
     from facepuppet.runtime.render.renderer import FaceRenderer
 
-    renderer = FaceRenderer(ctx, character, cell[0], cell[1], path=path, log=log, framing=framing)
+    renderer = FaceRenderer(ctx, character, cell[0], cell[1], path=path, log=log, framing=framing, **picture)
     try:
         frames = []
         weights = np.zeros(character.n_shapes, dtype=np.float32)
@@ -56,11 +58,15 @@ def render_shapes(ctx: moderngl.Context, character: Character, cell: tuple[int, 
 
 def run(args: argparse.Namespace) -> int:
     from facepuppet.runtime.render.gl_context import create_context
+    from facepuppet.runtime.render.options import render_options
 
     character = Character.load(args.character)
+    picture = render_options(args).renderer_kwargs()
+    if character.credits:
+        print(f"credits: {character.credits}")
     target = create_context(headless=True)
     try:
-        frames = render_shapes(target.ctx, character, args.cell, args.path, framing=args.framing)
+        frames = render_shapes(target.ctx, character, args.cell, args.path, **picture)
     finally:
         target.close()
     columns = args.columns or max(1, math.ceil(math.sqrt(len(frames) * 16 / 9 * args.cell[1] / args.cell[0])))
@@ -78,6 +84,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--cell", type=parse_cell, default=(320, 320), help="cell size WIDTHxHEIGHT (320x320)")
     parser.add_argument("--columns", type=int, default=0, help="grid columns (default: about 16:9)")
     parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
-    parser.add_argument("--framing", choices=("face", "head"), default="face",
-                        help="fit the camera to what the expressions move (face, default) or to the whole head")
+    from facepuppet.runtime.render.options import add_render_arguments
+
+    add_render_arguments(parser, framing="face", credits=False)
     parser.set_defaults(func=run)

@@ -23,6 +23,7 @@ from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink
 from facepuppet.runtime.live.video_out import VideoSink, add_video_arguments, plan_video_from_args
 from facepuppet.runtime.recording.replay_source import ReplaySource
+from facepuppet.runtime.render.options import add_render_arguments, render_options
 
 if TYPE_CHECKING:
     import argparse
@@ -64,6 +65,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     p.add_argument("--no-frames", action="store_true", help="write only the contact sheet, not every frame")
     add_video_arguments(p, audio_help="with --video, the sound track")
+    add_render_arguments(p)
     p.set_defaults(func=run_demo)
 
 
@@ -76,19 +78,22 @@ def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> in
     from facepuppet.runtime.render.renderer import FaceRenderer
 
     width, height = parse_size(args.size)
+    picture = render_options(args)
     if not (args.fps > 0) or not (args.duration > 0):
         raise ValueError(f"--fps and --duration must be positive, got {args.fps} and {args.duration}")
     if getattr(args, "audio_file", None) is not None and getattr(args, "video", None) is None:
         raise ValueError("--audio-file: in the demo it is the sound track of --video FILE; give --video too")
-    video_plan = plan_video_from_args(args, width, height)
+    video_plan = plan_video_from_args(args, width, height, alpha=picture.transparent)
     started = time.perf_counter()
     character = build_demo_character()
     frames = demo_frames(duration=args.duration, rate=60.0, seed=args.seed)
     log(f"demo: procedural head, {character.n_vertices} vertices, {len(character.triangles)} triangles, "
         f"{character.n_shapes} shapes; performance {args.duration:g} s, {len(frames)} frames "
         f"(seed {args.seed}); built in {time.perf_counter() - started:.2f} s")
+    if character.credits:
+        log(f"credits: {character.credits}")
     target = create_context(headless=True if args.headless else None, width=width, height=height,
-                            title="facepuppet demo")
+                            title="facepuppet demo", log=log, samples=picture.msaa, transparent=picture.transparent)
     out = args.out if args.out is not None else (Path("demo-out") if target.headless else None)
     if args.out is None and out is not None:   # the default folder follows the output policy too
         from facepuppet.runtime.outputs import check_path
@@ -103,7 +108,8 @@ def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> in
     renderer = video = None
     try:
         screen = None if target.headless else target.ctx.screen
-        renderer = FaceRenderer(target.ctx, character, width, height, path=args.path, target_fbo=screen, log=log)
+        renderer = FaceRenderer(target.ctx, character, width, height, path=args.path, target_fbo=screen, log=log,
+                                **picture.renderer_kwargs(), credits=character.credits if picture.credits else None)
         n_ticks = int(np.ceil(args.duration * args.fps - 1e-6)) + 1
         sheet = SheetSink(n_ticks, fps=args.fps)
         sinks = [sheet]
@@ -152,10 +158,10 @@ def run_demo(args: argparse.Namespace, log: Callable[[str], None] = print) -> in
 
 
 def _shrink(rgb: np.ndarray, width: int) -> np.ndarray:
-    """Downscale an (h, w, 3) uint8 image to ``width`` pixels wide (Pillow, high quality)."""
+    """Downscale an (h, w, 3) or RGBA (h, w, 4) uint8 image to ``width`` pixels wide (Pillow, high quality)."""
     from PIL import Image
 
-    h, w, _ = rgb.shape
+    h, w = rgb.shape[:2]
     if w <= width:
         return rgb
     img = Image.fromarray(rgb).resize((width, round(h * width / w)), Image.LANCZOS)

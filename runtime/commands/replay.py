@@ -43,6 +43,7 @@ from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, 
 from facepuppet.runtime.live.video_out import VideoSink, add_video_arguments, plan_video_from_args
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
+from facepuppet.runtime.render.options import add_render_arguments, render_options
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -62,6 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="ticks per second of recorded time (default: the live run's for a live recording, else 60)")
     p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    add_render_arguments(p)
     p.add_argument("--duration", type=float, default=None, help="seconds to play (default: the whole recording)")
     p.add_argument("--max-gap", type=_gap_seconds, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
                    help=f"cut a pause between recorded frames longer than this to this length, and say so "
@@ -101,8 +103,11 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
     if getattr(args, "audio_file", None) is not None and getattr(args, "video", None) is None:
         raise ValueError("--audio-file: in a replay it is the sound track of --video FILE; give --video too")
-    video_plan = plan_video_from_args(args, width, height)
+    video_plan = plan_video_from_args(args, width, height, alpha=render_options(args).transparent)
     character = Character.load(args.character)
+    picture = render_options(args)
+    if character.credits:
+        log(f"credits: {character.credits}")
     live = read_live_recording(args.session, lambda kind: make_input_adapter(kind, (), log=lambda s: None))
     kind = live.header.get("info", {}).get("input") if live is not None else None
     take = _marker_take(args.session) if live is None else None
@@ -127,12 +132,15 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         source, ticks, fps = _source(args, live, getattr(args, "fps", None), lambda s: None)
     log(chain.describe())
     target = create_context(headless=True if args.headless else None, width=width, height=height,
-                            title=f"facepuppet replay {args.session.name}")
+                            title=f"facepuppet replay {args.session.name}", log=log, samples=picture.msaa,
+                            transparent=picture.transparent)
     renderer = video = llf = None
     weights = WeightLog()
     try:
         screen = None if target.headless else target.ctx.screen
-        renderer = chain.renderer(target.ctx, character, width, height, args.path, screen, log)
+        renderer = chain.renderer(target.ctx, character, width, height, args.path, screen, log,
+                                  **picture.renderer_kwargs(),
+                                  credits=character.credits if picture.credits else None)
         sinks = [weights] + ([PngSink(args.out)] if args.out is not None else [])
         if video_plan is not None:
             video = VideoSink(video_plan, fps)

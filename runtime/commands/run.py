@@ -60,6 +60,7 @@ from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, mak
 from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.live.video_out import VideoPlan, VideoSink, add_video_arguments, plan_video_from_args
 from facepuppet.runtime.live.vmc_out import VmcSender
+from facepuppet.runtime.render.options import add_render_arguments, render_options
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
@@ -111,6 +112,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "'tick': draw on a fixed --fps grid")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    add_render_arguments(p)
     p.add_argument("--receiver", choices=RECEIVERS, default="process",
                    help="where datagrams are decoded: 'process' (default: a child process, never competing with "
                         "the frame loop for the GIL) or 'thread' (a thread of this process)")
@@ -169,7 +171,7 @@ def _check_options(args, default_port) -> _Options:
     if not getattr(args, "vmc_presets", True) and vmc_out is None:
         raise ValueError("--no-vmc-presets: needs --vmc-out HOST:PORT")
     llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
-    video = plan_video_from_args(args, width, height)
+    video = plan_video_from_args(args, width, height, alpha=render_options(args).transparent)
     return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out,
                     llf_out, video)
 
@@ -227,6 +229,9 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
     adapter_kind = None if args.input == "audio" else args.input
     opts = _check_options(args, input_default_port(adapter_kind))
     character = Character.load(args.character)
+    picture = render_options(args)
+    if character.credits:
+        log(f"credits: {character.credits}")
     stop_event = stop_event or threading.Event()
     parts: list = []  # things to close, in reverse order
     signals = _sigint_sets(stop_event).__enter__()  # from here on a SIGTERM or Ctrl-C ends the run cleanly
@@ -262,10 +267,13 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
             + (f" (only from {', '.join(sorted(opts.allow))})" if opts.allow else ""))
 
         target = create_context(headless=True if args.headless else None, width=opts.width, height=opts.height,
-                                title=f"facepuppet run ({args.input})")
+                                title=f"facepuppet run ({args.input})", log=log, samples=picture.msaa,
+                                transparent=picture.transparent)
         parts.append(target)
         screen = None if target.headless else target.ctx.screen
-        renderer = chain.renderer(target.ctx, character, opts.width, opts.height, args.path, screen, log)
+        renderer = chain.renderer(target.ctx, character, opts.width, opts.height, args.path, screen, log,
+                                  **picture.renderer_kwargs(),
+                                  credits=character.credits if picture.credits else None)
         parts.append(renderer)
         if not target.headless and chain.filter is not None:
             _bind_calibrate_key(target, chain.filter)

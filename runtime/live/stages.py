@@ -37,7 +37,7 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from facepuppet.runtime.frames import Frame
 
@@ -152,17 +152,17 @@ class Chain:
         return "stages: " + "→".join([self.input, *(s.name for s in self.stages), "map", draw])
 
     def renderer(self, ctx: moderngl.Context, character: Character, width: int, height: int, path: str,
-                 target_fbo: moderngl.Framebuffer | None, log: Callable[[str], None]) -> Renderer:
+                 target_fbo: moderngl.Framebuffer | None, log: Callable[[str], None], **options: Any) -> Renderer:
         """The renderer the loop draws with (an :class:`~facepuppet.runtime.render.elastic_path.ElasticDraw`
-        with ``--elastic``)."""
+        with ``--elastic``); ``options`` are FaceRenderer's picture options (framing, background, ...)."""
         from facepuppet.runtime.render.renderer import FaceRenderer
 
         if self.elastic is None:
-            return FaceRenderer(ctx, character, width, height, path=path, target_fbo=target_fbo, log=log)
+            return FaceRenderer(ctx, character, width, height, path=path, target_fbo=target_fbo, log=log, **options)
         from facepuppet.runtime.render.elastic_path import ElasticDraw
 
         r = FaceRenderer(ctx, character, width, height, path="elastic", target_fbo=target_fbo, log=log,
-                         elastic=self.elastic)
+                         elastic=self.elastic, **options)
         return ElasticDraw(r, self.elastic)
 
 

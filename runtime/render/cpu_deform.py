@@ -93,7 +93,7 @@ class CpuDeformer:
             rows = local[character.delta_indices[sl]]
             deltas[s, rows, :3] = character.delta_positions[sl]
             deltas[s, rows, 3:] = character.delta_normals[sl]
-        self.deltas = deltas.reshape(character.n_shapes, -1)
+        self.deltas = deltas.reshape(character.n_shapes, 6 * int(starts[-1]))  # (0, 0) for a character without shapes
         self._block_rest = np.concatenate([rest[a:b].reshape(-1) for a, b in self.spans]) if len(self.spans) \
             else np.zeros(0, np.float32)
         self._block = np.empty_like(self._block_rest)

@@ -31,12 +31,18 @@ class GLTarget:
     ctx : moderngl.Context
     window : glfw window handle or None (headless)
     headless : bool
+    transparent : bool, the window's framebuffer is transparent (its clear alpha shows the desktop); False
+        headless (offscreen frames carry their own alpha) or when the platform refused
+    samples : int, the window's multisample count (0 headless: the renderer multisamples offscreen)
     """
 
-    def __init__(self, ctx: moderngl.Context, window: Any = None) -> None:
+    def __init__(self, ctx: moderngl.Context, window: Any = None, transparent: bool = False,
+                 samples: int = 0) -> None:
         self.ctx = ctx
         self.window = window
         self.headless = window is None
+        self.transparent = transparent
+        self.samples = samples
 
     def should_close(self) -> bool:
         if self.window is None:
@@ -108,20 +114,32 @@ def _glfw_error(code: int, description: bytes) -> None:
     _glfw_errors.append(f"GLFW {code}: {text}")
 
 
-def _window(width: int, height: int, title: str) -> GLTarget:
+def _window(width: int, height: int, title: str, samples: int = 0, transparent: bool = False,
+            log: Callable[[str], None] | None = None) -> GLTarget:
     import glfw
 
     glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
     glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
     glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
     glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+    glfw.window_hint(glfw.SAMPLES, max(int(samples), 0))
+    glfw.window_hint(glfw.TRANSPARENT_FRAMEBUFFER, bool(transparent))
     window = glfw.create_window(width, height, title, None, None)
+    if not window and samples:  # no multisampled visual: try without
+        (log or logger.warning)(f"no {samples}x multisampled window on this display; opening one without MSAA")
+        glfw.window_hint(glfw.SAMPLES, 0)
+        samples = 0
+        window = glfw.create_window(width, height, title, None, None)
     if not window:
         glfw.terminate()
         raise GLUnavailable("glfw could not open an OpenGL 3.3 core window; try --headless")
+    granted = bool(transparent) and bool(glfw.get_window_attrib(window, glfw.TRANSPARENT_FRAMEBUFFER))
+    if transparent and not granted:
+        (log or logger.warning)("the display gives no transparent window framebuffer (a compositor is needed); "
+                                "the background is drawn opaque in the window (headless --out frames keep alpha)")
     glfw.make_context_current(window)
     glfw.swap_interval(0)
-    return GLTarget(moderngl.create_context(require=330), window)
+    return GLTarget(moderngl.create_context(require=330), window, transparent=granted, samples=int(samples))
 
 
 def _egl() -> GLTarget:
@@ -134,7 +152,7 @@ def _egl() -> GLTarget:
 
 def create_context(
     headless: bool | None = None, width: int = 1280, height: int = 720, title: str = "facepuppet",
-    log: Callable[[str], None] | None = None,
+    log: Callable[[str], None] | None = None, samples: int = 0, transparent: bool = False,
 ) -> GLTarget:
     """Make an OpenGL 3.3+ context.
 
@@ -145,8 +163,11 @@ def create_context(
         display). None: a window if a display exists and glfw starts, else EGL.
     width, height : int, window size in pixels (ignored headless)
     title : str, window title
-    log : where the one line goes when ``headless=None`` falls back to EGL (default: this module's
-        logger, at WARNING)
+    log : where the one line goes when ``headless=None`` falls back to EGL, or a window lacks the asked
+        samples or transparency (default: this module's logger, at WARNING)
+    samples : int, multisamples of a window's framebuffer (glfw SAMPLES hint; ignored headless, where the
+        renderer multisamples its own framebuffer)
+    transparent : bool, ask for a transparent window framebuffer (glfw TRANSPARENT_FRAMEBUFFER)
 
     Raises
     ------
@@ -157,10 +178,10 @@ def create_context(
             raise GLUnavailable(
                 f"a window was asked for but {_glfw_problem}; run with --headless to render offscreen through EGL"
             )
-        return _window(width, height, title)
+        return _window(width, height, title, samples, transparent, log)
     if headless is None:
         if _glfw_init():
-            return _window(width, height, title)
+            return _window(width, height, title, samples, transparent, log)
         target = _egl()
         (log or logger.warning)(f"{_glfw_problem}: no window, rendering offscreen through EGL "
                                 f"(pass --headless to ask for that)")

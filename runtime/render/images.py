@@ -13,20 +13,24 @@ _SHEET_BACKGROUND = (24, 25, 28)
 _LABEL_COLOR = (225, 225, 225)
 
 
-def check_rgb(image: np.ndarray, name: str = "image") -> np.ndarray:
-    """An image as (h, w, 3) uint8, or ValueError saying what came."""
+def check_rgb(image: np.ndarray, name: str = "image", alpha: bool = False) -> np.ndarray:
+    """An image as (h, w, 3) uint8 (or (h, w, 4) RGBA with ``alpha``), or ValueError saying what came."""
     a = np.asarray(image)
-    if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8 or a.shape[0] == 0 or a.shape[1] == 0:
-        raise ValueError(f"{name}: expected an (h, w, 3) uint8 RGB array, got {a.shape} {a.dtype}")
+    channels = (3, 4) if alpha else (3,)
+    if a.ndim != 3 or a.shape[2] not in channels or a.dtype != np.uint8 or a.shape[0] == 0 or a.shape[1] == 0:
+        what = "RGB or RGBA" if alpha else "RGB"
+        raise ValueError(f"{name}: expected an (h, w, {'|'.join(map(str, channels))}) uint8 {what} array, "
+                         f"got {a.shape} {a.dtype}")
     return a
 
 
 def save_png(path: str | os.PathLike, rgb: np.ndarray) -> Path:
-    """Write ``rgb`` (ndarray of shape (h, w, 3), uint8, top row first) as a PNG; returns the path."""
+    """Write ``rgb`` (ndarray of shape (h, w, 3) RGB or (h, w, 4) RGBA, uint8, top row first) as a PNG;
+    returns the path."""
     from facepuppet.runtime.outputs import atomic_path
 
     path = Path(path)
-    image = Image.fromarray(check_rgb(rgb, str(path)))
+    image = Image.fromarray(check_rgb(rgb, str(path), alpha=True))
     with atomic_path(path) as temp:       # never a half-written PNG under the final name
         image.save(temp, format="PNG")
     return path
@@ -37,7 +41,8 @@ def contact_sheet(images: list[tuple[str, np.ndarray]], columns: int) -> np.ndar
 
     Parameters
     ----------
-    images : list of (label, ndarray of shape (h, w, 3), uint8); all the same size
+    images : list of (label, ndarray of shape (h, w, 3) or RGBA (h, w, 4), uint8); all the same size;
+        RGBA cells are composited over the sheet's background
     columns : int, >= 1
 
     Returns
@@ -49,19 +54,33 @@ def contact_sheet(images: list[tuple[str, np.ndarray]], columns: int) -> np.ndar
         raise ValueError("contact_sheet: expected at least one (label, image) pair, got none")
     if columns < 1:
         raise ValueError(f"contact_sheet: columns must be >= 1, got {columns}")
-    h, w, _ = check_rgb(images[0][1], images[0][0]).shape
+    h, w, _ = check_rgb(images[0][1], images[0][0], alpha=True).shape
     rows = -(-len(images) // columns)
     cell_h = h + LABEL_HEIGHT
     sheet = Image.new("RGB", (columns * w, rows * cell_h), _SHEET_BACKGROUND)
     draw = ImageDraw.Draw(sheet)
     font = ImageFont.load_default()
     for i, (label, rgb) in enumerate(images):
-        rgb = check_rgb(rgb, label)
+        rgb = check_rgb(rgb, label, alpha=True)
         if rgb.shape[:2] != (h, w):
             raise ValueError(f"contact_sheet: image {label!r} is {rgb.shape[1]}x{rgb.shape[0]}, expected {w}x{h}")
         x, y = (i % columns) * w, (i // columns) * cell_h
-        sheet.paste(Image.fromarray(rgb), (x, y))
+        cell = Image.fromarray(rgb)
+        sheet.paste(cell, (x, y), cell if rgb.shape[2] == 4 else None)
         text = str(label)
         left, _, right, _ = draw.textbbox((0, 0), text, font=font)
         draw.text((x + max(2, (w - (right - left)) // 2), y + h + 3), text, fill=_LABEL_COLOR, font=font)
     return np.asarray(sheet)
+
+
+def label_image(text: str, scale: int = 1, pad: int = 4) -> np.ndarray:
+    """``text`` as a straight-alpha RGBA label (light text on a half-dark box), (h, w, 4) uint8, top row first."""
+    font = ImageFont.load_default()
+    probe = ImageDraw.Draw(Image.new("RGBA", (1, 1)))
+    left, top, right, bottom = probe.textbbox((0, 0), text, font=font)
+    w, h = right - left + 2 * pad, bottom - top + 2 * pad
+    image = Image.new("RGBA", (w, h), (0, 0, 0, 150))
+    ImageDraw.Draw(image).text((pad - left, pad - top), text, fill=(*_LABEL_COLOR, 255), font=font)
+    if scale > 1:
+        image = image.resize((w * scale, h * scale), Image.NEAREST)
+    return np.asarray(image)

@@ -11,6 +11,11 @@ Two deformation paths give the same picture:
   spreads control-point displacements with a compact basis
   (:mod:`~facepuppet.runtime.render.elastic_path`, Yano & Harada 2009).
 
+A character with glTF / VRM parts (a look, a skeleton) is drawn through
+``character.glsl`` with textures, the glTF material model, alpha modes and
+linear blend skinning (:mod:`~facepuppet.runtime.render.parts_path`) on both
+paths; a character without parts through ``face.glsl``, as before.
+
 On a real GPU the first wins by far. On Mesa's software rasteriser the vertex
 shader is emulated and the CPU path can be faster, so with ``path="auto"`` the
 renderer times both at construction and keeps the faster, saying which.
@@ -30,6 +35,19 @@ from facepuppet.runtime.geometry import bounds, vertex_normals
 from facepuppet.runtime.render.camera import frame_bounds, model_matrix
 from facepuppet.runtime.render.cpu_deform import CpuDeformer, check_weights
 from facepuppet.runtime.render.elastic_path import check_model, setup_elastic, upload_controls
+from facepuppet.runtime.render.options import FRAMINGS
+from facepuppet.runtime.render.parts_path import (
+    CpuSkinner,
+    HeadPose,
+    draw_groups,
+    has_parts,
+    head_vertices,
+    joint_texels,
+    look_of,
+    make_textures,
+    material_block,
+    vertex_attributes,
+)
 from facepuppet.runtime.render.shader_loader import load_program
 
 if TYPE_CHECKING:
@@ -38,10 +56,12 @@ if TYPE_CHECKING:
 DELTA_TEXTURE_WIDTH = 4096
 MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights
 PATHS = ("auto", "gpu", "cpu", "elastic")
-# "head": the camera fits every drawn vertex; "face": only what expressions move (contact sheets).
-FRAMINGS = ("head", "face")
+_JOINT_UNIT, _TEXTURE_UNIT = 2, 3
 _HIDDEN = MATERIAL_KINDS["hidden"]
-_TWO_SIDED = (MATERIAL_KINDS["lashes"],)
+# Thin layers drawn two-sided and blended after the surfaces, in this order (each over the ones before).
+_TWO_SIDED = (MATERIAL_KINDS["occlusion"], MATERIAL_KINDS["film"], MATERIAL_KINDS["lashes"])
+# Opacity of the thin layers (vertex_opacity): lashes at the root, the eye occlusion at the lids, films.
+LASH_ROOT_OPACITY, OCCLUSION_OPACITY, FILM_OPACITY = 0.9, 0.6, 0.22
 
 
 def realistic_weights(n_shapes: int, n_active: int = 10) -> np.ndarray:
@@ -70,8 +90,46 @@ def vertex_materials(character: Character) -> np.ndarray:
     return out.astype(np.float32)
 
 
+def vertex_opacity(character: Character) -> np.ndarray:
+    """Per-vertex opacity (n_vertices,) float32: 1 on surfaces; on the thin layers a fade with a distance
+    ``d``, ``s = (d - d_min) / (d_90 - d_min)`` clipped to [0, 1] (units cancel):
+
+    * lashes: ``LASH_ROOT_OPACITY (1 - s)^3``, ``d`` to the nearest eye vertex: dense at the lid margin,
+      fading to the tips (the cards carry no strand texture here; drawn at one opacity, the lower lash
+      card lying on the cheek read as a grey band under every ICT eye);
+    * occlusion: ``OCCLUSION_OPACITY (1 - s)^2``, ``d`` to the nearest skin vertex: the soft shadow the
+      lids cast on the eye, clear over the iris;
+    * film (lacrimal fluid, eye blend): ``FILM_OPACITY``, a faint wet layer with a highlight.
+    """
+    from scipy.spatial import cKDTree
+
+    c = character
+    kinds = c.material_params[:, 2].round().astype(int)
+    out = np.ones(c.n_vertices, np.float32)
+    tri_kind = kinds[c.triangle_material]
+    trees = {}
+    for name, near in (("skin", ("skin", "lips")), ("eye", ("eye",))):
+        verts = np.unique(c.triangles[np.isin(tri_kind, [MATERIAL_KINDS[k] for k in near])])
+        trees[name] = cKDTree(c.vertices[verts]) if len(verts) else None
+    for kind, opacity, power, near in ((MATERIAL_KINDS["lashes"], LASH_ROOT_OPACITY, 3.0, "eye"),
+                                       (MATERIAL_KINDS["occlusion"], OCCLUSION_OPACITY, 2.0, "skin"),
+                                       (MATERIAL_KINDS["film"], FILM_OPACITY, 0.0, "skin")):
+        v = np.unique(c.triangles[tri_kind == kind])
+        tree = trees[near]
+        if not len(v):
+            continue
+        if tree is None or power == 0.0:  # no eye to measure from (a lash card alone): one opacity
+            out[v] = opacity
+            continue
+        d, _ = tree.query(c.vertices[v])
+        lo, hi = float(d.min()), float(np.percentile(d, 90))
+        s = np.clip((d - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
+        out[v] = opacity * (1.0 - s) ** power
+    return out
+
+
 def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
-    """Triangles not of kind ``hidden``, one-sided kinds first.
+    """Triangles not of kind ``hidden``, one-sided kinds first, then the thin layers in ``_TWO_SIDED`` order.
 
     Returns
     -------
@@ -81,8 +139,8 @@ def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
     """
     kinds = character.material_params[:, 2].round().astype(int)[character.triangle_material]
     one_sided = character.triangles[(kinds != _HIDDEN) & ~np.isin(kinds, _TWO_SIDED)]
-    two_sided = character.triangles[np.isin(kinds, _TWO_SIDED)]
-    tris = np.ascontiguousarray(np.vstack([one_sided, two_sided]), dtype=np.uint32)
+    two_sided = [character.triangles[kinds == k] for k in _TWO_SIDED]
+    tris = np.ascontiguousarray(np.vstack([one_sided, *two_sided]), dtype=np.uint32)
     return tris, len(one_sided)
 
 
@@ -128,13 +186,20 @@ class FaceRenderer:
     path : {"auto", "gpu", "cpu", "elastic"}, deformation path; "auto" measures gpu and cpu and keeps the faster
     target_fbo : moderngl.Framebuffer or None; None renders offscreen (read back with read_pixels)
     background : tuple of 3 float, display RGB 0..1
+    transparent : bool, clear to alpha 0: :meth:`read_pixels` gives RGBA (straight alpha, alpha 0 where
+        nothing is drawn); blending keeps alpha right (separate alpha blend function)
+    credits : str or None, a line drawn in the bottom-left corner over every frame (the attribution a
+        licence asks for, ``Character.credits``); None or "" draws nothing
+    msaa : int, samples of the offscreen framebuffer (0 or 1: none; capped at the context's maximum);
+        a window's samples are the window's (``create_context(samples=...)``)
     log : callable(str), receives the one-line path report
     cull_back_faces : bool
         Cull back faces of closed, consistently wound surfaces (about half the
         triangles of a head; a large saving on a software rasteriser). Thin
         cards (lashes) are always drawn two-sided, and lighting is two-sided.
-    framing : str, "head" (fit every drawn vertex) or "face" (fit the vertices
-        the expressions move, so a contact sheet shows them large)
+    framing : str, "body" (fit every drawn vertex), "head" (the vertices following the
+        humanoid head bone; every drawn vertex for a character without a skeleton) or "face"
+        (the vertices the expressions move, so a contact sheet shows them large)
     elastic : ElasticModel or None, compact basis and parameters; required for (and only used by) "elastic"
 
     Attributes
@@ -156,6 +221,9 @@ class FaceRenderer:
         cull_back_faces: bool = True,
         framing: str = "head",
         elastic: ElasticModel | None = None,
+        transparent: bool = False,
+        msaa: int = 0,
+        credits: str | None = None,
     ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
@@ -168,19 +236,36 @@ class FaceRenderer:
         self.character = character
         self.width, self.height = int(width), int(height)
         self.background = tuple(float(c) for c in background)
+        self.transparent = bool(transparent)
+        if int(msaa) < 0:
+            raise ValueError(f"msaa: expected 0 (off) or a sample count, got {msaa}")
+        self.samples = min(int(msaa), int(ctx.max_samples)) if int(msaa) > 1 and target_fbo is None else 0
+        self.parts = has_parts(character)
+        if self.parts and path == "elastic":
+            raise ValueError("path: the elastic path draws characters without a skeleton or look only")
+        self._head_pose = HeadPose(character) if self.parts else None
         self.cull_back_faces = bool(cull_back_faces)
         self._own_fbo = target_fbo is None
         # Bound again on close, so that no deleted framebuffer stays bound.
         self._previous_fbo = ctx.fbo or ctx.detect_framebuffer(0)
+        self._resolve = None
         if target_fbo is None:
-            self._color = ctx.renderbuffer((self.width, self.height), 4)
-            self._depth = ctx.depth_renderbuffer((self.width, self.height))
+            size = (self.width, self.height)
+            self._color = ctx.renderbuffer(size, 4, samples=self.samples)
+            self._depth = ctx.depth_renderbuffer(size, samples=self.samples)
             self.fbo = ctx.framebuffer(self._color, self._depth)
+            if self.samples:  # multisampled: resolved into a plain one before reading
+                self._resolve_color = ctx.renderbuffer(size, 4)
+                self._resolve = ctx.framebuffer(self._resolve_color)
         else:
             self.fbo = target_fbo
         self._setup_camera()
         self._setup_buffers()
         self._gpu = self._cpu = self._elastic = None
+        self._look = look_of(character) if self.parts else None
+        self._textures = make_textures(ctx, self._look) if self.parts else []
+        self._materials = [ctx.buffer(material_block(character, m)) for m in range(len(character.material_names))] \
+            if self.parts else []
         if path == "elastic":
             if elastic is None:
                 raise ValueError("elastic: path 'elastic' needs an ElasticModel (elastic=...)")
@@ -190,6 +275,7 @@ class FaceRenderer:
         if path in ("auto", "cpu"):
             self._cpu = self._setup_cpu()
         self._pose = np.eye(4, dtype=np.float32)
+        self._label = self._setup_label(credits) if credits else None
         if path == "auto":
             self.path, self.path_report = self._choose_path()
             log(self.path_report)
@@ -203,7 +289,10 @@ class FaceRenderer:
         kinds = c.material_params[:, 2].round().astype(int)
         tris = c.triangles[kinds[c.triangle_material] != _HIDDEN]
         used = np.unique(tris) if len(tris) else np.arange(c.n_vertices)
-        if self.framing == "face":  # the part the shapes move; a character nothing moves is framed whole
+        if self.framing == "head":  # the head bone and below; a character without a skeleton is a head
+            head = np.intersect1d(used, head_vertices(c))
+            used = head if len(head) else used
+        elif self.framing == "face":  # the part the shapes move; a character nothing moves is framed whole
             moving = moving_vertices(c)
             used = np.intersect1d(used, moving) if len(moving) else used
         lo, hi = bounds(c.vertices[used])
@@ -211,7 +300,15 @@ class FaceRenderer:
 
     def _setup_buffers(self) -> None:
         c, ctx = self.character, self.ctx
-        attrs = np.hstack([c.vertex_color, vertex_materials(c)]).astype(np.float32)
+        if self.parts:
+            self._attr_vbo = ctx.buffer(vertex_attributes(c).tobytes())
+            view_dir = self.camera.view[2, :3] * -1.0  # the camera looks along -z of its frame
+            tris, self._groups = draw_groups(c, view_dir, self.cull_back_faces)
+            self._ibo = ctx.buffer(tris.tobytes() if len(tris) else b"\0" * 12)
+            self.n_indices = len(tris) * 3
+            self.n_one_sided_indices = 0
+            return
+        attrs = np.hstack([c.vertex_color, vertex_materials(c), vertex_opacity(c)[:, None]]).astype(np.float32)
         self._attr_vbo = ctx.buffer(attrs.tobytes())
         tris, n_one_sided = visible_triangles(c)
         self._ibo = ctx.buffer(tris.tobytes())
@@ -222,14 +319,26 @@ class FaceRenderer:
         c, ctx = self.character, self.ctx
         defines = gpu_defines(c)
         max_active = defines["MAX_ACTIVE"]
-        prog = load_program(ctx, "face.glsl", defines)
+        skin = self.parts and c.skeleton is not None
+        if skin:
+            defines["SKIN"] = 1
+        prog = load_program(ctx, "character.glsl" if self.parts else "face.glsl", defines)
         textures = delta_textures(ctx, c)
         rest = np.hstack([c.vertices, vertex_normals(c.vertices, c.triangles)]).astype(np.float32)
         vbo = ctx.buffer(rest.tobytes())
         vao = self._vao(prog, vbo)
         prog["u_delta_positions"].value = 0
         prog["u_delta_normals"].value = 1
+        joints = None
+        if skin:
+            n_nodes = c.skeleton.n_nodes
+            joints = ctx.texture((4 * n_nodes, 1), 4, joint_texels(np.tile(np.eye(4), (n_nodes, 1, 1))), dtype="f4")
+            joints.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            prog["u_joints"].value = _JOINT_UNIT
+        if self.parts:
+            self._bind_parts(prog)
         return {
+            "joints": joints,
             "prog": prog,
             "vao": vao,
             "vbo": vbo,
@@ -241,14 +350,63 @@ class FaceRenderer:
 
     def _setup_cpu(self) -> dict:
         deformer = CpuDeformer(self.character)
-        prog = load_program(self.ctx, "face.glsl")
+        prog = load_program(self.ctx, "character.glsl" if self.parts else "face.glsl")
         vbo = self.ctx.buffer(deformer.rest.tobytes(), dynamic=True)
-        return {"prog": prog, "vao": self._vao(prog, vbo), "vbo": vbo, "deformer": deformer}
+        skinner = None
+        if self.parts:
+            self._bind_parts(prog)
+            if self._head_pose.available:
+                skinner = CpuSkinner(self.character, self._head_pose.moved_nodes)
+        return {"prog": prog, "vao": self._vao(prog, vbo), "vbo": vbo, "deformer": deformer, "skinner": skinner}
+
+    def _setup_label(self, text: str) -> dict:
+        """The credits label: a Pillow-rendered RGBA texture on a quad in the bottom-left corner."""
+        from facepuppet.runtime.render.images import label_image
+
+        ctx = self.ctx
+        image = label_image(text, scale=2 if self.height >= 600 else 1)
+        h, w = image.shape[:2]
+        tex = ctx.texture((w, h), 4, np.ascontiguousarray(image[::-1]).tobytes())  # GL rows bottom first
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        margin = 8
+        x0, y0 = -1 + 2 * margin / self.width, -1 + 2 * margin / self.height
+        x1, y1 = x0 + 2 * w / self.width, y0 + 2 * h / self.height
+        quad = np.array([[x0, y0, 0, 0], [x1, y0, 1, 0], [x1, y1, 1, 1], [x0, y1, 0, 1]], np.float32)
+        prog = load_program(ctx, "text_overlay.glsl")
+        vbo = ctx.buffer(quad.tobytes())
+        ibo = ctx.buffer(np.array([0, 1, 2, 0, 2, 3], np.uint32).tobytes())
+        vao = ctx.vertex_array(prog, [(vbo, "2f 2f", "in_position", "in_uv")], index_buffer=ibo,
+                               index_element_size=4)
+        return {"prog": prog, "vbo": vbo, "ibo": ibo, "vao": vao, "texture": tex, "size": (w, h)}
+
+    def _draw_label(self) -> None:
+        label = self._label
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.ctx.enable(moderngl.BLEND)
+        label["texture"].use(0)
+        label["prog"]["u_label"].value = 0
+        label["vao"].render(moderngl.TRIANGLES)
+        self.ctx.disable(moderngl.BLEND)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+
+    def _bind_parts(self, prog) -> None:
+        prog["Material"].binding = 0
+        if "u_base_texture" in prog:
+            prog["u_base_texture"].value = _TEXTURE_UNIT
 
     def _vao(self, prog, vbo):
+        if self.parts:  # colour 3, uv 2, joints 4, weights 4; without SKIN the joints are skipped
+            skin = "in_joints" in prog
+            attrs = ("3f 2f 4f 4f", "in_color", "in_uv", "in_joints", "in_weights") if skin \
+                else ("3f 2f 32x", "in_color", "in_uv")
+            return self.ctx.vertex_array(
+                prog, [(vbo, "3f 3f", "in_position", "in_normal"), (self._attr_vbo, *attrs)],
+                index_buffer=self._ibo, index_element_size=4,
+            )
         return self.ctx.vertex_array(
             prog,
-            [(vbo, "3f 3f", "in_position", "in_normal"), (self._attr_vbo, "3f 3f", "in_color", "in_material")],
+            [(vbo, "3f 3f", "in_position", "in_normal"),
+             (self._attr_vbo, "3f 3f 1f", "in_color", "in_material", "in_opacity")],
             index_buffer=self._ibo,
             index_element_size=4,
         )
@@ -285,14 +443,24 @@ class FaceRenderer:
                 head_translation: np.ndarray | None = None) -> None:
         """The CPU side of a frame: pose, active weights or CPU deformation, uploads."""
         w = check_weights(weights, self.character.n_shapes)
-        self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
+        joints = None
+        if self.parts and self._head_pose.available:  # the head turns through the skeleton, the body stays
+            self._pose = model_matrix(None, head_translation)
+            joints = self._head_pose.matrices(head_rotation) if head_rotation is not None else None
+        else:
+            self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
         if self.path == "gpu":
             self._upload_active(w)
+            tex = self._gpu["joints"]
+            if tex is not None:
+                tex.write(joint_texels(joints if joints is not None else self._head_pose.matrices(None)))
         elif self.path == "elastic":
             upload_controls(self._elastic, self._elastic["model"].blend(w))  # Yano & Harada eq. 7
         else:
             cpu = self._cpu
             out = cpu["deformer"].deform_into(w)
+            if cpu["skinner"] is not None:
+                out = cpu["skinner"].skin(out, joints)
             cpu["vbo"].orphan()
             cpu["vbo"].write(out)
 
@@ -330,9 +498,23 @@ class FaceRenderer:
         if self.path in ("gpu", "elastic"):
             for unit, tex in enumerate(state["textures"]):
                 tex.use(unit)
+            if state.get("joints") is not None:
+                state["joints"].use(_JOINT_UNIT)
         self.fbo.use()
         self.ctx.enable(moderngl.DEPTH_TEST)
-        self.fbo.clear(*self.background, 1.0, depth=1.0)
+        self.fbo.clear(*((0.0, 0.0, 0.0, 0.0) if self.transparent else (*self.background, 1.0)), depth=1.0)
+        # Straight colour over, alpha accumulated as coverage: alpha stays right over a transparent clear.
+        self.ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA,
+                               moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+        if self.parts:
+            self._submit_groups(state["vao"])
+        else:
+            self._submit_kinds(state)
+        if self._label is not None:
+            self._draw_label()
+
+    def _submit_kinds(self, state: dict) -> None:
+        """A character without parts: one-sided kinds culled, then two-sided cards (lashes) blended."""
         culled = self.n_one_sided_indices
         if culled:
             self.ctx.front_face = "ccw"
@@ -340,11 +522,39 @@ class FaceRenderer:
             state["vao"].render(moderngl.TRIANGLES, vertices=culled)
         self.ctx.disable(moderngl.CULL_FACE)
         if self.n_indices > culled:
-            # Thin two-sided cards (lashes) last, blended over the finished surfaces.
+            # Thin two-sided layers (eye occlusion, films, lashes) last, blended over the finished surfaces,
+            # without writing depth so that each shows through the ones drawn after it.
             self.ctx.enable(moderngl.BLEND)
-            self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+            self.fbo.depth_mask = False
             state["vao"].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
+            self.fbo.depth_mask = True
             self.ctx.disable(moderngl.BLEND)
+
+    def _submit_groups(self, vao) -> None:
+        """Draw groups: opaque (culled, then double-sided), then blended ones far to near, depth writes off."""
+        ctx, groups = self.ctx, self._groups
+        blended = [g for g in groups if g.blend]
+        if len(blended) > 1:  # per frame: a handful of group centres
+            eye = self.camera.eye - self._pose[:3, 3]
+            blended.sort(key=lambda g: -float(np.dot(g.centre - eye, g.centre - eye)))
+        ctx.front_face = "ccw"
+        culling = None
+        look = self._look
+        for g in [g for g in groups if not g.blend] + blended:
+            if g.cull != culling:
+                (ctx.enable if g.cull else ctx.disable)(moderngl.CULL_FACE)
+                culling = g.cull
+            if g.blend:
+                ctx.enable(moderngl.BLEND)
+                self.fbo.depth_mask = False
+            self._materials[g.material].bind_to_uniform_block(0)
+            t = int(look.texture[g.material])
+            if t >= 0:
+                self._textures[t].use(_TEXTURE_UNIT)
+            vao.render(moderngl.TRIANGLES, vertices=g.count, first=g.first)
+        ctx.disable(moderngl.CULL_FACE)
+        ctx.disable(moderngl.BLEND)
+        self.fbo.depth_mask = True
 
     def draw(self, weights: np.ndarray, head_rotation: np.ndarray | None = None,
              head_translation: np.ndarray | None = None) -> None:
@@ -364,14 +574,31 @@ class FaceRenderer:
         self.ctx.finish()
 
     def read_pixels(self) -> np.ndarray:
-        """The last frame as ndarray of shape (height, width, 3), uint8, top row first."""
-        data = self.fbo.read(viewport=(0, 0, self.width, self.height), components=3, alignment=1)
-        return np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, 3)[::-1].copy()
+        """The last frame as ndarray of shape (height, width, 3), uint8, top row first; (height, width, 4)
+        RGBA with straight (not premultiplied) colour when the background is transparent."""
+        fbo = self.fbo
+        if self._resolve is not None:
+            self.ctx.copy_framebuffer(self._resolve, self.fbo)
+            fbo = self._resolve
+        k = 4 if self.transparent else 3
+        data = fbo.read(viewport=(0, 0, self.width, self.height), components=k, alignment=1)
+        image = np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, k)[::-1].copy()
+        if self.transparent:  # the framebuffer holds colour x alpha over the clear (0, 0, 0, 0)
+            a = image[:, :, 3:4].astype(np.uint16)
+            part = (a > 0) & (a < 255)
+            straight = np.minimum((image[:, :, :3].astype(np.uint32) * 255 + a // 2) // np.maximum(a, 1), 255)
+            image[:, :, :3] = np.where(part, straight, image[:, :, :3]).astype(np.uint8)
+        return image
 
     def project(self, points: np.ndarray, head_rotation: np.ndarray | None = None,
                 head_translation: np.ndarray | None = None) -> np.ndarray:
-        """Pixel coordinates (x right, y down) of character-space points, (n, 2) float64."""
+        """Pixel coordinates (x right, y down) of character-space points, (n, 2) float64.
+
+        The pose is the renderer's model matrix: for a character whose skeleton turns the head
+        (a humanoid head bone) only ``head_translation`` applies; the points are not skinned."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if self.parts and self._head_pose.available:  # the skeleton turns the head, not the whole character
+            head_rotation = None
         m = self.camera.view_projection @ model_matrix(head_rotation, head_translation, self.character.pivot)
         clip = np.c_[p, np.ones(len(p))] @ m.T.astype(np.float64)
         ndc = clip[:, :2] / clip[:, 3:4]
@@ -385,6 +612,14 @@ class FaceRenderer:
                     state[key].release()
                 for tex in state.get("textures", ()):
                     tex.release()
+                if state.get("joints") is not None:
+                    state["joints"].release()
+        for obj in self._textures + self._materials:
+            obj.release()
+        if self._label is not None:
+            for obj in self._label.values():
+                if hasattr(obj, "release"):
+                    obj.release()
         self._attr_vbo.release()
         self._ibo.release()
         if self._own_fbo:
@@ -392,3 +627,6 @@ class FaceRenderer:
             self.fbo.release()
             self._color.release()
             self._depth.release()
+            if self._resolve is not None:
+                self._resolve.release()
+                self._resolve_color.release()

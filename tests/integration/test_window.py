@@ -28,3 +28,20 @@ def test_demo_opens_a_window_when_a_display_exists(x_display, tmp_path):
     image = np.asarray(Image.open(frames[0]).convert("RGB"))
     assert image.shape == (180, 320, 3) and image.std() > 5  # the head was drawn into the window
 
+
+
+@pytest.mark.slow
+def test_a_transparent_window_background_is_asked_for_and_its_refusal_reported(x_display, tmp_path):
+    """Xvfb has no compositor: glfw's TRANSPARENT_FRAMEBUFFER is not granted and the run says so; the
+    window's frames written with --out still carry the cleared alpha 0 where nothing is drawn."""
+    env = {**os.environ, "DISPLAY": x_display}
+    env.pop("WAYLAND_DISPLAY", None)
+    out = tmp_path / "frames"
+    result = subprocess.run(
+        [sys.executable, "-m", "facepuppet", "demo", "--duration", "0.2", "--fps", "10", "--size", "160x90",
+         "--out", str(out), "--background", "transparent", "--msaa", "4", "--no-frames"],
+        env=env, capture_output=True, text=True, timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "demo: window" in result.stdout
+    assert "no transparent window framebuffer" in result.stdout + result.stderr

@@ -110,7 +110,8 @@ def test_explicit_shapes_and_neutral_inside_the_folder_is_skipped(rig):
 
 @pytest.mark.parametrize(
     "name, kind",
-    [("M_Face", "skin"), ("M_EyeBlend", "hidden"), ("M_EyeOcclusion", "hidden"), ("M_LacrimalFluid", "hidden"),
+    [("M_Face", "skin"), ("M_EyeBlend", "film"), ("M_EyeOcclusion", "occlusion"), ("M_LacrimalFluid", "film"),
+     ("Cornea_L", "hidden"),
      ("M_ScleraLeft", "eye"), ("M_IrisRight", "eye"), ("Eyeball", "eye"), ("M_Teeth", "teeth"),
      ("M_GumsTongue", "mouth"), ("M_EyeLashes", "lashes"), ("Lips", "lips")],
 )  # fmt: skip
@@ -204,8 +205,9 @@ def test_ict_head_shapes_and_deltas(ict_character):
 def test_ict_materials_and_colours(ict_character):
     ch = ict_character
     kinds = {m: int(p[2]) for m, p in zip(ch.material_names, ch.material_params)}
-    for hidden in ("M_EyeBlend", "M_EyeOcclusion", "M_LacrimalFluid"):
-        assert kinds[hidden] == MATERIAL_KINDS["hidden"]
+    # the eye's thin layers are drawn blended (issue 13): occlusion and films, not hidden
+    assert kinds["M_EyeOcclusion"] == MATERIAL_KINDS["occlusion"]
+    assert kinds["M_EyeBlend"] == kinds["M_LacrimalFluid"] == MATERIAL_KINDS["film"]
     assert kinds["M_Teeth"] == MATERIAL_KINDS["teeth"] and kinds["M_IrisLeft"] == MATERIAL_KINDS["eye"]
     assert kinds["M_Face"] == MATERIAL_KINDS["skin"] and kinds["M_GumsTongue"] == MATERIAL_KINDS["mouth"]
     lip = np.all(np.abs(ch.vertex_color - KIND_COLOR["lips"]) < 1e-3, axis=1)

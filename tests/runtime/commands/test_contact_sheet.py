@@ -25,8 +25,21 @@ def test_save_png_round_trips(tmp_path):
     rgb = np.random.default_rng(0).integers(0, 256, (7, 5, 3), dtype=np.uint8)
     path = save_png(tmp_path / "f.png", rgb)
     np.testing.assert_array_equal(np.asarray(Image.open(path)), rgb)
-    with pytest.raises(ValueError, match=r"expected an \(h, w, 3\) uint8 RGB array, got \(7, 5\) float64"):
+    with pytest.raises(ValueError, match=r"expected an \(h, w, 3\|4\) uint8 RGB or RGBA array, got \(7, 5\) float64"):
         save_png(tmp_path / "g.png", np.zeros((7, 5)))
+
+
+def test_save_png_keeps_alpha_and_the_sheet_composites_rgba_cells(tmp_path):
+    rgba = np.random.default_rng(1).integers(0, 256, (7, 5, 4), dtype=np.uint8)
+    path = save_png(tmp_path / "a.png", rgba)
+    back = Image.open(path)
+    assert back.mode == "RGBA"
+    np.testing.assert_array_equal(np.asarray(back), rgba)
+    clear = np.zeros((20, 30, 4), np.uint8)            # nothing drawn: the sheet background shows
+    solid = np.full((20, 30, 4), 255, np.uint8)        # opaque white
+    sheet = make_sheet([("clear", clear), ("solid", solid)], columns=2)
+    assert sheet.shape[2] == 3
+    assert tuple(sheet[5, 5]) == (24, 25, 28) and tuple(sheet[5, 35]) == (255, 255, 255)
 
 
 def test_grid_size_and_labels_drawn():

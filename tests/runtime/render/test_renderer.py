@@ -227,3 +227,71 @@ def test_face_framing_of_a_character_nothing_moves_frames_it_whole(egl_ctx, sphe
     moving = FaceRenderer(egl_ctx, sphere, W, H, path="cpu", framing="face")
     assert not np.array_equal(moving.camera.view, cameras[0].view)  # a character whose shapes move: framed on them
     moving.close()
+
+
+def lash_card_character():
+    """A skin quad, an eye quad in front of its middle, and a lash card from the eye's lower edge down over
+    the skin (the ICT lower-lash layout): vertex rows at 0, 0.1, ..., 0.4 below the eye edge."""
+    from facepuppet.runtime.character import MATERIAL_KINDS, Character
+
+    skin = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]
+    eye = [[-0.4, 0.0, 0.02], [0.4, 0.0, 0.02], [0.4, 0.3, 0.02], [-0.4, 0.3, 0.02]]
+    rows = [[[x, -0.1 * k, 0.03] for x in (-0.4, 0.0, 0.4)] for k in range(5)]
+    lash = [p for row in rows for p in row]
+    v = np.array(skin + eye + lash, np.float32)
+    tris = [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]
+    for k in range(4):
+        a = 8 + 3 * k
+        for j in range(2):
+            tris += [[a + j + 3, a + j + 4, a + j + 1], [a + j + 3, a + j + 1, a + j]]
+    kinds = [MATERIAL_KINDS["skin"], MATERIAL_KINDS["eye"], MATERIAL_KINDS["lashes"]]
+    tri_mat = [0, 0, 1, 1] + [2] * 16
+    color = np.array([[0.8, 0.6, 0.5]] * 4 + [[0.9, 0.9, 0.9]] * 4 + [[0.05, 0.04, 0.04]] * 15, np.float32)
+    return Character(
+        name="lash", units="cm", vertices=v, triangles=np.array(tris, np.uint32),
+        triangle_material=np.array(tri_mat, np.uint16), vertex_color=color, material_names=("skin", "eye", "lash"),
+        material_params=np.array([[0.05, 18, k, 0] for k in kinds], np.float32), pivot=np.zeros(3, np.float32),
+        shape_names=(), delta_offsets=np.zeros(1, np.int64), delta_indices=np.zeros(0, np.uint32),
+        delta_positions=np.zeros((0, 3), np.float32), delta_normals=np.zeros((0, 3), np.float32))
+
+
+def test_lash_cards_fade_from_the_lid_margin_instead_of_a_grey_band(egl_ctx):
+    """Issue 13: the ICT lower lash card lies on the cheek; drawn at one opacity it was a grey band under
+    every eye. Its opacity now falls from the eye's edge to the tips (renderer.vertex_opacity)."""
+    import dataclasses
+
+    from facepuppet.runtime.character import MATERIAL_KINDS
+    from facepuppet.runtime.render.renderer import vertex_opacity
+
+    c = lash_card_character()
+    opacity = vertex_opacity(c)
+    assert (opacity[:8] == 1).all()                       # surfaces opaque
+    rows = opacity[8:].reshape(5, 3)[:, 0]
+    assert rows[0] > 0.8 and np.all(np.diff(rows) < 0) and rows[-1] < 0.02
+    params = c.material_params.copy()
+    params[2, 2] = MATERIAL_KINDS["hidden"]
+    bare = dataclasses.replace(c, material_params=params)
+    with_lash, project = render(egl_ctx, c, [], size=(200, 200))
+    without, _ = render(egl_ctx, bare, [], size=(200, 200))
+    (x, y_root), (_, y_tip) = project([[0.2, -0.02, 0.03], [0.2, -0.36, 0.03]]).astype(int)
+    d = np.abs(with_lash.astype(int) - without.astype(int)).sum(axis=2)
+    assert d[y_root, x] > 60       # a dark lash line at the lid margin
+    assert d[y_tip, x] < 12        # the cheek shows through near the tips (a 0.55 band: > 100)
+
+
+@pytest.mark.data
+def test_ict_eye_layers_are_drawn_as_thin_blended_layers(egl_ctx, ict_character):
+    """The re-imported ICT head: the eye occlusion and the films are drawn (not hidden) and see-through."""
+    from facepuppet.runtime.character import MATERIAL_KINDS
+    from facepuppet.runtime.render.renderer import vertex_opacity, visible_triangles
+
+    c = ict_character
+    kinds = c.material_params[:, 2].round().astype(int)
+    tris, _ = visible_triangles(c)
+    drawn = set(np.unique(tris).tolist())
+    opacity = vertex_opacity(c)
+    for kind in ("occlusion", "film"):
+        m = np.flatnonzero(kinds == MATERIAL_KINDS[kind])
+        assert len(m)
+        v = np.unique(c.triangles[np.isin(c.triangle_material, m)])
+        assert set(v.tolist()) <= drawn and opacity[v].max() < 0.7 and opacity[v].max() > 0.1

@@ -1,0 +1,142 @@
+// A character with glTF / VRM parts (runtime.character_parts): morph targets
+// (GPU_DEFORM), linear blend skinning (SKIN), textured base colour with the
+// glTF material model (lit, unlit, MToon-style toon), alpha MASK / BLEND,
+// emissive. Characters without parts are drawn by face.glsl, as before.
+//
+// Colour: textures are sRGB8_ALPHA8 (the sampler decodes to linear), factors
+// and vertex colours are linear, lighting is linear, the output is encoded
+// to sRGB exactly (no tone curve), so an unlit texel shows as itself.
+#version 330 core
+
+#ifdef VERTEX_SHADER
+#ifdef GPU_DEFORM
+#include "blendshapes.glsl"
+#endif
+
+in vec3 in_position;   // rest pose, world space (GPU path) or already deformed and skinned (CPU path)
+in vec3 in_normal;
+in vec3 in_color;      // COLOR_0, linear RGB
+in vec2 in_uv;         // TEXCOORD_0, origin top-left
+#ifdef SKIN
+in vec4 in_joints;     // node indices (exact small integers as floats)
+in vec4 in_weights;
+// Skinning matrices D_j (Skeleton.pose_matrices), one node per 4 texels of a row: texel (4j + c, 0) = column c.
+uniform sampler2D u_joints;
+
+mat4 joint(float j) {
+    int x = 4 * int(j + 0.5);
+    return mat4(texelFetch(u_joints, ivec2(x, 0), 0), texelFetch(u_joints, ivec2(x + 1, 0), 0),
+                texelFetch(u_joints, ivec2(x + 2, 0), 0), texelFetch(u_joints, ivec2(x + 3, 0), 0));
+}
+#endif
+
+uniform mat4 u_model;           // whole-character translation (and, without a skeleton, the head pose)
+uniform mat4 u_view_projection;
+
+out vec3 v_world;
+out vec3 v_normal;
+out vec3 v_color;
+out vec2 v_uv;
+
+void main() {
+    vec3 position = in_position;
+    vec3 normal = in_normal;
+#ifdef GPU_DEFORM
+    apply_blendshapes(gl_VertexID, position, normal);   // morphs first, in the rest pose (glTF order)
+#endif
+#ifdef SKIN
+    mat4 skin = in_weights.x * joint(in_joints.x) + in_weights.y * joint(in_joints.y)
+              + in_weights.z * joint(in_joints.z) + in_weights.w * joint(in_joints.w);
+    position = (skin * vec4(position, 1.0)).xyz;
+    normal = mat3(skin) * normal;
+#endif
+    vec4 world = u_model * vec4(position, 1.0);
+    v_world = world.xyz;
+    v_normal = mat3(u_model) * normal;
+    v_color = in_color;
+    v_uv = in_uv;
+    gl_Position = u_view_projection * world;
+}
+#endif
+
+#ifdef FRAGMENT_SHADER
+#include "lighting.glsl"
+
+const int ALPHA_OPAQUE = 0;
+const int ALPHA_MASK = 1;
+const int ALPHA_BLEND = 2;
+const int SHADING_LIT = 0;
+const int SHADING_UNLIT = 1;
+const int SHADING_TOON = 2;
+
+uniform vec3 u_eye;
+// The material of this draw call: one uniform buffer per material (runtime/render/parts_path.py).
+layout(std140) uniform Material {
+    vec4 m_base_color;      // baseColorFactor, linear RGBA
+    vec4 m_emissive_cutoff; // emissiveFactor (linear), alphaCutoff
+    vec4 m_shade_shift;     // MToon shade colour (linear), shading shift
+    vec4 m_modes;           // alpha mode, shading code, shading toony, has texture
+    vec4 m_mirror_light;    // mirrored wrap s, t (done here; the sampler clamps), specular, shininess
+    vec4 m_uv_row0;         // KHR_texture_transform T * R * S, first two rows
+    vec4 m_uv_row1;
+};
+uniform sampler2D u_base_texture;
+
+in vec3 v_world;
+in vec3 v_normal;
+in vec3 v_color;
+in vec2 v_uv;
+
+out vec4 f_color;
+
+vec3 linear_to_srgb(vec3 c) {
+    c = clamp(c, 0.0, 1.0);
+    return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
+}
+
+vec2 mirror(vec2 uv) {
+    vec2 m = mod(uv, 2.0);
+    vec2 folded = mix(m, 2.0 - m, step(1.0, m));
+    return mix(uv, folded, m_mirror_light.xy);
+}
+
+// MToon-style toon shading (VRMC_materials_mtoon-1.0): a key light's N.L shifted by the shading
+// shift, then a linear step of width (1 - toony) * 2 about 0 between the shade and the lit colour.
+// The shade colour multiplies the base texture (VRM 0.x avatars mostly use the main texture as shade texture).
+vec3 toon(vec3 lit_color, vec3 shade_color, vec3 n) {
+    float shading = dot(n, normalize(KEY_DIR)) + m_shade_shift.a;
+    float toony = clamp(m_modes.z, 0.0, 0.999);
+    float t = clamp((shading - (-1.0 + toony)) / ((1.0 - toony) - (-1.0 + toony)), 0.0, 1.0);
+    return mix(shade_color, lit_color, t);
+}
+
+void main() {
+    int alpha_mode = int(m_modes.x + 0.5);
+    int shading = int(m_modes.y + 0.5);
+    vec4 texel = vec4(1.0);
+    if (m_modes.w > 0.5) {
+        vec3 uv1 = vec3(v_uv, 1.0);
+        vec2 uv = vec2(dot(m_uv_row0.xyz, uv1), dot(m_uv_row1.xyz, uv1));
+        texel = textureGrad(u_base_texture, mirror(uv), dFdx(uv), dFdy(uv));
+    }
+    vec4 base = m_base_color * vec4(v_color, 1.0) * texel;
+    if (alpha_mode == ALPHA_MASK && base.a < m_emissive_cutoff.a) discard;
+    float alpha = alpha_mode == ALPHA_BLEND ? base.a : 1.0;
+
+    vec3 v = normalize(u_eye - v_world);
+    vec3 n = normalize(v_normal);
+    // A double-sided surface seen from behind is lit as its back face (glTF: the normal is reversed).
+    if (!gl_FrontFacing) n = -n;
+    vec3 color;
+    if (shading == SHADING_UNLIT) {
+        color = base.rgb;
+    } else if (shading == SHADING_TOON) {
+        color = toon(base.rgb, m_shade_shift.rgb * v_color * texel.rgb, n);
+    } else {
+        if (dot(n, v) < 0.0) n = -n;
+        color = shade(base.rgb, KIND_SKIN, m_mirror_light.z, m_mirror_light.w, n, v);
+    }
+    color += m_emissive_cutoff.rgb;
+    f_color = vec4(linear_to_srgb(color), alpha);
+}
+#endif
