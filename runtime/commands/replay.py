@@ -121,7 +121,7 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         clock = RecordedClock() if target.headless else WallClock()
         progress = Progress("replay", total=_expected_ticks(args, source, ticks, fps), unit="ticks")
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
-                         stages=chain.stages, on_tick=[lambda info: progress.update(info.k + 1)])
+                         stages=chain.stages, on_tick=[lambda info: progress.update(info.k + 1)], drive=chain.drive)
         with progress:           # on a terminal: ticks done, rate, time left (quiet when piped)
             result = loop.run(source, duration=args.duration, ticks=ticks)
     finally:
