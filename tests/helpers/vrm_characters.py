@@ -13,7 +13,8 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.character_parts import OVERRIDES, Expressions
-from tests.helpers.small_characters import sphere_character
+
+from helpers.small_characters import sphere_character
 
 #: The morphs of the preset-only character (Godette's face morph names, and an angry brow and a smile).
 PRESET_MORPHS = ("blink_left", "blink_right", "ah", "ih", "uu", "ee", "oh", "look_up", "look_down",
@@ -69,7 +70,7 @@ def morph_character(morphs: Sequence[str]) -> Character:
         d = np.zeros_like(v)
         d[band, 2] = 1.0
         shapes[name] = d
-    from tests.helpers.small_characters import make_character
+    from helpers.small_characters import make_character
 
     return make_character(v, base.triangles, base.triangle_material, base.vertex_color, base.material_names,
                           base.material_params, shapes)

@@ -1,0 +1,137 @@
+"""``run --input vmc`` on VRM-like characters over real UDP on 127.0.0.1: perfect-sync ARKit names, VRM preset
+names and plain ARKit names onto an avatar with only VRM presets, and ``--vmc-out`` with the avatar's own names.
+
+The characters are built in code (tests/helpers/vrm_characters.py) until the glTF reader makes real ones;
+expected weights are worked out by hand from their bind weights and the documented ARKit -> VRM table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import threading
+import time
+
+import pytest
+from pythonosc.osc_bundle import OscBundle
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+from pythonosc.udp_client import SimpleUDPClient
+
+from facepuppet.runtime.commands import run
+
+from helpers.udp_helpers import free_udp_port
+from helpers.vrm_characters import preset_character, sync_character
+
+NO_SMOOTHING = "\n".join(f"[filter.{r}]\nmin_cutoff = 500.0\nbeta = 0.0" for r in ("eyes", "brows", "mouth", "other",
+                                                                                  "head")) + \
+    "\n[tracking_loss]\ntimeout_s = 30.0\n"
+TICKS_WITH_FRAMES = 8  # the run stops once this many ticks have drawn a received frame
+
+
+def send_vmc(client: SimpleUDPClient, values: dict) -> None:
+    b = OscBundleBuilder(IMMEDIATELY)
+    for name, value in values.items():
+        m = OscMessageBuilder("/VMC/Ext/Blend/Val")
+        m.add_arg(name, "s")
+        m.add_arg(float(value), "f")
+        b.add_content(m.build())
+    b.add_content(OscMessageBuilder("/VMC/Ext/Blend/Apply").build())
+    client.send(b.build())
+
+
+def drive(character, values: dict, tmp_path, extra: tuple = ()):
+    """Run ``run --input vmc -c character.npz --headless`` and send ``values`` until enough ticks have drawn them;
+    the run's weight log and its log lines."""
+    path = tmp_path / "avatar.npz"
+    character.save(path)
+    config = tmp_path / "live.toml"
+    config.write_text(NO_SMOOTHING)
+    port = free_udp_port()
+    parser = argparse.ArgumentParser()
+    run.register(parser.add_subparsers())
+    ns = parser.parse_args(["run", "-c", str(path), "--input", "vmc", "--listen", f"127.0.0.1:{port}", "--headless",
+                          "--size", "48x40", "--duration", "60", "--config", str(config), *extra])
+    stop, drawn = threading.Event(), []
+
+    def on_ready(address):
+        def send():
+            client = SimpleUDPClient("127.0.0.1", port)
+            while not stop.is_set():
+                send_vmc(client, values)
+                time.sleep(0.01)
+        threading.Thread(target=send, daemon=True).start()
+
+    def hook(info):
+        if info.raw is not None:
+            drawn.append(info.k)
+            if len(drawn) >= TICKS_WITH_FRAMES:
+                stop.set()
+
+    logs: list[str] = []
+    try:
+        result = run.run_live(ns, log=logs.append, stop_event=stop, on_ready=on_ready, hooks=[hook],
+                              keep_weights=True)
+    finally:
+        stop.set()
+    assert len(drawn) >= TICKS_WITH_FRAMES, "the run ended before drawing the sent frames"
+    return result, "\n".join(logs)
+
+
+def last_weights(character, result) -> dict[str, float]:
+    return {n: float(w) for n, w in zip(character.shape_names, result.weights.array[-1])}
+
+
+@pytest.mark.gl
+def test_perfect_sync_arkit_names_drive_the_arkit_named_morphs(tmp_path):
+    c = sync_character()
+    result, log = drive(c, {"EyeBlinkLeft": 0.9, "JawOpen": 0.6, "MouthSmileLeft": 0.2}, tmp_path)
+    assert last_weights(c, result) == pytest.approx(dict(
+        eyeBlink_L=0.9, eyeBlink_R=0.0, jawOpen=0.6, mouthFunnel=0.0, mouthPucker=0.0, mouthSmile_L=0.2,
+        mouthSmile_R=0.0, browInnerUp=0.0), abs=1e-5)
+    assert "morph (" in log and "eyeBlinkLeft→eyeBlink_L" in log
+
+
+@pytest.mark.gl
+def test_vrm_preset_names_drive_the_expressions_and_vmc_out_sends_the_avatars_names(tmp_path):
+    c = preset_character()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(0.0)
+        result, log = drive(c, {"Blink": 1.0, "aa": 0.5, "happy": 0.3, "oh": 0.4}, tmp_path,
+                            extra=("--vmc-out", f"127.0.0.1:{receiver.getsockname()[1]}"))
+        datagrams = []
+        while True:
+            try:
+                datagrams.append(receiver.recv(65536))
+            except BlockingIOError:
+                break
+    got = last_weights(c, result)
+    # Blink 1 -> both lids 1; A 0.5 + O 0.4*0.5 -> ah 0.7; O 0.4*0.6 -> oh 0.24; happy = Joy 0.3 -> smile 0.3
+    assert got["blink_left"] == pytest.approx(1.0) and got["blink_right"] == pytest.approx(1.0)
+    assert got["ah"] == pytest.approx(0.7) and got["oh"] == pytest.approx(0.24) and got["smile"] == pytest.approx(0.3)
+    assert got["look_up"] == got["ih"] == got["HideBlush"] == 0.0
+    assert "expression (" in log and "Blink→Blink" in log
+    assert "(--vmc-names both), 52 ARKit (perfect sync) + the avatar's 18 VRM expressions" in log
+    messages = [(m.address, m.params) for d in datagrams for m in OscBundle(d)]
+    end = max(i for i, (a, _) in enumerate(messages) if a == "/VMC/Ext/Blend/Apply")
+    start = max(i for i, (a, _) in enumerate(messages[:end]) if a == "/VMC/Ext/OK")
+    tick = dict(p for a, p in messages[start:end] if a == "/VMC/Ext/Blend/Val")
+    # the avatar's VRM 0.x preset names, with the values it showed; the ARKit names are 0 (no ARKit morph)
+    assert tick["Blink"] == pytest.approx(1.0) and tick["A"] == pytest.approx(0.5) and tick["O"] == pytest.approx(0.4)
+    assert tick["Joy"] == pytest.approx(0.3) and tick["HideBlush"] == 0.0 and tick["EyeBlinkLeft"] == 0.0
+    assert len(tick) == 52 + 18
+
+
+@pytest.mark.gl
+def test_arkit_names_onto_an_avatar_with_only_presets_take_the_default_mapping(tmp_path):
+    c = preset_character()
+    result, log = drive(c, {"EyeBlinkLeft": 0.9, "EyeBlinkRight": 0.4, "JawOpen": 0.6, "MouthSmileLeft": 0.8},
+                        tmp_path, extra=("--vmc-out", f"127.0.0.1:{free_udp_port()}", "--vmc-names", "vrm"))
+    got = last_weights(c, result)
+    # Blink = 0.4, Blink_L = 0.5 -> blink_left 0.9, blink_right 0.4; A = jawOpen 0.6 -> ah 0.6 (U = 0.6 - ... < 0)
+    # MouthSmileLeft: Joy is an emotion, off by default -> smile 0
+    assert got["blink_left"] == pytest.approx(0.9) and got["blink_right"] == pytest.approx(0.4)
+    assert got["ah"] == pytest.approx(0.6) and got["uu"] == 0.0 and got["smile"] == 0.0
+    assert "default preset mapping (" in log and "jawOpen→A+U" in log
+    assert "(--vmc-names vrm), the avatar's 18 VRM expressions" in log
