@@ -12,6 +12,7 @@ import socket
 import threading
 import time
 
+import numpy as np
 import pytest
 from pythonosc.osc_bundle import OscBundle
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
@@ -135,3 +136,39 @@ def test_arkit_names_onto_an_avatar_with_only_presets_take_the_default_mapping(t
     assert got["ah"] == pytest.approx(0.6) and got["uu"] == 0.0 and got["smile"] == 0.0
     assert "default preset mapping (" in log and "jawOpen→A+U" in log
     assert "(--vmc-names vrm), the avatar's 18 VRM expressions" in log
+
+
+def test_vmc_names_needs_vmc_out_and_a_bad_mapping_target_is_named(tmp_path, capsys):
+    from facepuppet.runtime.cli import main
+
+    path = preset_character().save(tmp_path / "avatar.npz")
+    code = main(["run", "-c", str(path), "--input", "vmc", "--headless", "--duration", "0.1", "--vmc-names", "vrm"])
+    assert code == 2 and "--vmc-names: needs --vmc-out HOST:PORT" in capsys.readouterr().err
+    config = tmp_path / "map.toml"
+    config.write_text('[mapping.channels]\njawOpen = "Surprised"\n')
+    code = main(["run", "-c", str(path), "--input", "vmc", "--headless", "--duration", "0.1", "--listen",
+                 f"127.0.0.1:{free_udp_port()}", "--config", str(config)])
+    err = capsys.readouterr().err
+    assert code == 2 and "map.toml: key 'mapping.channels.jawOpen': target 'Surprised' is neither" in err
+
+
+@pytest.mark.gl
+def test_a_recorded_run_on_the_avatar_replays_to_the_same_weights(tmp_path):
+    """The recording keeps the raw datagrams; replay decodes them again with the avatar's expression names, so
+    preset names sent live drive the same expressions on replay, tick for tick."""
+    from facepuppet.runtime.cli import main
+
+    c = preset_character()
+    record = tmp_path / "live.fps"
+    result, _ = drive(c, {"Blink_L": 0.8, "JawOpen": 0.5, "ou": 0.6}, tmp_path, extra=("--record", str(record)))
+    live = result.weights.array
+    replayed = tmp_path / "replay.npy"
+    code = main(["replay", str(record), "-c", str(tmp_path / "avatar.npz"), "--headless", "--size", "48x40",
+                 "--dump-weights", str(replayed)])
+    assert code == 0
+    back = np.load(replayed)
+    at = {n: i for i, n in enumerate(c.shape_names)}
+    # Blink_L 0.8 -> blink_left 0.8; ou = U 0.6 -> uu 0.6; JawOpen 0.5 -> A 0.5 - ... (no funnel/pucker) -> ah 0.5
+    assert back[-1, at["blink_left"]] == pytest.approx(0.8) and back[-1, at["uu"]] == pytest.approx(0.6)
+    assert back[-1, at["ah"]] == pytest.approx(0.5)
+    np.testing.assert_allclose(back[-len(live):], live, atol=1e-6)
