@@ -173,7 +173,7 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
 MAP_SAMPLES = 5000
 
 
-def map_step_cost(character_path, n: int = MAP_SAMPLES, seed: int = 0) -> dict:
+def map_step_cost(character_path: str | os.PathLike, n: int = MAP_SAMPLES, seed: int = 0) -> dict:
     """Cost of the frame loop's map step for this character and the VMC input's channels (µs per frame)."""
     from facepuppet.runtime.channels import ChannelMap
     from facepuppet.runtime.character import Character
