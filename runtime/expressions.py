@@ -73,6 +73,9 @@ wins. A shape that a channel drives directly (rule 3, or a config target that
 is a shape) takes that channel's value and expressions do not add to it; the
 expression's other binds still apply. So a perfect-sync avatar whose ``Blink``
 expression binds the same morphs as ``eyeBlinkLeft`` never closes an eye twice.
+This holds in each frame that sends the direct channel: a frame that leaves it
+out (NaN, e.g. a VMC sender of VRM presets only, whose frames carry the 52
+ARKit channels unsent) lets the expressions drive the shape.
 
 **Cost.** Everything by name is resolved when a layout is first seen (one
 :class:`ExpressionMap` per distinct channel tuple, cached by the frame loop);
@@ -204,8 +207,11 @@ class ExpressionDrive:
         return self._by_name.get(name.strip().lower())
 
     def receive_names(self) -> tuple[str, ...]:
-        """The extra channel names an input that names its channels itself (VMC) should carry: the expressions."""
-        return self.expression_names
+        """The extra channel names an input that names its channels itself (VMC) should carry: the expressions,
+        except those named like an ARKit shape (a perfect-sync avatar's ``EyeBlinkLeft`` clip): those arrive in
+        the ARKit channel of that name, which reaches the expression by its name (rule 2)."""
+        arkit = {n.lower() for n in ARKIT_NAMES}
+        return tuple(n for n in self.expression_names if n.strip().lower() not in arkit)
 
     def _overrides(self, flags: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], ...]:
         """Per group with any overrider: (target expressions, binary targets mask, blockers, blenders)."""
@@ -342,7 +348,10 @@ class ExpressionMap:
         # the per-frame arrays
         self._direct = direct
         self._direct_mask = direct.any(axis=1)
-        self._via_expressions = ~self._direct_mask
+        self._direct_from = (direct != 0).astype(np.float32)  # (n_shapes, n): which channels drive a shape directly
+        self._reached = np.zeros(n_s, bool)  # per frame: a shape whose direct channel was sent
+        self._sent = np.zeros(n, np.float32)
+        self._nan = np.zeros(n, bool)
         self._linear = linear
         self._named_e = np.array(sorted(named), np.intp)
         width = max((len(v) for v in named.values()), default=0)
@@ -432,7 +441,11 @@ class ExpressionMap:
         shapes = self._shapes
         np.matmul(d.binds_t, e, out=shapes)
         np.clip(shapes, 0.0, 1.0, out=shapes)
-        np.copyto(out, shapes, where=self._via_expressions)
+        # the direct route wins where its channel was sent this frame; elsewhere the expressions drive the shape
+        np.isnan(x[:n], out=self._nan)
+        np.subtract(1.0, self._nan, out=self._sent)
+        np.greater(self._direct_from @ self._sent, 0.0, out=self._reached)
+        np.copyto(out, shapes, where=~self._reached)
         return out
 
     def report(self) -> str:

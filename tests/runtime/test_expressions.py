@@ -262,3 +262,32 @@ def test_nan_counts_as_zero_for_morphs_and_the_map_writes_into_out():
     out = np.full(c.n_shapes, 9.0, np.float32)
     assert m.apply(np.array([np.nan, np.nan], np.float32), out=out) is out
     np.testing.assert_array_equal(out, 0.0)
+
+
+def test_a_direct_channel_left_out_of_a_frame_lets_the_expressions_drive_its_shape():
+    """A VMC sender of VRM presets only: its frames carry the 52 ARKit channels unsent (NaN). On a perfect-sync
+    avatar the Blink expression must then close the eyelids, though eyeBlinkLeft drives them directly when sent."""
+    c = sync_character()
+    m = drive_of(c).build(("EyeBlinkLeft", "EyeBlinkRight", "Blink"))
+    got = shapes(c, m.apply(np.array([np.nan, np.nan, 0.7], np.float32)))
+    assert got["eyeBlink_L"] == pytest.approx(0.7) and got["eyeBlink_R"] == pytest.approx(0.7)
+    got = shapes(c, m.apply(np.array([0.2, np.nan, 0.7], np.float32)))
+    assert got["eyeBlink_L"] == pytest.approx(0.2) and got["eyeBlink_R"] == pytest.approx(0.7)  # sent: direct wins
+
+
+def test_expressions_named_like_arkit_shapes_come_through_the_arkit_channels():
+    """A perfect-sync VRM avatar has clips named like the 52 (EyeBlinkLeft binding its eyeBlink_L morph): VMC does
+    not get them as extra channels (they would steal the ARKit name), and the ARKit channel reaches the clip."""
+    from helpers.vrm_characters import expressions_of, morph_character
+
+    base = morph_character(("eyeBlink_L", "jawOpen", "ah"))
+    c = base.with_parts(expressions=expressions_of(base.shape_names, (
+        ("EyeBlinkLeft", "", (("eyeBlink_L", 1.0),)), ("JawOpen", "", (("jawOpen", 0.5), ("ah", 1.0))),
+        ("A", "A", (("ah", 1.0),)))))
+    d = drive_of(c)
+    assert d.receive_names() == ("A",)
+    m = d.build(ARKIT_NAMES)
+    got = shapes(c, m.apply(arkit(eyeBlinkLeft=0.6, jawOpen=0.8)))
+    assert got == pytest.approx(dict(eyeBlink_L=0.6, jawOpen=0.4, ah=0.8))  # the clip's binds, not the raw morph
+    routes = dict(zip(ARKIT_NAMES, m.routes))
+    assert routes["eyeBlinkLeft"] == routes["jawOpen"] == "expression"
