@@ -44,7 +44,9 @@ applies:
    both ``Blink`` and ``EyeBlinkLeft``), the named value wins in every frame
    that sends it; a frame that leaves it out (NaN: not sent) uses the default.
 
-What is left over is unmatched and reported.
+What is left over is unmatched and reported. A layout that *is* the
+character's shapes in order (what a kernel-PLS retarget or a marker solve's
+pair table writes) is taken as shape weights: every channel onto its shape.
 
 **Expressions onto shapes** (VRM 1.0 ``expressions.md``, "Expression update
 algorithm"; VRM 0.x adds the binds of its blend shape groups the same way),
@@ -285,7 +287,13 @@ class ExpressionMap:
         named: dict[int, list[int]] = {}  # expression -> the channels naming it
         mapping = drive._targets
         rest = []
+        # a stage that writes the character's own shapes, in order (kernel-PLS retarget, the pair table of a
+        # marker solve): its values are shape weights, never expressions or ARKit channels
+        own_shapes = channels == drive.shape_names
         for i, name in enumerate(channels):
+            if own_shapes:
+                rest.append(i)
+                continue
             key = canonical(name)
             if key in mapping:
                 routes[i] = "config"
@@ -313,7 +321,7 @@ class ExpressionMap:
                 routes[i] = "morph"
                 detail[i] = "+".join(drive.shape_names[s] for s in np.flatnonzero(col))
         # 4. the default ARKit -> VRM preset mapping, on the ARKit channels left over
-        left = [i for i in rest if i not in used_by_morph]
+        left = [i for i in rest if i not in used_by_morph and not own_shapes]
         arkit = ChannelMap.build([channels[i] for i in left], ARKIT_NAMES).matrix  # (52, n_left)
         a = np.zeros((len(ARKIT_NAMES), n), np.float32)
         a[:, left] = arkit
@@ -322,7 +330,9 @@ class ExpressionMap:
         self._blink_split = None
         blink_l, blink_r = (a[ARKIT_NAMES.index(k)] for k in ("eyeBlinkLeft", "eyeBlinkRight"))
         present = [drive.preset_index.get(p) for p in _BLINKS]
-        if present[0] is not None and (present[1] is not None or present[2] is not None):
+        if not (blink_l.any() or blink_r.any()):
+            pass  # no eyeBlink channel reaches the default mapping
+        elif present[0] is not None and (present[1] is not None or present[2] is not None):
             self._blink_split = (np.stack([blink_l, blink_r]), np.array(present[0], np.intp),
                                  tuple(-1 if p is None else p for p in present[1:]))
         elif present[0] is not None:

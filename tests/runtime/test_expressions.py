@@ -291,3 +291,13 @@ def test_expressions_named_like_arkit_shapes_come_through_the_arkit_channels():
     assert got == pytest.approx(dict(eyeBlink_L=0.6, jawOpen=0.4, ah=0.8))  # the clip's binds, not the raw morph
     routes = dict(zip(ARKIT_NAMES, m.routes))
     assert routes["eyeBlinkLeft"] == routes["jawOpen"] == "expression"
+
+
+def test_a_stage_writing_the_characters_own_shapes_drives_them_as_shapes():
+    """Kernel PLS and the marker solve's pair table write the character's shapes in order: the values are shape
+    weights, even where a shape shares a name with an expression (HideBlush) or looks like an ARKit channel."""
+    c = preset_character()
+    m = drive_of(c).build(c.shape_names)
+    x = np.linspace(0.05, 0.7, c.n_shapes).astype(np.float32)
+    np.testing.assert_array_equal(m.apply(x), x)
+    assert set(m.routes) == {"morph"} and not m.drives_expressions
