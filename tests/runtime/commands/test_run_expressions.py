@@ -172,3 +172,37 @@ def test_a_recorded_run_on_the_avatar_replays_to_the_same_weights(tmp_path):
     assert back[-1, at["blink_left"]] == pytest.approx(0.8) and back[-1, at["uu"]] == pytest.approx(0.6)
     assert back[-1, at["ah"]] == pytest.approx(0.5)
     np.testing.assert_allclose(back[-len(live):], live, atol=1e-6)
+
+
+@pytest.mark.gl
+@pytest.mark.data
+def test_a_live_link_face_take_replayed_on_a_preset_only_avatar_blinks_and_talks(tmp_path):
+    """A real Live Link Face take (ARKit PascalCase columns) through the default ARKit -> VRM preset mapping. Each
+    drawn tick shows one recorded row, so every drawn weight must be that row's value by the hand formulas:
+    blink_left = Blink + Blink_L = eyeBlinkLeft; ah = A + 0.5 O = clip(jaw - funnel/2 - pucker/2) + funnel/2."""
+    import csv
+
+    from facepuppet.runtime.cli import main
+
+    from conftest import need_shared
+
+    take = need_shared("tracker", "livelinkface_myslate_3.csv")
+    with open(take, newline="") as f:
+        rows = list(csv.DictReader(f))
+    col = {k: np.clip(np.array([float(r[k]) for r in rows]), 0.0, 1.0)
+           for k in ("EyeBlinkLeft", "JawOpen", "MouthFunnel", "MouthPucker")}
+    blink = col["EyeBlinkLeft"]
+    ah = np.minimum(1.0, np.clip(col["JawOpen"] - col["MouthFunnel"] / 2 - col["MouthPucker"] / 2, 0.0, 1.0)
+                    + col["MouthFunnel"] / 2)
+    c = preset_character()
+    c.save(tmp_path / "avatar.npz")
+    out = tmp_path / "w.npy"
+    assert main(["replay", str(take), "-c", str(tmp_path / "avatar.npz"), "--headless", "--size", "48x40",
+                 "--dump-weights", str(out)]) == 0
+    w = np.load(out)
+    at = {n: i for i, n in enumerate(c.shape_names)}
+    drawn_blink, drawn_ah = w[:, at["blink_left"]], w[:, at["ah"]]
+    assert drawn_blink.max() > 0.5 and drawn_ah.max() > 0.1, "no blink or no open mouth drawn"
+    for k in range(len(w)):
+        row = np.flatnonzero(np.abs(blink - drawn_blink[k]) < 1e-5)
+        assert len(row) and np.any(np.abs(ah[row] - drawn_ah[k]) < 1e-5), f"tick {k} is no row of the take"
