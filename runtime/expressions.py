@@ -12,7 +12,9 @@ applies:
 
 1. **config**: a channel named in ``[mapping.channels]`` of ``--config``
    drives exactly the targets listed there (expressions or shapes, each at its
-   weight) and nothing else; ``false`` makes it drive nothing.
+   weight) and nothing else; ``false`` makes it drive nothing. A target name is
+   looked up among the expressions first (any VRM spelling), then the shapes
+   (Godette has a morph ``oh`` and a preset ``O``: ``oh`` is the preset).
 2. **expression**: a channel naming one of the avatar's expressions drives
    that expression. A preset is named in any VRM spelling, any case: VRM 0.x
    (``A``, ``a``, ``Blink_L``, ``blink_l``, ``Joy``) or VRM 1.0 (``aa``,

@@ -27,7 +27,7 @@ Every key is optional; what is left out keeps its default. Example::
     [mapping]                # a character with VRM expressions (runtime.expressions)
     emotions = true          # the default ARKit -> VRM mapping also drives Joy, Angry, Sorrow, Fun (default false)
     [mapping.channels]       # per input channel (any spelling): exactly these targets, nothing else
-    jawOpen = { to = "A", weight = 1.2 }                 # an expression (any VRM spelling) or a shape
+    jawOpen = { to = "A", weight = 1.2 }                 # an expression (any VRM spelling) or else a shape
     mouthSmileLeft = [{ to = "Joy", weight = 0.5 }, { to = "smile_l" }]   # several; weight defaults to 1
     tongueOut = "tongue_out"                             # a name alone: that target at weight 1
     eyeLookInLeft = false                                # drive nothing (turn a default off)
