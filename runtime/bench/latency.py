@@ -9,6 +9,9 @@ rendering the character at ``--size``. Reported:
 * receive -> GPU finished latency of each drawn frame (p50 / p99 / max, ms),
   and the per-stage split (:mod:`~facepuppet.runtime.live.stats`);
 * the CPU stages of the frame loop (snapshot, pipeline + map) p99;
+* the map step alone (``map_step``: channels onto the character's shapes, through its VRM expressions when it
+  has them; :mod:`~facepuppet.runtime.expressions`), timed apart over ``MAP_SAMPLES`` applications of
+  random values on the VMC input's channel layout: p50 / p99 / max in microseconds;
 * receive is the kernel's arrival stamp of the datagram (SO_TIMESTAMPNS), so
   time a datagram waits before the receiver reads it counts; ``--receiver``
   picks the run's receiver (child process, the default, or thread);
@@ -167,6 +170,36 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     }
 
 
+MAP_SAMPLES = 5000
+
+
+def map_step_cost(character_path: str | os.PathLike, n: int = MAP_SAMPLES, seed: int = 0) -> dict:
+    """Cost of the frame loop's map step for this character and the VMC input's channels (µs per frame)."""
+    from facepuppet.runtime.channels import ChannelMap
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.expressions import make_drive
+    from facepuppet.runtime.inputs.vmc import VmcAdapter
+
+    character = Character.load(character_path)
+    drive = make_drive(character.shape_names, character.expressions)
+    channels = VmcAdapter(extra_names=() if drive is None else drive.receive_names()).channels
+    cmap = ChannelMap.build(channels, character.shape_names) if drive is None else drive.build(channels)
+    values = np.random.default_rng(seed).random((n, len(channels)), dtype=np.float32)
+    values[:, len(channels) // 2:][values[:, len(channels) // 2:] < 0.3] = np.nan  # some channels not sent
+    out = np.zeros(character.n_shapes, np.float32)
+    ns = np.empty(n)
+    clock = time.perf_counter_ns
+    for i in range(n):
+        t0 = clock()
+        cmap.apply(values[i], out=out)
+        ns[i] = clock() - t0
+    us = ns / 1e3
+    p50, p99 = np.percentile(us, [50, 99])
+    return {"map": type(cmap).__name__, "channels": len(channels), "shapes": character.n_shapes,
+            "expressions": character.n_expressions, "n": n, "p50_us": float(p50), "p99_us": float(p99),
+            "max_us": float(us.max())}
+
+
 def _percentiles(ms: np.ndarray) -> dict:
     if ms.size == 0:
         return {"n": 0}
@@ -180,6 +213,9 @@ def bench_latency(args: argparse.Namespace) -> dict:
                "draw": getattr(args, "draw", "arrival")}
     results["nominal"] = _phase(args, args.rate, args.seconds, log)
     _print("nominal", results["nominal"])
+    m = results["map_step"] = map_step_cost(args.character)
+    print(f"  map step alone ({m['map']}, {m['channels']} channels -> {m['shapes']} shapes, "
+          f"{m['expressions']} expressions): p50 {m['p50_us']:.1f} µs, p99 {m['p99_us']:.1f} µs over {m['n']}")
     if args.flood:
         results["flood"] = _phase(args, args.rate * args.flood_factor, args.flood_seconds, log)
         _print("flood", results["flood"])

@@ -156,7 +156,7 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
             hooks.append(llf.on_tick)
         clock = RecordedClock() if target.headless and llf is None else WallClock()
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
-                         stages=chain.stages, on_tick=hooks)
+                         stages=chain.stages, on_tick=hooks, drive=chain.drive)
         with progress:           # on a terminal: ticks done, rate, time left (quiet when piped)
             result = loop.run(source, duration=args.duration, ticks=ticks)
         if video is not None:

@@ -16,7 +16,8 @@ it onto the rig and draws. Around that loop:
 * ``--audio [DEVICE]`` / ``--audio-file WAV``: the audio level (dBFS) on every
   drawn frame; no device is a message, not an error.
 * ``--vmc-out HOST:PORT``: the face as VMC perfect sync + VRM 0.x presets and the head pose, every tick
-  (:mod:`~facepuppet.runtime.live.vmc_out`); ``--vmc-extra`` adds the rig's channels outside ARKit.
+  (:mod:`~facepuppet.runtime.live.vmc_out`); ``--vmc-extra`` adds the rig's channels outside ARKit;
+  ``--vmc-names both|arkit|vrm`` whether a VRM avatar's own expression names go out with the 52.
 * ``--llf-out HOST:PORT``: the face and head as Live Link Face packets, every tick
   (:mod:`~facepuppet.runtime.live.llf_out`), for Unreal's Live Link and anything that reads the phone.
 * ``--video FILE``: the drawn ticks encoded as a video (:mod:`~facepuppet.runtime.live.video_out`),
@@ -59,7 +60,7 @@ from facepuppet.runtime.live.sinks import PngSink, RecordingHook, WeightLog
 from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, make_input_adapter
 from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.live.video_out import VideoPlan, VideoSink, add_video_arguments, plan_video_from_args
-from facepuppet.runtime.live.vmc_out import VmcSender
+from facepuppet.runtime.live.vmc_out import VMC_NAMES, VmcSender
 from facepuppet.runtime.render.options import add_render_arguments, render_options
 
 if TYPE_CHECKING:
@@ -99,6 +100,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="send the face and head as Live Link Face packets (the phone's UDP format; Unreal's Live "
                         "Link listens on port 11111)")
     add_video_arguments(p, audio_help=None)
+    p.add_argument("--vmc-names", choices=VMC_NAMES, default=None,
+                   help="with --vmc-out and a character with VRM expressions: 'both' (default) sends the 52 ARKit "
+                        "shapes and the avatar's own expressions (VRM 0.x preset names Blink, A, Joy, ..., custom "
+                        "ones by name) with the values drawn; 'vrm' only the expressions; 'arkit' the 52 and the "
+                        "presets derived from them, as for an OBJ rig")
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL (no window)")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
@@ -170,6 +176,8 @@ def _check_options(args, default_port) -> _Options:
         raise ValueError("--vmc-extra: needs --vmc-out HOST:PORT")
     if not getattr(args, "vmc_presets", True) and vmc_out is None:
         raise ValueError("--no-vmc-presets: needs --vmc-out HOST:PORT")
+    if getattr(args, "vmc_names", None) is not None and vmc_out is None:
+        raise ValueError("--vmc-names: needs --vmc-out HOST:PORT")
     llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
     video = plan_video_from_args(args, width, height, alpha=render_options(args).transparent)
     return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out,
@@ -291,7 +299,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log)
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
-                         catch_up=True, idle_fps=opts.idle_fps)
+                         catch_up=True, idle_fps=opts.idle_fps, drive=chain.drive)
         counters["loop"] = loop.counters
         stats.counters = _LiveCounters(source, counters)
         if on_ready is not None:
@@ -321,8 +329,11 @@ def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, 
     stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)
     hooks = [stats.on_tick, *hooks]
     if opts.vmc_out is not None:
+        drive = chain.drive
+        own = () if drive is None else tuple(p or n for n, p in zip(drive.expression_names, drive.presets))
         sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names, extra=getattr(args, "vmc_extra", False),
-                            presets=getattr(args, "vmc_presets", True))
+                           presets=getattr(args, "vmc_presets", True), expressions=own,
+                           names_mode=getattr(args, "vmc_names", None) or VMC_NAMES[0])
         log(sender.describe())
         parts.append(sender)
         hooks.append(sender.on_tick)

@@ -27,6 +27,11 @@ is nothing). A name is looked up first among the VRM0 and VRM1 presets
 sync name: any spelling that :func:`~facepuppet.runtime.channels.canonical`
 brings to one of the 52 ARKit names (``JawOpen`` -> ``jawOpen``). Names that
 match neither (``Neutral``, custom clips) are counted as ``unmapped_name``.
+An avatar's own expressions (a character with VRM expressions, see
+:mod:`facepuppet.runtime.expressions`) come as ``extra_names``: a name among
+them is that channel, and a VRM preset name in its other VRM spelling (``happy``
+for ``Joy``, ``blinkLeft`` for ``Blink_L``; any case) reaches the same channel;
+the map then drives the expression itself instead of the ARKit approximation.
 Within one frame a perfect-sync value wins over preset-derived values for the
 same channel; several presets on one channel combine by maximum (a VRM1 sender
 also sends the VRM0 names, so ``Joy`` and ``happy`` arrive together).
@@ -50,6 +55,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from facepuppet.runtime.channels import ARKIT_NAMES, canonical
+from facepuppet.runtime.expressions import preset_of
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.osc import OscAdapter, all_finite, as_float, finite32, floats
 
@@ -129,6 +135,9 @@ class VmcAdapter(OscAdapter):
         extra = tuple(n for n in dict.fromkeys(str(n) for n in extra_names) if n not in ARKIT_NAMES)
         self.channels = ARKIT_NAMES + extra
         self._extra = {name: len(ARKIT_NAMES) + i for i, name in enumerate(extra)}
+        # an extra channel named by a VRM preset also takes that preset's other spellings (Joy: happy, joy)
+        self._extra_preset = {preset_of(name): i for name, i in reversed(self._extra.items())
+                              if preset_of(name) is not None}
         self._direct = [math.nan] * len(self.channels)
         self._preset = [math.nan] * len(self.channels)
         self._poisoned = False
@@ -169,6 +178,8 @@ class VmcAdapter(OscAdapter):
             return hit
         if name in self._extra:
             hit = (True, ((self._extra[name], 1.0),))
+        elif self._extra_preset and preset_of(name) in self._extra_preset:
+            hit = (True, ((self._extra_preset[preset_of(name)], 1.0),))
         elif name in PRESETS:
             hit = (False, tuple((_INDEX[c], g) for c, g in PRESETS[name]))
         else:

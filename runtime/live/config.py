@@ -24,6 +24,14 @@ Every key is optional; what is left out keeps its default. Example::
     gain = 1.3
     clamp = [0.0, 1.0]
 
+    [mapping]                # a character with VRM expressions (runtime.expressions)
+    emotions = true          # the default ARKit -> VRM mapping also drives Joy, Angry, Sorrow, Fun (default false)
+    [mapping.channels]       # per input channel (any spelling): exactly these targets, nothing else
+    jawOpen = { to = "A", weight = 1.2 }                 # an expression (any VRM spelling) or else a shape
+    mouthSmileLeft = [{ to = "Joy", weight = 0.5 }, { to = "smile_l" }]   # several; weight defaults to 1
+    tongueOut = "tongue_out"                             # a name alone: that target at weight 1
+    eyeLookInLeft = false                                # drive nothing (turn a default off)
+
 Regions are ``eyes``, ``brows``, ``mouth``, ``other`` (weights) and ``head``
 (pose). Errors (:class:`LiveConfigError`) name the file, the key, the type
 or range expected and what was found; unknown keys are errors too (a typo
@@ -41,6 +49,7 @@ from typing import TYPE_CHECKING
 
 from facepuppet.runtime.channels import ARKIT_NAMES, canonical, split_side
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.expressions import MappingSettings, MappingTarget
 from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
@@ -90,6 +99,7 @@ class LiveConfig:
     default_channel : ChannelSettings, for channels not listed
     timeout_s, ease_out_s, ease_in_s : float, seconds (tracking loss)
     capture_s : float, seconds of frames averaged into the neutral pose
+    mapping : MappingSettings, the ``[mapping]`` (channels onto a character's expressions and shapes)
     path : str, the file it came from ("" for defaults)
     """
 
@@ -100,6 +110,7 @@ class LiveConfig:
     ease_out_s: float = 0.6
     ease_in_s: float = 0.25
     capture_s: float = 0.5
+    mapping: MappingSettings = MappingSettings()
     path: str = ""
 
     def channel(self, name: str) -> ChannelSettings:
@@ -145,7 +156,7 @@ def _channel(where: str, key: str, value: dict, base: ChannelSettings) -> Channe
     return ChannelSettings(gain, clamp)
 
 
-def _check_channel(where: str, name: str, known: dict[str, str]) -> None:
+def _check_channel(where: str, name: str, known: dict[str, str], section: str = "channels") -> None:
     """A ``[channels.NAME]`` must name a known channel (any spelling, or one side of an unsided one)."""
     key = canonical(name)
     if key in known or split_side(key)[0] in known:
@@ -153,7 +164,46 @@ def _check_channel(where: str, name: str, known: dict[str, str]) -> None:
     close = difflib.get_close_matches(key, list(known), n=3, cutoff=0.75)
     hint = (f"; did you mean {' or '.join(known[c] for c in close)}?" if close
             else "; expected an ARKit name (jawOpen, eyeBlinkLeft, ...) or one of the character's shapes")
-    raise LiveConfigError(f"{where}: key 'channels.{name}': no channel of that name{hint}")
+    raise LiveConfigError(f"{where}: key '{section}.{name}': no channel of that name{hint}")
+
+
+def _mapping_targets(where: str, key: str, value) -> tuple[MappingTarget, ...]:
+    """The targets of one ``[mapping.channels]`` entry: false, a name, a table {to, weight} or an array of them."""
+    if value is False:
+        return ()
+    items = value if isinstance(value, list) else [value]
+    out = []
+    for item in items:
+        if isinstance(item, str) and item.strip():
+            out.append(MappingTarget(item.strip()))
+            continue
+        if not isinstance(item, dict):
+            raise LiveConfigError(f"{where}: key '{key}': expected false, a target name, a table "
+                                  f"{{ to = NAME, weight = NUMBER }} or an array of them, got {item!r}")
+        _table(where, key, item, ("to", "weight"))
+        to = item.get("to")
+        if not isinstance(to, str) or not to.strip():
+            raise LiveConfigError(f"{where}: key '{key}.to': expected the name of an expression or shape, "
+                                  f"got {to!r}")
+        weight = _number(where, f"{key}.weight", item["weight"]) if "weight" in item else 1.0
+        out.append(MappingTarget(to.strip(), weight))
+    if not out:
+        raise LiveConfigError(f"{where}: key '{key}': an empty array; write false to make the channel drive nothing")
+    return tuple(out)
+
+
+def _mapping(where: str, value, known: dict[str, str]) -> MappingSettings:
+    table = _table(where, "mapping", value, ("emotions", "channels"))
+    emotions = table.get("emotions", False)
+    if not isinstance(emotions, bool):
+        raise LiveConfigError(f"{where}: key 'mapping.emotions': expected true or false, got {emotions!r}")
+    channels, written = {}, {}
+    for name, targets in _table(where, "mapping.channels", table.get("channels", {}), None).items():
+        _check_channel(where, name, known, "mapping.channels")
+        key = canonical(name)
+        channels[key] = _mapping_targets(where, f"mapping.channels.{name}", targets)
+        written[key] = name
+    return MappingSettings(emotions, channels, written, where)
 
 
 def parse_live_config(data: dict, where: str = "<config>", known_channels: Iterable[str] | None = None) -> LiveConfig:
@@ -163,7 +213,8 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
     the elastic muscles); any other name is an error listing the close matches.
     """
     known = {canonical(n): n for n in (*ARKIT_NAMES, *(known_channels or ()))}
-    _table(where, "<top>", data, ("filter", "tracking_loss", "calibration", "channels", "default_channel"))
+    _table(where, "<top>", data, ("filter", "tracking_loss", "calibration", "channels", "default_channel",
+                                  "mapping"))
     cfg = LiveConfig(path=where)
     filters = dict(DEFAULT_FILTERS)
     for region, values in _table(where, "filter", data.get("filter", {}), REGIONS).items():
@@ -184,8 +235,10 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
     for name, values in _table(where, "channels", data.get("channels", {}), None).items():
         _check_channel(where, name, known)
         channels[canonical(name)] = _channel(where, f"channels.{name}", values, default_channel)
+    mapping = _mapping(where, data["mapping"], known) if "mapping" in data else cfg.mapping
     return replace(
         cfg,
+        mapping=mapping,
         filters=filters,
         channels=channels,
         default_channel=default_channel,

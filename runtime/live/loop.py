@@ -5,7 +5,9 @@ frame). Each tick takes the newest frame the source has by ``t_k`` (older ones
 are dropped and counted, never queued), rejects it if it is not finite, runs
 the stages (:func:`~facepuppet.runtime.live.stages.build_chain`), maps the last
 stage's channels onto the renderer's by name with a
-:class:`~facepuppet.runtime.channels.ChannelMap` cached per channel tuple,
+:class:`~facepuppet.runtime.channels.ChannelMap` cached per channel tuple (an
+:class:`~facepuppet.runtime.expressions.ExpressionMap` for a character with VRM
+expressions: channels onto morphs and expressions),
 draws, waits for the GPU, and hands the result to the sinks and hooks.
 
 The clock only paces the ticks; it never decides what is drawn. With a
@@ -38,6 +40,7 @@ from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.timing import StageTimer
 
 if TYPE_CHECKING:
+    from facepuppet.runtime.expressions import ExpressionDrive, ExpressionMap
     from facepuppet.runtime.protocols import FrameSource, Renderer, Sink, Stage
     from facepuppet.runtime.render.gl_context import GLTarget
 
@@ -108,15 +111,17 @@ class TickInfo:
     frame : Frame or None, the frame on screen (after the stages)
     weights : ndarray of shape (n_shapes,), float32, the rig weights drawn (the loop's buffer: copy to keep)
     rotation, translation : ndarray or None, the head pose drawn
+    expressions : ndarray of shape (n_expressions,), float32, or None: the values of the character's VRM
+        expressions drawn (after isBinary and overrides; the map's buffer), None when the map drives none
     stamps : tuple of 5 floats on the loop's timer clock (``time.perf_counter``, which is the
         monotonic clock on Linux): snapshot start, snapshot end, map end, draw submitted, GPU finished
     """
 
-    __slots__ = ("k", "t", "raw", "frame", "weights", "rotation", "translation", "stamps")
+    __slots__ = ("k", "t", "raw", "frame", "weights", "rotation", "translation", "expressions", "stamps")
 
     def __init__(self) -> None:
         self.k, self.t, self.raw, self.frame, self.weights = 0, 0.0, None, None, None
-        self.rotation = self.translation = None
+        self.rotation = self.translation = self.expressions = None
         self.stamps = (0.0,) * 5
 
 
@@ -169,6 +174,8 @@ class FrameLoop:
     idle_fps : float or None; draw on arrival (see the module docstring) when the
         source has ``wait_for_frame(timeout_s) -> bool``, redrawing at least this
         often without new frames; ``fps`` is then the grid of the tick labels
+    drive : ExpressionDrive or None (:func:`~facepuppet.runtime.expressions.make_drive`): maps each channel
+        tuple onto the character's morphs and VRM expressions; None: a plain ChannelMap by name, as for an OBJ rig
 
     A frame with an infinite weight or a non-finite head pose is rejected here, once, before the
     stages (``counters["nonfinite_rejected"]``; NaN weights mean "not sent" and pass).
@@ -178,7 +185,8 @@ class FrameLoop:
                  sinks: Sequence[Sink] = (), fps: float = 60.0, log: Callable[[str], None] = logger.info,
                  target: GLTarget | None = None, stages: Sequence[Stage] = (),
                  on_tick: Sequence[Callable[[TickInfo], None]] = (), stop: Callable[[], bool] | None = None,
-                 catch_up: bool = False, idle_fps: float | None = None) -> None:
+                 catch_up: bool = False, idle_fps: float | None = None,
+                 drive: ExpressionDrive | None = None) -> None:
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
         if idle_fps is not None and not (isinstance(idle_fps, (int, float)) and 0 < idle_fps <= fps):
@@ -198,19 +206,24 @@ class FrameLoop:
         self.stop = stop
         self.catch_up = bool(catch_up)
         self.counters: dict[str, int] = {}
-        self._maps: dict[tuple[str, ...], ChannelMap] = {}
+        self.drive = drive
+        if drive is not None and tuple(drive.shape_names) != self.shape_names:
+            raise ValueError("FrameLoop drive: its shapes are not the renderer's channels")
+        self._maps: dict[tuple[str, ...], ChannelMap | ExpressionMap] = {}
+        self._expressions: np.ndarray | None = None
         self._weights = np.zeros(len(self.shape_names), dtype=np.float32)
         self._rotation: np.ndarray | None = None
         self._translation: np.ndarray | None = None
         self._frame: Frame | None = None
 
-    def channel_map(self, channels: tuple[str, ...], source: str = "") -> ChannelMap:
+    def channel_map(self, channels: tuple[str, ...], source: str = "") -> ChannelMap | ExpressionMap:
         """The cached map for a channel tuple; built (and its report logged) on first sight."""
         cmap = self._maps.get(channels)
         if cmap is None:
             if len(self._maps) >= MAX_CHANNEL_MAPS:  # a sender whose channel set keeps changing: bounded
                 del self._maps[next(iter(self._maps))]
-            cmap = self._maps[channels] = ChannelMap.build(channels, self.shape_names)
+            cmap = self._maps[channels] = (ChannelMap.build(channels, self.shape_names) if self.drive is None
+                                           else self.drive.build(channels))
             n_driven = len(self.shape_names) - len(cmap.undriven_target)
             head = (f"channel map ({source or 'source'}): {len(channels)} source channels -> "
                     f"{n_driven} of {len(self.shape_names)} rig shapes driven")
@@ -326,7 +339,7 @@ class FrameLoop:
             sink.consume(k, t, self._weights, self._frame, self.renderer)
         if self.on_tick:
             info.k, info.t, info.raw, info.frame, info.weights = k, t, raw, self._frame, self._weights
-            info.rotation, info.translation = self._rotation, self._translation
+            info.rotation, info.translation, info.expressions = self._rotation, self._translation, self._expressions
             info.stamps = (t0, t1, t2, t3, t4)
             for hook in self.on_tick:
                 hook(info)
@@ -335,7 +348,9 @@ class FrameLoop:
     def _accept(self, frame: Frame) -> None:
         """Make ``frame`` the current one: its weights mapped by name, its pose kept where it has one."""
         if frame.weights is not None:
-            self.channel_map(frame.channels, frame.source).apply(frame.weights, out=self._weights)
+            cmap = self.channel_map(frame.channels, frame.source)
+            cmap.apply(frame.weights, out=self._weights)
+            self._expressions = cmap.expression_values if getattr(cmap, "drives_expressions", False) else None
         if frame.head_rotation is not None:
             self._rotation = frame.head_rotation
         if frame.head_translation is not None:

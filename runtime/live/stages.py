@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from facepuppet.runtime.expressions import ExpressionDrive, expression_spellings, make_drive
 from facepuppet.runtime.frames import Frame
 
 if TYPE_CHECKING:
@@ -135,6 +136,8 @@ class Chain:
     elastic : ElasticModel or None, the elastic path's tables
     extra_names : tuple of str, input channel names beyond the trackers' own (muscles)
     marker_units : str or None, the units the solve wants marker frames in (the actor's), None without one
+    drive : ExpressionDrive or None, what maps channels onto a character with VRM expressions (or with a
+        ``[mapping]`` in ``--config``); None: the plain ChannelMap by name (``FrameLoop(drive=...)``)
     """
 
     input: str
@@ -145,6 +148,7 @@ class Chain:
     elastic: ElasticModel | None = None
     extra_names: tuple[str, ...] = field(default_factory=tuple)
     marker_units: str | None = None
+    drive: ExpressionDrive | None = None
 
     def describe(self) -> str:
         """``stages: vmc→filter→gestures→map→draw`` (``draw(elastic)`` on the elastic path)."""
@@ -236,12 +240,22 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
         stages.append(solve)
         chain.marker_units = solve.actor.units
     level = chain.audio.level if chain.audio is not None else None
+    from facepuppet.runtime.live.config import LiveConfig, load_live_config
+
+    known = (*shapes, *chain.names, *chain.extra_names, *(kpls.model.source_names if kpls is not None else ()),
+             *expression_spellings(character))
+    config = load_live_config(opt("config"), known) if opt("config") is not None else LiveConfig()
+    if elastic is None:  # the elastic path draws its own channels, not the character's shapes
+        chain.drive = make_drive(shapes, character.expressions, config.mapping)
+        if chain.drive is not None and input_kind == "vmc":
+            # VMC names its channels: the avatar's expression names arrive as channels of their own
+            chain.extra_names = tuple(dict.fromkeys((*chain.extra_names, *chain.drive.receive_names())))
+    elif not config.mapping.empty:
+        raise ValueError(f"--config {opt('config')}: [mapping] drives a character's shapes and expressions; "
+                         "it does not apply with --elastic")
     if filtered:
-        from facepuppet.runtime.live.config import LiveConfig, load_live_config
         from facepuppet.runtime.live.pipeline import LivePipeline
 
-        known = (*shapes, *chain.names, *chain.extra_names, *(kpls.model.source_names if kpls is not None else ()))
-        config = load_live_config(opt("config"), known) if opt("config") is not None else LiveConfig()
         chain.filter = LivePipeline(config, audio_level=level, log=log, calibrate_requests=calibrate_requests)
         if opt("calibrate"):
             chain.filter.request_calibration()

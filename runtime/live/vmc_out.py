@@ -20,6 +20,23 @@ Every tick sends, over one UDP socket, bundles of at most ``max_bundle`` bytes
    * with ``extra=True`` (``--vmc-extra``), the rig's channels outside ARKit
      (``CheekRaiserLeft``, ``PupilDilateRight``) under their PascalCase names;
 
+   **The avatar's own names** (``--vmc-names``, for a character with VRM expressions):
+   ``expressions`` gives the names of its expressions, each sent with the
+   value the avatar showed this tick (after isBinary and overrides; the
+   frame loop's :attr:`TickInfo.expressions`) — a preset under its VRM 0.x
+   name as the VMC spec asks (``Blink``, ``Blink_L``, ``A``, ``Joy``), a
+   custom expression under its own name. ``names="both"`` (the default) sends
+   the 52 ARKit shapes and the avatar's expressions *instead of* the 17
+   presets derived from ARKit, ``"vrm"`` only the expressions, ``"arkit"``
+   what an OBJ rig sends (the 52 and the derived presets). ``both`` is the
+   default because it is what makes VSeeFace move the same avatar out of the
+   box: VSeeFace applies each received name to the avatar's blend shape clip
+   of that name, so a VRM 0.x avatar reacts to its presets and a perfect-sync
+   one to the 52 (a shape the 52 drive directly is not also driven through an
+   expression by facepuppet's map, so nothing closes twice). For a character
+   without expressions every mode but ``vrm`` sends what it always did, and
+   ``vrm`` sends the derived presets;
+
    split greedily over as many bundles as keep each within ``max_bundle``,
    with one ``/VMC/Ext/Blend/Apply`` at the end of the last.
 
@@ -57,6 +74,7 @@ if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
 
 MAX_BUNDLE = 1200
+VMC_NAMES = ("both", "arkit", "vrm")  # --vmc-names, the first the default (see the module doc)
 _BUNDLE_HEAD = 16  # "#bundle\0" + 8-byte time tag
 _F32 = struct.Struct(">f")
 _I32 = struct.Struct(">i")
@@ -101,6 +119,9 @@ class VmcSender:
     presets : bool, send the VRM 0.x presets (default; ``--no-vmc-presets`` leaves them out for a perfect-sync
         avatar whose ``Blink``/vowel clips drive the same mesh shapes as the 52, which would add up twice)
     clock : callable returning seconds, for ``/VMC/Ext/T`` when :meth:`send` gets no time
+    expressions : sequence of str, the avatar's expression names to send (VRM 0.x spelling for a preset; see
+        the module doc), in the order of the values :meth:`send` gets; empty for a character without
+    names : "both" (default), "arkit" or "vrm" (``--vmc-names``, see the module doc)
 
     Attributes
     ----------
@@ -112,13 +133,26 @@ class VmcSender:
     """
 
     def __init__(self, host: str, port: int, names: Sequence[str], max_bundle: int = MAX_BUNDLE,
-                 extra: bool = False, clock: Callable[[], float] = time.monotonic, presets: bool = True) -> None:
+                 extra: bool = False, clock: Callable[[], float] = time.monotonic, presets: bool = True,
+                 expressions: Sequence[str] = (), names_mode: str = "both") -> None:
+        if names_mode not in VMC_NAMES:
+            raise ValueError(f"--vmc-names: expected one of {', '.join(VMC_NAMES)}, got {names_mode!r}")
+        if names_mode == "vrm" and not presets:
+            raise ValueError("--no-vmc-presets: leaves out every VRM name, and --vmc-names vrm sends only those")
         self.address = (host, int(port))
         names = tuple(names)
+        self.names_mode = names_mode
+        own = tuple(expressions) if names_mode != "arkit" and presets else ()
         self._n = len(names)
         self._first, self._second, extras = fold_to_arkit(names)
-        taken = set(PERFECT_SYNC_NAMES) | set(VRM0_PRESETS)
+        arkit_sent = names_mode != "vrm"
+        own_sent = [e for e, n in enumerate(own) if not (arkit_sent and n in PERFECT_SYNC_NAMES)]
+        self._own = np.array(own_sent, dtype=np.intp)
+        self._n_own = len(own)
+        derived = presets and not own  # the 17 presets derived from ARKit, when the avatar's own are not sent
+        taken = set(PERFECT_SYNC_NAMES) | set(VRM0_PRESETS) | set(own)
         sent_extras, held = [], []
+        self._clashing = tuple(n for n in own if arkit_sent and n in PERFECT_SYNC_NAMES)  # the 52 go instead
         for i in extras:
             name = pascal(names[i])
             if extra and name not in taken:
@@ -127,9 +161,10 @@ class VmcSender:
             else:
                 held.append(names[i])
         self._extras = np.array(sent_extras, dtype=np.intp)
-        self._n_presets = len(VRM0_PRESETS) if presets else 0
-        self.sent_names = (PERFECT_SYNC_NAMES + (VRM0_PRESETS if presets else ())
-                           + tuple(pascal(names[i]) for i in sent_extras))
+        self._n_arkit = len(PERFECT_SYNC_NAMES) if arkit_sent else 0
+        self._n_presets = len(VRM0_PRESETS) if derived else 0
+        self.sent_names = ((PERFECT_SYNC_NAMES if arkit_sent else ()) + (VRM0_PRESETS if derived else ())
+                           + tuple(own[e] for e in own_sent) + tuple(pascal(names[i]) for i in sent_extras))
         self.held_back = tuple(held)
         self._extra = extra
         self.counters = {"bundles_sent": 0, "send_errors": 0}
@@ -175,27 +210,36 @@ class VmcSender:
             at += 4 + m.size
         return out
 
-    def values(self, weights: np.ndarray) -> np.ndarray:
-        """The Blend/Val values of ``weights`` (n,) float, in :attr:`sent_names` order (float64, in [0, 1])."""
+    def values(self, weights: np.ndarray, expressions: np.ndarray | None = None) -> np.ndarray:
+        """The Blend/Val values of ``weights`` (n,) float and the avatar's ``expressions`` (n_expressions,)
+        float (None: all 0), in :attr:`sent_names` order (float64, in [0, 1])."""
         padded = self._padded
         padded[:-1] = weights
         np.nan_to_num(padded, copy=False, nan=0.0)
         np.clip(padded, 0.0, 1.0, out=padded)
         out = self._values
         arkit = np.maximum(padded[self._first], padded[self._second])
-        n_arkit, n_presets = len(PERFECT_SYNC_NAMES), self._n_presets
-        out[:n_arkit] = arkit
+        n_arkit, n_presets, n_own = self._n_arkit, self._n_presets, len(self._own)
+        out[:n_arkit] = arkit[:n_arkit]
         if n_presets:
             out[n_arkit:n_arkit + n_presets] = vrm0_from_arkit(arkit)
-        out[n_arkit + n_presets:] = padded[self._extras]
+        at = n_arkit + n_presets
+        if n_own:
+            if expressions is None or len(expressions) != self._n_own:
+                out[at:at + n_own] = 0.0
+            else:
+                out[at:at + n_own] = np.clip(np.nan_to_num(np.asarray(expressions)[self._own], nan=0.0), 0.0, 1.0)
+        out[at + n_own:] = padded[self._extras]
         return out
 
     def send(self, weights: np.ndarray, rotation: np.ndarray | None = None,
-             translation: np.ndarray | None = None, t: float | None = None, tracking: bool = True) -> None:
+             translation: np.ndarray | None = None, t: float | None = None, tracking: bool = True,
+             expressions: np.ndarray | None = None) -> None:
         """Send one tick: weights (n,) float, rotation (4,) (x, y, z, w) or None (identity),
         translation (3,) or None (zero), ``t`` seconds for ``/VMC/Ext/T`` (None: since the sender
-        started), ``tracking`` for the OK message. Send errors are counted, never raised."""
-        for (gi, at), v in zip(self._slots, self.values(weights).tolist()):
+        started), ``tracking`` for the OK message, the avatar's ``expressions`` values (or None).
+        Send errors are counted, never raised."""
+        for (gi, at), v in zip(self._slots, self.values(weights, expressions).tolist()):
             _F32.pack_into(self.datagrams[gi], at, v)
         px, py, pz = (0.0, 0.0, 0.0) if translation is None else (float(c) for c in translation)
         qx, qy, qz, qw = (0.0, 0.0, 0.0, 1.0) if rotation is None else (float(c) for c in rotation)
@@ -211,15 +255,25 @@ class VmcSender:
 
     def on_tick(self, info: TickInfo) -> None:
         """FrameLoop ``on_tick`` hook: send what this tick drew (tracking once a frame is on screen)."""
-        self.send(info.weights, info.rotation, info.translation, tracking=info.frame is not None)
+        self.send(info.weights, info.rotation, info.translation, tracking=info.frame is not None,
+                  expressions=info.expressions)
 
     def describe(self) -> str:
         """One line for the start of a run: what goes out, in how many bundles, what is held back."""
-        n_extra = len(self.sent_names) - 52 - self._n_presets
-        presets = f"{self._n_presets} VRM presets" if self._n_presets else "no VRM presets (--no-vmc-presets)"
-        line = (f"vmc-out: {self.address[0]}:{self.address[1]}, 52 ARKit (perfect sync) + "
-                f"{presets}" + (f" + {n_extra} extra" if n_extra else "")
+        n_own = len(self._own)
+        n_extra = len(self.sent_names) - self._n_arkit - self._n_presets - n_own
+        parts = ["52 ARKit (perfect sync)"] if self._n_arkit else []
+        if n_own:
+            parts.append(f"the avatar's {n_own} VRM expressions")
+        elif self._n_presets:
+            parts.append(f"{self._n_presets} VRM presets")
+        else:
+            parts.append("no VRM presets (--no-vmc-presets)")
+        line = (f"vmc-out: {self.address[0]}:{self.address[1]} (--vmc-names {self.names_mode}), "
+                + " + ".join(parts) + (f" + {n_extra} extra" if n_extra else "")
                 + f", {len(self.datagrams)} bundles a tick")
+        if self._clashing:
+            line += f"; expressions named like an ARKit shape go as that shape: {', '.join(self._clashing[:6])}"
         if self.held_back:
             shown = ", ".join(self.held_back[:6]) + (" …" if len(self.held_back) > 6 else "")
             why = "their names clash with one sent" if self._extra else "not ARKit; --vmc-extra sends them"

@@ -204,3 +204,21 @@ def test_oversized_datagram_is_counted():
     a = VmcAdapter()
     assert a.handle(b"/" + bytes(70000), 0.0) is None
     counts(a, datagrams=1, oversized=1)
+
+
+def test_the_avatars_expression_names_arrive_as_their_own_channels_in_any_vrm_spelling():
+    """A character with VRM expressions gives the adapter their names (build_chain): a preset name in its VRM 0.x
+    or 1.0 spelling, any case, reaches the expression's channel instead of the ARKit approximation."""
+    a = VmcAdapter(extra_names=("Blink", "Blink_L", "A", "Joy", "HideBlush"))
+    f = a.handle(blend(("happy", 0.4), ("blinkLeft", 0.7), ("aa", 0.3), ("HideBlush", 1.0), ("JawOpen", 0.2)), 1.0)
+    at = {name: i for i, name in enumerate(f.channels)}
+    assert f.channels[:52] == ARKIT_NAMES and f.channels[52:] == ("Blink", "Blink_L", "A", "Joy", "HideBlush")
+    assert f.weights[at["Joy"]] == pytest.approx(0.4) and f.weights[at["Blink_L"]] == pytest.approx(0.7)
+    assert f.weights[at["A"]] == pytest.approx(0.3) and f.weights[at["HideBlush"]] == 1.0
+    assert np.isnan(f.weights[at["Blink"]])  # not sent
+    # not also turned into ARKit channels: the smile and the eyelid stay unsent, the jaw is the perfect-sync value
+    assert np.isnan(f.weights[INDEX["mouthSmileLeft"]]) and np.isnan(f.weights[INDEX["eyeBlinkLeft"]])
+    assert f.weights[INDEX["jawOpen"]] == pytest.approx(0.2)
+    g = a.handle(blend(("Joy", 0.9), ("Sorrow", 0.5)), 2.0)  # Sorrow: not the avatar's -> the ARKit approximation
+    assert g.weights[at["Joy"]] == pytest.approx(0.9) and g.weights[INDEX["browInnerUp"]] == pytest.approx(0.5)
+    counts(a, datagrams=2, frames=2)

@@ -84,6 +84,39 @@ def test_channels_mapped_by_name_and_report_logged_once_per_channel_tuple():
                                                          [0.9, 0, 0.8, 0], [0.7, 0.45, 0, 0]]))
 
 
+def test_a_character_with_expressions_is_mapped_through_them_and_the_report_names_the_routes():
+    from facepuppet.runtime.expressions import make_drive
+
+    from helpers.vrm_characters import preset_character
+
+    c = preset_character()
+    channels = ("EyeBlinkLeft", "EyeBlinkRight", "aa", "ah", "TongueOut")
+    frames = [Frame(t=0.0, source="vmc", channels=channels, weights=[0.8, 0.8, 0.5, 0.1, 0.3]),
+              Frame(t=0.1, source="vmc", channels=channels, weights=[0.0, 0.0, 0.2, 0.0, 0.0])]
+    messages, log, seen = [], WeightLog(), []
+    drive = make_drive(c.shape_names, c.expressions)
+    loop = FrameLoop(c.shape_names, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=messages.append,
+                     drive=drive, on_tick=[lambda info: seen.append(np.array(info.expressions))])
+    loop.run(ReplaySource(frames))
+    assert len(messages) == 1
+    assert "default preset mapping (2): EyeBlinkLeft→Blink+Blink_L, EyeBlinkRight→Blink+Blink_R" in messages[0]
+    assert "expression (1): aa→A" in messages[0] and "morph (1): ah→ah" in messages[0]
+    assert "ignored: TongueOut" in messages[0]
+    at = {n: i for i, n in enumerate(c.shape_names)}
+    # tick 0: Blink = 0.8 -> both lids 0.8; A = 0.5 but ah is driven directly (0.1): the direct value wins
+    assert log.array[0, at["blink_left"]] == pytest.approx(0.8) and log.array[0, at["ah"]] == pytest.approx(0.1)
+    assert log.array[1, at["blink_left"]] == 0.0
+    names = c.expressions.names
+    assert seen[0][names.index("Blink")] == pytest.approx(0.8) and seen[1][names.index("A")] == pytest.approx(0.2)
+
+
+def test_a_frame_loop_without_a_drive_reports_no_expressions():
+    seen = []
+    FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), fps=10.0, log=lambda s: None,
+              on_tick=[lambda info: seen.append(info.expressions)]).run(ReplaySource([_frame(0.0, 0.5)]))
+    assert seen == [None]
+
+
 class FakeTime:
     def __init__(self):
         self.now = 100.0

@@ -18,6 +18,7 @@ from pythonosc.osc_bundle import OscBundle
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.commands.options import parse_host_port
 from facepuppet.runtime.live.vmc_out import MAX_BUNDLE, VmcSender
+from facepuppet.runtime.vrm_names import VRM0_PRESETS
 
 from helpers.udp_helpers import free_udp_port
 
@@ -280,3 +281,55 @@ def test_the_sending_socket_is_bound_to_loopback_and_hears_only_its_destination(
                 sender._sock.recvfrom(2048)
         finally:
             sender.close()
+
+
+def one_tick(sender_args: dict, weights, expressions) -> dict[str, float]:
+    """Blend/Val name -> value of one tick as a python-osc receiver on 127.0.0.1 reads it."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(5.0)
+        sender = VmcSender("127.0.0.1", receiver.getsockname()[1], **sender_args)
+        try:
+            sender.send(np.asarray(weights, np.float32), expressions=expressions)
+            datagrams = [receiver.recv(65536) for _ in range(len(sender.datagrams))]
+        finally:
+            sender.close()
+    vals = [m.params for d in datagrams for m in OscBundle(d) if m.address == "/VMC/Ext/Blend/Val"]
+    got = dict(vals)
+    assert len(got) == len(vals), "a name sent twice"
+    return got, sender
+
+
+AVATAR = ("blink_left", "blink_right", "ah", "smile")  # a VRM 0.x avatar's morphs (no ARKit names)
+OWN = ("Blink", "Blink_L", "Blink_R", "A", "Joy", "HideBlush")  # its expressions, as the sender names them
+
+
+@pytest.mark.parametrize("mode", ["both", "vrm", "arkit"])
+def test_vmc_names_send_the_avatars_own_expressions_with_the_values_drawn(mode):
+    weights = [0.9, 0.4, 0.55, 0.0]
+    expressions = np.array([0.4, 0.5, 0.0, 0.35, 0.0, 1.0], np.float32)
+    got, sender = one_tick(dict(names=AVATAR, expressions=OWN, names_mode=mode), weights, expressions)
+    if mode == "arkit":  # what an OBJ rig sends: the 52 (none of this avatar's morphs is ARKit) + the derived 17
+        assert len(got) == 69 and got["Blink"] == 0.0 and got["A"] == 0.0 and "HideBlush" not in got
+        assert "17 VRM presets" in sender.describe()
+        return
+    for name, value in zip(OWN, expressions.tolist()):
+        assert got[name] == pytest.approx(value), name
+    assert ("EyeBlinkLeft" in got) == (mode == "both") and len(got) == (52 if mode == "both" else 0) + len(OWN)
+    assert "I" not in got and "Sorrow" not in got  # presets the avatar has not are not derived and sent
+    assert f"--vmc-names {mode}" in sender.describe() and "the avatar's 6 VRM expressions" in sender.describe()
+
+
+def test_vmc_names_without_expressions_sends_what_it_always_did_and_vrm_sends_the_derived_presets():
+    weights = [0.3, 0.3, 0.6]
+    plain, _ = one_tick(dict(names=("eyeBlink_L", "eyeBlink_R", "jawOpen")), weights, None)
+    assert len(plain) == 69 and plain["Blink"] == pytest.approx(0.3) and plain["A"] == pytest.approx(0.6)
+    vrm, _ = one_tick(dict(names=("eyeBlink_L", "eyeBlink_R", "jawOpen"), names_mode="vrm"), weights, None)
+    assert set(vrm) == set(VRM0_PRESETS) and vrm["A"] == pytest.approx(0.6)
+
+
+def test_vmc_names_is_checked():
+    with pytest.raises(ValueError, match="--vmc-names: expected one of both, arkit, vrm"):
+        VmcSender("127.0.0.1", free_udp_port(), AVATAR, names_mode="VRM")
+    with pytest.raises(ValueError, match="--no-vmc-presets"):
+        VmcSender("127.0.0.1", free_udp_port(), AVATAR, names_mode="vrm", presets=False)
