@@ -88,6 +88,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vmc-presets", action=argparse.BooleanOptionalAction, default=True,
                    help="with --vmc-out, also send the VRM 0.x presets (Blink, A, I, U, E, O, ...; default on); "
                         "--no-vmc-presets for a perfect-sync avatar whose preset clips move the same shapes")
+    p.add_argument("--face-id", type=int, default=None, metavar="ID",
+                   help="--input openseeface: follow the face with this id (default: the first of each datagram)")
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL (no window)")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
@@ -156,13 +158,15 @@ def _check_options(args, default_port) -> _Options:
         raise ValueError("--vmc-extra: needs --vmc-out HOST:PORT")
     if not getattr(args, "vmc_presets", True) and vmc_out is None:
         raise ValueError("--no-vmc-presets: needs --vmc-out HOST:PORT")
+    if getattr(args, "face_id", None) is not None and args.input != "openseeface":
+        raise ValueError(f"--face-id: only for --input openseeface (not {args.input})")
     return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out)
 
 
 def _record_info(args, opts: _Options) -> dict:
     """The header facts of ``--record``: enough for ``replay`` to rebuild the same chain."""
     options = ("config", "calibrate", "actor", "pair", "marker_units", "retarget", "elastic", "gestures",
-               "gesture_seed")
+               "gesture_seed", "face_id")
     return {"character": str(args.character), "listen": f"{opts.host}:{opts.port}", "fps": opts.loop_fps,
             "idle_fps": opts.idle_fps,
             "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
@@ -232,7 +236,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         log(chain.describe())
         adapter = None if opts.voice_only else make_input_adapter(
             args.input, chain.extra_names, log=log, marker_units=getattr(args, "marker_units", None),
-            to_units=chain.marker_units)
+            to_units=chain.marker_units, face_id=getattr(args, "face_id", None))
         recorder = None
         if args.record is not None:
             recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts),
