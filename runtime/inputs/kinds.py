@@ -8,7 +8,7 @@ facecap        :class:`.facecap.FaceCapAdapter`       9000          Face Cap OSC
 faceosc        :class:`.faceosc.FaceOscAdapter`       8338          FaceOSC (§4)
 markers        :class:`facepuppet.runtime.inputs.markers.MarkersAdapter`   9763          /facepuppet/markers OSC
 livelinkface   :class:`facepuppet.runtime.inputs.livelinkface.LiveLinkFaceAdapter`  11111  binary UDP (§5)
-openseeface    :class:`facepuppet.runtime.inputs.openseeface.OpenSeeFaceAdapter`    11573  binary UDP (§7)
+openseeface    :class:`facepuppet.runtime.inputs.openseeface.OpenSeeFaceAdapter`    11573  binary UDP (§9)
 =============  =====================================  ============  =========================
 
 (§ = PROTOCOLS.md sections.) Every adapter has ``kind``, ``default_port``,

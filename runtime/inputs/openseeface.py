@@ -1,4 +1,4 @@
-"""OpenSeeFace's binary UDP stream (default port 11573), decoded directly: PROTOCOLS.md §7.
+"""OpenSeeFace's binary UDP stream (default port 11573), decoded directly: PROTOCOLS.md §9.
 
 One datagram holds N face records of ``RECORD_SIZE`` = 1785 bytes each, one
 per tracked face, little-endian, packed without padding (the layout below):
@@ -34,7 +34,7 @@ unmirrored camera).
 
 **Mapping onto ARKit** (:func:`arkit_weights`; ``ramp(x, a, b)`` = (x - a) /
 (b - a) clipped to [0, 1]; signs and dead zones read from the example VRM
-driver in OpenSeeFace's repository, PROTOCOLS.md §7):
+driver in OpenSeeFace's repository, PROTOCOLS.md §9):
 
 =====================================  ==============================================
 channel                                from

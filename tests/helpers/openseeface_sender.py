@@ -1,4 +1,4 @@
-"""An OpenSeeFace sender written from the published layout (PROTOCOLS.md §7), independent of the decoder.
+"""An OpenSeeFace sender written from the published layout (PROTOCOLS.md §9), independent of the decoder.
 
 Each field is packed with :mod:`struct`, little-endian, in the order OpenSeeFace's ``facetracker.py``
 writes them (one ``pack`` per field, no padding); the decoder reads them through a NumPy record dtype.

@@ -1,6 +1,6 @@
 """OpenSeeFace input: crafted records from the independent sender (helpers/openseeface_sender.py).
 
-Expected weights are worked out by hand from the mapping table in PROTOCOLS.md §7 (not by calling the
+Expected weights are worked out by hand from the mapping table in PROTOCOLS.md §9 (not by calling the
 decoder's mapping), poses from the reference receiver's conversion written out here.
 """
 
