@@ -53,7 +53,7 @@ from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult,
 from facepuppet.runtime.live.sinks import PngSink, RecordingHook, WeightLog
 from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, make_input_adapter
 from facepuppet.runtime.live.stats import LiveStats
-from facepuppet.runtime.live.vmc_out import VmcSender
+from facepuppet.runtime.live.vmc_out import VmcSender, pipeline_status
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
@@ -290,7 +290,8 @@ def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, 
     hooks = [stats.on_tick, *hooks]
     if opts.vmc_out is not None:
         sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names, extra=getattr(args, "vmc_extra", False),
-                            presets=getattr(args, "vmc_presets", True))
+                            presets=getattr(args, "vmc_presets", True),
+                            status=pipeline_status(chain.filter) if chain.filter is not None else None)
         log(sender.describe())
         parts.append(sender)
         hooks.append(sender.on_tick)
