@@ -21,7 +21,16 @@ rendering the character at ``--size``. Reported:
   latency of the newest frame per second and resident memory (RSS) sampled
   every second, which must stay flat.
 
-Run the sender alone with ``python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS``.
+``--input KIND`` picks the protocol the sender speaks and the run listens for
+(:data:`SENDERS`: ``vmc``, the default, or ``openseeface``: one datagram of one
+1785-byte face record per frame, mouth and brows moving). Before the live phase
+the bench also measures the decode cost per datagram of that kind: the
+adapter's ``handle`` (what the receiver runs for each datagram) timed over
+``DECODE_PACKETS`` prepared datagrams with ``perf_counter_ns``, p50/p99 in µs
+(``decode_us``, and per frame for VMC's several datagrams).
+
+Run the sender alone with
+``python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS [KIND]``.
 """
 
 from __future__ import annotations
@@ -52,15 +61,102 @@ def rss_mb() -> float:
         return peak_rss_mb()
 
 
-def send(host: str, port: int, rate: float, seconds: float) -> int:
-    """Stream VMC frames at ``rate`` Hz for ``seconds``; returns the number of frames sent."""
-    from facepuppet.runtime.channels import ARKIT_NAMES
-    from facepuppet.runtime.geometry import euler_to_quat
-    from facepuppet.runtime.live.vmc_out import VmcSender
+DECODE_PACKETS = 20_000
 
-    sender = VmcSender(host, port, ARKIT_NAMES)
-    n = len(ARKIT_NAMES)
-    phases = np.arange(n) * 0.37
+
+class _VmcFrames:
+    """VMC frames as :class:`~facepuppet.runtime.live.vmc_out.VmcSender` sends them."""
+
+    def __init__(self, host: str, port: int) -> None:
+        from facepuppet.runtime.channels import ARKIT_NAMES
+        from facepuppet.runtime.live.vmc_out import VmcSender
+
+        self.sender = VmcSender(host, port, ARKIT_NAMES)
+        self.phases = np.arange(len(ARKIT_NAMES)) * 0.37
+        self.per_frame = len(self.sender.datagrams)
+
+    def datagrams(self, t: float) -> list[bytes]:
+        """The datagrams of the frame at ``t`` seconds, as sent (to this object's loopback address)."""
+        self.send(t)
+        return [bytes(d) for d in self.sender.datagrams]
+
+    def send(self, t: float) -> None:
+        from facepuppet.runtime.geometry import euler_to_quat
+
+        weights = 0.5 + 0.5 * np.sin(2 * np.pi * 0.7 * t + self.phases)
+        self.sender.send(weights, euler_to_quat(0.2 * math.sin(t), 0.1 * math.sin(1.3 * t), 0.0), (0.0, 0.0, 0.0))
+
+    def close(self) -> None:
+        self.sender.close()
+
+
+class _OpenSeeFaceFrames:
+    """OpenSeeFace datagrams: one face record per frame, mouth, brows and eyes moving, head turning."""
+
+    per_frame = 1
+
+    def __init__(self, host: str, port: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.address = (host, port)
+
+    @staticmethod
+    def datagrams(t: float) -> list[bytes]:
+        from facepuppet.runtime.inputs.openseeface import FEATURES, encode_record
+
+        features = [0.8 * math.sin(2 * np.pi * 0.7 * t + 0.37 * i) for i in range(len(FEATURES))]
+        half = 0.1 * math.sin(t)
+        quaternion = (math.sin(half) * math.sqrt(0.5), math.sin(half) * math.sqrt(0.5),
+                      math.cos(half) * math.sqrt(0.5), math.cos(half) * math.sqrt(0.5))
+        openness = 0.5 + 0.5 * math.cos(2 * np.pi * 0.3 * t)
+        return [encode_record(time=t, face_id=0, right_open=openness, left_open=openness, quaternion=quaternion,
+                              translation=(0.1, 0.0, 5.0), features=features)]
+
+    def send(self, t: float) -> None:
+        for d in self.datagrams(t):
+            self.sock.sendto(d, self.address)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+#: input kind -> the frames the bench's sender streams for it
+SENDERS: dict[str, type] = {"vmc": _VmcFrames, "openseeface": _OpenSeeFaceFrames}
+
+
+def decode_cost(kind: str, n: int = DECODE_PACKETS) -> dict:
+    """Per-datagram cost of ``kind``'s adapter ``handle`` over ``n`` prepared datagrams: p50/p99/max µs."""
+    from facepuppet.runtime.inputs.kinds import make_adapter
+
+    frames = SENDERS[kind]("127.0.0.1", 9)  # loopback's discard port: VMC's sender fills its bytes by sending
+    try:
+        per_frame = frames.per_frame
+        distinct = [frames.datagrams(k / 60.0) for k in range(200)]
+    finally:
+        frames.close()
+    adapter = make_adapter(kind)
+    handle, clock = adapter.handle, time.perf_counter_ns
+    cost = np.empty(n, dtype=np.int64)
+    i = 0
+    while i < n:
+        for d in distinct[(i // per_frame) % len(distinct)]:
+            if i >= n:
+                break
+            t0 = clock()
+            handle(d, 0.0)
+            cost[i] = clock() - t0
+            i += 1
+    us = cost / 1e3
+    p50, p99 = np.percentile(us, [50, 99])
+    per_frame_us = us[: n - n % per_frame].reshape(-1, per_frame).sum(axis=1)
+    f50, f99 = np.percentile(per_frame_us, [50, 99])
+    return {"datagrams": n, "datagrams_per_frame": per_frame, "p50_us": float(p50), "p99_us": float(p99),
+            "max_us": float(us.max()), "per_frame_p50_us": float(f50), "per_frame_p99_us": float(f99),
+            "frames": adapter.counters.get("frames"), "internal_error": adapter.counters.get("internal_error")}
+
+
+def send(host: str, port: int, rate: float, seconds: float, kind: str = "vmc") -> int:
+    """Stream ``kind`` frames (:data:`SENDERS`) at ``rate`` Hz for ``seconds``; returns the number of frames sent."""
+    frames = SENDERS[kind](host, port)
     start = time.monotonic()
     k = 0
     while True:
@@ -70,10 +166,9 @@ def send(host: str, port: int, rate: float, seconds: float) -> int:
         ahead = start + t - time.monotonic()
         if ahead > 0:
             time.sleep(ahead)
-        weights = 0.5 + 0.5 * np.sin(2 * np.pi * 0.7 * t + phases)
-        sender.send(weights, euler_to_quat(0.2 * math.sin(t), 0.1 * math.sin(1.3 * t), 0.0), (0.0, 0.0, 0.0))
+        frames.send(t)
         k += 1
-    sender.close()
+    frames.close()
     return k
 
 
@@ -81,13 +176,18 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     """One sender process at ``rate`` for ``seconds`` against one headless live run."""
     from facepuppet.runtime.commands.run import run_live
 
+    kind = getattr(args, "input", "vmc")
+    probe = SENDERS[kind]("127.0.0.1", 9)  # datagrams per frame (VMC: status + the blend bundles); sends nothing
+    per_frame = probe.per_frame
+    probe.close()
+
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     # the run stops shortly after the sender process ends (its start-up time varies with load);
     # the duration is only a safety net
     run_args = SimpleNamespace(
-        character=args.character, input="vmc", listen=f"127.0.0.1:{port}", allow=None, config=None,
+        character=args.character, input=kind, listen=f"127.0.0.1:{port}", allow=None, config=None,
         calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False, headless=True,
         out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path,
         receiver=getattr(args, "receiver", "process"), draw=getattr(args, "draw", "arrival"))
@@ -104,7 +204,7 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
         t_start[0] = time.monotonic()
         procs.append(subprocess.Popen(
             [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(address[1]),
-             repr(rate), repr(seconds)], stdout=subprocess.PIPE, text=True))
+             repr(rate), repr(seconds), kind], stdout=subprocess.PIPE, text=True))
 
         def wait_for_sender():
             sender_out.append(procs[0].communicate()[0])
@@ -144,9 +244,10 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
         "rate_hz": rate,
         "seconds": seconds,
         "frames_sent": frames_sent,
-        "datagrams_sent": frames_sent * 3,
+        "input": kind,
+        "datagrams_sent": frames_sent * per_frame,
         "datagrams_received": udp["packets"],
-        "udp_lost": frames_sent * 3 - udp["packets"],
+        "udp_lost": frames_sent * per_frame - udp["packets"],
         "frames_decoded": udp.get("frames", None),
         "frames_drawn": int(e2e.size),
         "ticks": result.loop.n_ticks,
@@ -209,8 +310,13 @@ def _percentiles(ms: np.ndarray) -> dict:
 
 def bench_latency(args: argparse.Namespace) -> dict:
     log = print if args.verbose else (lambda s: None)
+    kind = getattr(args, "input", "vmc")
     results = {"character": str(args.character), "size": args.size, "fps": args.fps,
-               "draw": getattr(args, "draw", "arrival")}
+               "draw": getattr(args, "draw", "arrival"), "input": kind}
+    results["decode_us"] = d = decode_cost(kind)
+    print(f"latency bench [decode {kind}]: {d['datagrams']} datagrams, handle() p50 {d['p50_us']:.1f} us, "
+          f"p99 {d['p99_us']:.1f} us, max {d['max_us']:.1f} us; per frame ({d['datagrams_per_frame']} datagrams) "
+          f"p50 {d['per_frame_p50_us']:.1f} us, p99 {d['per_frame_p99_us']:.1f} us")
     results["nominal"] = _phase(args, args.rate, args.seconds, log)
     _print("nominal", results["nominal"])
     m = results["map_step"] = map_step_cost(args.character)
@@ -248,6 +354,8 @@ def _print(name: str, r: dict) -> None:
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-c", "--character", required=True,
                         help="character .npz (the ICT head for the issue's numbers)")
+    parser.add_argument("--input", choices=tuple(SENDERS), default="vmc",
+                        help="the protocol sent and listened for (vmc, the default, or openseeface)")
     parser.add_argument("--rate", type=float, default=120.0, help="frames per second sent (120)")
     parser.add_argument("--seconds", type=float, default=30.0, help="seconds of sending (30)")
     parser.add_argument("--size", default="640x480", help="render size (640x480)")
@@ -267,14 +375,17 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
 register_bench(
     "latency",
     bench_latency,
-    "receive -> frame-finished latency of a headless live run fed by a VMC sender process (optional flood)",
+    "receive -> frame-finished latency of a headless live run fed by a sender process (VMC or OpenSeeFace; "
+    "optional flood), and the decode cost per datagram",
     _add_arguments,
 )
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 6 and sys.argv[1] == "--send":
-        print(send(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])), flush=True)
+    if len(sys.argv) in (6, 7) and sys.argv[1] == "--send":
+        print(send(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5]),
+                   *(sys.argv[6:7])), flush=True)
     else:
-        print("usage: python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS", file=sys.stderr)
+        print("usage: python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS [KIND]",
+              file=sys.stderr)
         raise SystemExit(2)

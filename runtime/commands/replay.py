@@ -91,6 +91,16 @@ def _gap_seconds(text: str) -> float:
     return value
 
 
+def _recorded_face_id(header: dict) -> int | None:
+    """The ``--face-id`` a live recording was made with (openseeface); None when it has none."""
+    options = header.get("info", {}).get("options") if isinstance(header.get("info"), dict) else None
+    value = options.get("face_id") if isinstance(options, dict) else None
+    try:
+        return None if value is None else int(value)
+    except (TypeError, ValueError):
+        return None
+
+
 def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:
     """Run the ``replay`` command from parsed ``args``; returns the exit code."""
     from facepuppet.runtime.recording.ticked_source import TickedSource, read_live_recording
@@ -109,6 +119,10 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     if character.credits:
         log(f"credits: {character.credits}")
     live = read_live_recording(args.session, lambda kind: make_input_adapter(kind, (), log=lambda s: None))
+    face_id = _recorded_face_id(live.header) if live is not None else None
+    if face_id is not None:  # decode again following the face the run followed
+        live = read_live_recording(args.session, lambda kind: make_input_adapter(kind, (), log=lambda s: None,
+                                                                                 face_id=face_id))
     kind = live.header.get("info", {}).get("input") if live is not None else None
     take = _marker_take(args.session) if live is None else None
     if take is not None:
@@ -128,7 +142,7 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     if live is not None and (chain.extra_names or (kind == "markers" and (units or chain.marker_units))):
         # decode again, with the muscle names / converting marker frames to the actor's units
         live = read_live_recording(args.session, lambda k: make_input_adapter(
-            k, chain.extra_names, log=log, marker_units=units, to_units=chain.marker_units))
+            k, chain.extra_names, log=log, marker_units=units, to_units=chain.marker_units, face_id=face_id))
         source, ticks, fps = _source(args, live, getattr(args, "fps", None), lambda s: None)
     log(chain.describe())
     target = create_context(headless=True if args.headless else None, width=width, height=height,

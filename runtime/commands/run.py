@@ -60,7 +60,7 @@ from facepuppet.runtime.live.sinks import PngSink, RecordingHook, WeightLog
 from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, make_input_adapter
 from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.live.video_out import VideoPlan, VideoSink, add_video_arguments, plan_video_from_args
-from facepuppet.runtime.live.vmc_out import VMC_NAMES, VmcSender
+from facepuppet.runtime.live.vmc_out import VMC_NAMES, VmcSender, pipeline_status
 from facepuppet.runtime.render.options import add_render_arguments, render_options
 
 if TYPE_CHECKING:
@@ -105,6 +105,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "shapes and the avatar's own expressions (VRM 0.x preset names Blink, A, Joy, ..., custom "
                         "ones by name) with the values drawn; 'vrm' only the expressions; 'arkit' the 52 and the "
                         "presets derived from them, as for an OBJ rig")
+    p.add_argument("--face-id", type=int, default=None, metavar="ID",
+                   help="--input openseeface: follow the face with this id (default: the first of each datagram)")
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL (no window)")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
@@ -176,6 +178,8 @@ def _check_options(args, default_port) -> _Options:
         raise ValueError("--vmc-extra: needs --vmc-out HOST:PORT")
     if not getattr(args, "vmc_presets", True) and vmc_out is None:
         raise ValueError("--no-vmc-presets: needs --vmc-out HOST:PORT")
+    if getattr(args, "face_id", None) is not None and args.input != "openseeface":
+        raise ValueError(f"--face-id: only for --input openseeface (not {args.input})")
     if getattr(args, "vmc_names", None) is not None and vmc_out is None:
         raise ValueError("--vmc-names: needs --vmc-out HOST:PORT")
     llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
@@ -187,7 +191,7 @@ def _check_options(args, default_port) -> _Options:
 def _record_info(args, opts: _Options) -> dict:
     """The header facts of ``--record``: enough for ``replay`` to rebuild the same chain."""
     options = ("config", "calibrate", "actor", "pair", "marker_units", "retarget", "elastic", "gestures",
-               "gesture_seed")
+               "gesture_seed", "face_id")
     return {"character": str(args.character), "listen": f"{opts.host}:{opts.port}", "fps": opts.loop_fps,
             "idle_fps": opts.idle_fps,
             "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
@@ -260,7 +264,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         log(chain.describe())
         adapter = None if opts.voice_only else make_input_adapter(
             args.input, chain.extra_names, log=log, marker_units=getattr(args, "marker_units", None),
-            to_units=chain.marker_units)
+            to_units=chain.marker_units, face_id=getattr(args, "face_id", None))
         recorder = None
         if args.record is not None:
             recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts),
@@ -333,7 +337,8 @@ def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, 
         own = () if drive is None else tuple(p or n for n, p in zip(drive.expression_names, drive.presets))
         sender = VmcSender(opts.vmc_out[0], opts.vmc_out[1], chain.names, extra=getattr(args, "vmc_extra", False),
                            presets=getattr(args, "vmc_presets", True), expressions=own,
-                           names_mode=getattr(args, "vmc_names", None) or VMC_NAMES[0])
+                           names_mode=getattr(args, "vmc_names", None) or VMC_NAMES[0],
+                           status=pipeline_status(chain.filter) if chain.filter is not None else None)
         log(sender.describe())
         parts.append(sender)
         hooks.append(sender.on_tick)

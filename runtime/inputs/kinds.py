@@ -8,6 +8,7 @@ facecap        :class:`.facecap.FaceCapAdapter`       9000          Face Cap OSC
 faceosc        :class:`.faceosc.FaceOscAdapter`       8338          FaceOSC (§4)
 markers        :class:`facepuppet.runtime.inputs.markers.MarkersAdapter`   9763          /facepuppet/markers OSC
 livelinkface   :class:`facepuppet.runtime.inputs.livelinkface.LiveLinkFaceAdapter`  11111  binary UDP (§5)
+openseeface    :class:`facepuppet.runtime.inputs.openseeface.OpenSeeFaceAdapter`    11573  binary UDP (§9)
 =============  =====================================  ============  =========================
 
 (§ = PROTOCOLS.md sections.) Every adapter has ``kind``, ``default_port``,
@@ -22,6 +23,7 @@ from facepuppet.runtime.inputs.facecap import FaceCapAdapter
 from facepuppet.runtime.inputs.faceosc import FaceOscAdapter
 from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter
 from facepuppet.runtime.inputs.markers import MarkersAdapter
+from facepuppet.runtime.inputs.openseeface import OpenSeeFaceAdapter
 from facepuppet.runtime.inputs.vmc import VmcAdapter
 
 if TYPE_CHECKING:
@@ -33,6 +35,7 @@ INPUT_KINDS: dict[str, type] = {
     "faceosc": FaceOscAdapter,
     "markers": MarkersAdapter,
     "livelinkface": LiveLinkFaceAdapter,
+    "openseeface": OpenSeeFaceAdapter,
 }
 
 

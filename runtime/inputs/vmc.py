@@ -15,6 +15,11 @@ address                     args (extra ones ignored)         effect
 ``/VMC/Ext/OK``             ``i loaded [i calibState calibMode  kept in :attr:`VmcAdapter.status`
                             [i trackingStatus]]``
 ``/VMC/Ext/T``              ``f time``                        ``t_sender`` of later frames
+``/VMC/Ext/Cam``            ``s name, f px py pz qx qy qz qw,   kept in :attr:`VmcAdapter.camera` (our
+                            f fov``                           axes); drives nothing
+``/VMC/Ext/Tra/Pos``        ``s serial, f px py pz qx qy qz qw``  kept in :attr:`VmcAdapter.trackers`;
+``/VMC/Ext/Hmd/Pos``                                          a head tracker is the head until a
+                                                              ``Head`` bone comes (see Head)
 ==========================  ================================  ==================================
 
 Any other address is ignored and counted as ``unknown_address`` (receiver
@@ -45,6 +50,15 @@ counted as ``nonfinite``.
 avatar's right. Ours are right-handed with x to the character's left, so a
 position (x, y, z) becomes (-x, y, z) and a rotation (x, y, z, w) becomes
 (x, -y, -z, w) (the mirror x -> -x). Bone poses are local (to the parent bone).
+
+**Head.** The ``Head`` bone (its local rotation and position) is the head of
+every later frame. A sender that sends no bones but names a head tracker (a
+``/VMC/Ext/Tra/Pos`` serial containing ``head``, any case, or the HMD of
+``/VMC/Ext/Hmd/Pos``) gives the head its rotation; the tracker's position is a
+room position (metres, not an offset of the head) and stays in
+:attr:`VmcAdapter.trackers`. Once a ``Head`` bone has come, trackers no longer
+move the head. At most ``MAX_TRACKERS`` serials are kept; further new ones
+are counted as ``unknown_address``.
 """
 
 from __future__ import annotations
@@ -98,6 +112,8 @@ PRESETS: dict[str, tuple[tuple[str, float], ...]] = {
 }
 
 _CACHE_LIMIT = 1024  # name lookups remembered (bounded: a hostile sender can invent names)
+MAX_TRACKERS = 64  # tracker serials kept (bounded for the same reason)
+_TRACKERS = {"/VMC/Ext/Tra/Pos": "tracker", "/VMC/Ext/Hmd/Pos": "hmd"}
 
 
 def unity_to_ours(position: Sequence[float], rotation: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -123,6 +139,10 @@ class VmcAdapter(OscAdapter):
     root_position : ndarray of shape (3,), float32, our axes, sender units (m); or None
     root_rotation : ndarray of shape (4,), float32, (x, y, z, w); or None
     status : dict of str -> int, from ``/VMC/Ext/OK`` (loaded, calib_state, calib_mode, tracking)
+    camera : dict or None, the last ``/VMC/Ext/Cam``: ``name``, ``position`` (3,), ``rotation`` (4,) in our
+        axes, ``fov`` (degrees)
+    trackers : dict of serial str -> (kind "tracker" or "hmd", position (3,), rotation (4,)), our axes
+    head_source : str, ``none``, ``tracker`` (a head tracker) or ``bone`` (the Head bone)
     """
 
     kind = "vmc"
@@ -148,6 +168,9 @@ class VmcAdapter(OscAdapter):
         self.root_rotation: np.ndarray | None = None
         self.status: dict[str, int] = {}
         self.t_sender = math.nan
+        self.camera: dict | None = None
+        self.trackers: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
+        self.head_source = "none"
 
     def _message(self, address: str, params: list, t: float) -> None:
         if address == "/VMC/Ext/Blend/Val":
@@ -160,6 +183,10 @@ class VmcAdapter(OscAdapter):
             self._pose(params, root=True)
         elif address == "/VMC/Ext/OK":
             self._ok(params)
+        elif address in _TRACKERS:
+            self._tracker(_TRACKERS[address], params)
+        elif address == "/VMC/Ext/Cam":
+            self._camera(params)
         elif address == "/VMC/Ext/T":
             value = floats(params, 0, 1)
             if value is None:
@@ -234,29 +261,58 @@ class VmcAdapter(OscAdapter):
             t_sender=self.t_sender,
         )
 
-    def _pose(self, params: list, root: bool) -> None:
+    def _named_pose(self, params: list, n_floats: int = 7) -> tuple[str, list, tuple] | None:
+        """(name, the floats, (position, rotation) in our axes) of ``s name, f px py pz qx qy qz qw [...]``;
+        None (counted) when malformed or not finite."""
         if not params or type(params[0]) is not str:
             self._count("malformed")
-            return
-        values = floats(params, 1, 7)
+            return None
+        values = floats(params, 1, n_floats)
         if values is None:
             self._count("malformed")
-            return
-        name = params[0]
-        if not root and name != "Head":
-            return  # a bone we do not drive
+            return None
         if not all_finite(values):
             self._count("nonfinite")
-            return
-        norm = math.hypot(*values[3:])
+            return None
+        norm = math.hypot(*values[3:7])
         if not 1e-6 < norm < 1e30:  # not a rotation: keep the previous pose
             self._count("malformed")
+            return None
+        return params[0], values, unity_to_ours(values[:3], [q / norm for q in values[3:7]])
+
+    def _pose(self, params: list, root: bool) -> None:
+        if not root and params and type(params[0]) is str and params[0] != "Head":
+            if floats(params, 1, 7) is None:
+                self._count("malformed")
+            return  # a bone we do not drive
+        pose = self._named_pose(params)
+        if pose is None:
             return
-        position, rotation = unity_to_ours(values[:3], [q / norm for q in values[3:]])
+        position, rotation = pose[2]
         if root:
             self.root_position, self.root_rotation = position, rotation
         else:
             self.head_translation, self.head_rotation = position, rotation
+            self.head_source = "bone"
+
+    def _tracker(self, kind: str, params: list) -> None:
+        pose = self._named_pose(params)
+        if pose is None:
+            return
+        serial, _, (position, rotation) = pose
+        if serial not in self.trackers and len(self.trackers) >= MAX_TRACKERS:
+            self._count("unknown_address")
+            return
+        self.trackers[serial] = (kind, position, rotation)
+        if self.head_source != "bone" and (kind == "hmd" or "head" in serial.lower()):
+            self.head_rotation, self.head_source = rotation, "tracker"
+
+    def _camera(self, params: list) -> None:
+        pose = self._named_pose(params, 8)
+        if pose is None:
+            return
+        name, values, (position, rotation) = pose
+        self.camera = {"name": name, "position": position, "rotation": rotation, "fov": float(values[7])}
 
     def _ok(self, params: list) -> None:
         if not params or any(type(p) is not int for p in params[:4]):

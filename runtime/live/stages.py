@@ -328,8 +328,10 @@ def _load_kpls(path, shapes, log) -> KplsStage:
 
 def make_input_adapter(kind: str, extra_names: Sequence[str] = (),
                        log: Callable[[str], None] = logger.info, *, marker_units: str | None = None,
-                       to_units: str | None = None) -> InputAdapter:
+                       to_units: str | None = None, face_id: int | None = None) -> InputAdapter:
     """A new adapter of ``kind`` that also carries ``extra_names`` channels where its protocol can (VMC).
+
+    For ``openseeface``: ``face_id`` is the face to follow (``--face-id``; None: the first of each datagram).
 
     For ``markers``: ``marker_units`` are the frames' units where a layout declares none
     (``--marker-units``), ``to_units`` the units the solve wants (the actor's); frames are converted.
@@ -344,6 +346,14 @@ def make_input_adapter(kind: str, extra_names: Sequence[str] = (),
                 "marker frames are not converted")
             to_units = None
         return MarkersAdapter(units=marker_units, to_units=to_units)
+    if kind == "openseeface" and face_id is not None:
+        from facepuppet.runtime.inputs.openseeface import OpenSeeFaceAdapter
+
+        adapter = OpenSeeFaceAdapter(face_id=face_id)
+        if extra_names:
+            log(f"note: --input {kind} cannot name channels {tuple(extra_names)[:3]}...; "
+                "only VMC blend names reach them")
+        return adapter
     if extra_names and kind == "vmc":
         from facepuppet.runtime.inputs.vmc import VmcAdapter
 

@@ -3,11 +3,18 @@
 Every tick sends, over one UDP socket, bundles of at most ``max_bundle`` bytes
 (1,200, as VirtualMotionCapture does), each a complete OSC bundle:
 
-1. the status bundle: ``/VMC/Ext/OK i 1 i 3 i 0 i tracking`` (loaded,
-   calibrated, normal mode; tracking 1 once a frame is drawn, 0 before),
-   ``/VMC/Ext/T f seconds`` (since the sender started), ``/VMC/Ext/Root/Pos
-   s "root"`` at the origin, and ``/VMC/Ext/Bone/Pos s "Head" f px py pz qx qy
-   qz qw``;
+1. the status bundle: ``/VMC/Ext/OK i loaded i calibState i calibMode i
+   tracking`` (V2.7's four ints: loaded 1, the character is loaded before the
+   first tick; calibState 3 "calibrated", 2 "calibrating" while facepuppet
+   captures the neutral pose; calibMode 0 normal; tracking 1 while the run's
+   tracking state is live, 0 before the first frame and while tracking is lost
+   and the face eases to neutral: see :func:`pipeline_status`),
+   ``/VMC/Ext/T f seconds`` (since the sender started: the sender's relative
+   time, a sign of life), ``/VMC/Ext/Root/Pos s "root"`` at the origin, and
+   ``/VMC/Ext/Bone/Pos s "Head" f px py pz qx qy qz qw``. OK and T go out
+   every tick: the marionette spec marks only the Light, VRM, Remote, Option,
+   Setting and Config messages as low-frequency, and a performer's
+   ``/VMC/Ext/Set/Period`` status interval counts in frames;
 2. the blend bundles, ``/VMC/Ext/Blend/Val s Name f value`` each:
 
    * the 52 ARKit shapes, every tick, in the PascalCase of perfect sync
@@ -75,6 +82,7 @@ if TYPE_CHECKING:
 
 MAX_BUNDLE = 1200
 VMC_NAMES = ("both", "arkit", "vrm")  # --vmc-names, the first the default (see the module doc)
+CALIBRATED, CALIBRATING = 3, 2  # /VMC/Ext/OK calibration states (0 uncalibrated, 1 waiting, 2, 3)
 _BUNDLE_HEAD = 16  # "#bundle\0" + 8-byte time tag
 _F32 = struct.Struct(">f")
 _I32 = struct.Struct(">i")
@@ -122,6 +130,8 @@ class VmcSender:
     expressions : sequence of str, the avatar's expression names to send (VRM 0.x spelling for a preset; see
         the module doc), in the order of the values :meth:`send` gets; empty for a character without
     names : "both" (default), "arkit" or "vrm" (``--vmc-names``, see the module doc)
+    status : callable returning (calibration state int, tracking bool), read each tick by :meth:`on_tick`;
+        None: calibrated, tracking once a frame is on screen
 
     Attributes
     ----------
@@ -134,7 +144,9 @@ class VmcSender:
 
     def __init__(self, host: str, port: int, names: Sequence[str], max_bundle: int = MAX_BUNDLE,
                  extra: bool = False, clock: Callable[[], float] = time.monotonic, presets: bool = True,
-                 expressions: Sequence[str] = (), names_mode: str = "both") -> None:
+                 expressions: Sequence[str] = (), names_mode: str = "both",
+                 status: Callable[[], tuple[int, bool]] | None = None) -> None:
+        self._status_of = status
         if names_mode not in VMC_NAMES:
             raise ValueError(f"--vmc-names: expected one of {', '.join(VMC_NAMES)}, got {names_mode!r}")
         if names_mode == "vrm" and not presets:
@@ -182,6 +194,7 @@ class VmcSender:
         self._status = bytearray(_bundle(status))
         offsets = self._offsets(status)
         self._tracking_at = offsets[0] + status[0].size - 4  # the OK message's last int
+        self._calib_at = self._tracking_at - 8  # its second int
         self._t_at = offsets[1] + status[1].size - 4
         self._head_at = offsets[3] + status[3].size - 7 * 4  # the 7 floats end the Head message
 
@@ -234,10 +247,10 @@ class VmcSender:
 
     def send(self, weights: np.ndarray, rotation: np.ndarray | None = None,
              translation: np.ndarray | None = None, t: float | None = None, tracking: bool = True,
-             expressions: np.ndarray | None = None) -> None:
+             expressions: np.ndarray | None = None, calib_state: int = CALIBRATED) -> None:
         """Send one tick: weights (n,) float, rotation (4,) (x, y, z, w) or None (identity),
         translation (3,) or None (zero), ``t`` seconds for ``/VMC/Ext/T`` (None: since the sender
-        started), ``tracking`` for the OK message, the avatar's ``expressions`` values (or None).
+        started), ``tracking`` and ``calib_state`` for the OK message, the avatar's ``expressions`` values (or None).
         Send errors are counted, never raised."""
         for (gi, at), v in zip(self._slots, self.values(weights, expressions).tolist()):
             _F32.pack_into(self.datagrams[gi], at, v)
@@ -246,6 +259,7 @@ class VmcSender:
         struct.pack_into(">7f", self._status, self._head_at, -px, py, pz, qx, -qy, -qz, qw)  # mirror x
         _F32.pack_into(self._status, self._t_at, self._clock() - self._t0 if t is None else t)
         _I32.pack_into(self._status, self._tracking_at, 1 if tracking else 0)
+        _I32.pack_into(self._status, self._calib_at, int(calib_state))
         for d in self.datagrams:
             try:
                 self._sock.send(d)
@@ -254,8 +268,13 @@ class VmcSender:
                 self.counters["send_errors"] += 1
 
     def on_tick(self, info: TickInfo) -> None:
-        """FrameLoop ``on_tick`` hook: send what this tick drew (tracking once a frame is on screen)."""
-        self.send(info.weights, info.rotation, info.translation, tracking=info.frame is not None,
+        """FrameLoop ``on_tick`` hook: send what this tick drew, with the status of ``status`` (default:
+        calibrated, tracking once a frame is on screen)."""
+        if self._status_of is not None:
+            calib, tracking = self._status_of()
+        else:
+            calib, tracking = CALIBRATED, info.frame is not None
+        self.send(info.weights, info.rotation, info.translation, tracking=tracking, calib_state=calib,
                   expressions=info.expressions)
 
     def describe(self) -> str:
@@ -282,3 +301,13 @@ class VmcSender:
 
     def close(self) -> None:
         self._sock.close()
+
+
+def pipeline_status(stage: object) -> Callable[[], tuple[int, bool]]:
+    """The ``status`` of a run whose ``filter`` stage is ``stage`` (:class:`~facepuppet.runtime.live.pipeline.
+    LivePipeline`): calibrating (2) while it captures the neutral, else calibrated (3); tracking while its
+    state is ``live`` or ``returning`` (frames arriving), not while ``waiting`` (none yet) or ``lost``."""
+    def status() -> tuple[int, bool]:
+        calib = CALIBRATING if getattr(stage, "calibrating", False) else CALIBRATED
+        return calib, getattr(stage, "state", "live") in ("live", "returning")
+    return status

@@ -27,6 +27,7 @@ from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.osc import UNSUPPORTED, decode
 from facepuppet.runtime.inputs.udp import UdpSource
 
+from helpers.openseeface_sender import osf_record
 from helpers.osc_helpers import bundle, msg
 
 SEED = 3
@@ -53,6 +54,8 @@ def valid(kind: str, jaw: float) -> list[bytes]:
     if kind == "markers":
         return [bundle(msg("/facepuppet/markers/layout", 1, *MARKER_NAMES),
                        msg("/facepuppet/markers/frame", 1, 5, (1.0, "d"), ((MARKERS * jaw).tobytes(), "b")))]
+    if kind == "openseeface":
+        return [osf_record(features={"mouth_open": jaw})]
     weights = [0.0] * 52
     weights[JAW] = jaw
     return [encode_llf_packet(weights, head=(0.1, 0.0, 0.0), number=9)]
@@ -90,6 +93,8 @@ def seeds(kind: str) -> list[bytes]:
                     msg("/facepuppet/markers/frame", 1, 5, (1.0, "d"), (MARKERS.tobytes(), "b")).dgram,
                     valid("markers", 0.5)[0]],
         "livelinkface": [encode_llf_packet([0.5] * 52, head=(0.1, 0.2, 0.3), name="Phone")],
+        "openseeface": [osf_record(features={"mouth_open": 0.5}),
+                        osf_record(face_id=1, fit=0) + osf_record(face_id=2, right_open=0.1)],
     }
     return out[kind]
 

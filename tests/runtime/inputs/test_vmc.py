@@ -165,7 +165,7 @@ def test_nonfinite_value_rejects_the_frame(bad):
 
 def test_unknown_addresses_are_ignored_and_counted():
     a = VmcAdapter()
-    f = a.handle(bundle(msg("/VMC/Ext/Cam", "Camera", 0.0), msg("/VMC/Ext/Set/Period", 1, 1, 1, 1, 1, 1),
+    f = a.handle(bundle(msg("/VMC/Ext/Light", "Light", 0.0), msg("/VMC/Ext/Set/Period", 1, 1, 1, 1, 1, 1),
                         msg("/something/else"), msg(VAL, "JawOpen", 0.4), msg(APPLY)), 0.0)
     assert f.weights[INDEX["jawOpen"]] == pytest.approx(0.4)
     counts(a, datagrams=1, frames=1, unknown_address=3)
