@@ -80,7 +80,7 @@ def test_ok_carries_the_status_callable_and_t_the_sender_time(receiver):
     sender = VmcSender("127.0.0.1", receiver.getsockname()[1], ("jawOpen",), status=lambda: state["value"],
                        clock=iter([10.0, 10.25, 11.5]).__next__)
     try:
-        info = SimpleNamespace(weights=np.array([0.5], np.float32), rotation=None, translation=None, frame=None)
+        info = SimpleNamespace(weights=np.array([0.5], np.float32), rotation=None, translation=None, frame=None, expressions=None)
         sender.on_tick(info)
         state["value"] = (3, True)
         sender.on_tick(info)
@@ -96,8 +96,8 @@ def test_without_a_status_callable_tracking_is_a_frame_on_screen(receiver):
     sender = VmcSender("127.0.0.1", receiver.getsockname()[1], ("jawOpen",))
     try:
         w = np.array([0.5], np.float32)
-        sender.on_tick(SimpleNamespace(weights=w, rotation=None, translation=None, frame=None))
-        sender.on_tick(SimpleNamespace(weights=w, rotation=None, translation=None, frame=object()))
+        sender.on_tick(SimpleNamespace(weights=w, rotation=None, translation=None, frame=None, expressions=None))
+        sender.on_tick(SimpleNamespace(weights=w, rotation=None, translation=None, frame=object(), expressions=None))
         time.sleep(0.05)
         got = status_messages(receiver)
     finally:
