@@ -18,7 +18,14 @@ rendering the character at ``--size``. Reported:
   latency of the newest frame per second and resident memory (RSS) sampled
   every second, which must stay flat.
 
-Run the sender alone with ``python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS``.
+``--input ifacialmocap|vtubestudio`` streams that protocol instead, from a
+sender process that plays the phone: it waits on 127.0.0.1 for the run's
+``--phone`` start payload / data request and then sends one datagram per frame
+to the run (VTube Studio: to the ports the request names). ``decode_us`` is the
+cost of the receiver's decoding, ``adapter.handle`` per datagram (p50/p99 µs over
+``DECODE_SAMPLES`` datagrams of the kind, timed in this process).
+
+Run the sender alone with ``python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS [KIND]``.
 """
 
 from __future__ import annotations
@@ -49,15 +56,64 @@ def rss_mb() -> float:
         return peak_rss_mb()
 
 
-def send(host: str, port: int, rate: float, seconds: float) -> int:
-    """Stream VMC frames at ``rate`` Hz for ``seconds``; returns the number of frames sent."""
+INPUTS = ("vmc", "ifacialmocap", "vtubestudio")
+DATAGRAMS_PER_FRAME = {"vmc": 3, "ifacialmocap": 1, "vtubestudio": 1}
+DECODE_SAMPLES = 2000
+PHONE_WAIT_S = 60.0  # the phone sender waits this long for the run's first request
+
+
+def _weights(t: float) -> np.ndarray:
+    phases = np.arange(52) * 0.37
+    return 0.5 + 0.5 * np.sin(2 * np.pi * 0.7 * t + phases)
+
+
+def encode(kind: str, t: float) -> bytes:
+    """One datagram of a phone kind at time ``t`` of the bench's motion (weights and head)."""
+    from facepuppet.runtime.inputs.ifacialmocap import encode_ifm_frame
+    from facepuppet.runtime.inputs.vtubestudio import encode_vts_frame
+
+    yaw, pitch = math.degrees(0.2 * math.sin(t)), math.degrees(0.1 * math.sin(1.3 * t))
+    if kind == "ifacialmocap":
+        return encode_ifm_frame(_weights(t), head=(pitch, yaw, 0.0, 0.0, 0.0, 0.0))
+    return encode_vts_frame(_weights(t), rotation=(pitch, yaw, 0.0), timestamp_ms=int(t * 1000))
+
+
+def send(host: str, port: int, rate: float, seconds: float, kind: str = "vmc") -> int:
+    """Stream frames of ``kind`` at ``rate`` Hz for ``seconds`` to host:port; returns the number of frames sent.
+
+    For the phone kinds ``port`` is the run's listening port and this process plays the phone: it prints
+    ``phone PORT`` (its own port on 127.0.0.1), waits for the first request and streams to the requester
+    (VTube Studio: to the ports the request names).
+    """
     from facepuppet.runtime.channels import ARKIT_NAMES
     from facepuppet.runtime.geometry import euler_to_quat
     from facepuppet.runtime.live.vmc_out import VmcSender
 
-    sender = VmcSender(host, port, ARKIT_NAMES)
-    n = len(ARKIT_NAMES)
-    phases = np.arange(n) * 0.37
+    if kind == "vmc":
+        sender = VmcSender(host, port, ARKIT_NAMES)
+
+        def emit(t):
+            sender.send(_weights(t), euler_to_quat(0.2 * math.sin(t), 0.1 * math.sin(1.3 * t), 0.0), (0.0, 0.0, 0.0))
+    else:
+        sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sender.bind(("127.0.0.1", 0))
+        print(f"phone {sender.getsockname()[1]}", flush=True)
+        sender.settimeout(PHONE_WAIT_S)
+        request, requester = sender.recvfrom(4096)
+        targets = [(requester[0], port)]
+        if kind == "vtubestudio":
+            import json
+
+            targets = [(requester[0], int(p)) for p in json.loads(request)["ports"]]
+        sender.setblocking(False)
+
+        def emit(t):
+            data = encode(kind, t)
+            for target in targets:
+                try:
+                    sender.sendto(data, target)
+                except BlockingIOError:
+                    pass
     start = time.monotonic()
     k = 0
     while True:
@@ -67,30 +123,77 @@ def send(host: str, port: int, rate: float, seconds: float) -> int:
         ahead = start + t - time.monotonic()
         if ahead > 0:
             time.sleep(ahead)
-        weights = 0.5 + 0.5 * np.sin(2 * np.pi * 0.7 * t + phases)
-        sender.send(weights, euler_to_quat(0.2 * math.sin(t), 0.1 * math.sin(1.3 * t), 0.0), (0.0, 0.0, 0.0))
+        emit(t)
         k += 1
     sender.close()
     return k
+
+
+def decode_cost(kind: str, n: int = DECODE_SAMPLES) -> dict:
+    """p50/p99/max µs of ``adapter.handle`` per datagram of ``kind`` (the receiver's decoding), n datagrams."""
+    from facepuppet.runtime.inputs.kinds import make_adapter
+
+    if kind == "vmc":  # what VmcSender sends, caught on a loopback socket
+        from facepuppet.runtime.channels import ARKIT_NAMES
+        from facepuppet.runtime.geometry import euler_to_quat
+        from facepuppet.runtime.live.vmc_out import VmcSender
+
+        datagrams: list[bytes] = []
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:
+            sink.bind(("127.0.0.1", 0))
+            sender = VmcSender("127.0.0.1", sink.getsockname()[1], ARKIT_NAMES)
+            sink.settimeout(0.05)
+            for k in range(n // 3):
+                t = k / 60.0
+                sender.send(_weights(t), euler_to_quat(0.2 * math.sin(t), 0.0, 0.0), (0.0, 0.0, 0.0))
+                try:  # drain what this frame sent before the next (a small socket buffer)
+                    while True:
+                        datagrams.append(sink.recv(65536))
+                except TimeoutError:
+                    pass
+            sender.close()
+    else:
+        datagrams = [encode(kind, k / 60.0) for k in range(n)]
+    adapter = make_adapter(kind)
+    samples = np.empty(len(datagrams))
+    clock = time.perf_counter_ns
+    for i, data in enumerate(datagrams):
+        t0 = clock()
+        adapter.handle(data, float(i))
+        samples[i] = (clock() - t0) / 1e3
+    p50, p99 = np.percentile(samples, [50, 99])
+    return {"n": int(samples.size), "p50_us": float(p50), "p99_us": float(p99), "max_us": float(samples.max()),
+            "bytes": int(np.mean([len(d) for d in datagrams])), "frames": adapter.counters["frames"]}
 
 
 def _phase(args, rate: float, seconds: float, log) -> dict:
     """One sender process at ``rate`` for ``seconds`` against one headless live run."""
     from facepuppet.runtime.commands.run import run_live
 
+    kind = getattr(args, "input", "vmc")
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
+    procs = []
+    phone = None
+    if kind != "vmc":  # the phone must be there before the run asks it
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(port),
+             repr(rate), repr(seconds), kind], stdout=subprocess.PIPE, text=True))
+        first = procs[0].stdout.readline().split()
+        if len(first) != 2 or first[0] != "phone":
+            procs[0].kill()
+            raise RuntimeError(f"bench latency: the {kind} phone sender did not start ({first!r})")
+        phone = f"127.0.0.1:{first[1]}"
     # the run stops shortly after the sender process ends (its start-up time varies with load);
     # the duration is only a safety net
     run_args = SimpleNamespace(
-        character=args.character, input="vmc", listen=f"127.0.0.1:{port}", allow=None, config=None,
+        character=args.character, input=kind, listen=f"127.0.0.1:{port}", allow=None, config=None, phone=phone,
         calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False, headless=True,
         out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path,
         receiver=getattr(args, "receiver", "process"), draw=getattr(args, "draw", "arrival"))
     stop = threading.Event()
     sender_out: list[str] = []
-    procs = []
     rss: list[tuple[float, float]] = []
     newest: list[float] = []  # end-to-end ms of each drawn new frame (for per-second maxima)
     t_start = [0.0]
@@ -99,9 +202,10 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
 
     def on_ready(address):
         t_start[0] = time.monotonic()
-        procs.append(subprocess.Popen(
-            [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(address[1]),
-             repr(rate), repr(seconds)], stdout=subprocess.PIPE, text=True))
+        if not procs:
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(address[1]),
+                 repr(rate), repr(seconds)], stdout=subprocess.PIPE, text=True))
 
         def wait_for_sender():
             sender_out.append(procs[0].communicate()[0])
@@ -137,13 +241,15 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     per_second = {}
     for t, ms in newest:
         per_second[int(t)] = max(per_second.get(int(t), 0.0), ms)
+    per_frame = DATAGRAMS_PER_FRAME[kind]
     return {
+        "input": kind,
         "rate_hz": rate,
         "seconds": seconds,
         "frames_sent": frames_sent,
-        "datagrams_sent": frames_sent * 3,
+        "datagrams_sent": frames_sent * per_frame,
         "datagrams_received": udp["packets"],
-        "udp_lost": frames_sent * 3 - udp["packets"],
+        "udp_lost": frames_sent * per_frame - udp["packets"],
         "frames_decoded": udp.get("frames", None),
         "frames_drawn": int(e2e.size),
         "ticks": result.loop.n_ticks,
@@ -176,8 +282,14 @@ def _percentiles(ms: np.ndarray) -> dict:
 
 def bench_latency(args: argparse.Namespace) -> dict:
     log = print if args.verbose else (lambda s: None)
+    kind = getattr(args, "input", "vmc")
     results = {"character": str(args.character), "size": args.size, "fps": args.fps,
-               "draw": getattr(args, "draw", "arrival")}
+               "draw": getattr(args, "draw", "arrival"), "input": kind}
+    if kind != "vmc":
+        results["decode_us"] = decode_cost(kind)
+        d = results["decode_us"]
+        print(f"latency bench [{kind}]: decode per datagram ({d['bytes']} bytes) p50 {d['p50_us']:.1f} us, "
+              f"p99 {d['p99_us']:.1f} us over {d['n']}")
     results["nominal"] = _phase(args, args.rate, args.seconds, log)
     _print("nominal", results["nominal"])
     if args.flood:
@@ -212,6 +324,8 @@ def _print(name: str, r: dict) -> None:
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-c", "--character", required=True,
                         help="character .npz (the ICT head for the issue's numbers)")
+    parser.add_argument("--input", choices=INPUTS, default="vmc",
+                        help="the protocol sent: vmc (default), or a phone kind played by the sender process")
     parser.add_argument("--rate", type=float, default=120.0, help="frames per second sent (120)")
     parser.add_argument("--seconds", type=float, default=30.0, help="seconds of sending (30)")
     parser.add_argument("--size", default="640x480", help="render size (640x480)")
@@ -237,8 +351,10 @@ register_bench(
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 6 and sys.argv[1] == "--send":
-        print(send(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])), flush=True)
+    if len(sys.argv) in (6, 7) and sys.argv[1] == "--send":
+        print(send(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5]),
+                   sys.argv[6] if len(sys.argv) == 7 else "vmc"), flush=True)
     else:
-        print("usage: python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS", file=sys.stderr)
+        print("usage: python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS [KIND]",
+              file=sys.stderr)
         raise SystemExit(2)

@@ -37,6 +37,7 @@ Facemotion3D (same family, ``FM_*`` keys) is not read: see PROTOCOLS.md §7.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -55,6 +56,23 @@ COUNTERS = (*COUNTER_NAMES, "unknown_key")
 
 _INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 _EYES = {"rightEye": "Right", "leftEye": "Left"}
+
+
+_NAME_CACHE: dict[str, int | None] = {}
+MAX_CACHED_NAMES = 512  # names seen on the wire -> channel index (stray keys too, so bounded)
+
+
+def channel_index(name: str) -> int | None:
+    """Index in ARKIT_NAMES of a wire name (``canonical``), None for others; cached, the cache bounded."""
+    try:
+        return _NAME_CACHE[name]
+    except KeyError:
+        pass
+    index = _INDEX.get(canonical(name))
+    if len(_NAME_CACHE) >= MAX_CACHED_NAMES:
+        _NAME_CACHE.clear()
+    _NAME_CACHE[name] = index
+    return index
 
 
 class _Bad(Exception):
@@ -155,7 +173,7 @@ class IFacialMocapAdapter:
                 raise _Bad("malformed")
             seen.add(name)
             number = _number(value)
-            index = _INDEX.get(canonical(name))
+            index = channel_index(name)
             if index is None:
                 unknown += 1
                 continue
@@ -174,3 +192,34 @@ class IFacialMocapAdapter:
             eyes_into(weights, side, ex, ey)
         return Frame(t=t, source=self.kind, channels=ARKIT_NAMES, weights=weights, head_rotation=rotation,
                      head_translation=translation)
+
+
+def _wire_name(name: str) -> str:
+    """iFacialMocap's spelling of an ARKit name (``eyeBlinkLeft`` -> ``eyeBlink_L``; jawLeft etc. kept)."""
+    if name in ("jawLeft", "jawRight", "mouthLeft", "mouthRight"):
+        return name
+    for side, suffix in (("Left", "_L"), ("Right", "_R")):
+        if name.endswith(side):
+            return name[:-len(side)] + suffix
+    return name
+
+
+def encode_ifm_frame(weights: Sequence[float], head: Sequence[float] = (0.0,) * 6,
+                     right_eye: Sequence[float] = (0.0,) * 3, left_eye: Sequence[float] = (0.0,) * 3,
+                     version: int = 2) -> bytes:
+    """An iFacialMocap datagram of 52 ARKit weights (0-1, Apple's order) for benchmarks and senders.
+
+    ``head`` is (rx, ry, rz degrees, tx, ty, tz); the eyes (rx, ry, rz) degrees; v1 values are rounded
+    to integers 0-100 as the app sends them, v2 keep two decimals.
+    """
+    weights = list(weights)
+    if len(weights) != 52 or len(head) != 6 or len(right_eye) != 3 or len(left_eye) != 3:
+        raise ValueError("encode_ifm_frame: expected 52 weights, 6 head values and 3 per eye")
+    if version == 1:
+        items = [f"{_wire_name(n)}-{max(0, min(100, round(100 * w)))}" for n, w in zip(ARKIT_NAMES, weights)]
+    else:
+        items = [f"{_wire_name(n)}&{100 * w:.2f}" for n, w in zip(ARKIT_NAMES, weights)]
+    items.append("=head#" + ",".join(f"{x:.4f}" for x in head))
+    items.append("rightEye#" + ",".join(f"{x:.4f}" for x in right_eye))
+    items.append("leftEye#" + ",".join(f"{x:.4f}" for x in left_eye))
+    return ("|".join(items) + "|").encode("ascii")

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -62,6 +63,23 @@ MAX_MESSAGE = 16384
 COUNTERS = (*COUNTER_NAMES, "unknown_key", "face_lost")
 
 _INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
+
+
+_NAME_CACHE: dict[str, int | None] = {}
+MAX_CACHED_NAMES = 512  # names seen on the wire -> channel index (stray keys too, so bounded)
+
+
+def channel_index(name: str) -> int | None:
+    """Index in ARKIT_NAMES of a wire name (``canonical``), None for others; cached, the cache bounded."""
+    try:
+        return _NAME_CACHE[name]
+    except KeyError:
+        pass
+    index = _INDEX.get(canonical(name))
+    if len(_NAME_CACHE) >= MAX_CACHED_NAMES:
+        _NAME_CACHE.clear()
+    _NAME_CACHE[name] = index
+    return index
 
 
 class _Bad(Exception):
@@ -168,7 +186,7 @@ class VTubeStudioAdapter:
             if entry["k"] in seen:
                 raise _Bad("malformed")
             seen.add(entry["k"])
-            index = _INDEX.get(canonical(entry["k"]))
+            index = channel_index(entry["k"])
             if index is None:
                 unknown += 1
                 continue
@@ -187,3 +205,21 @@ class VTubeStudioAdapter:
         return Frame(t=t, source=self.kind, channels=ARKIT_NAMES, weights=weights, head_rotation=head,
                      head_translation=None if position is None else np.array(position, dtype=np.float32),
                      t_sender=t_sender)
+
+
+def encode_vts_frame(weights: Sequence[float], rotation: Sequence[float] = (0.0, 0.0, 0.0),
+                     position: Sequence[float] = (0.0, 0.0, 0.0), eye_left: Sequence[float] = (0.0, 0.0, 0.0),
+                     eye_right: Sequence[float] = (0.0, 0.0, 0.0), found: bool = True, timestamp_ms: int = 0) -> bytes:
+    """A VTube Studio tracking datagram of 52 ARKit weights (Apple's order) for benchmarks and senders."""
+    weights = list(weights)
+    if len(weights) != 52:
+        raise ValueError(f"encode_vts_frame: expected 52 weights, got {len(weights)}")
+
+    def vec(v):
+        return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
+    return json.dumps({"Timestamp": int(timestamp_ms), "Hotkey": -1, "FaceFound": bool(found),
+                       "Rotation": vec(rotation), "Position": vec(position), "EyeLeft": vec(eye_left),
+                       "EyeRight": vec(eye_right),
+                       "BlendShapes": [{"k": n[0].upper() + n[1:], "v": float(w)}
+                                       for n, w in zip(ARKIT_NAMES, weights)]}).encode("ascii")
