@@ -100,6 +100,7 @@ def send(host: str, port: int, rate: float, seconds: float, kind: str = "vmc") -
         print(f"phone {sender.getsockname()[1]}", flush=True)
         sender.settimeout(PHONE_WAIT_S)
         request, requester = sender.recvfrom(4096)
+        sys.stdin.readline()  # "go": the run is ready to draw (frames sent while it sets up would only go stale)
         targets = [(requester[0], port)]
         if kind == "vtubestudio":
             import json
@@ -179,7 +180,7 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     if kind != "vmc":  # the phone must be there before the run asks it
         procs.append(subprocess.Popen(
             [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(port),
-             repr(rate), repr(seconds), kind], stdout=subprocess.PIPE, text=True))
+             repr(rate), repr(seconds), kind], stdout=subprocess.PIPE, stdin=subprocess.PIPE, text=True))
         first = procs[0].stdout.readline().split()
         if len(first) != 2 or first[0] != "phone":
             procs[0].kill()
@@ -202,7 +203,10 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
 
     def on_ready(address):
         t_start[0] = time.monotonic()
-        if not procs:
+        if procs:  # the phone sender: go
+            procs[0].stdin.write("go\n")
+            procs[0].stdin.flush()
+        else:
             procs.append(subprocess.Popen(
                 [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(address[1]),
                  repr(rate), repr(seconds)], stdout=subprocess.PIPE, text=True))
