@@ -197,3 +197,15 @@ def test_run_vtubestudio_requests_repeatedly_and_face_lost_is_tracking_loss(char
     replayed = _replay_weights(record, character, config, tmp_path)  # tick for tick, as live
     assert replayed.shape == w.shape
     np.testing.assert_allclose(replayed, w, atol=1e-5)
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--input", "vmc", "--phone", "127.0.0.1"], "--phone: only for --input ifacialmocap or vtubestudio"),
+    (["--input", "ifacialmocap", "--phone", "192.168.1.20"], "cannot reach 127.0.0.1"),  # nothing is sent there
+    (["--input", "vtubestudio", "--phone", "localhost"], "is not an IP address"),
+    (["--input", "vtubestudio", "--phone", "255.255.255.255"], "broadcast"),
+])
+def test_bad_phone_options_exit_2_with_a_message(character, capsys, argv, match):
+    code = main(["run", "-c", str(character), "--headless", "--duration", "0.1", *argv])
+    assert code == 2
+    assert match in capsys.readouterr().err

@@ -118,3 +118,16 @@ def test_a_full_sized_v2_datagram_decodes():
     frame = a.handle(data, 0.0)
     assert frame is not None and np.all(np.isfinite(frame.weights))
     assert a.counters["unknown_key"] == 1
+
+
+@pytest.mark.parametrize("version, tolerance", [(1, 0.005 + 1e-6), (2, 0.00005 + 1e-6)])
+def test_the_runtime_encoder_round_trips(version, tolerance):
+    from facepuppet.runtime.inputs.ifacialmocap import encode_ifm_frame
+
+    weights = np.linspace(0.0, 1.0, 52)
+    data = encode_ifm_frame(weights, head=(3.0, -4.0, 5.0, 0.1, 0.2, 0.3), version=version)
+    assert all(ifm_name(n) in data.decode() for n in ARKIT_52)  # the app's spelling of every name
+    frame = IFacialMocapAdapter().handle(data, 0.0)
+    np.testing.assert_allclose(frame.weights, weights, atol=tolerance)
+    np.testing.assert_allclose(frame.head_rotation, euler_to_quat(math.radians(-4), math.radians(3),
+                                                                  math.radians(5)), atol=1e-6)

@@ -121,3 +121,14 @@ def test_bad_datagrams_are_dropped_and_counted_once(data, counter):
 def test_a_real_sized_frame_is_well_under_the_limit():
     data = vts_frame({name: 0.123456789 for name in ARKIT_52}, rotation=(12.3456, -7.891, 0.5))
     assert 1500 < len(data) < MAX_MESSAGE
+
+
+def test_the_runtime_encoder_round_trips():
+    from facepuppet.runtime.inputs.vtubestudio import encode_vts_frame
+
+    weights = np.linspace(0.0, 1.0, 52)
+    data = encode_vts_frame(weights, rotation=(3.0, -4.0, 5.0), timestamp_ms=1500)
+    assert [e["k"] for e in json.loads(data)["BlendShapes"]] == [n[0].upper() + n[1:] for n in ARKIT_52]
+    frame = VTubeStudioAdapter().handle(data, 0.0)
+    np.testing.assert_allclose(frame.weights, weights, atol=1e-7)
+    assert frame.t_sender == 1.5
