@@ -31,7 +31,7 @@ Each datagram counts in exactly one of ``frames``, ``malformed``,
 * ``nonfinite``: a value, angle or translation that is NaN, infinite or
   beyond float32 (the frame is dropped, not half drawn).
 
-Facemotion3D (same family, ``FM_*`` keys) is not read: see PROTOCOLS.md §7.
+Facemotion3D (same family, ``FM_*`` keys) and the developer's binary "v3" protocol are not read: PROTOCOLS.md §7.
 """
 
 from __future__ import annotations

@@ -131,3 +131,32 @@ def test_the_runtime_encoder_round_trips(version, tolerance):
     np.testing.assert_allclose(frame.weights, weights, atol=tolerance)
     np.testing.assert_allclose(frame.head_rotation, euler_to_quat(math.radians(-4), math.radians(3),
                                                                   math.radians(5)), atol=1e-6)
+
+
+# One v1 datagram as a phone sent it, from the tests of korewaChino/rust-ifacialmocap (src/lib.rs, MIT licence,
+# (c) Cappy Ishihara): the only public capture found; its 52 names and head/eye items are the app's own.
+PUBLIC_DATAGRAM = (
+    b"mouthSmile_R-0|eyeLookOut_L-0|mouthUpperUp_L-11|eyeWide_R-0|mouthClose-8|mouthPucker-4|mouthRollLower-9|"
+    b"eyeBlink_R-7|eyeLookDown_L-17|cheekSquint_R-11|eyeBlink_L-7|tongueOut-0|jawRight-0|eyeLookIn_R-6|"
+    b"cheekSquint_L-11|mouthDimple_L-10|mouthPress_L-4|eyeSquint_L-11|mouthRight-0|mouthShrugLower-9|eyeLookUp_R-0|"
+    b"eyeLookOut_R-0|mouthPress_R-5|cheekPuff-2|jawForward-11|mouthLowerDown_L-9|mouthFrown_L-6|mouthShrugUpper-26|"
+    b"browOuterUp_L-4|browInnerUp-20|mouthDimple_R-10|browDown_R-0|mouthUpperUp_R-10|mouthRollUpper-8|mouthFunnel-12|"
+    b"mouthStretch_R-21|mouthFrown_R-13|eyeLookDown_R-17|jawOpen-12|jawLeft-0|browDown_L-0|mouthSmile_L-0|"
+    b"noseSneer_R-18|mouthLowerDown_R-8|noseSneer_L-21|eyeWide_L-0|mouthStretch_L-21|browOuterUp_R-4|eyeLookIn_L-4|"
+    b"eyeSquint_R-11|eyeLookUp_L-0|mouthLeft-1|=head#-21.488958,-6.038993,-6.6019735,-0.030653415,-0.10287084,"
+    b"-0.6584072|rightEye#6.0297494,2.4403017,0.25649446|leftEye#6.034903,-1.6660284,-0.17520553|"
+)
+
+
+def test_the_public_datagram_gives_all_52_channels():
+    a = IFacialMocapAdapter()
+    frame = a.handle(PUBLIC_DATAGRAM, 0.0)
+    assert frame is not None and a.counters["unknown_key"] == 0
+    assert np.all(np.isfinite(frame.weights))  # every one of the 52 names is known
+    w = dict(zip(frame.channels, frame.weights.tolist()))
+    assert w["jawOpen"] == pytest.approx(0.12) and w["mouthShrugUpper"] == pytest.approx(0.26)
+    assert w["noseSneerLeft"] == pytest.approx(0.21) and w["eyeLookDownRight"] == pytest.approx(0.17)
+    np.testing.assert_allclose(frame.head_rotation, euler_to_quat(
+        math.radians(-6.038993), math.radians(-21.488958), math.radians(-6.6019735)), atol=1e-6)
+    np.testing.assert_allclose(frame.head_translation, (-0.030653415, -0.10287084, -0.6584072), rtol=1e-6)
+    assert a.eyes["Right"] == pytest.approx((6.0297494, 2.4403017, 0.25649446))
