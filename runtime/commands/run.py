@@ -17,6 +17,9 @@ it onto the rig and draws. Around that loop:
   drawn frame; no device is a message, not an error.
 * ``--vmc-out HOST:PORT``: the face as VMC perfect sync + VRM 0.x presets and the head pose, every tick
   (:mod:`~facepuppet.runtime.live.vmc_out`); ``--vmc-extra`` adds the rig's channels outside ARKit.
+* ``--phone IP[:PORT]`` (``--input ifacialmocap`` / ``vtubestudio``): the app's start payload or data request,
+  sent only to that address, at once and then periodically from a daemon thread that stops with the run
+  (:mod:`~facepuppet.runtime.inputs.phone`); a loopback ``--listen`` with a LAN phone is refused.
 * ``--stats``: counters and per-stage latency once a second and at exit.
 * Parameter spaces (:mod:`~facepuppet.runtime.live.stages`): ``--input markers``
   with ``--actor``/``--pair`` (marker solve, Shin & Lee), ``--retarget`` (kernel
