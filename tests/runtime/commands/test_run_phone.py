@@ -187,7 +187,7 @@ def test_run_vtubestudio_requests_repeatedly_and_face_lost_is_tracking_loss(char
     udp = stats["counters"]["udp"]
     assert udp["frames"] == n_found and udp["face_lost"] == n_lost and udp["packets"] == n_found + n_lost
     assert udp["malformed"] == udp["internal_error"] == 0
-    assert stats["counters"]["phone"]["sent"] == len(phone.requests) or stats["counters"]["phone"]["sent"] > 1
+    assert stats["counters"]["phone"]["sent"] >= len(phone.requests) >= 2  # every one the phone saw was counted
     assert stats["counters"]["pipeline"]["tracking_lost"] >= 1  # FaceFound false: tracking lost, eased out
     w = np.load(weights)
     assert np.any(np.abs(w[:, 0] - 0.6) < 1e-3)  # the face was drawn as sent ...
