@@ -22,6 +22,9 @@ it onto the rig and draws. Around that loop:
   (:mod:`~facepuppet.runtime.live.llf_out`), for Unreal's Live Link and anything that reads the phone.
 * ``--video FILE``: the drawn ticks encoded as a video (:mod:`~facepuppet.runtime.live.video_out`),
   with ``--audio-file`` as its sound track.
+* ``--phone IP[:PORT]`` (``--input ifacialmocap`` / ``vtubestudio``): the app's start payload or data request,
+  sent only to that address, at once and then periodically from a daemon thread that stops with the run
+  (:mod:`~facepuppet.runtime.inputs.phone`); a loopback ``--listen`` with a LAN phone is refused.
 * ``--stats``: counters and per-stage latency once a second and at exit.
 * Parameter spaces (:mod:`~facepuppet.runtime.live.stages`): ``--input markers``
   with ``--actor``/``--pair`` (marker solve, Shin & Lee), ``--retarget`` (kernel
@@ -41,6 +44,7 @@ stops it cleanly; either way the final stats are printed.
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import signal
 import sys
 import threading
@@ -75,7 +79,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from facepuppet.runtime.inputs.kinds import INPUT_KINDS
 
     p = subparsers.add_parser(
-        "run", help="drive a character live from a tracker over UDP (VMC, Face Cap, FaceOSC, markers, Live Link Face)",
+        "run", help="drive a character live from a tracker over UDP (VMC, Face Cap, FaceOSC, markers, Live Link Face, "
+                     "iFacialMocap, VTube Studio)",
         description="Drive a character live from OSC / UDP tracker input on this machine.")
     p.add_argument("-c", "--character", type=Path, required=True, help="character .npz")
     p.add_argument("--input", required=True, choices=tuple(INPUT_KINDS) + ("audio",),
@@ -84,6 +89,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="address to listen on (default 127.0.0.1 on the input's default port); "
                         "an address other than loopback must be named here explicitly")
     p.add_argument("--allow", metavar="IP[,IP...]", default=None, help="accept packets only from these senders")
+    p.add_argument("--phone", metavar="IP[:PORT]", default=None,
+                   help="--input ifacialmocap / vtubestudio: the phone's IP address, sent the app's start payload "
+                        "or data request (repeated) so that it streams here; only this address is ever sent to")
     p.add_argument("--audio", nargs="?", const="", default=None, metavar="DEVICE",
                    help="measure the microphone level (default input device, or DEVICE by name or number)")
     p.add_argument("--audio-file", type=Path, default=None, metavar="WAV", help="a WAV file as the audio input")
@@ -157,6 +165,7 @@ class _Options:
     vmc_out: tuple | None
     llf_out: tuple | None = None
     video: VideoPlan | None = None
+    phone: tuple | None = None
 
 
 def _check_options(args, default_port) -> _Options:
@@ -185,7 +194,27 @@ def _check_options(args, default_port) -> _Options:
     llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
     video = plan_video_from_args(args, width, height, alpha=render_options(args).transparent)
     return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out,
-                    llf_out, video)
+                    llf_out, video, _check_phone(args, host))
+
+
+def _check_phone(args, host: str) -> tuple | None:
+    """(ip, port) of ``--phone`` for the phone input kinds, or None; ValueError naming the option otherwise."""
+    from facepuppet.runtime.inputs.kinds import INPUT_KINDS
+    from facepuppet.runtime.inputs.phone import parse_phone
+
+    text = getattr(args, "phone", None)
+    if text is None:
+        return None
+    cls = INPUT_KINDS.get(args.input)
+    if cls is None or not hasattr(cls, "phone_request"):
+        kinds = [k for k, c in INPUT_KINDS.items() if hasattr(c, "phone_request")]
+        raise ValueError(f"--phone: only for --input {' or '.join(kinds)} (not {args.input})")
+    phone = parse_phone(text, cls.phone_port)
+    if _is_loopback(host) and not ipaddress.ip_address(phone[0]).is_loopback:
+        raise ValueError(f"--phone {phone[0]}: the phone's frames cannot reach {host}, where this run listens; "
+                         f"listen where the phone can send, e.g. --listen 0.0.0.0:{cls.default_port} or this "
+                         "machine's own LAN address")
+    return phone
 
 
 def _record_info(args, opts: _Options) -> dict:
@@ -277,6 +306,9 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         parts.append(source)
         log(f"run: listening for {args.input} on {source.address[0]}:{source.address[1]}"
             + (f" (only from {', '.join(sorted(opts.allow))})" if opts.allow else ""))
+        requester = _start_phone(adapter, opts, source.address[1], log)
+        if requester is not None:
+            parts.append(requester)
 
         target = create_context(headless=True if args.headless else None, width=opts.width, height=opts.height,
                                 title=f"facepuppet run ({args.input})", log=log, samples=picture.msaa,
@@ -300,7 +332,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                     "--audio-file WAV gives the video a sound track")
             parts.append(video)
             sinks.append(video)
-        counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log)
+        counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log, requester)
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
                          catch_up=True, idle_fps=opts.idle_fps, drive=chain.drive)
@@ -325,9 +357,38 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                     break
 
 
-def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, log) -> tuple[dict, LiveStats, list]:
+def _is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
+def _start_phone(adapter, opts: _Options, listen_port: int, log):
+    """The running requester of ``--phone`` (None without it; a note when the kind needs one)."""
+    from facepuppet.runtime.inputs.phone import PhoneRequester
+
+    if not hasattr(adapter, "phone_request"):
+        return None
+    if opts.phone is None:
+        log(f"run: no --phone: the {adapter.kind} app must be told to send here itself"
+            + (" (VTube Studio's phone protocol streams only on request: give --phone IP)"
+               if adapter.kind == "vtubestudio" else ""))
+        return None
+    host, port = opts.phone
+    requester = PhoneRequester(host, port, adapter.phone_request(listen_port), adapter.phone_every_s, log=log)
+    log(f"run: asking the phone at {host}:{port} to stream here (every {adapter.phone_every_s:g} s)"
+        + (f"; note: iFacialMocap sends to port {adapter.default_port}, this run listens on {listen_port}"
+           if adapter.kind == "ifacialmocap" and listen_port != adapter.default_port else ""))
+    return requester.start()
+
+
+def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, log,
+             requester=None) -> tuple[dict, LiveStats, list]:
     """The counters the stats read, the stats, and the tick hooks: stats, VMC out, the recording."""
     counters = {"udp": source.counters}
+    if requester is not None:
+        counters["phone"] = requester.counters
     if chain.filter is not None:
         counters["pipeline"] = chain.filter.counters
     stats = LiveStats(counters, log=log, interval_s=1.0 if args.stats else None)

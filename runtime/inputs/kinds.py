@@ -8,10 +8,14 @@ facecap        :class:`.facecap.FaceCapAdapter`       9000          Face Cap OSC
 faceosc        :class:`.faceosc.FaceOscAdapter`       8338          FaceOSC (§4)
 markers        :class:`facepuppet.runtime.inputs.markers.MarkersAdapter`   9763          /facepuppet/markers OSC
 livelinkface   :class:`facepuppet.runtime.inputs.livelinkface.LiveLinkFaceAdapter`  11111  binary UDP (§5)
+ifacialmocap   :class:`facepuppet.runtime.inputs.ifacialmocap.IFacialMocapAdapter`  49983  UDP text (§7)
+vtubestudio    :class:`facepuppet.runtime.inputs.vtubestudio.VTubeStudioAdapter`    21412  UDP JSON (§8)
 openseeface    :class:`facepuppet.runtime.inputs.openseeface.OpenSeeFaceAdapter`    11573  binary UDP (§9)
 =============  =====================================  ============  =========================
 
-(§ = PROTOCOLS.md sections.) Every adapter has ``kind``, ``default_port``,
+(§ = PROTOCOLS.md sections.) The phone kinds (ifacialmocap, vtubestudio) also have
+``phone_port``, ``phone_every_s`` and ``phone_request(listen_port)``: what ``run --phone`` sends
+(:mod:`facepuppet.runtime.inputs.phone`). Every adapter has ``kind``, ``default_port``,
 ``counters`` and ``handle(data, t_receive) -> Frame | None``, which never raises.
 """
 
@@ -21,10 +25,12 @@ from typing import TYPE_CHECKING
 
 from facepuppet.runtime.inputs.facecap import FaceCapAdapter
 from facepuppet.runtime.inputs.faceosc import FaceOscAdapter
+from facepuppet.runtime.inputs.ifacialmocap import IFacialMocapAdapter
 from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter
 from facepuppet.runtime.inputs.markers import MarkersAdapter
 from facepuppet.runtime.inputs.openseeface import OpenSeeFaceAdapter
 from facepuppet.runtime.inputs.vmc import VmcAdapter
+from facepuppet.runtime.inputs.vtubestudio import VTubeStudioAdapter
 
 if TYPE_CHECKING:
     from facepuppet.runtime.protocols import InputAdapter
@@ -35,6 +41,8 @@ INPUT_KINDS: dict[str, type] = {
     "faceosc": FaceOscAdapter,
     "markers": MarkersAdapter,
     "livelinkface": LiveLinkFaceAdapter,
+    "ifacialmocap": IFacialMocapAdapter,
+    "vtubestudio": VTubeStudioAdapter,
     "openseeface": OpenSeeFaceAdapter,
 }
 

@@ -29,6 +29,7 @@ from facepuppet.runtime.inputs.udp import UdpSource
 
 from helpers.openseeface_sender import osf_record
 from helpers.osc_helpers import bundle, msg
+from helpers.phone_senders import ARKIT_52, ifm_frame, vts_frame
 
 SEED = 3
 N_DIRECT = 16_000  # per kind: 80,000 in all
@@ -56,6 +57,10 @@ def valid(kind: str, jaw: float) -> list[bytes]:
                        msg("/facepuppet/markers/frame", 1, 5, (1.0, "d"), ((MARKERS * jaw).tobytes(), "b")))]
     if kind == "openseeface":
         return [osf_record(features={"mouth_open": jaw})]
+    if kind == "ifacialmocap":
+        return [ifm_frame({"jawOpen": jaw * 100})]
+    if kind == "vtubestudio":
+        return [vts_frame({"jawOpen": jaw})]
     weights = [0.0] * 52
     weights[JAW] = jaw
     return [encode_llf_packet(weights, head=(0.1, 0.0, 0.0), number=9)]
@@ -95,6 +100,10 @@ def seeds(kind: str) -> list[bytes]:
         "livelinkface": [encode_llf_packet([0.5] * 52, head=(0.1, 0.2, 0.3), name="Phone")],
         "openseeface": [osf_record(features={"mouth_open": 0.5}),
                         osf_record(face_id=1, fit=0) + osf_record(face_id=2, right_open=0.1)],
+        "ifacialmocap": [ifm_frame({n: 50 for n in ARKIT_52}, head=(1, 2, 3, 0.1, 0.2, 0.3), version=1),
+                         ifm_frame({n: -5 for n in ARKIT_52[::5]})],
+        "vtubestudio": [vts_frame({n: 0.5 for n in ARKIT_52}, rotation=(1.0, 2.0, 3.0)),
+                        vts_frame({}, found=False)],
     }
     return out[kind]
 

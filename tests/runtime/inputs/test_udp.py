@@ -25,7 +25,8 @@ JAW = ARKIT_NAMES.index("jawOpen")
 def test_registry_and_default_ports():
     ports = {k: make_adapter(k).default_port for k in INPUT_KINDS}
     assert ports == {"vmc": 39539, "facecap": 9000, "faceosc": 8338, "markers": 9763, "livelinkface": 11111,
-                     "openseeface": 11573}
+                     "openseeface": 11573,
+                     "ifacialmocap": 49983, "vtubestudio": 21412}
     assert all(make_adapter(k).kind == k for k in INPUT_KINDS)
     with pytest.raises(ValueError, match="unknown input kind 'osc'; expected one of: vmc, facecap"):
         make_adapter("osc")

@@ -80,7 +80,8 @@ def test_ok_carries_the_status_callable_and_t_the_sender_time(receiver):
     sender = VmcSender("127.0.0.1", receiver.getsockname()[1], ("jawOpen",), status=lambda: state["value"],
                        clock=iter([10.0, 10.25, 11.5]).__next__)
     try:
-        info = SimpleNamespace(weights=np.array([0.5], np.float32), rotation=None, translation=None, frame=None, expressions=None)
+        info = SimpleNamespace(weights=np.array([0.5], np.float32), rotation=None, translation=None, frame=None,
+                               expressions=None)
         sender.on_tick(info)
         state["value"] = (3, True)
         sender.on_tick(info)
