@@ -46,7 +46,8 @@ What is written (glTF 2.0 spec; VRM 0.x ``VRM`` extension; VRM 1.0 ``VRMC_vrm`` 
   lookAt) with node indices remapped through ``settings.source.node_from_file``.
 * **frame**: glTF units are metres (cm and mm are scaled); a VRM 0.x file faces
   −Z, so for VRM 0.x output everything is turned 180° about +Y (vertices,
-  normals, deltas, node transforms).
+  normals, deltas; the node transforms by turning the roots, so that every
+  world transform becomes ``T·G``, the inverse of the reader's turn).
 """
 
 from __future__ import annotations
@@ -358,7 +359,9 @@ class _Exporter:
         for j in range(k.n_nodes):
             local = np.asarray(k.rest_local[j], dtype=np.float64).copy()
             local[:3, 3] *= self.scale
-            node: dict[str, Any] = {"name": k.names[j], **_trs(t @ local @ t)}
+            if k.parent[j] < 0:  # turning the whole scene: the roots carry the turn, children are unchanged
+                local = t @ local
+            node: dict[str, Any] = {"name": k.names[j], **_trs(local)}
             if children[j]:
                 node["children"] = children[j]
             nodes.append(node)
@@ -370,7 +373,7 @@ class _Exporter:
         world = k.global_transforms()
         world[:, :3, 3] *= self.scale
         joints = self.joints
-        ibm = np.stack([np.linalg.inv(t @ world[j] @ t) for j in joints])
+        ibm = np.stack([np.linalg.inv(t @ world[j]) for j in joints])
         ibm[:, 3] = (0, 0, 0, 1)  # exact affine bottom row
         cols = np.ascontiguousarray(np.transpose(ibm, (0, 2, 1)), dtype=np.float32).reshape(len(joints), 16)
         acc = self.buf.accessor(cols, target=None)
