@@ -377,3 +377,14 @@ def test_round_trip_import_export_import(tmp_path):
         np.testing.assert_array_equal(be.flags[:3, 0], e.flags[:, 0])
         if fmt == "vrm1":
             np.testing.assert_array_equal(be.flags[:3], e.flags)
+
+
+def test_round_trip_keeps_the_bind_weight_of_a_shape_on_two_meshes(tmp_path):
+    # VRM binds are per mesh: expression A binds Spanning at 0.5 on Body and on Face (two binds of 50 / 0.5);
+    # read back, that is one shape at 0.5, not the sum of the two binds
+    gltf_read = pytest.importorskip("facepuppet.offline.io.gltf_read")
+    for fmt, kw in (("vrm0", {}), ("vrm1", {"source_format": "vrm1"})):
+        c, out, _ = write(tmp_path, fmt, **kw)
+        back = gltf_read.read_gltf(out)
+        s, w = back.expressions.binds(back.expressions.names.index("A"))
+        assert [back.shape_names[x] for x in s] == ["Spanning"] and w.tolist() == pytest.approx([0.5]), fmt
