@@ -23,8 +23,10 @@ What is written (glTF 2.0 spec; VRM 0.x ``VRM`` extension; VRM 1.0 ``VRMC_vrm`` 
   shear, else as ``matrix``; one skin whose joints are the nodes any vertex
   follows with a non-zero weight; inverse bind matrices = the inverse of each
   joint's rest world transform (vertices are stored in the world rest pose, so
-  at rest every joint matrix is the identity). Each mesh sits on a root node of
-  its own that carries the skin (a skinned mesh's node transform is ignored).
+  at rest every joint matrix is the identity). Each mesh goes back on the node
+  that held it in the file when the reader kept it (``settings.source.mesh_nodes``),
+  else on a new root node of its own; that node carries the skin (a skinned
+  mesh's node transform is ignored).
 * **textures**: PNG, lossless, re-encoded from the stored texels; samplers from
   the stored codes.
 * **materials**: baseColorFactor/-Texture (with KHR_texture_transform when not
@@ -43,7 +45,9 @@ What is written (glTF 2.0 spec; VRM 0.x ``VRM`` extension; VRM 1.0 ``VRMC_vrm`` 
   has no expression of its name yet (perfect sync: ``EyeBlinkLeft`` …). The
   raw extension kept on import (``settings.source.vrm_extension``) goes back
   for its other parts (0.x firstPerson / secondaryAnimation, 1.0 firstPerson /
-  lookAt) with node indices remapped through ``settings.source.node_from_file``.
+  lookAt) with node indices remapped through ``settings.source.node_from_file``
+  (and first-person mesh annotations through ``mesh_nodes`` / ``mesh_from_file``
+  when the reader kept them; dropped with a warning otherwise).
 * **frame**: glTF units are metres (cm and mm are scaled); a VRM 0.x file faces
   −Z, so for VRM 0.x output everything is turned 180° about +Y (vertices,
   normals, deltas; the node transforms by turning the roots, so that every
@@ -301,17 +305,22 @@ class _Exporter:
         self.primitives = self._layout()
         materials, textures = self._materials()
         meshes = self._meshes()
-        host0 = len(nodes)
+        kept = self._mesh_nodes(len(meshes))
+        self.host: list[int] = []
         for m in range(len(meshes)):
-            node = {"name": self._host_names[m], "mesh": m}
+            if kept is not None:  # back on the node that held it in the file
+                node = nodes[kept[m]]
+                node["mesh"] = m
+            else:
+                node = {"name": self._host_names[m], "mesh": m}
+                nodes.append(node)
             if c.skeleton is not None:
                 node["skin"] = 0
-            nodes.append(node)
+            self.host.append(kept[m] if kept is not None else len(nodes) - 1)
         roots = [j for j in range(self.n_skeleton_nodes) if c.skeleton.parent[j] < 0] if c.skeleton else []
-        doc["scenes"] = [{"nodes": roots + list(range(host0, len(nodes)))}]
+        doc["scenes"] = [{"nodes": roots + list(range(self.n_skeleton_nodes, len(nodes)))}]
         doc["nodes"] = nodes
         doc["meshes"] = meshes
-        self.host0 = host0
         if c.skeleton is not None:
             doc["skins"] = [self._skin()]
         doc["materials"] = materials
@@ -366,6 +375,22 @@ class _Exporter:
                 node["children"] = children[j]
             nodes.append(node)
         return nodes
+
+    def _mesh_nodes(self, n_meshes: int) -> list[int] | None:
+        """``settings.source.mesh_nodes``: the stored node that held each Layout mesh in the file, when the
+        reader kept it and it is usable (one distinct skeleton node per mesh); None: each mesh gets a new
+        root node."""
+        hint = self.c.source.get("mesh_nodes")
+        if hint is None or self.c.skeleton is None:
+            return None
+        ok = (isinstance(hint, list) and len(hint) == n_meshes and len(set(map(str, hint))) == n_meshes
+              and all(isinstance(n, int) and not isinstance(n, bool) and 0 <= n < self.n_skeleton_nodes
+                      for n in hint))
+        if not ok:
+            self.warn(f"settings.source.mesh_nodes {hint!r} is not one distinct node per mesh "
+                      f"({n_meshes} meshes, {self.n_skeleton_nodes} nodes): each mesh gets a node of its own")
+            return None
+        return [int(n) for n in hint]
 
     def _skin(self) -> dict:
         k = self.c.skeleton
@@ -671,10 +696,7 @@ class _Exporter:
         else:
             first.setdefault("firstPersonBone", int(bones["head"]))
             first.setdefault("firstPersonBoneOffset", {"x": 0.0, "y": 0.06, "z": 0.0})
-        if first.get("meshAnnotations"):
-            self.warn("firstPerson.meshAnnotations dropped: the character does not keep which file mesh each "
-                      "of its meshes was (VRM applications then use their automatic first-person view)")
-        first["meshAnnotations"] = []
+        first["meshAnnotations"] = self._annotations0(first.get("meshAnnotations"))
         out["firstPerson"] = first
         groups = []
         for name, preset, binds, flags in self._expression_rows():
@@ -685,6 +707,36 @@ class _Exporter:
         out["blendShapeMaster"] = {"blendShapeGroups": groups}
         out["secondaryAnimation"] = self._secondary0(raw.get("secondaryAnimation"), remap)
         out["materialProperties"] = [self._material0(i, m) for i, m in enumerate(materials)]
+        return out
+
+    def _annotations0(self, raw: Any) -> list:
+        """VRM 0.x firstPerson.meshAnnotations ({mesh: file mesh index}) onto the written meshes, through
+        ``settings.source.mesh_from_file`` (the file mesh of each Layout mesh) when the reader kept it."""
+        if not isinstance(raw, list) or not raw:
+            return []
+        of_file = self.c.source.get("mesh_from_file")
+        if not (isinstance(of_file, list) and len(of_file) == len(self.mesh_names)):
+            self.warn("firstPerson.meshAnnotations dropped: the character does not keep which file mesh each "
+                      "of its meshes was (VRM applications then use their automatic first-person view)")
+            return []
+        out = []
+        for a in raw:
+            if isinstance(a, dict):
+                out += [{**a, "mesh": m} for m, f in enumerate(of_file) if f == a.get("mesh")]
+        return out
+
+    def _annotations1(self, raw: Any, remap: Callable[[Any], int | None]) -> list:
+        """VRM 1.0 firstPerson.meshAnnotations ({node: file node}) onto the nodes the meshes are written on."""
+        if not isinstance(raw, list):
+            return []
+        out = []
+        for a in raw:
+            node = remap(a.get("node")) if isinstance(a, dict) else None
+            if node is not None and node in self.host:
+                out.append({**a, "node": node})
+            else:
+                self.warn(f"firstPerson.meshAnnotations: {a!r} dropped: its node does not hold a written mesh "
+                          "(the reader did not keep settings.source.mesh_nodes)")
         return out
 
     def _secondary0(self, raw: Any, remap: Callable[[Any], int | None]) -> dict:
@@ -823,14 +875,14 @@ class _Exporter:
         out: dict[str, Any] = {"specVersion": "1.0", "meta": self._meta1(),
                                "humanoid": {"humanBones": {b: {"node": int(n)} for b, n in bones.items()}}}
         first = raw.get("firstPerson")
-        if isinstance(first, dict) and first.get("meshAnnotations"):
-            self.warn("firstPerson.meshAnnotations dropped: the character does not keep which file node held "
-                      "each of its meshes (VRM applications then use 'auto')")
+        if isinstance(first, dict):
+            annotations = self._annotations1(first.get("meshAnnotations"), self._node_map())
+            out["firstPerson"] = {**first, "meshAnnotations": annotations}
         if isinstance(raw.get("lookAt"), dict):
             out["lookAt"] = raw["lookAt"]
         preset, custom = {}, {}
         for name, p, binds, flags in self._expression_rows():
-            e: dict[str, Any] = {"morphTargetBinds": [{"node": self.host0 + m, "index": k,
+            e: dict[str, Any] = {"morphTargetBinds": [{"node": self.host[m], "index": k,
                                                        "weight": float(np.clip(w, 0, 1))}
                                                       for m, k, w in self._binds(binds)],
                                  "isBinary": bool(flags[0])}

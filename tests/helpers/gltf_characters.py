@@ -28,9 +28,11 @@ BONES = (
 SHEARED = "hat"  # a child of the head whose rest matrix has a shear: written as a glTF matrix
 
 
-def _rest() -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-    names = tuple(b[0] for b in BONES) + (SHEARED,)
-    parent = np.array([-1 if p is None else names.index(p) for _, p, _ in BONES] + [names.index("head")], np.int32)
+def _rest(mesh_nodes: bool = False) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    extra = ("BodyNode", "FaceNode") if mesh_nodes else ()
+    names = tuple(b[0] for b in BONES) + (SHEARED,) + extra
+    parent = np.array([-1 if p is None else names.index(p) for _, p, _ in BONES] + [names.index("head")]
+                      + [-1] * len(extra), np.int32)
     rest = np.tile(np.eye(4, dtype=np.float32), (len(names), 1, 1))
     for j, (_, _, t) in enumerate(BONES):
         rest[j, :3, 3] = t
@@ -39,18 +41,23 @@ def _rest() -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     hat = np.eye(4, dtype=np.float32)
     hat[0, 1] = 0.25  # shear
     hat[:3, 3] = (0.0, 0.12, 0.0)
-    rest[-1] = hat
+    rest[names.index(SHEARED)] = hat
     return names, parent, rest
 
 
-def parts_character(units: str = "m", source_format: str = "vrm0", turned: bool = True) -> Character:
+def parts_character(units: str = "m", source_format: str = "vrm0", turned: bool = True,
+                    mesh_nodes: bool = False) -> Character:
     """Two meshes: ``Body`` (8 vertices over hips/spine, one primitive) and ``Face`` (6 vertices on the head,
     two primitives sharing them, two materials); four shapes (``Blink`` on the face, ``jawOpen`` an ARKit
     name without an expression, ``Spanning`` on both meshes, ``Still`` that moves nothing); three materials
     (textured lit with a UV transform, toon MASK double-sided, unlit BLEND emissive); two textures; three
-    expressions (preset Blink, preset A binary, custom Smirk with overrideBlink block)."""
+    expressions (preset Blink, preset A binary, custom Smirk with overrideBlink block).
+
+    ``mesh_nodes``: the skeleton also has the two nodes that held the meshes in the file (``BodyNode``,
+    ``FaceNode``), named in ``source.mesh_nodes``, with ``source.mesh_from_file`` = [1, 0] (the file had
+    the meshes the other way round) and a first-person annotation of the face in the raw extension."""
     rng = np.random.default_rng(7)
-    names, parent, rest = _rest()
+    names, parent, rest = _rest(mesh_nodes)
     head = names.index("head")
     body = rng.uniform(-0.3, 0.3, (8, 3)) + (0, 1.2, 0)
     face = rng.uniform(-0.08, 0.08, (6, 3)) + (0, 1.65, 0.05)
@@ -113,6 +120,13 @@ def parts_character(units: str = "m", source_format: str = "vrm0", turned: bool 
                                              "licenseUrl": "https://example.org/l", "thumbnailImage": 3})
     source = {"format": source_format, "file": "quad.vrm", "turned_y180": turned and source_format == "vrm0",
               "meta": meta, "credits": "Quad by Someone, CC BY", "vrm_extension": raw, "node_from_file": node_from_file}
+    if mesh_nodes:
+        source["mesh_nodes"] = [names.index("BodyNode"), names.index("FaceNode")]
+        source["mesh_from_file"] = [1, 0]
+        face_file_node = node_from_file[names.index("FaceNode")]
+        raw["firstPerson"]["meshAnnotations"] = ([{"mesh": 0, "firstPersonFlag": "ThirdPersonOnly"}]
+                                                 if source_format == "vrm0" else
+                                                 [{"node": face_file_node, "type": "thirdPersonOnly"}])
     scale = {"m": 1.0, "cm": 100.0, "mm": 1000.0}[units]
     rest = rest.copy()
     rest[:, :3, 3] *= scale

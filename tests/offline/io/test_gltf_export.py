@@ -21,6 +21,7 @@ from PIL import Image
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.cli import main
 
+from conftest import need_shared
 from facepuppet.offline.io.gltf_check import check_gltf
 from facepuppet.offline.io.gltf_export import ExportError, export_character
 from helpers.gltf_characters import BONES, decode, node_worlds, parts_character, view_bytes
@@ -388,3 +389,67 @@ def test_round_trip_keeps_the_bind_weight_of_a_shape_on_two_meshes(tmp_path):
         back = gltf_read.read_gltf(out)
         s, w = back.expressions.binds(back.expressions.names.index("A"))
         assert [back.shape_names[x] for x in s] == ["Spanning"] and w.tolist() == pytest.approx([0.5]), fmt
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("name", ["Godette_vrm_v4.vrm", "subdivision_shapekey_modifier_vrm1.vrm"])
+def test_round_trip_of_the_data_kit_avatars(tmp_path, name):
+    # the kit's VRM 0.x (Godette) and VRM 1.0 avatars: import -> export (as they came) -> import gives the same
+    gltf_read = pytest.importorskip("facepuppet.offline.io.gltf_read")
+    path = need_shared("gltf", name)
+    c = gltf_read.read_gltf(path)
+    out = tmp_path / name
+    summary = export_character(c, out)
+    assert check_gltf(out) == []
+    back = gltf_read.read_gltf(out)
+    assert back.source["format"] == c.source["format"] and back.source["turned_y180"] == c.source["turned_y180"]
+    assert summary.turned_y180 == (c.source["format"] == "vrm0")
+    np.testing.assert_allclose(back.vertices, c.vertices, atol=1e-6)
+    np.testing.assert_array_equal(back.triangles, c.triangles)
+    assert back.shape_names == c.shape_names and back.material_names == c.material_names
+    np.testing.assert_allclose(back.dense_deltas(), c.dense_deltas(), atol=1e-6)
+    assert back.skeleton.names == c.skeleton.names and back.skeleton.bones == c.skeleton.bones
+    np.testing.assert_allclose(back.skeleton.rest_local, c.skeleton.rest_local, atol=1e-5)
+    np.testing.assert_array_equal(back.skeleton.vertex_nodes[c.skeleton.vertex_weights > 0],
+                                  c.skeleton.vertex_nodes[c.skeleton.vertex_weights > 0])
+    np.testing.assert_allclose(back.skeleton.vertex_weights, c.skeleton.vertex_weights, atol=1e-6)
+    for t in range(len(c.look.texture_names)):
+        np.testing.assert_array_equal(back.look.image(t), c.look.image(t))
+    np.testing.assert_array_equal(back.look.texture_info, c.look.texture_info)
+    for field in ("uv", "base_color", "emissive", "alpha", "shading", "texture", "uv_transform"):
+        np.testing.assert_allclose(getattr(back.look, field), getattr(c.look, field), atol=1e-5, err_msg=field)
+    # the expressions, and for perfect sync the shapes with ARKit names that had none
+    n = c.expressions.n_expressions
+    assert back.expressions.names[:n] == c.expressions.names
+    np.testing.assert_allclose(back.expressions.dense(back.n_shapes)[:n], c.expressions.dense(c.n_shapes), atol=1e-6)
+    np.testing.assert_array_equal(back.expressions.flags[:n], c.expressions.flags)
+    assert list(back.expressions.names[n:]) == summary.added_expressions
+    assert back.source["meta"] == {k: v for k, v in c.source["meta"].items() if k not in ("texture", "thumbnailImage")}
+    assert back.credits == c.credits
+
+
+@pytest.mark.parametrize("fmt", ["vrm0", "vrm1"])
+def test_meshes_go_back_on_the_nodes_that_held_them(tmp_path, fmt):
+    # source.mesh_nodes: no new nodes; the first-person annotations follow their meshes
+    c, out, summary = write(tmp_path, fmt, source_format=fmt, mesh_nodes=True)
+    assert check_gltf(out) == [] and not [w for w in summary.warnings if "meshAnnotations" in w]
+    g, _ = load(out)
+    k = c.skeleton
+    body, face = k.names.index("BodyNode"), k.names.index("FaceNode")
+    assert len(g.nodes) == k.n_nodes
+    assert (g.nodes[body].mesh, g.nodes[face].mesh, g.nodes[body].skin, g.nodes[face].skin) == (0, 1, 0, 0)
+    assert sorted(g.scenes[0].nodes) == sorted(j for j in range(k.n_nodes) if k.parent[j] < 0)
+    if fmt == "vrm0":
+        annotations = g.extensions["VRM"]["firstPerson"]["meshAnnotations"]
+        assert annotations == [{"mesh": 1, "firstPersonFlag": "ThirdPersonOnly"}]  # file mesh 0 is our Face
+    else:
+        vrm = g.extensions["VRMC_vrm"]
+        assert vrm["firstPerson"]["meshAnnotations"] == [{"node": face, "type": "thirdPersonOnly"}]
+        assert [b["node"] for b in vrm["expressions"]["preset"]["blink"]["morphTargetBinds"]] == [face]
+
+
+def test_without_mesh_nodes_the_annotations_are_dropped_with_a_warning(tmp_path):
+    _, out, summary = write(tmp_path, "vrm1", source_format="vrm1")
+    g, _ = load(out)
+    assert g.extensions["VRMC_vrm"]["firstPerson"]["meshAnnotations"] == []
+    assert any("meshAnnotations" in w and "mesh_nodes" in w for w in summary.warnings)
