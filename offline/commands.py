@@ -17,7 +17,8 @@ _COMMAND_MODULES = ("facepuppet.offline.actuation.commands", "facepuppet.offline
                     "facepuppet.offline.io.gltf_commands")
 # Offline modules with ``register_benches(register_bench)``, same rule.
 _BENCH_MODULES = ("facepuppet.offline.actuation.bench", "facepuppet.offline.elastic.bench",
-                  "facepuppet.offline.gestures.bench", "facepuppet.offline.kpls.bench")
+                  "facepuppet.offline.gestures.bench", "facepuppet.offline.kpls.bench",
+                  "facepuppet.offline.io.gltf_bench")
 
 
 def _modules(names):
