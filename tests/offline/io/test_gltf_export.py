@@ -238,9 +238,10 @@ def test_vrm0_from_a_plus_z_character_is_turned(tmp_path):
     assert g.extensions["VRM"]["meta"]["title"] == "Quad" and g.extensions["VRM"]["meta"]["author"] == "Someone"
 
 
-def test_trimesh_and_pygltflib_load_the_glb(tmp_path):
-    c, out, _ = write(tmp_path, "glb")
-    scene = trimesh.load(str(out), process=False)
+@pytest.mark.parametrize("fmt", ["glb", "gltf", "vrm0", "vrm1"])
+def test_trimesh_loads_the_file(tmp_path, fmt):
+    c, out, _ = write(tmp_path, fmt)
+    scene = trimesh.load(str(out), file_type="glb" if fmt.startswith("vrm") else None, process=False)
     counts = sorted(len(geom.vertices) for geom in scene.geometry.values())
     assert counts == sorted(int(p[1]) for p in c.layout.primitives)
     assert sum(len(geom.faces) for geom in scene.geometry.values()) == len(c.triangles)
