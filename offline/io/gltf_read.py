@@ -164,6 +164,9 @@ class _Reader:
             "extensions_used": list(self.doc.get("extensionsUsed", [])),
             "vrm_extension": self.vrm0 if self.vrm0 is not None else self.vrm1,
             "node_from_file": [int(i) for i in self.node_from_file],
+            "mesh_nodes": [int(s) for _, s in sorted(x for v in geo["instance_of_mesh"].values() for x in v)],
+            "mesh_from_file": [m for _, m in sorted((mi, m) for m, v in geo["instance_of_mesh"].items()
+                                                    for mi, _ in v)],
             "default_weights": geo["default_weights"],
             "warnings": self.warnings,
             "pivot_rule": pivot_rule,
@@ -801,9 +804,14 @@ class _Reader:
             if name in names:
                 self.warn(f"expression {name!r} appears twice; the first is kept")
                 continue
+            # One shape spans every mesh whose targets share its name, and VRM binds it once per mesh:
+            # the binds of one shape are one bind (the largest, with a warning when the meshes differ).
             merged: dict[int, float] = {}
             for s, wt in zip(shapes, weights):
-                merged[s] = merged.get(s, 0.0) + wt
+                if s in merged and abs(merged[s] - wt) > 1e-6:
+                    self.warn(f"expression {name!r}: shape {shape_names[s]!r} is bound at {merged[s]:g} and "
+                              f"{wt:g} on different meshes; one shape takes the larger")
+                merged[s] = max(merged.get(s, 0.0), wt)
             names.append(name)
             presets.append(preset)
             bs.extend(merged)

@@ -22,6 +22,7 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.cli import main
 
 from conftest import need_shared
+from facepuppet.offline.io import gltf_read
 from facepuppet.offline.io.gltf_check import check_gltf
 from facepuppet.offline.io.gltf_export import ExportError, export_character
 from helpers.gltf_characters import BONES, decode, node_worlds, parts_character, view_bytes
@@ -337,8 +338,6 @@ def test_the_ict_head_exports_as_a_glb_that_passes_the_check(ict_character, tmp_
 
 
 def test_round_trip_import_export_import(tmp_path):
-    # needs the glTF reader (offline/io/gltf_read.py, another branch): skipped only while it is not merged
-    gltf_read = pytest.importorskip("facepuppet.offline.io.gltf_read")
     for fmt, kw in (("vrm0", {}), ("vrm1", {"source_format": "vrm1"}), ("glb", {})):
         c, out, _ = write(tmp_path, fmt, **kw)
         back = gltf_read.read_gltf(out)
@@ -384,7 +383,6 @@ def test_round_trip_import_export_import(tmp_path):
 def test_round_trip_keeps_the_bind_weight_of_a_shape_on_two_meshes(tmp_path):
     # VRM binds are per mesh: expression A binds Spanning at 0.5 on Body and on Face (two binds of 50 / 0.5);
     # read back, that is one shape at 0.5, not the sum of the two binds
-    gltf_read = pytest.importorskip("facepuppet.offline.io.gltf_read")
     for fmt, kw in (("vrm0", {}), ("vrm1", {"source_format": "vrm1"})):
         c, out, _ = write(tmp_path, fmt, **kw)
         back = gltf_read.read_gltf(out)
@@ -396,7 +394,6 @@ def test_round_trip_keeps_the_bind_weight_of_a_shape_on_two_meshes(tmp_path):
 @pytest.mark.parametrize("name", ["Godette_vrm_v4.vrm", "subdivision_shapekey_modifier_vrm1.vrm"])
 def test_round_trip_of_the_data_kit_avatars(tmp_path, name):
     # the kit's VRM 0.x (Godette) and VRM 1.0 avatars: import -> export (as they came) -> import gives the same
-    gltf_read = pytest.importorskip("facepuppet.offline.io.gltf_read")
     path = need_shared("gltf", name)
     c = gltf_read.read_gltf(path)
     out = tmp_path / name
