@@ -1,4 +1,9 @@
-"""``facepuppet contact-sheet``: every expression shape at weight 1, labelled, in one PNG."""
+"""``facepuppet contact-sheet``: every expression shape at weight 1, labelled, in one PNG.
+
+A character with VRM expressions gets a cell per expression too (its binds at expression weight 1,
+labelled ``[Blink]``), after its shapes; ``--no-expressions`` leaves them out. A character whose
+licence asks for attribution (``Character.credits``) gets it as a footer under the grid.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.render.images import contact_sheet, save_png
+from facepuppet.runtime.render.images import contact_sheet, label_image, save_png
 
 if TYPE_CHECKING:
     import moderngl
@@ -29,8 +34,9 @@ def parse_cell(text: str) -> tuple[int, int]:
 
 def render_shapes(ctx: moderngl.Context, character: Character, cell: tuple[int, int] = (320, 320),
                   path: str = "auto", log: Callable[[str], None] = print,
-                  framing: str = "face", **picture: object) -> list[tuple[str, np.ndarray]]:
-    """Neutral, then each shape at weight 1.
+                  framing: str = "face", expressions: bool = True,
+                  **picture: object) -> list[tuple[str, np.ndarray]]:
+    """Neutral, then each shape at weight 1, then (``expressions``) each VRM expression at weight 1.
 
     ``picture``: more FaceRenderer options (background, transparent, msaa).
 
@@ -51,9 +57,26 @@ def render_shapes(ctx: moderngl.Context, character: Character, cell: tuple[int, 
             weights[s] = 1.0
             renderer.draw(weights)
             frames.append((name, renderer.read_pixels()))
+        if expressions and character.expressions is not None:
+            binds = character.expressions.dense(character.n_shapes)
+            for e, name in enumerate(character.expressions.names):
+                renderer.draw(np.clip(binds[e], 0.0, 1.0))
+                frames.append((f"[{name}]", renderer.read_pixels()))
         return frames
     finally:
         renderer.close()
+
+
+def with_footer(sheet: np.ndarray, text: str) -> np.ndarray:
+    """``sheet`` (h, w, 3) uint8 with a row below it holding ``text`` (the attribution), left-aligned."""
+    label = label_image(text)
+    h, w = label.shape[:2]
+    footer = np.empty((h + 4, sheet.shape[1], 3), np.uint8)
+    footer[:] = sheet[-1, -1]
+    w = min(w, sheet.shape[1] - 4)
+    a = label[:, :w, 3:4].astype(np.float32) / 255.0
+    footer[2:2 + h, 4:4 + w] = (label[:, :w, :3] * a + footer[2:2 + h, 4:4 + w] * (1 - a)).astype(np.uint8)
+    return np.vstack([sheet, footer])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,12 +89,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"credits: {character.credits}")
     target = create_context(headless=True)
     try:
-        frames = render_shapes(target.ctx, character, args.cell, args.path, **picture)
+        frames = render_shapes(target.ctx, character, args.cell, args.path, expressions=args.expressions,
+                               **picture)
     finally:
         target.close()
     columns = args.columns or max(1, math.ceil(math.sqrt(len(frames) * 16 / 9 * args.cell[1] / args.cell[0])))
-    out = save_png(args.output, contact_sheet(frames, columns))
-    print(f"wrote {out}: {len(frames)} cells ({character.n_shapes} shapes + neutral), {columns} columns")
+    sheet = contact_sheet(frames, columns)
+    if character.credits:
+        sheet = with_footer(sheet, character.credits)
+    out = save_png(args.output, sheet)
+    n_expr = len(frames) - 1 - character.n_shapes
+    print(f"wrote {out}: {len(frames)} cells ({character.n_shapes} shapes"
+          + (f", {n_expr} expressions" if n_expr else "") + f" + neutral), {columns} columns")
     return 0
 
 
@@ -84,6 +113,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--cell", type=parse_cell, default=(320, 320), help="cell size WIDTHxHEIGHT (320x320)")
     parser.add_argument("--columns", type=int, default=0, help="grid columns (default: about 16:9)")
     parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    parser.add_argument("--expressions", action=argparse.BooleanOptionalAction, default=True,
+                        help="a cell per VRM expression after the shapes (default on, for characters that have them)")
     from facepuppet.runtime.render.options import add_render_arguments
 
     add_render_arguments(parser, framing="face", credits=False)

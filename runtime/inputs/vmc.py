@@ -292,7 +292,10 @@ class VmcAdapter(OscAdapter):
         if root:
             self.root_position, self.root_rotation = position, rotation
         else:
-            self.head_translation, self.head_rotation = position, rotation
+            # A bone's position is its local offset from its parent bone (the neck), not a motion of the
+            # head: taken as a head translation it lifted a whole VRM avatar by its neck length (1.4 m
+            # at a sender's rest pose). Only the rotation turns the head.
+            self.head_rotation = rotation
             self.head_source = "bone"
 
     def _tracker(self, kind: str, params: list) -> None:

@@ -148,12 +148,13 @@ def test_vmc_end_to_end_from_liblo_oscsend():
         port = source.address[1]
         oscsend(port, "/VMC/Ext/Blend/Val", "sf", "JawOpen", "0.8")
         oscsend(port, "/VMC/Ext/Blend/Val", "sf", "Blink", "0.5")
-        oscsend(port, "/VMC/Ext/Bone/Pos", "sfffffff", "Head", "0", "1.5", "0", "0", "0", "0", "1")
+        oscsend(port, "/VMC/Ext/Bone/Pos", "sfffffff", "Head", "0", "1.5", "0", "0", "0.2588190", "0", "0.9659258")
         oscsend(port, "/VMC/Ext/Blend/Apply", "")
         frame = poll_frame(source)
         assert frame.weights[JAW] == pytest.approx(0.8)
         assert frame.weights[ARKIT_NAMES.index("eyeBlinkRight")] == pytest.approx(0.5)
-        np.testing.assert_allclose(frame.head_translation, [0, 1.5, 0])
+        np.testing.assert_allclose(frame.head_rotation, [0, -0.2588190, 0, 0.9659258], atol=1e-6)  # x mirrored
+        assert frame.head_translation is None  # the bone's local offset from the neck moves nothing
         assert source.counters["datagrams"] == 4 and source.counters["malformed"] == 0
 
 
