@@ -22,12 +22,18 @@ rendering the character at ``--size``. Reported:
   every second, which must stay flat.
 
 ``--input KIND`` picks the protocol the sender speaks and the run listens for
-(:data:`SENDERS`: ``vmc``, the default, or ``openseeface``: one datagram of one
-1785-byte face record per frame, mouth and brows moving). Before the live phase
-the bench also measures the decode cost per datagram of that kind: the
-adapter's ``handle`` (what the receiver runs for each datagram) timed over
-``DECODE_PACKETS`` prepared datagrams with ``perf_counter_ns``, p50/p99 in µs
-(``decode_us``, and per frame for VMC's several datagrams).
+(:data:`SENDERS`: ``vmc``, the default; ``openseeface``: one datagram of one
+1785-byte face record per frame, mouth and brows moving; ``ifacialmocap`` and
+``vtubestudio``: one datagram per frame from a sender process that plays the
+phone: it binds 127.0.0.1, prints ``phone PORT``, waits for the run's
+``--phone`` start payload / data request, then, once told ``go`` on stdin (the
+run is ready to draw), streams to the requester, VTube Studio to the ports its
+request names). Before the live phase the bench also measures the decode cost
+per datagram of that kind: the adapter's ``handle`` (what the receiver runs for
+each datagram) timed over ``DECODE_PACKETS`` prepared datagrams with
+``perf_counter_ns``, p50/p99 in µs (``decode_us``, and per frame for VMC's
+several datagrams). The loss figures count each kind's datagrams per frame
+(``per_frame`` of its :data:`SENDERS` class).
 
 Run the sender alone with
 ``python -m facepuppet.runtime.bench.latency --send HOST PORT RATE SECONDS [KIND]``.
@@ -119,8 +125,82 @@ class _OpenSeeFaceFrames:
         self.sock.close()
 
 
+PHONE_WAIT_S = 60.0  # the phone sender waits this long for the run's first request
+
+
+def _phone_weights(t: float) -> np.ndarray:
+    return 0.5 + 0.5 * np.sin(2 * np.pi * 0.7 * t + np.arange(52) * 0.37)
+
+
+class _PhoneFrames:
+    """A phone app's frames, one datagram each, sent from the socket the app's request arrives on.
+
+    ``plays_phone``: :func:`send` binds :meth:`listen`, waits for the run's request and lets
+    :meth:`answer` pick where the frames go (before that, to ``(host, port)``).
+    """
+
+    per_frame = 1
+    plays_phone = True
+
+    def __init__(self, host: str, port: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.port = port
+        self.targets = [(host, port)]
+
+    def listen(self) -> int:
+        """Bind the phone's socket on 127.0.0.1 (a free port, returned)."""
+        self.sock.bind(("127.0.0.1", 0))
+        return self.sock.getsockname()[1]
+
+    def answer(self, request: bytes, requester: tuple) -> None:
+        """Stream to the requester's IP at the run's port (iFacialMocap answers there whatever asked)."""
+        self.targets = [(requester[0], self.port)]
+
+    def datagrams(self, t: float) -> list[bytes]:
+        return [self.encode(t)]
+
+    def send(self, t: float) -> None:
+        data = self.encode(t)
+        for target in self.targets:
+            try:
+                self.sock.sendto(data, target)
+            except BlockingIOError:  # a full send buffer drops the datagram (counted as lost by the bench)
+                pass
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class _IFacialMocapFrames(_PhoneFrames):
+    """iFacialMocap v2 text frames: the 52 weights and the head (degrees)."""
+
+    @staticmethod
+    def encode(t: float) -> bytes:
+        from facepuppet.runtime.inputs.ifacialmocap import encode_ifm_frame
+
+        yaw, pitch = math.degrees(0.2 * math.sin(t)), math.degrees(0.1 * math.sin(1.3 * t))
+        return encode_ifm_frame(_phone_weights(t), head=(pitch, yaw, 0.0, 0.0, 0.0, 0.0))
+
+
+class _VTubeStudioFrames(_PhoneFrames):
+    """VTube Studio phone-protocol JSON frames, sent to each port the data request names."""
+
+    @staticmethod
+    def encode(t: float) -> bytes:
+        from facepuppet.runtime.inputs.vtubestudio import encode_vts_frame
+
+        yaw, pitch = math.degrees(0.2 * math.sin(t)), math.degrees(0.1 * math.sin(1.3 * t))
+        return encode_vts_frame(_phone_weights(t), rotation=(pitch, yaw, 0.0), timestamp_ms=int(t * 1000))
+
+    def answer(self, request: bytes, requester: tuple) -> None:
+        import json
+
+        self.targets = [(requester[0], int(p)) for p in json.loads(request)["ports"]]
+
+
 #: input kind -> the frames the bench's sender streams for it
-SENDERS: dict[str, type] = {"vmc": _VmcFrames, "openseeface": _OpenSeeFaceFrames}
+SENDERS: dict[str, type] = {"vmc": _VmcFrames, "openseeface": _OpenSeeFaceFrames,
+                            "ifacialmocap": _IFacialMocapFrames, "vtubestudio": _VTubeStudioFrames}
 
 
 def decode_cost(kind: str, n: int = DECODE_PACKETS) -> dict:
@@ -145,18 +225,33 @@ def decode_cost(kind: str, n: int = DECODE_PACKETS) -> dict:
             handle(d, 0.0)
             cost[i] = clock() - t0
             i += 1
+    sizes = [len(d) for frame in distinct for d in frame]
     us = cost / 1e3
     p50, p99 = np.percentile(us, [50, 99])
     per_frame_us = us[: n - n % per_frame].reshape(-1, per_frame).sum(axis=1)
     f50, f99 = np.percentile(per_frame_us, [50, 99])
-    return {"datagrams": n, "datagrams_per_frame": per_frame, "p50_us": float(p50), "p99_us": float(p99),
+    return {"datagrams": n, "n": n, "bytes": int(np.mean(sizes)), "datagrams_per_frame": per_frame,
+            "p50_us": float(p50), "p99_us": float(p99),
             "max_us": float(us.max()), "per_frame_p50_us": float(f50), "per_frame_p99_us": float(f99),
             "frames": adapter.counters.get("frames"), "internal_error": adapter.counters.get("internal_error")}
 
 
 def send(host: str, port: int, rate: float, seconds: float, kind: str = "vmc") -> int:
-    """Stream ``kind`` frames (:data:`SENDERS`) at ``rate`` Hz for ``seconds``; returns the number of frames sent."""
+    """Stream ``kind`` frames (:data:`SENDERS`) at ``rate`` Hz for ``seconds``; returns the number of frames sent.
+
+    For the phone kinds ``port`` is the run's listening port and this process plays the phone: it prints
+    ``phone PORT`` (its own port on 127.0.0.1), waits for the first request, then for a line on stdin
+    ("go": the run is ready to draw; frames sent while it sets up would only go stale) and streams to the
+    requester (VTube Studio: to the ports the request names).
+    """
     frames = SENDERS[kind](host, port)
+    if getattr(frames, "plays_phone", False):
+        print(f"phone {frames.listen()}", flush=True)
+        frames.sock.settimeout(PHONE_WAIT_S)
+        request, requester = frames.sock.recvfrom(4096)
+        sys.stdin.readline()
+        frames.answer(request, requester)
+        frames.sock.setblocking(False)
     start = time.monotonic()
     k = 0
     while True:
@@ -184,16 +279,27 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
+    procs = []
+    phone = None
+    if getattr(SENDERS[kind], "plays_phone", False):  # the phone must be there before the run asks it
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(port),
+             repr(rate), repr(seconds), kind], stdout=subprocess.PIPE, stdin=subprocess.PIPE, text=True))
+        first = procs[0].stdout.readline().split()
+        if len(first) != 2 or first[0] != "phone":
+            procs[0].kill()
+            procs[0].wait()
+            raise RuntimeError(f"bench latency: the {kind} phone sender did not start ({first!r})")
+        phone = f"127.0.0.1:{first[1]}"
     # the run stops shortly after the sender process ends (its start-up time varies with load);
     # the duration is only a safety net
     run_args = SimpleNamespace(
-        character=args.character, input=kind, listen=f"127.0.0.1:{port}", allow=None, config=None,
+        character=args.character, input=kind, listen=f"127.0.0.1:{port}", allow=None, config=None, phone=phone,
         calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False, headless=True,
         out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path,
         receiver=getattr(args, "receiver", "process"), draw=getattr(args, "draw", "arrival"))
     stop = threading.Event()
     sender_out: list[str] = []
-    procs = []
     rss: list[tuple[float, float]] = []
     newest: list[float] = []  # end-to-end ms of each drawn new frame (for per-second maxima)
     t_start = [0.0]
@@ -202,9 +308,13 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
 
     def on_ready(address):
         t_start[0] = time.monotonic()
-        procs.append(subprocess.Popen(
-            [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(address[1]),
-             repr(rate), repr(seconds), kind], stdout=subprocess.PIPE, text=True))
+        if procs:  # the phone sender: go
+            procs[0].stdin.write("go\n")
+            procs[0].stdin.flush()
+        else:
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "facepuppet.runtime.bench.latency", "--send", "127.0.0.1", str(address[1]),
+                 repr(rate), repr(seconds), kind], stdout=subprocess.PIPE, text=True))
 
         def wait_for_sender():
             sender_out.append(procs[0].communicate()[0])
@@ -314,7 +424,8 @@ def bench_latency(args: argparse.Namespace) -> dict:
     results = {"character": str(args.character), "size": args.size, "fps": args.fps,
                "draw": getattr(args, "draw", "arrival"), "input": kind}
     results["decode_us"] = d = decode_cost(kind)
-    print(f"latency bench [decode {kind}]: {d['datagrams']} datagrams, handle() p50 {d['p50_us']:.1f} us, "
+    print(f"latency bench [{kind}]: decode {d['datagrams']} datagrams ({d['bytes']} bytes), "
+          f"handle() p50 {d['p50_us']:.1f} us, "
           f"p99 {d['p99_us']:.1f} us, max {d['max_us']:.1f} us; per frame ({d['datagrams_per_frame']} datagrams) "
           f"p50 {d['per_frame_p50_us']:.1f} us, p99 {d['per_frame_p99_us']:.1f} us")
     results["nominal"] = _phase(args, args.rate, args.seconds, log)
@@ -355,7 +466,8 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-c", "--character", required=True,
                         help="character .npz (the ICT head for the issue's numbers)")
     parser.add_argument("--input", choices=tuple(SENDERS), default="vmc",
-                        help="the protocol sent and listened for (vmc, the default, or openseeface)")
+                        help="the protocol sent and listened for (vmc, the default, openseeface, or a phone "
+                             "kind, ifacialmocap / vtubestudio, played by the sender process)")
     parser.add_argument("--rate", type=float, default=120.0, help="frames per second sent (120)")
     parser.add_argument("--seconds", type=float, default=30.0, help="seconds of sending (30)")
     parser.add_argument("--size", default="640x480", help="render size (640x480)")
@@ -375,8 +487,8 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
 register_bench(
     "latency",
     bench_latency,
-    "receive -> frame-finished latency of a headless live run fed by a sender process (VMC or OpenSeeFace; "
-    "optional flood), and the decode cost per datagram",
+    "receive -> frame-finished latency of a headless live run fed by a sender process (VMC, OpenSeeFace, "
+    "iFacialMocap or VTube Studio; optional flood), and the decode cost per datagram",
     _add_arguments,
 )
 

@@ -35,5 +35,6 @@ def test_decode_cost_times_every_datagram(kind):
 def test_input_option_lists_the_kinds():
     parser = argparse.ArgumentParser()
     _add_arguments(parser)
-    assert parser.parse_args(["-c", "x.npz", "--input", "openseeface"]).input == "openseeface"
+    for kind in ("openseeface", "ifacialmocap", "vtubestudio"):
+        assert parser.parse_args(["-c", "x.npz", "--input", kind]).input == kind
     assert parser.parse_args(["-c", "x.npz"]).input == "vmc"

@@ -24,6 +24,8 @@ def test_bench_latency_with_a_phone_sender(kind, tmp_path, capsys):
     assert decode["n"] == decode["frames"] > 0 and 0 < decode["p50_us"] <= decode["p99_us"]
     nominal = results["nominal"]
     assert nominal["input"] == kind and nominal["frames_sent"] == 30
+    # one datagram per phone frame (the frame class's per_frame, not VMC's several)
+    assert decode["datagrams_per_frame"] == 1 and nominal["datagrams_sent"] == 30
     assert nominal["frames_decoded"] == nominal["datagrams_received"] > 0  # the run asked, the phone answered
     assert nominal["end_to_end_ms"]["n"] > 0
     assert f"latency bench [{kind}]" in capsys.readouterr().out
