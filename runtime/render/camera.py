@@ -100,6 +100,8 @@ def frame_bounds(
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     centre = (lo + hi) / 2.0
     half = (hi - lo) / 2.0
+    # a flat or point-like box (one triangle in a plane, a single vertex) still gets a camera in front of it
+    half = np.maximum(half, 1e-3 * max(float(half.max()), 1e-3))
     tan_y = np.tan(np.radians(fov_y_deg) / 2.0)
     # Half height needed so the box's x and y extents both fit, seen at its front face.
     half_height = max(half[1], half[0] / aspect) * margin

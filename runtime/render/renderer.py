@@ -296,6 +296,10 @@ class FaceRenderer:
             moving = moving_vertices(c)
             used = np.intersect1d(used, moving) if len(moving) else used
         lo, hi = bounds(c.vertices[used])
+        whole_lo, whole_hi = bounds(c.vertices[np.unique(tris)] if len(tris) else c.vertices)
+        if float(np.max(hi - lo)) <= 0.05 * float(np.max(whole_hi - whole_lo)):
+            # a head or face part too small to frame (one moving vertex, a degenerate head box): frame it all
+            lo, hi = whole_lo, whole_hi
         self.camera = frame_bounds(lo, hi, self.width / self.height)
 
     def _setup_buffers(self) -> None:
