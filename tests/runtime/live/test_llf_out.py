@@ -254,11 +254,16 @@ def test_run_llf_out_sends_one_packet_a_tick_and_says_so(tmp_path, receiver, cap
     assert "51 ARKit shapes the character lacks sent as 0" in out  # the sphere: jawOpen and its own "puff"
     n_ticks = int(out.split("run: ")[-1].split(" ticks")[0])
     datagrams = drain(receiver)
-    assert len(datagrams) == n_ticks == 11
+    # one packet per drawn tick; a live run skips a tick it is late for (a loaded machine), so the count is
+    # what the run reports, at most the 11 ticks of 0.5 s at 20 fps, and each packet's frame number is its
+    # tick's time on the 60 fps timecode (3 per tick at 20 fps)
+    assert len(datagrams) == n_ticks and 6 <= n_ticks <= 11
     adapter = LiveLinkFaceAdapter()
     frames = [adapter.handle(d, 0.0) for d in datagrams]
-    assert adapter.counters["frames"] == n_ticks and [f.number for f in frames] == [3 * k for k in range(11)]
-    assert '"llf_out": {"packets_sent": 11, "send_errors": 0}' in out
+    numbers = [f.number for f in frames]
+    assert adapter.counters["frames"] == n_ticks and numbers[0] == 0 and all(n % 3 == 0 for n in numbers)
+    assert all(b > a for a, b in zip(numbers, numbers[1:])) and numbers[-1] <= 30
+    assert f'"llf_out": {{"packets_sent": {n_ticks}, "send_errors": 0}}' in out
 
 
 @pytest.mark.gl
