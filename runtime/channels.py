@@ -77,6 +77,28 @@ def canonical(name: str) -> str:
     return base + side
 
 
+_ARKIT_INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
+_WIRE_NAMES: dict[str, int | None] = {}
+MAX_CACHED_NAMES = 512  # names seen on the wire (stray keys too), so the cache is bounded
+
+
+def arkit_index(name: str) -> int | None:
+    """Index in :data:`ARKIT_NAMES` of a name in any convention (:func:`canonical`), None for others.
+
+    For decoders that meet the same few names in every datagram: cached, the cache bounded (cleared
+    when full).
+    """
+    try:
+        return _WIRE_NAMES[name]
+    except KeyError:
+        pass
+    index = _ARKIT_INDEX.get(canonical(name))
+    if len(_WIRE_NAMES) >= MAX_CACHED_NAMES:
+        _WIRE_NAMES.clear()
+    _WIRE_NAMES[name] = index
+    return index
+
+
 def pascal(name: str) -> str:
     """PascalCase spelling of the canonical key (VMC perfect sync, Live Link Face)."""
     key = canonical(name)

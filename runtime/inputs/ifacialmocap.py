@@ -41,7 +41,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES, canonical
+from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES, FLOAT32_MAX
@@ -54,25 +54,7 @@ PORT = 49983
 MAX_PACKET = 8192
 COUNTERS = (*COUNTER_NAMES, "unknown_key")
 
-_INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 _EYES = {"rightEye": "Right", "leftEye": "Left"}
-
-
-_NAME_CACHE: dict[str, int | None] = {}
-MAX_CACHED_NAMES = 512  # names seen on the wire -> channel index (stray keys too, so bounded)
-
-
-def channel_index(name: str) -> int | None:
-    """Index in ARKIT_NAMES of a wire name (``canonical``), None for others; cached, the cache bounded."""
-    try:
-        return _NAME_CACHE[name]
-    except KeyError:
-        pass
-    index = _INDEX.get(canonical(name))
-    if len(_NAME_CACHE) >= MAX_CACHED_NAMES:
-        _NAME_CACHE.clear()
-    _NAME_CACHE[name] = index
-    return index
 
 
 class _Bad(Exception):
@@ -173,7 +155,7 @@ class IFacialMocapAdapter:
                 raise _Bad("malformed")
             seen.add(name)
             number = _number(value)
-            index = channel_index(name)
+            index = arkit_index(name)
             if index is None:
                 unknown += 1
                 continue

@@ -48,7 +48,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES, canonical
+from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES, FLOAT32_MAX
@@ -62,24 +62,6 @@ SENT_BY = "facepuppet"
 MAX_MESSAGE = 16384
 COUNTERS = (*COUNTER_NAMES, "unknown_key", "face_lost")
 
-_INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
-
-
-_NAME_CACHE: dict[str, int | None] = {}
-MAX_CACHED_NAMES = 512  # names seen on the wire -> channel index (stray keys too, so bounded)
-
-
-def channel_index(name: str) -> int | None:
-    """Index in ARKIT_NAMES of a wire name (``canonical``), None for others; cached, the cache bounded."""
-    try:
-        return _NAME_CACHE[name]
-    except KeyError:
-        pass
-    index = _INDEX.get(canonical(name))
-    if len(_NAME_CACHE) >= MAX_CACHED_NAMES:
-        _NAME_CACHE.clear()
-    _NAME_CACHE[name] = index
-    return index
 
 
 class _Bad(Exception):
@@ -186,7 +168,7 @@ class VTubeStudioAdapter:
             if entry["k"] in seen:
                 raise _Bad("malformed")
             seen.add(entry["k"])
-            index = channel_index(entry["k"])
+            index = arkit_index(entry["k"])
             if index is None:
                 unknown += 1
                 continue
