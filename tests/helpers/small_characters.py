@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.character_parts import Expressions, Layout, Look, Skeleton, identity_look
 from facepuppet.runtime.geometry import vertex_normals
 
 
@@ -113,3 +114,28 @@ def grid_face(extra: bool = False) -> Character:
                      pivot=np.zeros(3, np.float32), shape_names=names, delta_offsets=offsets,
                      delta_indices=indices, delta_positions=np.ascontiguousarray(both[:, :3]),
                      delta_normals=np.ascontiguousarray(both[:, 3:]))
+
+
+def parts_character(**overrides) -> Character:
+    """Two triangles, a root and a head node (the top two vertices follow the head), one texture."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], np.float32)
+    rest = np.tile(np.eye(4, dtype=np.float32), (2, 1, 1))
+    rest[1, :3, 3] = (0.5, 1.0, 0.0)
+    fields = dict(
+        name="parts", units="m", vertices=v, triangles=np.array([[0, 1, 2], [1, 3, 2]], np.uint32),
+        triangle_material=np.zeros(2, np.uint16), vertex_color=np.ones((4, 3), np.float32),
+        material_names=("mat",), material_params=np.zeros((1, 4), np.float32), pivot=np.zeros(3, np.float32),
+        shape_names=("s",), delta_offsets=np.array([0, 1]), delta_indices=np.array([2], np.uint32),
+        delta_positions=np.ones((1, 3), np.float32), delta_normals=np.zeros((1, 3), np.float32),
+        metadata={"settings": {"source": {"format": "vrm0", "credits": "Quad by Someone, CC BY 4.0"}}},
+        skeleton=Skeleton(("root", "head"), np.array([-1, 0], np.int32), rest,
+                          np.array([[0, 0, 0, 0], [0, 0, 0, 0], [1, 0, 0, 0], [1, 0, 0, 0]], np.uint16),
+                          np.tile(np.array([1, 0, 0, 0], np.float32), (4, 1)), {"head": 1}),
+        look=Look(texture_names=("t0",), texture_info=np.array([[0, 2, 2, 0, 0, 0, 0]], np.int32),
+                  texture_pixels=np.arange(16, dtype=np.uint8).reshape(4, 4), **identity_look(4, 1)),
+        expressions=Expressions(("Blink",), ("Blink",), np.array([0, 1], np.int64), np.array([0], np.uint32),
+                                np.array([0.5], np.float32), np.zeros((1, 4), np.int32)),
+        layout=Layout(("m",), np.array([[0, 4, 0, 2, 0, 0]], np.int64)),
+    )
+    fields.update(overrides)
+    return Character(**fields)

@@ -12,7 +12,7 @@ from facepuppet.runtime.commands import contact_sheet
 from facepuppet.runtime.render.images import LABEL_HEIGHT, save_png
 from facepuppet.runtime.render.images import contact_sheet as make_sheet
 
-from helpers.small_characters import sphere_character
+from helpers.small_characters import parts_character, sphere_character
 
 
 def parse(module, argv):
@@ -89,3 +89,26 @@ def test_face_framing_shows_the_face_larger_than_head_framing(egl_ctx, ict_chara
         r.close()
         covered[framing] = (np.abs(image - image[0, 0]).sum(axis=2) > 30).mean()
     assert covered["face"] > 1.3 * covered["head"]
+
+
+@pytest.mark.gl
+def test_a_vrm_characters_sheet_has_a_cell_per_expression_and_its_credits_under_it(tmp_path, capsys):
+    c = parts_character()  # one shape "s" (moves the top-left vertex), one expression Blink binding it at 0.5
+    path = c.save(tmp_path / "parts.npz")
+    out = tmp_path / "sheet.png"
+    args = parse(contact_sheet, ["contact-sheet", str(path), "-o", str(out), "--cell", "64x48", "--columns", "3",
+                                 "--path", "cpu"])
+    assert args.func(args) == 0
+    assert "3 cells (1 shapes, 1 expressions + neutral)" in capsys.readouterr().out
+    sheet = np.asarray(Image.open(out))
+    cells = 48 + LABEL_HEIGHT
+    assert sheet.shape[0] > cells and sheet.shape[1] == 3 * 64  # one row of cells and a footer under it
+    neutral, shape, expression = (sheet[:48, k * 64:(k + 1) * 64].astype(int) for k in range(3))
+    assert np.abs(expression - neutral).max() > 30  # Blink moves its shape by half
+    assert np.abs(expression - shape).max() > 30    # ... not all the way
+    footer = sheet[cells:]
+    assert (footer.max(axis=2) > 150).any()  # the credits text
+    args = parse(contact_sheet, ["contact-sheet", str(path), "-o", str(tmp_path / "s2.png"), "--cell", "64x48",
+                                 "--no-expressions", "--path", "cpu"])
+    assert args.func(args) == 0
+    assert "2 cells (1 shapes + neutral)" in capsys.readouterr().out
