@@ -80,7 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     p = subparsers.add_parser(
         "run", help="drive a character live from a tracker over UDP (VMC, Face Cap, FaceOSC, markers, Live Link Face, "
-                     "iFacialMocap, VTube Studio)",
+                     "iFacialMocap, VTube Studio, OpenSeeFace)",
         description="Drive a character live from OSC / UDP tracker input on this machine.")
     p.add_argument("-c", "--character", type=Path, required=True, help="character .npz")
     p.add_argument("--input", required=True, choices=tuple(INPUT_KINDS) + ("audio",),
