@@ -28,7 +28,9 @@ from facepuppet.runtime.character_parts import (
     Layout,
     Look,
     Skeleton,
+    check_normals,
 )
+from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.runtime.tables import (
     Section,
     TableSchema,
@@ -101,6 +103,8 @@ class Character:
         says where a glTF/VRM character came from (format, VRM meta, the extension JSON kept for export)
     skeleton, look, expressions, layout : the optional parts a glTF / VRM avatar brings
         (:mod:`facepuppet.runtime.character_parts`); None for an OBJ rig
+    normals : ndarray of shape (n_vertices, 3), float32, unit, the file's rest normals, or None (computed
+        from the triangles, :meth:`rest_normals`)
     """
 
     name: str
@@ -122,6 +126,7 @@ class Character:
     look: Look | None = None
     expressions: Expressions | None = None
     layout: Layout | None = None
+    normals: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n_v = len(self.vertices)
@@ -147,6 +152,8 @@ class Character:
             self.expressions.check(self.n_shapes)
         if self.layout is not None:
             self.layout.check(n_v, len(self.triangles), len(self.material_names))
+        if self.normals is not None:
+            check_normals(self.normals, n_v)
         for arr in self._arrays().values():
             arr.setflags(write=False)
 
@@ -190,7 +197,15 @@ class Character:
                        expression_bind_weight=e.bind_weight, expression_flags=e.flags)
         if (lay := self.layout) is not None:
             out.update(primitives=lay.primitives)
+        if self.normals is not None:
+            out.update(vertex_normals=self.normals)
         return out
+
+    def rest_normals(self) -> np.ndarray:
+        """Rest normals (n_vertices, 3) float32: the file's own where it gave them, else area-weighted."""
+        if self.normals is not None:
+            return self.normals
+        return vertex_normals(self.vertices, self.triangles).astype(np.float32)
 
     def _channels(self) -> dict[str, list[str]]:
         channels = {"shapes": list(self.shape_names), "materials": list(self.material_names)}
@@ -287,6 +302,9 @@ def _load_parts(a: Mapping[str, np.ndarray], channels: Mapping[str, list], parts
         if len(have) != len(sections):
             missing = sorted(set(sections) - set(have))
             _fail(missing[0], f"missing: the {part} part has {', '.join(have)} but not {', '.join(missing)}")
+        if part == "normals":
+            out["normals"] = a["vertex_normals"]
+            continue
         group = next(g for g, (p, _) in PART_CHANNELS.items() if p == part)
         if group not in channels:
             _fail(f"channels.{group}", f"missing: the {part} part needs its name list")

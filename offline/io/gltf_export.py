@@ -7,8 +7,9 @@ What is written (glTF 2.0 spec; VRM 0.x ``VRM`` extension; VRM 1.0 ``VRMC_vrm`` 
   mesh, one primitive per Layout primitive; primitives of a mesh that share a
   vertex range share their vertex accessors. A character without a Layout (an
   OBJ rig) is one mesh with one primitive per material. Attributes: POSITION
-  (with min/max), NORMAL (area-weighted from the triangles: the character
-  stores no normals, and a glTF without them is drawn flat), TEXCOORD_0 (with
+  (with min/max), NORMAL (the character's own ``normals`` where it has them,
+  else area-weighted from the triangles, since a glTF without them is drawn
+  flat), TEXCOORD_0 (with
   a Look), COLOR_0 (the vertex colours, when not all white), JOINTS_0 and
   WEIGHTS_0 (with a Skeleton).
 * **morph targets**: per mesh, one target for each shape that moves a vertex of
@@ -295,7 +296,10 @@ class _Exporter:
             raise ExportError(f"character {c.name!r}: units {c.units!r} are not m, cm or mm")
         self.scale = scale
         self.vertices = self._points(c.vertices, scale)
-        self.normals = vertex_normals(self.vertices, c.triangles.astype(np.int64))
+        if c.normals is not None:  # the file's own normals (hard edges, custom normals), turned as the points
+            self.normals = self._points(c.normals)
+        else:
+            self.normals = vertex_normals(self.vertices, c.triangles.astype(np.int64))
         no_normal = np.linalg.norm(self.normals, axis=1) < 0.5
         self.normals[no_normal] = (0.0, 0.0, -1.0 if self.turn else 1.0)
         self.delta_pos = self._points(c.delta_positions, scale)

@@ -197,6 +197,7 @@ class _Reader:
                     skeleton=skeleton, look=look,
                     expressions=expressions if (self.vrm0 is not None or self.vrm1 is not None) else None,
                     layout=Layout(tuple(geo["mesh_names"]), geo["primitives"]),
+                    normals=geo["normals"].astype(np.float32) if geo["file_normals"] else None,
                 )
             except TablesError as exc:  # a value the file allows but a character cannot hold
                 raise GltfError(f.path, exc.field, exc.problem) from None
@@ -312,7 +313,7 @@ class _Reader:
         out: dict[str, Any] = {"vertices": [], "normals": [], "uv": [], "colors": [], "nodes": [], "weights": [],
                                "triangles": [], "triangle_material": [], "primitives": [], "mesh_names": [],
                                "targets": [], "default_weights": {}, "material_used": set(),
-                               "instance_of_mesh": {}, "n_joints": 0}
+                               "instance_of_mesh": {}, "n_joints": 0, "file_normals": True}
         n_v = n_t = 0
         joints_used: set[int] = set()
         for k, (s, i) in enumerate(instances, start=1):
@@ -352,6 +353,7 @@ class _Reader:
                     groups[key] = (n_v, len(g["positions"]))
                     out["vertices"].append(g["positions"])
                     out["normals"].append(g["normals"])
+                    out["file_normals"] &= g["from_file"]
                     out["uv"].append(g["uv"])
                     out["colors"].append(g["colors"])
                     out["nodes"].append(g["nodes"])
@@ -503,7 +505,11 @@ class _Reader:
                 dnw = np.zeros((n, 3))
             dnw[np.linalg.norm(dnw, axis=1) <= NORMAL_TOLERANCE] = 0.0  # as the OBJ import: not stored
             out_targets.append((dpw, dnw))
-        return {"positions": world, "normals": nrm, "uv": uv, "colors": colors, "nodes": nodes,
+        from_file = normals is not None and bool(np.all(np.abs(np.linalg.norm(nrm, axis=1) - 1.0) < 1e-3))
+        if normals is not None and not from_file:
+            self.warn(f"{aw}.NORMAL: zero or non-finite normals; the character's normals are computed instead")
+        return {"positions": world, "normals": nrm, "from_file": from_file, "uv": uv, "colors": colors,
+                "nodes": nodes,
                 "weights": weights, "targets": out_targets}
 
     def _attr(self, attrs: dict, key: str, where: str, widths: tuple, n: int | None = None,

@@ -17,7 +17,6 @@ import numpy as np
 from scipy.linalg.blas import saxpy
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.geometry import vertex_normals
 
 
 def check_weights(weights: np.ndarray, n_shapes: int) -> np.ndarray:
@@ -79,7 +78,7 @@ class CpuDeformer:
         n = character.n_vertices
         rest = np.empty((n, 6), dtype=np.float32)
         rest[:, :3] = character.vertices
-        rest[:, 3:] = vertex_normals(character.vertices, character.triangles)
+        rest[:, 3:] = character.rest_normals()
         self.rest = rest
         self.spans = moving_spans(np.unique(character.delta_indices), max_gap)
         lengths = self.spans[:, 1] - self.spans[:, 0]

@@ -17,7 +17,6 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
-from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.runtime.render.shader_loader import load_program
 
 if TYPE_CHECKING:
@@ -82,7 +81,7 @@ def setup_elastic(ctx: moderngl.Context, character: Character, model: ElasticMod
     ``make_vao(prog, vbo)`` is the renderer's VAO builder (same attribute layout as its other paths).
     """
     prog = load_program(ctx, "face.glsl", elastic_defines(model))
-    rest = np.hstack([character.vertices, vertex_normals(character.vertices, character.triangles)]).astype(np.float32)
+    rest = np.hstack([character.vertices, character.rest_normals()]).astype(np.float32)
     vbo = ctx.buffer(rest.tobytes())
     prog["u_basis"].value = 0
     prog["u_basis_index"].value = 1

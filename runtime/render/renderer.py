@@ -31,7 +31,7 @@ import moderngl
 import numpy as np
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, moving_vertices
-from facepuppet.runtime.geometry import bounds, vertex_normals
+from facepuppet.runtime.geometry import bounds
 from facepuppet.runtime.render.camera import frame_bounds, model_matrix
 from facepuppet.runtime.render.cpu_deform import CpuDeformer, check_weights
 from facepuppet.runtime.render.elastic_path import check_model, setup_elastic, upload_controls
@@ -328,7 +328,7 @@ class FaceRenderer:
             defines["SKIN"] = 1
         prog = load_program(ctx, "character.glsl" if self.parts else "face.glsl", defines)
         textures = delta_textures(ctx, c)
-        rest = np.hstack([c.vertices, vertex_normals(c.vertices, c.triangles)]).astype(np.float32)
+        rest = np.hstack([c.vertices, c.rest_normals()]).astype(np.float32)
         vbo = ctx.buffer(rest.tobytes())
         vao = self._vao(prog, vbo)
         prog["u_delta_positions"].value = 0

@@ -182,3 +182,27 @@ def test_godette_exported_as_vrm_reads_back_the_same_and_faces_minus_z_in_the_fi
         bs, bw = back.expressions.binds(e)
         assert dict(zip(bs.tolist(), bw.tolist())) == pytest.approx(dict(zip(s.tolist(), wt.tolist())))
     assert back.credits == godette.credits and "SirRichard94" in back.credits
+
+
+def test_godettes_own_normals_are_kept_drawn_and_exported(egl_ctx, godette, tmp_path):
+    from facepuppet.runtime.geometry import vertex_normals
+
+    # the file's normals (hard edges of a low-poly avatar), not area-weighted ones from the triangles
+    assert godette.normals is not None
+    computed = vertex_normals(godette.vertices, godette.triangles)
+    angle = np.degrees(np.arccos(np.clip(np.sum(godette.normals * computed, axis=1), -1, 1)))
+    assert np.median(angle) > 5.0
+    # kept through export (VRM 0.x turned back and forth) and import
+    out = tmp_path / "g.vrm"
+    export_character(godette, out)
+    np.testing.assert_allclose(read_gltf(out).normals, godette.normals, atol=1e-5)
+    # and drawn: the same avatar with computed normals shades differently
+    pictures = []
+    for c in (godette, godette.with_parts(normals=None)):
+        r = FaceRenderer(egl_ctx, c, 128, 128, path="cpu", log=lambda s: None)
+        try:
+            r.draw(np.zeros(c.n_shapes, np.float32))
+            pictures.append(r.read_pixels().astype(int))
+        finally:
+            r.close()
+    assert (np.abs(pictures[0] - pictures[1]).max(axis=2) > 24).sum() > 20  # toon shading: few steps move
