@@ -82,8 +82,9 @@ class DeskPanel:
     draw_s : float, seconds the last panel draw took on the CPU (build + submit)
     """
 
-    def __init__(self, ctx: moderngl.Context, fbo: moderngl.Framebuffer, width: int, height: int, *, pipeline=None, chain=None,
-                 character=None, counters: Callable[[], dict] | None = None, stats=None, recorder=None,
+    def __init__(self, ctx: moderngl.Context, fbo: moderngl.Framebuffer, width: int, height: int, *,
+                 pipeline=None, chain=None, character=None, counters: Callable[[], dict] | None = None,
+                 stats=None, recorder=None,
                  input_kind: str = "", address: str = "", visible: bool = True,
                  clock: Callable[[], float] = time.monotonic, window_size: tuple[int, int] | None = None,
                  names: tuple[str, ...] | None = None) -> None:
@@ -150,7 +151,7 @@ class DeskPanel:
     def _refresh(self, now: float) -> None:
         """Rates, drops, latency percentiles and the record size: twice a second."""
         self._refresh_at = now + REFRESH_S
-        groups = self.counters() if self.counters is not None else {}
+        groups = dict(self.counters().items()) if self.counters is not None else {}  # items(): fresh udp
         udp = dict(groups.get("udp", {}))
         packets = int(udp.get("packets", 0))
         s = self._status
@@ -237,7 +238,9 @@ class DeskPanel:
             imgui.text(region)
             imgui.pop_id()
             if c1 or c2:
-                filters[region] = replace(fs, min_cutoff=max(float(cutoff), 1e-3), beta=max(float(beta), 0.0))
+                # only the value dragged changes: ImGui hands back float32, the other keeps its exact value
+                filters[region] = replace(fs, min_cutoff=max(float(cutoff), 1e-3) if c1 else fs.min_cutoff,
+                                          beta=max(float(beta), 0.0) if c2 else fs.beta)
                 changed = True
         if changed:
             self.apply(replace(config, filters=filters))

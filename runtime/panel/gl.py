@@ -12,9 +12,10 @@ plain moderngl context the same way):
   table of moderngl textures, never a raw GL name.
 * **Geometry.** Each draw list holds ``ImDrawVert`` (2 float position in
   pixels, 2 float texture coordinate, 4 byte colour: 20 bytes) and 32-bit
-  indices (imgui-bundle's ``ImDrawIdx``; Dear ImGui's default is 16); each command draws ``ElemCount`` indices from ``IdxOffset`` (no
-  ``RendererHasVtxOffset``: ImGui keeps ``VtxOffset`` 0), one texture, and one
-  clip rectangle that becomes the scissor box (GL's y runs up, ImGui's down).
+  indices (imgui-bundle's ``ImDrawIdx``; Dear ImGui's default is 16); each
+  command draws ``ElemCount`` indices from ``IdxOffset`` (no ``RendererHasVtxOffset``:
+  ImGui keeps ``VtxOffset`` 0), one texture, and one clip rectangle that becomes
+  the scissor box (GL's y runs up, ImGui's down).
 * **State.** Alpha blending (colour over, alpha accumulated), no depth test, no
   culling, scissor on; restored for the character's renderer afterwards.
 
