@@ -142,7 +142,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 @dataclass
 class LiveRunResult:
     """What one live run did: the loop result, the stats, the per-tick weights (only when kept: ``--dump-weights``
-    or ``keep_weights``; None otherwise) and the parts' counters."""
+    or ``keep_weights``; None otherwise), the parts' counters and the panel (a closed DeskPanel, or None)."""
 
     loop: LoopResult
     stats: LiveStats
@@ -151,6 +151,7 @@ class LiveRunResult:
     path: str
     address: tuple
     chain: str = ""
+    panel: object = None
 
 
 @dataclass
@@ -350,7 +351,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         result = _run_loop(loop, source, args.duration, stop_event)
         counters["loop"] = result.counters
         return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address,
-                             chain.describe())
+                             chain.describe(), panel)
     except BaseException:
         for part in parts:   # a failed run leaves no half-written video
             if hasattr(part, "abort"):
@@ -382,7 +383,7 @@ def _open_panel(args, target, renderer, chain, character, stats, recorder, sourc
         panel = DeskPanel(target.ctx, renderer.fbo, opts.width, opts.height, pipeline=chain.filter, chain=chain,
                           character=character, counters=lambda: stats.counters, stats=stats, recorder=recorder,
                           input_kind=args.input, address=f"{source.address[0]}:{source.address[1]}",
-                          window_size=window_size)
+                          window_size=window_size, visible=not getattr(args, "panel_hidden", False))
     except PanelUnavailable as exc:
         if getattr(args, "panel", False):
             raise ValueError(f"--panel: {exc}") from None

@@ -12,8 +12,9 @@ frame on screen, not the one before.
   (over the last half second), drops by reason (every non-zero drop counter of the receiver and the loop),
   age of the last new frame, tracking state (waiting / live / lost / easing back), receive→draw latency
   p50/p99 (``end_to_end`` of the live stats over the last half second).
-* **Channels**: one row per input channel with three meters: raw input, after the stages (filter and
-  calibration), after mapping (the rig weight of the shape of that name: what the character gets).
+* **Channels**: one row per input channel (by default only those the input sends) with three meters:
+  raw input, after the stages (filter and calibration), after mapping (the rig weight of the shape of that
+  name: what the character gets).
 * **Filters**: One Euro min cutoff and beta per region.
 * **Calibrate** (neutral capture over ``capture_s``) and **Clear** (no neutral).
 * **Record**: the file and its size on disk; **Chain**: the stage chain; **Character**: name, shapes, credits.
@@ -36,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.live.timing import DurationSketch
 from facepuppet.runtime.panel import load_imgui
 from facepuppet.runtime.panel.apply import apply_config, clear_calibration
 from facepuppet.runtime.panel.gl import ImguiGL
@@ -50,8 +52,10 @@ REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed
 PANEL_WIDTH = 430
 #: meter colours (RGBA 0..1): raw, after the stages, after mapping; distinct so tests and eyes can tell them apart
 METER_COLOURS = ((0.35, 0.55, 0.95, 1.0), (0.30, 0.85, 0.40, 1.0), (0.98, 0.60, 0.15, 1.0))
-NOT_DROPS = frozenset({"packets", "rcvbuf_bytes", "frames_received", "ticks_without_new_frame", "late_ticks",
-                       "waited_over_1ms", "frames", "decoded"})
+#: a counter is a drop reason when its name has one of these (malformed, unknown_address, non_finite, oversized,
+#: filtered_sender, internal_error, stale_dropped, nonfinite_rejected, record_dropped, ...)
+DROP_WORDS = ("drop", "malformed", "unknown", "finite", "oversized", "filtered", "error", "rejected", "truncated",
+              "invalid", "bad")
 
 
 class DeskPanel:
@@ -80,6 +84,9 @@ class DeskPanel:
     rects : dict of widget label -> (x0, y0, x1, y1) in pixels, as last drawn (where to click)
     edits : int, config changes handed to the pipeline
     draw_s : float, seconds the last panel draw took on the CPU (build + submit)
+    draw_sketch : DurationSketch of every panel draw's CPU time (streaming: fixed memory in a long run)
+    submit_sketch : DurationSketch of the GL part of it (buffer uploads and draw calls; on llvmpipe the
+        vertex work of the draw calls runs here, on the calling thread)
     """
 
     def __init__(self, ctx: moderngl.Context, fbo: moderngl.Framebuffer, width: int, height: int, *,
@@ -108,6 +115,8 @@ class DeskPanel:
         self.rects: dict[str, tuple[float, float, float, float]] = {}
         self.edits = 0
         self.draw_s = 0.0
+        self.draw_sketch = DurationSketch()
+        self.submit_sketch = DurationSketch()
         self._last = clock()
         self._status: dict[str, Any] = {}
         self._refresh_at = -math.inf
@@ -115,6 +124,7 @@ class DeskPanel:
         self._ticks = 0
         self._last_raw_at: float | None = None
         self._shape_index: dict[tuple, np.ndarray] = {}
+        self.sent_only = True
         self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
 
     # -- the loop's overlay ----------------------------------------------------------------------
@@ -145,8 +155,12 @@ class DeskPanel:
         imgui.new_frame()
         self._build(info, now)
         imgui.render()
+        t1 = time.perf_counter()
         self.gl.render(imgui.get_draw_data(), self.fbo)
-        self.draw_s = time.perf_counter() - t0
+        t2 = time.perf_counter()
+        self.draw_s = t2 - t0
+        self.draw_sketch.add(self.draw_s)
+        self.submit_sketch.add(t2 - t1)
 
     def _refresh(self, now: float) -> None:
         """Rates, drops, latency percentiles and the record size: twice a second."""
@@ -163,7 +177,7 @@ class DeskPanel:
         drops = {}
         for group in ("udp", "loop"):
             for name, value in dict(groups.get(group, {})).items():
-                if name not in NOT_DROPS and isinstance(value, (int, np.integer)) and value:
+                if any(w in name for w in DROP_WORDS) and isinstance(value, (int, np.integer)) and value:
                     drops[f"{name}" if group == "udp" else f"{group}.{name}"] = int(value)
         s["drops"] = drops
         s["latency"] = None
@@ -193,10 +207,10 @@ class DeskPanel:
         imgui.set_next_window_bg_alpha(0.85)
         imgui.begin("facepuppet desk (Tab hides)")
         self._input_section(now)
+        self._channel_section(info)
         self._filter_section()
         self._calibration_section()
         self._info_section()
-        self._channel_section(info)
         imgui.end()
 
     def _input_section(self, now: float) -> None:
@@ -310,12 +324,18 @@ class DeskPanel:
         flt = frame.weights if frame is not None and frame.channels == channels else None
         mapped = self._mapped_index(channels)
         rig = info.weights
-        imgui.begin_child("channels", imgui.ImVec2(0, 0))
+        _, self.sent_only = imgui.checkbox("only the channels the input sends", self.sent_only)
+        rows = np.arange(len(channels))
+        if self.sent_only and raw_w is not None:  # NaN: not sent (a VMC sender names only some channels)
+            rows = np.flatnonzero(np.isfinite(raw_w))
+        height = max(120.0, 0.35 * self.window_size[1])  # scrolls; the sections below stay in view
+        imgui.begin_child("channels", imgui.ImVec2(0, height))
         clipper = imgui.ListClipper()
-        clipper.begin(len(channels))
+        clipper.begin(len(rows))
         bar = imgui.ImVec2(80, 12)
         while clipper.step():
-            for i in range(clipper.display_start, clipper.display_end):
+            for row in range(clipper.display_start, clipper.display_end):
+                i = int(rows[row])
                 values = (raw_w[i] if raw_w is not None else math.nan,
                           flt[i] if flt is not None else math.nan,
                           rig[mapped[i]] if mapped[i] >= 0 and rig is not None else math.nan)
@@ -325,8 +345,8 @@ class DeskPanel:
                     imgui.progress_bar(min(max(v, 0.0), 1.0) if math.isfinite(v) else 0.0, bar,
                                        f"{v:.2f}" if math.isfinite(v) else "-")
                     imgui.pop_style_color()
-                    if i == 0:
-                        self._remember(f"meter.0.{j}")
+                    if row == 0:
+                        self._remember(f"meter.0.{j}")  # the first row shown
                     imgui.same_line()
                 imgui.text(channels[i])
         clipper.end()

@@ -20,7 +20,7 @@ pytest.importorskip("imgui_bundle", reason="the panel's extra (imgui-bundle) is 
 from facepuppet.runtime.panel.desk import METER_COLOURS, DeskPanel  # noqa: E402
 
 pytestmark = pytest.mark.gl
-W, H, FPS = 480, 400, 30.0
+W, H, FPS = 480, 640, 30.0
 CHANNELS = ("jawOpen", "eyeBlinkLeft", "puff")
 
 
@@ -70,7 +70,7 @@ def _click(panel, x, y, down):
 def test_dragging_a_filter_slider_reaches_the_pipeline(egl_ctx):
     run = _Run(egl_ctx)
     try:
-        run.run(_frames(0.4, 3))  # lay the panel out once: where the slider is
+        run.run(_frames(0.4, 6))  # lay the panel out: where the slider is
         x0, y0, x1, y1 = run.panel.rects["filter.mouth.beta"]
         before = run.pipeline.config.filters["mouth"]
         assert before.beta == pytest.approx(0.4)
@@ -93,7 +93,7 @@ def test_dragging_a_filter_slider_reaches_the_pipeline(egl_ctx):
 def test_calibrate_button_captures_a_neutral_and_clear_drops_it(egl_ctx):
     run = _Run(egl_ctx)
     try:
-        run.run(_frames(0.4, 3))
+        run.run(_frames(0.4, 6))
         cx, cy = _centre(run.panel.rects["calibrate"])
         run.events = {2: lambda: _click(run.panel, cx, cy, True), 4: lambda: _click(run.panel, cx, cy, False)}
         run.run(_frames(0.4, 30))  # 1 s of frames: the 0.5 s capture completes
