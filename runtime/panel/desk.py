@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.channels import ChannelMap, canonical
 from facepuppet.runtime.live.timing import DurationSketch
 from facepuppet.runtime.panel import load_imgui
 from facepuppet.runtime.panel.apply import apply_config, clear_calibration
@@ -294,11 +294,17 @@ class DeskPanel:
                 imgui.text_wrapped(f"credits: {ch.credits}")
 
     def _mapped_index(self, channels: tuple) -> np.ndarray:
-        """For each input channel the index of the rig shape of the same name (-1: none)."""
+        """For each input channel the rig shape it drives (-1: none): the shape of the same name, else the
+        first the by-name channel map sends it to (an unsided browInnerUp drives browInnerUp_L and _R)."""
         idx = self._shape_index.get(channels)
         if idx is None:
             where = {canonical(n): i for i, n in enumerate(self.names)}
             idx = np.array([where.get(canonical(c), -1) for c in channels], dtype=np.int64)
+            if (idx < 0).any() and self.names:
+                matrix = ChannelMap.build(channels, self.names).matrix
+                for i in np.flatnonzero(idx < 0):
+                    targets = np.flatnonzero(matrix[:, i])
+                    idx[i] = targets[0] if targets.size else -1
             if len(self._shape_index) > 16:
                 self._shape_index.clear()
             self._shape_index[channels] = idx

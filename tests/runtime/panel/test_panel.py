@@ -153,3 +153,13 @@ def test_without_imgui_bundle_the_panel_says_how_to_install_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "imgui_bundle", None)  # an import of it now fails as if not installed
     with pytest.raises(PanelUnavailable, match=r"facepuppet\[panel\]"):
         load_imgui()
+
+
+def test_the_mapped_meter_of_an_unsided_channel_reads_the_shape_the_map_drives(egl_ctx):
+    fbo = egl_ctx.simple_framebuffer((64, 64))
+    panel = DeskPanel(egl_ctx, fbo, 64, 64, names=("jawOpen", "browInnerUp_L", "browInnerUp_R"))
+    try:  # browInnerUp has no shape of its name on this rig; the channel map sends it to both sides
+        assert list(panel._mapped_index(("browInnerUp", "jawOpen", "tongueOut"))) == [1, 0, -1]
+    finally:
+        panel.close()
+        fbo.release()
