@@ -10,12 +10,18 @@ LivePipeline has ``apply_config`` and ``clear_calibration`` itself.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from facepuppet.runtime.channels import filter_region
 
+if TYPE_CHECKING:
+    from facepuppet.runtime.live.config import LiveConfig
+    from facepuppet.runtime.live.pipeline import LivePipeline
 
-def apply_config(pipeline, config) -> None:
+
+def apply_config(pipeline: LivePipeline | None, config: LiveConfig) -> None:
     """``pipeline.apply_config(config)``, or the shim below when the pipeline has none yet."""
     if pipeline is None:
         return
@@ -26,7 +32,7 @@ def apply_config(pipeline, config) -> None:
         _apply_shim(pipeline, config)
 
 
-def clear_calibration(pipeline) -> None:
+def clear_calibration(pipeline: LivePipeline) -> None:
     """``pipeline.clear_calibration()``, or the shim below."""
     method = getattr(pipeline, "clear_calibration", None)
     if method is not None:

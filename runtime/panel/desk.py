@@ -45,7 +45,13 @@ from facepuppet.runtime.panel.gl import ImguiGL
 if TYPE_CHECKING:
     import moderngl
 
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.live.config import LiveConfig
     from facepuppet.runtime.live.loop import TickInfo
+    from facepuppet.runtime.live.pipeline import LivePipeline
+    from facepuppet.runtime.live.stages import Chain
+    from facepuppet.runtime.live.stats import LiveStats
+    from facepuppet.runtime.recording.recorder import PacketRecorder
 
 WEIGHT_REGIONS = ("eyes", "brows", "mouth", "other", "head")
 REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed this often
@@ -90,8 +96,9 @@ class DeskPanel:
     """
 
     def __init__(self, ctx: moderngl.Context, fbo: moderngl.Framebuffer, width: int, height: int, *,
-                 pipeline=None, chain=None, character=None, counters: Callable[[], dict] | None = None,
-                 stats=None, recorder=None,
+                 pipeline: LivePipeline | None = None, chain: Chain | None = None,
+                 character: Character | None = None, counters: Callable[[], dict] | None = None,
+                 stats: LiveStats | None = None, recorder: PacketRecorder | None = None,
                  input_kind: str = "", address: str = "", visible: bool = True,
                  clock: Callable[[], float] = time.monotonic, window_size: tuple[int, int] | None = None,
                  names: tuple[str, ...] | None = None) -> None:
@@ -360,7 +367,7 @@ class DeskPanel:
 
     # -- edits --------------------------------------------------------------------------------------
 
-    def apply(self, config) -> None:
+    def apply(self, config: LiveConfig) -> None:
         """Hand a changed config to the pipeline (applied at its next tick)."""
         apply_config(self.pipeline, config)
         self.edits += 1

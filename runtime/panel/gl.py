@@ -116,7 +116,7 @@ class ImguiGL:
         return self.ctx.vertex_array(self.prog, [(vbo, "2f 2f 4f1", "in_position", "in_uv", "in_color")],
                                      index_buffer=ibo, index_element_size=INDEX_BYTES)
 
-    def render(self, draw_data, fbo: moderngl.Framebuffer) -> int:
+    def render(self, draw_data: Any, fbo: moderngl.Framebuffer) -> int:
         """Draw ``draw_data`` (``imgui.get_draw_data()`` after ``imgui.render()``) into ``fbo``.
 
         Returns the number of draw commands issued.

@@ -8,7 +8,10 @@ headless. The run's own keys keep working: C calibrates when ImGui is not typing
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.panel.desk import DeskPanel
 
 
 def _key_table(glfw, imgui) -> dict[int, Any]:
@@ -28,7 +31,7 @@ def _key_table(glfw, imgui) -> dict[int, Any]:
     return table
 
 
-def bind_window(window: Any, panel, on_calibrate: Callable[[], None] | None = None) -> None:
+def bind_window(window: Any, panel: DeskPanel, on_calibrate: Callable[[], None] | None = None) -> None:
     """Install glfw callbacks on ``window`` feeding ``panel.io``; Tab toggles ``panel.visible``."""
     import glfw
 
