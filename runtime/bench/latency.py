@@ -267,7 +267,7 @@ def send(host: str, port: int, rate: float, seconds: float, kind: str = "vmc") -
     return k
 
 
-def _phase(args, rate: float, seconds: float, log) -> dict:
+def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> dict:
     """One sender process at ``rate`` for ``seconds`` against one headless live run."""
     from facepuppet.runtime.commands.run import run_live
 
@@ -297,7 +297,8 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
         character=args.character, input=kind, listen=f"127.0.0.1:{port}", allow=None, config=None, phone=phone,
         calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False, headless=True,
         out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path,
-        receiver=getattr(args, "receiver", "process"), draw=getattr(args, "draw", "arrival"))
+        receiver=getattr(args, "receiver", "process"), draw=getattr(args, "draw", "arrival"),
+        panel=panel is not None, panel_hidden=panel == "hidden")
     stop = threading.Event()
     sender_out: list[str] = []
     rss: list[tuple[float, float]] = []
@@ -350,7 +351,19 @@ def _phase(args, rate: float, seconds: float, log) -> dict:
     per_second = {}
     for t, ms in newest:
         per_second[int(t)] = max(per_second.get(int(t), 0.0), ms)
+    cpu = (result.loop.timer.samples("snapshot") + result.loop.timer.samples("map")
+           + result.loop.timer.samples("draw_submit")) * 1e3
+    extra = {}
+    if panel is not None:
+        sk, gl = result.panel.draw_sketch, result.panel.submit_sketch
+        extra = {"panel": panel, "panel_draws": sk.n,
+                 "panel_cpu_ms": {"p50": sk.quantile(0.5) * 1e3, "p99": sk.quantile(0.99) * 1e3} if sk.n else {},
+                 "panel_gl_submit_ms": {"p50": gl.quantile(0.5) * 1e3, "p99": gl.quantile(0.99) * 1e3}
+                 if gl.n else {}}
     return {
+        **extra,
+        "cpu_per_tick_ms": _percentiles(cpu),
+        "gpu_finish_ms": _percentiles(result.loop.timer.samples("gpu_finish") * 1e3),
         "rate_hz": rate,
         "seconds": seconds,
         "frames_sent": frames_sent,
@@ -433,6 +446,8 @@ def bench_latency(args: argparse.Namespace) -> dict:
     m = results["map_step"] = map_step_cost(args.character)
     print(f"  map step alone ({m['map']}, {m['channels']} channels -> {m['shapes']} shapes, "
           f"{m['expressions']} expressions): p50 {m['p50_us']:.1f} µs, p99 {m['p99_us']:.1f} µs over {m['n']}")
+    if getattr(args, "panel", False):
+        _panel_phases(args, results, log)
     if args.flood:
         results["flood"] = _phase(args, args.rate * args.flood_factor, args.flood_seconds, log)
         _print("flood", results["flood"])
@@ -440,6 +455,30 @@ def bench_latency(args: argparse.Namespace) -> dict:
         if len(rss) > 2:
             results["flood"]["rss_growth_mb"] = rss[-1] - rss[1]
     return results
+
+
+def _panel_phases(args, results: dict, log) -> None:
+    """``--panel``: the same run with the panel hidden and shown; what the panel adds per tick on the CPU
+    (snapshot + stages + map + draw submit, the panel's build and submit included) and in the GPU wait
+    (on llvmpipe the rasterising of the panel's triangles happens there)."""
+    for mode in ("hidden", "shown"):
+        results[f"panel_{mode}"] = r = _phase(args, args.rate, args.seconds, log, panel=mode)
+        _print(f"panel {mode}", r)
+    hidden, shown = results["panel_hidden"], results["panel_shown"]
+    added = {key: {q: shown[key][q] - hidden[key][q] for q in ("p50", "p99")}
+             for key in ("cpu_per_tick_ms", "gpu_finish_ms") if "p50" in shown[key] and "p50" in hidden[key]}
+    results["panel_added_ms"] = added
+    pc = shown.get("panel_cpu_ms", {})
+    for key, label in (("cpu_per_tick_ms", "CPU per tick"), ("gpu_finish_ms", "GPU wait (llvmpipe draw)")):
+        h, s = hidden[key], shown[key]
+        if "p50" in h and "p50" in s:
+            print(f"  panel: {label} ms p50/p99 hidden {h['p50']:.3f}/{h['p99']:.3f}, shown {s['p50']:.3f}/"
+                  f"{s['p99']:.3f}, added {added[key]['p50']:+.3f}/{added[key]['p99']:+.3f}")
+    if "p50" in pc:
+        gl = shown["panel_gl_submit_ms"]
+        print(f"  panel: its own build + submit on the CPU p50 {pc['p50']:.3f} ms, p99 {pc['p99']:.3f} ms "
+              f"over {shown['panel_draws']} draws; of which the GL submit (llvmpipe's vertex work) p50 "
+              f"{gl['p50']:.3f} ms, p99 {gl['p99']:.3f} ms")
 
 
 def _print(name: str, r: dict) -> None:
@@ -478,6 +517,9 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     parser.add_argument("--receiver", choices=("process", "thread"), default="process",
                         help="the run's receiver: a child process (default) or a thread")
+    parser.add_argument("--panel", action="store_true",
+                        help="then the same run with the operator's panel hidden and shown: CPU ms per tick p50/p99 "
+                             "of each, what the panel adds, and the GPU wait (the panel's draw on llvmpipe)")
     parser.add_argument("--flood", action="store_true", help="then flood: --flood-factor x the rate")
     parser.add_argument("--flood-factor", type=float, default=10.0, help="flood rate multiple (10)")
     parser.add_argument("--flood-seconds", type=float, default=60.0, help="seconds of flooding (60)")

@@ -117,6 +117,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="--input openseeface: follow the face with this id (default: the first of each datagram)")
     p.add_argument("--stats", action="store_true", help="print counters and latencies every second and at exit")
     p.add_argument("--headless", action="store_true", help="render offscreen through EGL (no window)")
+    p.add_argument("--panel", action="store_true",
+                   help="with --headless: draw the operator's panel into the frames (--out, --video); in a window "
+                        "the panel is shown anyway and Tab hides or shows it (needs the extra 'panel': imgui-bundle)")
     p.add_argument("--out", type=Path, default=None, help="write each tick as DIR/frame_00000.png")
     p.add_argument("--dump-weights", type=Path, default=None, metavar="FILE.npy",
                    help="save the rig weights of every tick, (n_ticks, n_shapes) float32, at exit")
@@ -139,7 +142,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 @dataclass
 class LiveRunResult:
     """What one live run did: the loop result, the stats, the per-tick weights (only when kept: ``--dump-weights``
-    or ``keep_weights``; None otherwise) and the parts' counters."""
+    or ``keep_weights``; None otherwise), the parts' counters and the panel (a closed DeskPanel, or None)."""
 
     loop: LoopResult
     stats: LiveStats
@@ -148,6 +151,7 @@ class LiveRunResult:
     path: str
     address: tuple
     chain: str = ""
+    panel: object = None
 
 
 @dataclass
@@ -319,8 +323,6 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                                   **picture.renderer_kwargs(),
                                   credits=character.credits if picture.credits else None)
         parts.append(renderer)
-        if not target.headless and chain.filter is not None:
-            _bind_calibrate_key(target, chain.filter)
 
         weights = WeightLog() if keep_weights or getattr(args, "dump_weights", None) is not None else None
         sinks = ([weights] if weights is not None else []) + ([PngSink(args.out)] if args.out is not None else [])
@@ -333,9 +335,15 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
             parts.append(video)
             sinks.append(video)
         counters, stats, hooks = _outputs(args, opts, chain, source, recorder, parts, hooks, log, requester)
+        panel = _open_panel(args, target, renderer, chain, character, stats, recorder, source, opts, log)
+        if panel is not None:
+            parts.append(panel)
+        elif not target.headless and chain.filter is not None:
+            _bind_calibrate_key(target, chain.filter)
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
-                         catch_up=True, idle_fps=opts.idle_fps, drive=chain.drive)
+                         catch_up=True, idle_fps=opts.idle_fps, drive=chain.drive,
+                         overlays=() if panel is None else (panel.overlay,))
         counters["loop"] = loop.counters
         stats.counters = _LiveCounters(source, counters)
         if on_ready is not None:
@@ -343,7 +351,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         result = _run_loop(loop, source, args.duration, stop_event)
         counters["loop"] = result.counters
         return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address,
-                             chain.describe())
+                             chain.describe(), panel)
     except BaseException:
         for part in parts:   # a failed run leaves no half-written video
             if hasattr(part, "abort"):
@@ -355,6 +363,39 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                 if hasattr(part, name):
                     getattr(part, name)()
                     break
+
+
+def _open_panel(args, target, renderer, chain, character, stats, recorder, source, opts: _Options, log):
+    """The operator's panel (:mod:`~facepuppet.runtime.panel`): in a window always (Tab toggles), headless only
+    with ``--panel``. Without imgui-bundle a window runs without it (said once); ``--panel`` is then an error."""
+    from facepuppet.runtime.panel import PanelUnavailable
+
+    if target.headless and not getattr(args, "panel", False):
+        return None
+    try:
+        from facepuppet.runtime.panel.desk import DeskPanel
+
+        window_size = None
+        if not target.headless:
+            import glfw
+
+            window_size = glfw.get_window_size(target.window)
+        panel = DeskPanel(target.ctx, renderer.fbo, opts.width, opts.height, pipeline=chain.filter, chain=chain,
+                          character=character, counters=lambda: stats.counters, stats=stats, recorder=recorder,
+                          input_kind=args.input, address=f"{source.address[0]}:{source.address[1]}",
+                          window_size=window_size, visible=not getattr(args, "panel_hidden", False))
+    except PanelUnavailable as exc:
+        if getattr(args, "panel", False):
+            raise ValueError(f"--panel: {exc}") from None
+        log(f"run: no panel: {exc}; the run goes on without it")
+        return None
+    if not target.headless:
+        from facepuppet.runtime.panel.glfw_input import bind_window
+
+        bind_window(target.window, panel,
+                    on_calibrate=chain.filter.request_calibration if chain.filter is not None else None)
+        log("run: the panel is shown; Tab hides or shows it")
+    return panel
 
 
 def _is_loopback(host: str) -> bool:

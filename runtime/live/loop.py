@@ -176,6 +176,9 @@ class FrameLoop:
         often without new frames; ``fps`` is then the grid of the tick labels
     drive : ExpressionDrive or None (:func:`~facepuppet.runtime.expressions.make_drive`): maps each channel
         tuple onto the character's morphs and VRM expressions; None: a plain ChannelMap by name, as for an OBJ rig
+    overlays : sequence of callables taking a :class:`TickInfo`, called every tick right after the
+        renderer's draw call and before the GPU wait, to draw over the character into the same framebuffer
+        (the panel, :mod:`~facepuppet.runtime.panel`); their time counts in ``draw_submit``
 
     A frame with an infinite weight or a non-finite head pose is rejected here, once, before the
     stages (``counters["nonfinite_rejected"]``; NaN weights mean "not sent" and pass).
@@ -186,7 +189,8 @@ class FrameLoop:
                  target: GLTarget | None = None, stages: Sequence[Stage] = (),
                  on_tick: Sequence[Callable[[TickInfo], None]] = (), stop: Callable[[], bool] | None = None,
                  catch_up: bool = False, idle_fps: float | None = None,
-                 drive: ExpressionDrive | None = None) -> None:
+                 drive: ExpressionDrive | None = None,
+                 overlays: Sequence[Callable[[TickInfo], None]] = ()) -> None:
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
         if idle_fps is not None and not (isinstance(idle_fps, (int, float)) and 0 < idle_fps <= fps):
@@ -203,6 +207,7 @@ class FrameLoop:
         self.target = target
         self.stages = tuple(stages)
         self.on_tick = tuple(on_tick)
+        self.overlays = tuple(overlays)
         self.stop = stop
         self.catch_up = bool(catch_up)
         self.counters: dict[str, int] = {}
@@ -330,6 +335,11 @@ class FrameLoop:
         add("map", t2 - t1)
 
         self.renderer.draw(self._weights, self._rotation, self._translation)
+        if self.overlays:  # drawn over the character (the panel), with this tick's frames; stamps: last tick's
+            info.k, info.t, info.raw, info.frame, info.weights = k, t, raw, self._frame, self._weights
+            info.rotation, info.translation, info.expressions = self._rotation, self._translation, self._expressions
+            for overlay in self.overlays:
+                overlay(info)
         t3 = now()
         add("draw_submit", t3 - t2)
         self.renderer.finish()

@@ -1,0 +1,380 @@
+"""What the panel shows and edits: input status, per-channel meters, filters per region, calibration, record, chain.
+
+The panel is one ImGui window drawn after the character, into the same
+framebuffer (:class:`~facepuppet.runtime.panel.gl.ImguiGL`). It runs as a
+:class:`~facepuppet.runtime.live.loop.FrameLoop` overlay: after the character's
+draw call of a tick, before the GPU wait, with that tick's
+:class:`~facepuppet.runtime.live.loop.TickInfo` (the raw frame the snapshot took,
+the frame after the stages, the rig weights drawn), so the meters show the
+frame on screen, not the one before.
+
+* **Input status**: kind, listening address and the frames' source, packets/s and frames drawn/s
+  (over the last half second), drops by reason (every non-zero drop counter of the receiver and the loop),
+  age of the last new frame, tracking state (waiting / live / lost / easing back), receive→draw latency
+  p50/p99 (``end_to_end`` of the live stats over the last half second).
+* **Channels**: one row per input channel (by default only those the input sends) with three meters:
+  raw input, after the stages (filter and calibration), after mapping (the rig weight of the shape of that
+  name: what the character gets).
+* **Filters**: One Euro min cutoff and beta per region.
+* **Calibrate** (neutral capture over ``capture_s``) and **Clear** (no neutral).
+* **Record**: the file and its size on disk; **Chain**: the stage chain; **Character**: name, shapes, credits.
+
+Every edit is a config change: a copy of the pipeline's ``LiveConfig`` (``dataclasses.replace``) handed
+to the pipeline's ``apply_config``, which applies it at the next tick. The status numbers that need a
+percentile or a file size are refreshed twice a second, not every frame, so the panel's cost stays small.
+Nothing is kept per frame.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from facepuppet.runtime.channels import ChannelMap, canonical
+from facepuppet.runtime.live.timing import DurationSketch
+from facepuppet.runtime.panel import load_imgui
+from facepuppet.runtime.panel.apply import apply_config, clear_calibration
+from facepuppet.runtime.panel.gl import ImguiGL
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.live.config import LiveConfig
+    from facepuppet.runtime.live.loop import TickInfo
+    from facepuppet.runtime.live.pipeline import LivePipeline
+    from facepuppet.runtime.live.stages import Chain
+    from facepuppet.runtime.live.stats import LiveStats
+    from facepuppet.runtime.recording.recorder import PacketRecorder
+
+WEIGHT_REGIONS = ("eyes", "brows", "mouth", "other", "head")
+REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed this often
+PANEL_WIDTH = 430
+#: meter colours (RGBA 0..1): raw, after the stages, after mapping; distinct so tests and eyes can tell them apart
+METER_COLOURS = ((0.35, 0.55, 0.95, 1.0), (0.30, 0.85, 0.40, 1.0), (0.98, 0.60, 0.15, 1.0))
+#: a counter is a drop reason when its name has one of these (malformed, unknown_address, non_finite, oversized,
+#: filtered_sender, internal_error, stale_dropped, nonfinite_rejected, record_dropped, ...)
+DROP_WORDS = ("drop", "malformed", "unknown", "finite", "oversized", "filtered", "error", "rejected", "truncated",
+              "invalid", "bad")
+
+
+class DeskPanel:
+    """The live panel of one run.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context, the run's context
+    fbo : moderngl.Framebuffer the character is drawn into (the renderer's ``fbo``: offscreen, or the window's)
+    width, height : int, the framebuffer size in pixels (and, in a window, ``window_size`` the window's)
+    pipeline : LivePipeline or None, the filter stage (edited through its ``apply_config``)
+    chain : Chain or None, for the stage chain and the rig's channel names
+    character : Character or None
+    counters : callable returning the run's counter groups (``{"udp": {...}, "loop": {...}, ...}``) or None
+    stats : LiveStats or None, for the receive→draw latency
+    recorder : PacketRecorder or None
+    input_kind, address : str, what the run listens to and where
+    visible : bool, shown at start (Tab toggles it in a window)
+    clock : callable returning seconds (monotonic; injectable for tests)
+    window_size : (width, height) of the window in screen units (default the framebuffer size)
+    names : the rig's channels drawn, in order (default ``chain.names``): the mapped meters read these
+
+    Attributes
+    ----------
+    io : ImGui's IO of this panel's own ImGui context (tests and the window feed events here)
+    rects : dict of widget label -> (x0, y0, x1, y1) in pixels, as last drawn (where to click)
+    edits : int, config changes handed to the pipeline
+    draw_s : float, seconds the last panel draw took on the CPU (build + submit)
+    draw_sketch : DurationSketch of every panel draw's CPU time (streaming: fixed memory in a long run)
+    submit_sketch : DurationSketch of the GL part of it (buffer uploads and draw calls; on llvmpipe the
+        vertex work of the draw calls runs here, on the calling thread)
+    """
+
+    def __init__(self, ctx: moderngl.Context, fbo: moderngl.Framebuffer, width: int, height: int, *,
+                 pipeline: LivePipeline | None = None, chain: Chain | None = None,
+                 character: Character | None = None, counters: Callable[[], dict] | None = None,
+                 stats: LiveStats | None = None, recorder: PacketRecorder | None = None,
+                 input_kind: str = "", address: str = "", visible: bool = True,
+                 clock: Callable[[], float] = time.monotonic, window_size: tuple[int, int] | None = None,
+                 names: tuple[str, ...] | None = None) -> None:
+        self.imgui = imgui = load_imgui()
+        self._prev_context = imgui.get_current_context()
+        self._context = imgui.create_context()
+        imgui.set_current_context(self._context)
+        self.io = imgui.get_io()
+        self.io.set_ini_filename("")  # no imgui.ini written into the working folder
+        self.io.config_input_trickle_event_queue = True
+        self.width, self.height = int(width), int(height)
+        self.window_size = window_size or (self.width, self.height)
+        self.gl = ImguiGL(ctx, imgui)
+        self.fbo = fbo
+        self.pipeline, self.chain, self.character = pipeline, chain, character
+        self.names = tuple(names) if names is not None else tuple(chain.names) if chain is not None else ()
+        self.counters, self.stats, self.recorder = counters, stats, recorder
+        self.input_kind, self.address = input_kind, address
+        self.visible = bool(visible)
+        self.clock = clock
+        self.rects: dict[str, tuple[float, float, float, float]] = {}
+        self.edits = 0
+        self.draw_s = 0.0
+        self.draw_sketch = DurationSketch()
+        self.submit_sketch = DurationSketch()
+        self._last = clock()
+        self._status: dict[str, Any] = {}
+        self._refresh_at = -math.inf
+        self._rate_base: tuple[float, int, int] | None = None
+        self._ticks = 0
+        self._last_raw_at: float | None = None
+        self._shape_index: dict[tuple, np.ndarray] = {}
+        self.sent_only = True
+        self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
+
+    # -- the loop's overlay ----------------------------------------------------------------------
+
+    def toggle(self) -> None:
+        self.visible = not self.visible
+
+    def overlay(self, info: TickInfo) -> None:
+        """FrameLoop overlay: count the tick, and when shown draw the panel into ``fbo`` (after the character)."""
+        now = self.clock()
+        self._ticks += 1
+        if info.raw is not None:
+            self._last_raw_at = now
+        if not self.visible:
+            self._last = now
+            return
+        t0 = time.perf_counter()
+        imgui = self.imgui
+        imgui.set_current_context(self._context)
+        io = self.io
+        io.display_size = imgui.ImVec2(*self.window_size)
+        io.display_framebuffer_scale = imgui.ImVec2(self.width / self.window_size[0],
+                                                    self.height / self.window_size[1])
+        io.delta_time = max(now - self._last, 1e-4)
+        self._last = now
+        if now >= self._refresh_at:
+            self._refresh(now)
+        imgui.new_frame()
+        self._build(info, now)
+        imgui.render()
+        t1 = time.perf_counter()
+        self.gl.render(imgui.get_draw_data(), self.fbo)
+        t2 = time.perf_counter()
+        self.draw_s = t2 - t0
+        self.draw_sketch.add(self.draw_s)
+        self.submit_sketch.add(t2 - t1)
+
+    def _refresh(self, now: float) -> None:
+        """Rates, drops, latency percentiles and the record size: twice a second."""
+        self._refresh_at = now + REFRESH_S
+        groups = dict(self.counters().items()) if self.counters is not None else {}  # items(): fresh udp
+        udp = dict(groups.get("udp", {}))
+        packets = int(udp.get("packets", 0))
+        s = self._status
+        if self._rate_base is not None and now > self._rate_base[0]:
+            dt = now - self._rate_base[0]
+            s["packets_s"] = (packets - self._rate_base[1]) / dt
+            s["drawn_s"] = (self._ticks - self._rate_base[2]) / dt
+        self._rate_base = (now, packets, self._ticks)
+        drops = {}
+        for group in ("udp", "loop"):
+            for name, value in dict(groups.get(group, {})).items():
+                if any(w in name for w in DROP_WORDS) and isinstance(value, (int, np.integer)) and value:
+                    drops[f"{name}" if group == "udp" else f"{group}.{name}"] = int(value)
+        s["drops"] = drops
+        s["latency"] = None
+        if self.stats is not None:
+            since = s.get("stats_n", 0)
+            lat = self.stats.latency(since=since).get("end_to_end", {})
+            s["stats_n"] = getattr(self.stats, "_n", 0)
+            if lat.get("n"):
+                s["latency"] = (lat["p50_ms"], lat["p99_ms"], lat["n"])
+        if self.recorder is not None:
+            path = str(getattr(self.recorder, "path", ""))
+            try:
+                s["record"] = (path, os.path.getsize(path))
+            except OSError:
+                s["record"] = (path, None)
+
+    # -- content ------------------------------------------------------------------------------------
+
+    def _remember(self, label: str) -> None:
+        a, b = self.imgui.get_item_rect_min(), self.imgui.get_item_rect_max()
+        self.rects[label] = (a.x, a.y, b.x, b.y)
+
+    def _build(self, info: TickInfo, now: float) -> None:
+        imgui = self.imgui
+        imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
+        imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, self.window_size[1] - 16), imgui.Cond_.first_use_ever)
+        imgui.set_next_window_bg_alpha(0.85)
+        imgui.begin("facepuppet desk (Tab hides)")
+        self._input_section(now)
+        self._channel_section(info)
+        self._filter_section()
+        self._calibration_section()
+        self._info_section()
+        imgui.end()
+
+    def _input_section(self, now: float) -> None:
+        imgui, s = self.imgui, self._status
+        if not imgui.collapsing_header("Input", imgui.TreeNodeFlags_.default_open):
+            return
+        imgui.text(f"{self.input_kind or '-'} on {self.address or '-'}")
+        rates = (f"{s['packets_s']:.1f} packets/s, {s['drawn_s']:.1f} frames drawn/s" if "packets_s" in s
+                 else "packets/s and frames drawn/s: measuring")
+        imgui.text(rates)
+        age = "no frame yet" if self._last_raw_at is None else f"{(now - self._last_raw_at) * 1e3:.0f} ms"
+        state = getattr(self.pipeline, "state", "-")
+        imgui.text(f"last frame: {age}   tracking: {'easing' if state == 'returning' else state}")
+        lat = s.get("latency")
+        imgui.text("receive->draw: no frames in the last 0.5 s" if lat is None
+                   else f"receive->draw p50 {lat[0]:.2f} ms, p99 {lat[1]:.2f} ms ({lat[2]} frames)")
+        drops = s.get("drops") or {}
+        imgui.text_wrapped("drops: " + (", ".join(f"{k} {v}" for k, v in sorted(drops.items())) or "none"))
+
+    def _filter_section(self) -> None:
+        imgui, pipeline = self.imgui, self.pipeline
+        if pipeline is None or not imgui.collapsing_header("Filter (One Euro)", imgui.TreeNodeFlags_.default_open):
+            return
+        config = pipeline.config
+        filters = dict(config.filters)
+        changed = False
+        for region in WEIGHT_REGIONS:
+            fs = filters[region]
+            imgui.push_id(region)
+            imgui.set_next_item_width(130)
+            c1, cutoff = imgui.slider_float("##cutoff", fs.min_cutoff, 0.05, 10.0, "%.2f Hz",
+                                            imgui.SliderFlags_.logarithmic)
+            self._remember(f"filter.{region}.min_cutoff")
+            imgui.same_line()
+            imgui.set_next_item_width(130)
+            c2, beta = imgui.slider_float("##beta", fs.beta, 0.0, 5.0, "beta %.2f")
+            self._remember(f"filter.{region}.beta")
+            imgui.same_line()
+            imgui.text(region)
+            imgui.pop_id()
+            if c1 or c2:
+                # only the value dragged changes: ImGui hands back float32, the other keeps its exact value
+                filters[region] = replace(fs, min_cutoff=max(float(cutoff), 1e-3) if c1 else fs.min_cutoff,
+                                          beta=max(float(beta), 0.0) if c2 else fs.beta)
+                changed = True
+        if changed:
+            self.apply(replace(config, filters=filters))
+
+    def _calibration_section(self) -> None:
+        imgui, pipeline = self.imgui, self.pipeline
+        if pipeline is None or not imgui.collapsing_header("Calibration", imgui.TreeNodeFlags_.default_open):
+            return
+        if imgui.button("Calibrate"):
+            pipeline.request_calibration()
+        self._remember("calibrate")
+        imgui.same_line()
+        if imgui.button("Clear"):
+            clear_calibration(pipeline)
+        self._remember("clear")
+        imgui.same_line()
+        neutral = "capturing..." if getattr(pipeline, "calibrating", False) else \
+            ("neutral set" if getattr(pipeline, "neutral_weights", None) is not None else "no neutral")
+        imgui.text(f"{neutral} ({pipeline.counters.get('calibrations', 0)} calibrations)")
+
+    def _info_section(self) -> None:
+        imgui = self.imgui
+        if not imgui.collapsing_header("Record, chain, character"):
+            return
+        rec = self._status.get("record")
+        if rec is None:
+            imgui.text("record: off (--record FILE)")
+        else:
+            size = "-" if rec[1] is None else f"{rec[1] / 1e6:.2f} MB"
+            imgui.text_wrapped(f"record: {rec[0]} ({size})")
+        if self.chain is not None:
+            imgui.text_wrapped(self.chain.describe())
+        ch = self.character
+        if ch is not None:
+            imgui.text_wrapped(f"character: {ch.name}, {len(ch.shape_names)} shapes")
+            if getattr(ch, "credits", None):
+                imgui.text_wrapped(f"credits: {ch.credits}")
+
+    def _mapped_index(self, channels: tuple) -> np.ndarray:
+        """For each input channel the rig shape it drives (-1: none): the shape of the same name, else the
+        first the by-name channel map sends it to (an unsided browInnerUp drives browInnerUp_L and _R)."""
+        idx = self._shape_index.get(channels)
+        if idx is None:
+            where = {canonical(n): i for i, n in enumerate(self.names)}
+            idx = np.array([where.get(canonical(c), -1) for c in channels], dtype=np.int64)
+            if (idx < 0).any() and self.names:
+                matrix = ChannelMap.build(channels, self.names).matrix
+                for i in np.flatnonzero(idx < 0):
+                    targets = np.flatnonzero(matrix[:, i])
+                    idx[i] = targets[0] if targets.size else -1
+            if len(self._shape_index) > 16:
+                self._shape_index.clear()
+            self._shape_index[channels] = idx
+        return idx
+
+    def _channel_section(self, info: TickInfo) -> None:
+        imgui = self.imgui
+        if not imgui.collapsing_header("Channels: raw | filtered | mapped", imgui.TreeNodeFlags_.default_open):
+            return
+        raw = info.raw
+        frame = info.frame
+        channels = (raw.channels if raw is not None and raw.channels else
+                    frame.channels if frame is not None and frame.channels else None)
+        if channels is None:
+            imgui.text("no channels yet")
+            return
+        self._channels = channels
+        raw_w = raw.weights if raw is not None and raw.channels == channels else None
+        if raw_w is not None:
+            self._last_raw_w = raw_w
+        elif getattr(self, "_last_raw_w", None) is not None and len(self._last_raw_w) == len(channels):
+            raw_w = self._last_raw_w
+        flt = frame.weights if frame is not None and frame.channels == channels else None
+        mapped = self._mapped_index(channels)
+        rig = info.weights
+        _, self.sent_only = imgui.checkbox("only the channels the input sends", self.sent_only)
+        rows = np.arange(len(channels))
+        if self.sent_only and raw_w is not None:  # NaN: not sent (a VMC sender names only some channels)
+            rows = np.flatnonzero(np.isfinite(raw_w))
+        height = max(120.0, 0.35 * self.window_size[1])  # scrolls; the sections below stay in view
+        imgui.begin_child("channels", imgui.ImVec2(0, height))
+        clipper = imgui.ListClipper()
+        clipper.begin(len(rows))
+        bar = imgui.ImVec2(80, 12)
+        while clipper.step():
+            for row in range(clipper.display_start, clipper.display_end):
+                i = int(rows[row])
+                values = (raw_w[i] if raw_w is not None else math.nan,
+                          flt[i] if flt is not None else math.nan,
+                          rig[mapped[i]] if mapped[i] >= 0 and rig is not None else math.nan)
+                for j, v in enumerate(values):
+                    imgui.push_style_color(imgui.Col_.plot_histogram, self._colours[j])
+                    v = float(v)
+                    imgui.progress_bar(min(max(v, 0.0), 1.0) if math.isfinite(v) else 0.0, bar,
+                                       f"{v:.2f}" if math.isfinite(v) else "-")
+                    imgui.pop_style_color()
+                    if row == 0:
+                        self._remember(f"meter.0.{j}")  # the first row shown
+                    imgui.same_line()
+                imgui.text(channels[i])
+        clipper.end()
+        imgui.end_child()
+
+    # -- edits --------------------------------------------------------------------------------------
+
+    def apply(self, config: LiveConfig) -> None:
+        """Hand a changed config to the pipeline (applied at its next tick)."""
+        apply_config(self.pipeline, config)
+        self.edits += 1
+
+    def close(self) -> None:
+        if self._context is None:
+            return
+        self.gl.release()
+        self.imgui.destroy_context(self._context)
+        self._context = None
