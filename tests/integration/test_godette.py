@@ -35,7 +35,8 @@ def godette():
 
 
 def region(renderer, character, shape: str, pad: int = 3) -> tuple[slice, slice]:
-    """Pixel box (rows, columns) of the vertices ``shape`` moves by a fifth of its largest move or more, in ``renderer``'s picture at rest."""
+    """Pixel box (rows, columns) of the vertices ``shape`` moves by a fifth of its largest move or more,
+    in ``renderer``'s picture at rest."""
     sl = character.shape_slice(character.shape_names.index(shape))
     length = np.linalg.norm(character.delta_positions[sl], axis=1)
     moved = character.delta_indices[sl][length > 0.2 * length.max()]  # what it visibly moves
