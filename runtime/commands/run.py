@@ -97,6 +97,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="measure the microphone level (default input device, or DEVICE by name or number)")
     p.add_argument("--audio-file", type=Path, default=None, metavar="WAV", help="a WAV file as the audio input")
     p.add_argument("--record", type=Path, default=None, metavar="FILE", help="record packets and audio levels")
+    p.add_argument("--save-profile", action="store_true",
+                   help="with --profile: save the config in force (the neutral captured by --calibrate, key C or "
+                        "/facepuppet/calibrate included) to the profile when the run ends")
     p.add_argument("--vmc-out", default=None, metavar="HOST:PORT",
                    help="send the face and head as VMC: the 52 ARKit shapes (perfect sync), the VRM 0.x presets "
                         "derived from them, the head bone")
@@ -176,6 +179,8 @@ def _check_options(args, default_port) -> _Options:
         raise ValueError(f"--fps: expected a positive number, got {args.fps}")
     if args.duration is not None and not (args.duration > 0):
         raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
+    if getattr(args, "save_profile", False) and getattr(args, "profile", None) is None:
+        raise ValueError("--save-profile: saves to --profile NAME|PATH; give one")
     voice_only = args.input == "audio"
     if voice_only and (getattr(args, "gestures", None) is None or (args.audio is None and args.audio_file is None)):
         raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
@@ -365,6 +370,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
             on_ready(source.address)
         result = _run_loop(loop, source, args.duration, stop_event)
         counters["loop"] = result.counters
+        if getattr(args, "save_profile", False) and chain.profile is not None and chain.filter is not None:
+            chain.profile.save(chain.filter.current_config())
         return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address,
                              chain.describe())
     except BaseException:

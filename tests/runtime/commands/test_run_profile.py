@@ -15,7 +15,7 @@ from pythonosc.udp_client import SimpleUDPClient
 
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.commands import run
-from facepuppet.runtime.live.config import ChannelSettings
+from facepuppet.runtime.live.profiles import Profile
 from facepuppet.runtime.recording.session import read_session
 
 from helpers.small_characters import sphere_character
@@ -120,3 +120,54 @@ def test_run_warns_when_the_profile_was_made_for_another_character(tmp_path):
     run.run_live(ns, log=logs.append)
     warning = next(line for line in logs if "warning" in line)
     assert "made for character 'sphere.npz'" in warning and "'ball.npz'" in warning
+
+
+@pytest.mark.gl
+def test_a_calibrated_run_saves_its_neutral_to_a_new_profile_by_name(tmp_path, monkeypatch):
+    """--profile NAME that does not exist yet, --calibrate, --save-profile: the neutral captured from the frames sent
+    over UDP is in the profile afterwards, and a run with that profile starts calibrated."""
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
+    char = sphere_character().save(tmp_path / "sphere.npz")
+    port = free_udp_port()
+    parser = argparse.ArgumentParser()
+    run.register(parser.add_subparsers())
+    ns = parser.parse_args(["run", "-c", str(char), "--input", "vmc", "--listen", f"127.0.0.1:{port}", "--headless",
+                            "--size", "32x24", "--duration", "60", "--profile", "rehearsal", "--calibrate",
+                            "--save-profile"])
+    stop = threading.Event()
+    seen = []
+
+    def on_ready(address):
+        def send():
+            client = SimpleUDPClient("127.0.0.1", port)
+            while not stop.is_set():
+                send_vmc(client, {"JawOpen": 0.3})
+                time.sleep(0.01)
+        threading.Thread(target=send, daemon=True).start()
+
+    def hook(info):
+        if info.raw is not None:
+            seen.append(info.k)
+        counters = result_counters[0] if result_counters else None
+        if counters is not None and counters["calibrations"] >= 1 and len(seen) > 3:
+            stop.set()
+
+    result_counters: list = []
+    logs: list[str] = []
+    try:
+        run.run_live(ns, log=logs.append, stop_event=stop, on_ready=on_ready, hooks=[hook],
+                     on_chain=lambda chain: result_counters.append(chain.filter.counters))
+    finally:
+        stop.set()
+    path = tmp_path / "xdg" / "facepuppet" / "profiles" / "rehearsal.toml"
+    assert path.is_file(), "\n".join(logs)
+    saved = Profile(path, log=lambda s: None).load()
+    at = [c.lower() for c in saved.neutral.channels].index("jawopen")
+    assert saved.neutral.weights[at] == pytest.approx(0.3, abs=1e-6)
+    assert any("does not exist yet" in line for line in logs) and any("profile: saved" in line for line in logs)
+
+
+def test_save_profile_needs_a_profile(tmp_path):
+    char = sphere_character().save(tmp_path / "s.npz")
+    assert main(["run", "-c", str(char), "--input", "vmc", "--listen", "127.0.0.1:0", "--headless",
+                 "--duration", "0.1", "--save-profile"]) == 2
