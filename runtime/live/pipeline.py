@@ -106,7 +106,8 @@ class LivePipeline:
     log : callable taking one str
     calibrate_requests : callable returning an int or None: a count of calibration requests that only
         grows (the source's calibrate messages); read every tick, each increase requests a calibration
-    on_config : callables taking (tick time, LiveConfig), called when an applied config takes effect
+    on_config : callables taking (tick time, LiveConfig), called when the config in force changes: an applied
+        config takes effect, or a calibration captures a neutral (the config then carries it)
     schedule : iterable of (tick time, LiveConfig), changes to apply at the first tick at or after each time
         (a replay of the changes a recording kept)
 
@@ -305,6 +306,9 @@ class LivePipeline:
             self._capture = None
             self.counters["calibrations"] += 1
             self.log(f"calibration: neutral captured from {c['n']} frames")
+            config = self.current_config()
+            for hook in self.on_config:  # the neutral in force changed: a recording keeps it like any change
+                hook(t, config)
 
     def _quiet(self, t: float) -> Frame | None:
         """A tick without a usable new frame: hold, keep blending in, or ease out to neutral."""

@@ -185,3 +185,23 @@ def test_the_captured_neutral_is_in_the_config_in_force_and_a_new_pipeline_start
     # clearing it (a config without neutral) gives the raw values back at the next tick
     fresh.apply_config(replace(fresh.current_config(), neutral=None))
     np.testing.assert_allclose(fresh(_frame(1 / 60, [0.5, 0.1, 0.0]), 1 / 60).weights, [0.5, 0.1, 0.0], atol=1e-7)
+
+
+def test_a_captured_neutral_is_heard_as_a_change_and_its_schedule_replays_it_without_a_request():
+    """Key C is not in a recording; the neutral it captured is (a CONFIG record): a replay that is not asked to
+    calibrate draws the same values."""
+    heard = []
+    live = LivePipeline(fast_config(capture_s=0.1), on_config=[lambda t, c: heard.append((t, c))])
+    ticks = [k / 60 for k in range(30)]
+    stream = [_frame(t, [0.2 + 0.1 * (t > 0.3), 0.1, 0.0]) for t in ticks]
+    out_live = []
+    for k, (t, f) in enumerate(zip(ticks, stream)):
+        if k == 3:
+            live.request_calibration()
+        out_live.append(live(f, t).weights.copy())
+    assert len(heard) == 1 and heard[0][1].neutral is not None
+    assert heard[0][1].neutral.weights[0] == pytest.approx(0.2)
+    replayed = LivePipeline(fast_config(capture_s=0.1), schedule=heard)
+    out_replay = [replayed(f, t).weights.copy() for t, f in zip(ticks, stream)]
+    np.testing.assert_array_equal(np.array(out_replay), np.array(out_live))
+    assert out_live[-1][0] == pytest.approx(0.1)  # 0.3 - the neutral 0.2
