@@ -131,7 +131,9 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     levels = RecordedLevels(live.audio_levels) if live is not None and live.audio_levels else None
     if take is None:
         source, ticks, fps = _source(args, live, fps, log)
+    config_text, schedule = _recorded_config(args, live, filtered, log)
     chain = build_chain(args, character, kind, filtered=filtered, audio_level=levels,
+                        config_text=config_text, schedule=schedule,
                         calibrate_requests=(lambda: source.watched) if take is None and isinstance(source, TickedSource)
                         else None,
                         voice_only=kind == "audio", label=f"replay({kind or 'frames'})", log=log)
@@ -234,13 +236,31 @@ def _filtered(args, live, take, log) -> bool:
         return True
     reproducing = (live is not None and bool(live.ticks)) or take is not None
     if live is not None and live.ticks:
-        recorded = live.header.get("info", {}).get("options", {}) or {}
+        recorded = dict(live.header.get("info", {}).get("options", {}) or {})
+        if isinstance(live.header.get("info", {}).get("config"), str):  # the config itself is in the recording
+            recorded.pop("config", None)
+            recorded.pop("profile", None)
         lacking = [f"--{name.replace('_', '-')} {value}" if value not in ("True", "False") else f"--{name}"
                    for name, value in recorded.items()
                    if value not in (None, "False", "0") and getattr(args, name, None) in (None, False, 0)]
         log("replay: a live recording: the filter stage runs as in the live run (--no-pipeline: the raw frames)"
             + (f"; the live run also had {' '.join(lacking)}: give the same to reproduce it" if lacking else ""))
     return reproducing
+
+
+def _recorded_config(args, live, filtered: bool, log) -> tuple[tuple[str, str] | None, list]:
+    """(where, TOML) of the config a live run started with, and its changes, for a replay without --config or
+    --profile (they win, and the live run's changes are not applied over them)."""
+    text = live.header.get("info", {}).get("config") if live is not None else None
+    if not filtered or not isinstance(text, str):
+        return None, []
+    if getattr(args, "config", None) is not None or getattr(args, "profile", None) is not None:
+        log("replay: the live run's recorded config (and its changes) is not used: --config/--profile given")
+        return None, []
+    changes = list(live.configs)
+    log("replay: the live run's config in force (recorded)"
+        + (f" and its {len(changes)} change{'s' if len(changes) != 1 else ''} during the run" if changes else ""))
+    return (f"{args.session} (its recorded config)", text), changes
 
 
 def _marker_take(path: Path):

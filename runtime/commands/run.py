@@ -69,6 +69,7 @@ from facepuppet.runtime.render.options import add_render_arguments, render_optio
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
+    from facepuppet.runtime.live.stages import Chain
 
 CALIBRATE_ADDRESS = "/facepuppet/calibrate"  # the receivers count decoded OSC messages to it
 RECEIVERS = ("process", "thread")
@@ -96,6 +97,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="measure the microphone level (default input device, or DEVICE by name or number)")
     p.add_argument("--audio-file", type=Path, default=None, metavar="WAV", help="a WAV file as the audio input")
     p.add_argument("--record", type=Path, default=None, metavar="FILE", help="record packets and audio levels")
+    p.add_argument("--save-profile", action="store_true",
+                   help="with --profile: save the config in force (the neutral captured by --calibrate, key C or "
+                        "/facepuppet/calibrate included) to the profile when the run ends")
     p.add_argument("--vmc-out", default=None, metavar="HOST:PORT",
                    help="send the face and head as VMC: the 52 ARKit shapes (perfect sync), the VRM 0.x presets "
                         "derived from them, the head bone")
@@ -179,6 +183,8 @@ def _check_options(args, default_port) -> _Options:
         raise ValueError(f"--fps: expected a positive number, got {args.fps}")
     if args.duration is not None and not (args.duration > 0):
         raise ValueError(f"--duration: expected a positive number of seconds, got {args.duration}")
+    if getattr(args, "save_profile", False) and getattr(args, "profile", None) is None:
+        raise ValueError("--save-profile: saves to --profile NAME|PATH; give one")
     voice_only = args.input == "audio"
     if voice_only and (getattr(args, "gestures", None) is None or (args.audio is None and args.audio_file is None)):
         raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
@@ -221,14 +227,30 @@ def _check_phone(args, host: str) -> tuple | None:
     return phone
 
 
-def _record_info(args, opts: _Options) -> dict:
-    """The header facts of ``--record``: enough for ``replay`` to rebuild the same chain."""
-    options = ("config", "calibrate", "actor", "pair", "marker_units", "retarget", "elastic", "gestures",
+def _record_info(args, opts: _Options, chain=None) -> dict:
+    """The header facts of ``--record``: enough for ``replay`` to rebuild the same chain (``config``: the live
+    config the run starts with, as TOML, neutral included)."""
+    options = ("config", "profile", "calibrate", "actor", "pair", "marker_units", "retarget", "elastic", "gestures",
                "gesture_seed", "face_id")
-    return {"character": str(args.character), "listen": f"{opts.host}:{opts.port}", "fps": opts.loop_fps,
+    info = {"character": str(args.character), "listen": f"{opts.host}:{opts.port}", "fps": opts.loop_fps,
             "idle_fps": opts.idle_fps,
             "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
                         for name in options}}
+    if chain is not None and chain.filter is not None:
+        from facepuppet.runtime.live.profiles import config_to_toml
+
+        info["config"] = config_to_toml(chain.filter.current_config())
+    return info
+
+
+def _config_recorder(late):
+    """The filter's ``on_config`` hook of ``--record``: each config change as a CONFIG record at its tick."""
+    def hook(t: float, config) -> None:
+        if late.recorder is not None:
+            from facepuppet.runtime.live.profiles import config_to_toml
+
+            late.recorder.put_config(t, config_to_toml(config))
+    return hook
 
 
 def _open_source(args, adapter, opts: _Options, recorder):
@@ -249,13 +271,16 @@ def _open_source(args, adapter, opts: _Options, recorder):
 
 def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_event: threading.Event | None = None,
              on_ready: Callable[[tuple[str, int]], None] | None = None,
-             hooks: Sequence[Callable[[TickInfo], None]] = (), keep_weights: bool = False) -> LiveRunResult:
+             hooks: Sequence[Callable[[TickInfo], None]] = (), keep_weights: bool = False,
+             on_chain: Callable[[Chain], None] | None = None) -> LiveRunResult:
     """Run a live session from parsed ``args`` (see :func:`register`) and return what it did.
 
     ``stop_event`` set from another thread ends the run at the next tick;
     ``on_ready(address)`` is called once the socket is bound, before the first tick;
     ``hooks`` are extra FrameLoop ``on_tick`` callables (benchmarks). Each tick's weights are kept
     (``LiveRunResult.weights``) only with ``--dump-weights`` or ``keep_weights``: a show runs for hours.
+    ``on_chain(chain)`` is called once the stage chain is built (its ``filter`` takes ``apply_config``,
+    its ``profile`` saves).
 
     Raises
     ------
@@ -290,18 +315,21 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
             audio = open_audio(device=args.audio, wav=args.audio_file, log=log)
             if audio is not None:
                 parts.append(audio)
-        late = SimpleNamespace(source=None)  # the filter reads the source's calibrate count once it exists
+        late = SimpleNamespace(source=None, recorder=None)  # the filter reads the source's calibrate count later
         chain = build_chain(args, character, adapter_kind, audio_level=audio.level if audio is not None else None,
                             calibrate_requests=lambda: getattr(late.source, "watched", 0),
-                            voice_only=opts.voice_only, label="voice" if opts.voice_only else args.input, log=log)
+                            voice_only=opts.voice_only, label="voice" if opts.voice_only else args.input, log=log,
+                            on_config=[_config_recorder(late)])
         log(chain.describe())
+        if on_chain is not None:
+            on_chain(chain)
         adapter = None if opts.voice_only else make_input_adapter(
             args.input, chain.extra_names, log=log, marker_units=getattr(args, "marker_units", None),
             to_units=chain.marker_units, face_id=getattr(args, "face_id", None))
         recorder = None
         if args.record is not None:
-            recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts),
-                                      overwrite=bool(getattr(args, "force", False)))
+            recorder = late.recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts, chain),
+                                                      overwrite=bool(getattr(args, "force", False)))
             parts.append(recorder)
         source = late.source = _open_source(args, adapter, opts, recorder)
         if opts.voice_only:
@@ -350,6 +378,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
             on_ready(source.address)
         result = _run_loop(loop, source, args.duration, stop_event)
         counters["loop"] = result.counters
+        if getattr(args, "save_profile", False) and chain.profile is not None and chain.filter is not None:
+            chain.profile.save(chain.filter.current_config())
         return LiveRunResult(result, stats, weights, stats.counter_snapshot(), renderer.path, source.address,
                              chain.describe(), panel)
     except BaseException:

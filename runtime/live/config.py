@@ -1,4 +1,4 @@
-"""The live run's small TOML config: filtering per region, gain and clamp per channel, tracking loss.
+"""The live run's small TOML config: filtering per region, the response per channel, tracking loss, neutral.
 
 Every key is optional; what is left out keeps its default. Example::
 
@@ -20,9 +20,27 @@ Every key is optional; what is left out keeps its default. Example::
     [calibration]
     capture_s = 0.5          # --calibrate / OSC /facepuppet/calibrate / key C: neutral = mean of this window
 
-    [channels.jawOpen]       # any spelling of a channel name (JawOpen, jawOpen, ...)
-    gain = 1.3
-    clamp = [0.0, 1.0]
+    [channels.jawOpen]       # any spelling of a channel name (JawOpen, jawOpen, ...): its response
+    gain = 1.3               # v = gain * (filtered value - neutral)
+    input_range = [0.05, 0.8]   # v over this range ...
+    output_range = [0.0, 1.0]   # ... maps onto this one (either given: v outside the input range is held at its ends)
+    curve = "threshold"      # linear (default), ease (smoothstep over the range) or threshold
+    threshold = 0.1          # threshold curve: v below this (the input's units) gives the output range's low end
+    clamp = [0.0, 1.0]       # last: the value is clamped to this
+
+    [face]
+    link_blinks = true       # both eyeBlink channels take the stronger of the two (default false)
+    mirror = true            # swap left and right channels, negate head yaw and roll and x (default false)
+
+    [neutral]                # the calibrated neutral (written by profiles; key C / --calibrate capture one)
+    channels = ["jawOpen", "eyeBlinkLeft"]   # the input's channel names
+    weights = [0.06, 0.1]
+    rotation = [0.0, 0.0, 0.0, 1.0]          # x, y, z, w
+    translation = [0.0, 0.0, 0.0]            # optional
+
+    [profile]                # written by profiles (runtime.live.profiles): what the profile was made for
+    character = "ict.npz"
+    input = "livelinkface"
 
     [mapping]                # a character with VRM expressions (runtime.expressions)
     emotions = true          # the default ARKit -> VRM mapping also drives Joy, Angry, Sorrow, Fun (default false)
@@ -32,8 +50,10 @@ Every key is optional; what is left out keeps its default. Example::
     tongueOut = "tongue_out"                             # a name alone: that target at weight 1
     eyeLookInLeft = false                                # drive nothing (turn a default off)
 
-Regions are ``eyes``, ``brows``, ``mouth``, ``other`` (weights) and ``head``
-(pose). Errors (:class:`LiveConfigError`) name the file, the key, the type
+The per-channel response runs after the filter and calibration, in this order: gain, input range -> output
+range through the curve, clamp; then blink linking. Mirroring swaps the channels before their response, so a
+``[channels.NAME]`` names what the character gets. Regions are ``eyes``, ``brows``, ``mouth``, ``other``
+(weights) and ``head`` (pose). Errors (:class:`LiveConfigError`) name the file, the key, the type
 or range expected and what was found; unknown keys are errors too (a typo
 must not pass silently).
 """
@@ -56,6 +76,7 @@ if TYPE_CHECKING:
     import os
 
 REGIONS = ("eyes", "brows", "mouth", "other", "head")
+CURVES = ("linear", "ease", "threshold")
 
 
 class LiveConfigError(InputFileError):
@@ -73,10 +94,48 @@ class FilterSettings:
 
 @dataclass(frozen=True)
 class ChannelSettings:
-    """Per-channel gain (applied after offset removal) and clamp [low, high]."""
+    """The response of one channel (see the module docstring for the order).
+
+    Attributes
+    ----------
+    gain : float, applied to the value after offset (neutral) removal
+    clamp : (low, high), the last step
+    input_range, output_range : (low, high) or None; either given: the gained value maps linearly from the input
+        range onto the output range (held at the ends), through ``curve``; both None and a linear curve: no remap
+    curve : str, ``linear``, ``ease`` (smoothstep) or ``threshold`` (below ``threshold``: the output's low end,
+        at or above it: linear)
+    threshold : float, in the input's units (the gained value)
+    """
 
     gain: float = 1.0
     clamp: tuple[float, float] = (0.0, 1.0)
+    input_range: tuple[float, float] | None = None
+    output_range: tuple[float, float] | None = None
+    curve: str = "linear"
+    threshold: float = 0.1
+
+    @property
+    def shaped(self) -> bool:
+        """Whether the value is remapped (a range or a curve other than linear)."""
+        return self.input_range is not None or self.output_range is not None or self.curve != "linear"
+
+
+@dataclass(frozen=True)
+class Neutral:
+    """A calibrated neutral pose: raw input values subtracted before the response.
+
+    Attributes
+    ----------
+    channels : tuple of str, the input's channel names (matched by any spelling)
+    weights : tuple of float, one per channel
+    rotation : (x, y, z, w), the neutral head rotation (unit quaternion)
+    translation : (x, y, z) or None (None: translation is not offset)
+    """
+
+    channels: tuple[str, ...]
+    weights: tuple[float, ...]
+    rotation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    translation: tuple[float, float, float] | None = None
 
 
 DEFAULT_FILTERS = {
@@ -99,6 +158,9 @@ class LiveConfig:
     default_channel : ChannelSettings, for channels not listed
     timeout_s, ease_out_s, ease_in_s : float, seconds (tracking loss)
     capture_s : float, seconds of frames averaged into the neutral pose
+    link_blinks : bool, both eyeBlink channels take the stronger of the two
+    mirror : bool, left and right channels swapped, head yaw and roll (and x) negated
+    neutral : Neutral or None, the calibrated neutral in force (None: none)
     mapping : MappingSettings, the ``[mapping]`` (channels onto a character's expressions and shapes)
     path : str, the file it came from ("" for defaults)
     """
@@ -110,6 +172,9 @@ class LiveConfig:
     ease_out_s: float = 0.6
     ease_in_s: float = 0.25
     capture_s: float = 0.5
+    link_blinks: bool = False
+    mirror: bool = False
+    neutral: Neutral | None = None
     mapping: MappingSettings = MappingSettings()
     path: str = ""
 
@@ -140,20 +205,70 @@ def _table(where: str, key: str, value, allowed: tuple[str, ...] | None) -> dict
     return value
 
 
+def _pair(where: str, key: str, c, strict: bool = False) -> tuple[float, float]:
+    if not isinstance(c, list) or len(c) != 2:
+        raise LiveConfigError(f"{where}: key '{key}': expected an array of two numbers [low, high], "
+                              f"got {c!r} ({type(c).__name__})")
+    lo, hi = (_number(where, key, v) for v in c)
+    if lo > hi or (strict and lo == hi):
+        raise LiveConfigError(f"{where}: key '{key}': expected low {'<' if strict else '<='} high, got [{lo}, {hi}]")
+    return lo, hi
+
+
 def _channel(where: str, key: str, value: dict, base: ChannelSettings) -> ChannelSettings:
-    _table(where, key, value, ("gain", "clamp"))
+    _table(where, key, value, ("gain", "clamp", "input_range", "output_range", "curve", "threshold"))
     gain = _number(where, f"{key}.gain", value["gain"]) if "gain" in value else base.gain
-    clamp = base.clamp
-    if "clamp" in value:
-        c = value["clamp"]
-        if not isinstance(c, list) or len(c) != 2:
-            raise LiveConfigError(f"{where}: key '{key}.clamp': expected an array of two numbers [low, high], "
-                                  f"got {c!r} ({type(c).__name__})")
-        lo, hi = (_number(where, f"{key}.clamp", v) for v in c)
-        if lo > hi:
-            raise LiveConfigError(f"{where}: key '{key}.clamp': expected low <= high, got [{lo}, {hi}]")
-        clamp = (lo, hi)
-    return ChannelSettings(gain, clamp)
+    clamp = _pair(where, f"{key}.clamp", value["clamp"]) if "clamp" in value else base.clamp
+    in_range = _pair(where, f"{key}.input_range", value["input_range"], strict=True) if "input_range" in value \
+        else base.input_range
+    out = value.get("output_range")
+    if out is not None and not (isinstance(out, list) and len(out) == 2):
+        raise LiveConfigError(f"{where}: key '{key}.output_range': expected an array of two numbers [from, to], "
+                              f"got {out!r} ({type(out).__name__})")
+    out_range = tuple(_number(where, f"{key}.output_range", v) for v in out) if out is not None else base.output_range
+    curve = value.get("curve", base.curve)
+    if curve not in CURVES:
+        raise LiveConfigError(f"{where}: key '{key}.curve': expected one of {', '.join(CURVES)}, got {curve!r}")
+    threshold = _number(where, f"{key}.threshold", value["threshold"]) if "threshold" in value else base.threshold
+    return ChannelSettings(gain, clamp, in_range, out_range, curve, threshold)
+
+
+def _flag(where: str, key: str, value) -> bool:
+    if not isinstance(value, bool):
+        raise LiveConfigError(f"{where}: key '{key}': expected true or false, got {value!r} ({type(value).__name__})")
+    return value
+
+
+def _numbers(where: str, key: str, value, n: int | None = None) -> tuple[float, ...]:
+    if not isinstance(value, list) or (n is not None and len(value) != n):
+        what = f"an array of {n} numbers" if n is not None else "an array of numbers"
+        raise LiveConfigError(f"{where}: key '{key}': expected {what}, got {value!r} ({type(value).__name__})")
+    return tuple(_number(where, key, v) for v in value)
+
+
+def _neutral(where: str, value) -> Neutral:
+    table = _table(where, "neutral", value, ("channels", "weights", "rotation", "translation"))
+    names = table.get("channels", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) and n.strip() for n in names):
+        raise LiveConfigError(f"{where}: key 'neutral.channels': expected an array of channel names, got {names!r}")
+    weights = _numbers(where, "neutral.weights", table.get("weights", []))
+    if len(weights) != len(names):
+        raise LiveConfigError(f"{where}: key 'neutral.weights': expected {len(names)} numbers (one per "
+                              f"neutral.channels), got {len(weights)}")
+    rotation = _numbers(where, "neutral.rotation", table.get("rotation", [0.0, 0.0, 0.0, 1.0]), 4)
+    if math.hypot(*rotation) < 1e-6:
+        raise LiveConfigError(f"{where}: key 'neutral.rotation': expected a unit quaternion [x, y, z, w], "
+                              f"got {list(rotation)}")
+    translation = _numbers(where, "neutral.translation", table["translation"], 3) if "translation" in table \
+        else None
+    return Neutral(tuple(names), weights, rotation, translation)
+
+
+def _profile_table(where: str, value) -> None:
+    table = _table(where, "profile", value, ("character", "input", "saved"))
+    for k, v in table.items():
+        if not isinstance(v, str):
+            raise LiveConfigError(f"{where}: key 'profile.{k}': expected a string, got {v!r} ({type(v).__name__})")
 
 
 def _check_channel(where: str, name: str, known: dict[str, str], section: str = "channels") -> None:
@@ -214,7 +329,7 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
     """
     known = {canonical(n): n for n in (*ARKIT_NAMES, *(known_channels or ()))}
     _table(where, "<top>", data, ("filter", "tracking_loss", "calibration", "channels", "default_channel",
-                                  "mapping"))
+                                  "mapping", "face", "neutral", "profile"))
     cfg = LiveConfig(path=where)
     filters = dict(DEFAULT_FILTERS)
     for region, values in _table(where, "filter", data.get("filter", {}), REGIONS).items():
@@ -236,9 +351,15 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
         _check_channel(where, name, known)
         channels[canonical(name)] = _channel(where, f"channels.{name}", values, default_channel)
     mapping = _mapping(where, data["mapping"], known) if "mapping" in data else cfg.mapping
+    face = _table(where, "face", data.get("face", {}), ("link_blinks", "mirror"))
+    if "profile" in data:
+        _profile_table(where, data["profile"])  # what a profile was made for: read by runtime.live.profiles
     return replace(
         cfg,
         mapping=mapping,
+        link_blinks=_flag(where, "face.link_blinks", face.get("link_blinks", cfg.link_blinks)),
+        mirror=_flag(where, "face.mirror", face.get("mirror", cfg.mirror)),
+        neutral=_neutral(where, data["neutral"]) if "neutral" in data else None,
         filters=filters,
         channels=channels,
         default_channel=default_channel,

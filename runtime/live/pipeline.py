@@ -12,12 +12,20 @@ For each accepted frame (finite: the frame loop rejects non-finite frames before
    (``--calibrate`` at start, the key C in a window) or after the source's count
    of calibrate messages (``/facepuppet/calibrate``) grows: the stage reads that
    count each tick (``calibrate_requests``); nothing calls into it from the receiver.
-3. **Gain and clamp** per channel.
+3. **Response** per channel (:mod:`~facepuppet.runtime.live.response`): mirror, gain, input range ->
+   output range through a curve (linear, ease, threshold), clamp, blink linking; the head mirrored.
 4. **Tracking loss**: with no frame for ``timeout_s`` the output eases to
    neutral over ``ease_out_s`` (smoothstep) instead of freezing; when frames
    return, the output blends from wherever it was to the live value over
    ``ease_in_s``, so no tick jumps by more than the live motion plus
    ``|live - held| * max slope of the ramp * tick``.
+
+**Live changes**: :meth:`LivePipeline.apply_config` (from any thread) hands over a new config; it takes
+effect at the start of the next tick. The filters keep their state (new cutoffs apply from that sample on, so
+the output moves no faster than the filter lets it), the response arrays are rebuilt, and the config's
+``neutral`` becomes the neutral in force. :meth:`LivePipeline.current_config` is the config in force with the
+captured neutral, what a profile saves. ``on_config`` callables hear each change (the recorder writes it), and
+``schedule`` replays recorded changes at their tick times.
 
 Times ``t`` are the frame loop's tick times (seconds), so a replay on recorded
 time gives the same output as the live run it came from.
@@ -27,15 +35,18 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterable
+from dataclasses import replace
 
 import numpy as np
 
-from facepuppet.runtime.channels import filter_region
+from facepuppet.runtime.channels import canonical, filter_region
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import quat_mul, smoothstep
-from facepuppet.runtime.live.config import LiveConfig
+from facepuppet.runtime.live.config import LiveConfig, Neutral
 from facepuppet.runtime.live.one_euro import OneEuroFilter
+from facepuppet.runtime.live.response import Response
 
 logger = logging.getLogger(__name__)
 
@@ -59,19 +70,23 @@ class _ChannelState:
 
     def __init__(self, channels: tuple[str, ...], config: LiveConfig):
         n = len(channels)
-        regions = [filter_region(c) for c in channels]
-        settings = [config.filters[r] for r in regions]
-        self.weights = OneEuroFilter(n, [s.min_cutoff for s in settings], [s.beta for s in settings],
-                                     [s.d_cutoff for s in settings])
-        head = config.filters["head"]
-        self.rotation = OneEuroFilter(4, head.min_cutoff, head.beta, head.d_cutoff)
-        self.translation = OneEuroFilter(3, head.min_cutoff, head.beta, head.d_cutoff)
-        per = [config.channel(c) for c in channels]
-        self.gain = np.array([p.gain for p in per])
-        self.low = np.array([p.clamp[0] for p in per])
-        self.high = np.array([p.clamp[1] for p in per])
-        self.neutral_out = np.clip(np.zeros(n), self.low, self.high)
+        self.channels = channels
+        self.weights = OneEuroFilter(n)
+        self.rotation = OneEuroFilter(4)
+        self.translation = OneEuroFilter(3)
+        self.configure(config)
         self.last_q: np.ndarray | None = None
+
+    def configure(self, config: LiveConfig) -> None:
+        """Take the settings of ``config``, keeping the filters' state (a live change)."""
+        settings = [config.filters[filter_region(c)] for c in self.channels]
+        for f, values in ((self.weights, settings), (self.rotation, [config.filters["head"]] * 4),
+                          (self.translation, [config.filters["head"]] * 3)):
+            f.min_cutoff[:] = [s.min_cutoff for s in values]
+            f.beta[:] = [s.beta for s in values]
+            f.d_cutoff[:] = [s.d_cutoff for s in values]
+        self.response = Response(self.channels, config)
+        self.neutral_out = self.response(np.zeros(len(self.channels)))
 
     def reset_filters(self) -> None:
         self.weights.reset()
@@ -91,6 +106,10 @@ class LivePipeline:
     log : callable taking one str
     calibrate_requests : callable returning an int or None: a count of calibration requests that only
         grows (the source's calibrate messages); read every tick, each increase requests a calibration
+    on_config : callables taking (tick time, LiveConfig), called when the config in force changes: an applied
+        config takes effect, or a calibration captures a neutral (the config then carries it)
+    schedule : iterable of (tick time, LiveConfig), changes to apply at the first tick at or after each time
+        (a replay of the changes a recording kept)
 
     Call it once per tick as ``pipeline(frame, t)`` (the frame loop's
     ``pipeline`` hook): ``frame`` is the newest new frame or None; the return
@@ -108,8 +127,14 @@ class LivePipeline:
 
     def __init__(self, config: LiveConfig | None = None, audio_level: Callable[[float], float] | None = None,
                  log: Callable[[str], None] = logger.info,
-                 calibrate_requests: Callable[[], int] | None = None) -> None:
+                 calibrate_requests: Callable[[], int] | None = None,
+                 on_config: Iterable[Callable[[float, LiveConfig], None]] = (),
+                 schedule: Iterable[tuple[float, LiveConfig]] = ()) -> None:
         self.config = config or LiveConfig()
+        self.on_config = list(on_config)
+        self._schedule = sorted(schedule, key=lambda item: item[0])
+        self._pending: LiveConfig | None = None
+        self._lock = threading.Lock()
         self.audio_level = audio_level
         self.log = log
         self.calibrate_requests = calibrate_requests
@@ -128,8 +153,51 @@ class LivePipeline:
         self.neutral_weights: np.ndarray | None = None
         self._neutral_rot = _IDENTITY.copy()
         self._neutral_trans: np.ndarray | None = None
+        self._neutral_pose = self.config.neutral  # the neutral in force, by channel name (Neutral or None)
+        self._take_neutral(self._neutral_pose)
         self._calib_pending = False
         self._capture: dict | None = None
+
+    def apply_config(self, config: LiveConfig) -> None:
+        """Hand over a new config (safe from any thread); it takes effect at the start of the next tick.
+
+        Its ``neutral`` becomes the neutral in force (None clears it): edit a copy of :meth:`current_config`.
+        Several calls before a tick: the last wins.
+        """
+        if not isinstance(config, LiveConfig):
+            raise TypeError(f"apply_config: expected a LiveConfig, got {type(config).__name__}")
+        with self._lock:
+            self._pending = config
+
+    def current_config(self) -> LiveConfig:
+        """The config in force, with the neutral in force (captured or given): what a profile saves."""
+        return replace(self.config, neutral=self._neutral_pose)
+
+    def _switch(self, config: LiveConfig, t: float) -> None:
+        self.config = config
+        if config.neutral != self._neutral_pose:
+            self._neutral_pose = config.neutral
+            self._take_neutral(config.neutral)
+        if self._cs is not None:
+            self._cs.configure(config)
+        for hook in self.on_config:
+            hook(t, config)
+
+    def _take_neutral(self, neutral: Neutral | None) -> None:
+        """Make ``neutral`` the neutral in force (the weights by name onto the current channels)."""
+        if neutral is None:
+            self.neutral_weights, self._neutral_rot, self._neutral_trans = None, _IDENTITY.copy(), None
+            return
+        self._neutral_rot = np.array(neutral.rotation, dtype=np.float64)
+        self._neutral_rot /= np.linalg.norm(self._neutral_rot)
+        self._neutral_trans = None if neutral.translation is None else np.array(neutral.translation, np.float64)
+        self.neutral_weights = self._neutral_on(self._channels)
+
+    def _neutral_on(self, channels: tuple[str, ...] | None) -> np.ndarray | None:
+        if self._neutral_pose is None or channels is None:
+            return None
+        by_key = {canonical(c): w for c, w in zip(self._neutral_pose.channels, self._neutral_pose.weights)}
+        return np.array([by_key.get(canonical(c), 0.0) for c in channels], dtype=np.float64)
 
     def request_calibration(self) -> None:
         """Capture the neutral from the next ``capture_s`` seconds of frames (safe from any thread)."""
@@ -140,6 +208,12 @@ class LivePipeline:
         return self._calib_pending or self._capture is not None
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
+        while self._schedule and self._schedule[0][0] <= t:
+            self._switch(self._schedule.pop(0)[1], t)
+        if self._pending is not None:
+            with self._lock:
+                config, self._pending = self._pending, None
+            self._switch(config, t)
         if self.calibrate_requests is not None:
             requests = int(self.calibrate_requests())
             if requests != self._requests_seen:
@@ -150,7 +224,7 @@ class LivePipeline:
         if frame.channels != self._channels:
             self._channels = frame.channels
             self._cs = _ChannelState(frame.channels or (), self.config)
-            self.neutral_weights = None
+            self.neutral_weights = self._neutral_on(frame.channels)
         dt = frame.t - self._last_frame.t if self._last_frame is not None else math.nan
         self._capture_step(frame, t)
         live = self._process(frame, dt)
@@ -176,7 +250,7 @@ class LivePipeline:
             w = cs.weights.filter(frame.weights, dt)
             if self.neutral_weights is not None:
                 w = w - self.neutral_weights
-            weights = np.clip(w * cs.gain, cs.low, cs.high)  # NaN (not sent) stays NaN
+            weights = cs.response(w)  # a new array; NaN (not sent) stays NaN
         rotation = None
         if frame.head_rotation is not None:
             q = frame.head_rotation.astype(np.float64)
@@ -185,12 +259,13 @@ class LivePipeline:
             cs.last_q = q
             q = cs.rotation.filter(q, dt)
             q = q / max(float(np.linalg.norm(q)), 1e-12)
-            rotation = quat_mul(_conj(self._neutral_rot), q)
+            rotation = cs.response.rotation(quat_mul(_conj(self._neutral_rot), q))
         translation = None
         if frame.head_translation is not None:
             translation = cs.translation.filter(frame.head_translation, dt).copy()
             if self._neutral_trans is not None:
                 translation -= self._neutral_trans
+            translation = cs.response.translation(translation)
         return weights, rotation, translation
 
     def _capture_step(self, frame: Frame, t: float) -> None:
@@ -224,9 +299,16 @@ class LivePipeline:
             norm = float(np.linalg.norm(c["q"]))
             self._neutral_rot = c["q"] / norm if norm > 0 else _IDENTITY.copy()
             self._neutral_trans = c["tr"] / c["ntr"] if c["ntr"] else None
+            self._neutral_pose = Neutral(tuple(c["channels"] or ()), tuple(float(w) for w in self.neutral_weights),
+                                    tuple(float(v) for v in self._neutral_rot),
+                                    None if self._neutral_trans is None else
+                                    tuple(float(v) for v in self._neutral_trans))
             self._capture = None
             self.counters["calibrations"] += 1
             self.log(f"calibration: neutral captured from {c['n']} frames")
+            config = self.current_config()
+            for hook in self.on_config:  # the neutral in force changed: a recording keeps it like any change
+                hook(t, config)
 
     def _quiet(self, t: float) -> Frame | None:
         """A tick without a usable new frame: hold, keep blending in, or ease out to neutral."""

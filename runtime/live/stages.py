@@ -138,6 +138,9 @@ class Chain:
     marker_units : str or None, the units the solve wants marker frames in (the actor's), None without one
     drive : ExpressionDrive or None, what maps channels onto a character with VRM expressions (or with a
         ``[mapping]`` in ``--config``); None: the plain ChannelMap by name (``FrameLoop(drive=...)``)
+    config : LiveConfig, the live config the chain started with (``--config``, ``--profile`` or a recording's)
+    profile : Profile or None, ``--profile``'s file (Save / Save as / Revert)
+    known_channels : tuple of str, the names a config's ``[channels.NAME]`` may use (to parse a config later)
     """
 
     input: str
@@ -149,6 +152,9 @@ class Chain:
     extra_names: tuple[str, ...] = field(default_factory=tuple)
     marker_units: str | None = None
     drive: ExpressionDrive | None = None
+    config: Any = None
+    profile: Any = None
+    known_channels: tuple[str, ...] = ()
 
     def describe(self) -> str:
         """``stages: vmc→filter→gestures→map→draw`` (``draw(elastic)`` on the elastic path)."""
@@ -189,7 +195,11 @@ def add_stage_arguments(parser: argparse.ArgumentParser, markers: bool = True) -
     parser.add_argument("--elastic", type=Path, default=None, metavar="ELASTIC.npz",
                         help="elastic tables of the character: draw through the elastic path; input channels "
                              "named after its muscles drive contractions")
-    parser.add_argument("--config", type=Path, default=None, help="TOML config: filters, gain/clamp, tracking loss")
+    parser.add_argument("--config", type=Path, default=None,
+                        help="TOML config: filters, per-channel response, blink linking, mirror, tracking loss")
+    parser.add_argument("--profile", default=None, metavar="NAME|PATH",
+                        help="a saved live config, neutral included: NAME under $XDG_CONFIG_HOME/facepuppet/profiles "
+                             "(~/.config/...), or a .toml path; created by its first Save; instead of --config")
     parser.add_argument("--calibrate", action="store_true",
                         help="capture the neutral pose from the first 0.5 s of frames")
     parser.add_argument("--gestures", type=Path, default=None, metavar="GESTURES.npz",
@@ -200,7 +210,9 @@ def add_stage_arguments(parser: argparse.ArgumentParser, markers: bool = True) -
 def build_chain(args: argparse.Namespace, character: Character, input_kind: str | None, *, filtered: bool = True,
                 audio_level: Callable[[float], float] | None = None,
                 calibrate_requests: Callable[[], int] | None = None, voice_only: bool = False,
-                label: str | None = None, log: Callable[[str], None] = logger.info) -> Chain:
+                label: str | None = None, log: Callable[[str], None] = logger.info,
+                config_text: tuple[str, str] | None = None, schedule: Sequence[tuple[float, str]] = (),
+                on_config: Sequence[Callable] = ()) -> Chain:
     """The stage chain for parsed options (``actor``, ``pair``, ``retarget``, ``elastic``, ``config``,
     ``calibrate``, ``gestures``, ``gesture_seed``), checked against the character; logs what it loaded.
 
@@ -214,6 +226,10 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
     calibrate_requests : callable returning a growing count, or None (see LivePipeline)
     voice_only : bool, the face from the voice alone (``run --input audio``): the gestures drive it
     label : str or None, what :meth:`Chain.describe` names as the input (default ``input_kind``)
+    config_text : (where, TOML text) or None, the config to start from when neither ``--config`` nor
+        ``--profile`` is given (a recording's config in force)
+    schedule : (tick time, TOML text) pairs, config changes the filter applies at those ticks (a recording's)
+    on_config : callables (tick time, LiveConfig) the filter calls when a config change takes effect
 
     Raises
     ------
@@ -244,7 +260,27 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
 
     known = (*shapes, *chain.names, *chain.extra_names, *(kpls.model.source_names if kpls is not None else ()),
              *expression_spellings(character))
-    config = load_live_config(opt("config"), known) if opt("config") is not None else LiveConfig()
+    chain.known_channels = known
+    if opt("config") is not None and opt("profile") is not None:
+        raise ValueError("--config and --profile: choose one (a profile is a config file with its neutral; "
+                         "--profile PATH.toml reads any config file)")
+    if opt("profile") is not None:
+        from facepuppet.runtime.live.profiles import Profile, profile_path
+
+        character_path = opt("character")
+        chain.profile = Profile(profile_path(opt("profile")), character=Path(character_path).name if
+                                character_path is not None else "", input_kind=input_kind or "",
+                                known_channels=known, log=log)
+        config = chain.profile.load()
+    elif opt("config") is not None:
+        config = load_live_config(opt("config"), known)
+    elif config_text is not None:
+        from facepuppet.runtime.live.profiles import parse_config_text
+
+        config = parse_config_text(config_text[1], config_text[0], known)
+    else:
+        config = LiveConfig()
+    chain.config = config
     if elastic is None:  # the elastic path draws its own channels, not the character's shapes
         chain.drive = make_drive(shapes, character.expressions, config.mapping)
         if chain.drive is not None and input_kind == "vmc":
@@ -255,8 +291,11 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
                          "it does not apply with --elastic")
     if filtered:
         from facepuppet.runtime.live.pipeline import LivePipeline
+        from facepuppet.runtime.live.profiles import parse_config_text
 
-        chain.filter = LivePipeline(config, audio_level=level, log=log, calibrate_requests=calibrate_requests)
+        changes = [(float(t), parse_config_text(text, f"config change at t={t:.3f} s", known)) for t, text in schedule]
+        chain.filter = LivePipeline(config, audio_level=level, log=log, calibrate_requests=calibrate_requests,
+                                    on_config=on_config, schedule=changes)
         if opt("calibrate"):
             chain.filter.request_calibration()
         stages.append(chain.filter)

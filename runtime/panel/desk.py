@@ -39,7 +39,7 @@ import numpy as np
 from facepuppet.runtime.channels import ChannelMap, canonical
 from facepuppet.runtime.live.timing import DurationSketch
 from facepuppet.runtime.panel import load_imgui
-from facepuppet.runtime.panel.apply import apply_config, clear_calibration
+from facepuppet.runtime.panel.apply import apply_config, clear_calibration, config_in_force
 from facepuppet.runtime.panel.gl import ImguiGL
 
 if TYPE_CHECKING:
@@ -241,7 +241,7 @@ class DeskPanel:
         imgui, pipeline = self.imgui, self.pipeline
         if pipeline is None or not imgui.collapsing_header("Filter (One Euro)", imgui.TreeNodeFlags_.default_open):
             return
-        config = pipeline.config
+        config = config_in_force(pipeline)
         filters = dict(config.filters)
         changed = False
         for region in WEIGHT_REGIONS:

@@ -26,9 +26,13 @@ TICK      5     live recording: ``b"K1"``, tick index i64, tick time f64 (s
                 completed when the tick took its snapshot), snapshot time f64
                 (monotonic s, the packets' clock); lets a replay tick as the
                 live run did (same frames at the same tick times)
+CONFIG    6     live recording: ``b"C1"``, tick time f64 (s), then the live
+                config that took effect at that tick, as UTF-8 TOML (the
+                schema of ``--config``, neutral included); the header's
+                ``info.config`` is the config the run started with
 ========  ====  ==============================================================
 
-The PACKET/AUDIO/TICK decoders return None for a payload they cannot decode
+The PACKET/AUDIO/TICK/CONFIG decoders return None for a payload they cannot decode
 (the reader counts those as skipped); the FRAME and LAYOUT decoders raise
 ValueError (the reader treats that as corruption).
 """
@@ -49,6 +53,7 @@ _FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
 _PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
 _AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
 _TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames completed, snapshot time
+_CONFIG_HEAD = struct.Struct("<2sd")  # b"C1", tick time
 
 
 class RecordKind(enum.IntEnum):
@@ -60,9 +65,10 @@ class RecordKind(enum.IntEnum):
     PACKET = 3  # live recording: raw bytes + receive time + input kind
     AUDIO = 4  # live recording: audio levels
     TICK = 5  # live recording: which frame each tick took, and when
+    CONFIG = 6  # live recording: a config change and the tick it took effect at
 
 
-RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK})
+RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG})
 
 
 class FrameFlags(enum.IntFlag):
@@ -171,6 +177,22 @@ class Tick:
 def encode_tick(k: int, t: float, frames: int, t_clock: float) -> bytes:
     """TICK payload (see the module docstring)."""
     return _TICK.pack(b"K1", int(k), float(t), int(frames), float(t_clock))
+
+
+def encode_config(t: float, text: str) -> bytes:
+    """CONFIG payload: the config (TOML text) that took effect at tick time ``t``."""
+    return _CONFIG_HEAD.pack(b"C1", float(t)) + text.encode("utf-8")
+
+
+def decode_config(payload: bytes) -> tuple[float, str] | None:
+    """(t, TOML text) from a CONFIG payload; None when it is not one this reader knows."""
+    if len(payload) < _CONFIG_HEAD.size or payload[:2] != b"C1":
+        return None
+    _, t = _CONFIG_HEAD.unpack_from(payload)
+    try:
+        return t, payload[_CONFIG_HEAD.size:].decode("utf-8")
+    except UnicodeDecodeError:
+        return None
 
 
 def decode_packet_record(payload: bytes) -> Packet | None:

@@ -52,7 +52,8 @@ def test_packets_and_audio_levels_round_trip(tmp_path):
     assert s.complete and s.header["info"]["input"] == "vmc" and s.header["info"]["test"] is True
     assert [(p.data, p.t, p.kind) for p in s.packets] == [(d, t, "vmc") for d, t in packets]
     assert s.audio_levels == [(0.5, -20.0)]
-    assert rec.counters == {"packets_recorded": 20, "audio_recorded": 1, "ticks_recorded": 0, "record_dropped": 0}
+    assert rec.counters == {"packets_recorded": 20, "audio_recorded": 1, "ticks_recorded": 0,
+                            "configs_recorded": 0, "record_dropped": 0}
 
 
 def test_a_full_queue_drops_and_counts_instead_of_blocking(tmp_path):
