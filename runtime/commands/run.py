@@ -25,6 +25,8 @@ it onto the rig and draws. Around that loop:
 * ``--phone IP[:PORT]`` (``--input ifacialmocap`` / ``vtubestudio``): the app's start payload or data request,
   sent only to that address, at once and then periodically from a daemon thread that stops with the run
   (:mod:`~facepuppet.runtime.inputs.phone`); a loopback ``--listen`` with a LAN phone is refused.
+* ``--events-out HOST:PORT`` (and ``--vmc-out``): tracking lost / found as OSC ``/facepuppet/tracking i``
+  (:mod:`~facepuppet.runtime.live.events_out`); with ``--record`` the events are also recorded (EVENT records).
 * ``--stats``: counters and per-stage latency once a second and at exit.
 * Parameter spaces (:mod:`~facepuppet.runtime.live.stages`): ``--input markers``
   with ``--actor``/``--pair`` (marker solve, Shin & Lee), ``--retarget`` (kernel
@@ -58,6 +60,7 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.commands.options import parse_allow, parse_host_port, parse_size
+from facepuppet.runtime.live.events_out import TrackingEventSender
 from facepuppet.runtime.live.llf_out import LlfSender
 from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, WallClock
 from facepuppet.runtime.live.sinks import PngSink, RecordingHook, WeightLog
@@ -99,6 +102,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vmc-out", default=None, metavar="HOST:PORT",
                    help="send the face and head as VMC: the 52 ARKit shapes (perfect sync), the VRM 0.x presets "
                         "derived from them, the head bone")
+    p.add_argument("--events-out", default=None, metavar="HOST:PORT",
+                   help="send tracking lost/found as OSC /facepuppet/tracking i (1 found, 0 lost) here "
+                        "(also sent to --vmc-out when given)")
     p.add_argument("--vmc-extra", action="store_true",
                    help="with --vmc-out, also send the character's channels outside ARKit (e.g. CheekRaiserLeft)")
     p.add_argument("--vmc-presets", action=argparse.BooleanOptionalAction, default=True,
@@ -166,6 +172,7 @@ class _Options:
     llf_out: tuple | None = None
     video: VideoPlan | None = None
     phone: tuple | None = None
+    events_out: tuple | None = None
 
 
 def _check_options(args, default_port) -> _Options:
@@ -193,8 +200,9 @@ def _check_options(args, default_port) -> _Options:
         raise ValueError("--vmc-names: needs --vmc-out HOST:PORT")
     llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
     video = plan_video_from_args(args, width, height, alpha=render_options(args).transparent)
+    events_out = parse_host_port(args.events_out, "--events-out") if getattr(args, "events_out", None) else None
     return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out,
-                    llf_out, video, _check_phone(args, host))
+                    llf_out, video, _check_phone(args, host), events_out)
 
 
 def _check_phone(args, host: str) -> tuple | None:
@@ -413,6 +421,16 @@ def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, 
     if recorder is not None:
         counters["record"] = recorder.counters
         hooks.append(RecordingHook(recorder, source, chain.audio))
+    if chain.filter is not None:
+        if recorder is not None:
+            chain.filter.listeners.append(recorder.put_event)
+        if opts.vmc_out is not None or opts.events_out is not None:
+            events = TrackingEventSender([opts.events_out] if opts.events_out else [],
+                                         [opts.vmc_out] if opts.vmc_out else [])
+            log(events.describe())
+            parts.append(events)
+            chain.filter.listeners.append(events)
+            counters["events_out"] = events.counters
     return counters, stats, hooks
 
 

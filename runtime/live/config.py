@@ -16,6 +16,7 @@ Every key is optional; what is left out keeps its default. Example::
     timeout_s = 0.5          # no frame for this long: ease to neutral
     ease_out_s = 0.6         # ...over this long
     ease_in_s = 0.25         # frames are back: blend from where we are to live over this long
+    mouth = "voice"          # per region: hold / neutral / voice (mouth) / idle (runtime.live.tracking_loss)
 
     [calibration]
     capture_s = 0.5          # --calibrate / OSC /facepuppet/calibrate / key C: neutral = mean of this window
@@ -51,6 +52,7 @@ from facepuppet.runtime.channels import ARKIT_NAMES, canonical, split_side
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.expressions import MappingSettings, MappingTarget
 from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.live.tracking_loss import LOSS_KEYS, LossSettings, parse_loss
 
 if TYPE_CHECKING:
     import os
@@ -100,6 +102,8 @@ class LiveConfig:
     timeout_s, ease_out_s, ease_in_s : float, seconds (tracking loss)
     capture_s : float, seconds of frames averaged into the neutral pose
     mapping : MappingSettings, the ``[mapping]`` (channels onto a character's expressions and shapes)
+    loss : LossSettings, the per-region tracking-loss modes of ``[tracking_loss]``
+        (:mod:`~facepuppet.runtime.live.tracking_loss`)
     path : str, the file it came from ("" for defaults)
     """
 
@@ -111,6 +115,7 @@ class LiveConfig:
     ease_in_s: float = 0.25
     capture_s: float = 0.5
     mapping: MappingSettings = MappingSettings()
+    loss: LossSettings = LossSettings()
     path: str = ""
 
     def channel(self, name: str) -> ChannelSettings:
@@ -226,7 +231,7 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
             beta=_number(where, f"{key}.beta", values.get("beta", base.beta), non_negative=True),
             d_cutoff=_number(where, f"{key}.d_cutoff", values.get("d_cutoff", base.d_cutoff), positive=True),
         )
-    loss = _table(where, "tracking_loss", data.get("tracking_loss", {}), ("timeout_s", "ease_out_s", "ease_in_s"))
+    loss = _table(where, "tracking_loss", data.get("tracking_loss", {}), LOSS_KEYS)
     calib = _table(where, "calibration", data.get("calibration", {}), ("capture_s",))
     default_channel = cfg.default_channel
     if "default_channel" in data:
@@ -239,6 +244,7 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
     return replace(
         cfg,
         mapping=mapping,
+        loss=parse_loss(where, loss, LiveConfigError),
         filters=filters,
         channels=channels,
         default_channel=default_channel,

@@ -263,8 +263,11 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
     if opt("gestures") is not None:
         from facepuppet.runtime.gestures.layer import gesture_layer
 
-        stages.append(gesture_layer(opt("gestures"), voice_only=voice_only, log=log, level=level,
-                                    seed=opt("gesture_seed") or 0))
+        layer = gesture_layer(opt("gestures"), voice_only=voice_only, log=log, level=level,
+                              seed=opt("gesture_seed") or 0)
+        stages.append(layer)
+        if chain.filter is not None:  # tracking lost: the voice / idle regions take the layer's face
+            chain.filter.generator = lambda t: layer.compose(None, t)
     if kpls is not None:
         stages.append(kpls)
     chain.stages = tuple(stages)

@@ -17,7 +17,13 @@ import collections
 import threading
 from typing import TYPE_CHECKING
 
-from facepuppet.runtime.recording.records import RecordKind, encode_audio, encode_packet_record, encode_tick
+from facepuppet.runtime.recording.records import (
+    RecordKind,
+    encode_audio,
+    encode_event,
+    encode_packet_record,
+    encode_tick,
+)
 from facepuppet.runtime.recording.session import SessionWriter
 
 if TYPE_CHECKING:
@@ -37,7 +43,8 @@ class PacketRecorder:
 
     Attributes
     ----------
-    counters : dict: ``packets_recorded``, ``audio_recorded``, ``ticks_recorded``, ``record_dropped`` (queue full)
+    counters : dict: ``packets_recorded``, ``audio_recorded``, ``ticks_recorded``, ``events_recorded``,
+        ``record_dropped`` (queue full)
     """
 
     def __init__(self, path: str | os.PathLike, kind: str, info: dict | None = None, capacity: int = 8192,
@@ -47,7 +54,8 @@ class PacketRecorder:
         self.writer = SessionWriter(path, info={"recording": "live packets", "input": kind, **(info or {})},
                                     fsync_every_s=fsync_every_s, overwrite=overwrite)
         self.path = self.writer.path
-        self.counters = {"packets_recorded": 0, "audio_recorded": 0, "ticks_recorded": 0, "record_dropped": 0}
+        self.counters = {"packets_recorded": 0, "audio_recorded": 0, "ticks_recorded": 0, "events_recorded": 0,
+                         "record_dropped": 0}
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
         self._stopping = False
@@ -79,6 +87,14 @@ class PacketRecorder:
         self._queue.append((RecordKind.TICK, t, (k, frames, t_clock)))
         self._wake.set()
 
+    def put_event(self, t: float, found: bool) -> None:
+        """Queue one EVENT record, tracking lost / found (frame-loop thread: a pipeline listener). Never blocks."""
+        if len(self._queue) >= self.capacity:
+            self.counters["record_dropped"] += 1
+            return
+        self._queue.append((RecordKind.EVENT, t, bool(found)))
+        self._wake.set()
+
     def _drain(self) -> None:
         q, write = self._queue, self.writer.write_record
         while True:
@@ -92,6 +108,9 @@ class PacketRecorder:
                 elif kind == RecordKind.TICK:
                     write(kind, encode_tick(value[0], t, value[1], value[2]))
                     self.counters["ticks_recorded"] += 1
+                elif kind == RecordKind.EVENT:
+                    write(kind, encode_event(t, value))
+                    self.counters["events_recorded"] += 1
                 else:
                     write(kind, encode_audio(t, value))
                     self.counters["audio_recorded"] += 1

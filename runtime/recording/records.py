@@ -26,9 +26,11 @@ TICK      5     live recording: ``b"K1"``, tick index i64, tick time f64 (s
                 completed when the tick took its snapshot), snapshot time f64
                 (monotonic s, the packets' clock); lets a replay tick as the
                 live run did (same frames at the same tick times)
+EVENT     6     live recording: ``b"E1"``, tick time f64 (s), found u8 (1
+                tracking found, 0 lost): the filter stage's tracking events
 ========  ====  ==============================================================
 
-The PACKET/AUDIO/TICK decoders return None for a payload they cannot decode
+The PACKET/AUDIO/TICK/EVENT decoders return None for a payload they cannot decode
 (the reader counts those as skipped); the FRAME and LAYOUT decoders raise
 ValueError (the reader treats that as corruption).
 """
@@ -49,6 +51,7 @@ _FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
 _PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
 _AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
 _TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames completed, snapshot time
+_EVENT = struct.Struct("<2sdB")  # b"E1", tick time, found
 
 
 class RecordKind(enum.IntEnum):
@@ -60,9 +63,10 @@ class RecordKind(enum.IntEnum):
     PACKET = 3  # live recording: raw bytes + receive time + input kind
     AUDIO = 4  # live recording: audio levels
     TICK = 5  # live recording: which frame each tick took, and when
+    EVENT = 6  # live recording: tracking lost / found
 
 
-RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK})
+RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.EVENT})
 
 
 class FrameFlags(enum.IntFlag):
@@ -202,6 +206,21 @@ def decode_tick(payload: bytes) -> Tick | None:
         return None
     _, k, t, frames, t_clock = _TICK.unpack(payload)
     return Tick(k, t, frames, t_clock)
+
+
+def encode_event(t: float, found: bool) -> bytes:
+    """EVENT payload (see the module docstring)."""
+    return _EVENT.pack(b"E1", float(t), 1 if found else 0)
+
+
+def decode_event(payload: bytes) -> tuple[float, bool] | None:
+    """(tick time, found) from an EVENT payload; None when it is not one this reader knows."""
+    if len(payload) != _EVENT.size or payload[:2] != b"E1":
+        return None
+    _, t, found = _EVENT.unpack(payload)
+    if found not in (0, 1):
+        return None
+    return t, bool(found)
 
 
 def decode_frame(payload: bytes, layouts: dict[int, Layout]) -> Frame:

@@ -45,6 +45,7 @@ from facepuppet.runtime.recording.records import (
     RecordKind,
     Tick,
     decode_audio,
+    decode_event,
     decode_frame,
     decode_layout,
     decode_packet_record,
@@ -156,6 +157,7 @@ class Session:
     packets : list of Packet, the received datagrams of a live recording, in file order
     audio_levels : list of (t, level_db) float pairs, the audio levels of a live recording
     ticks : list of Tick, the drawn ticks of a live recording (recordings made since TICK existed)
+    events : list of (tick time, found) pairs, the tracking lost (False) / found (True) events of a live run
     skipped_bytes : int, bytes skipped over damaged records in the middle of the file
     damaged : list of (byte offset, bytes skipped), each damaged stretch that reading resynchronised past
     """
@@ -170,6 +172,7 @@ class Session:
     packets: list[Packet] = field(default_factory=list)
     audio_levels: list[tuple[float, float]] = field(default_factory=list)
     ticks: list[Tick] = field(default_factory=list)
+    events: list[tuple[float, bool]] = field(default_factory=list)
     skipped_bytes: int = 0
     damaged: list[tuple[int, int]] = field(default_factory=list)
 
@@ -321,6 +324,8 @@ def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, paylo
         session.audio_levels.append(level)
     elif kind == RecordKind.TICK and (tick := decode_tick(payload)) is not None:
         session.ticks.append(tick)
+    elif kind == RecordKind.EVENT and (event := decode_event(payload)) is not None:
+        session.events.append(event)
     elif kind in RESERVED_KINDS:
         name = RecordKind(kind).name.lower()
         session.skipped[name] = session.skipped.get(name, 0) + 1

@@ -48,11 +48,15 @@ def test_packets_and_audio_levels_round_trip(tmp_path):
         for data, t in packets:
             rec.put(data, t, ("127.0.0.1", 5000))
         rec.put_audio(0.5, -20.0)
+        rec.put_event(0.75, False)  # tracking lost, then found (the filter stage's listeners)
+        rec.put_event(1.25, True)
     s = read_session(path)
     assert s.complete and s.header["info"]["input"] == "vmc" and s.header["info"]["test"] is True
     assert [(p.data, p.t, p.kind) for p in s.packets] == [(d, t, "vmc") for d, t in packets]
     assert s.audio_levels == [(0.5, -20.0)]
-    assert rec.counters == {"packets_recorded": 20, "audio_recorded": 1, "ticks_recorded": 0, "record_dropped": 0}
+    assert s.events == [(0.75, False), (1.25, True)]
+    assert rec.counters == {"packets_recorded": 20, "audio_recorded": 1, "ticks_recorded": 0, "events_recorded": 2,
+                            "record_dropped": 0}
 
 
 def test_a_full_queue_drops_and_counts_instead_of_blocking(tmp_path):
