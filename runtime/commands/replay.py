@@ -168,6 +168,9 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
             llf = LlfSender(llf_out[0], llf_out[1], chain.names)
             log(llf.describe() + " (paced to real time)")
             hooks.append(llf.on_tick)
+        events: list = []  # the replay's tracking events, compared with the recording's at the end
+        if chain.filter is not None:
+            chain.filter.listeners.append(lambda t, found: events.append((t, found)))
         clock = RecordedClock() if target.headless and llf is None else WallClock()
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
                          stages=chain.stages, on_tick=hooks, drive=chain.drive)
@@ -186,7 +189,21 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
             renderer.close()
         target.close()
     _report(args, result, renderer.path, fps, source, weights, log)
+    if chain.filter is not None and live is not None:
+        log(_compare_events(live.events, events))
     return 0
+
+
+def _compare_events(recorded: list, replayed: list) -> str:
+    """The report line on the tracking events: as recorded, or where the replay's first differ."""
+    def text(events):
+        return ", ".join(f"{'found' if f else 'lost'} at {t:.3f} s" for t, f in events[:6]) + (
+            ", ..." if len(events) > 6 else "")
+
+    if [(round(t, 9), f) for t, f in recorded] == [(round(t, 9), f) for t, f in replayed]:
+        return f"replay: tracking events as recorded ({len(replayed)}" + (f": {text(replayed)})" if replayed else ")")
+    return (f"replay: warning: tracking events differ from the recording's: recorded {len(recorded)} "
+            f"({text(recorded) or 'none'}), replayed {len(replayed)} ({text(replayed) or 'none'})")
 
 
 def _source(args, live, fps, log):

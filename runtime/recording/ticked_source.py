@@ -47,6 +47,7 @@ class LiveRecording:
     ticks : list of Tick
     header : dict
     audio_levels : list of (t, level_db), the audio level of each live tick (the tick's time)
+    events : list of (t, found), the tracking lost / found events of the live run (EVENT records)
     """
 
     frames: list
@@ -55,6 +56,7 @@ class LiveRecording:
     ticks: list
     header: dict
     audio_levels: list = field(default_factory=list)
+    events: list = field(default_factory=list)
 
 
 def read_live_recording(path: str | os.PathLike,
@@ -87,7 +89,7 @@ def read_live_recording(path: str | os.PathLike,
     if not frames and not session.ticks:
         raise ValueError(f"{path}: the recorded packets decode to no frame")
     return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header),
-                         list(session.audio_levels))
+                         list(session.audio_levels), list(session.events))
 
 
 class TickedSource:
