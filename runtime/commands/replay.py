@@ -144,6 +144,8 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         live = read_live_recording(args.session, lambda k: make_input_adapter(
             k, chain.extra_names, log=log, marker_units=units, to_units=chain.marker_units, face_id=face_id))
         source, ticks, fps = _source(args, live, getattr(args, "fps", None), lambda s: None)
+    if live is not None and live.header.get("info", {}).get("mix_sources") is not None:
+        _replay_mix(live, chain, ticks)
     log(chain.describe())
     target = create_context(headless=True if args.headless else None, width=width, height=height,
                             title=f"facepuppet replay {args.session.name}", log=log, samples=picture.msaa,
@@ -192,6 +194,38 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     if chain.filter is not None and live is not None:
         log(_compare_events(live.events, events))
     return 0
+
+
+def _replay_mix(live, chain, ticks) -> None:
+    """The ``mix`` stage of a recording of a run with several inputs: each mix source's frames at the ticks
+    the live run took them (its SOURCES records), the voice from the recorded levels, the order of the config."""
+    from dataclasses import replace
+
+    from facepuppet.runtime.live.mix import MixStage, VoiceMixSource, check_mix_sources
+    from facepuppet.runtime.recording.ticked_source import TickedSource
+
+    info = live.header["info"]
+    names = tuple(info.get("inputs") or ())
+    if ticks is None or not names:
+        raise ValueError("replay: a recording of several inputs replays tick for tick only; this one has no TICK "
+                         "records or no list of its inputs")
+    sources = {}
+    for name in names[1:]:
+        if name == "audio":
+            if chain.audio is None:
+                raise ValueError("replay: the recording mixed the voice but kept no audio levels")
+            sources[name] = VoiceMixSource(chain.audio.level, chain.config.loss)
+        else:
+            sources[name] = TickedSource(live.mix[name])
+    settings = chain.config.mix
+    if settings.order is None:
+        settings = replace(settings, order=names)
+    check_mix_sources(settings, names, chain.config.path or "(defaults)")
+    # as the live run ordered them: its own input, the other trackers in the order given, the voice last
+    loop_first = (info["input"], *(n for n in names if n not in (info["input"], "audio")),
+                  *(("audio",) if "audio" in names else ()))
+    chain.add_mix(MixStage(loop_first, {n: sources[n] for n in loop_first[1:]}, settings, chain.config.timeout_s),
+                  label=f"replay({'+'.join(names)})")
 
 
 def _compare_events(recorded: list, replayed: list) -> str:

@@ -25,6 +25,9 @@ Every key is optional; what is left out keeps its default. Example::
     gain = 1.3
     clamp = [0.0, 1.0]
 
+    [mix]                    # several inputs at once (run --input A --input B): runtime.live.mix
+    order = ["livelinkface", "audio"]
+
     [mapping]                # a character with VRM expressions (runtime.expressions)
     emotions = true          # the default ARKit -> VRM mapping also drives Joy, Angry, Sorrow, Fun (default false)
     [mapping.channels]       # per input channel (any spelling): exactly these targets, nothing else
@@ -52,6 +55,7 @@ from facepuppet.runtime.channels import ARKIT_NAMES, canonical, split_side
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.expressions import MappingSettings, MappingTarget
 from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.live.mix import MixSettings, parse_mix
 from facepuppet.runtime.live.tracking_loss import LOSS_KEYS, LossSettings, parse_loss
 
 if TYPE_CHECKING:
@@ -104,6 +108,7 @@ class LiveConfig:
     mapping : MappingSettings, the ``[mapping]`` (channels onto a character's expressions and shapes)
     loss : LossSettings, the per-region tracking-loss modes of ``[tracking_loss]``
         (:mod:`~facepuppet.runtime.live.tracking_loss`)
+    mix : MixSettings, the ``[mix]`` source orders of a run with several inputs (:mod:`~facepuppet.runtime.live.mix`)
     path : str, the file it came from ("" for defaults)
     """
 
@@ -116,6 +121,7 @@ class LiveConfig:
     capture_s: float = 0.5
     mapping: MappingSettings = MappingSettings()
     loss: LossSettings = LossSettings()
+    mix: MixSettings = MixSettings()
     path: str = ""
 
     def channel(self, name: str) -> ChannelSettings:
@@ -219,7 +225,7 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
     """
     known = {canonical(n): n for n in (*ARKIT_NAMES, *(known_channels or ()))}
     _table(where, "<top>", data, ("filter", "tracking_loss", "calibration", "channels", "default_channel",
-                                  "mapping"))
+                                  "mapping", "mix"))
     cfg = LiveConfig(path=where)
     filters = dict(DEFAULT_FILTERS)
     for region, values in _table(where, "filter", data.get("filter", {}), REGIONS).items():
@@ -245,6 +251,8 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
         cfg,
         mapping=mapping,
         loss=parse_loss(where, loss, LiveConfigError),
+        mix=parse_mix(where, data["mix"], LiveConfigError,
+                      lambda name: _check_channel(where, name, known, "mix.channels")) if "mix" in data else cfg.mix,
         filters=filters,
         channels=channels,
         default_channel=default_channel,

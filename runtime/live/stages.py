@@ -7,6 +7,8 @@ frame loop runs every tick, in this order (each present only when asked for):
 stage      what it does                                  module
 =========  ============================================  ===================================================
 audio      samples the voice level once per tick         :class:`AudioTap` (here)
+mix        several inputs: each channel and the head     :mod:`facepuppet.runtime.live.mix` (``--input A
+           from the first live source in its order       --input B``, ``[mix]`` in ``--config``)
 solve      marker frame -> actuations s -> the           :mod:`facepuppet.runtime.actuation.stage`
            character's weights and head rotation         (Shin & Lee eq 5, §6.2; ``--actor``/``--pair``)
 filter     One Euro filter, calibration, gain/clamp,     :mod:`facepuppet.runtime.live.pipeline`
@@ -138,6 +140,8 @@ class Chain:
     marker_units : str or None, the units the solve wants marker frames in (the actor's), None without one
     drive : ExpressionDrive or None, what maps channels onto a character with VRM expressions (or with a
         ``[mapping]`` in ``--config``); None: the plain ChannelMap by name (``FrameLoop(drive=...)``)
+    config : LiveConfig, the live config in force (``--config``, or the defaults)
+    mix : MixStage or None, the mix of a run with several inputs (:meth:`add_mix`)
     """
 
     input: str
@@ -149,6 +153,17 @@ class Chain:
     extra_names: tuple[str, ...] = field(default_factory=tuple)
     marker_units: str | None = None
     drive: ExpressionDrive | None = None
+    config: Any = None
+    mix: Any = None
+
+    def add_mix(self, mix: Any, label: str | None = None) -> None:
+        """Put the ``mix`` stage in the chain: after the audio tap, before every other stage; ``label`` names the
+        inputs in :meth:`describe` (e.g. ``livelinkface+audio``)."""
+        at = 1 if self.audio is not None else 0
+        self.stages = (*self.stages[:at], mix, *self.stages[at:])
+        self.mix = mix
+        if label is not None:
+            self.input = label
 
     def describe(self) -> str:
         """``stages: vmc→filter→gestures→map→draw`` (``draw(elastic)`` on the elastic path)."""
@@ -245,6 +260,7 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
     known = (*shapes, *chain.names, *chain.extra_names, *(kpls.model.source_names if kpls is not None else ()),
              *expression_spellings(character))
     config = load_live_config(opt("config"), known) if opt("config") is not None else LiveConfig()
+    chain.config = config
     if elastic is None:  # the elastic path draws its own channels, not the character's shapes
         chain.drive = make_drive(shapes, character.expressions, config.mapping)
         if chain.drive is not None and input_kind == "vmc":

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import collections
 import threading
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.recording.records import (
@@ -22,6 +23,7 @@ from facepuppet.runtime.recording.records import (
     encode_audio,
     encode_event,
     encode_packet_record,
+    encode_sources,
     encode_tick,
 )
 from facepuppet.runtime.recording.session import SessionWriter
@@ -87,6 +89,25 @@ class PacketRecorder:
         self._queue.append((RecordKind.TICK, t, (k, frames, t_clock)))
         self._wake.set()
 
+    def tagged(self, label: str) -> Callable[..., None]:
+        """An ``on_packet`` callable for another input of the run: its datagrams are recorded under ``label``
+        (a mix source name such as ``openseeface`` or ``vmc#2``) instead of this recorder's kind."""
+        def put(data: bytes, t_receive: float, sender: tuple | None = None) -> None:
+            if len(self._queue) >= self.capacity:
+                self.counters["record_dropped"] += 1
+                return
+            self._queue.append((RecordKind.PACKET, t_receive, (label, data)))
+            self._wake.set()
+        return put
+
+    def put_sources(self, k: int, frames: tuple[int, ...]) -> None:
+        """Queue one SOURCES record: frames each mix source had completed at tick ``k``. Never blocks."""
+        if len(self._queue) >= self.capacity:
+            self.counters["record_dropped"] += 1
+            return
+        self._queue.append((RecordKind.SOURCES, k, tuple(frames)))
+        self._wake.set()
+
     def put_event(self, t: float, found: bool) -> None:
         """Queue one EVENT record, tracking lost / found (frame-loop thread: a pipeline listener). Never blocks."""
         if len(self._queue) >= self.capacity:
@@ -103,11 +124,14 @@ class PacketRecorder:
             while q:
                 kind, t, value = q.popleft()
                 if kind == RecordKind.PACKET:
-                    write(kind, encode_packet_record(t, self.kind, value))
+                    label, data = value if isinstance(value, tuple) else (self.kind, value)
+                    write(kind, encode_packet_record(t, label, data))
                     self.counters["packets_recorded"] += 1
                 elif kind == RecordKind.TICK:
                     write(kind, encode_tick(value[0], t, value[1], value[2]))
                     self.counters["ticks_recorded"] += 1
+                elif kind == RecordKind.SOURCES:
+                    write(kind, encode_sources(t, value))
                 elif kind == RecordKind.EVENT:
                     write(kind, encode_event(t, value))
                     self.counters["events_recorded"] += 1

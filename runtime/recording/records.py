@@ -28,9 +28,13 @@ TICK      5     live recording: ``b"K1"``, tick index i64, tick time f64 (s
                 live run did (same frames at the same tick times)
 EVENT     6     live recording: ``b"E1"``, tick time f64 (s), found u8 (1
                 tracking found, 0 lost): the filter stage's tracking events
+SOURCES   7     live recording with several inputs: ``b"S1"``, tick index
+                i64, count u16, then count x i64: frames each mix source
+                (the header's ``info.mix_sources``, in order) had completed
+                at that tick; one after each TICK record
 ========  ====  ==============================================================
 
-The PACKET/AUDIO/TICK/EVENT decoders return None for a payload they cannot decode
+The PACKET/AUDIO/TICK/EVENT/SOURCES decoders return None for a payload they cannot decode
 (the reader counts those as skipped); the FRAME and LAYOUT decoders raise
 ValueError (the reader treats that as corruption).
 """
@@ -52,6 +56,7 @@ _PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
 _AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
 _TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames completed, snapshot time
 _EVENT = struct.Struct("<2sdB")  # b"E1", tick time, found
+_SOURCES_HEAD = struct.Struct("<2sqH")  # b"S1", tick index, count (then count x i64)
 
 
 class RecordKind(enum.IntEnum):
@@ -64,9 +69,11 @@ class RecordKind(enum.IntEnum):
     AUDIO = 4  # live recording: audio levels
     TICK = 5  # live recording: which frame each tick took, and when
     EVENT = 6  # live recording: tracking lost / found
+    SOURCES = 7  # live recording, several inputs: frames each mix source had per tick
 
 
-RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.EVENT})
+RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.EVENT,
+                            RecordKind.SOURCES})
 
 
 class FrameFlags(enum.IntFlag):
@@ -221,6 +228,21 @@ def decode_event(payload: bytes) -> tuple[float, bool] | None:
     if found not in (0, 1):
         return None
     return t, bool(found)
+
+
+def encode_sources(k: int, frames: tuple[int, ...] | list[int]) -> bytes:
+    """SOURCES payload (see the module docstring)."""
+    return _SOURCES_HEAD.pack(b"S1", int(k), len(frames)) + struct.pack(f"<{len(frames)}q", *map(int, frames))
+
+
+def decode_sources(payload: bytes) -> tuple[int, tuple[int, ...]] | None:
+    """(tick index, frames per mix source) from a SOURCES payload; None when it is not one this reader knows."""
+    if len(payload) < _SOURCES_HEAD.size or payload[:2] != b"S1":
+        return None
+    _, k, n = _SOURCES_HEAD.unpack_from(payload)
+    if len(payload) != _SOURCES_HEAD.size + 8 * n:
+        return None
+    return k, struct.unpack_from(f"<{n}q", payload, _SOURCES_HEAD.size)
 
 
 def decode_frame(payload: bytes, layouts: dict[int, Layout]) -> Frame:
