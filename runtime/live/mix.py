@@ -270,7 +270,10 @@ class MixStage:
             return None
         newest = max((x for x in self._sources if x.frame is not None), key=lambda x: x.t_frame)
         src = newest.frame
-        return Frame(t=src.t, source="mix", channels=self._channels, weights=out.astype(np.float32),
+        # a tick without a new frame (a crossfade moving) is stamped as if received now, on the frames' clock
+        # (the newest frame's receive time + the tick time since it came): the filter's dt stays the tick's
+        return Frame(t=src.t + (t - newest.t_frame), source="mix", channels=self._channels,
+                     weights=out.astype(np.float32),
                      head_rotation=rotation, head_translation=translation, audio_level=src.audio_level,
                      t_sender=src.t_sender, number=src.number)
 
