@@ -135,3 +135,42 @@ def test_two_inputs_over_udp_per_channel_order_and_the_loss_of_one_hands_its_cha
     replayed = np.load(dump)
     assert replayed.shape[0] == len(j)
     np.testing.assert_allclose(replayed[:, 0], j, atol=1e-6)
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--input", "vmc", "--input", "openseeface", "--listen", "127.0.0.1:40001"],
+     "--listen: 1 given for 2 tracker input(s) (vmc, openseeface); give one per tracker input"),
+    (["--input", "vmc", "--input", "vmc"], "--listen: vmc and vmc#2 would both listen on 127.0.0.1:39539"),
+    (["--input", "vmc", "--input", "vmc", "--listen", "127.0.0.1:40001", "--listen", "127.0.0.1:40001"],
+     "--listen: vmc and vmc#2 would both listen on 127.0.0.1:40001"),
+    (["--input", "markers", "--input", "vmc"], "--input markers: not with other inputs"),
+    (["--input", "vmc", "--input", "audio"], "--input audio: the voice as an input needs --audio"),
+    (["--input", "audio", "--input", "audio", "--audio-file", "x.wav"], "--input audio: given twice"),
+    (["--input", "vmc", "--listen", "127.0.0.1:40001", "--listen", "127.0.0.1:40002"],
+     "--listen: 2 given for 1 tracker input(s) (vmc)"),
+    (["--input", "vmc", "--events-out", "127.0.0.1"], "--events-out: expected HOST:PORT"),
+])
+def test_bad_input_combinations_exit_2_naming_the_option(tmp_path, capsys, argv, match):
+    from facepuppet.runtime.cli import main
+
+    character = tmp_path / "sphere.npz"
+    sphere_character().save(character)
+    code = main(["run", "-c", str(character), "--headless", "--duration", "0.1", *argv])
+    assert code == 2
+    assert match in capsys.readouterr().err
+
+
+@pytest.mark.gl
+def test_a_mix_order_naming_a_source_the_run_lacks_is_refused(tmp_path, capsys):
+    from facepuppet.runtime.cli import main
+
+    character = tmp_path / "sphere.npz"
+    sphere_character().save(character)
+    config = tmp_path / "mix.toml"
+    config.write_text('[mix]\norder = ["vmc", "openseeface"]\n')
+    code = main(["run", "-c", str(character), "--headless", "--duration", "0.1", "--input", "vmc", "--input", "vmc",
+                 "--listen", f"127.0.0.1:{free_udp_port()}", "--listen", f"127.0.0.1:{free_udp_port()}",
+                 "--config", str(config)])
+    assert code == 2
+    assert "[mix] names the source 'openseeface', which this run does not have; its sources are vmc, vmc#2" \
+        in capsys.readouterr().err
