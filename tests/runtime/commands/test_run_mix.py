@@ -174,3 +174,53 @@ def test_a_mix_order_naming_a_source_the_run_lacks_is_refused(tmp_path, capsys):
     assert code == 2
     assert "[mix] names the source 'openseeface', which this run does not have; its sources are vmc, vmc#2" \
         in capsys.readouterr().err
+
+
+@pytest.mark.gl
+def test_the_voice_as_an_input_fills_the_jaw_the_tracker_does_not_send(tmp_path):
+    """``--input vmc --input audio --audio-file WAV``, no [mix]: the order is the inputs as given; the VMC sender
+    sends a smile and no jaw, so the jaw comes from the voice level, and the smile from VMC."""
+    from facepuppet.runtime.live.tracking_loss import LossSettings, voice_jaw
+
+    from helpers.swinging_voice import write_voice
+
+    character = tmp_path / "sphere.npz"
+    sphere_character().save(character)
+    config, wav = tmp_path / "live.toml", tmp_path / "voice.wav"
+    config.write_text(CONFIG.split("[mix]")[0])
+    write_voice(wav)
+    port = free_udp_port()
+    logs: list[str] = []
+    ns = parse(run, ["run", "-c", str(character), "--input", "vmc", "--input", "audio", "--listen",
+                     f"127.0.0.1:{port}", "--headless", "--size", "48x40", "--draw", "tick", "--fps", str(FPS),
+                     "--duration", "30", "--config", str(config), "--audio-file", str(wav)])
+    stop = threading.Event()
+    ticks: list[tuple[float, float]] = []
+
+    def sender():
+        client = SimpleUDPClient("127.0.0.1", port)
+        while not stop.is_set():
+            send_vmc(client, {"MouthSmileLeft": 0.4})
+            time.sleep(0.01)
+
+    def hook(info):
+        if info.frame is not None and info.raw is not None:
+            ticks.append((info.frame.audio_level, float(info.weights[0])))
+            if len(ticks) >= 90:
+                stop.set()
+
+    thread = threading.Thread(target=sender, daemon=True)
+    try:
+        thread.start()
+        result = run.run_live(ns, log=logs.append, stop_event=stop, hooks=[hook])
+    finally:
+        stop.set()
+        thread.join(timeout=10)
+    assert len(ticks) >= 90
+    assert "stages: vmc+audio→audio→mix→filter→map→draw" in logs
+    level, jaw = (np.array(c) for c in zip(*ticks[10:]))
+    expected = np.array([voice_jaw(x, LossSettings()) for x in level])
+    # (the pass-through filter, alpha ~0.98 a tick, lags the slowly moving voice by well under 0.01)
+    np.testing.assert_allclose(jaw, expected, atol=0.01)
+    assert np.ptp(expected) > 0.1
+    assert result.counters["mix"]["served"]["audio"] > 0 and result.counters["mix"]["served"]["vmc"] > 0

@@ -12,7 +12,6 @@ import math
 import socket
 import threading
 import time
-import wave
 
 import numpy as np
 import pytest
@@ -24,6 +23,7 @@ from facepuppet.runtime.recording.session import read_session
 
 from helpers.osc_helpers import vmc_frame
 from helpers.small_characters import sphere_character
+from helpers.swinging_voice import write_voice
 from helpers.udp_helpers import free_udp_port
 
 FPS = 60
@@ -40,18 +40,6 @@ voice_floor_db = -40.0
 voice_ceiling_db = -10.0
 """
 LOSS = LossSettings(voice_floor_db=-40.0, voice_ceiling_db=-10.0)
-
-
-def write_voice(path, seconds=40.0, rate=16000):
-    """A 'voice': a 180 Hz tone whose loudness swings between about -36 and -9 dBFS at 0.8 Hz."""
-    t = np.arange(int(seconds * rate)) / rate
-    envelope = 0.02 + 0.48 * (0.5 + 0.5 * np.sin(2 * np.pi * 0.8 * t))
-    samples = (envelope * np.sin(2 * np.pi * 180.0 * t) * 32767).astype("<i2")
-    with wave.open(str(path), "wb") as f:
-        f.setnchannels(1)
-        f.setsampwidth(2)
-        f.setframerate(rate)
-        f.writeframes(samples.tobytes())
 
 
 def parse(command, argv):

@@ -190,3 +190,47 @@ def test_loss_settings_parse():
     assert (cfg.loss.voice_floor_db, cfg.loss.idle_seed) == (-40.0, 7)
     assert voice_jaw(-40.0, cfg.loss) == 0.0 and voice_jaw(-15.0, cfg.loss) == 1.0
     assert voice_jaw(-27.5, cfg.loss) == pytest.approx(0.5)
+
+
+def test_with_gestures_the_lost_mouth_takes_the_gesture_layers_lips(tmp_path):
+    """build_chain with --gestures hands the filter the layer's voice face: while lost (mouth = "voice") the
+    jaw is the layer's synthesised lips from the voice level, not the built-in level line."""
+    import argparse
+
+    from facepuppet.runtime.live.stages import build_chain
+
+    from helpers.gesture_dbs import small_db
+    from helpers.small_characters import sphere_character
+
+    small_db(tmp_path / "gestures.npz")
+    config = tmp_path / "live.toml"
+    config.write_text("\n".join(f"[filter.{r}]\nmin_cutoff = 500.0\nbeta = 0.0" for r in
+                                ("eyes", "brows", "mouth", "other", "head"))
+                      + '\n[tracking_loss]\ntimeout_s = 0.3\nease_out_s = 0.4\nmouth = "voice"\n')
+
+    def level(t):
+        return -60.0 if t < 1.2 else -30.0 + 20.0 * math.sin(3.0 * t)
+
+    args = argparse.Namespace(config=config, gestures=tmp_path / "gestures.npz", gesture_seed=1)
+    chain = build_chain(args, sphere_character(), "vmc", audio_level=level, log=lambda s: None)
+    assert chain.filter.generator is not None
+    seen = {}
+    generator = chain.filter.generator
+
+    def spy(t):
+        frame = generator(t)
+        seen[round(t, 9)] = float(frame.weights[list(frame.channels).index("jawOpen")])
+        return frame
+
+    chain.filter.generator = spy
+    renderer, log = StubRenderer(), WeightLog()
+    loop = FrameLoop(("jawOpen",), renderer, RecordedClock(), sinks=[log], fps=FPS, log=lambda s: None,
+                     stages=chain.stages)
+    loop.run(ReplaySource(STREAM), duration=4.0)
+    t, jaw = log.times, log.array[:, 0]
+    settled = window(t, *SETTLED)
+    lips = np.array([seen[round(x, 9)] for x in t[settled]])
+    np.testing.assert_allclose(jaw[settled], np.clip(lips, 0.0, 1.0), atol=1e-6)
+    assert np.ptp(lips) > 0.05  # the synthesised lips move with the voice
+    line = np.array([voice_jaw(level(x), chain.config.loss) for x in t[settled]])
+    assert np.abs(line - jaw[settled]).max() > 0.05  # and they are not the built-in line
