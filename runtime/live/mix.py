@@ -24,9 +24,10 @@ from the same voice), so the lost / found events mean "no tracker" / "a tracker 
 
 A tick emits a mixed frame when a source delivered a new frame this tick (or a crossfade or the voice is
 moving); its channels are the union of what the sources sent, in order of first appearance. Each source
-keeps its own counters (``counters[name]``: ``frames``, ``lost``, ``found``) and ``served`` counts the
-channel-ticks each source supplied. Everything works on tick times, so a replay of a recording (which
-keeps each source's packets and, per tick, how many frames each had completed) mixes as the live run did.
+keeps its own counters (``NAME.frames``, ``NAME.lost``, ``NAME.found``, and ``NAME.served``, the
+channel-ticks it supplied; one flat dict, as ``--stats`` prints counter groups). Everything works on tick
+times, so a replay of a recording (which keeps each source's packets and, per tick, how many frames each
+had completed) mixes as the live run did.
 """
 
 from __future__ import annotations
@@ -169,7 +170,6 @@ class _Source:
         self.t_frame = -math.inf  # tick time the newest frame arrived
         self.live = False
         self.tracker = not isinstance(source, VoiceMixSource)
-        self.counters = {"frames": 0, "lost": 0, "found": 0}
 
 
 class MixStage:
@@ -184,8 +184,9 @@ class MixStage:
 
     Attributes
     ----------
-    counters : dict of source name -> dict (``frames``, ``lost``, ``found``), plus ``served``: dict of source
-        name -> channel-ticks supplied, and ``handovers``: channel source changes
+    counters : dict of str to int: ``NAME.frames`` (new frames taken), ``NAME.lost``, ``NAME.found`` (times the
+        source went quiet past the timeout / came back), ``NAME.served`` (channel-ticks it supplied) for each
+        source, and ``handovers`` (channel and head source changes)
     chosen : dict of canonical channel key -> source name (None: no source) of the last tick, and ``head``
     """
 
@@ -199,9 +200,9 @@ class MixStage:
         self.timeout_s = float(timeout_s)
         self._sources = [_Source(self.names[0], None)] + [_Source(n, sources[n]) for n in self.names[1:]]
         self._rank = {n: i for i, n in enumerate(self.names)}
-        self.counters: dict = {s.name: s.counters for s in self._sources}
-        self.counters["served"] = {n: 0 for n in self.names}
-        self.counters["handovers"] = 0
+        self.counters: dict = {"handovers": 0}
+        for n in self.names:
+            self.counters.update({f"{n}.frames": 0, f"{n}.lost": 0, f"{n}.found": 0, f"{n}.served": 0})
         self.chosen: dict = {}
         self._channels: tuple[str, ...] = ()
         self._keys: list[str] = []
@@ -239,11 +240,11 @@ class MixStage:
             new = frame if i == 0 else s.source.latest(t)[0]
             if new is not None:
                 s.frame, s.t_frame = new, t
-                s.counters["frames"] += 1
+                self.counters[f"{s.name}.frames"] += 1
                 fresh = fresh or s.tracker
             live = s.frame is not None and t - s.t_frame <= self.timeout_s
             if live != s.live:
-                s.counters["found" if live else "lost"] += 1
+                self.counters[f"{s.name}.found" if live else f"{s.name}.lost"] += 1
                 s.live = live
         self._grow_channels()
         if not any(s.live and s.tracker for s in self._sources):
@@ -262,7 +263,7 @@ class MixStage:
         moving = bool(np.any(s < 1.0))
         self._out = out
         for i in choice[choice >= 0]:
-            self.counters["served"][self.names[i]] += 1
+            self.counters[f"{self.names[i]}.served"] += 1
         rotation, translation, head_moving = self._mix_head(t)
         self.chosen = {k: (self.names[c] if c >= 0 else None) for k, c in zip(self._keys, choice)}
         self.chosen["head"] = self.names[self._head[0]] if self._head[0] >= 0 else None

@@ -103,9 +103,9 @@ def test_two_inputs_over_udp_per_channel_order_and_the_loss_of_one_hands_its_cha
     assert state["phase"] == "done", f"the run stopped in phase {state['phase']}"
     assert "stages: vmc+vmc#2→mix→filter→map→draw" in logs
     c = result.counters
-    assert c["mix"]["vmc"]["lost"] == 1 and c["mix"]["vmc#2"]["lost"] == 0
+    assert c["mix"]["vmc.lost"] == 1 and c["mix"]["vmc#2.lost"] == 0
     assert c["udp"]["packets"] > 0 and c["udp:vmc#2"]["packets"] > 0  # each receiver's own counters
-    assert c["mix"]["vmc#2"]["frames"] > 0 and c["mix"]["served"]["vmc#2"] > 0 and c["mix"]["served"]["vmc"] > 0
+    assert c["mix"]["vmc#2.frames"] > 0 and c["mix"]["vmc#2.served"] > 0 and c["mix"]["vmc.served"] > 0
     assert c["pipeline"]["tracking_lost"] == 0  # B never stopped: no tracking loss, a hand-over
     t = np.array([x for x, _, _ in ticks])
     j = np.array([x for _, x, _ in ticks])
@@ -223,4 +223,4 @@ def test_the_voice_as_an_input_fills_the_jaw_the_tracker_does_not_send(tmp_path)
     # (the pass-through filter, alpha ~0.98 a tick, lags the slowly moving voice by well under 0.01)
     np.testing.assert_allclose(jaw, expected, atol=0.01)
     assert np.ptp(expected) > 0.1
-    assert result.counters["mix"]["served"]["audio"] > 0 and result.counters["mix"]["served"]["vmc"] > 0
+    assert result.counters["mix"]["audio.served"] > 0 and result.counters["mix"]["vmc.served"] > 0
