@@ -193,7 +193,8 @@ def test_the_voice_as_an_input_fills_the_jaw_the_tracker_does_not_send(tmp_path)
     logs: list[str] = []
     ns = parse(run, ["run", "-c", str(character), "--input", "vmc", "--input", "audio", "--listen",
                      f"127.0.0.1:{port}", "--headless", "--size", "48x40", "--draw", "tick", "--fps", str(FPS),
-                     "--duration", "30", "--config", str(config), "--audio-file", str(wav)])
+                     "--duration", "30", "--config", str(config), "--audio-file", str(wav),
+                     "--record", str(tmp_path / "voice.fps")])
     stop = threading.Event()
     ticks: list[tuple[float, float]] = []
 
@@ -212,7 +213,7 @@ def test_the_voice_as_an_input_fills_the_jaw_the_tracker_does_not_send(tmp_path)
     thread = threading.Thread(target=sender, daemon=True)
     try:
         thread.start()
-        result = run.run_live(ns, log=logs.append, stop_event=stop, hooks=[hook])
+        result = run.run_live(ns, log=logs.append, stop_event=stop, hooks=[hook], keep_weights=True)
     finally:
         stop.set()
         thread.join(timeout=10)
@@ -224,3 +225,10 @@ def test_the_voice_as_an_input_fills_the_jaw_the_tracker_does_not_send(tmp_path)
     np.testing.assert_allclose(jaw, expected, atol=0.01)
     assert np.ptp(expected) > 0.1
     assert result.counters["mix"]["audio.served"] > 0 and result.counters["mix"]["vmc.served"] > 0
+    # the replay mixes the recorded voice levels with the recorded packets as the run did
+    dump, lines = tmp_path / "replay.npy", []
+    args = parse(replay, ["replay", str(tmp_path / "voice.fps"), "-c", str(character), "--headless", "--size",
+                          "48x40", "--config", str(config), "--dump-weights", str(dump)])
+    assert replay.run_replay(args, log=lines.append) == 0
+    assert "stages: replay(vmc+audio)→audio→mix→filter→map→draw" in lines
+    np.testing.assert_allclose(np.load(dump), result.weights.array, atol=1e-6)

@@ -234,3 +234,14 @@ def test_with_gestures_the_lost_mouth_takes_the_gesture_layers_lips(tmp_path):
     assert np.ptp(lips) > 0.05  # the synthesised lips move with the voice
     line = np.array([voice_jaw(level(x), chain.config.loss) for x in t[settled]])
     assert np.abs(line - jaw[settled]).max() > 0.05  # and they are not the built-in line
+
+
+def test_replay_reports_tracking_events_that_differ_from_the_recording():
+    from facepuppet.runtime.commands.replay import _compare_events
+
+    same = _compare_events([(1.5, False), (3.0, True)], [(1.5, False), (3.0, True)])
+    assert same == "replay: tracking events as recorded (2: lost at 1.500 s, found at 3.000 s)"
+    differ = _compare_events([(1.5, False), (3.0, True)], [(1.5, False)])
+    assert differ.startswith("replay: warning: tracking events differ from the recording's: recorded 2 "
+                             "(lost at 1.500 s, found at 3.000 s), replayed 1 (lost at 1.500 s)")
+    assert _compare_events([], []) == "replay: tracking events as recorded (0)"
