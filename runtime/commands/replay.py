@@ -146,6 +146,8 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         live = read_live_recording(args.session, lambda k: make_input_adapter(
             k, chain.extra_names, log=log, marker_units=units, to_units=chain.marker_units, face_id=face_id))
         source, ticks, fps = _source(args, live, getattr(args, "fps", None), lambda s: None)
+    if live is not None and live.header.get("info", {}).get("mix_sources") is not None:
+        _replay_mix(live, chain, ticks, log)
     log(chain.describe())
     target = create_context(headless=True if args.headless else None, width=width, height=height,
                             title=f"facepuppet replay {args.session.name}", log=log, samples=picture.msaa,
@@ -170,6 +172,9 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
             llf = LlfSender(llf_out[0], llf_out[1], chain.names)
             log(llf.describe() + " (paced to real time)")
             hooks.append(llf.on_tick)
+        events: list = []  # the replay's tracking events, compared with the recording's at the end
+        if chain.filter is not None:
+            chain.filter.listeners.append(lambda t, found: events.append((t, found)))
         clock = RecordedClock() if target.headless and llf is None else WallClock()
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
                          stages=chain.stages, on_tick=hooks, drive=chain.drive)
@@ -188,7 +193,55 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
             renderer.close()
         target.close()
     _report(args, result, renderer.path, fps, source, weights, log)
+    if chain.filter is not None and live is not None:
+        log(_compare_events(live.events, events))
     return 0
+
+
+def _replay_mix(live, chain, ticks, log) -> None:
+    """The ``mix`` stage of a recording of a run with several inputs: each mix source's frames at the ticks
+    the live run took them (its SOURCES records), the voice from the recorded levels, the order of the config."""
+    from dataclasses import replace
+
+    from facepuppet.runtime.live.mix import MixStage, VoiceMixSource, check_mix_sources, follow_config
+    from facepuppet.runtime.recording.ticked_source import TickedSource
+
+    info = live.header["info"]
+    names = tuple(info.get("inputs") or ())
+    if ticks is None or not names:
+        raise ValueError("replay: a recording of several inputs replays tick for tick only; this one has no TICK "
+                         "records or no list of its inputs")
+    sources = {}
+    for name in names[1:]:
+        if name == "audio":
+            if chain.audio is None:
+                raise ValueError("replay: the recording mixed the voice but kept no audio levels")
+            sources[name] = VoiceMixSource(chain.audio.level, chain.config.loss)
+        else:
+            sources[name] = TickedSource(live.mix[name])
+    settings = chain.config.mix
+    if settings.order is None:
+        settings = replace(settings, order=names)
+    check_mix_sources(settings, names, chain.config.path or "(defaults)")
+    # as the live run ordered them: its own input, the other trackers in the order given, the voice last
+    loop_first = (info["input"], *(n for n in names if n not in (info["input"], "audio")),
+                  *(("audio",) if "audio" in names else ()))
+    stage = MixStage(loop_first, {n: sources[n] for n in loop_first[1:]}, settings, chain.config.timeout_s)
+    chain.add_mix(stage, label=f"replay({'+'.join(names)})")
+    if chain.filter is not None:  # the live run's config changes (its CONFIG records) reach the mix as they did
+        chain.filter.on_config.append(follow_config(stage, names, log))
+
+
+def _compare_events(recorded: list, replayed: list) -> str:
+    """The report line on the tracking events: as recorded, or where the replay's first differ."""
+    def text(events):
+        return ", ".join(f"{'found' if f else 'lost'} at {t:.3f} s" for t, f in events[:6]) + (
+            ", ..." if len(events) > 6 else "")
+
+    if [(round(t, 9), f) for t, f in recorded] == [(round(t, 9), f) for t, f in replayed]:
+        return f"replay: tracking events as recorded ({len(replayed)}" + (f": {text(replayed)})" if replayed else ")")
+    return (f"replay: warning: tracking events differ from the recording's: recorded {len(recorded)} "
+            f"({text(recorded) or 'none'}), replayed {len(replayed)} ({text(replayed) or 'none'})")
 
 
 def _source(args, live, fps, log):

@@ -25,6 +25,8 @@ it onto the rig and draws. Around that loop:
 * ``--phone IP[:PORT]`` (``--input ifacialmocap`` / ``vtubestudio``): the app's start payload or data request,
   sent only to that address, at once and then periodically from a daemon thread that stops with the run
   (:mod:`~facepuppet.runtime.inputs.phone`); a loopback ``--listen`` with a LAN phone is refused.
+* ``--events-out HOST:PORT`` (and ``--vmc-out``): tracking lost / found as OSC ``/facepuppet/tracking i``
+  (:mod:`~facepuppet.runtime.live.events_out`); with ``--record`` the events are also recorded (EVENT records).
 * ``--stats``: counters and per-stage latency once a second and at exit.
 * Parameter spaces (:mod:`~facepuppet.runtime.live.stages`): ``--input markers``
   with ``--actor``/``--pair`` (marker solve, Shin & Lee), ``--retarget`` (kernel
@@ -58,6 +60,7 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.commands.options import parse_allow, parse_host_port, parse_size
+from facepuppet.runtime.live.events_out import TrackingEventSender
 from facepuppet.runtime.live.llf_out import LlfSender
 from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, WallClock
 from facepuppet.runtime.live.sinks import PngSink, RecordingHook, WeightLog
@@ -84,11 +87,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      "iFacialMocap, VTube Studio, OpenSeeFace)",
         description="Drive a character live from OSC / UDP tracker input on this machine.")
     p.add_argument("-c", "--character", type=Path, required=True, help="character .npz")
-    p.add_argument("--input", required=True, choices=tuple(INPUT_KINDS) + ("audio",),
-                   help="tracker protocol, or 'audio': no tracker, the face from the voice (needs --gestures)")
-    p.add_argument("--listen", metavar="HOST:PORT", default=None,
+    p.add_argument("--input", required=True, action="append", choices=tuple(INPUT_KINDS) + ("audio",),
+                   help="tracker protocol, or 'audio': no tracker, the face from the voice (needs --gestures); "
+                        "give it more than once for several inputs at once (--input livelinkface --input audio, "
+                        "--input vmc --input openseeface): each channel and the head come from the first live "
+                        "source in the [mix] order of --config (default: the inputs in the order given)")
+    p.add_argument("--listen", metavar="HOST:PORT", default=None, action="append",
                    help="address to listen on (default 127.0.0.1 on the input's default port); "
-                        "an address other than loopback must be named here explicitly")
+                        "an address other than loopback must be named here explicitly; with several tracker "
+                        "inputs, one --listen per tracker, in the order of their --input (or none at all)")
     p.add_argument("--allow", metavar="IP[,IP...]", default=None, help="accept packets only from these senders")
     p.add_argument("--phone", metavar="IP[:PORT]", default=None,
                    help="--input ifacialmocap / vtubestudio: the phone's IP address, sent the app's start payload "
@@ -103,6 +110,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vmc-out", default=None, metavar="HOST:PORT",
                    help="send the face and head as VMC: the 52 ARKit shapes (perfect sync), the VRM 0.x presets "
                         "derived from them, the head bone")
+    p.add_argument("--events-out", default=None, metavar="HOST:PORT",
+                   help="send tracking lost/found as OSC /facepuppet/tracking i (1 found, 0 lost) here "
+                        "(also sent to --vmc-out when given)")
     p.add_argument("--vmc-extra", action="store_true",
                    help="with --vmc-out, also send the character's channels outside ARKit (e.g. CheekRaiserLeft)")
     p.add_argument("--vmc-presets", action=argparse.BooleanOptionalAction, default=True,
@@ -174,6 +184,7 @@ class _Options:
     llf_out: tuple | None = None
     video: VideoPlan | None = None
     phone: tuple | None = None
+    events_out: tuple | None = None
 
 
 def _check_options(args, default_port) -> _Options:
@@ -197,14 +208,15 @@ def _check_options(args, default_port) -> _Options:
         raise ValueError("--vmc-extra: needs --vmc-out HOST:PORT")
     if not getattr(args, "vmc_presets", True) and vmc_out is None:
         raise ValueError("--no-vmc-presets: needs --vmc-out HOST:PORT")
-    if getattr(args, "face_id", None) is not None and args.input != "openseeface":
+    if getattr(args, "face_id", None) is not None and "openseeface" not in getattr(args, "inputs", (args.input,)):
         raise ValueError(f"--face-id: only for --input openseeface (not {args.input})")
     if getattr(args, "vmc_names", None) is not None and vmc_out is None:
         raise ValueError("--vmc-names: needs --vmc-out HOST:PORT")
     llf_out = parse_host_port(args.llf_out, "--llf-out") if getattr(args, "llf_out", None) else None
     video = plan_video_from_args(args, width, height, alpha=render_options(args).transparent)
+    events_out = parse_host_port(args.events_out, "--events-out") if getattr(args, "events_out", None) else None
     return _Options(width, height, loop_fps, idle_fps, voice_only, host, port, parse_allow(args.allow), vmc_out,
-                    llf_out, video, _check_phone(args, host))
+                    llf_out, video, _check_phone(args, host), events_out)
 
 
 def _check_phone(args, host: str) -> tuple | None:
@@ -232,8 +244,11 @@ def _record_info(args, opts: _Options, chain=None) -> dict:
     config the run starts with, as TOML, neutral included)."""
     options = ("config", "profile", "calibrate", "actor", "pair", "marker_units", "retarget", "elastic", "gestures",
                "gesture_seed", "face_id")
+    mix = [{"name": m.name, "kind": m.kind, "listen": f"{m.host}:{m.port}"} for m in getattr(args, "mix_inputs", ())
+           if m.kind != "audio"]
     info = {"character": str(args.character), "listen": f"{opts.host}:{opts.port}", "fps": opts.loop_fps,
-            "idle_fps": opts.idle_fps,
+            "idle_fps": opts.idle_fps, **({"inputs": list(args.input_names), "mix_sources": mix} if mix or len(
+                getattr(args, "input_names", ())) > 1 else {}),
             "options": {name: None if getattr(args, name, None) is None else str(getattr(args, name))
                         for name in options}}
     if chain is not None and chain.filter is not None:
@@ -251,6 +266,104 @@ def _config_recorder(late):
 
             late.recorder.put_config(t, config_to_toml(config))
     return hook
+
+
+@dataclass(frozen=True)
+class MixInput:
+    """One input of a run with several besides the frame loop's own: its source name, kind and address."""
+
+    name: str
+    kind: str
+    host: str = "127.0.0.1"
+    port: int = 0
+
+
+def split_inputs(args: argparse.Namespace) -> tuple[argparse.Namespace, list[MixInput]]:
+    """The run's inputs: ``args`` with ``input`` the frame loop's own (the first tracker, or ``audio`` alone) and
+    ``listen`` its address, plus ``inputs`` / ``input_names`` (every input in the order given) and
+    ``mix_inputs``; and the other inputs (the mix sources). One ``--input`` gives ``args`` as it was.
+
+    Raises
+    ------
+    ValueError
+        naming the option: ``audio`` twice, ``markers`` with another input, a count of ``--listen`` that is
+        not one per tracker (or none), two trackers on one address, a voice without ``--audio``/``--audio-file``.
+    """
+    from facepuppet.runtime.live.mix import source_names
+
+    inputs = list(args.input) if isinstance(args.input, (list, tuple)) else [args.input]
+    listens = list(args.listen) if isinstance(args.listen, (list, tuple)) else (
+        [] if args.listen is None else [args.listen])
+    out = argparse.Namespace(**vars(args))
+    out.inputs, out.input_names, out.mix_inputs = tuple(inputs), source_names(inputs), ()
+    trackers = [k for k in inputs if k != "audio"]
+    if len(listens) > max(1, len(trackers)) or (listens and len(trackers) > 1 and len(listens) != len(trackers)):
+        raise ValueError(f"--listen: {len(listens)} given for {len(trackers)} tracker input(s) "
+                         f"({', '.join(trackers) or 'none'}); give one per tracker input, in the order of their "
+                         "--input, or none (each on its kind's default port)")
+    out.listen = listens[0] if listens else None
+    if len(inputs) == 1:
+        out.input = inputs[0]
+        return out, []
+    if inputs.count("audio") > 1:
+        raise ValueError("--input audio: given twice; the voice is one input")
+    if "markers" in inputs:
+        raise ValueError("--input markers: not with other inputs (the marker solve takes one marker stream)")
+    if not trackers:
+        raise ValueError("--input: several inputs need at least one tracker")
+    if "audio" in inputs and args.audio is None and args.audio_file is None:
+        raise ValueError("--input audio: the voice as an input needs --audio [DEVICE] or --audio-file WAV")
+    addresses = [parse_host_port(listens[i], "--listen") if listens else ("127.0.0.1", input_default_port(k))
+                 for i, k in enumerate(trackers)]
+    tracker_names = [n for n, k in zip(out.input_names, inputs) if k != "audio"]
+    for i in range(len(addresses)):
+        for j in range(i):
+            if addresses[i] == addresses[j]:
+                raise ValueError(f"--listen: {tracker_names[j]} and {tracker_names[i]} would both listen on "
+                                 f"{addresses[i][0]}:{addresses[i][1]}; give each tracker input its own --listen")
+    out.input = trackers[0]
+    mix = [MixInput(n, k, *addresses[i]) for i, (n, k) in enumerate(zip(tracker_names, trackers)) if i > 0]
+    if "audio" in inputs:
+        mix.append(MixInput("audio", "audio"))
+    out.mix_inputs = tuple(mix)
+    return out, mix
+
+
+def _open_mix(args, mix_inputs: list[MixInput], chain, opts: _Options, recorder, parts: list, log) -> None:
+    """Start the other inputs' receivers and put the ``mix`` stage in the chain."""
+    from dataclasses import replace
+
+    from facepuppet.runtime.inputs.udp import UdpSource
+    from facepuppet.runtime.inputs.udp_process import UdpProcessSource
+    from facepuppet.runtime.live.mix import MixStage, VoiceMixSource, check_mix_sources, follow_config
+
+    sources = {}
+    for m in mix_inputs:
+        if m.kind == "audio":
+            if chain.audio is None:
+                raise ValueError("--input audio: no audio level (--audio found no device); the voice input needs one")
+            sources[m.name] = VoiceMixSource(chain.audio.level, chain.config.loss)
+            continue
+        adapter = make_input_adapter(m.kind, chain.extra_names, log=log, face_id=getattr(args, "face_id", None))
+        on_packet = recorder.tagged(m.name) if recorder is not None else None
+        cls = UdpProcessSource if getattr(args, "receiver", "process") == "process" else UdpSource
+        src = cls(adapter, host=m.host, port=m.port, allow=opts.allow, on_packet=on_packet, watch=CALIBRATE_ADDRESS)
+        src.start()
+        parts.append(src)
+        sources[m.name] = src
+        log(f"run: listening for {m.kind} ({m.name}) on {src.address[0]}:{src.address[1]}")
+    names = (args.input, *(m.name for m in mix_inputs))
+    settings = chain.config.mix
+    if settings.order is None:
+        settings = replace(settings, order=tuple(args.input_names))
+    check_mix_sources(settings, names, chain.config.path or "(defaults)")
+    stage = MixStage(names, sources, settings, chain.config.timeout_s)
+    chain.add_mix(stage, label="+".join(args.input_names))
+    if chain.filter is not None:  # a config applied live (the panel) changes the mix's orders too
+        chain.filter.on_config.append(follow_config(stage, tuple(args.input_names), log))
+    log(f"mix: {len(names)} sources, order {' > '.join(settings.order)}"
+        + "".join(f"; {r}: {' > '.join(o)}" for r, o in settings.regions.items())
+        + (f"; {len(settings.channels)} channels with their own order" if settings.channels else ""))
 
 
 def _open_source(args, adapter, opts: _Options, recorder):
@@ -296,6 +409,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
     receiver = getattr(args, "receiver", "process")
     if receiver not in RECEIVERS:
         raise ValueError(f"--receiver: expected one of {RECEIVERS}, got {receiver!r}")
+    args, mix_inputs = split_inputs(args)
     adapter_kind = None if args.input == "audio" else args.input
     opts = _check_options(args, input_default_port(adapter_kind))
     character = Character.load(args.character)
@@ -320,9 +434,6 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                             calibrate_requests=lambda: getattr(late.source, "watched", 0),
                             voice_only=opts.voice_only, label="voice" if opts.voice_only else args.input, log=log,
                             on_config=[_config_recorder(late)])
-        log(chain.describe())
-        if on_chain is not None:
-            on_chain(chain)
         adapter = None if opts.voice_only else make_input_adapter(
             args.input, chain.extra_names, log=log, marker_units=getattr(args, "marker_units", None),
             to_units=chain.marker_units, face_id=getattr(args, "face_id", None))
@@ -338,6 +449,11 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         parts.append(source)
         log(f"run: listening for {args.input} on {source.address[0]}:{source.address[1]}"
             + (f" (only from {', '.join(sorted(opts.allow))})" if opts.allow else ""))
+        if mix_inputs:
+            _open_mix(args, mix_inputs, chain, opts, recorder, parts, log)
+        log(chain.describe())
+        if on_chain is not None:
+            on_chain(chain)
         requester = _start_phone(adapter, opts, source.address[1], log)
         if requester is not None:
             parts.append(requester)
@@ -373,7 +489,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                          catch_up=True, idle_fps=opts.idle_fps, drive=chain.drive,
                          overlays=() if panel is None else (panel.overlay,))
         counters["loop"] = loop.counters
-        stats.counters = _LiveCounters(source, counters)
+        stats.counters = _LiveCounters(source, counters, dict(chain.mix.tracker_sources()) if chain.mix else {})
         if on_ready is not None:
             on_ready(source.address)
         result = _run_loop(loop, source, args.duration, stop_event)
@@ -481,9 +597,22 @@ def _outputs(args, opts: _Options, chain, source, recorder, parts: list, hooks, 
         parts.append(llf)
         hooks.append(llf.on_tick)
         counters["llf_out"] = llf.counters
+    if chain.mix is not None:
+        counters["mix"] = chain.mix.counters
     if recorder is not None:
         counters["record"] = recorder.counters
-        hooks.append(RecordingHook(recorder, source, chain.audio))
+        hooks.append(RecordingHook(recorder, source, chain.audio,
+                                   mix_sources=[s for _, s in chain.mix.tracker_sources()] if chain.mix else ()))
+    if chain.filter is not None:
+        if recorder is not None:
+            chain.filter.listeners.append(recorder.put_event)
+        if opts.vmc_out is not None or opts.events_out is not None:
+            events = TrackingEventSender([opts.events_out] if opts.events_out else [],
+                                         [opts.vmc_out] if opts.vmc_out else [])
+            log(events.describe())
+            parts.append(events)
+            chain.filter.listeners.append(events)
+            counters["events_out"] = events.counters
     return counters, stats, hooks
 
 
@@ -514,12 +643,15 @@ def input_default_port(kind: str | None) -> int:
 class _LiveCounters(dict):
     """The stats' counter groups, with ``udp`` read afresh each time (UdpSource merges on access)."""
 
-    def __init__(self, source, groups: dict):
+    def __init__(self, source, groups: dict, others: dict | None = None):
         super().__init__(groups)
         self._source = source
+        self._others = others or {}  # the mix sources of a run with several inputs: "udp:NAME"
 
     def items(self):
         self["udp"] = self._source.counters
+        for name, other in self._others.items():
+            self[f"udp:{name}"] = other.counters
         return super().items()
 
 

@@ -16,6 +16,7 @@ Every key is optional; what is left out keeps its default. Example::
     timeout_s = 0.5          # no frame for this long: ease to neutral
     ease_out_s = 0.6         # ...over this long
     ease_in_s = 0.25         # frames are back: blend from where we are to live over this long
+    mouth = "voice"          # per region: hold / neutral / voice (mouth) / idle (runtime.live.tracking_loss)
 
     [calibration]
     capture_s = 0.5          # --calibrate / OSC /facepuppet/calibrate / key C: neutral = mean of this window
@@ -41,6 +42,9 @@ Every key is optional; what is left out keeps its default. Example::
     [profile]                # written by profiles (runtime.live.profiles): what the profile was made for
     character = "ict.npz"
     input = "livelinkface"
+
+    [mix]                    # several inputs at once (run --input A --input B): runtime.live.mix
+    order = ["livelinkface", "audio"]
 
     [mapping]                # a character with VRM expressions (runtime.expressions)
     emotions = true          # the default ARKit -> VRM mapping also drives Joy, Angry, Sorrow, Fun (default false)
@@ -71,6 +75,8 @@ from facepuppet.runtime.channels import ARKIT_NAMES, canonical, split_side
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.expressions import MappingSettings, MappingTarget
 from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.live.mix import MixSettings, parse_mix
+from facepuppet.runtime.live.tracking_loss import LOSS_KEYS, LossSettings, parse_loss
 
 if TYPE_CHECKING:
     import os
@@ -162,6 +168,9 @@ class LiveConfig:
     mirror : bool, left and right channels swapped, head yaw and roll (and x) negated
     neutral : Neutral or None, the calibrated neutral in force (None: none)
     mapping : MappingSettings, the ``[mapping]`` (channels onto a character's expressions and shapes)
+    loss : LossSettings, the per-region tracking-loss modes of ``[tracking_loss]``
+        (:mod:`~facepuppet.runtime.live.tracking_loss`)
+    mix : MixSettings, the ``[mix]`` source orders of a run with several inputs (:mod:`~facepuppet.runtime.live.mix`)
     path : str, the file it came from ("" for defaults)
     """
 
@@ -176,6 +185,8 @@ class LiveConfig:
     mirror: bool = False
     neutral: Neutral | None = None
     mapping: MappingSettings = MappingSettings()
+    loss: LossSettings = LossSettings()
+    mix: MixSettings = MixSettings()
     path: str = ""
 
     def channel(self, name: str) -> ChannelSettings:
@@ -329,7 +340,7 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
     """
     known = {canonical(n): n for n in (*ARKIT_NAMES, *(known_channels or ()))}
     _table(where, "<top>", data, ("filter", "tracking_loss", "calibration", "channels", "default_channel",
-                                  "mapping", "face", "neutral", "profile"))
+                                  "mapping", "face", "neutral", "profile", "mix"))
     cfg = LiveConfig(path=where)
     filters = dict(DEFAULT_FILTERS)
     for region, values in _table(where, "filter", data.get("filter", {}), REGIONS).items():
@@ -341,7 +352,7 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
             beta=_number(where, f"{key}.beta", values.get("beta", base.beta), non_negative=True),
             d_cutoff=_number(where, f"{key}.d_cutoff", values.get("d_cutoff", base.d_cutoff), positive=True),
         )
-    loss = _table(where, "tracking_loss", data.get("tracking_loss", {}), ("timeout_s", "ease_out_s", "ease_in_s"))
+    loss = _table(where, "tracking_loss", data.get("tracking_loss", {}), LOSS_KEYS)
     calib = _table(where, "calibration", data.get("calibration", {}), ("capture_s",))
     default_channel = cfg.default_channel
     if "default_channel" in data:
@@ -360,6 +371,9 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
         link_blinks=_flag(where, "face.link_blinks", face.get("link_blinks", cfg.link_blinks)),
         mirror=_flag(where, "face.mirror", face.get("mirror", cfg.mirror)),
         neutral=_neutral(where, data["neutral"]) if "neutral" in data else None,
+        loss=parse_loss(where, loss, LiveConfigError),
+        mix=parse_mix(where, data["mix"], LiveConfigError,
+                      lambda name: _check_channel(where, name, known, "mix.channels")) if "mix" in data else cfg.mix,
         filters=filters,
         channels=channels,
         default_channel=default_channel,

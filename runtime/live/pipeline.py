@@ -14,11 +14,12 @@ For each accepted frame (finite: the frame loop rejects non-finite frames before
    count each tick (``calibrate_requests``); nothing calls into it from the receiver.
 3. **Response** per channel (:mod:`~facepuppet.runtime.live.response`): mirror, gain, input range ->
    output range through a curve (linear, ease, threshold), clamp, blink linking; the head mirrored.
-4. **Tracking loss**: with no frame for ``timeout_s`` the output eases to
-   neutral over ``ease_out_s`` (smoothstep) instead of freezing; when frames
-   return, the output blends from wherever it was to the live value over
-   ``ease_in_s``, so no tick jumps by more than the live motion plus
-   ``|live - held| * max slope of the ramp * tick``.
+4. **Tracking loss**: with no frame for ``timeout_s`` the input is *lost* (an event, counted, handed to the
+   ``listeners``: the recorder, the OSC ``/facepuppet/tracking`` sender); each region then eases over
+   ``ease_out_s`` (smoothstep) to its loss target (``[tracking_loss]`` per region: hold, neutral, voice,
+   idle; :mod:`~facepuppet.runtime.live.tracking_loss`); when frames return (event *found*) the output
+   blends from wherever it was to the live value over ``ease_in_s``, so no tick jumps by more than the
+   live motion plus ``|live - out| * max slope of the ramp * tick``.
 
 **Live changes**: :meth:`LivePipeline.apply_config` (from any thread) hands over a new config; it takes
 effect at the start of the next tick. The filters keep their state (new cutoffs apply from that sample on, so
@@ -33,6 +34,7 @@ time gives the same output as the live run it came from.
 
 from __future__ import annotations
 
+import collections
 import logging
 import math
 import threading
@@ -47,10 +49,13 @@ from facepuppet.runtime.geometry import quat_mul, smoothstep
 from facepuppet.runtime.live.config import LiveConfig, Neutral
 from facepuppet.runtime.live.one_euro import OneEuroFilter
 from facepuppet.runtime.live.response import Response
+from facepuppet.runtime.live.tracking_loss import IdleMotion, LossTargets, voice_jaw
 
 logger = logging.getLogger(__name__)
 
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+EVENTS_KEPT = 64  # the last tracking events kept for the panel (a ring: a show runs for hours)
+TRACKING_STATES = ("waiting", "live", "lost", "easing")
 
 
 def nlerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
@@ -87,6 +92,7 @@ class _ChannelState:
             f.d_cutoff[:] = [s.d_cutoff for s in values]
         self.response = Response(self.channels, config)
         self.neutral_out = self.response(np.zeros(len(self.channels)))
+        self.loss = LossTargets(self.channels, [filter_region(c) for c in self.channels], config.loss)
 
     def reset_filters(self) -> None:
         self.weights.reset()
@@ -118,8 +124,15 @@ class LivePipeline:
     Attributes
     ----------
     counters : dict of str to int: ``tracking_lost`` (times the input went quiet past the timeout),
-        ``calibrations``
+        ``tracking_found`` (times frames came back after a loss), ``calibrations``
     state : str, ``waiting`` (no frame yet), ``live``, ``lost``, ``returning``
+    tracking_state : str, for the panel: ``waiting``, ``live``, ``lost`` or ``easing`` (frames are back and
+        the output is still blending in)
+    events : deque of (tick time s, found bool), the last EVENTS_KEPT tracking events
+    listeners : list of callables ``(t, found)`` called on each event (tick thread; must not block)
+    generator : callable taking the tick time and returning a Frame (or None), or None: the voice/idle face
+        of the gesture layer (:meth:`~facepuppet.runtime.gestures.layer.GestureLayer.compose` over nothing),
+        used by the ``voice`` and ``idle`` loss modes instead of the built-in line and IdleMotion
     neutral_weights : ndarray of shape (n_channels,), float64, or None before calibration
     """
 
@@ -139,8 +152,12 @@ class LivePipeline:
         self.log = log
         self.calibrate_requests = calibrate_requests
         self._requests_seen = 0 if calibrate_requests is None else int(calibrate_requests())
-        self.counters = {"tracking_lost": 0, "calibrations": 0}
+        self.counters = {"tracking_lost": 0, "tracking_found": 0, "calibrations": 0}
         self.state = "waiting"
+        self.events: collections.deque = collections.deque(maxlen=EVENTS_KEPT)
+        self.listeners: list[Callable[[float, bool], None]] = []
+        self.generator: Callable[[float], Frame | None] | None = None
+        self.idle = IdleMotion(self.config.loss.idle_blink_s, self.config.loss.idle_seed)
         self._channels: tuple[str, ...] | None = None
         self._cs: _ChannelState | None = None
         self._last_frame: Frame | None = None  # last accepted input frame
@@ -150,6 +167,7 @@ class LivePipeline:
         self._held: tuple | None = None  # start of the current ease (out or in)
         self._ease_start = 0.0
         self._lost_done = False
+        self._loss_from = 0.0  # tick time the ease to the loss targets runs from
         self.neutral_weights: np.ndarray | None = None
         self._neutral_rot = _IDENTITY.copy()
         self._neutral_trans: np.ndarray | None = None
@@ -174,12 +192,18 @@ class LivePipeline:
         return replace(self.config, neutral=self._neutral_pose)
 
     def _switch(self, config: LiveConfig, t: float) -> None:
+        if (config.loss.idle_blink_s, config.loss.idle_seed) != (self.config.loss.idle_blink_s,
+                                                                  self.config.loss.idle_seed):
+            self.idle = IdleMotion(config.loss.idle_blink_s, config.loss.idle_seed)
         self.config = config
         if config.neutral != self._neutral_pose:
             self._neutral_pose = config.neutral
             self._take_neutral(config.neutral)
         if self._cs is not None:
-            self._cs.configure(config)
+            self._cs.configure(config)  # the response and the tracking-loss targets per channel, rebuilt
+        if self.state == "lost" and self._out is not None:
+            # lost already: ease from what is shown to the new config's loss targets (a changed mode moves now)
+            self._held, self._loss_from, self._lost_done = self._out, t, False
         for hook in self.on_config:
             hook(t, config)
 
@@ -207,6 +231,17 @@ class LivePipeline:
     def calibrating(self) -> bool:
         return self._calib_pending or self._capture is not None
 
+    @property
+    def tracking_state(self) -> str:
+        """``waiting``, ``live``, ``lost`` or ``easing`` (see the class docstring)."""
+        return "easing" if self.state == "returning" else self.state
+
+    def _event(self, t: float, found: bool) -> None:
+        self.counters["tracking_found" if found else "tracking_lost"] += 1
+        self.events.append((t, found))
+        for listener in self.listeners:
+            listener(t, found)
+
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
         while self._schedule and self._schedule[0][0] <= t:
             self._switch(self._schedule.pop(0)[1], t)
@@ -232,6 +267,7 @@ class LivePipeline:
         if self.state in ("lost", "returning"):
             if self.state == "lost":
                 self.state, self._held, self._ease_start = "returning", self._out, t
+                self._event(t, True)
             s = smoothstep(0.0, 1.0, (t - self._ease_start) / self.config.ease_in_s)
             out = self._blend(self._held, live, s)
             if s >= 1.0:
@@ -324,13 +360,43 @@ class LivePipeline:
             return None
         if self.state != "lost":
             self.state, self._held, self._lost_done = "lost", self._out, False
-            self.counters["tracking_lost"] += 1
+            self._loss_from = self._last_tick + self.config.timeout_s
+            self._event(t, False)
             self._cs.reset_filters()  # frames that come back start the filters afresh
         if self._lost_done:
             return None
-        e = smoothstep(0.0, 1.0, (idle - self.config.timeout_s) / self.config.ease_out_s)
-        self._lost_done = e >= 1.0
-        return self._emit(self._blend(self._held, self._neutral(), e), t)
+        e = smoothstep(0.0, 1.0, (t - self._loss_from) / self.config.ease_out_s)
+        self._lost_done = e >= 1.0 and not self._cs.loss.moving
+        return self._emit(self._blend(self._held, self._loss_target(t), e), t)
+
+    def _loss_target(self, t: float) -> tuple:
+        """Where each part goes while tracking is lost, per region mode (hold, neutral, voice, idle)."""
+        weights, rotation, translation = self._neutral()
+        loss, held = self._cs.loss, self._held
+        gen = self.generator(t) if self.generator is not None and loss.moving else None
+        if weights is not None:
+            weights = weights.copy()
+            if held[0] is not None:
+                weights[loss.hold] = np.nan_to_num(held[0][loss.hold])
+            level = self.audio_level(t) if self.audio_level is not None else math.nan
+            jaw = voice_jaw(level, self.config.loss)
+            if math.isfinite(jaw):
+                weights[loss.jaw] = jaw
+            if loss.blink.any():
+                weights[loss.blink] = self.idle.blink(t)
+            if gen is not None and gen.weights is not None and gen.channels is not None:
+                index = {canonical(c): i for i, c in enumerate(gen.channels)}
+                for j in np.flatnonzero(loss.voice | loss.idle):
+                    i = index.get(loss.keys[j])
+                    if i is not None and math.isfinite(float(gen.weights[i])):
+                        weights[j] = float(gen.weights[i])
+            weights = np.clip(weights, self._cs.response.low, self._cs.response.high)
+        if loss.head == "hold":
+            rotation, translation = held[1], held[2]
+        elif loss.head == "idle":
+            sway = gen.head_rotation if gen is not None and gen.head_rotation is not None else self.idle.sway(t)
+            rotation = np.asarray(sway, np.float64)
+        return weights, rotation, translation
 
     def _neutral(self) -> tuple:
         weights = None if self._channels is None or self._last_frame.weights is None else self._cs.neutral_out

@@ -37,6 +37,7 @@ from facepuppet.runtime.live.config import (
     load_live_config,
     parse_live_config,
 )
+from facepuppet.runtime.live.mix import MixSettings
 
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
@@ -130,7 +131,7 @@ def config_to_dict(config: LiveConfig) -> dict:
         "filter": {r: {"min_cutoff": f.min_cutoff, "beta": f.beta, "d_cutoff": f.d_cutoff}
                    for r, f in config.filters.items() if r in REGIONS},
         "tracking_loss": {"timeout_s": config.timeout_s, "ease_out_s": config.ease_out_s,
-                          "ease_in_s": config.ease_in_s},
+                          "ease_in_s": config.ease_in_s, **config.loss.to_toml()},
         "calibration": {"capture_s": config.capture_s},
         "face": {"link_blinks": config.link_blinks, "mirror": config.mirror},
         "default_channel": _channel_dict(config.default_channel),
@@ -149,6 +150,13 @@ def config_to_dict(config: LiveConfig) -> dict:
             doc["mapping"]["channels"] = {
                 m.written.get(k, k): [{"to": t.to, "weight": t.weight} for t in targets] if targets else False
                 for k, targets in m.channels.items()}
+    mix = config.mix
+    if not mix.empty or mix.ease_s != MixSettings().ease_s:
+        doc["mix"] = {**({"order": list(mix.order)} if mix.order is not None else {}), "ease_s": mix.ease_s}
+        if mix.regions:
+            doc["mix"]["regions"] = {r: list(v) for r, v in mix.regions.items()}
+        if mix.channels:
+            doc["mix"]["channels"] = {k: list(v) for k, v in mix.channels.items()}
     return doc
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     import os
+    from collections.abc import Sequence
 
     from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.live.loop import TickInfo
@@ -85,12 +86,18 @@ class RecordingHook:
         the last tick to the recorder (the process receiver's ring), its ``frames_taken`` says which
         frame the tick drew (a faithful replay needs it)
     audio : AudioTap or None, the tick's audio level (recorded as the stages used it)
+    mix_sources : sequence of the other tracker inputs of a run with several (the mix stage's sources, in the
+        order of the header's ``info.mix_sources``): their datagrams are delivered too, and a SOURCES record
+        after each TICK says how many frames each had completed
 
     The datagrams behind the frame a tick took reach the recorder before that tick's TICK record.
     """
 
-    def __init__(self, recorder: PacketRecorder, source: FrameSource, audio: AudioTap | None = None) -> None:
+    def __init__(self, recorder: PacketRecorder, source: FrameSource, audio: AudioTap | None = None,
+                 mix_sources: Sequence = ()) -> None:
         self.recorder = recorder
+        self.mix_sources = tuple(mix_sources)
+        self._mix_deliver = [d for s in self.mix_sources if (d := getattr(s, "deliver_packets", None)) is not None]
         self.source = source
         self.audio = audio
         self._deliver = getattr(source, "deliver_packets", None)
@@ -99,7 +106,11 @@ class RecordingHook:
     def __call__(self, info: TickInfo) -> None:
         if self._deliver is not None:
             self._deliver()
+        for deliver in self._mix_deliver:
+            deliver()
         if self.audio is not None:
             self.recorder.put_audio(info.t, self.audio.value)
         if self._ticks:
             self.recorder.put_tick(info.k, info.t, self.source.frames_taken, info.stamps[0])
+            if self.mix_sources:
+                self.recorder.put_sources(info.k, tuple(s.frames_taken for s in self.mix_sources))

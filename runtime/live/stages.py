@@ -7,6 +7,8 @@ frame loop runs every tick, in this order (each present only when asked for):
 stage      what it does                                  module
 =========  ============================================  ===================================================
 audio      samples the voice level once per tick         :class:`AudioTap` (here)
+mix        several inputs: each channel and the head     :mod:`facepuppet.runtime.live.mix` (``--input A
+           from the first live source in its order       --input B``, ``[mix]`` in ``--config``)
 solve      marker frame -> actuations s -> the           :mod:`facepuppet.runtime.actuation.stage`
            character's weights and head rotation         (Shin & Lee eq 5, §6.2; ``--actor``/``--pair``)
 filter     One Euro filter, calibration, gain/clamp,     :mod:`facepuppet.runtime.live.pipeline`
@@ -141,6 +143,7 @@ class Chain:
     config : LiveConfig, the live config the chain started with (``--config``, ``--profile`` or a recording's)
     profile : Profile or None, ``--profile``'s file (Save / Save as / Revert)
     known_channels : tuple of str, the names a config's ``[channels.NAME]`` may use (to parse a config later)
+    mix : MixStage or None, the mix of a run with several inputs (:meth:`add_mix`)
     """
 
     input: str
@@ -155,6 +158,16 @@ class Chain:
     config: Any = None
     profile: Any = None
     known_channels: tuple[str, ...] = ()
+    mix: Any = None
+
+    def add_mix(self, mix: Any, label: str | None = None) -> None:
+        """Put the ``mix`` stage in the chain: after the audio tap, before every other stage; ``label`` names the
+        inputs in :meth:`describe` (e.g. ``livelinkface+audio``)."""
+        at = 1 if self.audio is not None else 0
+        self.stages = (*self.stages[:at], mix, *self.stages[at:])
+        self.mix = mix
+        if label is not None:
+            self.input = label
 
     def describe(self) -> str:
         """``stages: vmc→filter→gestures→map→draw`` (``draw(elastic)`` on the elastic path)."""
@@ -302,8 +315,11 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
     if opt("gestures") is not None:
         from facepuppet.runtime.gestures.layer import gesture_layer
 
-        stages.append(gesture_layer(opt("gestures"), voice_only=voice_only, log=log, level=level,
-                                    seed=opt("gesture_seed") or 0))
+        layer = gesture_layer(opt("gestures"), voice_only=voice_only, log=log, level=level,
+                              seed=opt("gesture_seed") or 0)
+        stages.append(layer)
+        if chain.filter is not None:  # tracking lost: the voice / idle regions take the layer's face
+            chain.filter.generator = lambda t: layer.compose(None, t)
     if kpls is not None:
         stages.append(kpls)
     chain.stages = tuple(stages)

@@ -229,8 +229,10 @@ class DeskPanel:
                  else "packets/s and frames drawn/s: measuring")
         imgui.text(rates)
         age = "no frame yet" if self._last_raw_at is None else f"{(now - self._last_raw_at) * 1e3:.0f} ms"
-        state = getattr(self.pipeline, "state", "-")
-        imgui.text(f"last frame: {age}   tracking: {'easing' if state == 'returning' else state}")
+        state = getattr(self.pipeline, "tracking_state", "-")  # waiting / live / lost / easing
+        events = getattr(self.pipeline, "events", ())
+        last = (f" ({'found' if events[-1][1] else 'lost'} at {events[-1][0]:.1f} s)" if events else "")
+        imgui.text(f"last frame: {age}   tracking: {state}{last}")
         lat = s.get("latency")
         imgui.text("receive->draw: no frames in the last 0.5 s" if lat is None
                    else f"receive->draw p50 {lat[0]:.2f} ms, p99 {lat[1]:.2f} ms ({lat[2]} frames)")

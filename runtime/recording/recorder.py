@@ -15,13 +15,16 @@ from __future__ import annotations
 
 import collections
 import threading
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.recording.records import (
     RecordKind,
     encode_audio,
     encode_config,
+    encode_event,
     encode_packet_record,
+    encode_sources,
     encode_tick,
 )
 from facepuppet.runtime.recording.session import SessionWriter
@@ -44,7 +47,7 @@ class PacketRecorder:
     Attributes
     ----------
     counters : dict: ``packets_recorded``, ``audio_recorded``, ``ticks_recorded``, ``configs_recorded``,
-        ``record_dropped`` (queue full)
+        ``events_recorded``, ``record_dropped`` (queue full)
     """
 
     def __init__(self, path: str | os.PathLike, kind: str, info: dict | None = None, capacity: int = 8192,
@@ -55,7 +58,7 @@ class PacketRecorder:
                                     fsync_every_s=fsync_every_s, overwrite=overwrite)
         self.path = self.writer.path
         self.counters = {"packets_recorded": 0, "audio_recorded": 0, "ticks_recorded": 0, "configs_recorded": 0,
-                         "record_dropped": 0}
+                         "events_recorded": 0, "record_dropped": 0}
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
         self._stopping = False
@@ -93,6 +96,33 @@ class PacketRecorder:
         self._queue.append((RecordKind.CONFIG, t, text))
         self._wake.set()
 
+    def tagged(self, label: str) -> Callable[..., None]:
+        """An ``on_packet`` callable for another input of the run: its datagrams are recorded under ``label``
+        (a mix source name such as ``openseeface`` or ``vmc#2``) instead of this recorder's kind."""
+        def put(data: bytes, t_receive: float, sender: tuple | None = None) -> None:
+            if len(self._queue) >= self.capacity:
+                self.counters["record_dropped"] += 1
+                return
+            self._queue.append((RecordKind.PACKET, t_receive, (label, data)))
+            self._wake.set()
+        return put
+
+    def put_sources(self, k: int, frames: tuple[int, ...]) -> None:
+        """Queue one SOURCES record: frames each mix source had completed at tick ``k``. Never blocks."""
+        if len(self._queue) >= self.capacity:
+            self.counters["record_dropped"] += 1
+            return
+        self._queue.append((RecordKind.SOURCES, k, tuple(frames)))
+        self._wake.set()
+
+    def put_event(self, t: float, found: bool) -> None:
+        """Queue one EVENT record, tracking lost / found (frame-loop thread: a pipeline listener). Never blocks."""
+        if len(self._queue) >= self.capacity:
+            self.counters["record_dropped"] += 1
+            return
+        self._queue.append((RecordKind.EVENT, t, bool(found)))
+        self._wake.set()
+
     def _drain(self) -> None:
         q, write = self._queue, self.writer.write_record
         while True:
@@ -101,7 +131,8 @@ class PacketRecorder:
             while q:
                 kind, t, value = q.popleft()
                 if kind == RecordKind.PACKET:
-                    write(kind, encode_packet_record(t, self.kind, value))
+                    label, data = value if isinstance(value, tuple) else (self.kind, value)
+                    write(kind, encode_packet_record(t, label, data))
                     self.counters["packets_recorded"] += 1
                 elif kind == RecordKind.CONFIG:
                     write(kind, encode_config(t, value))
@@ -109,6 +140,11 @@ class PacketRecorder:
                 elif kind == RecordKind.TICK:
                     write(kind, encode_tick(value[0], t, value[1], value[2]))
                     self.counters["ticks_recorded"] += 1
+                elif kind == RecordKind.SOURCES:
+                    write(kind, encode_sources(t, value))
+                elif kind == RecordKind.EVENT:
+                    write(kind, encode_event(t, value))
+                    self.counters["events_recorded"] += 1
                 else:
                     write(kind, encode_audio(t, value))
                     self.counters["audio_recorded"] += 1

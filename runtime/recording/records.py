@@ -30,9 +30,15 @@ CONFIG    6     live recording: ``b"C1"``, tick time f64 (s), then the live
                 config that took effect at that tick, as UTF-8 TOML (the
                 schema of ``--config``, neutral included); the header's
                 ``info.config`` is the config the run started with
+EVENT     7     live recording: ``b"E1"``, tick time f64 (s), found u8 (1
+                tracking found, 0 lost): the filter stage's tracking events
+SOURCES   8     live recording with several inputs: ``b"S1"``, tick index
+                i64, count u16, then count x i64: frames each mix source
+                (the header's ``info.mix_sources``, in order) had completed
+                at that tick; one after each TICK record
 ========  ====  ==============================================================
 
-The PACKET/AUDIO/TICK/CONFIG decoders return None for a payload they cannot decode
+The PACKET/AUDIO/TICK/CONFIG/EVENT/SOURCES decoders return None for a payload they cannot decode
 (the reader counts those as skipped); the FRAME and LAYOUT decoders raise
 ValueError (the reader treats that as corruption).
 """
@@ -54,6 +60,8 @@ _PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
 _AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
 _TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames completed, snapshot time
 _CONFIG_HEAD = struct.Struct("<2sd")  # b"C1", tick time
+_EVENT = struct.Struct("<2sdB")  # b"E1", tick time, found
+_SOURCES_HEAD = struct.Struct("<2sqH")  # b"S1", tick index, count (then count x i64)
 
 
 class RecordKind(enum.IntEnum):
@@ -66,9 +74,12 @@ class RecordKind(enum.IntEnum):
     AUDIO = 4  # live recording: audio levels
     TICK = 5  # live recording: which frame each tick took, and when
     CONFIG = 6  # live recording: a config change and the tick it took effect at
+    EVENT = 7  # live recording: tracking lost / found
+    SOURCES = 8  # live recording, several inputs: frames each mix source had per tick
 
 
-RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG})
+RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG,
+                            RecordKind.EVENT, RecordKind.SOURCES})
 
 
 class FrameFlags(enum.IntFlag):
@@ -224,6 +235,36 @@ def decode_tick(payload: bytes) -> Tick | None:
         return None
     _, k, t, frames, t_clock = _TICK.unpack(payload)
     return Tick(k, t, frames, t_clock)
+
+
+def encode_event(t: float, found: bool) -> bytes:
+    """EVENT payload (see the module docstring)."""
+    return _EVENT.pack(b"E1", float(t), 1 if found else 0)
+
+
+def decode_event(payload: bytes) -> tuple[float, bool] | None:
+    """(tick time, found) from an EVENT payload; None when it is not one this reader knows."""
+    if len(payload) != _EVENT.size or payload[:2] != b"E1":
+        return None
+    _, t, found = _EVENT.unpack(payload)
+    if found not in (0, 1):
+        return None
+    return t, bool(found)
+
+
+def encode_sources(k: int, frames: tuple[int, ...] | list[int]) -> bytes:
+    """SOURCES payload (see the module docstring)."""
+    return _SOURCES_HEAD.pack(b"S1", int(k), len(frames)) + struct.pack(f"<{len(frames)}q", *map(int, frames))
+
+
+def decode_sources(payload: bytes) -> tuple[int, tuple[int, ...]] | None:
+    """(tick index, frames per mix source) from a SOURCES payload; None when it is not one this reader knows."""
+    if len(payload) < _SOURCES_HEAD.size or payload[:2] != b"S1":
+        return None
+    _, k, n = _SOURCES_HEAD.unpack_from(payload)
+    if len(payload) != _SOURCES_HEAD.size + 8 * n:
+        return None
+    return k, struct.unpack_from(f"<{n}q", payload, _SOURCES_HEAD.size)
 
 
 def decode_frame(payload: bytes, layouts: dict[int, Layout]) -> Frame:

@@ -46,9 +46,11 @@ from facepuppet.runtime.recording.records import (
     Tick,
     decode_audio,
     decode_config,
+    decode_event,
     decode_frame,
     decode_layout,
     decode_packet_record,
+    decode_sources,
     decode_tick,
     encode_frame,
     layout_of,
@@ -158,6 +160,8 @@ class Session:
     audio_levels : list of (t, level_db) float pairs, the audio levels of a live recording
     ticks : list of Tick, the drawn ticks of a live recording (recordings made since TICK existed)
     configs : list of (tick time, TOML text), the live config changes of a live recording (CONFIG records)
+    events : list of (tick time, found) pairs, the tracking lost (False) / found (True) events of a live run
+    sources : list of (tick index, frames per mix source), one per tick of a run with several inputs
     skipped_bytes : int, bytes skipped over damaged records in the middle of the file
     damaged : list of (byte offset, bytes skipped), each damaged stretch that reading resynchronised past
     """
@@ -173,6 +177,8 @@ class Session:
     audio_levels: list[tuple[float, float]] = field(default_factory=list)
     ticks: list[Tick] = field(default_factory=list)
     configs: list[tuple[float, str]] = field(default_factory=list)
+    events: list[tuple[float, bool]] = field(default_factory=list)
+    sources: list[tuple[int, tuple[int, ...]]] = field(default_factory=list)
     skipped_bytes: int = 0
     damaged: list[tuple[int, int]] = field(default_factory=list)
 
@@ -326,6 +332,10 @@ def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, paylo
         session.ticks.append(tick)
     elif kind == RecordKind.CONFIG and (change := decode_config(payload)) is not None:
         session.configs.append(change)
+    elif kind == RecordKind.EVENT and (event := decode_event(payload)) is not None:
+        session.events.append(event)
+    elif kind == RecordKind.SOURCES and (sources := decode_sources(payload)) is not None:
+        session.sources.append(sources)
     elif kind in RESERVED_KINDS:
         name = RecordKind(kind).name.lower()
         session.skipped[name] = session.skipped.get(name, 0) + 1

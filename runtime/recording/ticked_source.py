@@ -48,6 +48,9 @@ class LiveRecording:
     header : dict
     audio_levels : list of (t, level_db), the audio level of each live tick (the tick's time)
     configs : list of (t, TOML text), the config changes of the live run and the tick times they took effect
+    events : list of (t, found), the tracking lost / found events of the live run (EVENT records)
+    mix : dict of source name -> LiveRecording, the other tracker inputs of a run with several
+        (``info.mix_sources``): each one's frames and, per tick, how many it had completed (SOURCES records)
     """
 
     frames: list
@@ -57,6 +60,8 @@ class LiveRecording:
     header: dict
     audio_levels: list = field(default_factory=list)
     configs: list = field(default_factory=list)
+    events: list = field(default_factory=list)
+    mix: dict = field(default_factory=dict)
 
 
 def read_live_recording(path: str | os.PathLike,
@@ -80,16 +85,30 @@ def read_live_recording(path: str | os.PathLike,
         session = read_session(path)
     if session.frames or not (session.packets or session.ticks):
         return None
+    from facepuppet.runtime.recording.records import Tick
     from facepuppet.runtime.recording.replay_source import decode_packets
 
-    calibrate = [i for i, packet in enumerate(session.packets) if CALIBRATE_ADDRESS in packet.data]
-    decoded = decode_packets(session.packets, make_adapter)
+    info = session.header.get("info", {}) if isinstance(session.header, dict) else {}
+    mix_sources = info.get("mix_sources") or []
+    packets = session.packets
+    mix = {}
+    if mix_sources:  # a run with several inputs: the loop's own input, then each mix source's packets
+        packets = [p for p in session.packets if p.kind == info.get("input")]
+        for j, m in enumerate(mix_sources):
+            name, kind = str(m["name"]), str(m["kind"])
+            own = decode_packets([p for p in session.packets if p.kind == name],
+                                 lambda _, kind=kind: make_adapter(kind))
+            ticks = [Tick(t.k, t.t, counts[j] if j < len(counts) else 0, t.t_clock)
+                     for t, (_, counts) in zip(session.ticks, session.sources)]
+            mix[name] = LiveRecording([f for _, f in own], [i for i, _ in own], [], ticks, {})
+    calibrate = [i for i, packet in enumerate(packets) if CALIBRATE_ADDRESS in packet.data]
+    decoded = decode_packets(packets, make_adapter)
     frames = [frame for _, frame in decoded]
     frame_packets = [i for i, _ in decoded]
     if not frames and not session.ticks:
         raise ValueError(f"{path}: the recorded packets decode to no frame")
     return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header),
-                         list(session.audio_levels), list(session.configs))
+                         list(session.audio_levels), list(session.configs), list(session.events), mix)
 
 
 class TickedSource:

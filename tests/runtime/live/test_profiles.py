@@ -141,3 +141,21 @@ def test_run_refuses_config_and_profile_together(tmp_path):
     code = main(["run", "-c", str(char), "--input", "vmc", "--listen", "127.0.0.1:0", "--headless",
                  "--duration", "0.1", "--config", str(tmp_path / "c.toml"), "--profile", str(tmp_path / "p.toml")])
     assert code == 2
+
+
+def test_a_profile_keeps_the_tracking_loss_modes_and_the_mix_orders(tmp_path):
+    from facepuppet.runtime.live.mix import MixSettings
+    from facepuppet.runtime.live.tracking_loss import LossSettings
+
+    loss = LossSettings({**LossSettings().modes, "mouth": "voice", "eyes": "idle", "head": "hold"},
+                        voice_floor_db=-45.0, voice_ceiling_db=-12.5, idle_blink_s=3.0, idle_seed=7)
+    mix = MixSettings(order=("livelinkface", "vmc#2", "audio"), regions={"head": ("vmc#2", "livelinkface")},
+                      channels={"jawOpen": ("audio", "livelinkface")}, ease_s=0.4)
+    cfg = replace(tuned(), loss=loss, mix=mix)
+    saved = Profile(tmp_path / "show.toml", character="ict.npz", input_kind="livelinkface").save(cfg)
+    back = Profile(saved, character="ict.npz", input_kind="livelinkface").load()
+    assert back.loss == loss and back.loss.mode("mouth") == "voice"
+    assert back.mix == mix and back.mix.order == ("livelinkface", "vmc#2", "audio")
+    assert same(back, cfg)
+    # a config without a mix writes no [mix] table (a one-input profile stays as it was)
+    assert "[mix]" not in config_to_toml(tuned()) and "[mix]" in config_to_toml(cfg)

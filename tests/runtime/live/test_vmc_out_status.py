@@ -53,8 +53,9 @@ def messages_of(bundle: bytes) -> list[tuple[str, list]]:
     return out
 
 
-def status_messages(receiver: socket.socket) -> list[dict]:
-    """Every status bundle waiting on ``receiver``: {address: args} of its messages."""
+def status_messages(receiver: socket.socket, tracking: list | None = None) -> list[dict]:
+    """Every status bundle waiting on ``receiver``: {address: args} of its messages; the arguments of
+    ``/facepuppet/tracking`` bundles (the run's tracking events) go to ``tracking``."""
     got = []
     while True:
         try:
@@ -64,6 +65,8 @@ def status_messages(receiver: socket.socket) -> list[dict]:
         msgs = messages_of(data)
         if msgs and msgs[0][0] == "/VMC/Ext/OK":
             got.append(dict(msgs))
+        elif msgs and msgs[0][0] == "/facepuppet/tracking" and tracking is not None:
+            tracking.append(msgs[0][1])
 
 
 @pytest.fixture()
@@ -136,19 +139,20 @@ def test_run_vmc_out_reports_tracking_lost_after_the_input_goes_quiet(tmp_path, 
     port = free_udp_port()
     done = threading.Event()
     got: list[dict] = []
+    events: list[list] = []
 
     def send_while_listening(rx: socket.socket):
         """Collect the status bundles; send frames for 0.6 s once 5 status bundles (ticks) have come."""
         sending_until = None
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             while not done.is_set():
-                got.extend(status_messages(rx))
+                got.extend(status_messages(rx, events))
                 if sending_until is None and len(got) >= 5:
                     sending_until = time.monotonic() + 0.6
                 if sending_until is not None and time.monotonic() < sending_until:
                     s.sendto(vmc_frame(0.5), ("127.0.0.1", port))
                 time.sleep(0.02)
-            got.extend(status_messages(rx))
+            got.extend(status_messages(rx, events))
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as rx:
         rx.bind(("127.0.0.1", 0))
@@ -167,5 +171,6 @@ def test_run_vmc_out_reports_tracking_lost_after_the_input_goes_quiet(tmp_path, 
     assert all(g["/VMC/Ext/OK"][:3] == [1, 3, 0] for g in got)
     runs = [tracking[0]] + [b for a, b in zip(tracking, tracking[1:]) if a != b]
     assert runs == [0, 1, 0], tracking
+    assert events == [[0]]  # the tracking-lost event, in a bundle of its own on the VMC stream
     times = [g["/VMC/Ext/T"][0] for g in got]
     assert times == sorted(times) and len(got) >= 30

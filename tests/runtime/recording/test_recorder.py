@@ -48,12 +48,37 @@ def test_packets_and_audio_levels_round_trip(tmp_path):
         for data, t in packets:
             rec.put(data, t, ("127.0.0.1", 5000))
         rec.put_audio(0.5, -20.0)
+        rec.put_event(0.75, False)  # tracking lost, then found (the filter stage's listeners)
+        rec.put_event(1.25, True)
     s = read_session(path)
     assert s.complete and s.header["info"]["input"] == "vmc" and s.header["info"]["test"] is True
     assert [(p.data, p.t, p.kind) for p in s.packets] == [(d, t, "vmc") for d, t in packets]
     assert s.audio_levels == [(0.5, -20.0)]
+    assert s.events == [(0.75, False), (1.25, True)]
     assert rec.counters == {"packets_recorded": 20, "audio_recorded": 1, "ticks_recorded": 0,
-                            "configs_recorded": 0, "record_dropped": 0}
+                            "configs_recorded": 0, "events_recorded": 2, "record_dropped": 0}
+
+
+def test_config_event_and_sources_records_have_kinds_of_their_own_and_each_round_trips(tmp_path):
+    from facepuppet.runtime.recording.records import RESERVED_KINDS, RecordKind
+
+    kinds = [RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG, RecordKind.EVENT,
+             RecordKind.SOURCES]
+    assert len(set(kinds)) == len(kinds) and set(kinds) == RESERVED_KINDS
+    assert (RecordKind.CONFIG, RecordKind.EVENT, RecordKind.SOURCES) == (6, 7, 8)
+    path = tmp_path / "all.fps"
+    with PacketRecorder(path, "vmc") as rec:  # one live run's worth of each: a tuned, lost, mixed show
+        rec.put_tick(0, 0.0, 1, 10.0)
+        rec.put_sources(0, (1, 0))
+        rec.put_config(0.5, '[face]\nmirror = true\n')
+        rec.put_event(0.75, False)
+        rec.put_event(1.25, True)
+        rec.put_config(1.5, '[face]\nmirror = false\n')
+    s = read_session(path)
+    assert s.configs == [(0.5, "[face]\nmirror = true\n"), (1.5, "[face]\nmirror = false\n")]
+    assert s.events == [(0.75, False), (1.25, True)]
+    assert s.sources == [(0, (1, 0))] and len(s.ticks) == 1 and not s.skipped
+    assert rec.counters["configs_recorded"] == 2 and rec.counters["events_recorded"] == 2
 
 
 def test_a_full_queue_drops_and_counts_instead_of_blocking(tmp_path):
