@@ -276,7 +276,9 @@ def _resync(data: bytes, offset: int) -> int | None:
         if data[at + 8] not in _KINDS or data[at + 8] == RecordKind.HEADER:
             continue
         length, crc, _ = _RECORD_HEAD.unpack_from(data, at)
-        if length > end - at - head:
+        # no record is empty (each payload starts with its tag or JSON), and eight zero bytes and a kind
+        # byte, common in OSC's zero padding, would otherwise verify as an empty record (crc32(b"") == 0)
+        if length == 0 or length > end - at - head:
             continue
         if zlib.crc32(data[at + head:at + head + length]) == crc:
             return at
