@@ -16,8 +16,16 @@ frame on screen, not the one before.
   raw input, after the stages (filter and calibration), after mapping (the rig weight of the shape of that
   name: what the character gets).
 * **Filters**: One Euro min cutoff and beta per region.
+* **Response** of the channel selected (click its name in the channel rows): gain, clamp, input range ->
+  output range, curve (linear / ease / threshold, with the threshold value); Reset drops the channel's entry.
+* **Face**: blink linking and mirror (``[face]``).
+* **Tracking loss**: the mode per region (hold / neutral / voice for the mouth / idle, ``[tracking_loss]``).
 * **Calibrate** (neutral capture over ``capture_s``) and **Clear** (no neutral).
+* **Profile** (a run with ``--profile``: ``chain.profile``): Save, Save as (a name or a path), Revert, and a
+  warning when the profile was made for another character or input.
 * **Record**: the file and its size on disk; **Chain**: the stage chain; **Character**: name, shapes, credits.
+  Record start/stop is not in the panel: ``--record`` wires its recorder into the receiver, the tick hook,
+  the config and event listeners when the run starts (see the report of issue 15).
 
 Every edit is a config change: a copy of the pipeline's ``LiveConfig`` (``dataclasses.replace``) handed
 to the pipeline's ``apply_config``, which applies it at the next tick. The status numbers that need a
@@ -37,7 +45,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap, canonical
+from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.live.config import CURVES
 from facepuppet.runtime.live.timing import DurationSketch
+from facepuppet.runtime.live.tracking_loss import LOSS_MODES, LOSS_REGIONS, VOICE_REGIONS
 from facepuppet.runtime.panel import load_imgui
 from facepuppet.runtime.panel.apply import apply_config, clear_calibration, config_in_force
 from facepuppet.runtime.panel.gl import ImguiGL
@@ -132,6 +143,11 @@ class DeskPanel:
         self._last_raw_at: float | None = None
         self._shape_index: dict[tuple, np.ndarray] = {}
         self.sent_only = True
+        self.selected: str | None = None  # the channel the response editor edits
+        self.profile_name = ""  # the Save as field
+        self.profile_message = ""  # what the last Save / Save as / Revert did (or why it failed)
+        self.profile_warning = ""  # the profile was made for another character or input
+        self._profile_checked: object = None  # the profile path the warning was computed for
         self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
 
     # -- the loop's overlay ----------------------------------------------------------------------
@@ -215,8 +231,12 @@ class DeskPanel:
         imgui.begin("facepuppet desk (Tab hides)")
         self._input_section(now)
         self._channel_section(info)
+        self._response_section()
         self._filter_section()
+        self._face_section()
+        self._loss_section()
         self._calibration_section()
+        self._profile_section()
         self._info_section()
         imgui.end()
 
@@ -267,6 +287,177 @@ class DeskPanel:
                 changed = True
         if changed:
             self.apply(replace(config, filters=filters))
+
+    def _slider(self, label: str, value: float, lo: float, hi: float, fmt: str) -> tuple[bool, float]:
+        imgui = self.imgui
+        imgui.set_next_item_width(170)
+        changed, v = imgui.slider_float(f"##{label}", float(value), lo, hi, fmt)
+        self._remember(f"response.{label}")
+        return changed, float(v)
+
+    def _response_section(self) -> None:
+        """The response of the selected channel: gain, clamp, input range -> output range, curve."""
+        imgui, pipeline = self.imgui, self.pipeline
+        if pipeline is None or not imgui.collapsing_header("Response (click a channel)",
+                                                           imgui.TreeNodeFlags_.default_open):
+            return
+        name = self.selected
+        if name is None:
+            imgui.text("no channel selected: click a channel's name above")
+            return
+        config = config_in_force(pipeline)
+        key = canonical(name)
+        cs = config.channel(name)
+        imgui.text(f"{name}" + ("" if key in config.channels else " (default response)"))
+        imgui.push_id("response")
+        new = cs
+        c, v = self._slider("gain", cs.gain, 0.0, 3.0, "gain %.2f")
+        if c:
+            new = replace(new, gain=v)
+        lo, hi = cs.clamp
+        c1, v1 = self._slider("clamp_low", lo, -1.0, 2.0, "clamp low %.2f")
+        imgui.same_line()
+        c2, v2 = self._slider("clamp_high", hi, -1.0, 2.0, "clamp high %.2f")
+        if c1 or c2:  # low <= high: the one dragged pushes the other
+            lo, hi = (v1, max(v1, hi)) if c1 else (min(lo, v2), v2)
+            new = replace(new, clamp=(lo, hi))
+        ilo, ihi = cs.input_range or (0.0, 1.0)
+        c1, v1 = self._slider("in_low", ilo, -1.0, 2.0, "in %.2f")
+        imgui.same_line()
+        c2, v2 = self._slider("in_high", ihi, -1.0, 2.0, "to %.2f")
+        if c1 or c2:  # low < high (the config's rule): the one dragged pushes the other
+            ilo, ihi = (v1, max(v1 + 1e-3, ihi)) if c1 else (min(ilo, v2 - 1e-3), v2)
+            new = replace(new, input_range=(ilo, ihi))
+        ofrom, oto = cs.output_range or (0.0, 1.0)
+        c1, v1 = self._slider("out_from", ofrom, -1.0, 2.0, "out %.2f")
+        imgui.same_line()
+        c2, v2 = self._slider("out_to", oto, -1.0, 2.0, "to %.2f")
+        if c1 or c2:  # from > to is allowed: an inverted channel
+            new = replace(new, output_range=(v1 if c1 else ofrom, v2 if c2 else oto))
+        for curve in CURVES:
+            if imgui.radio_button(curve, cs.curve == curve) and curve != cs.curve:
+                new = replace(new, curve=curve)
+            self._remember(f"response.curve.{curve}")
+            imgui.same_line()
+        imgui.new_line()
+        if cs.curve == "threshold":
+            c, v = self._slider("threshold", cs.threshold, 0.0, 1.0, "threshold %.2f")
+            if c:
+                new = replace(new, threshold=v)
+        reset = imgui.button("Reset")
+        self._remember("response.reset")
+        imgui.pop_id()
+        channels = dict(config.channels)
+        if reset and key in channels:
+            del channels[key]
+            self.apply(replace(config, channels=channels))
+        elif new != cs:
+            channels[key] = new
+            self.apply(replace(config, channels=channels))
+
+    def _face_section(self) -> None:
+        imgui, pipeline = self.imgui, self.pipeline
+        if pipeline is None or not imgui.collapsing_header("Face", imgui.TreeNodeFlags_.default_open):
+            return
+        config = config_in_force(pipeline)
+        c1, link = imgui.checkbox("link blinks (both eyes from the stronger)", config.link_blinks)
+        self._remember("face.link_blinks")
+        c2, mirror = imgui.checkbox("mirror (left/right, head yaw and roll)", config.mirror)
+        self._remember("face.mirror")
+        if c1 or c2:
+            self.apply(replace(config, link_blinks=bool(link), mirror=bool(mirror)))
+
+    def _loss_section(self) -> None:
+        imgui, pipeline = self.imgui, self.pipeline
+        if pipeline is None or not imgui.collapsing_header("Tracking loss", imgui.TreeNodeFlags_.default_open):
+            return
+        config = config_in_force(pipeline)
+        modes = dict(config.loss.modes)
+        changed = False
+        for region in LOSS_REGIONS:
+            imgui.push_id(f"loss.{region}")
+            imgui.text(f"{region:6s}")
+            for mode in LOSS_MODES:
+                if mode == "voice" and region not in VOICE_REGIONS:
+                    continue  # voice drives the mouth only (the config refuses it elsewhere)
+                imgui.same_line()
+                if imgui.radio_button(mode, config.loss.mode(region) == mode) and modes.get(region) != mode:
+                    modes[region] = mode
+                    changed = True
+                self._remember(f"loss.{region}.{mode}")
+            imgui.pop_id()
+        if changed:
+            self.apply(replace(config, loss=replace(config.loss, modes=modes)))
+
+    def _check_profile(self, profile: Any) -> None:
+        """The mismatch warning of the profile's file (read once per path and after each Save / Revert)."""
+        from facepuppet.runtime.live.profiles import read_made_for
+
+        self._profile_checked = profile.path
+        try:
+            made = read_made_for(profile.path) if profile.path.exists() else {}
+        except (OSError, ValueError) as exc:
+            self.profile_warning = f"cannot read {profile.path}: {exc}"
+            return
+        notes = [f"{what} {theirs!r} (this run: {mine!r})"
+                 for what, mine in (("character", profile.character), ("input", profile.input_kind))
+                 if mine and (theirs := made.get(what)) and theirs != mine]
+        self.profile_warning = ("made for " + ", ".join(notes) + "; its settings apply by channel name") \
+            if notes else ""
+
+    def _profile_section(self) -> None:
+        imgui, pipeline = self.imgui, self.pipeline
+        profile = getattr(self.chain, "profile", None)
+        if profile is None or pipeline is None or not imgui.collapsing_header("Profile",
+                                                                              imgui.TreeNodeFlags_.default_open):
+            return
+        if self._profile_checked != profile.path:
+            self._check_profile(profile)
+        imgui.text_wrapped(f"{profile.path}" + ("" if profile.exists else " (not saved yet)"))
+        if self.profile_warning:
+            imgui.text_colored(imgui.ImVec4(1.0, 0.75, 0.2, 1.0), f"warning: {self.profile_warning}")
+            self._remember("profile.warning")
+        action = None
+        if imgui.button("Save"):
+            action = "save"
+        self._remember("profile.save")
+        imgui.same_line()
+        if imgui.button("Revert"):
+            action = "revert"
+        self._remember("profile.revert")
+        imgui.set_next_item_width(200)
+        _, self.profile_name = imgui.input_text("##profile_name", self.profile_name)
+        self._remember("profile.name")
+        imgui.same_line()
+        if imgui.button("Save as"):
+            action = "save_as"
+        self._remember("profile.save_as")
+        if self.profile_message:
+            imgui.text_wrapped(self.profile_message)
+        if action is not None:
+            self.profile_action(action)
+
+    def profile_action(self, action: str) -> None:
+        """``save``, ``save_as`` (to :attr:`profile_name`) or ``revert`` the run's profile; the outcome (or the
+        error, which loses nothing: the config in force stays) in :attr:`profile_message`."""
+        profile, pipeline = self.chain.profile, self.pipeline
+        try:
+            if action == "save":
+                self.profile_message = f"saved {profile.save(config_in_force(pipeline))}"
+            elif action == "save_as":
+                name = self.profile_name.strip()
+                if not name:
+                    self.profile_message = "Save as: type a profile name or a path to a .toml file first"
+                    return
+                self.profile_message = f"saved {profile.save_as(name, config_in_force(pipeline))}"
+            elif action == "revert":
+                self.apply(profile.revert())
+                self.profile_message = f"reverted to {profile.path}"
+            else:
+                raise ValueError(f"profile action: expected save, save_as or revert, got {action!r}")
+        except (OSError, ValueError, FacepuppetError) as exc:
+            self.profile_message = f"{action}: failed: {exc}"
+        self._check_profile(profile)
 
     def _calibration_section(self) -> None:
         imgui, pipeline = self.imgui, self.pipeline
@@ -363,7 +554,10 @@ class DeskPanel:
                     if row == 0:
                         self._remember(f"meter.0.{j}")  # the first row shown
                     imgui.same_line()
-                imgui.text(channels[i])
+                name = channels[i]
+                if imgui.selectable(name, name == self.selected)[0]:
+                    self.selected = name
+                self._remember(f"channel.{name}")
         clipper.end()
         imgui.end_child()
 
