@@ -233,10 +233,10 @@ class DeskPanel:
         self._channel_section(info)
         self._response_section()
         self._filter_section()
-        self._face_section()
-        self._loss_section()
         self._calibration_section()
+        self._face_section()
         self._profile_section()
+        self._loss_section()
         self._info_section()
         imgui.end()
 
@@ -415,7 +415,9 @@ class DeskPanel:
             self._check_profile(profile)
         imgui.text_wrapped(f"{profile.path}" + ("" if profile.exists else " (not saved yet)"))
         if self.profile_warning:
-            imgui.text_colored(imgui.ImVec4(1.0, 0.75, 0.2, 1.0), f"warning: {self.profile_warning}")
+            imgui.push_style_color(imgui.Col_.text, imgui.ImVec4(1.0, 0.75, 0.2, 1.0))
+            imgui.text_wrapped(f"warning: {self.profile_warning}")
+            imgui.pop_style_color()
             self._remember("profile.warning")
         action = None
         if imgui.button("Save"):
@@ -426,7 +428,7 @@ class DeskPanel:
             action = "revert"
         self._remember("profile.revert")
         imgui.set_next_item_width(200)
-        _, self.profile_name = imgui.input_text("##profile_name", self.profile_name)
+        _, self.profile_name = imgui.input_text_with_hint("##profile_name", "name or path.toml", self.profile_name)
         self._remember("profile.name")
         imgui.same_line()
         if imgui.button("Save as"):

@@ -211,19 +211,26 @@ def test_profile_save_writes_the_file_and_revert_restores_it(egl_ctx, tmp_path):
         run.click("response.gain", along=0.5)  # gain about 1.5
         gain = run.pipeline.config.channel("jawOpen").gain
         assert 1.4 < gain < 1.6
+        run.click("calibrate", n=30)  # a neutral captured (0.5 s of frames) is saved with the rest
+        assert run.pipeline.counters["calibrations"] == 1
         run.click("profile.save")
         saved = load_live_config(path)
         assert saved.channel("jawOpen").gain == pytest.approx(gain)
+        assert dict(zip(saved.neutral.channels, saved.neutral.weights)) == pytest.approx(
+            dict(zip(CHANNELS, (0.4, 0.2, 0.7))))
         assert read_made_for(path)["character"] == "sphere"
         assert run.panel.profile_warning == ""  # made for this run now
 
         run.click("face.mirror")
         run.click("response.gain", along=0.1)
         assert run.pipeline.config.mirror and run.pipeline.config.channel("jawOpen").gain < 0.5
+        run.click("clear")
+        assert run.pipeline.neutral_weights is None
         run.click("profile.revert")
-        config = run.pipeline.config
+        config = run.pipeline.current_config()
+        assert config.neutral == saved.neutral  # the saved neutral is back
         assert not config.mirror and config.channel("jawOpen").gain == pytest.approx(gain)
-        assert run.ticks[-1][1][0] == pytest.approx(min(0.4 * gain, 1.0))
+        assert run.ticks[-1][1][0] == pytest.approx(0.0, abs=1e-6)  # jawOpen at its neutral
 
         other = tmp_path / "second.toml"
         run.click("profile.name")
