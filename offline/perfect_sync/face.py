@@ -15,7 +15,7 @@ to the skin by mirror ICP (reflect, match nearest points, refit the plane
 from the matched pairs), up comes from the humanoid neck → head bones when
 present, else +Y made orthogonal to the plane normal, and forward is their
 cross product. The nose tip is the skin vertex farthest forward near the
-symmetry plane.
+symmetry plane; it must stand out of the forward-facing skin around it.
 
 Refusals (:class:`FaceError`, naming the character and what is wrong): too
 few vertices, no protruding nose near the symmetry plane (a cube, a sphere),
@@ -190,10 +190,11 @@ def find_face(character: Character) -> Face:
     if not len(near):
         raise FaceError(f"{name}: no recognisable face: no forward-facing skin on the symmetry plane")
     tip = int(near[np.argmax(local[near, 2])])
-    around = skin[np.hypot(local[skin, 0] - d, local[skin, 1] - local[tip, 1]).clip(0) < 0.35 * width]
+    front = skin[normals[skin, 2] > 0.3]
+    around = front[np.hypot(local[front, 0] - d, local[front, 1] - local[tip, 1]) < 0.35 * width]
     around = around[np.hypot(local[around, 0] - d, local[around, 1] - local[tip, 1]) > 0.2 * width]
     if not len(around):
-        raise FaceError(f"{name}: no recognisable face: nothing of the skin around the nose tip")
+        raise FaceError(f"{name}: no recognisable face: no forward-facing skin around the nose tip")
     protrusion = float(local[tip, 2] - np.median(local[around, 2]))
     if protrusion < NOSE_PROTRUSION * width:
         raise FaceError(f"{name}: no recognisable face: no nose (the most forward point on the symmetry plane "

@@ -119,7 +119,9 @@ def propose(source_positions: np.ndarray, source_names: Sequence[str], vertices:
         taken.add(pick)
         chosen.append(pick)
     points = ControlPoints(names, np.array(chosen, np.int64))
-    points = fix_inner_lips(points, v, skin_triangles(face), cand)
+    fixed = fix_inner_lips(points, v, skin_triangles(face), cand)
+    if len(np.unique(fixed.vertices)) == len(names):  # a lip line too small for its points: keep the fit's
+        points = fixed
     return points, fitted
 
 

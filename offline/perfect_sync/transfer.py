@@ -1,0 +1,150 @@
+"""The source's expressions cloned onto a character's face mesh and added as ARKit-named shapes.
+
+The elastic cloning of Yano & Harada (2009) §5 (:func:`clone_model`) runs on
+the face mesh only (:class:`~.face.Face`), so the body and every other mesh
+cannot move; inside the face mesh the basis's fixed region (§4) holds the
+back of the head, the pieces without control points below the lips follow
+the jaw rigidly (:mod:`facepuppet.offline.elastic.rigid_parts`) and the
+others (eyes, upper teeth) stay. Each cloned expression is evaluated once at
+weight 1 and stored as a morph (dense → sparse deltas with normal deltas).
+
+The source's shapes are folded into ARKit's 52: a shape whose name is an
+ARKit name in any spelling (:func:`canonical`) directly; an unsided ARKit
+shape the source splits (ICT's ``browInnerUp_L`` / ``_R``, ``cheekPuff_L`` /
+``_R``) as the sum of its sides' parameters (the parameters are linear);
+others (ICT's ``cheekRaiser``, ``PupilDilate``) are left out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index, canonical, split_side
+from facepuppet.runtime.character import Character, sparse_deltas
+from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.geometry import vertex_normals
+
+from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
+from facepuppet.offline.elastic.clone import clone_model
+from facepuppet.offline.elastic.control_points import ControlPoints
+from facepuppet.offline.elastic.params import build_model
+from facepuppet.offline.perfect_sync.face import Face
+
+
+def fold_source(source: ElasticModel) -> tuple[tuple[str, ...], np.ndarray]:
+    """(ARKit names the source can give, in ARKit's order; their parameters (n, n_c, 3) float32)."""
+    params = source.arrays["params"].astype(np.float64)
+    by_key: dict[str, int] = {}
+    for s, name in enumerate(source.shape_names):
+        by_key.setdefault(canonical(name), s)
+    names, out = [], []
+    for key in ARKIT_NAMES:
+        _, side = split_side(key)
+        if key in by_key:
+            out.append(params[by_key[key]])
+        elif side is None and key + "Left" in by_key and key + "Right" in by_key:
+            out.append(params[by_key[key + "Left"]] + params[by_key[key + "Right"]])
+        else:
+            continue
+        names.append(key)
+    return tuple(names), np.asarray(out, np.float32).reshape(len(names), len(source.control_names), 3)
+
+
+def naming_style(names: tuple[str, ...]) -> str:
+    """The character's convention for ARKit names: "apple" (eyeBlinkLeft), "pascal" (EyeBlinkLeft) or
+    "sided" (eyeBlink_L); "apple" when it has none."""
+    styles = []
+    for n in names:
+        if arkit_index(n) is None:
+            continue
+        if n[:1].isupper():
+            styles.append("pascal")
+        elif n.endswith(("_L", "_R")):
+            styles.append("sided")
+        else:
+            styles.append("apple")
+    return max(set(styles), key=styles.count) if styles else "apple"
+
+
+def spelled(key: str, style: str) -> str:
+    """ARKit canonical ``key`` in the character's ``style``."""
+    if style == "pascal":
+        return key[:1].upper() + key[1:]
+    if style == "sided":
+        base, side = split_side(key)
+        return base + "_" + side[0] if side else key
+    return key
+
+
+def clone_face(source: ElasticModel, character: Character, face: Face, points: ControlPoints, *,
+               k: int = DEFAULT_K, fixed_ratio: float = DEFAULT_FIXED_RATIO,
+               progress: Callable[[int, int, str], None] | None = None) -> tuple[tuple[str, ...], np.ndarray]:
+    """Cloned ARKit shapes on ``character``: (canonical names, dense deltas (n, n_vertices, 3) float32)."""
+    names, params = fold_source(source)
+    local = np.full(character.n_vertices, -1, np.int64)
+    local[face.mesh] = np.arange(len(face.mesh))
+    sub_v = character.vertices[face.mesh].astype(np.float64)
+    sub_t = local[face.triangles]
+    sub_points = ControlPoints(points.names, local[points.vertices])
+    if (sub_points.vertices < 0).any():
+        raise ValueError("control points: every point must lie on the face mesh")
+    folded = ElasticModel(arrays={**source.arrays, "params": params}, shape_names=names,
+                          control_names=source.control_names, muscle_names=source.muscle_names,
+                          units=source.units, metadata=dict(source.metadata))
+
+    def build(tgt_points, cloned, shape_names):
+        return build_model(sub_v, sub_t, tgt_points, cloned, shape_names, k=k, fixed_ratio=fixed_ratio,
+                           units=character.units, with_muscles=False)[0]
+
+    model = clone_model(folded, sub_points, sub_v, build)
+    dense = np.zeros((len(names), character.n_vertices, 3), np.float32)
+    up = np.tile([0, 0, 1.0], (len(sub_v), 1))
+    for s, name in enumerate(names):
+        pos, _ = model.deform(model.arrays["params"][s], sub_v.astype(np.float32), up)
+        dense[s, face.mesh] = pos - sub_v
+        if progress is not None:
+            progress(s + 1, len(names), name)
+    return names, dense
+
+
+def add_shapes(character: Character, keys: tuple[str, ...], dense: np.ndarray,
+               replace: bool = False) -> tuple[Character, dict]:
+    """``character`` with the cloned shapes added under its naming convention.
+
+    A shape it already has under an ARKit name is kept (``replace``: its deltas replaced). Returns
+    (character, {"added": [...], "kept": [...], "replaced": [...]}).
+    """
+    style = naming_style(character.shape_names)
+    have = {canonical(n): s for s, n in enumerate(character.shape_names) if arkit_index(n) is not None}
+    rows = []  # (name, indices, positions, normals) per shape, existing first
+    for s, name in enumerate(character.shape_names):
+        sl = character.shape_slice(s)
+        rows.append([name, character.delta_indices[sl], character.delta_positions[sl], character.delta_normals[sl]])
+    n0 = vertex_normals(character.vertices, character.triangles)
+    report = {"added": [], "kept": [], "replaced": []}
+    for key, d in zip(keys, dense):
+        if key in have and not replace:
+            report["kept"].append(character.shape_names[have[key]])
+            continue
+        dn = vertex_normals(character.vertices + d, character.triangles) - n0
+        offsets, idx, both = sparse_deltas(np.concatenate([d, dn], axis=1)[None], tolerance=1e-6)
+        row = [spelled(key, style), idx, both[:, :3], both[:, 3:]]
+        if key in have:
+            row[0] = character.shape_names[have[key]]
+            rows[have[key]] = row
+            report["replaced"].append(row[0])
+        else:
+            rows.append(row)
+            report["added"].append(row[0])
+    counts = [len(r[1]) for r in rows]
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    cat = (lambda i, shape, dt: np.concatenate([np.asarray(r[i], dt).reshape(shape) for r in rows])  # noqa: E731
+           if rows else np.zeros((0,) + shape[1:], dt))
+    out = character.with_parts(
+        shape_names=tuple(r[0] for r in rows), delta_offsets=offsets,
+        delta_indices=cat(1, (-1,), np.uint32), delta_positions=np.ascontiguousarray(cat(2, (-1, 3), np.float32)),
+        delta_normals=np.ascontiguousarray(cat(3, (-1, 3), np.float32)),
+    )
+    return out, report
