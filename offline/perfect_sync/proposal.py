@@ -43,8 +43,8 @@ START_SCALES = (0.6, 0.8, 1.0, 1.25, 1.6)
 ICP_STEPS = 20
 BEND_STEPS = 6
 ASYMMETRY = 0.25  # a mirrored pair further apart than this many FAPU (inner-eye distances) is doubtful
-OFF_SURFACE = 0.5
-MIN_CANDIDATES = 120  # fewer forward-facing skin vertices than this: every skin vertex is a candidate  # a fitted point this many FAPU from the skin vertex it took is doubtful
+OFF_SURFACE = 0.5  # a fitted point this many FAPU from the skin vertex it took is doubtful
+MIN_CANDIDATES = 120  # fewer forward-facing skin vertices than this: every skin vertex is a candidate
 
 
 def _front_skin(vertices: np.ndarray, face: Face) -> np.ndarray:
@@ -215,8 +215,10 @@ def picture(path: str | os.PathLike, vertices: np.ndarray, face: Face, points: C
     lo, hi = v[used, :2].min(0), v[used, :2].max(0)
     scale = 0.9 * size / max(float((hi - lo).max()), 1e-12)
 
+    mid = (lo + hi) / 2
+
     def xy(p):
-        return (size / 2 + (p[..., 0] - (lo[0] + hi[0]) / 2) * scale, size / 2 - (p[..., 1] - (lo[1] + hi[1]) / 2) * scale)
+        return size / 2 + (p[..., 0] - mid[0]) * scale, size / 2 - (p[..., 1] - mid[1]) * scale
 
     n = np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-18)
