@@ -13,7 +13,8 @@ ICT head's 47) are fitted to the target's skin coarsely and non-rigidly:
    vertex by the Gaussian-smoothed offsets of its neighbours, so the set
    bends to the target's proportions without collapsing;
 4. each point takes its nearest free skin vertex; ``nose_tip`` the face's
-   detected nose tip; the inner lips are put in order (:func:`fix_inner_lips`).
+   detected nose tip; the inner lips the nearest skin vertex facing down
+   (upper) or up (lower), then put in order (:func:`fix_inner_lips`).
 
 Doubts (:func:`doubts`): a sided point on the wrong side of the symmetry
 plane or far from its mirrored partner (asymmetric), a point off the skin or
@@ -118,11 +119,34 @@ def propose(source_positions: np.ndarray, source_names: Sequence[str], vertices:
                              f"{len(names)} control points")
         taken.add(pick)
         chosen.append(pick)
+    chosen = _inner_lips(names, chosen, fitted, v, face)
     points = ControlPoints(names, np.array(chosen, np.int64))
     fixed = fix_inner_lips(points, v, skin_triangles(face), cand)
     if len(np.unique(fixed.vertices)) == len(names):  # a lip line too small for its points: keep the fit's
         points = fixed
     return points, fitted
+
+
+def _inner_lips(names: tuple, chosen: list, fitted: np.ndarray, v: np.ndarray, face: Face) -> list:
+    """The inner-lip points on the skin vertex nearest their fitted place whose normal faces down (upper lip)
+    or up (lower lip): where the lips touch, the two lips' vertices lie a hair apart and only their normals
+    tell them apart (ICT's inner lips face within 15 degrees of straight down / up, and not forward)."""
+    if UPPER not in names or LOWER not in names:
+        return chosen
+    normals = vertex_normals(v.astype(np.float32), skin_triangles(face).astype(np.uint32)).astype(np.float64)
+    up = normals[face.skin] @ face.frame[1]
+    out = list(chosen)
+    taken = set(out)
+    for name, sign in ((UPPER, -1.0), (LOWER, 1.0)):
+        i = names.index(name)
+        cand = face.skin[sign * up > 0.5]
+        cand = cand[[int(c) not in taken or int(c) == out[i] for c in cand]]
+        if len(cand):
+            pick = int(cand[np.argmin(np.linalg.norm(v[cand] - fitted[i], axis=1))])
+            taken.discard(out[i])
+            out[i] = pick
+            taken.add(pick)
+    return out
 
 
 def skin_triangles(face: Face) -> np.ndarray:

@@ -68,10 +68,11 @@ def test_identical_character_clones_with_small_error(identical, ict_character):
     assert len(report["added"]) == 51 and report["kept"] == []
     errs = truth_errors(ict_character, out, report["added"])
     skin = [k for k in errs if not k.startswith("eyeLook")]
-    # measured 16.6 % median on the skin (2-core CPU): the elastic model's own reconstruction error of ICT
-    # is 9.8 % (fit-elastic); the geometric nose tip and the inner lips the proposal moves add the rest.
-    # The issue's "~0 error" is not reached.
-    assert np.median([errs[k] for k in skin]) < 0.18, errs
+    # measured 11.4 % median on the skin, worst 20 % (cheekPuff): the elastic model's own reconstruction error
+    # of ICT is 9.8 % (fit-elastic); the geometric nose tip adds the rest. (16.6 % median, jawOpen 48 %, while
+    # the inner lips were taken by distance alone: the lower lip's vertex as the upper point.)
+    assert np.median([errs[k] for k in skin]) < 0.13, errs
+    assert max(errs.values()) < 0.25, errs
 
 
 def test_cloned_blink_closes_the_lids_and_jaw_open_parts_the_lips(identical, ict_character, source):
@@ -97,8 +98,9 @@ def test_stylised_variant_of_known_truth(ict_character, source):
     out, report, _ = perfect_sync(_renamed(variant), source[0])
     errs = truth_errors(variant, out, report["added"])
     skin = {k: e for k, e in errs.items() if not k.startswith("eyeLook")}
-    # measured (2-core CPU): median 0.20 on the skin; bound with margin. Goal of the issue: 0.15 (not met)
-    assert np.median(list(skin.values())) < 0.25, skin
+    # measured: median 13.2 % on the skin (15.8 % with the eye looks), worst 31 % (mouthRollLower)
+    assert np.median(list(skin.values())) < 0.15, skin
+    assert max(errs.values()) < 0.40, errs
 
 
 def test_doubt_report_fires_on_a_wrong_landmark_file(identical, source, tmp_path):
