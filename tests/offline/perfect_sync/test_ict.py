@@ -50,6 +50,21 @@ def truth_errors(target, out, report_added) -> dict:
     return result
 
 
+def _mid_lid_gap(character, points, side, d):
+    """(rest, blinked) vertical gap between the skin vertices nearest the mid-points of the upper and lower
+    lid (between each lid's inner and outer control points): the lids between the handles."""
+    v = character.vertices.astype(np.float64)
+    face = find_face(character)
+    skin = face.skin
+
+    def near(p):
+        return int(skin[np.argmin(np.linalg.norm(v[skin] - p, axis=1))])
+
+    up = near(0.5 * (v[points.vertex(f"lid_upper_inner_{side}")] + v[points.vertex(f"lid_upper_outer_{side}")]))
+    low = near(0.5 * (v[points.vertex(f"lid_lower_inner_{side}")] + v[points.vertex(f"lid_lower_outer_{side}")]))
+    return v[up, 1] - v[low, 1], (v[up, 1] + d[up, 1]) - (v[low, 1] + d[low, 1])
+
+
 def _renamed(character):
     """The character with its shapes renamed out of ARKit's names (so perfect-sync adds them all)."""
     return character.with_parts(shape_names=tuple(f"truth{i}" for i in range(character.n_shapes)),
@@ -68,11 +83,12 @@ def test_identical_character_clones_with_small_error(identical, ict_character):
     assert len(report["added"]) == 51 and report["kept"] == []
     errs = truth_errors(ict_character, out, report["added"])
     skin = [k for k in errs if not k.startswith("eyeLook")]
-    # measured 11.4 % median on the skin, worst 20 % (cheekPuff): the elastic model's own reconstruction error
+    # measured 11.4 % median on the skin, worst 25 % (the blinks, 16 % before close_lids made the lids meet;
+    # cheekPuff 20 %): the elastic model's own reconstruction error
     # of ICT is 9.8 % (fit-elastic); the geometric nose tip adds the rest. (16.6 % median, jawOpen 48 %, while
     # the inner lips were taken by distance alone: the lower lip's vertex as the upper point.)
     assert np.median([errs[k] for k in skin]) < 0.13, errs
-    assert max(errs.values()) < 0.25, errs
+    assert max(errs.values()) < 0.30, errs
 
 
 def test_cloned_blink_closes_the_lids_and_jaw_open_parts_the_lips(identical, ict_character, source):
@@ -85,9 +101,10 @@ def test_cloned_blink_closes_the_lids_and_jaw_open_parts_the_lips(identical, ict
         rest_gap = v[up, 1] - v[low, 1]
         d = dense[names.index(key)]
         gap = (v[up, 1] + d[up, 1]) - (v[low, 1] + d[low, 1])
-        # measured: 0.85 cm -> 0.44 cm (51 %) at the inner lid points. The issue's goal (the lids meet,
-        # below a small fraction of the eye height) is NOT met yet; this bounds what the cloning does.
-        assert rest_gap > 0.5 and gap < 0.6 * rest_gap, (side, rest_gap, gap)
+        # 0.85 cm -> 0.44 cm at the inner lid points before close_lids (the eq. 6 compromise); now the lids meet
+        assert rest_gap > 0.5 and abs(gap) < 0.1 * rest_gap, (side, rest_gap, gap)
+        mid = _mid_lid_gap(out, points, side, d)
+        assert mid[1] < 0.25 * mid[0], (side, mid)
     d = dense[names.index("jawOpen")]
     up, low = points.vertex("lip_upper"), points.vertex("lip_lower")
     assert (v[up, 1] + d[up, 1]) - (v[low, 1] + d[low, 1]) > (v[up, 1] - v[low, 1]) + 1.0  # cm
