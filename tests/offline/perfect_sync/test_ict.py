@@ -12,6 +12,7 @@ from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ict_control_points, write_control_points
 from facepuppet.offline.elastic.params import fit_character
 from facepuppet.offline.kpls.targets import stylise
+from facepuppet.offline.perfect_sync import evaluate
 from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.proposal import doubts, read_landmarks
@@ -30,39 +31,8 @@ def source(ict_character, tmp_path_factory):
     return load_source(path), path
 
 
-def truth_errors(target, out, report_added) -> dict:
-    """Relative RMS error per cloned shape against the target's own (true) shape, on the skin."""
-    face = find_face(target)
-    truth = target.dense_deltas()
-    by = {canonical(n): s for s, n in enumerate(target.shape_names)}
-    errs = {}
-    for name in out.shape_names[target.n_shapes:]:
-        key = canonical(name)
-        t = truth[by[key]] if key in by else truth[by[key + "Left"]] + truth[by[key + "Right"]]
-        errs[key] = t
-    dense = out.dense_deltas()[target.n_shapes:]
-    result = {}
-    for (key, t), d in zip(errs.items(), dense):
-        length = np.linalg.norm(t[face.skin], axis=1)
-        moved = length > 0.01 * length.max()
-        err = np.linalg.norm(d[face.skin][moved] - t[face.skin][moved], axis=1)
-        result[key] = float(np.sqrt(np.mean(err**2)) / length.max())
-    return result
-
-
-def _mid_lid_gap(character, points, side, d):
-    """(rest, blinked) vertical gap between the skin vertices nearest the mid-points of the upper and lower
-    lid (between each lid's inner and outer control points): the lids between the handles."""
-    v = character.vertices.astype(np.float64)
-    face = find_face(character)
-    skin = face.skin
-
-    def near(p):
-        return int(skin[np.argmin(np.linalg.norm(v[skin] - p, axis=1))])
-
-    up = near(0.5 * (v[points.vertex(f"lid_upper_inner_{side}")] + v[points.vertex(f"lid_upper_outer_{side}")]))
-    low = near(0.5 * (v[points.vertex(f"lid_lower_inner_{side}")] + v[points.vertex(f"lid_lower_outer_{side}")]))
-    return v[up, 1] - v[low, 1], (v[up, 1] + d[up, 1]) - (v[low, 1] + d[low, 1])
+def truth_errors(target, out, _added=None) -> dict:
+    return evaluate.truth_errors(target, out, find_face(target))
 
 
 def _renamed(character):
@@ -103,7 +73,7 @@ def test_cloned_blink_closes_the_lids_and_jaw_open_parts_the_lips(identical, ict
         gap = (v[up, 1] + d[up, 1]) - (v[low, 1] + d[low, 1])
         # 0.85 cm -> 0.44 cm at the inner lid points before close_lids (the eq. 6 compromise); now the lids meet
         assert rest_gap > 0.5 and abs(gap) < 0.1 * rest_gap, (side, rest_gap, gap)
-        mid = _mid_lid_gap(out, points, side, d)
+        mid = evaluate.mid_lid_gap(out, find_face(out), points, side, d)
         assert mid[1] < 0.25 * mid[0], (side, mid)
     d = dense[names.index("jawOpen")]
     up, low = points.vertex("lip_upper"), points.vertex("lip_lower")
