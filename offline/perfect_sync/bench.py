@@ -91,8 +91,9 @@ def run_bench(args: argparse.Namespace) -> dict:
                                          "n_added": len(report["added"]), "n_doubts": len(report["doubts"]),
                                          **_summary(errs)}
         s = result["ict_variants"][label]
-        print(f"bench perfect-sync: {label}: median {100 * s['median']:.1f}% ({100 * s['median_without_eye_looks']:.1f}%"
-              f" without eye looks), worst {s['worst'][0]} {100 * s['worst'][1]:.1f}%, {seconds:.1f} s")
+        print(f"bench perfect-sync: {label}: median {100 * s['median']:.1f}% "
+              f"({100 * s['median_without_eye_looks']:.1f}% without eye looks), "
+              f"worst {s['worst'][0]} {100 * s['worst'][1]:.1f}%, {seconds:.1f} s")
     godette_path = kit / "gltf" / "Godette_vrm_v4.vrm"
     if godette_path.exists():
         godette = read_gltf(godette_path)
