@@ -122,3 +122,51 @@ def test_landmarks_with_unknown_or_missing_points_are_refused(identical, source,
 def test_a_source_of_the_wrong_kind_is_refused(ict_character_path):
     with pytest.raises(TablesError, match="kind"):
         load_source(ict_character_path)
+
+
+def test_a_static_head_without_shapes_gets_all_51(ict_character, source, tmp_path):
+    """import-rig head.obj with no shapes folder, then perfect-sync: the face found from the geometry alone."""
+    from facepuppet.offline.io.rig_import import import_rig
+
+    static = import_rig(need_shared("ict-facekit", "generic_neutral_mesh.obj"), None)
+    assert static.n_shapes == 0
+    out, report, _ = perfect_sync(static, source[0])
+    assert report["face"]["evidence"] == "whole character"
+    assert len(report["added"]) == 51 and out.n_shapes == 51
+    assert out.shape_names[0] == "eyeBlinkLeft"  # Apple's spelling when the character has no convention
+    errs = evaluate.truth_errors(ict_character, ict_character.with_parts(
+        shape_names=_renamed(ict_character).shape_names + out.shape_names,
+        delta_offsets=np.concatenate([ict_character.delta_offsets,
+                                      ict_character.delta_offsets[-1] + out.delta_offsets[1:]]),
+        delta_indices=np.concatenate([ict_character.delta_indices, out.delta_indices]),
+        delta_positions=np.concatenate([ict_character.delta_positions, out.delta_positions]),
+        delta_normals=np.concatenate([ict_character.delta_normals, out.delta_normals])), find_face(ict_character))
+    assert np.median(list(errs.values())) < 0.13, errs
+
+
+def test_command_writes_the_character_and_refuses_bad_landmarks_writing_nothing(ict_character_path, source,
+                                                                                  tmp_path, capsys):
+    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.cli import main
+
+    out, pics = tmp_path / "ps.npz", tmp_path / "pics"
+    assert main(["perfect-sync", str(ict_character_path), "-o", str(out), "--source", str(source[1]),
+                 "--pictures", str(pics)]) == 0
+    ps = Character.load(out)
+    assert ps.n_shapes == 57 + 2  # ICT's 57 kept (ARKit-named), browInnerUp and cheekPuff added (folded sides)
+    assert (pics / "landmarks.png").stat().st_size > 1000 and (pics / "landmarks.json").exists()
+    again = tmp_path / "again.npz"
+    assert main(["perfect-sync", str(ict_character_path), "-o", str(again), "--source", str(source[1]),
+                 "--landmarks", str(pics / "landmarks.json"), "--replace"]) == 0
+    replaced = Character.load(again)
+    assert replaced.shape_names[:57] == ps.shape_names[:57]
+    assert not np.allclose(replaced.dense_deltas()[14], ps.dense_deltas()[14])  # eyeBlink_L now the clone
+    doc = json.loads((pics / "landmarks.json").read_text(encoding="utf-8"))
+    doc["points"][0]["name"] = "ear_L"
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc), encoding="utf-8")
+    never = tmp_path / "never.npz"
+    assert main(["perfect-sync", str(ict_character_path), "-o", str(never), "--source", str(source[1]),
+                 "--landmarks", str(bad)]) == 2
+    assert "unknown points ['ear_L']; missing points ['jaw_R']" in capsys.readouterr().err
+    assert not never.exists()
