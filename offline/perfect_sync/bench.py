@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from facepuppet.runtime.character import Character
+
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 GOAL_MEDIAN, GOAL_WORST, GOAL_COSINE = 0.15, 0.40, 0.7
@@ -41,7 +43,7 @@ def _renamed(character):
     return character.with_parts(shape_names=tuple(f"truth{i}" for i in range(character.n_shapes)), expressions=None)
 
 
-def proportions(character, scale=(1.15, 0.9, 1.05)):
+def proportions(character: Character, scale: tuple[float, float, float] = (1.15, 0.9, 1.05)) -> Character:
     """The character under the linear map diag(scale) about its pivot; the shapes carried (A d)."""
     a = np.asarray(scale, np.float32)
     p = character.pivot
