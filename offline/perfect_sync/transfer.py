@@ -13,7 +13,9 @@ ARKit name in any spelling (:func:`canonical`) directly; an unsided ARKit
 shape the source splits (ICT's ``browInnerUp_L`` / ``_R``, ``cheekPuff_L`` /
 ``_R``) as the sum of its sides' parameters (the parameters are linear);
 others (ICT's ``cheekRaiser``, ``PupilDilate``) are left out. The blinks'
-upper lid points are then put onto the lower ones (:func:`close_lids`).
+upper lid points are then put onto the lower ones (:func:`close_lids`), and
+the eye looks turn the eyeball pieces where the character has them
+(:func:`eyeballs`) instead of leaving the eyes still under moving lids.
 """
 
 from __future__ import annotations
@@ -34,6 +36,17 @@ from facepuppet.offline.elastic.params import build_model
 from facepuppet.offline.perfect_sync.face import Face
 
 CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between the lid points
+# An eye look at weight 1 turns the eyeball this far. The source's shapes do not say (ICT's eyeLook shapes
+# move the lids only: its eyes are turned by the app); 25 degrees is about the eye's comfortable range.
+EYE_LOOK_DEGREES = 25.0
+# (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
+# turn about +y by + moves the front (+z) towards +x, one about +x by − moves it up.
+EYE_TURNS = {
+    ("eyeLookUpLeft", "L"): (0, -1.0), ("eyeLookUpRight", "R"): (0, -1.0),
+    ("eyeLookDownLeft", "L"): (0, 1.0), ("eyeLookDownRight", "R"): (0, 1.0),
+    ("eyeLookOutLeft", "L"): (1, 1.0), ("eyeLookInLeft", "L"): (1, -1.0),
+    ("eyeLookOutRight", "R"): (1, -1.0), ("eyeLookInRight", "R"): (1, 1.0),
+}
 
 
 def fold_source(source: ElasticModel) -> tuple[tuple[str, ...], np.ndarray]:
@@ -53,6 +66,64 @@ def fold_source(source: ElasticModel) -> tuple[tuple[str, ...], np.ndarray]:
             continue
         names.append(key)
     return tuple(names), np.asarray(out, np.float32).reshape(len(names), len(source.control_names), 3)
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix (3, 3) by ``angle`` radians about unit ``axis`` (Rodrigues)."""
+    k = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
+
+
+def eyeballs(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints) -> dict:
+    """{"L"/"R": (vertex indices, centre (3,))} of the eyeball pieces found behind each eye's corners.
+
+    An eyeball is a piece without control points that is close to a sphere (every vertex within 15 %
+    of the radius from the least-squares sphere; ICT's sclera 8 %, its iris and cornea 14 %), of radius
+    0.2–0.8 inner-eye distances, at least a radius deep (not a cap like ICT's tear film), centred
+    behind the eye's corners, between them across the eye and within half an inner-eye distance of
+    their mid-point. A character whose eyes are flat decals or part of the skin has none, and its eye
+    looks stay skin-only.
+    """
+    from facepuppet.offline.elastic.laplacian import components
+
+    v = np.asarray(vertices, np.float64)
+    t = np.asarray(triangles, np.int64)
+    need = ("eye_inner_L", "eye_outer_L", "eye_inner_R", "eye_outer_R")
+    if not all(n in points.names for n in need):
+        return {}
+    es = float(np.linalg.norm(v[points.vertex("eye_inner_L")] - v[points.vertex("eye_inner_R")]))
+    _, labels = components(len(v), t)
+    handled = np.zeros(len(v), bool)
+    handled[points.vertices] = True
+    out: dict = {}
+    for label in np.unique(labels[np.unique(t)]):
+        members = np.flatnonzero(labels == label)
+        if handled[members].any() or len(members) < 20:
+            continue
+        p = v[members]
+        # sphere fit: |p|² = 2 c·p + (r² − |c|²), linear in c and the constant
+        a = np.column_stack([2 * p, np.ones(len(p))])
+        sol = np.linalg.lstsq(a, (p**2).sum(1), rcond=None)[0]
+        centre = sol[:3]
+        radius = float(np.sqrt(max(sol[3] + centre @ centre, 0.0)))
+        off_sphere = np.abs(np.linalg.norm(p - centre, axis=1) - radius).max()
+        if not 0.2 * es < radius < 0.8 * es or off_sphere > 0.15 * radius or np.ptp(p[:, 2]) < radius:
+            continue  # not a ball: the wrong size, not round, or a thin cap (a tear film over the eye)
+        for side in ("L", "R"):
+            inner, outer = v[points.vertex(f"eye_inner_{side}")], v[points.vertex(f"eye_outer_{side}")]
+            corners = 0.5 * (inner + outer)
+            across = (outer - inner) / np.linalg.norm(outer - inner)
+            behind = centre[2] < min(inner[2], outer[2])
+            # the centre behind the corners' mid-point, between the corners across the eye
+            if behind and np.linalg.norm(centre - corners) < 0.5 * es and abs((centre - corners) @ across) < 0.3 * es:
+                prev = out.get(side)
+                if prev is None:
+                    out[side] = (members, centre, len(members))
+                else:  # sclera and iris (cornea): one eyeball, turned about the larger piece's centre
+                    out[side] = (np.concatenate([prev[0], members]), prev[1] if prev[2] >= len(members) else centre,
+                                 max(prev[2], len(members)))
+    return {side: (members, centre) for side, (members, centre, _) in out.items()}
 
 
 def close_lids(params: np.ndarray, names: tuple[str, ...], points: ControlPoints, vertices: np.ndarray,
@@ -128,11 +199,19 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
 
     model = clone_model(folded, sub_points, sub_v, build)
     params = close_lids(model.arrays["params"], names, sub_points, sub_v)
+    eyes = eyeballs(sub_v, sub_t, sub_points)
     dense = np.zeros((len(names), character.n_vertices, 3), np.float32)
     up = np.tile([0, 0, 1.0], (len(sub_v), 1))
     for s, name in enumerate(names):
         pos, _ = model.deform(params[s], sub_v.astype(np.float32), up)
-        dense[s, face.mesh] = pos - sub_v
+        d = pos - sub_v
+        for side, (members, centre) in eyes.items():
+            turn = EYE_TURNS.get((name, side))
+            if turn is not None:
+                axis, sign = turn
+                r = _rotation(face.frame[axis], sign * np.radians(EYE_LOOK_DEGREES))
+                d[members] = (sub_v[members] - centre) @ r.T + centre - sub_v[members]
+        dense[s, face.mesh] = d
         if progress is not None:
             progress(s + 1, len(names), name)
     return names, dense

@@ -170,3 +170,29 @@ def test_command_writes_the_character_and_refuses_bad_landmarks_writing_nothing(
                  "--landmarks", str(bad)]) == 2
     assert "unknown points ['ear_L']; missing points ['jaw_R']" in capsys.readouterr().err
     assert not never.exists()
+
+
+def test_eye_looks_turn_the_eyeballs_rigidly(identical, ict_character):
+    """ICT's own eyeLook shapes move the lids only; the cloned ones also turn the eyeball pieces (sclera, iris)."""
+    _, out, _, points = identical
+    c = ict_character
+    v = out.vertices.astype(np.float64)
+    dense = out.dense_deltas()
+    names = [canonical(n) for n in out.shape_names]
+    eye = {side: np.unique(c.triangles[np.isin(c.triangle_material, [c.material_names.index(f"M_Sclera{word}"),
+                                                                      c.material_names.index(f"M_Iris{word}")])])
+           for side, word in (("L", "Left"), ("R", "Right"))}
+    front = {side: eye[side][np.argmax(v[eye[side], 2])] for side in eye}  # the pupil's centre
+    expected = {"eyeLookUpLeft": ("L", 1, 1.0), "eyeLookDownLeft": ("L", 1, -1.0),
+                "eyeLookOutLeft": ("L", 0, 1.0), "eyeLookInLeft": ("L", 0, -1.0),
+                "eyeLookOutRight": ("R", 0, -1.0), "eyeLookInRight": ("R", 0, 1.0)}
+    for key, (side, axis, sign) in expected.items():
+        d = dense[names.index(key)]
+        pupil = d[front[side]]
+        assert sign * pupil[axis] > 0.3, (key, pupil)  # cm: 25 degrees on a 1.4 cm eye moves it ~0.6 cm
+        other = "R" if side == "L" else "L"
+        assert np.abs(d[eye[other]]).max() == 0.0, key
+        p, q = v[eye[side]], v[eye[side]] + d[eye[side]]  # rigid: pairwise distances kept
+        np.testing.assert_allclose(np.linalg.norm(q[1:] - q[0], axis=1), np.linalg.norm(p[1:] - p[0], axis=1),
+                                   atol=1e-4)
+    assert np.abs(dense[names.index("jawOpen")][eye["L"]]).max() == 0.0
