@@ -196,3 +196,25 @@ def test_eye_looks_turn_the_eyeballs_rigidly(identical, ict_character):
         np.testing.assert_allclose(np.linalg.norm(q[1:] - q[0], axis=1), np.linalg.norm(p[1:] - p[0], axis=1),
                                    atol=1e-4)
     assert np.abs(dense[names.index("jawOpen")][eye["L"]]).max() == 0.0
+
+
+def test_lower_teeth_follow_the_jaw_and_the_back_of_the_head_stays(identical, ict_character):
+    _, out, _, _ = identical
+    c = ict_character
+    from facepuppet.offline.elastic.laplacian import components
+
+    dense = out.dense_deltas()
+    names = [canonical(n) for n in out.shape_names]
+    _, comp = components(c.n_vertices, c.triangles)
+    teeth = np.unique(comp[c.triangles[c.triangle_material == c.material_names.index("M_Teeth")]])
+    jaw = dense[names.index("jawOpen")]
+    for k in teeth:  # ICT: upper teeth centred near y = -2.3 cm, lower near y = -4 cm
+        members = comp == k
+        moved = np.linalg.norm(jaw[members], axis=1)
+        if c.vertices[members, 1].mean() < -3.0:
+            assert moved.min() > 0.5, k  # cm: the lower teeth drop with the jaw
+        else:
+            assert moved.max() == 0.0, k  # the upper teeth stay with the skull
+    back = np.unique(c.triangles[c.triangle_material == c.material_names.index("M_BackHead")])
+    back = back[c.vertices[back, 2] < -2.0]  # the back half of the cranium
+    assert np.abs(dense[c.n_shapes:, back]).max() == 0.0
