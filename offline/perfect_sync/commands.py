@@ -7,6 +7,8 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
+
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.progress import Progress
@@ -15,6 +17,8 @@ from facepuppet.offline.elastic.control_points import ControlPoints, write_contr
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.proposal import doubts, picture, propose, read_landmarks
 from facepuppet.offline.perfect_sync.transfer import add_shapes, clone_face
+
+IMPLAUSIBLE = 0.3  # a cloned shape moving a vertex this many face widths is reported (ICT's jawOpen: 0.12)
 
 
 def load_source(path: str | os.PathLike) -> ElasticModel:
@@ -37,12 +41,18 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
     else:
         points, fitted = propose(source.arrays["control_positions"], names, character.vertices, face)
     doubtful = doubts(points, character.vertices, face, fitted)
-    step = None if progress is None else (lambda i, n, name: progress.update(i, name))
-    keys, dense = clone_face(source, character, face, points, progress=step)
+    def step(i: int, n: int, name: str) -> None:
+        progress.total = n
+        progress.update(i, name)
+
+    keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step)
     out, added = add_shapes(character, keys, dense, replace)
+    largest = np.linalg.norm(dense, axis=2).max(axis=1) / face.width
+    implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} face widths (> {IMPLAUSIBLE}): check the points"}
+                   for k, r in zip(keys, largest) if r > IMPLAUSIBLE]
     report = {"face": {"evidence": face.evidence, "mesh_vertices": int(len(face.mesh)), "skin_vertices":
                        int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
-              "doubts": doubtful, **added}
+              "doubts": doubtful, "implausible_shapes": implausible, **added}
     return out, report, points
 
 
@@ -64,6 +74,8 @@ def _run(args: argparse.Namespace) -> int:
         (args.pictures / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     for d in report["doubts"]:
         print(f"doubtful: {', '.join(d['points'])}: {d['why']}")
+    for d in report["implausible_shapes"]:
+        print(f"implausible: {d['shape']}: {d['why']}")
     print(f"{args.output}: {len(report['added'])} ARKit shapes added, {len(report['kept'])} kept, "
           f"{len(report['replaced'])} replaced; {len(report['doubts'])} doubtful proposal(s)"
           + (f" (correct them in {args.pictures / 'landmarks.json'} and rerun with --landmarks)"

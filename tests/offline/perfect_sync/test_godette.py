@@ -32,6 +32,7 @@ def test_godette_perfect_sync_exports_and_reads_back_its_expressions(ict_charact
     assert out.expressions.names == godette.expressions.names  # the binds still point at its own shapes
     assert report["face"]["evidence"] == "shapes" and report["face"]["skin_vertices"] == 79
     assert len(report["doubts"]) > 10  # the proposal on its 79-vertex skin is not to be trusted
+    assert "jawOpen" in {d["shape"] for d in report["implausible_shapes"]}  # measured: 0.76 face widths
     path = tmp_path / "godette_ps.vrm"
     export_character(out, path)
     back = read_gltf(path)

@@ -51,6 +51,7 @@ def identical(ict_character, source):
 def test_identical_character_clones_with_small_error(identical, ict_character):
     target, out, report, _ = identical
     assert len(report["added"]) == 51 and report["kept"] == []
+    assert report["implausible_shapes"] == [] and report["doubts"] == []
     errs = truth_errors(ict_character, out, report["added"])
     skin = [k for k in errs if not k.startswith("eyeLook")]
     # measured 11.4 % median on the skin, worst 25 % (the blinks, 16 % before close_lids made the lids meet;
