@@ -9,6 +9,7 @@ ICT head's 47) are fitted to the target's skin coarsely and non-rigidly:
    symmetric), by ICP against the target's forward-facing skin, from a few
    starting scales, keeping the one with the smallest residual (relative to
    the scale);
+   then a scale per axis (within a third of the uniform one);
 3. a few non-rigid steps: each point moves halfway to its nearest skin
    vertex by the Gaussian-smoothed offsets of its neighbours, so the set
    bends to the target's proportions without collapsing;
@@ -41,6 +42,7 @@ from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, fix_inner
 from facepuppet.offline.perfect_sync.face import Face
 
 START_SCALES = (0.6, 0.8, 1.0, 1.25, 1.6)
+AXIS_RANGE = 1.33  # each axis's scale within this factor of the uniform fit's
 ICP_STEPS = 20
 BEND_STEPS = 6
 ASYMMETRY = 0.25  # a mirrored pair further apart than this many FAPU (inner-eye distances) is doubtful
@@ -73,6 +75,22 @@ def _fit_scale(src: np.ndarray, tgt: np.ndarray, tree: cKDTree, scale: float) ->
     return s, t, float(np.sqrt(np.mean(d**2))) / s
 
 
+def _fit_axes(src: np.ndarray, tgt: np.ndarray, tree: cKDTree, scale: float, t: np.ndarray) -> tuple[np.ndarray,
+                                                                                                       np.ndarray]:
+    """ICP for p = diag(s) src + t from the uniform fit: a scale per axis of the face frame, each kept within
+    ``AXIS_RANGE`` of the uniform one (a face wider than tall, a long jaw); returns (s (3,), t)."""
+    s = np.full(3, scale)
+    for _ in range(ICP_STEPS):
+        _, j = tree.query(src * s + t)
+        q = tgt[j]
+        sm, qm = src.mean(0), q.mean(0)
+        a, b = src - sm, q - qm
+        s = np.clip((a * b).sum(0) / np.maximum((a * a).sum(0), 1e-18), scale / AXIS_RANGE, scale * AXIS_RANGE)
+        t = qm - s * sm
+        t[0] = 0.0
+    return s, t
+
+
 def fit_points(source_positions: np.ndarray, source_names: Sequence[str], vertices: np.ndarray,
                face: Face) -> tuple[np.ndarray, np.ndarray]:
     """The source control points fitted onto the target's skin, (n_c, 3) in target world units, and the
@@ -86,9 +104,9 @@ def fit_points(source_positions: np.ndarray, source_names: Sequence[str], vertic
     tree = cKDTree(tgt)
     base = face.width / max(1.9 * float(np.ptp(src[:, 0])), 1e-18)  # the ICT head is ~1.9 times its points wide
     best = min((_fit_scale(src, tgt, tree, base * k) for k in START_SCALES), key=lambda r: r[2])
-    s, t, _ = best
+    s, t = _fit_axes(src, tgt, tree, best[0], best[1])
     p = s * src + t
-    es = s * float(np.linalg.norm(src[names.index("eye_inner_L")] - src[names.index("eye_inner_R")]))
+    es = s[0] * float(np.linalg.norm(src[names.index("eye_inner_L")] - src[names.index("eye_inner_R")]))
     sigma = 1.5 * es
     w = np.exp(-((p[:, None] - p[None]) ** 2).sum(-1) / (2 * sigma**2))
     w /= w.sum(1, keepdims=True)

@@ -86,8 +86,20 @@ def test_stylised_variant_of_known_truth(ict_character, source):
     out, report, _ = perfect_sync(_renamed(variant), source[0])
     errs = truth_errors(variant, out, report["added"])
     skin = {k: e for k, e in errs.items() if not k.startswith("eyeLook")}
-    # measured: median 13.2 % on the skin (15.8 % with the eye looks), worst 31 % (mouthRollLower)
+    # measured: median 12.8 % without the eye looks (14.8 % with them), worst 31 % (mouthRollUpper)
     assert np.median(list(skin.values())) < 0.15, skin
+    assert max(errs.values()) < 0.40, errs
+
+
+def test_a_wider_shorter_deeper_variant_of_known_truth(ict_character, source):
+    from facepuppet.offline.perfect_sync.bench import proportions
+
+    variant = proportions(ict_character)  # x 1.15, y 0.9, z 1.05 about the pivot; true shapes A d
+    out, report, points = perfect_sync(_renamed(variant), source[0])
+    errs = truth_errors(variant, out)
+    # measured 12.7 % median, worst 25 % (eyeBlinkRight). With one scale for all axes in the fit: 17.9 %,
+    # eyeWide 56 % (5 of the 47 points on their vertex; now 46).
+    assert np.median(list(errs.values())) < 0.15, errs
     assert max(errs.values()) < 0.40, errs
 
 
