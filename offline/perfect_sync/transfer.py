@@ -36,9 +36,10 @@ from facepuppet.offline.elastic.params import build_model
 from facepuppet.offline.perfect_sync.face import Face
 
 CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between the lid points
-# An eye look at weight 1 turns the eyeball this far. The source's shapes do not say (ICT's eyeLook shapes
-# move the lids only: its eyes are turned by the app); 25 degrees is about the eye's comfortable range.
-EYE_LOOK_DEGREES = 25.0
+# An eye look at weight 1 turns the eyeball this far (sideways, up or down). The source's shapes do not say
+# (ICT's eyeLook shapes move the lids only: its eyes are turned by the app); a judgement, about the eye's
+# comfortable range: 25 degrees sideways, 15 up and down (at 25 the ICT iris went under the upper lid).
+EYE_LOOK_DEGREES = (25.0, 15.0)  # (about the up axis, about the across axis)
 # (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
 # turn about +y by + moves the front (+z) towards +x, one about +x by − moves it up.
 EYE_TURNS = {
@@ -119,10 +120,12 @@ def eyeballs(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints)
             if behind and np.linalg.norm(centre - corners) < 0.5 * es and abs((centre - corners) @ across) < 0.3 * es:
                 prev = out.get(side)
                 if prev is None:
-                    out[side] = (members, centre, len(members))
-                else:  # sclera and iris (cornea): one eyeball, turned about the larger piece's centre
-                    out[side] = (np.concatenate([prev[0], members]), prev[1] if prev[2] >= len(members) else centre,
-                                 max(prev[2], len(members)))
+                    out[side] = (members, centre, radius)
+                else:  # sclera and iris: one eyeball, turned about the widest sphere's centre (the sclera's:
+                    # the iris's cornea bulge pulls its fitted centre 0.09 cm forward on ICT, and turning about it
+                    # pushes the eye through the tear film in front)
+                    out[side] = (np.concatenate([prev[0], members]), prev[1] if prev[2] >= radius else centre,
+                                 max(prev[2], radius))
     return {side: (members, centre) for side, (members, centre, _) in out.items()}
 
 
@@ -209,7 +212,7 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
             turn = EYE_TURNS.get((name, side))
             if turn is not None:
                 axis, sign = turn
-                r = _rotation(face.frame[axis], sign * np.radians(EYE_LOOK_DEGREES))
+                r = _rotation(face.frame[axis], sign * np.radians(EYE_LOOK_DEGREES[0 if axis == 1 else 1]))
                 d[members] = (sub_v[members] - centre) @ r.T + centre - sub_v[members]
         dense[s, face.mesh] = d
         if progress is not None:

@@ -202,7 +202,7 @@ def test_eye_looks_turn_the_eyeballs_rigidly(identical, ict_character):
     for key, (side, axis, sign) in expected.items():
         d = dense[names.index(key)]
         pupil = d[front[side]]
-        assert sign * pupil[axis] > 0.3, (key, pupil)  # cm: 25 degrees on a 1.4 cm eye moves it ~0.6 cm
+        assert sign * pupil[axis] > 0.3, (key, pupil)  # cm: 15-25 degrees on a 1.6 cm eye move it 0.4-0.7 cm
         other = "R" if side == "L" else "L"
         assert np.abs(d[eye[other]]).max() == 0.0, key
         p, q = v[eye[side]], v[eye[side]] + d[eye[side]]  # rigid: pairwise distances kept
