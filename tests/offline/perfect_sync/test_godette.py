@@ -13,7 +13,8 @@ from tests.conftest import need_shared
 pytestmark = [pytest.mark.data, pytest.mark.slow]
 
 
-def test_godette_perfect_sync_exports_and_reads_back_its_expressions(ict_character, tmp_path):
+@pytest.fixture(scope="module")
+def synced(ict_character):
     import json
 
     from facepuppet.offline.elastic.commands import main_front
@@ -25,7 +26,11 @@ def test_godette_perfect_sync_exports_and_reads_back_its_expressions(ict_charact
     points = ict_control_points(marks["idx_to_landmark_verts"], c.vertices, c.triangles, main_front(c))
     source = fit_character(c, points, with_muscles=False)[0]
     godette = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
-    out, report, _ = perfect_sync(godette, source)
+    return godette, perfect_sync(godette, source)
+
+
+def test_godette_perfect_sync_exports_and_reads_back_its_expressions(synced, tmp_path):
+    godette, (out, report, _) = synced
     assert out.shape_names[:godette.n_shapes] == godette.shape_names  # its own shapes first, untouched
     added = out.shape_names[godette.n_shapes:]
     assert len(added) == 51 and added[0] == "eyeBlinkLeft"  # Godette has no ARKit names: Apple's spelling
@@ -39,3 +44,18 @@ def test_godette_perfect_sync_exports_and_reads_back_its_expressions(ict_charact
     assert back.shape_names == out.shape_names
     for name in added:
         assert pascal(name) in back.expressions.names, name  # VSeeFace / Warudo perfect-sync names
+
+
+@pytest.mark.gl
+def test_the_exported_perfect_sync_vrm_is_driven_by_arkit_pascal_case_over_vmc(synced, tmp_path):
+    from helpers.vmc_run import drive, last_weights
+
+    _, (out, _, _) = synced
+    path = tmp_path / "godette_ps.vrm"
+    export_character(out, path)
+    back = read_gltf(path)
+    result, log = drive(back, {"EyeBlinkLeft": 0.9, "JawOpen": 0.6, "MouthSmileRight": 0.3}, tmp_path)
+    got = last_weights(back, result)
+    assert got["eyeBlinkLeft"] == pytest.approx(0.9) and got["jawOpen"] == pytest.approx(0.6)
+    assert got["mouthSmileRight"] == pytest.approx(0.3)
+    assert got["eyeBlinkRight"] == 0.0 and got["mouthSmileLeft"] == 0.0
