@@ -20,7 +20,8 @@ ICT head's 47) are fitted to the target's skin coarsely and non-rigidly:
 Doubts (:func:`doubts`): a sided point on the wrong side of the symmetry
 plane or far from its mirrored partner (asymmetric), a point off the skin or
 facing away (off the surface), the inner lips in the wrong order, on one
-vertex, or with no opening between them (lips not separated). The landmarks
+vertex, or with no opening between them (lips not separated), a hole in the
+skin among the points that is not an eye or the mouth (:func:`holes`). The landmarks
 file is the control-point file of :mod:`facepuppet.offline.elastic.control_points`;
 :func:`read_landmarks` refuses unknown and missing names.
 """
@@ -217,6 +218,7 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
             if d > OFF_SURFACE:
                 out.append({"points": [name], "why": f"off the surface: the fitted point is {d:.2f} FAPU from the "
                                                      f"nearest free skin vertex (> {OFF_SURFACE})"})
+    out += holes(points, v, face)
     if UPPER in points.names and LOWER in points.names:
         up, low = points.vertex(UPPER), points.vertex(LOWER)
         if up == low or local[points.index(UPPER), 1] <= local[points.index(LOWER), 1]:
@@ -230,6 +232,34 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
                 out.append({"points": [UPPER, LOWER], "why": "lips not separated: the inner lip points share a "
                                                              "triangle and no opening runs between the lips (a "
                                                              "closed mouth); jawOpen stretches them apart"})
+    return out
+
+
+def holes(points: ControlPoints, vertices: np.ndarray, face: Face) -> list[dict]:
+    """Doubts for holes in the face: skin boundary loops within the control points' extent that are not an
+    eye or the mouth opening (their centre more than an inner-eye distance from the eye corners' and the
+    mouth corners' mid-points), each naming the control point nearest to it."""
+    from facepuppet.offline.elastic.lip_line import boundary_loops
+
+    v = np.asarray(vertices, np.float64)
+    es = max(fapu_of(points, v), 1e-12)
+    local_points = face.to_frame(v[points.vertices])
+    lo, hi = local_points.min(0), local_points.max(0)
+    openings = []
+    for a, b in (("eye_inner_L", "eye_outer_L"), ("eye_inner_R", "eye_outer_R"), ("mouth_corner_L", "mouth_corner_R")):
+        if a in points.names and b in points.names:
+            openings.append(0.5 * (v[points.vertex(a)] + v[points.vertex(b)]))
+    out = []
+    for loop in boundary_loops(len(v), skin_triangles(face)):
+        centre = v[loop].mean(0)
+        c = face.to_frame(centre)
+        if np.any(c[:2] < lo[:2]) or np.any(c[:2] > hi[:2]) or c[2] < lo[2]:
+            continue  # outside the face (the neck, the back of the head)
+        if any(np.linalg.norm(centre - o) < es for o in openings):
+            continue
+        near = points.names[int(np.argmin(np.linalg.norm(v[points.vertices] - centre, axis=1)))]
+        out.append({"points": [near], "why": f"a hole in the face ({len(loop)} boundary vertices) near {near}: "
+                                             "the skin must be closed there, or the clone tears it"})
     return out
 
 

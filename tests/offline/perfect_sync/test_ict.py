@@ -231,3 +231,17 @@ def test_lower_teeth_follow_the_jaw_and_the_back_of_the_head_stays(identical, ic
     back = np.unique(c.triangles[c.triangle_material == c.material_names.index("M_BackHead")])
     back = back[c.vertices[back, 2] < -2.0]  # the back half of the cranium
     assert np.abs(dense[c.n_shapes:, back]).max() == 0.0
+
+
+def test_a_hole_in_the_cheek_is_doubted(identical):
+    target, _, _, points = identical
+    v = target.vertices.astype(np.float64)
+    cheek = v[points.vertex("cheek_L")]
+    t = target.triangles
+    hole = (np.linalg.norm(v[t].mean(1) - cheek, axis=1) < 0.6)  # cm: a hole about 1 cm across
+    holed = target.with_parts(triangles=t[~hole], triangle_material=target.triangle_material[~hole],
+                              layout=None, normals=None)
+    face = find_face(holed)
+    found = [d for d in doubts(points, holed.vertices, face) if "hole" in d["why"]]
+    assert [d["points"] for d in found] == [["cheek_L"]], found
+    assert not [d for d in doubts(points, target.vertices, find_face(target)) if "hole" in d["why"]]
