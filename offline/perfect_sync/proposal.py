@@ -14,7 +14,7 @@ ICT head's 47) are fitted to the target's skin coarsely and non-rigidly:
    vertex by the Gaussian-smoothed offsets of its neighbours, so the set
    bends to the target's proportions without collapsing;
 4. each point takes its nearest free skin vertex; ``nose_tip`` the face's
-   detected nose tip; the inner lips the nearest skin vertex facing down
+   detected nose tip unless the fit's lies within 0.3 FAPU of it; the inner lips the nearest skin vertex facing down
    (upper) or up (lower), then put in order (:func:`fix_inner_lips`).
 
 Doubts (:func:`doubts`): a sided point on the wrong side of the symmetry
@@ -43,6 +43,7 @@ from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, fix_inner
 from facepuppet.offline.perfect_sync.face import Face
 
 START_SCALES = (0.6, 0.8, 1.0, 1.25, 1.6)
+NOSE_SNAP = 0.3  # the fitted nose tip is kept within this many FAPU of the detected one
 AXIS_RANGE = 1.33  # each axis's scale within this factor of the uniform fit's
 ICP_STEPS = 20
 BEND_STEPS = 6
@@ -125,11 +126,17 @@ def propose(source_positions: np.ndarray, source_names: Sequence[str], vertices:
     fitted, cand = fit_points(source_positions, names, vertices, face)
     v = np.asarray(vertices, np.float64)
     tree = cKDTree(v[cand])
-    taken = {face.nose_tip}
+    # the nose tip: the fit's nearest vertex when it lies near the face's detected tip, else the detected one
+    i_nose = names.index("nose_tip")
+    es = float(np.linalg.norm(fitted[names.index("eye_inner_L")] - fitted[names.index("eye_inner_R")]))
+    nose = int(cand[tree.query(fitted[i_nose])[1]])
+    if np.linalg.norm(v[nose] - v[face.nose_tip]) > NOSE_SNAP * es:
+        nose = face.nose_tip
+    taken = {nose}
     chosen = []
     for name, point in zip(names, fitted):
         if name == "nose_tip":
-            chosen.append(face.nose_tip)
+            chosen.append(nose)
             continue
         _, order = tree.query(point, k=min(len(cand), len(names) + 1))
         pick = next((int(cand[i]) for i in np.atleast_1d(order) if int(cand[i]) not in taken), None)

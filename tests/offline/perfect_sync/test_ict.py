@@ -54,11 +54,11 @@ def test_identical_character_clones_with_small_error(identical, ict_character):
     assert report["implausible_shapes"] == [] and report["doubts"] == []
     errs = truth_errors(ict_character, out, report["added"])
     skin = [k for k in errs if not k.startswith("eyeLook")]
-    # measured 11.4 % median on the skin, worst 25 % (the blinks, 16 % before close_lids made the lids meet;
-    # cheekPuff 20 %): the elastic model's own reconstruction error
-    # of ICT is 9.8 % (fit-elastic); the geometric nose tip adds the rest. (16.6 % median, jawOpen 48 %, while
-    # the inner lips were taken by distance alone: the lower lip's vertex as the upper point.)
-    assert np.median([errs[k] for k in skin]) < 0.13, errs
+    # measured 9.8 % median without the eye looks (10.7 % with them), worst 25 % (the blinks, 16 % before
+    # close_lids made the lids meet): the elastic model's own reconstruction error of ICT is 9.8 % (fit-elastic).
+    # 11.4 % while the detected nose tip replaced the fitted one; 16.6 % (jawOpen 48 %) while the inner lips
+    # were taken by distance alone (the lower lip's vertex as the upper point).
+    assert np.median([errs[k] for k in skin]) < 0.11, errs
     assert max(errs.values()) < 0.30, errs
 
 
@@ -245,3 +245,24 @@ def test_a_hole_in_the_cheek_is_doubted(identical):
     found = [d for d in doubts(points, holed.vertices, face) if "hole" in d["why"]]
     assert [d["points"] for d in found] == [["cheek_L"]], found
     assert not [d for d in doubts(points, target.vertices, find_face(target)) if "hole" in d["why"]]
+
+
+def test_identical_character_reproduces_the_source_model_exactly(identical, source, ict_character):
+    """On the source's own head the proposal finds the source's 47 vertices and the clone is the source's
+    own elastic reconstruction (zero error beyond the model's), except the blinks, whose lids close_lids
+    makes meet. (Before the fitted nose tip was kept, the detected one moved a vertex: 5.4 % median.)"""
+    from facepuppet.offline.perfect_sync.transfer import fold_source
+
+    target, out, _, points = identical
+    model = source[0]
+    np.testing.assert_array_equal(points.vertices, model.arrays["control_vertices"])
+    keys, params = fold_source(model)
+    v = ict_character.vertices
+    skin = find_face(ict_character).skin
+    dense = out.dense_deltas()[target.n_shapes:]
+    for key, p, d in zip(keys, params, dense):
+        if key.startswith("eyeBlink"):
+            continue
+        pos, _ = model.deform(p, v, np.tile([0, 0, 1.0], (len(v), 1)))
+        ref = (pos - v)[skin]
+        np.testing.assert_allclose(d[skin], ref, atol=1e-4 * max(np.abs(ref).max(), 1e-6), err_msg=key)
