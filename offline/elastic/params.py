@@ -29,6 +29,7 @@ from scipy.linalg import qr, solve_triangular
 from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
+from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.muscles import default_muscles, muscle_sections
 from facepuppet.offline.elastic.rigid_parts import rigid_labels
 
@@ -137,7 +138,8 @@ def build_model(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoin
                                       points.names)
     positions = v[points.vertices]
     muscles = default_muscles(positions, points) if with_muscles else []
-    labels, anchors = rigid_labels(v, points, basis.detached_mask_, params, deltas)
+    labels, anchors = rigid_labels(v, points, basis.detached_mask_, params, deltas,
+                                   pieces=components(len(v), triangles)[1])
     arrays = {
         "basis_indices": basis.compact_indices_,
         "basis_weights": basis.compact_weights_,

@@ -15,7 +15,8 @@ Which handle-free vertices belong to the jaw:
   parameters): a vertex joins the jaw when, summed over the shapes, the jaw
   transform fitted to the shape's control displacements explains its motion
   better than staying fixed does;
-* without (a bare cloned mesh): when it lies below the inner-lip midline.
+* without (a bare cloned mesh): when it lies below the inner-lip midline (a
+  whole piece by its centre, when the pieces are given).
 
 Symbols → code names: R_s, t_s (jaw rotation and translation of shape s,
 fitted to the anchors' control displacements) ``kabsch(rest + U_s[a], rest)``;
@@ -59,6 +60,7 @@ def rigid_labels(
     detached_mask: np.ndarray,
     params: np.ndarray | None = None,
     deltas: np.ndarray | None = None,
+    pieces: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The rigid-part sections of an elastic table: one part, the jaw.
 
@@ -69,6 +71,9 @@ def rigid_labels(
     detached_mask : ndarray of shape (n,), bool, handle-free vertices (ElasticBasis.detached_mask_)
     params : ndarray of shape (n_shapes, n_c, 3), float, or None; eq. 6 parameters of ``deltas``
     deltas : ndarray of shape (n_shapes, n, 3), float, units, or None
+    pieces : ndarray of shape (n,), int, or None; connected-piece label of each vertex. Without example
+        shapes a whole piece joins the jaw when its centre lies below the inner-lip midline (else each
+        vertex by its own height, which splits an upper tooth reaching below the midline)
 
     Returns
     -------
@@ -92,6 +97,12 @@ def rigid_labels(
         joins = jaw_residual < fixed_residual
     else:
         midline = 0.5 * (v[points.vertex("lip_upper_inner"), 1] + v[points.vertex("lip_lower_inner"), 1])
-        joins = v[idx, 1] < midline
+        if pieces is None:
+            joins = v[idx, 1] < midline
+        else:
+            piece = np.asarray(pieces)[idx]
+            _, inverse = np.unique(piece, return_inverse=True)
+            centre_y = np.bincount(inverse, weights=v[idx, 1]) / np.bincount(inverse)
+            joins = centre_y[inverse] < midline
     labels[idx[joins]] = 0
     return labels, mask[None, :]

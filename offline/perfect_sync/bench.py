@@ -1,0 +1,128 @@
+"""``facepuppet bench perfect-sync --json OUT.json``: cloned ARKit shapes measured on characters with truth.
+
+* ICT variants whose true expressions are known (the same rig deformed, its
+  shapes carried along): the ICT head itself, its proportions changed (a
+  linear map: wider, shorter, deeper; truth A d) and the cartoon warp of
+  ``bench kpls`` (:func:`facepuppet.offline.kpls.targets.stylise`: big eyes,
+  long jaw; truth f(v + d) − f(v)). Each is given to ``perfect-sync`` with its
+  shapes renamed out of ARKit's names, so all are cloned; per shape and over
+  all, the relative error (:func:`.evaluate.truth_errors`; goal median < 15 %,
+  no shape over 40 %), with and without the eye looks (the eyeballs do not
+  turn: the elastic skin model has no handle on them).
+* Godette (the data kit's VRM): cosine and magnitude ratio of each cloned
+  shape against the artist's shape meaning the same (goal cosine >= 0.7 on
+  the blinks and the open mouth), and the doubts of the proposal.
+* Time of the whole command's work per character (goals: Godette < 30 s, a
+  30k-vertex face < 2 min; the ICT head has 26.7k vertices).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from facepuppet.runtime.character import Character
+
+from facepuppet.offline.bench_data import add_data_argument, data_dir
+
+GOAL_MEDIAN, GOAL_WORST, GOAL_COSINE = 0.15, 0.40, 0.7
+GOAL_GODETTE_S, GOAL_30K_S = 30.0, 120.0
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_data_argument(parser)
+    parser.add_argument("--source", type=Path, help="source elastic table (default: fit-elastic of the kit's ICT)")
+
+
+def _renamed(character):
+    return character.with_parts(shape_names=tuple(f"truth{i}" for i in range(character.n_shapes)), expressions=None)
+
+
+def proportions(character: Character, scale: tuple[float, float, float] = (1.15, 0.9, 1.05)) -> Character:
+    """The character under the linear map diag(scale) about its pivot; the shapes carried (A d)."""
+    a = np.asarray(scale, np.float32)
+    p = character.pivot
+    return character.with_parts(name=f"{character.name} (proportions)", vertices=((character.vertices - p) * a + p),
+                                delta_positions=character.delta_positions * a, normals=None)
+
+
+def _summary(errs: dict) -> dict:
+    skin = {k: v for k, v in errs.items() if not k.startswith("eyeLook")}
+    worst = max(errs, key=errs.get)
+    return {"per_shape": errs, "median": float(np.median(list(errs.values()))),
+            "median_without_eye_looks": float(np.median(list(skin.values()))),
+            "worst": [worst, errs[worst]], "n_over_40": int(sum(v > GOAL_WORST for v in errs.values())),
+            "meets_goal": bool(np.median(list(errs.values())) < GOAL_MEDIAN and errs[worst] < GOAL_WORST)}
+
+
+def run_bench(args: argparse.Namespace) -> dict:
+    from facepuppet.runtime.progress import Progress
+
+    from facepuppet.offline.elastic.commands import main_front
+    from facepuppet.offline.elastic.control_points import ict_control_points
+    from facepuppet.offline.elastic.params import fit_character
+    from facepuppet.offline.io.gltf_read import read_gltf
+    from facepuppet.offline.io.rig_import import import_rig
+    from facepuppet.offline.kpls.targets import stylise
+    from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
+    from facepuppet.offline.perfect_sync.evaluate import GODETTE_PAIRS, pair_similarity, truth_errors
+    from facepuppet.offline.perfect_sync.face import find_face
+
+    kit = data_dir(args.data)
+    ict = import_rig(kit / "ict-facekit" / "generic_neutral_mesh.obj", kit / "ict-facekit")
+    if args.source:
+        source = load_source(args.source)
+    else:
+        marks = json.loads((kit / "ict-facekit" / "vertex_indices.json").read_text(encoding="utf-8"))
+        points = ict_control_points(marks["idx_to_landmark_verts"], ict.vertices, ict.triangles, main_front(ict))
+        source = fit_character(ict, points, with_muscles=False)[0]
+    result: dict = {"goals": {"median": GOAL_MEDIAN, "worst": GOAL_WORST, "cosine": GOAL_COSINE,
+                              "godette_s": GOAL_GODETTE_S, "face_30k_s": GOAL_30K_S}, "ict_variants": {}}
+    for label, variant in (("identical", ict), ("proportions", proportions(ict)), ("stylised", stylise(ict))):
+        with Progress(f"perfect-sync {label}", total=None, unit="shapes") as bar:
+            t = time.perf_counter()
+            out, report, _ = perfect_sync(_renamed(variant), source, progress=bar)
+            seconds = time.perf_counter() - t
+        errs = truth_errors(variant, out, find_face(variant))
+        result["ict_variants"][label] = {"n_vertices": variant.n_vertices, "seconds": seconds,
+                                         "n_added": len(report["added"]), "n_doubts": len(report["doubts"]),
+                                         **_summary(errs)}
+        s = result["ict_variants"][label]
+        print(f"bench perfect-sync: {label}: median {100 * s['median']:.1f}% "
+              f"({100 * s['median_without_eye_looks']:.1f}% without eye looks), "
+              f"worst {s['worst'][0]} {100 * s['worst'][1]:.1f}%, {seconds:.1f} s")
+    godette_path = kit / "gltf" / "Godette_vrm_v4.vrm"
+    if godette_path.exists():
+        godette = read_gltf(godette_path)
+        with Progress("perfect-sync Godette", total=None, unit="shapes") as bar:
+            t = time.perf_counter()
+            out, report, _ = perfect_sync(godette, source, progress=bar)
+            seconds = time.perf_counter() - t
+        face = find_face(godette)
+        pairs = {}
+        for key, artist in GODETTE_PAIRS:
+            if artist in out.shape_names and key in out.shape_names:
+                pairs[f"{key}~{artist}"] = pair_similarity(out, key, artist, face.mesh)
+        result["godette"] = {"n_vertices": godette.n_vertices, "face_vertices": int(len(face.mesh)),
+                             "skin_vertices": int(len(face.skin)), "seconds": seconds, "pairs": pairs,
+                             "n_doubts": len(report["doubts"]), "doubts": report["doubts"],
+                             "meets_time_goal": seconds < GOAL_GODETTE_S}
+        print(f"bench perfect-sync: Godette {seconds:.1f} s; " + ", ".join(
+            f"{k} cos {v['cosine']:.2f} x{v['magnitude_ratio']:.2f}" for k, v in pairs.items()
+            if v["cosine"] is not None))
+    else:
+        result["godette"] = {"note": f"{godette_path} not in the data kit: not measured"}
+    result["face_30k"] = {"n_vertices": ict.n_vertices, "seconds": result["ict_variants"]["identical"]["seconds"],
+                          "meets_goal": result["ict_variants"]["identical"]["seconds"] < GOAL_30K_S}
+    return result
+
+
+def register_benches(register_bench: Callable[..., None]) -> None:
+    """Entry of ``offline/commands.py``: add ``bench perfect-sync``."""
+    register_bench("perfect-sync", run_bench, "cloned ARKit shapes against true ones (ICT variants), against "
+                   "Godette's artist shapes, and their time", _add_arguments)

@@ -1,0 +1,95 @@
+"""``facepuppet perfect-sync``: ARKit-named shapes cloned onto any character's face (issue 14)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.progress import Progress
+
+from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
+from facepuppet.offline.perfect_sync.face import find_face
+from facepuppet.offline.perfect_sync.proposal import doubts, picture, propose, read_landmarks
+from facepuppet.offline.perfect_sync.transfer import add_shapes, clone_face
+
+IMPLAUSIBLE = 0.3  # a cloned shape moving a vertex this many face widths is reported (ICT's jawOpen: 0.12)
+
+
+def load_source(path: str | os.PathLike) -> ElasticModel:
+    """The source elastic table (``fit-elastic`` of a head with ARKit shapes); TablesError for another kind."""
+    source = ElasticModel.load(path)
+    for role in ("nose_tip", "forehead", "eye_inner_L", "eye_inner_R"):
+        if role not in source.control_names:
+            raise ValueError(f"{path}: control_names: the source has no {role!r} point (the cloning's face frame "
+                             "needs it)")
+    return source
+
+
+def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | None = None,
+                 replace: bool = False, progress: Progress | None = None) -> tuple[Character, dict, ControlPoints]:
+    """(character with the ARKit shapes, report, control points used); see the module doc."""
+    face = find_face(character)
+    names = tuple(source.control_names)
+    if landmarks is not None:
+        points, fitted = read_landmarks(landmarks, names, character.n_vertices), None
+    else:
+        points, fitted = propose(source.arrays["control_positions"], names, character.vertices, face)
+    doubtful = doubts(points, character.vertices, face, fitted)
+    def step(i: int, n: int, name: str) -> None:
+        progress.total = n
+        progress.update(i, name)
+
+    keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step)
+    out, added = add_shapes(character, keys, dense, replace)
+    largest = np.linalg.norm(dense, axis=2).max(axis=1) / face.width
+    implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} face widths (> {IMPLAUSIBLE}): check the points"}
+                   for k, r in zip(keys, largest) if r > IMPLAUSIBLE]
+    report = {"face": {"evidence": face.evidence, "mesh_vertices": int(len(face.mesh)), "skin_vertices":
+                       int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
+              "doubts": doubtful, "implausible_shapes": implausible, **added}
+    return out, report, points
+
+
+def _run(args: argparse.Namespace) -> int:
+    character = Character.load(args.character)
+    source = load_source(args.source)
+    with Progress("perfect-sync", total=None, unit="shapes") as bar:
+        out, report, points = perfect_sync(character, source, args.landmarks, args.replace, bar)
+    from facepuppet.runtime.outputs import OutputSet
+
+    with OutputSet() as outputs:
+        out.save(outputs.path(args.output))
+    if args.pictures:
+        args.pictures.mkdir(parents=True, exist_ok=True)
+        write_control_points(args.pictures / "landmarks.json", points)
+        face = find_face(character)
+        bad = [n for d in report["doubts"] for n in d["points"]]
+        print(picture(args.pictures / "landmarks.png", character.vertices, face, points, bad))
+        (args.pictures / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    for d in report["doubts"]:
+        print(f"doubtful: {', '.join(d['points'])}: {d['why']}")
+    for d in report["implausible_shapes"]:
+        print(f"implausible: {d['shape']}: {d['why']}")
+    print(f"{args.output}: {len(report['added'])} ARKit shapes added, {len(report['kept'])} kept, "
+          f"{len(report['replaced'])} replaced; {len(report['doubts'])} doubtful proposal(s)"
+          + (f" (correct them in {args.pictures / 'landmarks.json'} and rerun with --landmarks)"
+             if report["doubts"] and args.pictures else ""))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("perfect-sync", help="add the 52 ARKit shapes to a character by elastic cloning")
+    p.add_argument("character", type=Path, help="character table (.npz, from import-rig of OBJ/GLB/VRM)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="character table to write (.npz)")
+    p.add_argument("--source", type=Path, required=True,
+                   help="source elastic table (fit-elastic of the ICT head: ict_elastic.npz)")
+    p.add_argument("--landmarks", type=Path, help="control points to use (the JSON --pictures writes, edited)")
+    p.add_argument("--pictures", type=Path, help="folder for the proposed points (PNG, JSON) and the report")
+    p.add_argument("--replace", action="store_true", help="replace shapes it already has under an ARKit name")
+    p.set_defaults(func=_run)

@@ -1,0 +1,85 @@
+"""How good cloned perfect-sync shapes are: against true shapes, against an artist's, and at the lids.
+
+* :func:`truth_errors`: on a character whose true ARKit expressions are known
+  (an ICT variant): per shape the RMS error over the skin vertices the true
+  shape moves (more than 1 % of its largest displacement), relative to that
+  largest displacement (as fit-elastic reports its own error);
+* :func:`pair_similarity`: against an artist's shape that means the same
+  (Godette's ``blink_left`` for ``eyeBlinkLeft``): cosine of the two
+  displacement fields over the face mesh, and the ratio of their norms;
+* :func:`mid_lid_gap`: the vertical gap between the lids half way between
+  their inner and outer control points, at rest and in a shape.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.character import Character
+
+from facepuppet.offline.elastic.control_points import ControlPoints
+from facepuppet.offline.perfect_sync.face import Face
+
+# ARKit shape → the VRM 0.x preset / Godette shape meaning the same thing (canonical ARKit key first).
+GODETTE_PAIRS = (
+    ("eyeBlinkLeft", "blink_left"), ("eyeBlinkRight", "blink_right"), ("jawOpen", "ah"),
+    ("mouthFunnel", "oh"), ("mouthPucker", "uu"), ("mouthStretchLeft", "ee"), ("mouthSmileLeft", "ih"),
+    ("eyeLookUpLeft", "look_up"), ("eyeLookDownLeft", "look_down"), ("eyeLookOutLeft", "look_left"),
+    ("eyeLookInLeft", "look_right"), ("browDownLeft", "angled_eyebrows"),
+)
+
+
+def truth_errors(truth: Character, cloned: Character, face: Face) -> dict:
+    """{canonical ARKit key: relative RMS error} of each shape ``cloned`` has beyond ``truth``'s own count.
+
+    ``truth`` holds the true shapes under any ARKit spelling (an unsided key the truth splits is the sum
+    of its sides); ``cloned`` is ``truth``'s mesh with the cloned shapes after its own ``truth.n_shapes``.
+    """
+    true = truth.dense_deltas()
+    by = {canonical(n): s for s, n in enumerate(truth.shape_names)}
+    dense = cloned.dense_deltas()
+    out = {}
+    for s in range(truth.n_shapes, cloned.n_shapes):
+        key = canonical(cloned.shape_names[s])
+        if key in by:
+            t = true[by[key]]
+        elif key + "Left" in by and key + "Right" in by:
+            t = true[by[key + "Left"]] + true[by[key + "Right"]]
+        else:
+            continue
+        length = np.linalg.norm(t[face.skin], axis=1)
+        if length.max() <= 0:
+            continue
+        moved = length > 0.01 * length.max()
+        err = np.linalg.norm(dense[s][face.skin][moved] - t[face.skin][moved], axis=1)
+        out[key] = float(np.sqrt(np.mean(err**2)) / length.max())
+    return out
+
+
+def pair_similarity(character: Character, cloned_name: str, artist_name: str, vertices: np.ndarray) -> dict:
+    """{"cosine", "magnitude_ratio"} of two shapes of ``character`` over ``vertices`` (cloned / artist)."""
+    a = character.dense_deltas()[character.shape_names.index(cloned_name)][vertices].astype(np.float64).ravel()
+    b = character.dense_deltas()[character.shape_names.index(artist_name)][vertices].astype(np.float64).ravel()
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    return {"cosine": float(a @ b / (na * nb)) if na > 0 and nb > 0 else None,
+            "magnitude_ratio": float(na / nb) if nb > 0 else None}
+
+
+def mid_lid_gap(character: Character, face: Face, points: ControlPoints, side: str,
+                delta: np.ndarray) -> tuple[float, float]:
+    """(rest, shaped) vertical gap (units, along the face's up) between the skin vertices nearest the
+    mid-points of the upper and lower lid of ``side`` ("L"/"R"); ``delta`` (n, 3) the shape's deltas."""
+    v = character.vertices.astype(np.float64)
+    skin = face.skin
+    up_axis = face.frame[1]
+
+    def near(p):
+        return int(skin[np.argmin(np.linalg.norm(v[skin] - p, axis=1))])
+
+    def mid(lid):
+        return 0.5 * (v[points.vertex(f"lid_{lid}_inner_{side}")] + v[points.vertex(f"lid_{lid}_outer_{side}")])
+
+    up, low = near(mid("upper")), near(mid("lower"))
+    rest = float((v[up] - v[low]) @ up_axis)
+    return rest, float((v[up] + delta[up] - v[low] - delta[low]) @ up_axis)

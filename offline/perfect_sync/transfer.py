@@ -1,0 +1,261 @@
+"""The source's expressions cloned onto a character's face mesh and added as ARKit-named shapes.
+
+The elastic cloning of Yano & Harada (2009) §5 (:func:`clone_model`) runs on
+the face mesh only (:class:`~.face.Face`), so the body and every other mesh
+cannot move; inside the face mesh the basis's fixed region (§4) holds the
+back of the head, the pieces without control points below the lips follow
+the jaw rigidly (:mod:`facepuppet.offline.elastic.rigid_parts`) and the
+others (eyes, upper teeth) stay. Each cloned expression is evaluated once at
+weight 1 and stored as a morph (dense → sparse deltas with normal deltas).
+
+The source's shapes are folded into ARKit's 52: a shape whose name is an
+ARKit name in any spelling (:func:`canonical`) directly; an unsided ARKit
+shape the source splits (ICT's ``browInnerUp_L`` / ``_R``, ``cheekPuff_L`` /
+``_R``) as the sum of its sides' parameters (the parameters are linear);
+others (ICT's ``cheekRaiser``, ``PupilDilate``) are left out. The blinks'
+upper lid points are then put onto the lower ones (:func:`close_lids`), and
+the eye looks turn the eyeball pieces where the character has them
+(:func:`eyeballs`) instead of leaving the eyes still under moving lids.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index, canonical, split_side
+from facepuppet.runtime.character import Character, sparse_deltas
+from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.geometry import vertex_normals
+
+from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
+from facepuppet.offline.elastic.clone import clone_model
+from facepuppet.offline.elastic.control_points import ControlPoints
+from facepuppet.offline.elastic.params import build_model
+from facepuppet.offline.perfect_sync.face import Face
+
+CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between the lid points
+# An eye look at weight 1 turns the eyeball this far (sideways, up or down). The source's shapes do not say
+# (ICT's eyeLook shapes move the lids only: its eyes are turned by the app); a judgement, about the eye's
+# comfortable range: 25 degrees sideways, 15 up and down (at 25 the ICT iris went under the upper lid).
+EYE_LOOK_DEGREES = (25.0, 15.0)  # (about the up axis, about the across axis)
+# (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
+# turn about +y by + moves the front (+z) towards +x, one about +x by − moves it up.
+EYE_TURNS = {
+    ("eyeLookUpLeft", "L"): (0, -1.0), ("eyeLookUpRight", "R"): (0, -1.0),
+    ("eyeLookDownLeft", "L"): (0, 1.0), ("eyeLookDownRight", "R"): (0, 1.0),
+    ("eyeLookOutLeft", "L"): (1, 1.0), ("eyeLookInLeft", "L"): (1, -1.0),
+    ("eyeLookOutRight", "R"): (1, -1.0), ("eyeLookInRight", "R"): (1, 1.0),
+}
+
+
+def fold_source(source: ElasticModel) -> tuple[tuple[str, ...], np.ndarray]:
+    """(ARKit names the source can give, in ARKit's order; their parameters (n, n_c, 3) float32)."""
+    params = source.arrays["params"].astype(np.float64)
+    by_key: dict[str, int] = {}
+    for s, name in enumerate(source.shape_names):
+        by_key.setdefault(canonical(name), s)
+    names, out = [], []
+    for key in ARKIT_NAMES:
+        _, side = split_side(key)
+        if key in by_key:
+            out.append(params[by_key[key]])
+        elif side is None and key + "Left" in by_key and key + "Right" in by_key:
+            out.append(params[by_key[key + "Left"]] + params[by_key[key + "Right"]])
+        else:
+            continue
+        names.append(key)
+    return tuple(names), np.asarray(out, np.float32).reshape(len(names), len(source.control_names), 3)
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix (3, 3) by ``angle`` radians about unit ``axis`` (Rodrigues)."""
+    k = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
+
+
+def eyeballs(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints) -> dict:
+    """{"L"/"R": (vertex indices, centre (3,))} of the eyeball pieces found behind each eye's corners.
+
+    An eyeball is a piece without control points that is close to a sphere (every vertex within 15 %
+    of the radius from the least-squares sphere; ICT's sclera 8 %, its iris and cornea 14 %), of radius
+    0.2–0.8 inner-eye distances, at least a radius deep (not a cap like ICT's tear film), centred
+    behind the eye's corners, between them across the eye and within half an inner-eye distance of
+    their mid-point. A character whose eyes are flat decals or part of the skin has none, and its eye
+    looks stay skin-only.
+    """
+    from facepuppet.offline.elastic.laplacian import components
+
+    v = np.asarray(vertices, np.float64)
+    t = np.asarray(triangles, np.int64)
+    need = ("eye_inner_L", "eye_outer_L", "eye_inner_R", "eye_outer_R")
+    if not all(n in points.names for n in need):
+        return {}
+    es = float(np.linalg.norm(v[points.vertex("eye_inner_L")] - v[points.vertex("eye_inner_R")]))
+    _, labels = components(len(v), t)
+    handled = np.zeros(len(v), bool)
+    handled[points.vertices] = True
+    out: dict = {}
+    for label in np.unique(labels[np.unique(t)]):
+        members = np.flatnonzero(labels == label)
+        if handled[members].any() or len(members) < 20:
+            continue
+        p = v[members]
+        # sphere fit: |p|² = 2 c·p + (r² − |c|²), linear in c and the constant
+        a = np.column_stack([2 * p, np.ones(len(p))])
+        sol = np.linalg.lstsq(a, (p**2).sum(1), rcond=None)[0]
+        centre = sol[:3]
+        radius = float(np.sqrt(max(sol[3] + centre @ centre, 0.0)))
+        off_sphere = np.abs(np.linalg.norm(p - centre, axis=1) - radius).max()
+        if not 0.2 * es < radius < 0.8 * es or off_sphere > 0.15 * radius or np.ptp(p[:, 2]) < radius:
+            continue  # not a ball: the wrong size, not round, or a thin cap (a tear film over the eye)
+        for side in ("L", "R"):
+            inner, outer = v[points.vertex(f"eye_inner_{side}")], v[points.vertex(f"eye_outer_{side}")]
+            corners = 0.5 * (inner + outer)
+            across = (outer - inner) / np.linalg.norm(outer - inner)
+            behind = centre[2] < min(inner[2], outer[2])
+            # the centre behind the corners' mid-point, between the corners across the eye
+            if behind and np.linalg.norm(centre - corners) < 0.5 * es and abs((centre - corners) @ across) < 0.3 * es:
+                prev = out.get(side)
+                if prev is None:
+                    out[side] = (members, centre, radius)
+                else:  # sclera and iris: one eyeball, turned about the widest sphere's centre (the sclera's:
+                    # the iris's cornea bulge pulls its fitted centre 0.09 cm forward on ICT, and turning about it
+                    # pushes the eye through the tear film in front)
+                    out[side] = (np.concatenate([prev[0], members]), prev[1] if prev[2] >= radius else centre,
+                                 max(prev[2], radius))
+    return {side: (members, centre) for side, (members, centre, _) in out.items()}
+
+
+def close_lids(params: np.ndarray, names: tuple[str, ...], points: ControlPoints, vertices: np.ndarray,
+               closed: float = CLOSED_GAP) -> np.ndarray:
+    """``params`` (n_shapes, n_c, 3) with each blink's upper lid points brought onto the lower ones.
+
+    The eq. 6 parameters are a least-squares compromise over the whole skin: on ICT they leave the lid
+    points of eyeBlink half open (0.44 of the 0.85 cm gap; the true shape 0.08). A blink means the lids
+    meet, so each upper lid point of ``eyeBlinkLeft`` / ``Right`` is put ``closed`` of its rest gap above
+    its lower partner's displaced place (the lower lid keeps its cloned motion).
+    """
+    out = np.array(params, np.float64)
+    v = np.asarray(vertices, np.float64)
+    for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
+        if key not in names:
+            continue
+        s = names.index(key)
+        for part in ("inner", "outer"):
+            a, b = f"lid_upper_{part}_{side}", f"lid_lower_{part}_{side}"
+            if a not in points.names or b not in points.names:
+                continue
+            i, j = points.index(a), points.index(b)
+            rest_up, rest_low = v[points.vertices[i]], v[points.vertices[j]]
+            out[s, i] = rest_low + out[s, j] + closed * (rest_up - rest_low) - rest_up
+    return out.astype(np.float32)
+
+
+def naming_style(names: tuple[str, ...]) -> str:
+    """The character's convention for ARKit names: "apple" (eyeBlinkLeft), "pascal" (EyeBlinkLeft) or
+    "sided" (eyeBlink_L); "apple" when it has none."""
+    styles = []
+    for n in names:
+        if arkit_index(n) is None:
+            continue
+        if n[:1].isupper():
+            styles.append("pascal")
+        elif n.endswith(("_L", "_R")):
+            styles.append("sided")
+        else:
+            styles.append("apple")
+    return max(set(styles), key=styles.count) if styles else "apple"
+
+
+def spelled(key: str, style: str) -> str:
+    """ARKit canonical ``key`` in the character's ``style``."""
+    if style == "pascal":
+        return key[:1].upper() + key[1:]
+    if style == "sided":
+        base, side = split_side(key)
+        return base + "_" + side[0] if side else key
+    return key
+
+
+def clone_face(source: ElasticModel, character: Character, face: Face, points: ControlPoints, *,
+               k: int = DEFAULT_K, fixed_ratio: float = DEFAULT_FIXED_RATIO,
+               progress: Callable[[int, int, str], None] | None = None) -> tuple[tuple[str, ...], np.ndarray]:
+    """Cloned ARKit shapes on ``character``: (canonical names, dense deltas (n, n_vertices, 3) float32)."""
+    names, params = fold_source(source)
+    local = np.full(character.n_vertices, -1, np.int64)
+    local[face.mesh] = np.arange(len(face.mesh))
+    sub_v = character.vertices[face.mesh].astype(np.float64)
+    sub_t = local[face.triangles]
+    sub_points = ControlPoints(points.names, local[points.vertices])
+    if (sub_points.vertices < 0).any():
+        raise ValueError("control points: every point must lie on the face mesh")
+    folded = ElasticModel(arrays={**source.arrays, "params": params}, shape_names=names,
+                          control_names=source.control_names, muscle_names=source.muscle_names,
+                          units=source.units, metadata=dict(source.metadata))
+
+    def build(tgt_points, cloned, shape_names):
+        return build_model(sub_v, sub_t, tgt_points, cloned, shape_names, k=k, fixed_ratio=fixed_ratio,
+                           units=character.units, with_muscles=False)[0]
+
+    model = clone_model(folded, sub_points, sub_v, build)
+    params = close_lids(model.arrays["params"], names, sub_points, sub_v)
+    eyes = eyeballs(sub_v, sub_t, sub_points)
+    dense = np.zeros((len(names), character.n_vertices, 3), np.float32)
+    up = np.tile([0, 0, 1.0], (len(sub_v), 1))
+    for s, name in enumerate(names):
+        pos, _ = model.deform(params[s], sub_v.astype(np.float32), up)
+        d = pos - sub_v
+        for side, (members, centre) in eyes.items():
+            turn = EYE_TURNS.get((name, side))
+            if turn is not None:
+                axis, sign = turn
+                r = _rotation(face.frame[axis], sign * np.radians(EYE_LOOK_DEGREES[0 if axis == 1 else 1]))
+                d[members] = (sub_v[members] - centre) @ r.T + centre - sub_v[members]
+        dense[s, face.mesh] = d
+        if progress is not None:
+            progress(s + 1, len(names), name)
+    return names, dense
+
+
+def add_shapes(character: Character, keys: tuple[str, ...], dense: np.ndarray,
+               replace: bool = False) -> tuple[Character, dict]:
+    """``character`` with the cloned shapes added under its naming convention.
+
+    A shape it already has under an ARKit name is kept (``replace``: its deltas replaced). Returns
+    (character, {"added": [...], "kept": [...], "replaced": [...]}).
+    """
+    style = naming_style(character.shape_names)
+    have = {canonical(n): s for s, n in enumerate(character.shape_names) if arkit_index(n) is not None}
+    rows = []  # (name, indices, positions, normals) per shape, existing first
+    for s, name in enumerate(character.shape_names):
+        sl = character.shape_slice(s)
+        rows.append([name, character.delta_indices[sl], character.delta_positions[sl], character.delta_normals[sl]])
+    n0 = vertex_normals(character.vertices, character.triangles)
+    report = {"added": [], "kept": [], "replaced": []}
+    for key, d in zip(keys, dense):
+        if key in have and not replace:
+            report["kept"].append(character.shape_names[have[key]])
+            continue
+        dn = vertex_normals(character.vertices + d, character.triangles) - n0
+        offsets, idx, both = sparse_deltas(np.concatenate([d, dn], axis=1)[None], tolerance=1e-6)
+        row = [spelled(key, style), idx, both[:, :3], both[:, 3:]]
+        if key in have:
+            row[0] = character.shape_names[have[key]]
+            rows[have[key]] = row
+            report["replaced"].append(row[0])
+        else:
+            rows.append(row)
+            report["added"].append(row[0])
+    counts = [len(r[1]) for r in rows]
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    cat = (lambda i, shape, dt: np.concatenate([np.asarray(r[i], dt).reshape(shape) for r in rows])  # noqa: E731
+           if rows else np.zeros((0,) + shape[1:], dt))
+    out = character.with_parts(
+        shape_names=tuple(r[0] for r in rows), delta_offsets=offsets,
+        delta_indices=cat(1, (-1,), np.uint32), delta_positions=np.ascontiguousarray(cat(2, (-1, 3), np.float32)),
+        delta_normals=np.ascontiguousarray(cat(3, (-1, 3), np.float32)),
+    )
+    return out, report

@@ -1,0 +1,61 @@
+"""Finding the face: the demo head's face and frame; a cube and a face cut in two refused."""
+
+import numpy as np
+import pytest
+
+from facepuppet.runtime.demo.head import build_demo_character
+
+from facepuppet.offline.elastic.clone import mesh_character
+from facepuppet.offline.perfect_sync.face import FaceError, find_face
+
+
+def _box(n: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """A closed (welded) cube of side 10 with n x n quads per side (each quad two triangles)."""
+    verts, tris = [], []
+    g = np.linspace(-5, 5, n + 1)
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            base = len(verts)
+            for a in g:
+                for b in g:
+                    p = [0.0, 0.0, 0.0]
+                    p[axis], p[(axis + 1) % 3], p[(axis + 2) % 3] = 5 * sign, a, b
+                    verts.append(p)
+            for i in range(n):
+                for j in range(n):
+                    q = base + i * (n + 1) + j
+                    t1, t2 = (q, q + n + 1, q + 1), (q + 1, q + n + 1, q + n + 2)
+                    tris += [t1, t2] if sign > 0 else [t1[::-1], t2[::-1]]
+    v, inverse = np.unique(np.round(np.array(verts), 6), axis=0, return_inverse=True)  # weld the edges
+    return v.astype(np.float32), inverse.reshape(-1)[np.array(tris)].astype(np.uint32)
+
+
+def test_demo_head_face_is_found_with_its_frame():
+    c = build_demo_character()
+    face = find_face(c)
+    assert face.evidence == "shapes"
+    np.testing.assert_allclose(face.frame, np.eye(3), atol=0.02)  # stored +Y up, facing +Z
+    assert abs(face.plane_offset) < 0.01 * face.width
+    assert face.symmetry_error < 0.01
+    assert c.vertices[face.nose_tip, 2] > np.percentile(c.vertices[face.skin, 2], 95)
+
+
+@pytest.mark.parametrize("n", [1, 12])
+def test_a_cube_has_no_face(n):
+    v, t = _box(n)
+    with pytest.raises(FaceError, match="cube.*no recognisable face"):
+        find_face(mesh_character(v, t, "cube"))
+
+
+def test_a_face_cut_in_two_pieces_is_refused():
+    c = build_demo_character()
+    face = find_face(c)
+    v = c.vertices
+    t = c.triangles.astype(np.int64)
+    # cut every triangle crossing x = 0.3 (just off the plane): the skin falls into two unequal pieces
+    side = v[:, 0] > 0.3
+    keep = (side[t].all(1)) | (~side[t]).all(1)
+    cut = mesh_character(v, t[keep].astype(np.uint32), "split")
+    assert len(face.skin) > 1000
+    with pytest.raises(FaceError, match="split: the face is in several disconnected pieces"):
+        find_face(cut)
