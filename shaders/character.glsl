@@ -6,6 +6,12 @@
 // Colour: textures are sRGB8_ALPHA8 (the sampler decodes to linear), factors
 // and vertex colours are linear, lighting is linear, the output is encoded
 // to sRGB exactly (no tone curve), so an unlit texel shows as itself.
+//
+// The fragment stage is compiled once per material variant (parts_path.material_variant):
+// ALPHA_MODE (0 opaque, 1 mask, 2 blend), SHADING (0 lit, 1 unlit, 2 toon), TEXTURED and
+// MIRROR (0 or 1) are #defines, so a variant carries no branch, texture fetch or discard it
+// does not use. On a software rasteriser that is a third of the shading time, and an opaque
+// variant without discard lets the depth test run before the shader (early z).
 #version 330 core
 
 #ifdef VERTEX_SHADER
@@ -62,12 +68,15 @@ void main() {
 #ifdef FRAGMENT_SHADER
 #include "lighting.glsl"
 
-const int ALPHA_OPAQUE = 0;
-const int ALPHA_MASK = 1;
-const int ALPHA_BLEND = 2;
-const int SHADING_LIT = 0;
-const int SHADING_UNLIT = 1;
-const int SHADING_TOON = 2;
+#if !defined(ALPHA_MODE) || !defined(SHADING) || !defined(TEXTURED) || !defined(MIRROR)
+#error "character.glsl: ALPHA_MODE, SHADING, TEXTURED and MIRROR must be defined (parts_path.material_variant)"
+#endif
+#define ALPHA_OPAQUE 0
+#define ALPHA_MASK 1
+#define ALPHA_BLEND 2
+#define SHADING_LIT 0
+#define SHADING_UNLIT 1
+#define SHADING_TOON 2
 
 uniform vec3 u_eye;
 // The material of this draw call: one uniform buffer per material (runtime/render/parts_path.py).
@@ -75,7 +84,8 @@ layout(std140) uniform Material {
     vec4 m_base_color;      // baseColorFactor, linear RGBA
     vec4 m_emissive_cutoff; // emissiveFactor (linear), alphaCutoff
     vec4 m_shade_shift;     // MToon shade colour (linear), shading shift
-    vec4 m_modes;           // alpha mode, shading code, shading toony, has texture
+    vec4 m_modes;           // alpha mode, shading code, shading toony, has texture (the first two and the
+                            // last are also the variant's #defines)
     vec4 m_mirror_light;    // mirrored wrap s, t (done here; the sampler clamps), specular, shininess
     vec4 m_uv_row0;         // KHR_texture_transform T * R * S, first two rows
     vec4 m_uv_row1;
@@ -111,31 +121,40 @@ vec3 toon(vec3 lit_color, vec3 shade_color, vec3 n) {
 }
 
 void main() {
-    int alpha_mode = int(m_modes.x + 0.5);
-    int shading = int(m_modes.y + 0.5);
     vec4 texel = vec4(1.0);
-    if (m_modes.w > 0.5) {
-        vec3 uv1 = vec3(v_uv, 1.0);
-        vec2 uv = vec2(dot(m_uv_row0.xyz, uv1), dot(m_uv_row1.xyz, uv1));
-        texel = textureGrad(u_base_texture, mirror(uv), dFdx(uv), dFdy(uv));
-    }
+#if TEXTURED
+    vec3 uv1 = vec3(v_uv, 1.0);
+    vec2 uv = vec2(dot(m_uv_row0.xyz, uv1), dot(m_uv_row1.xyz, uv1));
+#if MIRROR
+    texel = textureGrad(u_base_texture, mirror(uv), dFdx(uv), dFdy(uv));  // derivatives of the unfolded uv
+#else
+    texel = texture(u_base_texture, uv);
+#endif
+#endif
     vec4 base = m_base_color * vec4(v_color, 1.0) * texel;
-    if (alpha_mode == ALPHA_MASK && base.a < m_emissive_cutoff.a) discard;
-    float alpha = alpha_mode == ALPHA_BLEND ? base.a : 1.0;
+#if ALPHA_MODE == ALPHA_MASK
+    if (base.a < m_emissive_cutoff.a) discard;
+#endif
+#if ALPHA_MODE == ALPHA_BLEND
+    float alpha = base.a;
+#else
+    float alpha = 1.0;
+#endif
 
-    vec3 v = normalize(u_eye - v_world);
+#if SHADING == SHADING_UNLIT
+    vec3 color = base.rgb;
+#else
     vec3 n = normalize(v_normal);
     // A double-sided surface seen from behind is lit as its back face (glTF: the normal is reversed).
     if (!gl_FrontFacing) n = -n;
-    vec3 color;
-    if (shading == SHADING_UNLIT) {
-        color = base.rgb;
-    } else if (shading == SHADING_TOON) {
-        color = toon(base.rgb, m_shade_shift.rgb * v_color * texel.rgb, n);
-    } else {
-        if (dot(n, v) < 0.0) n = -n;
-        color = shade(base.rgb, KIND_SKIN, m_mirror_light.z, m_mirror_light.w, n, v);
-    }
+#if SHADING == SHADING_TOON
+    vec3 color = toon(base.rgb, m_shade_shift.rgb * v_color * texel.rgb, n);
+#else
+    vec3 v = normalize(u_eye - v_world);
+    if (dot(n, v) < 0.0) n = -n;
+    vec3 color = shade(base.rgb, KIND_SKIN, m_mirror_light.z, m_mirror_light.w, n, v);
+#endif
+#endif
     color += m_emissive_cutoff.rgb;
     f_color = vec4(linear_to_srgb(color), alpha);
 }

@@ -72,7 +72,7 @@ vec3 shade(vec3 albedo, int kind, float specular, float shininess, vec3 n, vec3 
     vec3 hemi = mix(GROUND, SKY, 0.5 + 0.5 * n.y);
     vec3 color = ambient * albedo * hemi;
     color += light * light_one(albedo, n, v, KEY_DIR, KEY_COLOR, wrap, specular, shininess);
-    color += light * light_one(albedo, n, v, FILL_DIR, FILL_COLOR, wrap, 0.0, shininess);
+    color += light * FILL_COLOR * albedo * wrap_diffuse(n, normalize(FILL_DIR), wrap);  // the fill has no highlight
     color += light * light_one(albedo, n, v, RIM_DIR, RIM_COLOR, 0.0, specular * 0.5, shininess);
     return color;
 }

@@ -108,6 +108,30 @@ def material_block(character: Character, m: int) -> bytes:
     return block.tobytes()
 
 
+#: The #defines that make one fragment variant of ``character.glsl``, in the order of a variant key
+VARIANT_DEFINES = ("ALPHA_MODE", "SHADING", "TEXTURED", "MIRROR")
+
+
+def material_variant(character: Character, m: int) -> tuple[int, int, int, int]:
+    """The fragment variant of material ``m``: (alpha mode, shading code, textured, mirrored wrap), each an int.
+
+    ``character.glsl`` is compiled once per distinct variant with these as #defines
+    (:data:`VARIANT_DEFINES`): a variant has no branch, texture fetch or discard it does not use.
+    """
+    look = look_of(character)
+    t = int(look.texture[m])
+    mirrored = False
+    if t >= 0:
+        wrap_s, wrap_t = (int(x) for x in look.texture_info[t, 5:7])
+        mirrored = MIRRORED_REPEAT in (wrap_s, wrap_t)
+    return (int(round(float(look.alpha[m, 0]))), int(round(float(look.shading[m][0]))), int(t >= 0), int(mirrored))
+
+
+def variant_defines(variant: tuple[int, int, int, int]) -> dict[str, int]:
+    """The #defines of a variant key from :func:`material_variant`."""
+    return dict(zip(VARIANT_DEFINES, variant))
+
+
 def make_textures(ctx: moderngl.Context, look: Look) -> list:
     """One sRGB moderngl texture per look texture, with its glTF sampler's filters and wraps."""
     out = []

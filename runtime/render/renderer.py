@@ -46,6 +46,8 @@ from facepuppet.runtime.render.parts_path import (
     look_of,
     make_textures,
     material_block,
+    material_variant,
+    variant_defines,
     vertex_attributes,
 )
 from facepuppet.runtime.render.shader_loader import load_program
@@ -308,6 +310,7 @@ class FaceRenderer:
             self._attr_vbo = ctx.buffer(vertex_attributes(c).tobytes())
             view_dir = self.camera.view[2, :3] * -1.0  # the camera looks along -z of its frame
             tris, self._groups = draw_groups(c, view_dir, self.cull_back_faces)
+            self._variant_of = [material_variant(c, m) for m in range(len(c.material_names))]
             self._ibo = ctx.buffer(tris.tobytes() if len(tris) else b"\0" * 12)
             self.n_indices = len(tris) * 3
             self.n_one_sided_indices = 0
@@ -326,25 +329,25 @@ class FaceRenderer:
         skin = self.parts and c.skeleton is not None
         if skin:
             defines["SKIN"] = 1
-        prog = load_program(ctx, "character.glsl" if self.parts else "face.glsl", defines)
         textures = delta_textures(ctx, c)
         rest = np.hstack([c.vertices, c.rest_normals()]).astype(np.float32)
         vbo = ctx.buffer(rest.tobytes())
-        vao = self._vao(prog, vbo)
-        prog["u_delta_positions"].value = 0
-        prog["u_delta_normals"].value = 1
+        programs, vaos = self._programs(defines, vbo)
         joints = None
         if skin:
             n_nodes = c.skeleton.n_nodes
             joints = ctx.texture((4 * n_nodes, 1), 4, joint_texels(np.tile(np.eye(4), (n_nodes, 1, 1))), dtype="f4")
             joints.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            prog["u_joints"].value = _JOINT_UNIT
-        if self.parts:
-            self._bind_parts(prog)
+        for prog in programs.values():  # an unlit variant does not read the normals
+            for name, unit in (("u_delta_positions", 0), ("u_delta_normals", 1), ("u_joints", _JOINT_UNIT)):
+                if name in prog:
+                    prog[name].value = unit
         return {
             "joints": joints,
-            "prog": prog,
-            "vao": vao,
+            "prog": next(iter(programs.values())),
+            "vao": next(iter(vaos.values())),
+            "programs": programs,
+            "vaos": vaos,
             "vbo": vbo,
             "textures": textures,
             "max_active": max_active,
@@ -354,14 +357,29 @@ class FaceRenderer:
 
     def _setup_cpu(self) -> dict:
         deformer = CpuDeformer(self.character)
-        prog = load_program(self.ctx, "character.glsl" if self.parts else "face.glsl")
         vbo = self.ctx.buffer(deformer.rest.tobytes(), dynamic=True)
+        programs, vaos = self._programs({}, vbo)
         skinner = None
-        if self.parts:
+        if self.parts and self._head_pose.available:
+            skinner = CpuSkinner(self.character, self._head_pose.moved_nodes)
+        return {"prog": next(iter(programs.values())), "vao": next(iter(vaos.values())), "programs": programs,
+                "vaos": vaos, "vbo": vbo, "deformer": deformer, "skinner": skinner}
+
+    def _programs(self, defines: dict, vbo) -> tuple[dict, dict]:
+        """The programs and vertex arrays of one deformation path, by fragment variant.
+
+        A character without parts has one (``face.glsl``, key None); a character with parts one
+        ``character.glsl`` program per distinct :func:`material_variant` of its draw groups.
+        """
+        if not self.parts:
+            prog = load_program(self.ctx, "face.glsl", defines or None)
+            return {None: prog}, {None: self._vao(prog, vbo)}
+        programs, vaos = {}, {}
+        for key in dict.fromkeys(self._variant_of[g.material] for g in self._groups) or [(0, 0, 0, 0)]:
+            prog = load_program(self.ctx, "character.glsl", {**defines, **variant_defines(key)})
             self._bind_parts(prog)
-            if self._head_pose.available:
-                skinner = CpuSkinner(self.character, self._head_pose.moved_nodes)
-        return {"prog": prog, "vao": self._vao(prog, vbo), "vbo": vbo, "deformer": deformer, "skinner": skinner}
+            programs[key], vaos[key] = prog, self._vao(prog, vbo)
+        return programs, vaos
 
     def _setup_label(self, text: str) -> dict:
         """The credits label: a Pillow-rendered RGBA texture on a quad in the bottom-left corner."""
@@ -399,20 +417,18 @@ class FaceRenderer:
             prog["u_base_texture"].value = _TEXTURE_UNIT
 
     def _vao(self, prog, vbo):
+        """The vertex array of ``prog``; attributes a variant does not read are skipped (padding)."""
+        def layout(buffer, attributes):  # [(name, floats)] -> (buffer, format, *names present)
+            fmt = " ".join(f"{k}f" if name in prog else f"{4 * k}x" for name, k in attributes)
+            return (buffer, fmt, *(name for name, _ in attributes if name in prog))
+
         if self.parts:  # colour 3, uv 2, joints 4, weights 4; without SKIN the joints are skipped
-            skin = "in_joints" in prog
-            attrs = ("3f 2f 4f 4f", "in_color", "in_uv", "in_joints", "in_weights") if skin \
-                else ("3f 2f 32x", "in_color", "in_uv")
-            return self.ctx.vertex_array(
-                prog, [(vbo, "3f 3f", "in_position", "in_normal"), (self._attr_vbo, *attrs)],
-                index_buffer=self._ibo, index_element_size=4,
-            )
+            attributes = [("in_color", 3), ("in_uv", 2), ("in_joints", 4), ("in_weights", 4)]
+        else:
+            attributes = [("in_color", 3), ("in_material", 3), ("in_opacity", 1)]
         return self.ctx.vertex_array(
-            prog,
-            [(vbo, "3f 3f", "in_position", "in_normal"),
-             (self._attr_vbo, "3f 3f 1f", "in_color", "in_material", "in_opacity")],
-            index_buffer=self._ibo,
-            index_element_size=4,
+            prog, [layout(vbo, [("in_position", 3), ("in_normal", 3)]), layout(self._attr_vbo, attributes)],
+            index_buffer=self._ibo, index_element_size=4,
         )
 
     def _choose_path(self, warmup: int = 2, frames: int = 10) -> tuple[str, str]:
@@ -486,19 +502,23 @@ class FaceRenderer:
         count = len(active)
         gpu["shapes"][:count] = active
         gpu["weights"][:count] = w[active]
-        prog = gpu["prog"]
-        prog["u_active_count"].value = count
-        if count:
-            prog["u_active_shape"].write(gpu["shapes"].tobytes())
-            prog["u_active_weight"].write(gpu["weights"].tobytes())
+        shapes, weights = gpu["shapes"].tobytes(), gpu["weights"].tobytes()
+        for prog in gpu["programs"].values():
+            prog["u_active_count"].value = count
+            if count:
+                prog["u_active_shape"].write(shapes)
+                prog["u_active_weight"].write(weights)
 
     def submit(self) -> None:
         """Issue the draw call for the prepared frame (never waits for the GPU)."""
         state = {"gpu": self._gpu, "cpu": self._cpu, "elastic": self._elastic}[self.path]
-        prog = state["prog"]
-        prog["u_model"].write(self._pose.T.tobytes())
-        prog["u_view_projection"].write(self.camera.view_projection.T.tobytes())
-        prog["u_eye"].value = tuple(float(x) for x in self.camera.eye)
+        model, view_projection = self._pose.T.tobytes(), self.camera.view_projection.T.tobytes()
+        eye = tuple(float(x) for x in self.camera.eye)
+        for prog in state.get("programs", {None: state["prog"]}).values():
+            prog["u_model"].write(model)
+            prog["u_view_projection"].write(view_projection)
+            if "u_eye" in prog:  # an unlit or toon variant does not read it
+                prog["u_eye"].value = eye
         if self.path in ("gpu", "elastic"):
             for unit, tex in enumerate(state["textures"]):
                 tex.use(unit)
@@ -511,7 +531,7 @@ class FaceRenderer:
         self.ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA,
                                moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         if self.parts:
-            self._submit_groups(state["vao"])
+            self._submit_groups(state["vaos"])
         else:
             self._submit_kinds(state)
         if self._label is not None:
@@ -534,7 +554,7 @@ class FaceRenderer:
             self.fbo.depth_mask = True
             self.ctx.disable(moderngl.BLEND)
 
-    def _submit_groups(self, vao) -> None:
+    def _submit_groups(self, vaos: dict) -> None:
         """Draw groups: opaque (culled, then double-sided), then blended ones far to near, depth writes off."""
         ctx, groups = self.ctx, self._groups
         blended = [g for g in groups if g.blend]
@@ -543,7 +563,7 @@ class FaceRenderer:
             blended.sort(key=lambda g: -float(np.dot(g.centre - eye, g.centre - eye)))
         ctx.front_face = "ccw"
         culling = None
-        look = self._look
+        look, variants = self._look, self._variant_of
         for g in [g for g in groups if not g.blend] + blended:
             if g.cull != culling:
                 (ctx.enable if g.cull else ctx.disable)(moderngl.CULL_FACE)
@@ -555,7 +575,7 @@ class FaceRenderer:
             t = int(look.texture[g.material])
             if t >= 0:
                 self._textures[t].use(_TEXTURE_UNIT)
-            vao.render(moderngl.TRIANGLES, vertices=g.count, first=g.first)
+            vaos[variants[g.material]].render(moderngl.TRIANGLES, vertices=g.count, first=g.first)
         ctx.disable(moderngl.CULL_FACE)
         ctx.disable(moderngl.BLEND)
         self.fbo.depth_mask = True
@@ -612,8 +632,9 @@ class FaceRenderer:
         """Release every GL object this renderer made."""
         for state in (self._gpu, self._cpu, self._elastic):
             if state:
-                for key in ("vao", "prog", "vbo"):
-                    state[key].release()
+                for obj in (*state.get("vaos", {None: state["vao"]}).values(),
+                            *state.get("programs", {None: state["prog"]}).values(), state["vbo"]):
+                    obj.release()
                 for tex in state.get("textures", ()):
                     tex.release()
                 if state.get("joints") is not None:

@@ -278,3 +278,26 @@ def test_a_skeleton_without_a_look_draws_its_vertex_colours_and_turns_its_head(e
     diff = np.abs(rest.astype(int) - turned.astype(int)).sum(axis=2) > 24
     _, y_neck = r.project([[0, 1.45, 0]]).astype(int)[0]
     assert diff[:y_neck].sum() > 40 and diff[y_neck + 10:].sum() == 0
+
+
+@pytest.mark.parametrize("path", ["gpu", "cpu"])
+def test_each_material_draws_with_its_own_variant_in_one_frame(egl_ctx, path):
+    # Four quads side by side, one frame: OPAQUE and MASK with the same alpha 0.3 (cutoff 0.5), an unlit
+    # BLEND one at alpha 0.5 over the background, and a lit one. Each group must run its own fragment
+    # variant: the opaque one ignores alpha, the mask one discards, the blend one mixes, the lit one is shaded.
+    pieces = [quad(0.0, 0.4) for _ in range(4)]
+    xs = (-0.75, -0.25, 0.25, 0.75)
+    v = np.vstack([p[0] + np.float32([x, 0, 0]) for p, x in zip(pieces, xs)])
+    t = np.vstack([p[1] + 4 * i for i, p in enumerate(pieces)])
+    mats = [material(base=(1, 0, 0, 0.3)), material(base=(1, 0, 0, 0.3), alpha="MASK"),
+            material(base=(1, 0, 0, 0.5), alpha="BLEND"), material(base=(0.3, 0.3, 0.3, 1), shading="lit")]
+    c = part_character(v, t, [0, 0, 1, 1, 2, 2, 3, 3], mats, uv=np.vstack([p[2] for p in pieces]))
+    image, r = draw(egl_ctx, c, path=path, framing="body", size=(192, 64), background=(0.0, 0.0, 1.0))
+    state = r._gpu if path == "gpu" else r._cpu
+    assert len(state["programs"]) == 4  # four distinct (alpha, shading, textured, mirrored) variants
+    px = [tuple(int(c) for c in image[y, x]) for x, y in r.project([[x, 0, 0] for x in xs]).astype(int)]
+    assert px[0] == (255, 0, 0)                      # OPAQUE: alpha ignored
+    assert px[1] == (0, 0, 255)                      # MASK below the cutoff: the background shows
+    assert abs(px[2][0] - 128) <= 1 and px[2][1] == 0 and abs(px[2][2] - 128) <= 1  # BLEND: half over blue
+    unlit_grey = round(255 * (1.055 * 0.3 ** (1 / 2.4) - 0.055))  # 149: what an unlit variant would draw
+    assert abs(px[3][0] - unlit_grey) > 10  # lit: the lights change the grey
