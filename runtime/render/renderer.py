@@ -51,6 +51,7 @@ from facepuppet.runtime.render.parts_path import (
     vertex_attributes,
 )
 from facepuppet.runtime.render.shader_loader import load_program
+from facepuppet.runtime.render.triangle_order import cache_order
 
 if TYPE_CHECKING:
     from facepuppet.runtime.elastic.model import ElasticModel
@@ -131,7 +132,8 @@ def vertex_opacity(character: Character) -> np.ndarray:
 
 
 def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
-    """Triangles not of kind ``hidden``, one-sided kinds first, then the thin layers in ``_TWO_SIDED`` order.
+    """Triangles not of kind ``hidden``, one-sided kinds first (by material, each in compact patches:
+    :mod:`~facepuppet.runtime.render.triangle_order`), then the thin layers in ``_TWO_SIDED`` order.
 
     Returns
     -------
@@ -140,7 +142,11 @@ def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
         the rest (thin cards such as lashes) are seen from both sides.
     """
     kinds = character.material_params[:, 2].round().astype(int)[character.triangle_material]
-    one_sided = character.triangles[(kinds != _HIDDEN) & ~np.isin(kinds, _TWO_SIDED)]
+    keep = (kinds != _HIDDEN) & ~np.isin(kinds, _TWO_SIDED)
+    # material by material in file order (the face before what it hides), each in compact patches
+    one_sided = np.vstack([np.zeros((0, 3), np.uint32)] + [
+        cache_order(character.triangles[keep & (character.triangle_material == m)], character.vertices)
+        for m in range(len(character.material_names))])
     two_sided = [character.triangles[kinds == k] for k in _TWO_SIDED]
     tris = np.ascontiguousarray(np.vstack([one_sided, *two_sided]), dtype=np.uint32)
     return tris, len(one_sided)
