@@ -9,9 +9,10 @@
 //
 // The fragment stage is compiled once per material variant (parts_path.material_variant):
 // ALPHA_MODE (0 opaque, 1 mask, 2 blend), SHADING (0 lit, 1 unlit, 2 toon), TEXTURED and
-// MIRROR (0 or 1) are #defines, so a variant carries no branch, texture fetch or discard it
-// does not use. On a software rasteriser that is a third of the shading time, and an opaque
-// variant without discard lets the depth test run before the shader (early z).
+// MIRROR (0 or 1) and KIND (a lit material's kind, lighting.glsl) are #defines, so a variant
+// carries no branch, texture fetch or discard it does not use. On a software rasteriser that
+// is a third of the shading time, and an opaque variant without discard lets the depth test
+// run before the shader (early z).
 #version 330 core
 
 #ifdef VERTEX_SHADER
@@ -23,6 +24,7 @@ in vec3 in_position;   // rest pose, world space (GPU path) or already deformed 
 in vec3 in_normal;
 in vec3 in_color;      // COLOR_0, linear RGB
 in vec2 in_uv;         // TEXCOORD_0, origin top-left
+in float in_opacity;   // multiplies the alpha: the fade of an OBJ rig's thin layers (1 elsewhere)
 #ifdef SKIN
 in vec4 in_joints;     // node indices (exact small integers as floats)
 in vec4 in_weights;
@@ -43,6 +45,7 @@ out vec3 v_world;
 out vec3 v_normal;
 out vec3 v_color;
 out vec2 v_uv;
+out float v_opacity;
 
 void main() {
     vec3 position = in_position;
@@ -61,6 +64,7 @@ void main() {
     v_normal = mat3(u_model) * normal;
     v_color = in_color;
     v_uv = in_uv;
+    v_opacity = in_opacity;
     gl_Position = u_view_projection * world;
 }
 #endif
@@ -68,8 +72,8 @@ void main() {
 #ifdef FRAGMENT_SHADER
 #include "lighting.glsl"
 
-#if !defined(ALPHA_MODE) || !defined(SHADING) || !defined(TEXTURED) || !defined(MIRROR)
-#error "character.glsl: ALPHA_MODE, SHADING, TEXTURED and MIRROR must be defined (parts_path.material_variant)"
+#if !defined(ALPHA_MODE) || !defined(SHADING) || !defined(TEXTURED) || !defined(MIRROR) || !defined(KIND)
+#error "character.glsl: ALPHA_MODE, SHADING, TEXTURED, MIRROR and KIND must be defined (parts_path.material_variant)"
 #endif
 #define ALPHA_OPAQUE 0
 #define ALPHA_MASK 1
@@ -96,6 +100,7 @@ in vec3 v_world;
 in vec3 v_normal;
 in vec3 v_color;
 in vec2 v_uv;
+in float v_opacity;
 
 out vec4 f_color;
 
@@ -131,7 +136,7 @@ void main() {
     texel = texture(u_base_texture, uv);
 #endif
 #endif
-    vec4 base = m_base_color * vec4(v_color, 1.0) * texel;
+    vec4 base = m_base_color * vec4(v_color, v_opacity) * texel;
 #if ALPHA_MODE == ALPHA_MASK
     if (base.a < m_emissive_cutoff.a) discard;
 #endif
@@ -152,7 +157,7 @@ void main() {
 #else
     vec3 v = normalize(u_eye - v_world);
     if (dot(n, v) < 0.0) n = -n;
-    vec3 color = shade(base.rgb, KIND_SKIN, m_mirror_light.z, m_mirror_light.w, n, v);
+    vec3 color = shade(base.rgb, KIND, m_mirror_light.z, m_mirror_light.w, n, v);
 #endif
 #endif
     color += m_emissive_cutoff.rgb;

@@ -34,7 +34,11 @@ What is written (glTF 2.0 spec; VRM 0.x ``VRM`` extension; VRM 1.0 ``VRMC_vrm`` 
   the identity), emissive, alphaMode/alphaCutoff, doubleSided, KHR_materials_unlit;
   metallicFactor 0 and a roughness from the stored shininess (Blinn-Phong n ->
   GGX: roughness = (2 / (n + 2))^(1/4)), since a character keeps no metal/roughness.
-  An OBJ rig's ``hidden`` material is written BLEND with alpha 0 (kept, not drawn).
+  An OBJ rig's ``hidden`` material is written BLEND with alpha 0 (kept, not drawn);
+  its thin layers (eye occlusion, films, lashes) BLEND and double-sided, with the fade the
+  renderer gives them (``renderer.vertex_opacity``) as COLOR_0 alpha (RGBA), so any glTF
+  viewer draws them see-through. A material kind other than skin (eye, teeth, lashes ...) and
+  its specular/shininess go in ``material.extras.facepuppet`` for the importer.
   Toon materials: VRM 0.x ``materialProperties`` (``VRM/MToon``) or VRM 1.0
   ``VRMC_materials_mtoon``; the 0.x shading range is converted back from the
   1.0 terms the character stores.
@@ -96,6 +100,9 @@ REQUIRED_BONES = ("hips", "spine", "head", "leftUpperLeg", "leftLowerLeg", "left
 _VRM1_PRESETS = frozenset(VRM1_FROM_VRM0.values()) | {"surprised"}
 _ARKIT = frozenset(ARKIT_NAMES)
 _ALPHA_NAME = {v: k for k, v in ALPHA_MODES.items()}
+_KIND_NAME = {v: k for k, v in MATERIAL_KINDS.items()}
+#: An OBJ rig's thin see-through layers (eye occlusion, lacrimal films, lashes): BLEND, two-sided, COLOR_0 alpha
+_LAYER_KINDS = frozenset(MATERIAL_KINDS[k] for k in ("occlusion", "film", "lashes"))
 _OVERRIDE_NAME = {v: k for k, v in OVERRIDES.items()}
 _SPARSE_FRACTION = 0.5  # a target is sparse when its sparse form is under half the dense one
 GENERATOR = "facepuppet export-character"
@@ -302,6 +309,12 @@ class _Exporter:
             self.normals = vertex_normals(self.vertices, c.triangles.astype(np.int64))
         no_normal = np.linalg.norm(self.normals, axis=1) < 0.5
         self.normals[no_normal] = (0.0, 0.0, -1.0 if self.turn else 1.0)
+        kinds = c.material_params[:, 2].round().astype(int)
+        self.opacity = None  # an OBJ rig's thin layers: the fade the renderer gives them, as COLOR_0 alpha
+        if c.look is None and np.isin(kinds, list(_LAYER_KINDS)).any():
+            from facepuppet.runtime.render.renderer import vertex_opacity
+
+            self.opacity = vertex_opacity(c).astype(np.float32)
         self.delta_pos = self._points(c.delta_positions, scale)
         self.delta_nrm = self._points(c.delta_normals)
         doc: dict[str, Any] = {"asset": self._asset(), "scene": 0}
@@ -520,6 +533,8 @@ class _Exporter:
         if c.look is not None:
             attrs["TEXCOORD_0"] = buf.accessor(np.asarray(c.look.uv[sl], np.float32))
         colour = np.asarray(c.vertex_color[sl], np.float32)
+        if c.look is None and self.opacity is not None:  # RGBA: the thin layers' fade in alpha
+            colour = np.c_[colour, self.opacity[sl]]
         if c.look is None or not np.allclose(colour, 1.0, atol=1e-6):
             attrs["COLOR_0"] = buf.accessor(np.clip(colour, 0.0, 1.0))
         if c.skeleton is not None:
@@ -564,10 +579,18 @@ class _Exporter:
             rough = float(np.clip((2.0 / (max(shine, 0.0) + 2.0)) ** 0.25, 0.0, 1.0))
             pbr: dict[str, Any] = {"metallicFactor": 0.0, "roughnessFactor": round(rough, 6)}
             mat: dict[str, Any] = {"name": name, "pbrMetallicRoughness": pbr}
+            kind = int(round(float(c.material_params[i, 2])))
+            if kind != MATERIAL_KINDS["skin"]:  # read back by the importer; other readers ignore extras
+                mat["extras"] = {"facepuppet": {"kind": _KIND_NAME.get(kind, "skin"),
+                                                "specular": float(c.material_params[i, 0]),
+                                                "shininess": float(c.material_params[i, 1])}}
             if lk is None:
-                if int(c.material_params[i, 2]) == MATERIAL_KINDS["hidden"]:
+                if kind == MATERIAL_KINDS["hidden"]:
                     pbr["baseColorFactor"] = [1.0, 1.0, 1.0, 0.0]
                     mat["alphaMode"] = "BLEND"
+                elif kind in _LAYER_KINDS:  # thin see-through layers: COLOR_0 alpha holds their fade
+                    mat["alphaMode"] = "BLEND"
+                    mat["doubleSided"] = True
                 mats.append(mat)
                 continue
             base = [float(x) for x in lk.base_color[i]]

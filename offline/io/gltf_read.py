@@ -577,7 +577,7 @@ class _Reader:
                 n = f"{base}#{k}"
             seen.add(n)
             names.append(n)
-            params.append([_SKIN_SHINE[0], _SKIN_SHINE[1], MATERIAL_KINDS["skin"], 0.0])
+            params.append(self._material_kind(m, i))
         self.default_material = None
         if -1 in used:  # primitives without a material: the spec's default material, appended
             self.default_material = len(names)
@@ -589,6 +589,23 @@ class _Reader:
         if not names:
             names, params = ["default"], [[_SKIN_SHINE[0], _SKIN_SHINE[1], MATERIAL_KINDS["skin"], 0.0]]
         return {"names": tuple(names), "params": np.asarray(params, dtype=np.float32)}
+
+    def _material_kind(self, m: dict, i: int) -> list[float]:
+        """[specular, shininess, kind, 0] of material ``i``: skin, unless ``extras.facepuppet`` (written by
+        ``export-character``) names another kind; a malformed entry is warned about and ignored."""
+        skin = [_SKIN_SHINE[0], _SKIN_SHINE[1], float(MATERIAL_KINDS["skin"]), 0.0]
+        extras = m.get("extras")
+        ours = extras.get("facepuppet") if isinstance(extras, dict) else None
+        if ours is None:
+            return skin
+        kind, spec, shine = (ours.get(k) if isinstance(ours, dict) else None for k in ("kind", "specular", "shininess"))
+        numbers = all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x >= 0
+                      for x in (spec, shine))
+        if kind not in MATERIAL_KINDS or not numbers:
+            self.warn(f"materials[{i}].extras.facepuppet: expected a kind of {sorted(MATERIAL_KINDS)} and "
+                      f"finite specular/shininess >= 0, got {ours!r}; read as skin")
+            return skin
+        return [float(spec), float(shine), float(MATERIAL_KINDS[kind]), 0.0]
 
     def _look(self, geo: dict, materials: dict) -> Look:
         f = self.f

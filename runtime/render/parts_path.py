@@ -66,10 +66,14 @@ def look_of(character: Character) -> Look:
                 texture_pixels=np.zeros((0, 4), np.uint8), **identity_look(character.n_vertices, n_m))
 
 
-def vertex_attributes(character: Character) -> np.ndarray:
-    """Per-vertex [colour 3, uv 2, joints 4, weights 4] float32 (joints exact as floats), shape (n, 13)."""
+def vertex_attributes(character: Character, opacity: np.ndarray | None = None) -> np.ndarray:
+    """Per-vertex [colour 3, uv 2, joints 4, weights 4, opacity 1] float32 (joints exact as floats), (n, 14).
+
+    ``opacity`` (n,), default 1: multiplies the material's alpha (the renderer gives the thin layers of an
+    OBJ rig's kinds, eye occlusion, films, lashes, their fade: ``renderer.vertex_opacity``).
+    """
     c = character
-    out = np.zeros((c.n_vertices, 13), np.float32)
+    out = np.zeros((c.n_vertices, 14), np.float32)
     out[:, :3] = c.vertex_color
     out[:, 3:5] = look_of(c).uv
     if c.skeleton is not None:
@@ -77,6 +81,7 @@ def vertex_attributes(character: Character) -> np.ndarray:
         out[:, 9:13] = c.skeleton.vertex_weights
     else:
         out[:, 9] = 1.0
+    out[:, 13] = 1.0 if opacity is None else opacity
     return out
 
 
@@ -111,11 +116,14 @@ def material_block(character: Character, m: int) -> bytes:
 
 
 #: The #defines that make one fragment variant of ``character.glsl``, in the order of a variant key
-VARIANT_DEFINES = ("ALPHA_MODE", "SHADING", "TEXTURED", "MIRROR")
+VARIANT_DEFINES = ("ALPHA_MODE", "SHADING", "TEXTURED", "MIRROR", "KIND")
+_LIT = 0
 
 
-def material_variant(character: Character, m: int) -> tuple[int, int, int, int]:
-    """The fragment variant of material ``m``: (alpha mode, shading code, textured, mirrored wrap), each an int.
+def material_variant(character: Character, m: int) -> tuple[int, int, int, int, int]:
+    """The fragment variant of material ``m``: (alpha mode, shading code, textured, mirrored wrap, lighting
+    kind), each an int; the kind (:data:`~facepuppet.runtime.character.MATERIAL_KINDS`) only for lit
+    materials (the studio lighting of eyes, teeth, lashes ... as ``face.glsl`` draws them), else 0.
 
     ``character.glsl`` is compiled once per distinct variant with these as #defines
     (:data:`VARIANT_DEFINES`): a variant has no branch, texture fetch or discard it does not use.
@@ -126,10 +134,12 @@ def material_variant(character: Character, m: int) -> tuple[int, int, int, int]:
     if t >= 0:
         wrap_s, wrap_t = (int(x) for x in look.texture_info[t, 5:7])
         mirrored = MIRRORED_REPEAT in (wrap_s, wrap_t)
-    return (int(round(float(look.alpha[m, 0]))), int(round(float(look.shading[m][0]))), int(t >= 0), int(mirrored))
+    shading = int(round(float(look.shading[m][0])))
+    kind = int(round(float(character.material_params[m, 2]))) if shading == _LIT else 0
+    return (int(round(float(look.alpha[m, 0]))), shading, int(t >= 0), int(mirrored), kind)
 
 
-def variant_defines(variant: tuple[int, int, int, int]) -> dict[str, int]:
+def variant_defines(variant: tuple[int, ...]) -> dict[str, int]:
     """The #defines of a variant key from :func:`material_variant`."""
     return dict(zip(VARIANT_DEFINES, variant))
 

@@ -391,7 +391,9 @@ class FaceRenderer:
     def _setup_buffers(self) -> None:
         c, ctx = self.character, self.ctx
         if self.parts:
-            self._attr_vbo = ctx.buffer(vertex_attributes(c).tobytes())
+            kinds = c.material_params[:, 2].round().astype(int)
+            layered = np.isin(kinds, _TWO_SIDED).any()  # thin layers of an OBJ rig (kept through glTF)
+            self._attr_vbo = ctx.buffer(vertex_attributes(c, vertex_opacity(c) if layered else None).tobytes())
             view_dir = self.camera.view[2, :3] * -1.0  # the camera looks along -z of its frame
             tris, self._groups = draw_groups(c, view_dir, self.cull_back_faces)
             self._variant_of = [material_variant(c, m) for m in range(len(c.material_names))]
@@ -459,7 +461,7 @@ class FaceRenderer:
             prog = load_program(self.ctx, "face.glsl", defines or None)
             return {None: prog}, {None: self._vao(prog, vbo)}
         programs, vaos = {}, {}
-        for key in dict.fromkeys(self._variant_of[g.material] for g in self._groups) or [(0, 0, 0, 0)]:
+        for key in dict.fromkeys(self._variant_of[g.material] for g in self._groups) or [(0, 0, 0, 0, 0)]:
             prog = load_program(self.ctx, "character.glsl", {**defines, **variant_defines(key)})
             self._bind_parts(prog)
             programs[key], vaos[key] = prog, self._vao(prog, vbo)
@@ -507,7 +509,7 @@ class FaceRenderer:
             return (buffer, fmt, *(name for name, _ in attributes if name in prog))
 
         if self.parts:  # colour 3, uv 2, joints 4, weights 4; without SKIN the joints are skipped
-            attributes = [("in_color", 3), ("in_uv", 2), ("in_joints", 4), ("in_weights", 4)]
+            attributes = [("in_color", 3), ("in_uv", 2), ("in_joints", 4), ("in_weights", 4), ("in_opacity", 1)]
         else:
             attributes = [("in_color", 3), ("in_material", 3), ("in_opacity", 1)]
         return self.ctx.vertex_array(

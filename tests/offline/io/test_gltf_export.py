@@ -451,3 +451,92 @@ def test_without_mesh_nodes_the_annotations_are_dropped_with_a_warning(tmp_path)
     g, _ = load(out)
     assert g.extensions["VRMC_vrm"]["firstPerson"]["meshAnnotations"] == []
     assert any("meshAnnotations" in w and "mesh_nodes" in w for w in summary.warnings)
+
+
+def layered_rig() -> Character:
+    """An OBJ-kind rig (cm): a skin sheet, an eye-occlusion card 0.2 cm in front of its middle, a lash card."""
+    from helpers.small_characters import make_character
+
+    xs = np.linspace(-4, 4, 9)
+    sheet = np.array([(x, y, 0.0) for y in xs for x in xs], np.float32)
+    i = np.arange(81).reshape(9, 9)
+    a, b, c_, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
+    skin_t = np.vstack([np.c_[a, b, c_], np.c_[a, c_, d]])
+    card = np.array([[-2, -1, 0.2], [2, -1, 0.2], [2, 1, 0.2], [-2, 1, 0.2]], np.float32)
+    lash = card + np.float32([0, 2.5, 0.1])
+    v = np.vstack([sheet, card, lash])
+    t = np.vstack([skin_t, [[81, 82, 83], [81, 83, 84]], [[85, 86, 87], [85, 87, 88]]]).astype(np.uint32)
+    mats = np.r_[np.zeros(len(skin_t)), [1, 1], [2, 2]]
+    params = [[0.05, 18.0, 0, 0], [0.0, 1.0, 7, 0], [0.05, 10.0, 4, 0]]  # skin, occlusion, lashes
+    colour = np.ones((len(v), 3), np.float32) * (0.9, 0.7, 0.6)
+    return make_character(v, t, mats, colour, ("M_Skin", "M_EyeOcclusion", "M_Lashes"), params,
+                          {"up": np.r_[np.zeros((81, 3)), np.tile([0, 0.5, 0], (8, 1))]})
+
+
+def test_an_obj_rigs_thin_layers_export_see_through_and_their_kinds_come_back(tmp_path):
+    from facepuppet.runtime.render.renderer import vertex_opacity
+
+    c = layered_rig()
+    _, out, _ = write(tmp_path, "glb", character=c)
+    assert check_gltf(out) == []
+    g, blob = load(out)
+    by_name = {m.name: m for m in g.materials}
+    for name, kind in (("M_EyeOcclusion", "occlusion"), ("M_Lashes", "lashes")):
+        m = by_name[name]
+        assert m.alphaMode == "BLEND" and m.doubleSided, name
+        assert m.extras["facepuppet"]["kind"] == kind
+    assert by_name["M_Skin"].alphaMode in (None, "OPAQUE") and not by_name["M_Skin"].extras
+    prim = g.meshes[0].primitives[0]
+    assert g.accessors[prim.attributes.COLOR_0].type == "VEC4"
+    rgba = decode(g, blob, prim.attributes.COLOR_0)
+    np.testing.assert_allclose(rgba[:, :3], c.vertex_color, atol=1e-6)
+    np.testing.assert_allclose(rgba[:81, 3], 1.0)              # the skin is opaque
+    assert np.all(rgba[81:, 3] < 1.0)                          # the layers fade
+    np.testing.assert_allclose(rgba[:, 3], vertex_opacity(c), atol=1e-6)  # as the OBJ path draws them
+    back = gltf_read.read_gltf(out)
+    np.testing.assert_array_equal(back.material_params[:, 2], c.material_params[:, 2])
+    np.testing.assert_allclose(back.material_params[:, :2], c.material_params[:, :2])
+
+
+def test_a_malformed_facepuppet_material_extra_is_warned_about_and_read_as_skin(tmp_path):
+    c = layered_rig()
+    out = tmp_path / "rig.gltf"
+    export_character(c, out)
+    doc = json.loads(out.read_text())
+    doc["materials"][1]["extras"]["facepuppet"]["kind"] = "chrome"
+    doc["materials"][2]["extras"]["facepuppet"]["shininess"] = "shiny"
+    out.write_text(json.dumps(doc))
+    back = gltf_read.read_gltf(out)
+    warnings = [w for w in back.metadata["settings"]["source"]["warnings"] if "extras.facepuppet" in w]
+    assert len(warnings) == 2 and "chrome" in warnings[0] and "shiny" in warnings[1]
+    assert back.material_params[1, 2] == 0 and back.material_params[2, 2] == 0  # skin
+
+
+@pytest.mark.gl
+def test_the_imported_layers_are_drawn_see_through_over_the_skin(egl_ctx, tmp_path):
+    from dataclasses import replace
+
+    from facepuppet.runtime.render.renderer import FaceRenderer
+
+    c = layered_rig()
+    _, out, _ = write(tmp_path, "glb", character=c)
+    back = gltf_read.read_gltf(out)
+    opaque_alpha = np.array(back.look.alpha)
+    opaque_alpha[:, 0] = 0  # every material OPAQUE: the cards hide the skin
+    opaque = replace(back, look=replace(back.look, alpha=opaque_alpha))
+
+    def centre_and_skin(character):
+        r = FaceRenderer(egl_ctx, character, 160, 160, path="cpu", framing="body", log=lambda s: None)
+        try:
+            r.draw(np.zeros(character.n_shapes, np.float32))
+            image = r.read_pixels().astype(int)
+            k = {"m": 0.01, "cm": 1.0}[character.units]  # the rig was made in cm; glTF is in metres
+            (cx, cy), (sx, sy) = r.project(np.array([[0, 0, 0.2], [0, -3, 0]]) * k).astype(int)
+            return image[cy, cx], image[sy, sx]
+        finally:
+            r.close()
+
+    layered, skin = centre_and_skin(back)
+    hidden, _ = centre_and_skin(opaque)
+    # the occlusion card darkens the skin it lies on, without hiding it as an opaque card does
+    assert np.all(layered < skin - 10) and np.all(layered > hidden + 10)
