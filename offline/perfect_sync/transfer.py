@@ -217,7 +217,36 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
         dense[s, face.mesh] = d
         if progress is not None:
             progress(s + 1, len(names), name)
+    carry_pieces(dense, source, names, fold_source(source)[1], character.vertices, face,
+                 rigid=face.mesh[model.arrays["rigid_labels"] >= 0],
+                 eyeballs=np.concatenate([face.mesh[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]))
     return names, dense
+
+
+def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...], params: np.ndarray,
+                 vertices: np.ndarray, face: Face, rigid: np.ndarray, eyeballs: np.ndarray) -> None:
+    """Carry the cloned skin motion in ``dense`` (n, n_vertices, 3), in place, onto the face's other pieces
+    (:mod:`.pieces`): those on the skin follow their skin triangle, decal eyes and mouths the landmark field of
+    the source's ``params`` (the folded (n, n_c, 3)). The ``eyeballs`` (their vertices) and the ``rigid`` jaw
+    keep their motion, except that on a decal face the jaw found from the skin's points is not trusted: what of it
+    the field does not move stays."""
+    from facepuppet.offline.perfect_sync.pieces import embed, feature_field, find_pieces
+    from facepuppet.offline.perfect_sync.proposal import skin_triangles
+
+    skin_t = skin_triangles(face)
+    pieces = find_pieces(vertices, face, skin_t, still=eyeballs)
+    features = pieces.feature_vertices
+    if not len(features):  # the skin carries the features: the pieces on it follow it
+        carried = pieces.on_skin[~np.isin(pieces.on_skin, rigid)]
+        if len(carried):
+            dense[:, carried] = embed(vertices, carried, skin_t, dense)
+        return
+    dense[:, rigid] = 0.0
+    # a decal face: its features are pieces, and the skin's control points cannot sit on features it does not
+    # have; the skin and everything on it move by the features' landmark field
+    moved = np.concatenate([features, pieces.on_skin, face.skin])
+    dense[:, moved] = feature_field(pieces, face, vertices, source.arrays["control_positions"],
+                                    tuple(source.control_names), params, names, moved)
 
 
 def add_shapes(character: Character, keys: tuple[str, ...], dense: np.ndarray,
