@@ -30,7 +30,10 @@ moves nothing that the artist's shapes move. This module:
   **cut along the lip line**: a vertex above the mouth's line (a quadratic
   through the mouth pieces' vertices, with half of them above it) takes the field of the upper lip, one
   below it that of the lower lip and jaw, so the mouth opens between its
-  lips even where they lie on one line at rest.
+  lips even where they lie on one line at rest; likewise only the eye's own
+  pieces follow the lid points (a brow piece just above the lashes does not),
+  and an eye piece beyond the eye's box (the lashes above the upper lid)
+  moves as the box's edge does.
 """
 
 from __future__ import annotations
@@ -307,14 +310,23 @@ def feature_field(pieces: Pieces, face: Face, vertices: np.ndarray, source_posit
     tgt = local[np.asarray(targets, np.int64)]
     out = np.zeros((len(prm), len(tgt), 3))
     flat = disp.transpose(1, 0, 2).reshape(n_c, -1)
-    if line is None:
-        fields = [(np.ones(n_c, bool), np.ones(len(tgt), bool))]
-    else:
-        below = tgt[:, 1] < np.polyval(line, tgt[:, 0])
-        fields = [(~lower, ~below), (~upper_lip, below)]
-    for keep, where in fields:
-        if not where.any():
-            continue
-        rbf = RBFInterpolator(pos[keep], flat[keep], kernel="thin_plate_spline", smoothing=0.0, degree=1)
-        out[:, where] = rbf(tgt[where, :2]).reshape(where.sum(), len(prm), 3).transpose(1, 0, 2)
+    below = np.zeros(len(tgt), bool) if line is None else tgt[:, 1] < np.polyval(line, tgt[:, 0])
+    eye_members = [m for m, _ in pieces.eyes.values()]
+    in_eye = np.isin(targets, np.concatenate(eye_members)) if eye_members else np.zeros(len(tgt), bool)
+    lids = np.array([n.startswith("lid_") for n in names])
+    for is_below in (False, True):
+        for inside in (False, True):
+            where = (below == is_below) & (in_eye == inside)
+            if not where.any():
+                continue
+            keep = ~(upper_lip if is_below else lower) if line is not None else np.ones(n_c, bool)
+            if not inside:
+                keep &= ~lids  # the lids are the eye's moving edge: what is not the eye (a brow) does not follow them
+            at = tgt[where, :2].copy()
+            if inside:  # an eye piece beyond the lid points (the lashes above the upper lid) moves as the lid
+                for m, (x0, x1, y0, y1) in pieces.eyes.values():
+                    mine = np.isin(np.asarray(targets)[where], m)
+                    at[mine] = np.clip(at[mine], [x0, y0], [x1, y1])
+            rbf = RBFInterpolator(pos[keep], flat[keep], kernel="thin_plate_spline", smoothing=0.0, degree=1)
+            out[:, where] = rbf(at).reshape(where.sum(), len(prm), 3).transpose(1, 0, 2)
     return out @ face.frame  # face-frame axes back to world

@@ -241,12 +241,40 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
         if len(carried):
             dense[:, carried] = embed(vertices, carried, skin_t, dense)
         return
+    # a decal face (Godette): its features are pieces in front of a skin too coarse for them, which the skin's
+    # control points cannot find; the features and the pieces on the skin move by the features' landmark field,
+    # the skin stays (folding its coarse triangles about an eye tears the face, and the artist's own shapes
+    # move no skin), and so does the jaw found from the skin's points
     dense[:, rigid] = 0.0
-    # a decal face: its features are pieces, and the skin's control points cannot sit on features it does not
-    # have; the skin and everything on it move by the features' landmark field
-    moved = np.concatenate([features, pieces.on_skin, face.skin])
+    dense[:, face.skin] = 0.0
+    moved = np.concatenate([features, pieces.on_skin])
     dense[:, moved] = feature_field(pieces, face, vertices, source.arrays["control_positions"],
                                     tuple(source.control_names), params, names, moved)
+    decal_eye_looks(dense, names, vertices, face, pieces)
+
+
+def decal_eye_looks(dense: np.ndarray, names: tuple[str, ...], vertices: np.ndarray, face: Face, pieces) -> None:
+    """The eye looks turn a decal eye (in place in ``dense``): the eye's pieces that lie within its largest
+    piece's box (iris, pupil, highlights; not the lashes reaching beyond it) slide across the face as the front
+    of a ball of half the eye's width would turn by ``EYE_LOOK_DEGREES``, on top of the lids' field."""
+    v = face.to_frame(vertices)
+    for s, name in enumerate(names):
+        for side, (members, (x0, x1, y0, y1)) in pieces.eyes.items():
+            turn = EYE_TURNS.get((name, side))
+            if turn is None:
+                continue
+            labels = pieces.labels[members]
+            inside = [lab for lab in np.unique(labels) if np.all(
+                (v[members[labels == lab], 0] >= x0 - 1e-9) & (v[members[labels == lab], 0] <= x1 + 1e-9)
+                & (v[members[labels == lab], 1] >= y0 - 1e-9) & (v[members[labels == lab], 1] <= y1 + 1e-9))]
+            iris = members[np.isin(labels, inside)]
+            axis, sign = turn
+            angle = np.radians(EYE_LOOK_DEGREES[0 if axis == 1 else 1])
+            radius = 0.5 * (x1 - x0)
+            # about up (axis 1) by +a: the front moves to +x; about across (axis 0) by -a: the front moves up
+            slide = np.zeros(3)
+            slide[0 if axis == 1 else 1] = (sign if axis == 1 else -sign) * radius * np.sin(angle)
+            dense[s, iris] += (slide @ face.frame).astype(dense.dtype)
 
 
 def add_shapes(character: Character, keys: tuple[str, ...], dense: np.ndarray,
