@@ -219,17 +219,20 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
             progress(s + 1, len(names), name)
     carry_pieces(dense, source, names, fold_source(source)[1], character.vertices, face,
                  rigid=face.mesh[model.arrays["rigid_labels"] >= 0],
-                 eyeballs=np.concatenate([face.mesh[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]))
+                 eyeballs=np.concatenate([face.mesh[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]),
+                 mouth=_mouth_ball(points, character.vertices))
     return names, dense
 
 
 def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...], params: np.ndarray,
-                 vertices: np.ndarray, face: Face, rigid: np.ndarray, eyeballs: np.ndarray) -> None:
+                 vertices: np.ndarray, face: Face, rigid: np.ndarray, eyeballs: np.ndarray,
+                 mouth: tuple | None = None) -> None:
     """Carry the cloned skin motion in ``dense`` (n, n_vertices, 3), in place, onto the face's other pieces
     (:mod:`.pieces`): those on the skin follow their skin triangle, decal eyes and mouths the landmark field of
     the source's ``params`` (the folded (n, n_c, 3)). The ``eyeballs`` (their vertices) and the ``rigid`` jaw
     keep their motion, except that on a decal face the jaw found from the skin's points is not trusted: what of it
-    the field does not move stays."""
+    the field does not move stays. A piece centred within the ``mouth`` ball (centre, radius) is the inside of
+    the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too."""
     from facepuppet.offline.perfect_sync.pieces import embed, feature_field, find_pieces
     from facepuppet.offline.perfect_sync.proposal import skin_triangles
 
@@ -238,6 +241,12 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     features = pieces.feature_vertices
     if not len(features):  # the skin carries the features: the pieces on it follow it
         carried = pieces.on_skin[~np.isin(pieces.on_skin, rigid)]
+        if mouth is not None and len(carried):
+            lab = pieces.labels[carried]
+            _, inverse = np.unique(lab, return_inverse=True)
+            centres = np.stack([np.bincount(inverse, weights=vertices[carried, k]) for k in range(3)], 1)
+            centres /= np.bincount(inverse)[:, None]
+            carried = carried[np.linalg.norm(centres - mouth[0], axis=1)[inverse] > mouth[1]]
         if len(carried):
             dense[:, carried] = embed(vertices, carried, skin_t, dense)
         return
@@ -251,6 +260,17 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     dense[:, moved] = feature_field(pieces, face, vertices, source.arrays["control_positions"],
                                     tuple(source.control_names), params, names, moved)
     decal_eye_looks(dense, names, vertices, face, pieces)
+
+
+def _mouth_ball(points: ControlPoints, vertices: np.ndarray) -> tuple | None:
+    """(centre, radius): the mouth corners' mid-point and 1.6 inner-eye distances (ICT's back molars are centred
+    1.5 from it, its lashes 1.9), or None without those points."""
+    need = ("mouth_corner_L", "mouth_corner_R", "eye_inner_L", "eye_inner_R")
+    if not all(n in points.names for n in need):
+        return None
+    v = np.asarray(vertices, np.float64)
+    centre = 0.5 * (v[points.vertex("mouth_corner_L")] + v[points.vertex("mouth_corner_R")])
+    return centre, 1.6 * float(np.linalg.norm(v[points.vertex("eye_inner_L")] - v[points.vertex("eye_inner_R")]))
 
 
 def decal_eye_looks(dense: np.ndarray, names: tuple[str, ...], vertices: np.ndarray, face: Face, pieces) -> None:
