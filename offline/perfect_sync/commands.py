@@ -45,14 +45,15 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
         progress.total = n
         progress.update(i, name)
 
-    keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step)
+    info: dict = {}
+    keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
     out, added = add_shapes(character, keys, dense, replace)
     largest = np.linalg.norm(dense, axis=2).max(axis=1) / face.width
     implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} face widths (> {IMPLAUSIBLE}): check the points"}
                    for k, r in zip(keys, largest) if r > IMPLAUSIBLE]
     report = {"face": {"evidence": face.evidence, "mesh_vertices": int(len(face.mesh)), "skin_vertices":
                        int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
-              "doubts": doubtful, "implausible_shapes": implausible, **added}
+              "pieces": info["pieces"], "doubts": doubtful, "implausible_shapes": implausible, **added}
     return out, report, points
 
 
@@ -72,6 +73,15 @@ def _run(args: argparse.Namespace) -> int:
         bad = [n for d in report["doubts"] for n in d["points"]]
         print(picture(args.pictures / "landmarks.png", character.vertices, face, points, bad))
         (args.pictures / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+        from facepuppet.runtime.render.gl_context import GLUnavailable
+
+        from facepuppet.offline.perfect_sync.pictures import shape_sheet
+
+        added = report["added"] + report["replaced"]
+        try:
+            print(shape_sheet(out, added, args.pictures / "shapes.png"))
+        except GLUnavailable as exc:
+            print(f"perfect-sync: no contact sheet of the shapes (no OpenGL: {exc})")
     for d in report["doubts"]:
         print(f"doubtful: {', '.join(d['points'])}: {d['why']}")
     for d in report["implausible_shapes"]:

@@ -56,12 +56,17 @@ def shape_images(character: Character, names: Sequence[str], ctx: moderngl.Conte
 def shape_sheet(character: Character, names: Sequence[str], path: str | os.PathLike, columns: int = 8,
                 ctx: moderngl.Context | None = None) -> Path:
     """Contact sheet PNG of the neutral and the named shapes; returns its path (a standalone EGL context when
-    ``ctx`` is None)."""
+    ``ctx`` is None; GLUnavailable when there is none)."""
     own = ctx is None
     if own:
         import moderngl
 
-        ctx = moderngl.create_standalone_context(backend="egl", require=330)
+        from facepuppet.runtime.render.gl_context import GLUnavailable
+
+        try:
+            ctx = moderngl.create_standalone_context(backend="egl", require=330)
+        except Exception as exc:
+            raise GLUnavailable(f"no headless EGL OpenGL 3.3 context for the contact sheet ({exc})") from None
     try:
         return save_png(path, contact_sheet(shape_images(character, names, ctx), columns))
     finally:

@@ -182,8 +182,12 @@ def spelled(key: str, style: str) -> str:
 
 def clone_face(source: ElasticModel, character: Character, face: Face, points: ControlPoints, *,
                k: int = DEFAULT_K, fixed_ratio: float = DEFAULT_FIXED_RATIO,
-               progress: Callable[[int, int, str], None] | None = None) -> tuple[tuple[str, ...], np.ndarray]:
-    """Cloned ARKit shapes on ``character``: (canonical names, dense deltas (n, n_vertices, 3) float32)."""
+               progress: Callable[[int, int, str], None] | None = None,
+               info: dict | None = None) -> tuple[tuple[str, ...], np.ndarray]:
+    """Cloned ARKit shapes on ``character``: (canonical names, dense deltas (n, n_vertices, 3) float32).
+
+    ``info``, when given, receives {"pieces": ...}: how the pieces that are not skin were moved
+    (:func:`carry_pieces`)."""
     names, params = fold_source(source)
     local = np.full(character.n_vertices, -1, np.int64)
     local[face.mesh] = np.arange(len(face.mesh))
@@ -217,22 +221,26 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
         dense[s, face.mesh] = d
         if progress is not None:
             progress(s + 1, len(names), name)
-    carry_pieces(dense, source, names, fold_source(source)[1], character.vertices, face,
+    carried = carry_pieces(dense, source, names, fold_source(source)[1], character.vertices, face,
                  rigid=face.mesh[model.arrays["rigid_labels"] >= 0],
                  eyeballs=np.concatenate([face.mesh[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]),
                  mouth=_mouth_ball(points, character.vertices))
+    if info is not None:
+        info["pieces"] = carried
     return names, dense
 
 
 def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...], params: np.ndarray,
                  vertices: np.ndarray, face: Face, rigid: np.ndarray, eyeballs: np.ndarray,
-                 mouth: tuple | None = None) -> None:
+                 mouth: tuple | None = None) -> dict:
     """Carry the cloned skin motion in ``dense`` (n, n_vertices, 3), in place, onto the face's other pieces
     (:mod:`.pieces`): those on the skin follow their skin triangle, decal eyes and mouths the landmark field of
     the source's ``params`` (the folded (n, n_c, 3)). The ``eyeballs`` (their vertices) and the ``rigid`` jaw
     keep their motion, except that on a decal face the jaw found from the skin's points is not trusted: what of it
     the field does not move stays. A piece centred within the ``mouth`` ball (centre, radius) is the inside of
-    the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too."""
+    the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too.
+
+    Returns {"decal_eyes": sides, "decal_mouth": bool, "carried_vertices": n, "field_vertices": n}."""
     from facepuppet.offline.perfect_sync.pieces import embed, feature_field, find_pieces
     from facepuppet.offline.perfect_sync.proposal import skin_triangles
 
@@ -249,7 +257,7 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
             carried = carried[np.linalg.norm(centres - mouth[0], axis=1)[inverse] > mouth[1]]
         if len(carried):
             dense[:, carried] = embed(vertices, carried, skin_t, dense)
-        return
+        return {"decal_eyes": [], "decal_mouth": False, "carried_vertices": int(len(carried)), "field_vertices": 0}
     # a decal face (Godette): its features are pieces in front of a skin too coarse for them, which the skin's
     # control points cannot find; the features and the pieces on the skin move by the features' landmark field,
     # the skin stays (folding its coarse triangles about an eye tears the face, and the artist's own shapes
@@ -260,6 +268,8 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     dense[:, moved] = feature_field(pieces, face, vertices, source.arrays["control_positions"],
                                     tuple(source.control_names), params, names, moved)
     decal_eye_looks(dense, names, vertices, face, pieces)
+    return {"decal_eyes": sorted(pieces.eyes), "decal_mouth": pieces.mouth is not None, "carried_vertices": 0,
+            "field_vertices": int(len(np.unique(moved)))}
 
 
 def _mouth_ball(points: ControlPoints, vertices: np.ndarray) -> tuple | None:
