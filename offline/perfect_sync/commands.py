@@ -58,6 +58,8 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.sheet and not args.pictures:
+        raise ValueError("--sheet: needs --pictures DIR (the folder the contact sheet goes to)")
     character = Character.load(args.character)
     source = load_source(args.source)
     with Progress("perfect-sync", total=None, unit="shapes") as bar:
@@ -77,11 +79,11 @@ def _run(args: argparse.Namespace) -> int:
 
         from facepuppet.offline.perfect_sync.pictures import shape_sheet
 
-        added = report["added"] + report["replaced"]
-        try:
-            print(shape_sheet(out, added, args.pictures / "shapes.png"))
-        except GLUnavailable as exc:
-            print(f"perfect-sync: no contact sheet of the shapes (no OpenGL: {exc})")
+        if args.sheet:
+            try:
+                print(shape_sheet(out, report["added"] + report["replaced"], args.pictures / "shapes.png"))
+            except GLUnavailable as exc:
+                print(f"perfect-sync: no contact sheet of the shapes (no OpenGL: {exc})")
     for d in report["doubts"]:
         print(f"doubtful: {', '.join(d['points'])}: {d['why']}")
     for d in report["implausible_shapes"]:
@@ -101,5 +103,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="source elastic table (fit-elastic of the ICT head: ict_elastic.npz)")
     p.add_argument("--landmarks", type=Path, help="control points to use (the JSON --pictures writes, edited)")
     p.add_argument("--pictures", type=Path, help="folder for the proposed points (PNG, JSON) and the report")
+    p.add_argument("--sheet", action="store_true",
+                   help="with --pictures: also render a contact sheet of the cloned shapes there (OpenGL)")
     p.add_argument("--replace", action="store_true", help="replace shapes it already has under an ARKit name")
     p.set_defaults(func=_run)

@@ -154,3 +154,25 @@ def test_ict_lashes_follow_the_closing_lids(ict_character, source):
     err = np.linalg.norm(d[moving] - skin_d, axis=1) / np.linalg.norm(skin_d, axis=1)
     assert np.median(err) < 0.2, np.median(err)
     assert np.abs(d[lashes[v[lashes, 0] < 0]]).max() < 0.05  # the right eye's lashes stay (cm)
+
+
+@pytest.mark.data
+@pytest.mark.slow
+@pytest.mark.gl
+def test_contact_sheet_of_godettes_cloned_shapes(godette, egl_ctx, tmp_path):
+    from PIL import Image
+
+    from facepuppet.offline.perfect_sync.pictures import shape_images, shape_sheet
+
+    cells = shape_images(godette, ["eyeBlinkLeft", "jawOpen"], egl_ctx, size=(160, 160))
+    assert [label for label, _ in cells] == ["neutral", "eyeBlinkLeft", "jawOpen"]
+    neutral, blink, jaw = (c.astype(int) for _, c in cells)
+    changed = np.abs(blink - neutral).max(axis=2) > 12
+    ys, xs = np.nonzero(changed)
+    # the crop is the square around what the shapes change: the closed eye lies in the cell, on the character's
+    # left (the image's right, front view), above the opened mouth
+    assert changed.mean() > 0.01 and xs.mean() > 80
+    mouth = np.nonzero(np.abs(jaw - neutral).max(axis=2) > 12)
+    assert len(mouth[0]) and mouth[0].mean() > ys.mean()
+    path = shape_sheet(godette, ["eyeBlinkLeft", "jawOpen"], tmp_path / "sheet.png", columns=3, ctx=egl_ctx)
+    assert Image.open(path).size[0] >= 3 * 160
