@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index, canonical, split_side
 from facepuppet.runtime.character import Character, sparse_deltas
@@ -40,6 +41,7 @@ CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between
 # (ICT's eyeLook shapes move the lids only: its eyes are turned by the app); a judgement, about the eye's
 # comfortable range: 25 degrees sideways, 15 up and down (at 25 the ICT iris went under the upper lid).
 EYE_LOOK_DEGREES = (25.0, 15.0)  # (about the up axis, about the across axis)
+EYE_CLEARANCE = 0.03  # a lid passing over an eyeball keeps at most this fraction of its radius clear of it
 # (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
 # turn about +y by + moves the front (+z) towards +x, one about +x by − moves it up.
 EYE_TURNS = {
@@ -209,6 +211,12 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
     eyes = eyeballs(sub_v, sub_t, sub_points)
     dense = np.zeros((len(names), character.n_vertices, 3), np.float32)
     up = np.tile([0, 0, 1.0], (len(sub_v), 1))
+    skin_local = local[face.skin]
+    lid_skin = {}  # the skin in front of each eyeball, which must pass over it, not through it
+    for side, (members, centre) in eyes.items():
+        reach = 1.6 * float(np.linalg.norm(sub_v[members] - centre, axis=1).max())
+        rel = sub_v[skin_local] - centre
+        lid_skin[side] = skin_local[(np.linalg.norm(rel, axis=1) < reach) & (rel @ face.frame[2] > 0)]
     for s, name in enumerate(names):
         pos, _ = model.deform(params[s], sub_v.astype(np.float32), up)
         d = pos - sub_v
@@ -218,6 +226,8 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
                 axis, sign = turn
                 r = _rotation(face.frame[axis], sign * np.radians(EYE_LOOK_DEGREES[0 if axis == 1 else 1]))
                 d[members] = (sub_v[members] - centre) @ r.T + centre - sub_v[members]
+        for side, (members, centre) in eyes.items():
+            d[lid_skin[side]] = clear_eyeball(sub_v, d, members, centre, lid_skin[side])
         dense[s, face.mesh] = d
         if progress is not None:
             progress(s + 1, len(names), name)
@@ -228,6 +238,34 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
     if info is not None:
         info["pieces"] = carried
     return names, dense
+
+
+def clear_eyeball(rest: np.ndarray, d: np.ndarray, members: np.ndarray, centre: np.ndarray, near: np.ndarray,
+                  margin: float = EYE_CLEARANCE) -> np.ndarray:
+    """Displacements of the ``near`` skin vertices with none left inside the eyeball: a vertex whose shaped place
+    lies closer to the eye's ``centre`` than the (shaped) eyeball's surface in its direction, plus the clearance it
+    had at rest (at most ``margin`` of the eye's radius), is put back out along that direction. Vertices behind
+    the eyeball's surface at rest (the socket) are left. Returns (len(near), 3)."""
+    ball = rest[members] + d[members]
+    rel = ball - centre
+    radius = np.linalg.norm(rel, axis=1)
+    tree = cKDTree(rel / radius[:, None])
+
+    def surface(p):
+        u = (p - centre) / np.maximum(np.linalg.norm(p - centre, axis=1, keepdims=True), 1e-12)
+        _, j = tree.query(u, k=min(4, len(radius)))
+        return u, radius[np.atleast_2d(j)].max(axis=1)  # the bulge (a cornea) among the nearest directions
+
+    x = rest[near]
+    _, at_rest = surface(x)
+    clearance = np.linalg.norm(x - centre, axis=1) - at_rest
+    p = x + d[near]
+    u, now = surface(p)
+    need = now + np.minimum(clearance, margin * radius.max())
+    inside = (clearance > 0) & (np.linalg.norm(p - centre, axis=1) < need)
+    out = np.array(d[near])
+    out[inside] = centre + u[inside] * need[inside, None] - x[inside]
+    return out
 
 
 def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...], params: np.ndarray,
