@@ -250,22 +250,34 @@ def test_a_hole_in_the_cheek_is_doubted(identical):
 def test_identical_character_reproduces_the_source_model_exactly(identical, source, ict_character):
     """On the source's own head the proposal finds the source's 47 vertices and the clone is the source's
     own elastic reconstruction (zero error beyond the model's), except the blinks, whose lids close_lids
-    makes meet. (Before the fitted nose tip was kept, the detected one moved a vertex: 5.4 % median.)"""
+    makes meet, and the lid skin kept out of the eyeballs (only ever farther out). (Before the fitted nose tip
+    was kept, the detected one moved a vertex: 5.4 % median.)"""
     from facepuppet.offline.perfect_sync.transfer import fold_source
 
     target, out, _, points = identical
     model = source[0]
     np.testing.assert_array_equal(points.vertices, model.arrays["control_vertices"])
     keys, params = fold_source(model)
-    v = ict_character.vertices
-    skin = find_face(ict_character).skin
+    c = ict_character
+    v = c.vertices
+    skin = find_face(c).skin
+    # the lids pass over the eyeballs: the skin within 2.5 cm of an eyeball's centre may be put out of it
+    centres = [v[np.unique(c.triangles[c.triangle_material == c.material_names.index(f"M_Sclera{w}")])].mean(0)
+               for w in ("Left", "Right")]
+    near = [np.linalg.norm(v[skin] - e, axis=1) < 2.5 for e in centres]
+    far = ~(near[0] | near[1])
     dense = out.dense_deltas()[target.n_shapes:]
     for key, p, d in zip(keys, params, dense):
         if key.startswith("eyeBlink"):
             continue
         pos, _ = model.deform(p, v, np.tile([0, 0, 1.0], (len(v), 1)))
         ref = (pos - v)[skin]
-        np.testing.assert_allclose(d[skin], ref, atol=1e-4 * max(np.abs(ref).max(), 1e-6), err_msg=key)
+        tol = 1e-4 * max(np.abs(ref).max(), 1e-6)
+        np.testing.assert_allclose(d[skin][far], ref[far], atol=tol, err_msg=key)
+        for e, m in zip(centres, near):  # near the eyes only ever farther out of the eyeball
+            out_r = np.linalg.norm(v[skin][m] + d[skin][m] - e, axis=1)
+            ref_r = np.linalg.norm(v[skin][m] + ref[m] - e, axis=1)
+            assert (out_r >= ref_r - tol).all(), key
 
 
 def test_the_closed_lids_cover_the_eyeball(identical, ict_character):
