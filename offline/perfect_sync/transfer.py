@@ -42,6 +42,7 @@ CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between
 # comfortable range: 25 degrees sideways, 15 up and down (at 25 the ICT iris went under the upper lid).
 EYE_LOOK_DEGREES = (25.0, 15.0)  # (about the up axis, about the across axis)
 EYE_CLEARANCE = 0.03  # a lid passing over an eyeball keeps at most this fraction of its radius clear of it
+MOUTH_CLEARANCE = 0.25  # outer skin pushed towards the teeth or gums keeps this fraction of its rest gap to them
 # (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
 # turn about +y by + moves the front (+z) towards +x, one about +x by − moves it up.
 EYE_TURNS = {
@@ -217,6 +218,7 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
         reach = 1.6 * float(np.linalg.norm(sub_v[members] - centre, axis=1).max())
         rel = sub_v[skin_local] - centre
         lid_skin[side] = skin_local[(np.linalg.norm(rel, axis=1) < reach) & (rel @ face.frame[2] > 0)]
+    inside = mouth_parts(sub_v, sub_t, skin_local, _mouth_ball(sub_points, sub_v), face.frame[2])
     for s, name in enumerate(names):
         pos, _ = model.deform(params[s], sub_v.astype(np.float32), up)
         d = pos - sub_v
@@ -228,6 +230,8 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
                 d[members] = (sub_v[members] - centre) @ r.T + centre - sub_v[members]
         for side, (members, centre) in eyes.items():
             d[lid_skin[side]] = clear_eyeball(sub_v, d, members, centre, lid_skin[side])
+        if inside is not None:
+            d[inside[1]] = clear_mouth_parts(sub_v, d, *inside)
         dense[s, face.mesh] = d
         if progress is not None:
             progress(s + 1, len(names), name)
@@ -265,6 +269,67 @@ def clear_eyeball(rest: np.ndarray, d: np.ndarray, members: np.ndarray, centre: 
     inside = (clearance > 0) & (np.linalg.norm(p - centre, axis=1) < need)
     out = np.array(d[near])
     out[inside] = centre + u[inside] * need[inside, None] - x[inside]
+    return out
+
+
+def mouth_parts(vertices: np.ndarray, triangles: np.ndarray, skin: np.ndarray, mouth: tuple | None,
+                forward: np.ndarray) -> tuple | None:
+    """The pieces inside the mouth (teeth, gums, tongue: pieces centred within the ``mouth`` ball (centre,
+    radius)) and the skin that must stay outside them: (their triangles, the outer skin vertices (facing
+    ``forward``; not the lips' inner sides, which the true shapes press onto the teeth) within a third of the
+    ball's radius of them and outside them at rest, those vertices' rest clearance), or None when there are none.
+    """
+    from facepuppet.offline.elastic.laplacian import components
+
+    if mouth is None:
+        return None
+    v = np.asarray(vertices, np.float64)
+    t = np.asarray(triangles, np.int64)
+    _, labels = components(len(v), t)
+    skin_label = labels[skin[0]]
+    parts = [lab for lab in np.unique(labels[np.unique(t)]) if lab != skin_label
+             and np.linalg.norm(v[labels == lab].mean(0) - mouth[0]) < mouth[1]]
+    if not parts:
+        return None
+    part_t = t[np.isin(labels[t[:, 0]], parts)]
+    e1, e2 = v[part_t[:, 1]] - v[part_t[:, 0]], v[part_t[:, 2]] - v[part_t[:, 0]]
+    part_t = part_t[np.cross(e1, e2) @ forward > 0]  # their front: the back and insides are no guide for the skin
+    facing = vertex_normals(v.astype(np.float32), t.astype(np.uint32))[skin] @ forward > 0.3
+    cand = skin[facing]
+    clearance, dist, _ = _surface_push(v[cand], v, part_t)
+    near = (dist < mouth[1] / 3) & (clearance > 0)
+    if not near.any():
+        return None
+    return part_t, cand[near], clearance[near]
+
+
+def _surface_push(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> tuple:
+    """(signed distance along the nearest triangle's normal, distance, that normal) of ``points`` to the
+    surface of ``triangles``."""
+    from facepuppet.offline.perfect_sync.pieces import nearest_triangles
+
+    tri_i, bary, dist = nearest_triangles(points, vertices, triangles)
+    tri = vertices[triangles[tri_i]]
+    closest = (bary[:, :, None] * tri).sum(1)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-18)
+    return ((points - closest) * n).sum(1), dist, n
+
+
+def clear_mouth_parts(rest: np.ndarray, d: np.ndarray, part_t: np.ndarray, near: np.ndarray, clearance: np.ndarray,
+                      margin: float = MOUTH_CLEARANCE) -> np.ndarray:
+    """Displacements of the ``near`` skin vertices with none pushed into the mouth's parts (the gums through the
+    cheeks in mouthFunnel): a vertex whose shaped place lies less than ``margin`` of its rest ``clearance`` outside
+    the nearest (shaped) mouth-part triangle, along its normal, is put back out along it. Returns (len(near), 3)."""
+    q = rest + d  # the parts stay or follow the jaw
+    out = np.array(d[near])
+    for _ in range(2):  # a pushed vertex may meet another triangle
+        p = rest[near] + out
+        gap, _, n = _surface_push(p, q, part_t)
+        short = gap < margin * clearance
+        if not short.any():
+            break
+        out[short] += ((margin * clearance - gap)[short])[:, None] * n[short]
     return out
 
 
