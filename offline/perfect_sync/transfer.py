@@ -35,6 +35,7 @@ from facepuppet.offline.elastic.clone import clone_model
 from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.elastic.params import build_model
 from facepuppet.offline.perfect_sync.face import Face
+from facepuppet.offline.perfect_sync.pieces import Pieces
 
 CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between the lid points
 # An eye look at weight 1 turns the eyeball this far (sideways, up or down). The source's shapes do not say
@@ -386,7 +387,8 @@ def _mouth_ball(points: ControlPoints, vertices: np.ndarray) -> tuple | None:
     return centre, 1.6 * float(np.linalg.norm(v[points.vertex("eye_inner_L")] - v[points.vertex("eye_inner_R")]))
 
 
-def decal_eye_looks(dense: np.ndarray, names: tuple[str, ...], vertices: np.ndarray, face: Face, pieces) -> None:
+def decal_eye_looks(dense: np.ndarray, names: tuple[str, ...], vertices: np.ndarray, face: Face,
+                    pieces: Pieces) -> None:
     """The eye looks turn a decal eye (in place in ``dense``): the eye's pieces that lie within its largest
     piece's box (iris, pupil, highlights; not the lashes reaching beyond it) slide across the face as the front
     of a ball of half the eye's width would turn by ``EYE_LOOK_DEGREES``, on top of the lids' field."""
