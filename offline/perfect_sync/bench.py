@@ -37,6 +37,7 @@ GOAL_GODETTE_S, GOAL_30K_S = 30.0, 120.0
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     add_data_argument(parser)
     parser.add_argument("--source", type=Path, help="source elastic table (default: fit-elastic of the kit's ICT)")
+    parser.add_argument("--pictures", type=Path, help="folder for contact sheets of the cloned shapes (GL)")
 
 
 def _renamed(character):
@@ -58,6 +59,15 @@ def _summary(errs: dict) -> dict:
             "median_without_eye_looks": float(np.median(list(skin.values()))),
             "worst": [worst, errs[worst]], "n_over_40": int(sum(v > GOAL_WORST for v in errs.values())),
             "meets_goal": bool(np.median(list(errs.values())) < GOAL_MEDIAN and errs[worst] < GOAL_WORST)}
+
+
+def _sheet(args: argparse.Namespace, character: Character, report: dict, label: str) -> None:
+    if not getattr(args, "pictures", None):
+        return
+    from facepuppet.offline.perfect_sync.pictures import shape_sheet
+
+    args.pictures.mkdir(parents=True, exist_ok=True)
+    print(f"bench perfect-sync: {shape_sheet(character, report['added'], args.pictures / f'{label}_shapes.png')}")
 
 
 def run_bench(args: argparse.Namespace) -> dict:
@@ -89,6 +99,7 @@ def run_bench(args: argparse.Namespace) -> dict:
             out, report, _ = perfect_sync(_renamed(variant), source, progress=bar)
             seconds = time.perf_counter() - t
         errs = truth_errors(variant, out, find_face(variant))
+        _sheet(args, out, report, f"ict_{label}")
         result["ict_variants"][label] = {"n_vertices": variant.n_vertices, "seconds": seconds,
                                          "n_added": len(report["added"]), "n_doubts": len(report["doubts"]),
                                          **_summary(errs)}
@@ -103,6 +114,7 @@ def run_bench(args: argparse.Namespace) -> dict:
             t = time.perf_counter()
             out, report, _ = perfect_sync(godette, source, progress=bar)
             seconds = time.perf_counter() - t
+        _sheet(args, out, report, "godette")
         face = find_face(godette)
         pairs = {}
         for key, artist in GODETTE_PAIRS:
@@ -110,6 +122,9 @@ def run_bench(args: argparse.Namespace) -> dict:
                 pairs[f"{key}~{artist}"] = pair_similarity(out, key, artist, face.mesh)
         result["godette"] = {"n_vertices": godette.n_vertices, "face_vertices": int(len(face.mesh)),
                              "skin_vertices": int(len(face.skin)), "seconds": seconds, "pairs": pairs,
+                             "pieces": report["pieces"], "meets_cosine_goal": {
+                                 k: v["cosine"] is not None and v["cosine"] >= GOAL_COSINE for k, v in pairs.items()
+                                 if k.split("~")[0] in ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")},
                              "n_doubts": len(report["doubts"]), "doubts": report["doubts"],
                              "meets_time_goal": seconds < GOAL_GODETTE_S}
         print(f"bench perfect-sync: Godette {seconds:.1f} s; " + ", ".join(

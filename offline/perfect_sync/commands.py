@@ -45,18 +45,21 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
         progress.total = n
         progress.update(i, name)
 
-    keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step)
+    info: dict = {}
+    keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
     out, added = add_shapes(character, keys, dense, replace)
     largest = np.linalg.norm(dense, axis=2).max(axis=1) / face.width
     implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} face widths (> {IMPLAUSIBLE}): check the points"}
                    for k, r in zip(keys, largest) if r > IMPLAUSIBLE]
     report = {"face": {"evidence": face.evidence, "mesh_vertices": int(len(face.mesh)), "skin_vertices":
                        int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
-              "doubts": doubtful, "implausible_shapes": implausible, **added}
+              "pieces": info["pieces"], "doubts": doubtful, "implausible_shapes": implausible, **added}
     return out, report, points
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.sheet and not args.pictures:
+        raise ValueError("--sheet: needs --pictures DIR (the folder the contact sheet goes to)")
     character = Character.load(args.character)
     source = load_source(args.source)
     with Progress("perfect-sync", total=None, unit="shapes") as bar:
@@ -72,6 +75,15 @@ def _run(args: argparse.Namespace) -> int:
         bad = [n for d in report["doubts"] for n in d["points"]]
         print(picture(args.pictures / "landmarks.png", character.vertices, face, points, bad))
         (args.pictures / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+        from facepuppet.runtime.render.gl_context import GLUnavailable
+
+        from facepuppet.offline.perfect_sync.pictures import shape_sheet
+
+        if args.sheet:
+            try:
+                print(shape_sheet(out, report["added"] + report["replaced"], args.pictures / "shapes.png"))
+            except GLUnavailable as exc:
+                print(f"perfect-sync: no contact sheet of the shapes (no OpenGL: {exc})")
     for d in report["doubts"]:
         print(f"doubtful: {', '.join(d['points'])}: {d['why']}")
     for d in report["implausible_shapes"]:
@@ -91,5 +103,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="source elastic table (fit-elastic of the ICT head: ict_elastic.npz)")
     p.add_argument("--landmarks", type=Path, help="control points to use (the JSON --pictures writes, edited)")
     p.add_argument("--pictures", type=Path, help="folder for the proposed points (PNG, JSON) and the report")
+    p.add_argument("--sheet", action="store_true",
+                   help="with --pictures: also render a contact sheet of the cloned shapes there (OpenGL)")
     p.add_argument("--replace", action="store_true", help="replace shapes it already has under an ARKit name")
     p.set_defaults(func=_run)

@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index, canonical, split_side
 from facepuppet.runtime.character import Character, sparse_deltas
@@ -34,12 +35,15 @@ from facepuppet.offline.elastic.clone import clone_model
 from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.elastic.params import build_model
 from facepuppet.offline.perfect_sync.face import Face
+from facepuppet.offline.perfect_sync.pieces import Pieces
 
 CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between the lid points
 # An eye look at weight 1 turns the eyeball this far (sideways, up or down). The source's shapes do not say
 # (ICT's eyeLook shapes move the lids only: its eyes are turned by the app); a judgement, about the eye's
 # comfortable range: 25 degrees sideways, 15 up and down (at 25 the ICT iris went under the upper lid).
 EYE_LOOK_DEGREES = (25.0, 15.0)  # (about the up axis, about the across axis)
+EYE_CLEARANCE = 0.03  # a lid passing over an eyeball keeps at most this fraction of its radius clear of it
+MOUTH_CLEARANCE = 0.25  # outer skin pushed towards the teeth or gums keeps this fraction of its rest gap to them
 # (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
 # turn about +y by + moves the front (+z) towards +x, one about +x by − moves it up.
 EYE_TURNS = {
@@ -182,8 +186,12 @@ def spelled(key: str, style: str) -> str:
 
 def clone_face(source: ElasticModel, character: Character, face: Face, points: ControlPoints, *,
                k: int = DEFAULT_K, fixed_ratio: float = DEFAULT_FIXED_RATIO,
-               progress: Callable[[int, int, str], None] | None = None) -> tuple[tuple[str, ...], np.ndarray]:
-    """Cloned ARKit shapes on ``character``: (canonical names, dense deltas (n, n_vertices, 3) float32)."""
+               progress: Callable[[int, int, str], None] | None = None,
+               info: dict | None = None) -> tuple[tuple[str, ...], np.ndarray]:
+    """Cloned ARKit shapes on ``character``: (canonical names, dense deltas (n, n_vertices, 3) float32).
+
+    ``info``, when given, receives {"pieces": ...}: how the pieces that are not skin were moved
+    (:func:`carry_pieces`)."""
     names, params = fold_source(source)
     local = np.full(character.n_vertices, -1, np.int64)
     local[face.mesh] = np.arange(len(face.mesh))
@@ -205,6 +213,13 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
     eyes = eyeballs(sub_v, sub_t, sub_points)
     dense = np.zeros((len(names), character.n_vertices, 3), np.float32)
     up = np.tile([0, 0, 1.0], (len(sub_v), 1))
+    skin_local = local[face.skin]
+    lid_skin = {}  # the skin in front of each eyeball, which must pass over it, not through it
+    for side, (members, centre) in eyes.items():
+        reach = 1.6 * float(np.linalg.norm(sub_v[members] - centre, axis=1).max())
+        rel = sub_v[skin_local] - centre
+        lid_skin[side] = skin_local[(np.linalg.norm(rel, axis=1) < reach) & (rel @ face.frame[2] > 0)]
+    inside = mouth_parts(sub_v, sub_t, skin_local, _mouth_ball(sub_points, sub_v), face.frame[2])
     for s, name in enumerate(names):
         pos, _ = model.deform(params[s], sub_v.astype(np.float32), up)
         d = pos - sub_v
@@ -214,10 +229,187 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
                 axis, sign = turn
                 r = _rotation(face.frame[axis], sign * np.radians(EYE_LOOK_DEGREES[0 if axis == 1 else 1]))
                 d[members] = (sub_v[members] - centre) @ r.T + centre - sub_v[members]
+        for side, (members, centre) in eyes.items():
+            d[lid_skin[side]] = clear_eyeball(sub_v, d, members, centre, lid_skin[side])
+        if inside is not None:
+            d[inside[1]] = clear_mouth_parts(sub_v, d, *inside)
         dense[s, face.mesh] = d
         if progress is not None:
             progress(s + 1, len(names), name)
+    carried = carry_pieces(dense, source, names, fold_source(source)[1], character.vertices, face,
+                 rigid=face.mesh[model.arrays["rigid_labels"] >= 0],
+                 eyeballs=np.concatenate([face.mesh[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]),
+                 mouth=_mouth_ball(points, character.vertices))
+    if info is not None:
+        info["pieces"] = carried
     return names, dense
+
+
+def clear_eyeball(rest: np.ndarray, d: np.ndarray, members: np.ndarray, centre: np.ndarray, near: np.ndarray,
+                  margin: float = EYE_CLEARANCE) -> np.ndarray:
+    """Displacements of the ``near`` skin vertices with none left inside the eyeball: a vertex whose shaped place
+    lies closer to the eye's ``centre`` than the (shaped) eyeball's surface in its direction, plus the clearance it
+    had at rest (at most ``margin`` of the eye's radius), is put back out along that direction. Vertices behind
+    the eyeball's surface at rest (the socket) are left. Returns (len(near), 3)."""
+    ball = rest[members] + d[members]
+    rel = ball - centre
+    radius = np.linalg.norm(rel, axis=1)
+    tree = cKDTree(rel / radius[:, None])
+
+    def surface(p):
+        u = (p - centre) / np.maximum(np.linalg.norm(p - centre, axis=1, keepdims=True), 1e-12)
+        _, j = tree.query(u, k=min(4, len(radius)))
+        return u, radius[np.atleast_2d(j)].max(axis=1)  # the bulge (a cornea) among the nearest directions
+
+    x = rest[near]
+    _, at_rest = surface(x)
+    clearance = np.linalg.norm(x - centre, axis=1) - at_rest
+    p = x + d[near]
+    u, now = surface(p)
+    need = now + np.minimum(clearance, margin * radius.max())
+    inside = (clearance > 0) & (np.linalg.norm(p - centre, axis=1) < need)
+    out = np.array(d[near])
+    out[inside] = centre + u[inside] * need[inside, None] - x[inside]
+    return out
+
+
+def mouth_parts(vertices: np.ndarray, triangles: np.ndarray, skin: np.ndarray, mouth: tuple | None,
+                forward: np.ndarray) -> tuple | None:
+    """The pieces inside the mouth (teeth, gums, tongue: pieces centred within the ``mouth`` ball (centre,
+    radius)) and the skin that must stay outside them: (their triangles, the outer skin vertices (facing
+    ``forward``; not the lips' inner sides, which the true shapes press onto the teeth) within a third of the
+    ball's radius of them and outside them at rest, those vertices' rest clearance), or None when there are none.
+    """
+    from facepuppet.offline.elastic.laplacian import components
+
+    if mouth is None:
+        return None
+    v = np.asarray(vertices, np.float64)
+    t = np.asarray(triangles, np.int64)
+    _, labels = components(len(v), t)
+    skin_label = labels[skin[0]]
+    parts = [lab for lab in np.unique(labels[np.unique(t)]) if lab != skin_label
+             and np.linalg.norm(v[labels == lab].mean(0) - mouth[0]) < mouth[1]]
+    if not parts:
+        return None
+    part_t = t[np.isin(labels[t[:, 0]], parts)]
+    e1, e2 = v[part_t[:, 1]] - v[part_t[:, 0]], v[part_t[:, 2]] - v[part_t[:, 0]]
+    part_t = part_t[np.cross(e1, e2) @ forward > 0]  # their front: the back and insides are no guide for the skin
+    facing = vertex_normals(v.astype(np.float32), t.astype(np.uint32))[skin] @ forward > 0.3
+    cand = skin[facing]
+    clearance, dist, _ = _surface_push(v[cand], v, part_t)
+    near = (dist < mouth[1] / 3) & (clearance > 0)
+    if not near.any():
+        return None
+    return part_t, cand[near], clearance[near]
+
+
+def _surface_push(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> tuple:
+    """(signed distance along the nearest triangle's normal, distance, that normal) of ``points`` to the
+    surface of ``triangles``."""
+    from facepuppet.offline.perfect_sync.pieces import nearest_triangles
+
+    tri_i, bary, dist = nearest_triangles(points, vertices, triangles)
+    tri = vertices[triangles[tri_i]]
+    closest = (bary[:, :, None] * tri).sum(1)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-18)
+    return ((points - closest) * n).sum(1), dist, n
+
+
+def clear_mouth_parts(rest: np.ndarray, d: np.ndarray, part_t: np.ndarray, near: np.ndarray, clearance: np.ndarray,
+                      margin: float = MOUTH_CLEARANCE) -> np.ndarray:
+    """Displacements of the ``near`` skin vertices with none pushed into the mouth's parts (the gums through the
+    cheeks in mouthFunnel): a vertex whose shaped place lies less than ``margin`` of its rest ``clearance`` outside
+    the nearest (shaped) mouth-part triangle, along its normal, is put back out along it. Returns (len(near), 3)."""
+    q = rest + d  # the parts stay or follow the jaw
+    out = np.array(d[near])
+    for _ in range(2):  # a pushed vertex may meet another triangle
+        p = rest[near] + out
+        gap, _, n = _surface_push(p, q, part_t)
+        short = gap < margin * clearance
+        if not short.any():
+            break
+        out[short] += ((margin * clearance - gap)[short])[:, None] * n[short]
+    return out
+
+
+def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...], params: np.ndarray,
+                 vertices: np.ndarray, face: Face, rigid: np.ndarray, eyeballs: np.ndarray,
+                 mouth: tuple | None = None) -> dict:
+    """Carry the cloned skin motion in ``dense`` (n, n_vertices, 3), in place, onto the face's other pieces
+    (:mod:`.pieces`): those on the skin follow their skin triangle, decal eyes and mouths the landmark field of
+    the source's ``params`` (the folded (n, n_c, 3)). The ``eyeballs`` (their vertices) and the ``rigid`` jaw
+    keep their motion, except that on a decal face the jaw found from the skin's points is not trusted: what of it
+    the field does not move stays. A piece centred within the ``mouth`` ball (centre, radius) is the inside of
+    the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too.
+
+    Returns {"decal_eyes": sides, "decal_mouth": bool, "carried_vertices": n, "field_vertices": n}."""
+    from facepuppet.offline.perfect_sync.pieces import embed, feature_field, find_pieces
+    from facepuppet.offline.perfect_sync.proposal import skin_triangles
+
+    skin_t = skin_triangles(face)
+    pieces = find_pieces(vertices, face, skin_t, still=eyeballs)
+    features = pieces.feature_vertices
+    if not len(features):  # the skin carries the features: the pieces on it follow it
+        carried = pieces.on_skin[~np.isin(pieces.on_skin, rigid)]
+        if mouth is not None and len(carried):
+            lab = pieces.labels[carried]
+            _, inverse = np.unique(lab, return_inverse=True)
+            centres = np.stack([np.bincount(inverse, weights=vertices[carried, k]) for k in range(3)], 1)
+            centres /= np.bincount(inverse)[:, None]
+            carried = carried[np.linalg.norm(centres - mouth[0], axis=1)[inverse] > mouth[1]]
+        if len(carried):
+            dense[:, carried] = embed(vertices, carried, skin_t, dense)
+        return {"decal_eyes": [], "decal_mouth": False, "carried_vertices": int(len(carried)), "field_vertices": 0}
+    # a decal face (Godette): its features are pieces in front of a skin too coarse for them, which the skin's
+    # control points cannot find; the features and the pieces on the skin move by the features' landmark field,
+    # the skin stays (folding its coarse triangles about an eye tears the face, and the artist's own shapes
+    # move no skin), and so does the jaw found from the skin's points
+    dense[:, rigid] = 0.0
+    dense[:, face.skin] = 0.0
+    moved = np.concatenate([features, pieces.on_skin])
+    dense[:, moved] = feature_field(pieces, face, vertices, source.arrays["control_positions"],
+                                    tuple(source.control_names), params, names, moved)
+    decal_eye_looks(dense, names, vertices, face, pieces)
+    return {"decal_eyes": sorted(pieces.eyes), "decal_mouth": pieces.mouth is not None, "carried_vertices": 0,
+            "field_vertices": int(len(np.unique(moved)))}
+
+
+def _mouth_ball(points: ControlPoints, vertices: np.ndarray) -> tuple | None:
+    """(centre, radius): the mouth corners' mid-point and 1.6 inner-eye distances (ICT's back molars are centred
+    1.5 from it, its lashes 1.9), or None without those points."""
+    need = ("mouth_corner_L", "mouth_corner_R", "eye_inner_L", "eye_inner_R")
+    if not all(n in points.names for n in need):
+        return None
+    v = np.asarray(vertices, np.float64)
+    centre = 0.5 * (v[points.vertex("mouth_corner_L")] + v[points.vertex("mouth_corner_R")])
+    return centre, 1.6 * float(np.linalg.norm(v[points.vertex("eye_inner_L")] - v[points.vertex("eye_inner_R")]))
+
+
+def decal_eye_looks(dense: np.ndarray, names: tuple[str, ...], vertices: np.ndarray, face: Face,
+                    pieces: Pieces) -> None:
+    """The eye looks turn a decal eye (in place in ``dense``): the eye's pieces that lie within its largest
+    piece's box (iris, pupil, highlights; not the lashes reaching beyond it) slide across the face as the front
+    of a ball of half the eye's width would turn by ``EYE_LOOK_DEGREES``, on top of the lids' field."""
+    v = face.to_frame(vertices)
+    for s, name in enumerate(names):
+        for side, (members, (x0, x1, y0, y1)) in pieces.eyes.items():
+            turn = EYE_TURNS.get((name, side))
+            if turn is None:
+                continue
+            labels = pieces.labels[members]
+            inside = [lab for lab in np.unique(labels) if np.all(
+                (v[members[labels == lab], 0] >= x0 - 1e-9) & (v[members[labels == lab], 0] <= x1 + 1e-9)
+                & (v[members[labels == lab], 1] >= y0 - 1e-9) & (v[members[labels == lab], 1] <= y1 + 1e-9))]
+            iris = members[np.isin(labels, inside)]
+            axis, sign = turn
+            angle = np.radians(EYE_LOOK_DEGREES[0 if axis == 1 else 1])
+            radius = 0.5 * (x1 - x0)
+            # about up (axis 1) by +a: the front moves to +x; about across (axis 0) by -a: the front moves up
+            slide = np.zeros(3)
+            slide[0 if axis == 1 else 1] = (sign if axis == 1 else -sign) * radius * np.sin(angle)
+            dense[s, iris] += (slide @ face.frame).astype(dense.dtype)
 
 
 def add_shapes(character: Character, keys: tuple[str, ...], dense: np.ndarray,

@@ -1,0 +1,332 @@
+"""The face's pieces that are not its skin, and how the cloned expressions carry onto them.
+
+Many characters draw their features on separate pieces rather than in the
+skin: Godette's eyes are stacked alpha decals (iris, pupil, highlights), a
+lash-and-upper-lid strip and a brow quad, lying a few millimetres in front
+of a 79-vertex skin that has no eye openings; her mouth is four collapsed
+strips (closed line) in front of a skin with no mouth. The elastic clone
+(:func:`~.transfer.clone_face`) moves the skin only, so on such a face it
+moves nothing that the artist's shapes move. This module:
+
+* **embeds** every other piece that lies on the skin (lashes, tear films,
+  blush decals: each vertex within ``ON_SKIN`` face widths of it) on its
+  nearest skin triangle: the piece's vertex takes the barycentric mix of
+  the triangle's cloned displacements (:func:`embed`);
+* finds **decal features** (:func:`decal_features`): an eye is the largest
+  forward piece (by its front-projected area) on each side above the nose
+  tip where the skin has no opening, with every piece whose centre lies in
+  its box; the mouth is the lowest forward piece near the symmetry plane
+  below the nose tip, wider than tall, with every piece overlapping it,
+  where the skin has no mouth opening;
+* moves decal features by a **landmark field** (:func:`feature_field`): the
+  source's control points are placed on the target relative to the features
+  (eye points by their place in the source eye's box of corners and lids,
+  mouth points relative to the mouth corners and lip line, the others by
+  the affine map these define), each control point's cloned displacement is
+  scaled by its feature's size against the source's (an anime eye three
+  times as tall as ICT's closes three times as far), and a thin-plate
+  spline over the face's front plane interpolates them. The blinks' upper
+  lid points are put onto the lower ones (the lids meet), and the field is
+  **cut along the lip line**: a vertex above the mouth's line (a quadratic
+  through the mouth pieces' vertices, with half of them above it) takes the field of the upper lip, one
+  below it that of the lower lip and jaw, so the mouth opens between its
+  lips even where they lie on one line at rest; likewise only the eye's own
+  pieces follow the lid points (a brow piece just above the lashes does not),
+  and an eye piece beyond the eye's box (the lashes above the upper lid)
+  moves as the box's edge does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import RBFInterpolator
+from scipy.spatial import cKDTree
+
+from facepuppet.offline.elastic.laplacian import components
+from facepuppet.offline.elastic.lip_line import boundary_loops
+from facepuppet.offline.perfect_sync.face import Face
+
+ON_SKIN = 0.06  # a piece lies on the skin when every vertex is within this many face widths of it
+OPENING = 0.5  # a skin boundary loop within this many eye widths of a feature is its opening (a real eye/mouth)
+DECAL_DEPTH = 0.6  # a decal eye's largest piece is no deeper than this fraction of its width
+CLOSED = 0.05  # a decal blink leaves this fraction of the eye's height between the lids
+EYE_NAMES = ("eye_inner", "eye_outer", "lid_upper_inner", "lid_upper_outer", "lid_lower_inner", "lid_lower_outer")
+MOUTH_NAMES = ("mouth_corner", "lip_upper", "lip_lower", "mouth_inner")  # prefixes
+LOWER_JAW = ("lip_lower", "chin", "jaw_chin")  # prefixes of the points below the lip line
+
+
+def closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray,
+                                                                                                np.ndarray]:
+    """Closest points of triangles (a, b, c) (m, 3) to points ``p`` (m, 3): (points (m, 3), barycentric (m, 3)).
+
+    Ericson, Real-Time Collision Detection §5.1.5 (Voronoi regions of the vertices, edges and face).
+    """
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = (ab * ap).sum(1), (ac * ap).sum(1)
+    bp = p - b
+    d3, d4 = (ab * bp).sum(1), (ac * bp).sum(1)
+    cp = p - c
+    d5, d6 = (ab * cp).sum(1), (ac * cp).sum(1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    denom = va + vb + vc
+    denom = np.where(np.abs(denom) < 1e-30, 1e-30, denom)
+    v, w = vb / denom, vc / denom  # inside the face
+    bary = np.stack([1 - v - w, v, w], 1)
+
+    def put(mask, u):
+        bary[mask] = u[mask]
+
+    safe = lambda x: np.where(np.abs(x) < 1e-30, 1e-30, x)  # noqa: E731
+    # edges (checked before the vertices, which override them)
+    t = d1 / safe(d1 - d3)
+    put((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - t, t, 0 * t], 1))
+    t = d2 / safe(d2 - d6)
+    put((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - t, 0 * t, t], 1))
+    t = (d4 - d3) / safe((d4 - d3) + (d5 - d6))
+    put((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), np.stack([0 * t, 1 - t, t], 1))
+    one = np.ones(len(p))
+    zero = np.zeros(len(p))
+    put((d1 <= 0) & (d2 <= 0), np.stack([one, zero, zero], 1))
+    put((d3 >= 0) & (d4 <= d3), np.stack([zero, one, zero], 1))
+    put((d6 >= 0) & (d5 <= d6), np.stack([zero, zero, one], 1))
+    q = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    return q, bary
+
+
+def nearest_triangles(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
+                      k: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each point its nearest triangle among the ``k`` with the nearest centroids: (triangle index (n,),
+    barycentric (n, 3), distance (n,))."""
+    p = np.asarray(points, np.float64)
+    v = np.asarray(vertices, np.float64)
+    t = np.asarray(triangles, np.int64)
+    k = min(k, len(t))
+    _, cand = cKDTree(v[t].mean(1)).query(p, k=k)
+    cand = np.asarray(cand).reshape(len(p), k)
+    best_d = np.full(len(p), np.inf)
+    best_t = np.zeros(len(p), np.int64)
+    best_b = np.zeros((len(p), 3))
+    for j in range(k):
+        tri = t[cand[:, j]]
+        q, bary = closest_on_triangles(p, v[tri[:, 0]], v[tri[:, 1]], v[tri[:, 2]])
+        d = np.linalg.norm(p - q, axis=1)
+        better = d < best_d
+        best_d[better], best_t[better], best_b[better] = d[better], cand[better, j], bary[better]
+    return best_t, best_b, best_d
+
+
+@dataclass(frozen=True, eq=False)
+class Pieces:
+    """The face mesh's pieces besides the skin.
+
+    Attributes
+    ----------
+    labels : ndarray (n_vertices,), int64, piece label of every vertex of the character (-1: not the face mesh)
+    skin_label : int
+    on_skin : ndarray (p,), int64, vertices of the pieces lying on the skin (not feature pieces)
+    eyes : dict "L"/"R" -> (vertices (int64), box (x0, x1, y0, y1) in the face frame): decal eyes
+    mouth : (vertices (int64), (x_right, x_left), line (3,) quadratic y(x) in the face frame) or None
+    """
+
+    labels: np.ndarray
+    skin_label: int
+    on_skin: np.ndarray
+    eyes: dict
+    mouth: tuple | None
+
+    @property
+    def feature_vertices(self) -> np.ndarray:
+        parts = [m for m, _ in self.eyes.values()] + ([self.mouth[0]] if self.mouth is not None else [])
+        return np.unique(np.concatenate(parts)) if parts else np.zeros(0, np.int64)
+
+
+def _area_2d(p: np.ndarray, t: np.ndarray) -> float:
+    e1, e2 = p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]
+    return float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
+
+
+def find_pieces(vertices: np.ndarray, face: Face, skin_triangles: np.ndarray, still: np.ndarray = ()) -> Pieces:
+    """The face's pieces (see the module doc): which lie on the skin, which are decal eyes and mouth.
+
+    ``still``: vertices of the eyeballs (:func:`~.transfer.eyeballs`), whose pieces are neither carried nor
+    features. A decal eye is thin: its largest piece no deeper than ``DECAL_DEPTH`` of its width (Godette's
+    iris 0.38; ICT's sclera, a ball in a socket of skin, 1.0).
+    """
+    v = np.asarray(vertices, np.float64)
+    tris = face.triangles
+    n = len(v)
+    _, labels = components(n, tris)
+    labels = np.where(np.isin(np.arange(n), face.mesh), labels, -1)
+    skin_label = int(labels[face.skin[0]])
+    local = face.to_frame(v)
+    width = face.width
+    held = set(np.unique(labels[np.asarray(still, np.int64)]).tolist()) if len(still) else set()
+    others = [lab for lab in np.unique(labels[face.mesh]) if lab != skin_label]
+    members = {lab: np.flatnonzero(labels == lab) for lab in others}
+    on_skin = []
+    if len(skin_triangles):
+        for lab in others:
+            _, _, dist = nearest_triangles(v[members[lab]], v, skin_triangles)
+            if dist.max() < ON_SKIN * width:
+                on_skin.append(lab)
+    loops = [local[loop].mean(0) for loop in boundary_loops(n, skin_triangles)] if len(skin_triangles) else []
+    info = {}
+    for lab in on_skin:
+        m = members[lab]
+        t = tris[np.isin(tris, m).all(axis=1)]
+        p = local[m]
+        info[lab] = {"centre": 0.5 * (p.min(0) + p.max(0)), "lo": p.min(0), "hi": p.max(0),
+                     "area": _area_2d(local, t) if len(t) else 0.0}
+
+    def opening_near(centre, size):
+        return any(np.linalg.norm(c[:2] - centre[:2]) < OPENING * size for c in loops)
+
+    eyes = {}
+    for side, sign in (("L", 1.0), ("R", -1.0)):
+        cand = [lab for lab, i in info.items() if sign * i["centre"][0] > 0.1 * width and i["centre"][1] > 0
+                and sign * i["centre"][0] < 0.45 * width and i["area"] > 0]
+        if not cand:
+            continue
+        core = max(cand, key=lambda lab: info[lab]["area"])
+        lo, hi = info[core]["lo"], info[core]["hi"]
+        size = float(hi[0] - lo[0])
+        if core in held or hi[2] - lo[2] > DECAL_DEPTH * size or opening_near(info[core]["centre"], size):
+            continue  # the skin has its own eye here: the elastic clone and the eyeballs handle it
+        group = [lab for lab in cand if lab not in held and np.all(info[lab]["centre"][:2] >= lo[:2])
+                 and np.all(info[lab]["centre"][:2] <= hi[:2])]
+        eyes[side] = (np.concatenate([members[lab] for lab in group]),
+                      (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
+    mouth = None
+    cand = [lab for lab, i in info.items() if lab not in held and abs(i["centre"][0]) < 0.05 * width
+            and i["centre"][1] < 0 and (i["hi"][0] - i["lo"][0]) > (i["hi"][1] - i["lo"][1])]
+    if cand:
+        low = min(cand, key=lambda lab: info[lab]["centre"][1])
+        lo, hi = info[low]["lo"], info[low]["hi"]
+        pad = 0.25 * float(hi[0] - lo[0])  # strips stacked a hair apart at a closed mouth
+        group = [lab for lab in cand if info[lab]["lo"][1] <= hi[1] + pad and info[lab]["hi"][1] >= lo[1] - pad]
+        m = np.concatenate([members[lab] for lab in group])
+        p = local[m]
+        size = float(np.ptp(p[:, 0]))
+        if not opening_near(0.5 * (p.min(0) + p.max(0)), size):
+            line = np.polyfit(p[:, 0], p[:, 1], 2 if len(np.unique(np.round(p[:, 0], 9))) > 2 else 0)
+            line = np.concatenate([np.zeros(3 - len(line)), line])
+            line[2] += float(np.median(p[:, 1] - np.polyval(line, p[:, 0])))  # half the mouth above, half below
+            mouth = (m, (float(p[:, 0].min()), float(p[:, 0].max())), line)
+    features = set()
+    for m, _ in eyes.values():
+        features.update(np.unique(labels[m]).tolist())
+    if mouth is not None:
+        features.update(np.unique(labels[mouth[0]]).tolist())
+    rest = [members[lab] for lab in on_skin if lab not in features and lab not in held]
+    return Pieces(labels=labels, skin_label=skin_label,
+                  on_skin=np.concatenate(rest) if rest else np.zeros(0, np.int64), eyes=eyes, mouth=mouth)
+
+
+def embed(vertices: np.ndarray, pieces: np.ndarray, skin_triangles: np.ndarray,
+          dense: np.ndarray) -> np.ndarray:
+    """Displacements (n_shapes, p, 3) of the ``pieces`` vertices carried by their nearest skin triangles'
+    (barycentric mix of ``dense`` (n_shapes, n_vertices, 3))."""
+    v = np.asarray(vertices, np.float64)
+    tri, bary, _ = nearest_triangles(v[pieces], v, skin_triangles)
+    corners = skin_triangles[tri]  # (p, 3)
+    return np.einsum("pk,spkc->spc", bary, dense[:, corners])
+
+
+def _prefixed(name: str, prefixes: tuple) -> bool:
+    return any(name == p or name.startswith(p + "_") for p in prefixes)
+
+
+def feature_field(pieces: Pieces, face: Face, vertices: np.ndarray, source_positions: np.ndarray,
+                  names: tuple, params: np.ndarray, shape_names: tuple, targets: np.ndarray) -> np.ndarray:
+    """Displacements (n_shapes, len(targets), 3) in world axes of the ``targets`` vertices by the landmark field
+    (see the module doc). ``params``: the source's (n_shapes, n_c, 3), source units and axes (+Y up, +Z
+    forward); ``source_positions`` (n_c, 3)."""
+    src = np.asarray(source_positions, np.float64)
+    prm = np.asarray(params, np.float64)
+    idx = {n: i for i, n in enumerate(names)}
+    v = np.asarray(vertices, np.float64)
+    local = face.to_frame(v)
+    n_c = len(names)
+    pos = np.full((n_c, 2), np.nan)  # target places in the face frame (x, y)
+    scale = np.full((n_c, 3), np.nan)
+    for side, (_, (x0, x1, y0, y1)) in pieces.eyes.items():
+        sign = 1.0 if side == "L" else -1.0
+        need = [f"{n}_{side}" for n in EYE_NAMES]
+        if not all(n in idx for n in need):
+            continue
+        s_in, s_out = src[idx[f"eye_inner_{side}"]], src[idx[f"eye_outer_{side}"]]
+        s_low = np.mean([src[idx[f"lid_lower_{p}_{side}"]][1] for p in ("inner", "outer")])
+        s_up = np.mean([src[idx[f"lid_upper_{p}_{side}"]][1] for p in ("inner", "outer")])
+        t_in, t_out = (x0, x1) if sign > 0 else (x1, x0)
+        sx = abs(t_out - t_in) / max(abs(s_out[0] - s_in[0]), 1e-12)
+        sy = (y1 - y0) / max(s_up - s_low, 1e-12)
+        for name in names:
+            if not name.endswith("_" + side) or not (_prefixed(name[:-2], EYE_NAMES) or name.startswith("brow")):
+                continue
+            p = src[idx[name]]
+            u = (p[0] - s_in[0]) / (s_out[0] - s_in[0])
+            if name.startswith("brow"):  # above the upper lid by the source's gap, in the eye's width scale
+                y = y1 + (p[1] - s_up) * sx
+            else:
+                y = y0 + (p[1] - s_low) / (s_up - s_low) * (y1 - y0)
+            pos[idx[name]] = (t_in + u * (t_out - t_in), y)
+            scale[idx[name]] = (sx, sy if not name.startswith("brow") else sx, sx)
+    lower = np.array([_prefixed(n, LOWER_JAW) for n in names])
+    upper_lip = np.array([_prefixed(n, ("lip_upper",)) for n in names])
+    line = None
+    if pieces.mouth is not None and all(n in idx for n in ("mouth_corner_L", "mouth_corner_R",
+                                                          "lip_upper_inner", "lip_lower_inner")):
+        _, (xr, xl), line = pieces.mouth
+        s_r, s_l = src[idx["mouth_corner_R"]], src[idx["mouth_corner_L"]]
+        s_line = 0.5 * (src[idx["lip_upper_inner"]][1] + src[idx["lip_lower_inner"]][1])
+        sm = (xl - xr) / max(s_l[0] - s_r[0], 1e-12)
+        for name in names:
+            if not (_prefixed(name, MOUTH_NAMES) or _prefixed(name, LOWER_JAW)):
+                continue
+            p = src[idx[name]]
+            x = xr + (p[0] - s_r[0]) / (s_l[0] - s_r[0]) * (xl - xr)
+            pos[idx[name]] = (x, np.polyval(line, x) + (p[1] - s_line) * sm)
+            scale[idx[name]] = sm
+    placed = ~np.isnan(pos[:, 0])
+    if placed.sum() < 3:
+        return np.zeros((len(prm), len(targets), 3))
+    # the others by the affine map the placed ones define, at their mean scale
+    a = np.column_stack([src[placed, :2], np.ones(placed.sum())])
+    affine = np.linalg.lstsq(a, pos[placed], rcond=None)[0]
+    rest = ~placed
+    pos[rest] = np.column_stack([src[rest, :2], np.ones(rest.sum())]) @ affine
+    scale[rest] = float(np.sqrt(abs(np.linalg.det(affine[:2]))))
+    disp = prm * scale[None]  # (s, n_c, 3) in the source's axes = the face frame's
+    for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
+        if key not in shape_names or side not in pieces.eyes:
+            continue
+        s = shape_names.index(key)
+        for part in ("inner", "outer"):
+            i, j = idx[f"lid_upper_{part}_{side}"], idx[f"lid_lower_{part}_{side}"]
+            gap = pos[i, 1] - pos[j, 1]
+            disp[s, i, 1] = pos[j, 1] + disp[s, j, 1] + CLOSED * gap - pos[i, 1]
+    tgt = local[np.asarray(targets, np.int64)]
+    out = np.zeros((len(prm), len(tgt), 3))
+    flat = disp.transpose(1, 0, 2).reshape(n_c, -1)
+    below = np.zeros(len(tgt), bool) if line is None else tgt[:, 1] < np.polyval(line, tgt[:, 0])
+    eye_members = [m for m, _ in pieces.eyes.values()]
+    in_eye = np.isin(targets, np.concatenate(eye_members)) if eye_members else np.zeros(len(tgt), bool)
+    lids = np.array([n.startswith("lid_") for n in names])
+    for is_below in (False, True):
+        for inside in (False, True):
+            where = (below == is_below) & (in_eye == inside)
+            if not where.any():
+                continue
+            keep = ~(upper_lip if is_below else lower) if line is not None else np.ones(n_c, bool)
+            if not inside:
+                keep &= ~lids  # the lids are the eye's moving edge: what is not the eye (a brow) does not follow them
+            at = tgt[where, :2].copy()
+            if inside:  # an eye piece beyond the lid points (the lashes above the upper lid) moves as the lid
+                for m, (x0, x1, y0, y1) in pieces.eyes.values():
+                    mine = np.isin(np.asarray(targets)[where], m)
+                    at[mine] = np.clip(at[mine], [x0, y0], [x1, y1])
+            rbf = RBFInterpolator(pos[keep], flat[keep], kernel="thin_plate_spline", smoothing=0.0, degree=1)
+            out[:, where] = rbf(at).reshape(where.sum(), len(prm), 3).transpose(1, 0, 2)
+    return out @ face.frame  # face-frame axes back to world

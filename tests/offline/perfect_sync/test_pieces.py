@@ -1,0 +1,178 @@
+"""The clone carried onto the face's pieces: Godette's decal eyes close and her decal mouth opens between the lips;
+ICT's lashes follow its lids; the closest-point routine the embedding uses."""
+
+import json
+
+import numpy as np
+import pytest
+
+from facepuppet.offline.elastic.laplacian import components
+from facepuppet.offline.perfect_sync.pieces import closest_on_triangles
+from tests.conftest import need_shared
+
+
+def _brute_closest(p, a, b, c, n=120):
+    """Closest point of a triangle to p by dense sampling of its barycentric grid (the reference)."""
+    u, v = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    keep = u + v <= 1
+    u, v = u[keep], v[keep]
+    q = (1 - u - v)[:, None] * a + u[:, None] * b + v[:, None] * c
+    return q[np.argmin(np.linalg.norm(q - p, axis=1))]
+
+
+def test_closest_point_on_triangles_matches_a_dense_search():
+    rng = np.random.default_rng(3)
+    a, b, c = rng.normal(size=(3, 200, 3))
+    p = 2.0 * rng.normal(size=(200, 3))  # points off every face, edge and corner region
+    q, bary = closest_on_triangles(p, a, b, c)
+    assert np.all(bary >= -1e-9) and np.allclose(bary.sum(1), 1.0)
+    np.testing.assert_allclose(bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c, q, atol=1e-12)
+    for i in range(len(p)):
+        ref = _brute_closest(p[i], a[i], b[i], c[i])
+        # the dense grid is within a grid step of the true point: ours is never farther than it
+        assert np.linalg.norm(q[i] - p[i]) <= np.linalg.norm(ref - p[i]) + 1e-12, i
+        assert np.linalg.norm(q[i] - ref) < 0.05 * np.linalg.norm(b[i] - a[i]) + 0.05 * np.linalg.norm(c[i] - a[i])
+
+
+@pytest.fixture(scope="module")
+def source(ict_character):
+    from facepuppet.offline.elastic.commands import main_front
+    from facepuppet.offline.elastic.control_points import ict_control_points
+    from facepuppet.offline.elastic.params import fit_character
+
+    marks = json.loads(need_shared("ict-facekit", "vertex_indices.json").read_text(encoding="utf-8"))
+    c = ict_character
+    points = ict_control_points(marks["idx_to_landmark_verts"], c.vertices, c.triangles, main_front(c))
+    return fit_character(c, points, with_muscles=False)[0]
+
+
+@pytest.fixture(scope="module")
+def godette(source):
+    from facepuppet.offline.io.gltf_read import read_gltf
+    from facepuppet.offline.perfect_sync.commands import perfect_sync
+
+    g = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
+    out, _, _ = perfect_sync(g, source)
+    return out
+
+
+def _eye(character, artist_blink):
+    """Godette's eye as her own artist's blink tells it: (iris piece vertices, upper-lid piece vertices, eye height).
+    The upper lid is the piece her blink moves farthest (the lashes), the iris the largest other piece it moves."""
+    d = character.dense_deltas()[character.shape_names.index(artist_blink)]
+    _, comp = components(character.n_vertices, character.triangles)
+    moved = np.linalg.norm(d, axis=1)
+    lash = comp[np.argmax(moved)]
+    others = [p for p in np.unique(comp[moved > 1e-6]) if p != lash]
+    iris = max(others, key=lambda p: int((comp == p).sum()))
+    im = np.flatnonzero(comp == iris)
+    return im, np.flatnonzero(comp == lash), float(np.ptp(character.vertices[im, 1]))
+
+
+def _lid_gap(character, eye, shape):
+    """(lowest lash vertex - lowest iris vertex) in the eye's middle column, over the eye's height."""
+    iris, lash, height = eye
+    v = character.vertices.astype(np.float64)
+    p = v if shape is None else v + character.dense_deltas()[character.shape_names.index(shape)]
+    cx, w = v[iris, 0].mean(), np.ptp(v[iris, 0])
+    col_i, col_l = iris[np.abs(v[iris, 0] - cx) < 0.2 * w], lash[np.abs(v[lash, 0] - cx) < 0.2 * w]
+    return float(p[col_l, 1].min() - p[col_i, 1].min()) / height
+
+
+@pytest.mark.data
+@pytest.mark.slow
+@pytest.mark.parametrize("key, artist", [("eyeBlinkLeft", "blink_left"), ("eyeBlinkRight", "blink_right")])
+def test_godette_cloned_blink_closes_her_decal_lids(godette, key, artist):
+    """Her eyes are pieces (iris stack, lash strip) in front of a 79-vertex skin: the skin-only clone left them
+    open (gap 0.96 of the eye's height, as at rest); now the lash comes down to the eye's bottom (measured 0.03;
+    her artist's own blink 0.18), and not through it."""
+    eye = _eye(godette, artist)
+    assert _lid_gap(godette, eye, None) > 0.8  # open at rest
+    assert _lid_gap(godette, eye, artist) < 0.25  # the measure: her artist's blink passes it
+    gap = _lid_gap(godette, eye, key)
+    assert -0.1 < gap < 0.25, gap
+    other = _eye(godette, "blink_right" if artist == "blink_left" else "blink_left")
+    assert _lid_gap(godette, other, key) > 0.8  # one eye at a time
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_godette_cloned_jaw_open_parts_her_decal_lips(godette):
+    """Her mouth is stacked strips collapsed onto one line at rest. In each strip and column the upper vertex must
+    stay above the lower one (a strip wholly below the lip line may thin: ICT's inner lower lip drops farther than
+    its outer edge), and the middle opens (measured 0.72 of the mouth's width; the skin-only clone
+    moved the strips rigidly with a jaw found on the skin: no opening)."""
+    d_ah = godette.dense_deltas()[godette.shape_names.index("ah")]
+    d = godette.dense_deltas()[godette.shape_names.index("jawOpen")]
+    v = godette.vertices.astype(np.float64)
+    _, comp = components(godette.n_vertices, godette.triangles)
+    mouth = np.flatnonzero(np.linalg.norm(d_ah, axis=1) > 1e-6)  # the pieces her artist's "ah" moves
+    width = float(np.ptp(v[mouth, 0]))
+    opened = []
+    for piece in np.unique(comp[mouth]):
+        members = mouth[comp[mouth] == piece]
+        for x in np.unique(np.round(v[members, 0], 3)):
+            col = members[np.abs(v[members, 0] - x) < 0.1 * width]
+            up, low = col[np.argmax(v[col, 1])], col[np.argmin(v[col, 1])]
+            if up == low:
+                continue
+            rest = v[up, 1] - v[low, 1]
+            now = (v[up, 1] + d[up, 1]) - (v[low, 1] + d[low, 1])
+            assert now > 0, (piece, x, rest, now)  # no upper vertex below its lower one
+            if abs(x) < 0.1 * width:
+                opened.append((now - rest) / width)
+    assert opened and max(opened) > 0.3, opened
+
+
+@pytest.mark.slow
+def test_ict_lashes_follow_the_closing_lids(ict_character, source):
+    """ICT's lashes (and tear film) are pieces of their own lying on the lids: they now move with the skin under
+    them (on main they stayed, and the closing lid passed through the upper lashes)."""
+    from facepuppet.runtime.channels import canonical
+
+    from facepuppet.offline.kpls.targets import stylise
+    from facepuppet.offline.perfect_sync.commands import perfect_sync
+    from facepuppet.offline.perfect_sync.face import find_face
+
+    variant = stylise(ict_character)
+    target = variant.with_parts(shape_names=tuple(f"truth{i}" for i in range(variant.n_shapes)), expressions=None)
+    out, _, _ = perfect_sync(target, source)
+    c = ict_character
+    lashes = np.unique(c.triangles[c.triangle_material == c.material_names.index("M_EyeLashes")])
+    v = out.vertices.astype(np.float64)
+    skin = find_face(out).skin
+    from scipy.spatial import cKDTree
+
+    _, near = cKDTree(v[skin]).query(v[lashes])
+    near = skin[near]
+    d = out.dense_deltas()[[canonical(n) for n in out.shape_names].index("eyeBlinkLeft")]
+    left = lashes[v[lashes, 0] > 0]
+    moving = left[np.linalg.norm(d[near[np.isin(lashes, left)]], axis=1) > 0.3]  # cm: on the closing upper lid
+    assert len(moving) > 50
+    skin_d = d[near[np.searchsorted(lashes, moving)]]
+    # each such lash vertex moves as the skin vertex nearest to it, within a fifth of that motion
+    err = np.linalg.norm(d[moving] - skin_d, axis=1) / np.linalg.norm(skin_d, axis=1)
+    assert np.median(err) < 0.2, np.median(err)
+    assert np.abs(d[lashes[v[lashes, 0] < 0]]).max() < 0.05  # the right eye's lashes stay (cm)
+
+
+@pytest.mark.data
+@pytest.mark.slow
+@pytest.mark.gl
+def test_contact_sheet_of_godettes_cloned_shapes(godette, egl_ctx, tmp_path):
+    from PIL import Image
+
+    from facepuppet.offline.perfect_sync.pictures import shape_images, shape_sheet
+
+    cells = shape_images(godette, ["eyeBlinkLeft", "jawOpen"], egl_ctx, size=(160, 160))
+    assert [label for label, _ in cells] == ["neutral", "eyeBlinkLeft", "jawOpen"]
+    neutral, blink, jaw = (c.astype(int) for _, c in cells)
+    changed = np.abs(blink - neutral).max(axis=2) > 12
+    ys, xs = np.nonzero(changed)
+    # the crop is the square around what the shapes change: the closed eye lies in the cell, on the character's
+    # left (the image's right, front view), above the opened mouth
+    assert changed.mean() > 0.01 and xs.mean() > 80
+    mouth = np.nonzero(np.abs(jaw - neutral).max(axis=2) > 12)
+    assert len(mouth[0]) and mouth[0].mean() > ys.mean()
+    path = shape_sheet(godette, ["eyeBlinkLeft", "jawOpen"], tmp_path / "sheet.png", columns=3, ctx=egl_ctx)
+    assert Image.open(path).size[0] >= 3 * 160
