@@ -60,7 +60,6 @@ DELTA_TEXTURE_WIDTH = 4096
 MAX_ACTIVE_LIMIT = 256  # uniform array length cap; more active shapes keep the largest weights
 PATHS = ("auto", "gpu", "cpu", "elastic")
 _JOINT_UNIT, _TEXTURE_UNIT = 2, 3
-_CORNERS = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], np.float64)  # a unit box's corners
 _HIDDEN = MATERIAL_KINDS["hidden"]
 # Thin layers drawn two-sided and blended after the surfaces, in this order (each over the ones before).
 _TWO_SIDED = (MATERIAL_KINDS["occlusion"], MATERIAL_KINDS["film"], MATERIAL_KINDS["lashes"])
@@ -333,14 +332,14 @@ class FaceRenderer:
         corners = []
         if self.path == "cpu" and self._exact_box is not None:  # the deformed vertices themselves
             lo, hi = self._exact_box
-            corners.append(lo + (hi - lo) * _CORNERS)
+            corners.append(np.array(np.meshgrid(*zip(lo, hi))).reshape(3, -1).T)
         elif self._box is not None:
             lo, hi = self._box[0] - self._reach, self._box[1] + self._reach
-            corners.append(lo + (hi - lo) * _CORNERS)
+            corners.append(np.array(np.meshgrid(*zip(lo, hi))).reshape(3, -1).T)
         if self._sphere is not None and self.path != "cpu":
             centre, radius = self._sphere
             r = radius + self._reach
-            corners.append(centre - r + 2 * r * _CORNERS)
+            corners.append(np.array(np.meshgrid(*zip(centre - r, centre + r))).reshape(3, -1).T)
         if not corners:
             return 0, 0, 0, 0
         p = np.vstack(corners)
