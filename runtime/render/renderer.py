@@ -322,7 +322,6 @@ class FaceRenderer:
                 self._sphere = (centre, radius)
         self._box = bounds(c.vertices[~moving]) if (~moving).any() else None
         self._reach = 0.0
-        self._exact_box = None  # the CPU path's deformed and skinned vertices' box, per frame
         self._last_rect = None  # None: the next frame clears everything
         self._shared = False
 
@@ -330,13 +329,10 @@ class FaceRenderer:
         """Screen rectangle (x, y, w, h), GL pixels from the bottom left, that this frame can draw into;
         None when it cannot be bounded (a corner behind the eye)."""
         corners = []
-        if self.path == "cpu" and self._exact_box is not None:  # the deformed vertices themselves
-            lo, hi = self._exact_box
-            corners.append(np.array(np.meshgrid(*zip(lo, hi))).reshape(3, -1).T)
-        elif self._box is not None:
+        if self._box is not None:
             lo, hi = self._box[0] - self._reach, self._box[1] + self._reach
             corners.append(np.array(np.meshgrid(*zip(lo, hi))).reshape(3, -1).T)
-        if self._sphere is not None and self.path != "cpu":
+        if self._sphere is not None:
             centre, radius = self._sphere
             r = radius + self._reach
             corners.append(np.array(np.meshgrid(*zip(centre - r, centre + r))).reshape(3, -1).T)
@@ -568,7 +564,6 @@ class FaceRenderer:
             out = cpu["deformer"].deform_into(w)
             if cpu["skinner"] is not None:
                 out = cpu["skinner"].skin(out, joints)
-            self._exact_box = (out[:, :3].min(axis=0).astype(np.float64), out[:, :3].max(axis=0).astype(np.float64))
             cpu["vbo"].orphan()
             cpu["vbo"].write(out)
 
