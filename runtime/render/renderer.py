@@ -261,12 +261,12 @@ class FaceRenderer:
             size = (self.width, self.height)
             self._color = ctx.renderbuffer(size, 4, samples=self.samples)
             self._depth = ctx.depth_renderbuffer(size, samples=self.samples)
-            self._fbo = ctx.framebuffer(self._color, self._depth)
+            self.fbo = ctx.framebuffer(self._color, self._depth)
             if self.samples:  # multisampled: resolved into a plain one before reading
                 self._resolve_color = ctx.renderbuffer(size, 4)
                 self._resolve = ctx.framebuffer(self._resolve_color)
         else:
-            self._fbo = target_fbo
+            self.fbo = target_fbo
         self._setup_camera()
         self._setup_buffers()
         self._gpu = self._cpu = self._elastic = None
@@ -284,7 +284,6 @@ class FaceRenderer:
             self._cpu = self._setup_cpu()
         self._pose = np.eye(4, dtype=np.float32)
         self._label = self._setup_label(credits) if credits else None
-        self._setup_reach()
         if path == "auto":
             self.path, self.path_report = self._choose_path()
             log(self.path_report)
@@ -292,80 +291,7 @@ class FaceRenderer:
             self.path = path
             self.path_report = f"deformation path: {path} (asked for)"
 
-    @property
-    def fbo(self) -> moderngl.Framebuffer:
-        """The framebuffer frames are drawn into. Whoever takes it may draw into it too (a panel, an overlay),
-        so from then on every frame clears all of it, not only the character's rectangle."""
-        self._shared = True
-        return self._fbo
-
     # -- construction ------------------------------------------------------
-    def _setup_reach(self) -> None:
-        """What a frame can cover, so that a frame clears only the screen rectangle drawn in it and the last.
-
-        Every vertex lies, in the model frame, in the rest box of the vertices a head pose does not move or
-        in a sphere about the neck (or head) joint holding the ones it moves, each grown by the blendshapes'
-        reach ``sum_s |w_s| max_v |d_sv|`` (morphs come first, in the rest pose; a rotation keeps lengths).
-        """
-        c = self.character
-        norms = np.linalg.norm(c.delta_positions.astype(np.float64), axis=1)
-        self._shape_reach = np.array([norms[c.shape_slice(s)].max(initial=0.0) for s in range(c.n_shapes)])
-        moving = np.zeros(c.n_vertices, bool)
-        self._sphere = None
-        pose = self._head_pose
-        if self.parts and pose.available:
-            moving[CpuSkinner(c, pose.moved_nodes).rows] = True
-            head = np.asarray(pose._head_pivot[:3], np.float64)
-            if moving.any():
-                centre = np.asarray(pose._neck_pivot[:3], np.float64) if pose.neck is not None else head
-                radius = float(np.linalg.norm(c.vertices[moving] - head, axis=1).max() + np.linalg.norm(head - centre))
-                self._sphere = (centre, radius)
-        self._box = bounds(c.vertices[~moving]) if (~moving).any() else None
-        self._reach = 0.0
-        self._last_rect = None  # None: the next frame clears everything
-        self._shared = False
-
-    def _frame_rect(self) -> tuple[int, int, int, int] | None:
-        """Screen rectangle (x, y, w, h), GL pixels from the bottom left, that this frame can draw into;
-        None when it cannot be bounded (a corner behind the eye)."""
-        corners = []
-        if self._box is not None:
-            lo, hi = self._box[0] - self._reach, self._box[1] + self._reach
-            corners.append(np.array(np.meshgrid(*zip(lo, hi))).reshape(3, -1).T)
-        if self._sphere is not None:
-            centre, radius = self._sphere
-            r = radius + self._reach
-            corners.append(np.array(np.meshgrid(*zip(centre - r, centre + r))).reshape(3, -1).T)
-        if not corners:
-            return 0, 0, 0, 0
-        p = np.vstack(corners)
-        clip = np.c_[p, np.ones(len(p))] @ (self.camera.view_projection.astype(np.float64) @ self._pose).T
-        if np.any(clip[:, 3] <= 1e-9):
-            return None
-        ndc = clip[:, :2] / clip[:, 3:4]
-        x0, y0 = np.floor((ndc.min(axis=0) + 1) / 2 * (self.width, self.height)).astype(int) - 2
-        x1, y1 = np.ceil((ndc.max(axis=0) + 1) / 2 * (self.width, self.height)).astype(int) + 2
-        x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, self.width), min(y1, self.height)
-        return (int(x0), int(y0), int(max(x1 - x0, 0)), int(max(y1 - y0, 0)))
-
-    def _clear(self) -> None:
-        """Clear colour and depth where this or the last frame draws; all of a shared or window framebuffer,
-        and the first frame. A MSAA clear on llvmpipe costs ~2.5 ms at 1280x720, most of it where no
-        character is."""
-        colour = (0.0, 0.0, 0.0, 0.0) if self.transparent else (*self.background, 1.0)
-        rect = self._frame_rect() if self._own_fbo and not self._shared and self.path != "elastic" else None
-        last, self._last_rect = self._last_rect, rect
-        if rect is None or last is None:
-            self._fbo.clear(*colour, depth=1.0)
-            return
-        x0, y0 = min(rect[0], last[0]), min(rect[1], last[1])
-        x1, y1 = max(rect[0] + rect[2], last[0] + last[2]), max(rect[1] + rect[3], last[1] + last[3])
-        if self._label is not None:  # drawn by this renderer every frame, at the bottom left
-            w, h = self._label["size"]
-            x0, y0, x1, y1 = 0, 0, max(x1, w + 16), max(y1, h + 16)
-        if x1 > x0 and y1 > y0:
-            self._fbo.clear(*colour, depth=1.0, viewport=(x0, y0, x1 - x0, y1 - y0))
-
     def _setup_camera(self) -> None:
         c = self.character
         kinds = c.material_params[:, 2].round().astype(int)
@@ -545,7 +471,6 @@ class FaceRenderer:
                 head_translation: np.ndarray | None = None) -> None:
         """The CPU side of a frame: pose, active weights or CPU deformation, uploads."""
         w = check_weights(weights, self.character.n_shapes)
-        self._reach = float(np.abs(w) @ self._shape_reach) if len(w) else 0.0
         joints = None
         if self.parts and self._head_pose.available:  # the head turns through the skeleton, the body stays
             self._pose = model_matrix(None, head_translation)
@@ -607,9 +532,9 @@ class FaceRenderer:
                 tex.use(unit)
             if state.get("joints") is not None:
                 state["joints"].use(_JOINT_UNIT)
-        self._fbo.use()
+        self.fbo.use()
         self.ctx.enable(moderngl.DEPTH_TEST)
-        self._clear()
+        self.fbo.clear(*((0.0, 0.0, 0.0, 0.0) if self.transparent else (*self.background, 1.0)), depth=1.0)
         # Straight colour over, alpha accumulated as coverage: alpha stays right over a transparent clear.
         self.ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA,
                                moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
@@ -632,9 +557,9 @@ class FaceRenderer:
             # Thin two-sided layers (eye occlusion, films, lashes) last, blended over the finished surfaces,
             # without writing depth so that each shows through the ones drawn after it.
             self.ctx.enable(moderngl.BLEND)
-            self._fbo.depth_mask = False
+            self.fbo.depth_mask = False
             state["vao"].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
-            self._fbo.depth_mask = True
+            self.fbo.depth_mask = True
             self.ctx.disable(moderngl.BLEND)
 
     def _submit_groups(self, vaos: dict) -> None:
@@ -653,7 +578,7 @@ class FaceRenderer:
                 culling = g.cull
             if g.blend:
                 ctx.enable(moderngl.BLEND)
-                self._fbo.depth_mask = False
+                self.fbo.depth_mask = False
             self._materials[g.material].bind_to_uniform_block(0)
             t = int(look.texture[g.material])
             if t >= 0:
@@ -661,7 +586,7 @@ class FaceRenderer:
             vaos[variants[g.material]].render(moderngl.TRIANGLES, vertices=g.count, first=g.first)
         ctx.disable(moderngl.CULL_FACE)
         ctx.disable(moderngl.BLEND)
-        self._fbo.depth_mask = True
+        self.fbo.depth_mask = True
 
     def draw(self, weights: np.ndarray, head_rotation: np.ndarray | None = None,
              head_translation: np.ndarray | None = None) -> None:
@@ -683,9 +608,9 @@ class FaceRenderer:
     def read_pixels(self) -> np.ndarray:
         """The last frame as ndarray of shape (height, width, 3), uint8, top row first; (height, width, 4)
         RGBA with straight (not premultiplied) colour when the background is transparent."""
-        fbo = self._fbo
+        fbo = self.fbo
         if self._resolve is not None:
-            self.ctx.copy_framebuffer(self._resolve, self._fbo)
+            self.ctx.copy_framebuffer(self._resolve, self.fbo)
             fbo = self._resolve
         k = 4 if self.transparent else 3
         data = fbo.read(viewport=(0, 0, self.width, self.height), components=k, alignment=1)
@@ -732,7 +657,7 @@ class FaceRenderer:
         self._ibo.release()
         if self._own_fbo:
             self._previous_fbo.use()
-            self._fbo.release()
+            self.fbo.release()
             self._color.release()
             self._depth.release()
             if self._resolve is not None:
