@@ -301,3 +301,17 @@ def test_each_material_draws_with_its_own_variant_in_one_frame(egl_ctx, path):
     assert abs(px[2][0] - 128) <= 1 and px[2][1] == 0 and abs(px[2][2] - 128) <= 1  # BLEND: half over blue
     unlit_grey = round(255 * (1.055 * 0.3 ** (1 / 2.4) - 0.055))  # 149: what an unlit variant would draw
     assert abs(px[3][0] - unlit_grey) > 10  # lit: the lights change the grey
+
+
+def test_every_grey_level_of_an_unlit_texture_comes_out_as_itself(egl_ctx):
+    # 256 sRGB grey levels on a 16 x 16 texture (nearest): decoded by the sampler, encoded by the shader
+    levels = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    tex = np.dstack([levels, levels, levels, np.full_like(levels, 255)])
+    v, t, uv = quad()
+    c = part_character(v, t, [0, 0], [material(texture=0)], uv=uv, textures=[tex],
+                       samplers=[(NEAREST, NEAREST, CLAMP_TO_EDGE, CLAMP_TO_EDGE)])
+    image, r = draw(egl_ctx, c, framing="body", size=(320, 320))
+    centres = [[-0.5 + (j + 0.5) / 16, 0.5 - (i + 0.5) / 16, 0] for i in range(16) for j in range(16)]
+    got = np.array([image[y, x, 0] for x, y in r.project(centres).round().astype(int)], int)
+    off = np.abs(got - np.arange(256))
+    assert off.max() <= 1 and np.count_nonzero(off) <= 3, np.flatnonzero(off)
