@@ -23,9 +23,10 @@ frame on screen, not the one before.
 * **Calibrate** (neutral capture over ``capture_s``) and **Clear** (no neutral).
 * **Profile** (a run with ``--profile``: ``chain.profile``): Save, Save as (a name or a path), Revert, and a
   warning when the profile was made for another character or input.
-* **Record**: the file and its size on disk; **Chain**: the stage chain; **Character**: name, shapes, credits.
-  Record start/stop is not in the panel: ``--record`` wires its recorder into the receiver, the tick hook,
-  the config and event listeners when the run starts (see the report of issue 15).
+* **Record**: Record (a file name, or blank for ``facepuppet-YYYYmmdd-HHMMSS.fps`` next to the ``--record``
+  file or in the current folder) and Stop, the file and its size on disk (``run``'s
+  :class:`~facepuppet.runtime.recording.switch.SwitchableRecorder`: each recording replays like ``--record``'s).
+* **Chain**: the stage chain; **Character**: name, shapes, credits.
 
 Every edit is a config change: a copy of the pipeline's ``LiveConfig`` (``dataclasses.replace``) handed
 to the pipeline's ``apply_config``, which applies it at the next tick. The status numbers that need a
@@ -63,6 +64,7 @@ if TYPE_CHECKING:
     from facepuppet.runtime.live.stages import Chain
     from facepuppet.runtime.live.stats import LiveStats
     from facepuppet.runtime.recording.recorder import PacketRecorder
+    from facepuppet.runtime.recording.switch import SwitchableRecorder
 
 WEIGHT_REGIONS = ("eyes", "brows", "mouth", "other", "head")
 REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed this often
@@ -88,7 +90,7 @@ class DeskPanel:
     character : Character or None
     counters : callable returning the run's counter groups (``{"udp": {...}, "loop": {...}, ...}``) or None
     stats : LiveStats or None, for the receive→draw latency
-    recorder : PacketRecorder or None
+    recorder : SwitchableRecorder (Record / Stop), PacketRecorder (shown only) or None
     input_kind, address : str, what the run listens to and where
     visible : bool, shown at start (Tab toggles it in a window)
     clock : callable returning seconds (monotonic; injectable for tests)
@@ -109,7 +111,7 @@ class DeskPanel:
     def __init__(self, ctx: moderngl.Context, fbo: moderngl.Framebuffer, width: int, height: int, *,
                  pipeline: LivePipeline | None = None, chain: Chain | None = None,
                  character: Character | None = None, counters: Callable[[], dict] | None = None,
-                 stats: LiveStats | None = None, recorder: PacketRecorder | None = None,
+                 stats: LiveStats | None = None, recorder: SwitchableRecorder | PacketRecorder | None = None,
                  input_kind: str = "", address: str = "", visible: bool = True,
                  clock: Callable[[], float] = time.monotonic, window_size: tuple[int, int] | None = None,
                  names: tuple[str, ...] | None = None) -> None:
@@ -145,6 +147,7 @@ class DeskPanel:
         self.sent_only = True
         self.selected: str | None = None  # the channel the response editor edits
         self.profile_name = ""  # the Save as field
+        self.record_name = ""  # the Record field (blank: a name from the date and time)
         self.profile_message = ""  # what the last Save / Save as / Revert did (or why it failed)
         self.profile_warning = ""  # the profile was made for another character or input
         self._profile_checked: object = None  # the profile path the warning was computed for
@@ -210,12 +213,19 @@ class DeskPanel:
             s["stats_n"] = getattr(self.stats, "_n", 0)
             if lat.get("n"):
                 s["latency"] = (lat["p50_ms"], lat["p99_ms"], lat["n"])
-        if self.recorder is not None:
-            path = str(getattr(self.recorder, "path", ""))
+        self._refresh_record()
+
+    def _refresh_record(self) -> None:
+        """The recording's file and its size on disk."""
+        s = self._status
+        path = getattr(self.recorder, "path", None) if self.recorder is not None else None
+        if path is not None:
             try:
-                s["record"] = (path, os.path.getsize(path))
+                s["record"] = (str(path), os.path.getsize(path))
             except OSError:
-                s["record"] = (path, None)
+                s["record"] = (str(path), None)
+        else:
+            s.pop("record", None)
 
     # -- content ------------------------------------------------------------------------------------
 
@@ -237,6 +247,7 @@ class DeskPanel:
         self._face_section()
         self._profile_section()
         self._loss_section()
+        self._record_section(info)
         self._info_section()
         imgui.end()
 
@@ -477,16 +488,66 @@ class DeskPanel:
             ("neutral set" if getattr(pipeline, "neutral_weights", None) is not None else "no neutral")
         imgui.text(f"{neutral} ({pipeline.counters.get('calibrations', 0)} calibrations)")
 
+    def _record_section(self, info: TickInfo) -> None:
+        """Record / Stop (a run's :class:`~facepuppet.runtime.recording.switch.SwitchableRecorder`), the file
+        and its size (refreshed with the status numbers)."""
+        imgui, rec = self.imgui, self.recorder
+        if not imgui.collapsing_header("Record", imgui.TreeNodeFlags_.default_open):
+            return
+        shown = self._status.get("record")
+        recording = bool(getattr(rec, "recording", rec is not None))
+        if shown is None:
+            imgui.text("not recording" if rec is not None else "record: off (--record FILE)")
+        else:
+            size = "-" if shown[1] is None else f"{shown[1] / 1e6:.2f} MB"
+            imgui.text_wrapped(f"{'recording' if recording else 'stopped'}: {shown[0]} ({size})")
+        if not hasattr(rec, "start"):
+            return
+        action = None
+        imgui.push_id("record")  # the button "Record" is not the header "Record"
+        if recording:
+            if imgui.button("Stop"):
+                action = "stop"
+            self._remember("record.stop")
+        else:
+            if imgui.button("Record"):
+                action = "start"
+            self._remember("record.start")
+            imgui.same_line()
+            imgui.set_next_item_width(-1)
+            _, self.record_name = imgui.input_text_with_hint("##record_name", "file (default: facepuppet-DATE-TIME)",
+                                                            self.record_name)
+            self._remember("record.name")
+        imgui.pop_id()
+        if rec.message:
+            imgui.text_wrapped(rec.message)
+        if action is not None:
+            self.record_action(action)
+
+    def record_action(self, action: str) -> None:
+        """``start`` a recording (to :attr:`record_name`, blank: the default name; the config in force its
+        first CONFIG) or ``stop`` it; a failure is in the recorder's message and loses nothing."""
+        rec = self.recorder
+        if action == "stop":
+            rec.stop()
+        elif action == "start":
+            text = None
+            if self.pipeline is not None:
+                from facepuppet.runtime.live.profiles import config_to_toml
+
+                text = config_to_toml(config_in_force(self.pipeline))
+            try:
+                rec.start(self.record_name, config_text=text)
+            except (OSError, ValueError):
+                pass  # said in rec.message, shown under the buttons
+        else:
+            raise ValueError(f"record action: expected start or stop, got {action!r}")
+        self._refresh_record()  # the new file and its size at once
+
     def _info_section(self) -> None:
         imgui = self.imgui
-        if not imgui.collapsing_header("Record, chain, character"):
+        if not imgui.collapsing_header("Chain, character"):
             return
-        rec = self._status.get("record")
-        if rec is None:
-            imgui.text("record: off (--record FILE)")
-        else:
-            size = "-" if rec[1] is None else f"{rec[1] / 1e6:.2f} MB"
-            imgui.text_wrapped(f"record: {rec[0]} ({size})")
         if self.chain is not None:
             imgui.text_wrapped(self.chain.describe())
         ch = self.character
@@ -536,7 +597,9 @@ class DeskPanel:
         rows = np.arange(len(channels))
         if self.sent_only and raw_w is not None:  # NaN: not sent (a VMC sender names only some channels)
             rows = np.flatnonzero(np.isfinite(raw_w))
-        height = max(120.0, 0.35 * self.window_size[1])  # scrolls; the sections below stay in view
+        # as tall as its rows, at most a third of the window (then it scrolls; the sections below stay in view)
+        fit = max(len(rows), 1) * imgui.get_frame_height_with_spacing() + 2 * imgui.get_style().window_padding.y
+        height = min(fit, max(120.0, 0.35 * self.window_size[1]))
         imgui.begin_child("channels", imgui.ImVec2(0, height))
         clipper = imgui.ListClipper()
         clipper.begin(len(rows))
