@@ -68,6 +68,9 @@ if TYPE_CHECKING:
 
 WEIGHT_REGIONS = ("eyes", "brows", "mouth", "other", "head")
 REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed this often
+#: ImGui frames per second at most: a tick closer than 0.9 / REBUILD_HZ to the last frame draws that frame
+#: again (its buffers are uploaded already; only the draw calls), e.g. every other tick at 120 frames/s on arrival
+REBUILD_HZ = 60.0
 PANEL_WIDTH = 430
 #: meter colours (RGBA 0..1): raw, after the stages, after mapping; distinct so tests and eyes can tell them apart
 METER_COLOURS = ((0.35, 0.55, 0.95, 1.0), (0.30, 0.85, 0.40, 1.0), (0.98, 0.60, 0.15, 1.0))
@@ -102,10 +105,17 @@ class DeskPanel:
     io : ImGui's IO of this panel's own ImGui context (tests and the window feed events here)
     rects : dict of widget label -> (x0, y0, x1, y1) in pixels, as last drawn (where to click)
     edits : int, config changes handed to the pipeline
-    draw_s : float, seconds the last panel draw took on the CPU (build + submit)
+    draw_s : float, seconds the last panel draw took on the CPU (build + submit, or the redraw of the last frame)
+    rebuild_hz : float, ImGui frames per second at most (:data:`REBUILD_HZ`); ``reused`` counts the ticks that
+        drew the last frame again instead
     draw_sketch : DurationSketch of every panel draw's CPU time (streaming: fixed memory in a long run)
     submit_sketch : DurationSketch of the GL part of it (buffer uploads and draw calls; on llvmpipe the
         vertex work of the draw calls runs here, on the calling thread)
+    build_sketch : DurationSketch of the ImGui frame alone (status, sections, ``imgui.render``)
+    calls_sketch : DurationSketch of the draw calls alone (on llvmpipe: the panel's vertex shading and triangle
+        binning, done on the CPU; a GPU does it itself); ``draw_calls_s`` the last frame's (0 when hidden)
+    cpu_sketch : DurationSketch of build + submit without the draw calls (what the panel costs the CPU on any
+        OpenGL: the ImGui frame, the buffer uploads, the state changes)
     """
 
     def __init__(self, ctx: moderngl.Context, fbo: moderngl.Framebuffer, width: int, height: int, *,
@@ -137,6 +147,13 @@ class DeskPanel:
         self.draw_s = 0.0
         self.draw_sketch = DurationSketch()
         self.submit_sketch = DurationSketch()
+        self.build_sketch = DurationSketch()
+        self.calls_sketch = DurationSketch()
+        self.cpu_sketch = DurationSketch()
+        self.draw_calls_s = 0.0
+        self.rebuild_hz = REBUILD_HZ
+        self.reused = 0  # ticks that drew the last ImGui frame again
+        self._built = False
         self._last = clock()
         self._status: dict[str, Any] = {}
         self._refresh_at = -math.inf
@@ -151,6 +168,8 @@ class DeskPanel:
         self.profile_message = ""  # what the last Save / Save as / Revert did (or why it failed)
         self.profile_warning = ""  # the profile was made for another character or input
         self._profile_checked: object = None  # the profile path the warning was computed for
+        self._config: LiveConfig | None = None
+        self._lines: dict[str, str] = {}  # status lines built at each refresh, not every frame
         self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
 
     # -- the loop's overlay ----------------------------------------------------------------------
@@ -166,8 +185,20 @@ class DeskPanel:
             self._last_raw_at = now
         if not self.visible:
             self._last = now
+            self.draw_calls_s = 0.0
+            self._built = False
             return
         t0 = time.perf_counter()
+        if self._built and now - self._last < 0.9 / self.rebuild_hz:  # the last ImGui frame is recent: drawn again
+            self.gl.redraw(self.fbo)
+            self.draw_s = time.perf_counter() - t0
+            self.draw_calls_s = calls = self.gl.draw_calls_s
+            self.reused += 1
+            self.draw_sketch.add(self.draw_s)
+            self.submit_sketch.add(self.draw_s)
+            self.calls_sketch.add(calls)
+            self.cpu_sketch.add(self.draw_s - calls)
+            return
         imgui = self.imgui
         imgui.set_current_context(self._context)
         io = self.io
@@ -179,14 +210,20 @@ class DeskPanel:
         if now >= self._refresh_at:
             self._refresh(now)
         imgui.new_frame()
+        self._config = None  # read afresh this frame
         self._build(info, now)
         imgui.render()
         t1 = time.perf_counter()
         self.gl.render(imgui.get_draw_data(), self.fbo)
         t2 = time.perf_counter()
         self.draw_s = t2 - t0
+        self.draw_calls_s = calls = self.gl.draw_calls_s
+        self._built = True
         self.draw_sketch.add(self.draw_s)
         self.submit_sketch.add(t2 - t1)
+        self.build_sketch.add(t1 - t0)
+        self.calls_sketch.add(calls)
+        self.cpu_sketch.add(self.draw_s - calls)
 
     def _refresh(self, now: float) -> None:
         """Rates, drops, latency percentiles and the record size: twice a second."""
@@ -214,6 +251,7 @@ class DeskPanel:
             if lat.get("n"):
                 s["latency"] = (lat["p50_ms"], lat["p99_ms"], lat["n"])
         self._refresh_record()
+        self._status_lines()
 
     def _refresh_record(self) -> None:
         """The recording's file and its size on disk."""
@@ -252,29 +290,40 @@ class DeskPanel:
         imgui.end()
 
     def _input_section(self, now: float) -> None:
-        imgui, s = self.imgui, self._status
+        imgui = self.imgui
         if not imgui.collapsing_header("Input", imgui.TreeNodeFlags_.default_open):
             return
-        imgui.text(f"{self.input_kind or '-'} on {self.address or '-'}")
-        rates = (f"{s['packets_s']:.1f} packets/s, {s['drawn_s']:.1f} frames drawn/s" if "packets_s" in s
-                 else "packets/s and frames drawn/s: measuring")
-        imgui.text(rates)
+        if not self._lines:
+            self._status_lines()
+        lines = self._lines
+        imgui.text(lines["where"])
+        imgui.text(lines["rates"])
         age = "no frame yet" if self._last_raw_at is None else f"{(now - self._last_raw_at) * 1e3:.0f} ms"
         state = getattr(self.pipeline, "tracking_state", "-")  # waiting / live / lost / easing
         events = getattr(self.pipeline, "events", ())
         last = (f" ({'found' if events[-1][1] else 'lost'} at {events[-1][0]:.1f} s)" if events else "")
         imgui.text(f"last frame: {age}   tracking: {state}{last}")
+        imgui.text(lines["latency"])
+        imgui.text_wrapped(lines["drops"])
+
+    def _status_lines(self) -> None:
+        """The input section's lines that change only with the status numbers (at each refresh)."""
+        s = self._status
         lat = s.get("latency")
-        imgui.text("receive->draw: no frames in the last 0.5 s" if lat is None
-                   else f"receive->draw p50 {lat[0]:.2f} ms, p99 {lat[1]:.2f} ms ({lat[2]} frames)")
         drops = s.get("drops") or {}
-        imgui.text_wrapped("drops: " + (", ".join(f"{k} {v}" for k, v in sorted(drops.items())) or "none"))
+        self._lines = {
+            "where": f"{self.input_kind or '-'} on {self.address or '-'}",
+            "rates": (f"{s['packets_s']:.1f} packets/s, {s['drawn_s']:.1f} frames drawn/s" if "packets_s" in s
+                      else "packets/s and frames drawn/s: measuring"),
+            "latency": ("receive->draw: no frames in the last 0.5 s" if lat is None
+                        else f"receive->draw p50 {lat[0]:.2f} ms, p99 {lat[1]:.2f} ms ({lat[2]} frames)"),
+            "drops": "drops: " + (", ".join(f"{k} {v}" for k, v in sorted(drops.items())) or "none")}
 
     def _filter_section(self) -> None:
         imgui, pipeline = self.imgui, self.pipeline
         if pipeline is None or not imgui.collapsing_header("Filter (One Euro)", imgui.TreeNodeFlags_.default_open):
             return
-        config = config_in_force(pipeline)
+        config = self._config_now()
         filters = dict(config.filters)
         changed = False
         for region in WEIGHT_REGIONS:
@@ -316,7 +365,7 @@ class DeskPanel:
         if name is None:
             imgui.text("no channel selected: click a channel's name above")
             return
-        config = config_in_force(pipeline)
+        config = self._config_now()
         key = canonical(name)
         cs = config.channel(name)
         imgui.text(f"{name}" + ("" if key in config.channels else " (default response)"))
@@ -370,7 +419,7 @@ class DeskPanel:
         imgui, pipeline = self.imgui, self.pipeline
         if pipeline is None or not imgui.collapsing_header("Face", imgui.TreeNodeFlags_.default_open):
             return
-        config = config_in_force(pipeline)
+        config = self._config_now()
         c1, link = imgui.checkbox("link blinks (both eyes from the stronger)", config.link_blinks)
         self._remember("face.link_blinks")
         c2, mirror = imgui.checkbox("mirror (left/right, head yaw and roll)", config.mirror)
@@ -382,7 +431,7 @@ class DeskPanel:
         imgui, pipeline = self.imgui, self.pipeline
         if pipeline is None or not imgui.collapsing_header("Tracking loss", imgui.TreeNodeFlags_.default_open):
             return
-        config = config_in_force(pipeline)
+        config = self._config_now()
         modes = dict(config.loss.modes)
         changed = False
         for region in LOSS_REGIONS:
@@ -604,21 +653,32 @@ class DeskPanel:
         clipper = imgui.ListClipper()
         clipper.begin(len(rows))
         bar = imgui.ImVec2(80, 12)
+        push, pop, progress, same_line = imgui.push_style_color, imgui.pop_style_color, imgui.progress_bar, \
+            imgui.same_line
+        hist, colours, isfinite = imgui.Col_.plot_histogram, self._colours, math.isfinite
+        nan = math.nan
         while clipper.step():
-            for row in range(clipper.display_start, clipper.display_end):
-                i = int(rows[row])
-                values = (raw_w[i] if raw_w is not None else math.nan,
-                          flt[i] if flt is not None else math.nan,
-                          rig[mapped[i]] if mapped[i] >= 0 and rig is not None else math.nan)
-                for j, v in enumerate(values):
-                    imgui.push_style_color(imgui.Col_.plot_histogram, self._colours[j])
-                    v = float(v)
-                    imgui.progress_bar(min(max(v, 0.0), 1.0) if math.isfinite(v) else 0.0, bar,
-                                       f"{v:.2f}" if math.isfinite(v) else "-")
-                    imgui.pop_style_color()
+            start, end = clipper.display_start, clipper.display_end
+            if end <= start:
+                continue
+            idx = rows[start:end]  # the visible rows' values in three array reads, then plain floats
+            raw_v = raw_w[idx].tolist() if raw_w is not None else [nan] * len(idx)
+            flt_v = flt[idx].tolist() if flt is not None else [nan] * len(idx)
+            where = mapped[idx]
+            rig_v = (np.where(where >= 0, rig[np.maximum(where, 0)], nan).tolist() if rig is not None
+                     else [nan] * len(idx))
+            for n, i in enumerate(idx.tolist()):
+                row = start + n
+                for j, v in enumerate((raw_v[n], flt_v[n], rig_v[n])):
+                    push(hist, colours[j])
+                    if isfinite(v):
+                        progress(min(max(v, 0.0), 1.0), bar, f"{v:.2f}")
+                    else:
+                        progress(0.0, bar, "-")
+                    pop()
                     if row == 0:
                         self._remember(f"meter.0.{j}")  # the first row shown
-                    imgui.same_line()
+                    same_line()
                 name = channels[i]
                 if imgui.selectable(name, name == self.selected)[0]:
                     self.selected = name
@@ -628,9 +688,16 @@ class DeskPanel:
 
     # -- edits --------------------------------------------------------------------------------------
 
+    def _config_now(self) -> LiveConfig:
+        """The config in force, read once per panel frame (and the one handed over since, after an edit)."""
+        if self._config is None:
+            self._config = config_in_force(self.pipeline)
+        return self._config
+
     def apply(self, config: LiveConfig) -> None:
         """Hand a changed config to the pipeline (applied at its next tick)."""
         apply_config(self.pipeline, config)
+        self._config = config  # a later section of the same frame edits on top of it
         self.edits += 1
 
     def close(self) -> None:
