@@ -1,6 +1,7 @@
 """What the panel shows and edits: input status, per-channel meters, filters per region, calibration, record, chain.
 
-The panel is one ImGui window drawn after the character, into the same
+The panel is one ImGui window (two in a window wide enough for both and some face: the settings at the right edge)
+drawn after the character, into the same
 framebuffer (:class:`~facepuppet.runtime.panel.gl.ImguiGL`). It runs as a
 :class:`~facepuppet.runtime.live.loop.FrameLoop` overlay: after the character's
 draw call of a tick, before the GPU wait, with that tick's
@@ -78,6 +79,16 @@ METER_COLOURS = ((0.35, 0.55, 0.95, 1.0), (0.30, 0.85, 0.40, 1.0), (0.98, 0.60, 
 #: filtered_sender, internal_error, stale_dropped, nonfinite_rejected, record_dropped, ...)
 DROP_WORDS = ("drop", "malformed", "unknown", "finite", "oversized", "filtered", "error", "rejected", "truncated",
               "invalid", "bad")
+
+
+#: characters the panel's font (ImGui's built-in, ASCII) lacks, written as ASCII
+_NOT_IN_FONT = str.maketrans({"→": "->", "—": "-", "–": "-", "×": "x", "µ": "u", "©": "(c)", "’": "'", "“": '"',
+                              "”": '"'})
+
+
+def _ascii(text: str) -> str:
+    """``text`` for the panel's font: arrows and dashes as ASCII, anything else outside ASCII as '?'."""
+    return text.translate(_NOT_IN_FONT).encode("ascii", "replace").decode("ascii")
 
 
 class DeskPanel:
@@ -169,6 +180,7 @@ class DeskPanel:
         self.profile_warning = ""  # the profile was made for another character or input
         self._profile_checked: object = None  # the profile path the warning was computed for
         self._config: LiveConfig | None = None
+        self._row_pitch = 0.0  # height of a channel row, as ImGui's list clipper measured it
         self._lines: dict[str, str] = {}  # status lines built at each refresh, not every frame
         self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
 
@@ -273,13 +285,21 @@ class DeskPanel:
 
     def _build(self, info: TickInfo, now: float) -> None:
         imgui = self.imgui
+        w, h = self.window_size
+        two = w >= 2 * PANEL_WIDTH + 200  # room for the settings in a window of their own, at the right edge
         imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
-        imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, self.window_size[1] - 16), imgui.Cond_.first_use_ever)
+        imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
         imgui.set_next_window_bg_alpha(0.85)
         imgui.begin("facepuppet desk (Tab hides)")
         self._input_section(now)
         self._channel_section(info)
         self._response_section()
+        if two:
+            imgui.end()
+            imgui.set_next_window_pos(imgui.ImVec2(w - PANEL_WIDTH - 8, 8), imgui.Cond_.first_use_ever)
+            imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
+            imgui.set_next_window_bg_alpha(0.85)
+            imgui.begin("settings")
         self._filter_section()
         self._calibration_section()
         self._face_section()
@@ -436,6 +456,7 @@ class DeskPanel:
         changed = False
         for region in LOSS_REGIONS:
             imgui.push_id(f"loss.{region}")
+            imgui.align_text_to_frame_padding()  # the region's name on the radio buttons' line
             imgui.text(f"{region:6s}")
             for mode in LOSS_MODES:
                 if mode == "voice" and region not in VOICE_REGIONS:
@@ -568,7 +589,7 @@ class DeskPanel:
                                                             self.record_name)
             self._remember("record.name")
         imgui.pop_id()
-        if rec.message:
+        if rec.message and not (recording and rec.message == f"recording to {rec.path}"):  # not the line above again
             imgui.text_wrapped(rec.message)
         if action is not None:
             self.record_action(action)
@@ -595,15 +616,18 @@ class DeskPanel:
 
     def _info_section(self) -> None:
         imgui = self.imgui
-        if not imgui.collapsing_header("Chain, character"):
+        shown = imgui.collapsing_header("Chain, character")
+        self._remember("header.chain")
+        if not shown:
             return
         if self.chain is not None:
-            imgui.text_wrapped(self.chain.describe())
+            imgui.text_wrapped(_ascii(self.chain.describe()))
+            self._remember("chain.text")
         ch = self.character
         if ch is not None:
-            imgui.text_wrapped(f"character: {ch.name}, {len(ch.shape_names)} shapes")
+            imgui.text_wrapped(_ascii(f"character: {ch.name}, {len(ch.shape_names)} shapes"))
             if getattr(ch, "credits", None):
-                imgui.text_wrapped(f"credits: {ch.credits}")
+                imgui.text_wrapped(_ascii(f"credits: {ch.credits}"))
 
     def _mapped_index(self, channels: tuple) -> np.ndarray:
         """For each input channel the rig shape it drives (-1: none): the shape of the same name, else the
@@ -647,7 +671,8 @@ class DeskPanel:
         if self.sent_only and raw_w is not None:  # NaN: not sent (a VMC sender names only some channels)
             rows = np.flatnonzero(np.isfinite(raw_w))
         # as tall as its rows, at most a third of the window (then it scrolls; the sections below stay in view)
-        fit = max(len(rows), 1) * imgui.get_frame_height_with_spacing() + 2 * imgui.get_style().window_padding.y
+        pitch = self._row_pitch or imgui.get_frame_height_with_spacing()  # measured by the clipper once drawn
+        fit = max(len(rows), 1) * pitch + 2 * imgui.get_style().window_padding.y
         height = min(fit, max(120.0, 0.35 * self.window_size[1]))
         imgui.begin_child("channels", imgui.ImVec2(0, height))
         clipper = imgui.ListClipper()
@@ -683,6 +708,8 @@ class DeskPanel:
                 if imgui.selectable(name, name == self.selected)[0]:
                     self.selected = name
                 self._remember(f"channel.{name}")
+        if clipper.items_height > 0:
+            self._row_pitch = clipper.items_height
         clipper.end()
         imgui.end_child()
 
