@@ -69,3 +69,18 @@ def test_a_run_with_several_inputs_refuses_a_start_once_it_ticks_with_the_reason
         rec.start("")
     rec.close()
     assert not list(tmp_path.glob("facepuppet-*"))
+
+
+def test_a_replay_in_real_time_of_a_recording_started_mid_run_starts_at_its_first_tick():
+    from facepuppet.runtime.commands.replay import replay_wall_clock
+
+    now = [100.0]
+    clock = replay_wall_clock([6000, 6001], 1000.0)  # the panel's recording began 6 s into the run
+    clock._monotonic = lambda: now[0]
+    clock.start()
+    assert clock.now() == pytest.approx(6.0)  # the loop's wait for tick 6000 is over at once
+    assert clock.wait_until(6.0) == pytest.approx(0.0)
+    plain = replay_wall_clock([0, 1], 1000.0)
+    plain._monotonic = lambda: now[0]
+    plain.start()
+    assert plain.now() == 0.0
