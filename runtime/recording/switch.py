@@ -22,6 +22,7 @@ The config in force is the header's (``info.config``) and the first CONFIG recor
 
 from __future__ import annotations
 
+import collections
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -76,8 +77,12 @@ class _Aligner:
     def __init__(self, adapter: InputAdapter | None, base: int | None = None) -> None:
         self.adapter = adapter
         self.base = base  # None until found
-        self.packets: list[tuple[bytes, float]] = []  # recorded datagrams not decoded yet (bounded)
-        self.times: list[float] = []  # receive times of the frames the recorded datagrams decoded to so far
+        # recorded datagrams not decoded yet (bounded); a deque: the receive thread appends while the frame loop
+        # takes them off (a receiver thread's on_packet), each end atomic
+        self.packets: collections.deque[tuple[bytes, float]] = collections.deque()
+        # (index, receive time) of the frames the recorded datagrams decoded to so far (the newest, bounded)
+        self.times: collections.deque[tuple[int, float]] = collections.deque(maxlen=ALIGN_PACKETS)
+        self.decoded = 0
 
     def keep(self, data: bytes, t: float) -> None:
         if self.base is None and len(self.packets) < ALIGN_PACKETS:
@@ -89,19 +94,21 @@ class _Aligner:
         if self.base is None:
             if raw is None or self.adapter is None:
                 return 0
-            packets, self.packets = self.packets, []
-            for data, t in packets:
+            packets = self.packets
+            while packets:
+                data, t = packets.popleft()
                 try:
                     frame = self.adapter.handle(data, t)
                 except Exception:  # the replay's adapter counts and skips what it cannot decode: so do we
                     frame = None
                 if frame is not None:
-                    self.times.append(frame.t)
-            found = [i for i, t in enumerate(self.times) if t == raw.t]
+                    self.times.append((self.decoded, frame.t))
+                    self.decoded += 1
+            found = [i for i, t in self.times if t == raw.t]
             if not found:
                 return 0  # the frame taken came from a datagram before the recording
             self.base = frames_taken - (found[-1] + 1)
-            self.times = []
+            self.times.clear()
         return max(frames_taken - self.base, 0)
 
 

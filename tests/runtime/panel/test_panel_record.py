@@ -119,9 +119,10 @@ def _run(tmp_path, extra=()):
 
 
 @pytest.mark.slow
-def test_record_then_stop_in_the_panel_twice_makes_two_files_that_replay_the_run(tmp_path, monkeypatch):
+@pytest.mark.parametrize("receiver", ["process", "thread"])  # datagrams recorded from a ring, or as they arrive
+def test_record_then_stop_in_the_panel_twice_makes_two_files_that_replay_the_run(tmp_path, monkeypatch, receiver):
     monkeypatch.chdir(tmp_path)  # recordings named by default go into the current folder
-    result, op, character, config = _run(tmp_path)
+    result, op, character, config = _run(tmp_path, ("--receiver", receiver))
     assert not op.plan, f"the run ended before the clicks were done: {op.plan}"
     assert len(op.files) == 2 and op.files[0] != op.files[1]
     for path in op.files:
