@@ -326,7 +326,12 @@ def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> 
 
     next_rss = [0.0]
 
+    shown_panel: list = []  # the run's DeskPanel (on_panel)
+    calls_ms: list[float] = []  # per tick: the panel's draw calls (llvmpipe's vertex work for the panel)
+
     def sample(info):
+        if shown_panel:
+            calls_ms.append(shown_panel[0].draw_calls_s * 1e3)
         now = time.monotonic()
         if now >= next_rss[0]:
             rss.append((now - t_start[0], rss_mb()))
@@ -337,7 +342,8 @@ def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> 
             t_first_last[1] = info.stamps[4]
 
     try:
-        result = run_live(run_args, log=log, stop_event=stop, on_ready=on_ready, hooks=[sample])
+        result = run_live(run_args, log=log, stop_event=stop, on_ready=on_ready, hooks=[sample],
+                          on_panel=shown_panel.append)
     finally:
         for proc in procs:
             proc.kill()
@@ -355,11 +361,16 @@ def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> 
            + result.loop.timer.samples("draw_submit")) * 1e3
     extra = {}
     if panel is not None:
-        sk, gl = result.panel.draw_sketch, result.panel.submit_sketch
-        extra = {"panel": panel, "panel_draws": sk.n,
-                 "panel_cpu_ms": {"p50": sk.quantile(0.5) * 1e3, "p99": sk.quantile(0.99) * 1e3} if sk.n else {},
-                 "panel_gl_submit_ms": {"p50": gl.quantile(0.5) * 1e3, "p99": gl.quantile(0.99) * 1e3}
-                 if gl.n else {}}
+        p = result.panel
+
+        def q(sketch):
+            return {"p50": sketch.quantile(0.5) * 1e3, "p99": sketch.quantile(0.99) * 1e3} if sketch.n else {}
+
+        extra = {"panel": panel, "panel_draws": p.draw_sketch.n, "panel_cpu_ms": q(p.draw_sketch),
+                 "panel_gl_submit_ms": q(p.submit_sketch), "panel_build_ms": q(p.build_sketch),
+                 "panel_draw_calls_ms": q(p.calls_sketch), "panel_cpu_without_draw_calls_ms": q(p.cpu_sketch)}
+        if len(calls_ms) == cpu.size:  # one sample per tick in both: the tick's CPU less the panel's draw calls
+            extra["cpu_per_tick_less_panel_draw_calls_ms"] = _percentiles(cpu - np.asarray(calls_ms))
     return {
         **extra,
         "cpu_per_tick_ms": _percentiles(cpu),
@@ -467,6 +478,10 @@ def _panel_phases(args, results: dict, log) -> None:
     hidden, shown = results["panel_hidden"], results["panel_shown"]
     added = {key: {q: shown[key][q] - hidden[key][q] for q in ("p50", "p99")}
              for key in ("cpu_per_tick_ms", "gpu_finish_ms") if "p50" in shown[key] and "p50" in hidden[key]}
+    if "p50" in hidden["cpu_per_tick_ms"] and "p50" in shown.get("cpu_per_tick_less_panel_draw_calls_ms", {}):
+        less = shown["cpu_per_tick_less_panel_draw_calls_ms"]
+        added["cpu_per_tick_less_panel_draw_calls_ms"] = {q: less[q] - hidden["cpu_per_tick_ms"][q]
+                                                          for q in ("p50", "p99")}
     results["panel_added_ms"] = added
     pc = shown.get("panel_cpu_ms", {})
     for key, label in (("cpu_per_tick_ms", "CPU per tick"), ("gpu_finish_ms", "GPU wait (llvmpipe draw)")):
@@ -477,8 +492,16 @@ def _panel_phases(args, results: dict, log) -> None:
     if "p50" in pc:
         gl = shown["panel_gl_submit_ms"]
         print(f"  panel: its own build + submit on the CPU p50 {pc['p50']:.3f} ms, p99 {pc['p99']:.3f} ms "
-              f"over {shown['panel_draws']} draws; of which the GL submit (llvmpipe's vertex work) p50 "
+              f"over {shown['panel_draws']} draws; of which the GL submit p50 "
               f"{gl['p50']:.3f} ms, p99 {gl['p99']:.3f} ms")
+        b, c, w = shown["panel_build_ms"], shown["panel_draw_calls_ms"], shown["panel_cpu_without_draw_calls_ms"]
+        print(f"  panel: ImGui frame p50/p99 {b['p50']:.3f}/{b['p99']:.3f} ms; draw calls (llvmpipe's vertex work and "
+              f"binning, reported apart) {c['p50']:.3f}/{c['p99']:.3f} ms; all but the draw calls "
+              f"{w['p50']:.3f}/{w['p99']:.3f} ms")
+    less = added.get("cpu_per_tick_less_panel_draw_calls_ms")
+    if less is not None:
+        print(f"  panel: CPU per tick added, the panel's draw calls (llvmpipe) left out: p50 {less['p50']:+.3f} ms, "
+              f"p99 {less['p99']:+.3f} ms")
 
 
 def _print(name: str, r: dict) -> None:

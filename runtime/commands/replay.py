@@ -175,7 +175,7 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         events: list = []  # the replay's tracking events, compared with the recording's at the end
         if chain.filter is not None:
             chain.filter.listeners.append(lambda t, found: events.append((t, found)))
-        clock = RecordedClock() if target.headless and llf is None else WallClock()
+        clock = RecordedClock() if target.headless and llf is None else replay_wall_clock(ticks, fps)
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
                          stages=chain.stages, on_tick=hooks, drive=chain.drive)
         with progress:           # on a terminal: ticks done, rate, time left (quiet when piped)
@@ -196,6 +196,25 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
     if chain.filter is not None and live is not None:
         log(_compare_events(live.events, events))
     return 0
+
+
+class WallClockFrom(WallClock):
+    """Real time that starts at ``t0`` seconds instead of 0 (:meth:`start` puts the origin ``t0`` back)."""
+
+    def __init__(self, t0: float) -> None:
+        super().__init__()
+        self.t0 = float(t0)
+
+    def start(self) -> None:
+        super().start()
+        self._origin -= self.t0
+
+
+def replay_wall_clock(ticks: list[int] | None, fps: float) -> WallClock:
+    """Real time for a replay; a recording whose first tick is late (one the panel started during a run) plays
+    its first tick at once, not after that tick's time."""
+    first = ticks[0] / fps if ticks else 0.0
+    return WallClockFrom(first) if first > 0 else WallClock()
 
 
 def _replay_mix(live, chain, ticks, log) -> None:

@@ -258,6 +258,41 @@ def _record_info(args, opts: _Options, chain=None) -> dict:
     return info
 
 
+def _wants_panel(args) -> bool:
+    """Whether this run may show the panel (a window, or ``--headless --panel``) and imgui-bundle is there."""
+    if getattr(args, "headless", False) and not getattr(args, "panel", False):
+        return False
+    from importlib.util import find_spec
+
+    return find_spec("imgui_bundle") is not None
+
+
+def _open_recorder(args, opts: _Options, chain, late, mix_inputs, log):
+    """The run's :class:`~facepuppet.runtime.recording.switch.SwitchableRecorder` (``--record`` and the panel's
+    Record / Stop), or None for a run without either (no datagram ring then)."""
+    from facepuppet.runtime.recording.recorder import PacketRecorder
+    from facepuppet.runtime.recording.switch import SwitchableRecorder
+
+    if args.record is None and not _wants_panel(args):
+        return None
+    force = bool(getattr(args, "force", False))
+
+    def open_recorder(path: Path) -> PacketRecorder:
+        info = _record_info(args, opts, chain)  # the config in force now
+        if holder.ticks_seen:
+            info["started_at_t"] = holder.last_t  # a recording the panel started during the run
+        return PacketRecorder(path, args.input, info=info, overwrite=force and path == args.record)
+
+    make_adapter = None if opts.voice_only else (
+        lambda: make_input_adapter(args.input, (), log=lambda s: None, face_id=getattr(args, "face_id", None)))
+    holder = SwitchableRecorder(
+        open_recorder, args.record.parent if args.record is not None else Path.cwd(), make_adapter=make_adapter,
+        frames_taken=lambda: getattr(late.source, "frames_taken", 0), log=log,
+        refuse_midrun="not with several inputs (their frame counts cannot be aligned mid-run); use --record FILE"
+        if mix_inputs else "")
+    return holder
+
+
 def _config_recorder(late):
     """The filter's ``on_config`` hook of ``--record``: each config change as a CONFIG record at its tick."""
     def hook(t: float, config) -> None:
@@ -385,7 +420,8 @@ def _open_source(args, adapter, opts: _Options, recorder):
 def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_event: threading.Event | None = None,
              on_ready: Callable[[tuple[str, int]], None] | None = None,
              hooks: Sequence[Callable[[TickInfo], None]] = (), keep_weights: bool = False,
-             on_chain: Callable[[Chain], None] | None = None) -> LiveRunResult:
+             on_chain: Callable[[Chain], None] | None = None,
+             on_panel: Callable[[object], None] | None = None) -> LiveRunResult:
     """Run a live session from parsed ``args`` (see :func:`register`) and return what it did.
 
     ``stop_event`` set from another thread ends the run at the next tick;
@@ -393,7 +429,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
     ``hooks`` are extra FrameLoop ``on_tick`` callables (benchmarks). Each tick's weights are kept
     (``LiveRunResult.weights``) only with ``--dump-weights`` or ``keep_weights``: a show runs for hours.
     ``on_chain(chain)`` is called once the stage chain is built (its ``filter`` takes ``apply_config``,
-    its ``profile`` saves).
+    its ``profile`` saves). ``on_panel(panel)`` is called with the run's DeskPanel once it is made (tests drive
+    it through its ImGui IO; its ``recorder`` is the run's SwitchableRecorder).
 
     Raises
     ------
@@ -402,7 +439,6 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         GLUnavailable when no OpenGL context can be made.
     """
     from facepuppet.runtime.inputs.audio import open_audio
-    from facepuppet.runtime.recording.recorder import PacketRecorder
     from facepuppet.runtime.render.blas_threads import BlasThreads
     from facepuppet.runtime.render.gl_context import create_context
 
@@ -437,11 +473,11 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         adapter = None if opts.voice_only else make_input_adapter(
             args.input, chain.extra_names, log=log, marker_units=getattr(args, "marker_units", None),
             to_units=chain.marker_units, face_id=getattr(args, "face_id", None))
-        recorder = None
-        if args.record is not None:
-            recorder = late.recorder = PacketRecorder(args.record, args.input, info=_record_info(args, opts, chain),
-                                                      overwrite=bool(getattr(args, "force", False)))
-            parts.append(recorder)
+        recorder = late.recorder = _open_recorder(args, opts, chain, late, mix_inputs, log)
+        if recorder is not None:
+            parts.append(SimpleNamespace(close=recorder.close))  # close() waits for every recording's file
+            if args.record is not None:
+                recorder.start(args.record)
         source = late.source = _open_source(args, adapter, opts, recorder)
         if opts.voice_only:
             source.duration = getattr(audio, "duration", None)
@@ -482,6 +518,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         panel = _open_panel(args, target, renderer, chain, character, stats, recorder, source, opts, log)
         if panel is not None:
             parts.append(panel)
+            if on_panel is not None:
+                on_panel(panel)
         elif not target.headless and chain.filter is not None:
             _bind_calibrate_key(target, chain.filter)
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,

@@ -81,7 +81,8 @@ class RecordingHook:
 
     Parameters
     ----------
-    recorder : PacketRecorder
+    recorder : PacketRecorder, or a :class:`~facepuppet.runtime.recording.switch.SwitchableRecorder` (the
+        run's: records only while a recording is in force, its TICK frame counts aligned for one started mid-run)
     source : the live source; its ``deliver_packets()`` (if any) hands the datagrams received since
         the last tick to the recorder (the process receiver's ring), its ``frames_taken`` says which
         frame the tick drew (a faithful replay needs it)
@@ -104,13 +105,22 @@ class RecordingHook:
         self._ticks = hasattr(source, "frames_taken")
 
     def __call__(self, info: TickInfo) -> None:
-        if self._deliver is not None:
+        recorder = self.recorder
+        if self._deliver is not None:  # also while a switchable recorder records nothing: the ring stays drained
             self._deliver()
         for deliver in self._mix_deliver:
             deliver()
+        saw = getattr(recorder, "saw_tick", None)
+        if saw is not None:  # a SwitchableRecorder (run): started and stopped during the run
+            saw(info.t)
+            if not recorder.recording:
+                return
         if self.audio is not None:
-            self.recorder.put_audio(info.t, self.audio.value)
+            recorder.put_audio(info.t, self.audio.value)
         if self._ticks:
-            self.recorder.put_tick(info.k, info.t, self.source.frames_taken, info.stamps[0])
+            frames = self.source.frames_taken
+            if saw is not None:  # a recording started mid-run counts only the frames it has the packets of
+                frames = recorder.tick_frames(frames, info.raw)
+            recorder.put_tick(info.k, info.t, frames, info.stamps[0])
             if self.mix_sources:
-                self.recorder.put_sources(info.k, tuple(s.frames_taken for s in self.mix_sources))
+                recorder.put_sources(info.k, tuple(s.frames_taken for s in self.mix_sources))

@@ -1,6 +1,7 @@
 """What the panel shows and edits: input status, per-channel meters, filters per region, calibration, record, chain.
 
-The panel is one ImGui window drawn after the character, into the same
+The panel is one ImGui window (two in a window wide enough for both and some face: the settings at the right edge)
+drawn after the character, into the same
 framebuffer (:class:`~facepuppet.runtime.panel.gl.ImguiGL`). It runs as a
 :class:`~facepuppet.runtime.live.loop.FrameLoop` overlay: after the character's
 draw call of a tick, before the GPU wait, with that tick's
@@ -23,9 +24,10 @@ frame on screen, not the one before.
 * **Calibrate** (neutral capture over ``capture_s``) and **Clear** (no neutral).
 * **Profile** (a run with ``--profile``: ``chain.profile``): Save, Save as (a name or a path), Revert, and a
   warning when the profile was made for another character or input.
-* **Record**: the file and its size on disk; **Chain**: the stage chain; **Character**: name, shapes, credits.
-  Record start/stop is not in the panel: ``--record`` wires its recorder into the receiver, the tick hook,
-  the config and event listeners when the run starts (see the report of issue 15).
+* **Record**: Record (a file name, or blank for ``facepuppet-YYYYmmdd-HHMMSS.fps`` next to the ``--record``
+  file or in the current folder) and Stop, the file and its size on disk (``run``'s
+  :class:`~facepuppet.runtime.recording.switch.SwitchableRecorder`: each recording replays like ``--record``'s).
+* **Chain**: the stage chain; **Character**: name, shapes, credits.
 
 Every edit is a config change: a copy of the pipeline's ``LiveConfig`` (``dataclasses.replace``) handed
 to the pipeline's ``apply_config``, which applies it at the next tick. The status numbers that need a
@@ -63,9 +65,13 @@ if TYPE_CHECKING:
     from facepuppet.runtime.live.stages import Chain
     from facepuppet.runtime.live.stats import LiveStats
     from facepuppet.runtime.recording.recorder import PacketRecorder
+    from facepuppet.runtime.recording.switch import SwitchableRecorder
 
 WEIGHT_REGIONS = ("eyes", "brows", "mouth", "other", "head")
 REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed this often
+#: ImGui frames per second at most: a tick closer than 0.9 / REBUILD_HZ to the last frame draws that frame
+#: again (its buffers are uploaded already; only the draw calls), e.g. every other tick at 120 frames/s on arrival
+REBUILD_HZ = 60.0
 PANEL_WIDTH = 430
 #: meter colours (RGBA 0..1): raw, after the stages, after mapping; distinct so tests and eyes can tell them apart
 METER_COLOURS = ((0.35, 0.55, 0.95, 1.0), (0.30, 0.85, 0.40, 1.0), (0.98, 0.60, 0.15, 1.0))
@@ -73,6 +79,16 @@ METER_COLOURS = ((0.35, 0.55, 0.95, 1.0), (0.30, 0.85, 0.40, 1.0), (0.98, 0.60, 
 #: filtered_sender, internal_error, stale_dropped, nonfinite_rejected, record_dropped, ...)
 DROP_WORDS = ("drop", "malformed", "unknown", "finite", "oversized", "filtered", "error", "rejected", "truncated",
               "invalid", "bad")
+
+
+#: characters the panel's font (ImGui's built-in, ASCII) lacks, written as ASCII
+_NOT_IN_FONT = str.maketrans({"→": "->", "—": "-", "–": "-", "×": "x", "µ": "u", "©": "(c)", "’": "'", "“": '"',
+                              "”": '"'})
+
+
+def _ascii(text: str) -> str:
+    """``text`` for the panel's font: arrows and dashes as ASCII, anything else outside ASCII as '?'."""
+    return text.translate(_NOT_IN_FONT).encode("ascii", "replace").decode("ascii")
 
 
 class DeskPanel:
@@ -88,7 +104,7 @@ class DeskPanel:
     character : Character or None
     counters : callable returning the run's counter groups (``{"udp": {...}, "loop": {...}, ...}``) or None
     stats : LiveStats or None, for the receive→draw latency
-    recorder : PacketRecorder or None
+    recorder : SwitchableRecorder (Record / Stop), PacketRecorder (shown only) or None
     input_kind, address : str, what the run listens to and where
     visible : bool, shown at start (Tab toggles it in a window)
     clock : callable returning seconds (monotonic; injectable for tests)
@@ -100,16 +116,23 @@ class DeskPanel:
     io : ImGui's IO of this panel's own ImGui context (tests and the window feed events here)
     rects : dict of widget label -> (x0, y0, x1, y1) in pixels, as last drawn (where to click)
     edits : int, config changes handed to the pipeline
-    draw_s : float, seconds the last panel draw took on the CPU (build + submit)
+    draw_s : float, seconds the last panel draw took on the CPU (build + submit, or the redraw of the last frame)
+    rebuild_hz : float, ImGui frames per second at most (:data:`REBUILD_HZ`); ``reused`` counts the ticks that
+        drew the last frame again instead
     draw_sketch : DurationSketch of every panel draw's CPU time (streaming: fixed memory in a long run)
     submit_sketch : DurationSketch of the GL part of it (buffer uploads and draw calls; on llvmpipe the
         vertex work of the draw calls runs here, on the calling thread)
+    build_sketch : DurationSketch of the ImGui frame alone (status, sections, ``imgui.render``)
+    calls_sketch : DurationSketch of the draw calls alone (on llvmpipe: the panel's vertex shading and triangle
+        binning, done on the CPU; a GPU does it itself); ``draw_calls_s`` the last frame's (0 when hidden)
+    cpu_sketch : DurationSketch of build + submit without the draw calls (what the panel costs the CPU on any
+        OpenGL: the ImGui frame, the buffer uploads, the state changes)
     """
 
     def __init__(self, ctx: moderngl.Context, fbo: moderngl.Framebuffer, width: int, height: int, *,
                  pipeline: LivePipeline | None = None, chain: Chain | None = None,
                  character: Character | None = None, counters: Callable[[], dict] | None = None,
-                 stats: LiveStats | None = None, recorder: PacketRecorder | None = None,
+                 stats: LiveStats | None = None, recorder: SwitchableRecorder | PacketRecorder | None = None,
                  input_kind: str = "", address: str = "", visible: bool = True,
                  clock: Callable[[], float] = time.monotonic, window_size: tuple[int, int] | None = None,
                  names: tuple[str, ...] | None = None) -> None:
@@ -135,6 +158,13 @@ class DeskPanel:
         self.draw_s = 0.0
         self.draw_sketch = DurationSketch()
         self.submit_sketch = DurationSketch()
+        self.build_sketch = DurationSketch()
+        self.calls_sketch = DurationSketch()
+        self.cpu_sketch = DurationSketch()
+        self.draw_calls_s = 0.0
+        self.rebuild_hz = REBUILD_HZ
+        self.reused = 0  # ticks that drew the last ImGui frame again
+        self._built = False
         self._last = clock()
         self._status: dict[str, Any] = {}
         self._refresh_at = -math.inf
@@ -145,9 +175,13 @@ class DeskPanel:
         self.sent_only = True
         self.selected: str | None = None  # the channel the response editor edits
         self.profile_name = ""  # the Save as field
+        self.record_name = ""  # the Record field (blank: a name from the date and time)
         self.profile_message = ""  # what the last Save / Save as / Revert did (or why it failed)
         self.profile_warning = ""  # the profile was made for another character or input
         self._profile_checked: object = None  # the profile path the warning was computed for
+        self._config: LiveConfig | None = None
+        self._row_pitch = 0.0  # height of a channel row, as ImGui's list clipper measured it
+        self._lines: dict[str, str] = {}  # status lines built at each refresh, not every frame
         self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
 
     # -- the loop's overlay ----------------------------------------------------------------------
@@ -163,8 +197,20 @@ class DeskPanel:
             self._last_raw_at = now
         if not self.visible:
             self._last = now
+            self.draw_calls_s = 0.0
+            self._built = False
             return
         t0 = time.perf_counter()
+        if self._built and now - self._last < 0.9 / self.rebuild_hz:  # the last ImGui frame is recent: drawn again
+            self.gl.redraw(self.fbo)
+            self.draw_s = time.perf_counter() - t0
+            self.draw_calls_s = calls = self.gl.draw_calls_s
+            self.reused += 1
+            self.draw_sketch.add(self.draw_s)
+            self.submit_sketch.add(self.draw_s)
+            self.calls_sketch.add(calls)
+            self.cpu_sketch.add(self.draw_s - calls)
+            return
         imgui = self.imgui
         imgui.set_current_context(self._context)
         io = self.io
@@ -176,14 +222,20 @@ class DeskPanel:
         if now >= self._refresh_at:
             self._refresh(now)
         imgui.new_frame()
+        self._config = None  # read afresh this frame
         self._build(info, now)
         imgui.render()
         t1 = time.perf_counter()
         self.gl.render(imgui.get_draw_data(), self.fbo)
         t2 = time.perf_counter()
         self.draw_s = t2 - t0
+        self.draw_calls_s = calls = self.gl.draw_calls_s
+        self._built = True
         self.draw_sketch.add(self.draw_s)
         self.submit_sketch.add(t2 - t1)
+        self.build_sketch.add(t1 - t0)
+        self.calls_sketch.add(calls)
+        self.cpu_sketch.add(self.draw_s - calls)
 
     def _refresh(self, now: float) -> None:
         """Rates, drops, latency percentiles and the record size: twice a second."""
@@ -210,12 +262,20 @@ class DeskPanel:
             s["stats_n"] = getattr(self.stats, "_n", 0)
             if lat.get("n"):
                 s["latency"] = (lat["p50_ms"], lat["p99_ms"], lat["n"])
-        if self.recorder is not None:
-            path = str(getattr(self.recorder, "path", ""))
+        self._refresh_record()
+        self._status_lines()
+
+    def _refresh_record(self) -> None:
+        """The recording's file and its size on disk."""
+        s = self._status
+        path = getattr(self.recorder, "path", None) if self.recorder is not None else None
+        if path is not None:
             try:
-                s["record"] = (path, os.path.getsize(path))
+                s["record"] = (str(path), os.path.getsize(path))
             except OSError:
-                s["record"] = (path, None)
+                s["record"] = (str(path), None)
+        else:
+            s.pop("record", None)
 
     # -- content ------------------------------------------------------------------------------------
 
@@ -225,45 +285,65 @@ class DeskPanel:
 
     def _build(self, info: TickInfo, now: float) -> None:
         imgui = self.imgui
+        w, h = self.window_size
+        two = w >= 2 * PANEL_WIDTH + 200  # room for the settings in a window of their own, at the right edge
         imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
-        imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, self.window_size[1] - 16), imgui.Cond_.first_use_ever)
+        imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
         imgui.set_next_window_bg_alpha(0.85)
         imgui.begin("facepuppet desk (Tab hides)")
         self._input_section(now)
         self._channel_section(info)
         self._response_section()
+        if two:
+            imgui.end()
+            imgui.set_next_window_pos(imgui.ImVec2(w - PANEL_WIDTH - 8, 8), imgui.Cond_.first_use_ever)
+            imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
+            imgui.set_next_window_bg_alpha(0.85)
+            imgui.begin("settings")
         self._filter_section()
         self._calibration_section()
         self._face_section()
         self._profile_section()
         self._loss_section()
+        self._record_section(info)
         self._info_section()
         imgui.end()
 
     def _input_section(self, now: float) -> None:
-        imgui, s = self.imgui, self._status
+        imgui = self.imgui
         if not imgui.collapsing_header("Input", imgui.TreeNodeFlags_.default_open):
             return
-        imgui.text(f"{self.input_kind or '-'} on {self.address or '-'}")
-        rates = (f"{s['packets_s']:.1f} packets/s, {s['drawn_s']:.1f} frames drawn/s" if "packets_s" in s
-                 else "packets/s and frames drawn/s: measuring")
-        imgui.text(rates)
+        if not self._lines:
+            self._status_lines()
+        lines = self._lines
+        imgui.text(lines["where"])
+        imgui.text(lines["rates"])
         age = "no frame yet" if self._last_raw_at is None else f"{(now - self._last_raw_at) * 1e3:.0f} ms"
         state = getattr(self.pipeline, "tracking_state", "-")  # waiting / live / lost / easing
         events = getattr(self.pipeline, "events", ())
         last = (f" ({'found' if events[-1][1] else 'lost'} at {events[-1][0]:.1f} s)" if events else "")
         imgui.text(f"last frame: {age}   tracking: {state}{last}")
+        imgui.text(lines["latency"])
+        imgui.text_wrapped(lines["drops"])
+
+    def _status_lines(self) -> None:
+        """The input section's lines that change only with the status numbers (at each refresh)."""
+        s = self._status
         lat = s.get("latency")
-        imgui.text("receive->draw: no frames in the last 0.5 s" if lat is None
-                   else f"receive->draw p50 {lat[0]:.2f} ms, p99 {lat[1]:.2f} ms ({lat[2]} frames)")
         drops = s.get("drops") or {}
-        imgui.text_wrapped("drops: " + (", ".join(f"{k} {v}" for k, v in sorted(drops.items())) or "none"))
+        self._lines = {
+            "where": f"{self.input_kind or '-'} on {self.address or '-'}",
+            "rates": (f"{s['packets_s']:.1f} packets/s, {s['drawn_s']:.1f} frames drawn/s" if "packets_s" in s
+                      else "packets/s and frames drawn/s: measuring"),
+            "latency": ("receive->draw: no frames in the last 0.5 s" if lat is None
+                        else f"receive->draw p50 {lat[0]:.2f} ms, p99 {lat[1]:.2f} ms ({lat[2]} frames)"),
+            "drops": "drops: " + (", ".join(f"{k} {v}" for k, v in sorted(drops.items())) or "none")}
 
     def _filter_section(self) -> None:
         imgui, pipeline = self.imgui, self.pipeline
         if pipeline is None or not imgui.collapsing_header("Filter (One Euro)", imgui.TreeNodeFlags_.default_open):
             return
-        config = config_in_force(pipeline)
+        config = self._config_now()
         filters = dict(config.filters)
         changed = False
         for region in WEIGHT_REGIONS:
@@ -305,7 +385,7 @@ class DeskPanel:
         if name is None:
             imgui.text("no channel selected: click a channel's name above")
             return
-        config = config_in_force(pipeline)
+        config = self._config_now()
         key = canonical(name)
         cs = config.channel(name)
         imgui.text(f"{name}" + ("" if key in config.channels else " (default response)"))
@@ -359,7 +439,7 @@ class DeskPanel:
         imgui, pipeline = self.imgui, self.pipeline
         if pipeline is None or not imgui.collapsing_header("Face", imgui.TreeNodeFlags_.default_open):
             return
-        config = config_in_force(pipeline)
+        config = self._config_now()
         c1, link = imgui.checkbox("link blinks (both eyes from the stronger)", config.link_blinks)
         self._remember("face.link_blinks")
         c2, mirror = imgui.checkbox("mirror (left/right, head yaw and roll)", config.mirror)
@@ -371,11 +451,12 @@ class DeskPanel:
         imgui, pipeline = self.imgui, self.pipeline
         if pipeline is None or not imgui.collapsing_header("Tracking loss", imgui.TreeNodeFlags_.default_open):
             return
-        config = config_in_force(pipeline)
+        config = self._config_now()
         modes = dict(config.loss.modes)
         changed = False
         for region in LOSS_REGIONS:
             imgui.push_id(f"loss.{region}")
+            imgui.align_text_to_frame_padding()  # the region's name on the radio buttons' line
             imgui.text(f"{region:6s}")
             for mode in LOSS_MODES:
                 if mode == "voice" and region not in VOICE_REGIONS:
@@ -477,23 +558,76 @@ class DeskPanel:
             ("neutral set" if getattr(pipeline, "neutral_weights", None) is not None else "no neutral")
         imgui.text(f"{neutral} ({pipeline.counters.get('calibrations', 0)} calibrations)")
 
+    def _record_section(self, info: TickInfo) -> None:
+        """Record / Stop (a run's :class:`~facepuppet.runtime.recording.switch.SwitchableRecorder`), the file
+        and its size (refreshed with the status numbers)."""
+        imgui, rec = self.imgui, self.recorder
+        if not imgui.collapsing_header("Record", imgui.TreeNodeFlags_.default_open):
+            return
+        shown = self._status.get("record")
+        recording = bool(getattr(rec, "recording", rec is not None))
+        if shown is None:
+            imgui.text("not recording" if rec is not None else "record: off (--record FILE)")
+        else:
+            size = "-" if shown[1] is None else f"{shown[1] / 1e6:.2f} MB"
+            imgui.text_wrapped(f"{'recording' if recording else 'stopped'}: {shown[0]} ({size})")
+        if not hasattr(rec, "start"):
+            return
+        action = None
+        imgui.push_id("record")  # the button "Record" is not the header "Record"
+        if recording:
+            if imgui.button("Stop"):
+                action = "stop"
+            self._remember("record.stop")
+        else:
+            if imgui.button("Record"):
+                action = "start"
+            self._remember("record.start")
+            imgui.same_line()
+            imgui.set_next_item_width(-1)
+            _, self.record_name = imgui.input_text_with_hint("##record_name", "file (default: facepuppet-DATE-TIME)",
+                                                            self.record_name)
+            self._remember("record.name")
+        imgui.pop_id()
+        if rec.message and not (recording and rec.message == f"recording to {rec.path}"):  # not the line above again
+            imgui.text_wrapped(rec.message)
+        if action is not None:
+            self.record_action(action)
+
+    def record_action(self, action: str) -> None:
+        """``start`` a recording (to :attr:`record_name`, blank: the default name; the config in force its
+        first CONFIG) or ``stop`` it; a failure is in the recorder's message and loses nothing."""
+        rec = self.recorder
+        if action == "stop":
+            rec.stop()
+        elif action == "start":
+            text = None
+            if self.pipeline is not None:
+                from facepuppet.runtime.live.profiles import config_to_toml
+
+                text = config_to_toml(config_in_force(self.pipeline))
+            try:
+                rec.start(self.record_name, config_text=text)
+            except (OSError, ValueError):
+                pass  # said in rec.message, shown under the buttons
+        else:
+            raise ValueError(f"record action: expected start or stop, got {action!r}")
+        self._refresh_record()  # the new file and its size at once
+
     def _info_section(self) -> None:
         imgui = self.imgui
-        if not imgui.collapsing_header("Record, chain, character"):
+        shown = imgui.collapsing_header("Chain, character")
+        self._remember("header.chain")
+        if not shown:
             return
-        rec = self._status.get("record")
-        if rec is None:
-            imgui.text("record: off (--record FILE)")
-        else:
-            size = "-" if rec[1] is None else f"{rec[1] / 1e6:.2f} MB"
-            imgui.text_wrapped(f"record: {rec[0]} ({size})")
         if self.chain is not None:
-            imgui.text_wrapped(self.chain.describe())
+            imgui.text_wrapped(_ascii(self.chain.describe()))
+            self._remember("chain.text")
         ch = self.character
         if ch is not None:
-            imgui.text_wrapped(f"character: {ch.name}, {len(ch.shape_names)} shapes")
+            imgui.text_wrapped(_ascii(f"character: {ch.name}, {len(ch.shape_names)} shapes"))
             if getattr(ch, "credits", None):
-                imgui.text_wrapped(f"credits: {ch.credits}")
+                imgui.text_wrapped(_ascii(f"credits: {ch.credits}"))
 
     def _mapped_index(self, channels: tuple) -> np.ndarray:
         """For each input channel the rig shape it drives (-1: none): the shape of the same name, else the
@@ -536,38 +670,61 @@ class DeskPanel:
         rows = np.arange(len(channels))
         if self.sent_only and raw_w is not None:  # NaN: not sent (a VMC sender names only some channels)
             rows = np.flatnonzero(np.isfinite(raw_w))
-        height = max(120.0, 0.35 * self.window_size[1])  # scrolls; the sections below stay in view
+        # as tall as its rows, at most a third of the window (then it scrolls; the sections below stay in view)
+        pitch = self._row_pitch or imgui.get_frame_height_with_spacing()  # measured by the clipper once drawn
+        fit = max(len(rows), 1) * pitch + 2 * imgui.get_style().window_padding.y
+        height = min(fit, max(120.0, 0.35 * self.window_size[1]))
         imgui.begin_child("channels", imgui.ImVec2(0, height))
         clipper = imgui.ListClipper()
         clipper.begin(len(rows))
         bar = imgui.ImVec2(80, 12)
+        push, pop, progress, same_line = imgui.push_style_color, imgui.pop_style_color, imgui.progress_bar, \
+            imgui.same_line
+        hist, colours, isfinite = imgui.Col_.plot_histogram, self._colours, math.isfinite
+        nan = math.nan
         while clipper.step():
-            for row in range(clipper.display_start, clipper.display_end):
-                i = int(rows[row])
-                values = (raw_w[i] if raw_w is not None else math.nan,
-                          flt[i] if flt is not None else math.nan,
-                          rig[mapped[i]] if mapped[i] >= 0 and rig is not None else math.nan)
-                for j, v in enumerate(values):
-                    imgui.push_style_color(imgui.Col_.plot_histogram, self._colours[j])
-                    v = float(v)
-                    imgui.progress_bar(min(max(v, 0.0), 1.0) if math.isfinite(v) else 0.0, bar,
-                                       f"{v:.2f}" if math.isfinite(v) else "-")
-                    imgui.pop_style_color()
+            start, end = clipper.display_start, clipper.display_end
+            if end <= start:
+                continue
+            idx = rows[start:end]  # the visible rows' values in three array reads, then plain floats
+            raw_v = raw_w[idx].tolist() if raw_w is not None else [nan] * len(idx)
+            flt_v = flt[idx].tolist() if flt is not None else [nan] * len(idx)
+            where = mapped[idx]
+            rig_v = (np.where(where >= 0, rig[np.maximum(where, 0)], nan).tolist() if rig is not None
+                     else [nan] * len(idx))
+            for n, i in enumerate(idx.tolist()):
+                row = start + n
+                for j, v in enumerate((raw_v[n], flt_v[n], rig_v[n])):
+                    push(hist, colours[j])
+                    if isfinite(v):
+                        progress(min(max(v, 0.0), 1.0), bar, f"{v:.2f}")
+                    else:
+                        progress(0.0, bar, "-")
+                    pop()
                     if row == 0:
                         self._remember(f"meter.0.{j}")  # the first row shown
-                    imgui.same_line()
+                    same_line()
                 name = channels[i]
                 if imgui.selectable(name, name == self.selected)[0]:
                     self.selected = name
                 self._remember(f"channel.{name}")
+        if clipper.items_height > 0:
+            self._row_pitch = clipper.items_height
         clipper.end()
         imgui.end_child()
 
     # -- edits --------------------------------------------------------------------------------------
 
+    def _config_now(self) -> LiveConfig:
+        """The config in force, read once per panel frame (and the one handed over since, after an edit)."""
+        if self._config is None:
+            self._config = config_in_force(self.pipeline)
+        return self._config
+
     def apply(self, config: LiveConfig) -> None:
         """Hand a changed config to the pipeline (applied at its next tick)."""
         apply_config(self.pipeline, config)
+        self._config = config  # a later section of the same frame edits on top of it
         self.edits += 1
 
     def close(self) -> None:

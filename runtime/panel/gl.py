@@ -19,14 +19,18 @@ plain moderngl context the same way):
 * **State.** Alpha blending (colour over, alpha accumulated), no depth test, no
   culling, scissor on; restored for the character's renderer afterwards.
 
-The buffers are read straight from ImGui's memory (``data_address``) into one
-vertex and one index buffer per draw list, grown by doubling and reused:
-nothing is allocated per frame once the panel's size has settled.
+The draw lists are copied straight from ImGui's memory (``data_address``) into
+one staging array of vertices and one of indices (a list's indices moved by the
+vertices of the lists before it), uploaded as one vertex and one index buffer
+per frame, grown by doubling and reused: nothing is allocated per frame once
+the panel's size has settled. Uniforms are written only when the display
+changes, the texture bound only when it changes between commands.
 """
 
 from __future__ import annotations
 
 import ctypes
+import time
 from typing import Any
 
 import moderngl
@@ -58,7 +62,13 @@ class ImguiGL:
         self.prog["u_texture"].value = 0
         self._textures: dict[int, moderngl.Texture] = {}
         self._next_id = 1  # 0 means "no texture" to ImGui
-        self._slots: list[tuple[moderngl.Buffer, moderngl.Buffer, moderngl.VertexArray]] = []
+        self._vbo: moderngl.Buffer | None = None
+        self._ibo: moderngl.Buffer | None = None
+        self._vao: moderngl.VertexArray | None = None
+        self._vtx = self._idx = None  # staging arrays the draw lists are copied into
+        self._display: tuple | None = None
+        self._cmds: list = []  # the last frame's draw commands (redraw)
+        self.draw_calls_s = 0.0  # seconds in the last frame's draw calls (llvmpipe: its vertex work runs in them)
         status = imgui.ImTextureStatus
         self._status = (status.want_create, status.want_updates, status.want_destroy, status.ok, status.destroyed)
 
@@ -96,29 +106,28 @@ class ImguiGL:
 
     # -- geometry -----------------------------------------------------------------------------------
 
-    def _slot(self, i: int, vtx_bytes: int, idx_bytes: int):
-        while len(self._slots) <= i:
-            vbo = self.ctx.buffer(reserve=64 * 1024, dynamic=True)
-            ibo = self.ctx.buffer(reserve=32 * 1024, dynamic=True)
-            self._slots.append((vbo, ibo, self._vao(vbo, ibo)))
-        vbo, ibo, vao = self._slots[i]
-        if vbo.size < vtx_bytes or ibo.size < idx_bytes:
-            vao.release()
-            if vbo.size < vtx_bytes:
-                vbo.orphan(max(vtx_bytes, 2 * vbo.size))
-            if ibo.size < idx_bytes:
-                ibo.orphan(max(idx_bytes, 2 * ibo.size))
-            vao = self._vao(vbo, ibo)
-            self._slots[i] = (vbo, ibo, vao)
-        return vbo, ibo, vao
-
-    def _vao(self, vbo: moderngl.Buffer, ibo: moderngl.Buffer) -> moderngl.VertexArray:
-        return self.ctx.vertex_array(self.prog, [(vbo, "2f 2f 4f1", "in_position", "in_uv", "in_color")],
-                                     index_buffer=ibo, index_element_size=INDEX_BYTES)
+    def _buffers(self, vtx_bytes: int, n_idx: int) -> tuple[moderngl.Buffer, moderngl.Buffer, moderngl.VertexArray]:
+        """The one vertex and index buffer (and their staging arrays) for a frame of this size, grown by doubling."""
+        if self._vao is None or self._vbo.size < vtx_bytes or self._ibo.size < n_idx * INDEX_BYTES:
+            if self._vao is not None:
+                self._vao.release()
+                self._vbo.release()
+                self._ibo.release()
+            vbo_size = max(vtx_bytes, 2 * (self._vbo.size if self._vbo is not None else 64 * 1024))
+            ibo_size = max(n_idx * INDEX_BYTES, 2 * (self._ibo.size if self._ibo is not None else 32 * 1024))
+            self._vbo = self.ctx.buffer(reserve=vbo_size, dynamic=True)
+            self._ibo = self.ctx.buffer(reserve=ibo_size, dynamic=True)
+            self._vao = self.ctx.vertex_array(self.prog, [(self._vbo, "2f 2f 4f1", "in_position", "in_uv", "in_color")],
+                                              index_buffer=self._ibo, index_element_size=INDEX_BYTES)
+            self._vtx = np.empty(vbo_size, dtype=np.uint8)
+            self._idx = np.empty(ibo_size // INDEX_BYTES, dtype=np.uint32)
+        return self._vbo, self._ibo, self._vao
 
     def render(self, draw_data: Any, fbo: moderngl.Framebuffer) -> int:
         """Draw ``draw_data`` (``imgui.get_draw_data()`` after ``imgui.render()``) into ``fbo``.
 
+        Every draw list goes into one vertex and one index buffer (one upload each per frame; a list's indices
+        moved by the vertices before it), then one draw call per command (its clip rectangle as the scissor box).
         Returns the number of draw commands issued.
         """
         self._sync_textures(draw_data)
@@ -126,54 +135,97 @@ class ImguiGL:
         dw, dh = draw_data.display_size.x, draw_data.display_size.y
         sx, sy = draw_data.framebuffer_scale.x, draw_data.framebuffer_scale.y
         fb_w, fb_h = int(dw * sx), int(dh * sy)
-        if fb_w <= 0 or fb_h <= 0 or draw_data.cmd_lists_count == 0:
+        n_lists = draw_data.cmd_lists_count
+        if fb_w <= 0 or fb_h <= 0 or n_lists == 0:
+            self._cmds = []
+            return 0
+        lists = []
+        nv_all = ni_all = 0
+        for i in range(n_lists):
+            dl = draw_data.cmd_lists[i]
+            nv, ni = dl.vtx_buffer.size(), dl.idx_buffer.size()
+            if nv and ni:
+                lists.append((dl, nv, ni, nv_all, ni_all))
+                nv_all += nv
+                ni_all += ni
+        if not lists:
+            self._cmds = []
+            return 0
+        vbo, ibo, vao = self._buffers(nv_all * VERTEX_BYTES, ni_all)
+        vtx, idx = self._vtx, self._idx
+        vtx_at, idx_at = vtx.ctypes.data, idx.ctypes.data
+        for dl, nv, ni, v0, i0 in lists:  # straight from ImGui's memory into the staging arrays
+            ctypes.memmove(vtx_at + v0 * VERTEX_BYTES, dl.vtx_buffer.data_address(), nv * VERTEX_BYTES)
+            ctypes.memmove(idx_at + i0 * INDEX_BYTES, dl.idx_buffer.data_address(), ni * INDEX_BYTES)
+            if v0:
+                idx[i0:i0 + ni] += v0
+        vbo.write(vtx[:nv_all * VERTEX_BYTES])
+        ibo.write(idx[:ni_all])
+        display = (dpx, dpy, dw, dh)
+        if display != self._display:  # uniforms only when the display moved or changed size
+            self.prog["u_display_pos"].value = (dpx, dpy)
+            self.prog["u_display_size"].value = (dw, dh)
+            self._display = display
+        cmds = []  # (texture, scissor box, index count, first index): what redraw() issues again
+        for dl, _, _, _, i0 in lists:
+            buf = dl.cmd_buffer
+            for j in range(buf.size()):
+                cmd = buf[j]
+                n = cmd.elem_count
+                if n == 0:
+                    continue
+                c = cmd.clip_rect
+                x1, y1 = max((c.x - dpx) * sx, 0.0), max((c.y - dpy) * sy, 0.0)
+                x2, y2 = min((c.z - dpx) * sx, fb_w), min((c.w - dpy) * sy, fb_h)
+                if x2 <= x1 or y2 <= y1:
+                    continue
+                tex = self._textures.get(int(cmd.get_tex_id()))
+                if tex is None:
+                    continue
+                cmds.append((tex, (int(x1), int(fb_h - y2), int(x2 - x1 + 0.5), int(y2 - y1 + 0.5)), n,
+                             i0 + cmd.idx_offset))
+        self._cmds = cmds
+        return self.redraw(fbo)
+
+    def redraw(self, fbo: moderngl.Framebuffer) -> int:
+        """Issue the last frame's draw calls again (its buffers are still uploaded): the panel between two
+        ImGui frames. Returns the number of draw commands issued."""
+        cmds, vao = self._cmds, self._vao
+        if not cmds or vao is None:
+            self.draw_calls_s = 0.0
             return 0
         ctx = self.ctx
-        fbo.use()
+        if ctx.fbo is not fbo:  # drawn after the character: its framebuffer (and viewport) are bound already
+            fbo.use()
         ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.enable(moderngl.BLEND)
         ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
-        self.prog["u_display_pos"].value = (dpx, dpy)
-        self.prog["u_display_size"].value = (dw, dh)
-        n_cmds = 0
+        bound = None
+        calls_s = 0.0
+        clock = time.perf_counter
         try:
-            for i in range(draw_data.cmd_lists_count):
-                dl = draw_data.cmd_lists[i]
-                nv, ni = dl.vtx_buffer.size(), dl.idx_buffer.size()
-                if nv == 0 or ni == 0:
-                    continue
-                vtx_bytes, idx_bytes = nv * VERTEX_BYTES, ni * INDEX_BYTES
-                vbo, ibo, vao = self._slot(i, vtx_bytes, idx_bytes)
-                vbo.write(ctypes.string_at(dl.vtx_buffer.data_address(), vtx_bytes))
-                ibo.write(ctypes.string_at(dl.idx_buffer.data_address(), idx_bytes))
-                for j in range(dl.cmd_buffer.size()):
-                    cmd = dl.cmd_buffer[j]
-                    if cmd.user_callback_data is not None and cmd.elem_count == 0:
-                        continue
-                    c = cmd.clip_rect
-                    x1, y1 = max((c.x - dpx) * sx, 0.0), max((c.y - dpy) * sy, 0.0)
-                    x2, y2 = min((c.z - dpx) * sx, fb_w), min((c.w - dpy) * sy, fb_h)
-                    if x2 <= x1 or y2 <= y1:
-                        continue
-                    fbo.scissor = (int(x1), int(fb_h - y2), int(x2 - x1 + 0.5), int(y2 - y1 + 0.5))
-                    tex = self._textures.get(int(cmd.get_tex_id()))
-                    if tex is None:
-                        continue
+            for tex, box, n, first in cmds:
+                if tex is not bound:
                     tex.use(0)
-                    vao.render(moderngl.TRIANGLES, vertices=cmd.elem_count, first=cmd.idx_offset)
-                    n_cmds += 1
+                    bound = tex
+                fbo.scissor = box
+                t = clock()
+                vao.render(moderngl.TRIANGLES, vertices=n, first=first)
+                calls_s += clock() - t
         finally:
+            self.draw_calls_s = calls_s
             fbo.scissor = None
             ctx.disable(moderngl.BLEND)
             ctx.enable(moderngl.DEPTH_TEST)
-        return n_cmds
+        return len(cmds)
 
     def release(self) -> None:
-        for vbo, ibo, vao in self._slots:
-            vao.release()
-            vbo.release()
-            ibo.release()
-        self._slots = []
+        if self._vao is not None:
+            self._vao.release()
+            self._vbo.release()
+            self._ibo.release()
+        self._vbo = self._ibo = self._vao = None
+        self._cmds = []
         for tex in self._textures.values():
             tex.release()
         self._textures = {}

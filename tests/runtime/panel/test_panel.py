@@ -135,6 +135,33 @@ def test_a_meter_bar_grows_with_its_channel_in_the_pixels(egl_ctx):
         assert high < area
 
 
+def test_ticks_faster_than_rebuild_hz_draw_the_last_imgui_frame_again_pixel_for_pixel(egl_ctx):
+    images = {}
+    for step in (1.0 / FPS, 1.0 / 240):  # 30 ticks/s: an ImGui frame each tick; 240/s: one every fourth or so
+        run = _Run(egl_ctx)
+        reused = []  # the panel's count of redrawn ticks, after each tick
+
+        def hook(info, run=run, step=step, reused=reused):
+            run.now += step
+            reused.append(run.panel.reused)
+        run._hook = hook
+        try:
+            images[step] = run.run(_frames(0.6, 12))
+            panel = run.panel
+            ticks = panel.draw_sketch.n
+            assert ticks == 12
+            if step < 1.0 / 60:
+                assert panel.reused >= 6 and panel.build_sketch.n == ticks - panel.reused
+                assert reused[-1] == reused[-2] + 1  # the image read is of a redrawn tick
+            else:
+                assert panel.reused == 0
+        finally:
+            run.close()
+    # every tick drew the panel: the last frame (a redraw of an ImGui frame, or a new one of the same values)
+    # shows the same panel as a run that built a frame each tick
+    np.testing.assert_array_equal(images[1.0 / 240], images[1.0 / FPS])
+
+
 def test_the_hidden_panel_leaves_the_frame_as_it_was(egl_ctx):
     images = {}
     for name, kwargs in {"none": {"panel": False}, "hidden": {"visible": False}, "shown": {}}.items():

@@ -1,0 +1,164 @@
+"""Record and Stop in the panel of a real run (headless, VMC over real UDP on 127.0.0.1, clicks through ImGui's IO):
+each recording is a complete file that ``replay`` plays back to the weights the run drew while it recorded."""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import time
+
+import numpy as np
+import pytest
+from pythonosc.udp_client import SimpleUDPClient
+
+from facepuppet.runtime.cli import main
+from facepuppet.runtime.commands import run
+from facepuppet.runtime.recording.session import read_session
+
+from helpers.small_characters import sphere_character
+from helpers.udp_helpers import free_udp_port
+from helpers.vmc_run import NO_SMOOTHING, send_vmc
+
+pytest.importorskip("imgui_bundle", reason="the panel's extra (imgui-bundle) is not installed")
+
+pytestmark = pytest.mark.gl
+
+TICKS_RECORDED = 12  # ticks with a new frame in each recording before Stop is clicked
+
+
+class _Operator:
+    """The test's hand on the mouse: one step per tick, from the frame loop's tick hook (so it is in step with
+    the panel's frames whatever the machine's speed)."""
+
+    def __init__(self, stop: threading.Event):
+        self.stop = stop
+        self.panel = None
+        self.plan: list = []  # (what, label) steps
+        self.pressed = None
+        self.live: dict[int, np.ndarray] = {}  # tick index -> rig weights drawn, while a recording was in force
+        self.sizes: list[tuple[int, int]] = []  # (recording number, size shown) while recording
+        self.files: list = []
+        self.with_frames = 0
+
+    def click(self, label):
+        x0, y0, x1, y1 = self.panel.rects[label]
+        x, y = (x0 + x1) / 2, (y0 + y1) / 2
+        self.panel.io.add_mouse_pos_event(float(x), float(y))
+        self.panel.io.add_mouse_button_event(0, True)
+        self.pressed = (x, y)
+
+    def release(self):
+        self.panel.io.add_mouse_button_event(0, False)
+        self.pressed = None
+
+    def _grew(self, n):
+        """The size shown for recording ``n`` has changed since it was first shown (refreshed twice a second)."""
+        sizes = [s for i, s in self.sizes if i == n]
+        return len(sizes) >= 2 and sizes[-1] != sizes[0]
+
+    def __call__(self, info):
+        rec = self.panel.recorder
+        if rec.recording:
+            self.live[info.k] = info.weights.copy()
+            shown = self.panel._status.get("record")
+            if shown is not None and shown[1] is not None and shown[0] == str(rec.path):
+                self.sizes.append((rec.recordings, shown[1]))
+            if info.raw is not None:
+                self.with_frames += 1
+        if self.pressed is not None:
+            self.release()
+            return
+        if not self.plan:
+            self.stop.set()
+            return
+        what = self.plan[0]
+        if what == "start" and "record.start" in self.panel.rects and not rec.recording:
+            self.click("record.start")
+            self.plan.pop(0)
+            self.with_frames = 0
+        elif what == "stop" and rec.recording and self.with_frames >= TICKS_RECORDED and self._grew(rec.recordings) \
+                and "record.stop" in self.panel.rects:
+            self.files.append(rec.path)
+            self.click("record.stop")
+            self.plan.pop(0)
+        elif what == "wait":
+            self.plan.pop(0)
+
+
+def _run(tmp_path, extra=()):
+    character = tmp_path / "sphere.npz"
+    sphere_character().save(character)
+    config = tmp_path / "live.toml"
+    config.write_text(NO_SMOOTHING)
+    port = free_udp_port()
+    parser = argparse.ArgumentParser()
+    run.register(parser.add_subparsers())
+    ns = parser.parse_args(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{port}",
+                            "--headless", "--panel", "--size", "640x1000", "--duration", "60", "--config",
+                            str(config), "--draw", "tick", "--fps", "30", *extra])
+    stop = threading.Event()
+    op = _Operator(stop)
+    op.plan = ["wait"] * 5 + ["start", "stop"] + ["wait"] * 5 + ["start", "stop"] + ["wait"] * 3
+
+    def on_ready(address):
+        def send():
+            client = SimpleUDPClient("127.0.0.1", port)
+            i = 0
+            while not stop.is_set():  # every frame its own jaw value: a replay taking another frame shows it
+                send_vmc(client, {"JawOpen": 0.05 + 0.9 * ((i * 7) % 97) / 97})
+                i += 1
+                time.sleep(0.011)
+        threading.Thread(target=send, daemon=True).start()
+
+    try:
+        result = run.run_live(ns, log=lambda s: None, stop_event=stop, on_ready=on_ready, hooks=[op],
+                              on_panel=lambda p: setattr(op, "panel", p))
+    finally:
+        stop.set()
+    return result, op, character, config
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("receiver", ["process", "thread"])  # datagrams recorded from a ring, or as they arrive
+def test_record_then_stop_in_the_panel_twice_makes_two_files_that_replay_the_run(tmp_path, monkeypatch, receiver):
+    monkeypatch.chdir(tmp_path)  # recordings named by default go into the current folder
+    result, op, character, config = _run(tmp_path, ("--receiver", receiver))
+    assert not op.plan, f"the run ended before the clicks were done: {op.plan}"
+    assert len(op.files) == 2 and op.files[0] != op.files[1]
+    for path in op.files:
+        assert path.parent == tmp_path and path.name.startswith("facepuppet-") and path.suffix == ".fps"
+    assert result.counters["record"]["recordings"] == 2
+    assert result.counters["record"]["record_dropped"] == 0
+    # the size shown grew while each recording went on
+    for n in (1, 2):
+        sizes = [s for i, s in op.sizes if i == n]
+        assert len(sizes) >= 2 and sizes[-1] > sizes[0], (n, sizes)
+
+    for n, path in enumerate(op.files):
+        session = read_session(path)
+        assert session.complete, session.tail_error
+        info = session.header["info"]
+        assert info["input"] == "vmc" and info["started_at_t"] > 0
+        assert "min_cutoff = 500.0" in info["config"]  # the config in force, in the header...
+        assert session.configs and "min_cutoff = 500.0" in session.configs[0][1]  # ... and as the first CONFIG
+        assert session.packets and session.ticks
+        ticks = [t.k for t in session.ticks]
+        assert set(ticks) <= set(op.live)
+        # replay it (its own header: the config, the character's path, the fps) and compare with the run
+        dump = tmp_path / f"replay{n}.npy"
+        assert main(["replay", str(path), "-c", str(character), "--headless", "--size", "64x64",
+                     "--dump-weights", str(dump)]) == 0
+        replayed = np.load(dump)
+        assert replayed.shape[0] == len(ticks)
+        live = np.array([op.live[k] for k in ticks])
+        drawn = np.flatnonzero(np.abs(replayed).sum(axis=1) > 0)
+        assert drawn.size >= TICKS_RECORDED - 2  # the ticks before the first recorded frame draw the rest pose
+        first = drawn[0]
+        # from a few frames after the first on (the filter's history before the recording is not in it) the
+        # replay draws what the run drew, tick for tick
+        later = np.arange(first + 3, len(ticks))
+        assert later.size >= 5
+        np.testing.assert_allclose(replayed[later], live[later], atol=2e-3)
+    # the two recordings hold different stretches of the run: nothing of the first is in the second
+    a, b = (read_session(p) for p in op.files)
+    assert max(t.k for t in a.ticks) < min(t.k for t in b.ticks)
