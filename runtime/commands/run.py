@@ -275,18 +275,19 @@ def _open_recorder(args, opts: _Options, chain, late, mix_inputs, log):
 
     if args.record is None and not _wants_panel(args):
         return None
+    record = Path(args.record) if args.record is not None else None  # callers in code (bench soak) pass a str
     force = bool(getattr(args, "force", False))
 
     def open_recorder(path: Path) -> PacketRecorder:
         info = _record_info(args, opts, chain)  # the config in force now
         if holder.ticks_seen:
             info["started_at_t"] = holder.last_t  # a recording the panel started during the run
-        return PacketRecorder(path, args.input, info=info, overwrite=force and path == args.record)
+        return PacketRecorder(path, args.input, info=info, overwrite=force and path == record)
 
     make_adapter = None if opts.voice_only else (
         lambda: make_input_adapter(args.input, (), log=lambda s: None, face_id=getattr(args, "face_id", None)))
     holder = SwitchableRecorder(
-        open_recorder, args.record.parent if args.record is not None else Path.cwd(), make_adapter=make_adapter,
+        open_recorder, record.parent if record is not None else Path.cwd(), make_adapter=make_adapter,
         frames_taken=lambda: getattr(late.source, "frames_taken", 0), log=log,
         refuse_midrun="not with several inputs (their frame counts cannot be aligned mid-run); use --record FILE"
         if mix_inputs else "")
@@ -477,7 +478,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         if recorder is not None:
             parts.append(SimpleNamespace(close=recorder.close))  # close() waits for every recording's file
             if args.record is not None:
-                recorder.start(args.record)
+                recorder.start(Path(args.record))
         source = late.source = _open_source(args, adapter, opts, recorder)
         if opts.voice_only:
             source.duration = getattr(audio, "duration", None)
