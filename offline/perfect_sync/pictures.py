@@ -156,7 +156,8 @@ def take_side_by_side(original: Character, synced: Character, take: str | os.Pat
                       size: tuple[int, int] = (240, 240), fps: float = 60.0) -> Path:
     """PNG of a Live Link Face take replayed at ``moments`` times on two characters, one row each: top, the
     ``original`` through its VRM presets (the default ARKit→VRM mapping), bottom, ``synced`` (its perfect-sync
-    clone) by the ARKit names onto its ARKit shapes; each cell labelled with the take time. Both rows are
+    clone) by the ARKit names onto its ARKit shapes (a character without VRM presets: top, its own shapes by
+    name, labelled "as imported"); each cell labelled with the take time. Both rows are
     drawn by the replay's own chain and seen from one camera (the synced character's face framing).
     Returns the path; GLUnavailable without a headless EGL context."""
     from facepuppet.runtime.recording.replay_source import open_recording
@@ -175,7 +176,8 @@ def take_side_by_side(original: Character, synced: Character, take: str | os.Pat
         if own:
             ctx.release()
     cells = []
-    for label, images in zip(("VRM presets", "perfect sync"), rows):
+    presets = original.expressions is not None and any(original.expressions.presets)
+    for label, images in zip(("VRM presets" if presets else "as imported", "perfect sync"), rows):
         for k, image in zip(ticks, images):
             small = np.asarray(Image.fromarray(image).resize(size, Image.LANCZOS))
             cells.append((f"{label} {k / fps:.2f} s", small))
