@@ -12,6 +12,10 @@
 * Godette (the data kit's VRM): cosine and magnitude ratio of each cloned
   shape against the artist's shape meaning the same (goal cosine >= 0.7 on
   the blinks and the open mouth), and the doubts of the proposal.
+* With ``--pictures DIR``: contact sheets of the cloned shapes and
+  ``godette_llf_side_by_side.png``, a Live Link Face take of the kit replayed
+  at 8 moments on Godette through her VRM presets (top) and on her clone
+  through the ARKit shapes (bottom), the picture a user would compare.
 * Time of the whole command's work per character (goals: Godette < 30 s, a
   30k-vertex face < 2 min; the ICT head has 26.7k vertices).
 """
@@ -32,6 +36,7 @@ from facepuppet.offline.bench_data import add_data_argument, data_dir
 
 GOAL_MEDIAN, GOAL_WORST, GOAL_COSINE = 0.15, 0.40, 0.7
 GOAL_GODETTE_S, GOAL_30K_S = 30.0, 120.0
+TAKE = "livelinkface_myslate_3.csv"  # the kit's Live Link Face take the side-by-side picture replays
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -68,6 +73,21 @@ def _sheet(args: argparse.Namespace, character: Character, report: dict, label: 
 
     args.pictures.mkdir(parents=True, exist_ok=True)
     print(f"bench perfect-sync: {shape_sheet(character, report['added'], args.pictures / f'{label}_shapes.png')}")
+
+
+def _side_by_side(args: argparse.Namespace, original: Character, synced: Character, take: Path) -> str | None:
+    """With ``--pictures``: the Live Link Face take replayed on the original (VRM presets) over the clone."""
+    if not getattr(args, "pictures", None):
+        return None
+    if not take.exists():
+        print(f"bench perfect-sync: no side-by-side picture: {take} not in the data kit")
+        return None
+    from facepuppet.offline.perfect_sync.pictures import take_side_by_side
+
+    args.pictures.mkdir(parents=True, exist_ok=True)
+    path = take_side_by_side(original, synced, take, args.pictures / "godette_llf_side_by_side.png")
+    print(f"bench perfect-sync: {path} (top: {take.name} through the VRM presets, bottom: perfect sync)")
+    return str(path)
 
 
 def run_bench(args: argparse.Namespace) -> dict:
@@ -115,6 +135,7 @@ def run_bench(args: argparse.Namespace) -> dict:
             out, report, _ = perfect_sync(godette, source, progress=bar)
             seconds = time.perf_counter() - t
         _sheet(args, out, report, "godette")
+        side = _side_by_side(args, godette, out, kit / "tracker" / TAKE)
         face = find_face(godette)
         pairs = {}
         for key, artist in GODETTE_PAIRS:
@@ -126,7 +147,8 @@ def run_bench(args: argparse.Namespace) -> dict:
                                  k: v["cosine"] is not None and v["cosine"] >= GOAL_COSINE for k, v in pairs.items()
                                  if k.split("~")[0] in ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")},
                              "n_doubts": len(report["doubts"]), "doubts": report["doubts"],
-                             "meets_time_goal": seconds < GOAL_GODETTE_S}
+                             "meets_time_goal": seconds < GOAL_GODETTE_S,
+                             **({"side_by_side": side} if side else {})}
         print(f"bench perfect-sync: Godette {seconds:.1f} s; " + ", ".join(
             f"{k} cos {v['cosine']:.2f} x{v['magnitude_ratio']:.2f}" for k, v in pairs.items()
             if v["cosine"] is not None))

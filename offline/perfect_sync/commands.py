@@ -60,6 +60,12 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
 def _run(args: argparse.Namespace) -> int:
     if args.sheet and not args.pictures:
         raise ValueError("--sheet: needs --pictures DIR (the folder the contact sheet goes to)")
+    if args.take is not None and not args.sheet:
+        raise ValueError("--take: needs --pictures DIR --sheet (the side-by-side picture is one of the sheets)")
+    if args.take is not None:
+        from facepuppet.runtime.recording.replay_source import open_recording
+
+        open_recording(args.take)  # a take that cannot be read is refused before the work, nothing written
     character = Character.load(args.character)
     source = load_source(args.source)
     with Progress("perfect-sync", total=None, unit="shapes") as bar:
@@ -82,6 +88,11 @@ def _run(args: argparse.Namespace) -> int:
         if args.sheet:
             try:
                 print(shape_sheet(out, report["added"] + report["replaced"], args.pictures / "shapes.png"))
+                if args.take is not None:
+                    from facepuppet.offline.perfect_sync.pictures import take_side_by_side
+
+                    side = take_side_by_side(character, out, args.take, args.pictures / "side_by_side.png")
+                    print(f"{side} (top: {args.take.name} on the character as it was, bottom: perfect sync)")
             except GLUnavailable as exc:
                 print(f"perfect-sync: no contact sheet of the shapes (no OpenGL: {exc})")
     for d in report["doubts"]:
@@ -105,5 +116,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--pictures", type=Path, help="folder for the proposed points (PNG, JSON) and the report")
     p.add_argument("--sheet", action="store_true",
                    help="with --pictures: also render a contact sheet of the cloned shapes there (OpenGL)")
+    p.add_argument("--take", type=Path, metavar="TAKE.csv",
+                   help="with --pictures --sheet: also side_by_side.png, this Live Link Face take (or session) "
+                        "replayed at 8 moments on the character as it was (top) and with the cloned shapes "
+                        "(bottom)")
     p.add_argument("--replace", action="store_true", help="replace shapes it already has under an ARKit name")
     p.set_defaults(func=_run)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -72,3 +73,123 @@ def shape_sheet(character: Character, names: Sequence[str], path: str | os.PathL
     finally:
         if own:
             ctx.release()
+
+
+#: The ARKit channels a VRM's presets cannot show (brows, cheeks, mouth corners, lip rolls and presses,
+#: squints, sneers, the jaw sideways): the moments of a take are picked where they and the mouth/eyes move most.
+PRESET_BLIND = ("browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
+                "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "mouthSmileLeft", "mouthSmileRight",
+                "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft",
+                "mouthStretchRight", "mouthRollLower", "mouthRollUpper", "mouthPressLeft", "mouthPressRight",
+                "mouthLeft", "mouthRight", "eyeSquintLeft", "eyeSquintRight", "noseSneerLeft", "noseSneerRight",
+                "jawLeft", "jawRight")
+ACTIVE = (*PRESET_BLIND, "jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthFunnel", "mouthPucker")
+
+
+def take_moments(frames: Sequence, n: int = 8) -> list[int]:
+    """Indices of ``n`` frames spread over a take: in each of ``n`` equal spans of its time, the frame where the
+    channels of :data:`ACTIVE` (what the presets cannot show, the jaw, the blinks) add up highest."""
+    from facepuppet.runtime.channels import canonical
+
+    if not frames:
+        raise ValueError("take_moments: the take has no frames")
+    wanted = {canonical(k) for k in ACTIVE}
+    scores = np.zeros(len(frames))
+    for i, f in enumerate(frames):
+        if f.channels is None or f.weights is None:
+            continue
+        keep = np.array([canonical(c) in wanted for c in f.channels], bool)
+        scores[i] = float(np.nansum(np.clip(np.asarray(f.weights, np.float64)[keep], 0.0, 1.0)))
+    times = np.array([f.t for f in frames], np.float64)
+    edges = np.linspace(times[0], times[-1], n + 1)
+    picked = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        span = np.flatnonzero((times >= a) & (times <= b))
+        span = [i for i in span if i not in picked]
+        if span:
+            picked.append(int(max(span, key=lambda i: scores[i])))
+    return picked
+
+
+class _GrabSink:
+    """Keep the image of each tick the loop draws (only the few ticks of a side-by-side are drawn)."""
+
+    def __init__(self) -> None:
+        self.images: list[np.ndarray] = []
+
+    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame, renderer) -> None:
+        self.images.append(np.array(renderer.read_pixels(), copy=True))
+
+
+def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence[int], fps: float,
+                  ctx: moderngl.Context, size: tuple[int, int],
+                  camera_from: Character | None = None) -> list[np.ndarray]:
+    """The images ``facepuppet replay TAKE -c CHARACTER --headless`` draws at the given ticks (the same frame
+    source, stage chain, channel map and renderer; no filter stage, as replay of a CSV by default), framed on
+    the face of ``camera_from`` (default: ``character``) so two characters are seen from one camera."""
+    from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
+    from facepuppet.runtime.live.stages import build_chain
+    from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
+
+    quiet = lambda line: None  # noqa: E731
+    source = ReplaySource(open_recording(take), max_gap=DEFAULT_MAX_GAP_S)
+    chain = build_chain(argparse.Namespace(character=None), character, None, filtered=False, label="replay",
+                        log=quiet)
+    renderer = chain.renderer(ctx, character, size[0], size[1], "auto", None, quiet, framing="face")
+    if camera_from is not None and camera_from is not character:
+        from facepuppet.runtime.render.renderer import FaceRenderer
+
+        probe = FaceRenderer(ctx, camera_from, size[0], size[1], framing="face", log=quiet)
+        renderer.camera = probe.camera  # the same view of the same head (both are one mesh, one pose)
+        probe.close()
+    grab = _GrabSink()
+    try:
+        FrameLoop(chain.names, renderer, RecordedClock(), sinks=[grab], fps=fps, log=quiet, stages=chain.stages,
+                  drive=chain.drive).run(source, ticks=list(ticks))
+    finally:
+        renderer.close()
+    return grab.images
+
+
+def take_side_by_side(original: Character, synced: Character, take: str | os.PathLike,
+                      path: str | os.PathLike, moments: int = 8, ctx: moderngl.Context | None = None,
+                      size: tuple[int, int] = (240, 240), fps: float = 60.0) -> Path:
+    """PNG of a Live Link Face take replayed at ``moments`` times on two characters, one row each: top, the
+    ``original`` through its VRM presets (the default ARKit→VRM mapping), bottom, ``synced`` (its perfect-sync
+    clone) by the ARKit names onto its ARKit shapes (a character without VRM presets: top, its own shapes by
+    name, labelled "as imported"); each cell labelled with the take time. Both rows are
+    drawn by the replay's own chain and seen from one camera (the synced character's face framing).
+    Returns the path; GLUnavailable without a headless EGL context."""
+    from facepuppet.runtime.recording.replay_source import open_recording
+
+    frames = open_recording(take)
+    picked = take_moments(frames, moments)
+    ticks = sorted({int(np.ceil(frames[i].t * fps - 1e-9)) for i in picked})
+    own = ctx is None
+    if own:
+        ctx = _standalone()
+    try:
+        zoom = 2
+        big = (size[0] * zoom, size[1] * zoom)
+        rows = [replay_images(c, take, ticks, fps, ctx, big, camera_from=synced) for c in (original, synced)]
+    finally:
+        if own:
+            ctx.release()
+    cells = []
+    presets = original.expressions is not None and any(original.expressions.presets)
+    for label, images in zip(("VRM presets" if presets else "as imported", "perfect sync"), rows):
+        for k, image in zip(ticks, images):
+            small = np.asarray(Image.fromarray(image).resize(size, Image.LANCZOS))
+            cells.append((f"{label} {k / fps:.2f} s", small))
+    return save_png(path, contact_sheet(cells, len(ticks)))
+
+
+def _standalone() -> moderngl.Context:
+    import moderngl
+
+    from facepuppet.runtime.render.gl_context import GLUnavailable
+
+    try:
+        return moderngl.create_standalone_context(backend="egl", require=330)
+    except Exception as exc:
+        raise GLUnavailable(f"no headless EGL OpenGL 3.3 context for the pictures ({exc})") from None
