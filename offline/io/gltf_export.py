@@ -36,7 +36,7 @@ What is written (glTF 2.0 spec; VRM 0.x ``VRM`` extension; VRM 1.0 ``VRMC_vrm`` 
   GGX: roughness = (2 / (n + 2))^(1/4)), since a character keeps no metal/roughness.
   An OBJ rig's ``hidden`` material is written BLEND with alpha 0 (kept, not drawn);
   its thin layers (eye occlusion, films, lashes) BLEND and double-sided, with the fade the
-  renderer gives them (``renderer.vertex_opacity``) as COLOR_0 alpha (RGBA), so any glTF
+  renderer gives them (``render.layers.vertex_opacity``) as COLOR_0 alpha (RGBA), so any glTF
   viewer draws them see-through. A material kind other than skin (eye, teeth, lashes ...) and
   its specular/shininess go in ``material.extras.facepuppet`` for the importer.
   Toon materials: VRM 0.x ``materialProperties`` (``VRM/MToon``) or VRM 1.0
@@ -81,6 +81,7 @@ from facepuppet.runtime.character_parts import ALPHA_MODES, OVERRIDES, SHADING
 from facepuppet.runtime.errors import FacepuppetError
 from facepuppet.runtime.geometry import matrix_to_quat, vertex_normals
 from facepuppet.runtime.outputs import atomic_path
+from facepuppet.runtime.render.layers import LAYER_KINDS, has_layers, vertex_opacity
 from facepuppet.runtime.vrm_names import VRM1_FROM_VRM0
 
 __all__ = ["ExportError", "ExportSummary", "build_gltf", "encode_glb", "export_character", "output_format"]
@@ -101,8 +102,6 @@ _VRM1_PRESETS = frozenset(VRM1_FROM_VRM0.values()) | {"surprised"}
 _ARKIT = frozenset(ARKIT_NAMES)
 _ALPHA_NAME = {v: k for k, v in ALPHA_MODES.items()}
 _KIND_NAME = {v: k for k, v in MATERIAL_KINDS.items()}
-#: An OBJ rig's thin see-through layers (eye occlusion, lacrimal films, lashes): BLEND, two-sided, COLOR_0 alpha
-_LAYER_KINDS = frozenset(MATERIAL_KINDS[k] for k in ("occlusion", "film", "lashes"))
 _OVERRIDE_NAME = {v: k for k, v in OVERRIDES.items()}
 _SPARSE_FRACTION = 0.5  # a target is sparse when its sparse form is under half the dense one
 GENERATOR = "facepuppet export-character"
@@ -309,12 +308,8 @@ class _Exporter:
             self.normals = vertex_normals(self.vertices, c.triangles.astype(np.int64))
         no_normal = np.linalg.norm(self.normals, axis=1) < 0.5
         self.normals[no_normal] = (0.0, 0.0, -1.0 if self.turn else 1.0)
-        kinds = c.material_params[:, 2].round().astype(int)
-        self.opacity = None  # an OBJ rig's thin layers: the fade the renderer gives them, as COLOR_0 alpha
-        if c.look is None and np.isin(kinds, list(_LAYER_KINDS)).any():
-            from facepuppet.runtime.render.renderer import vertex_opacity
-
-            self.opacity = vertex_opacity(c).astype(np.float32)
+        # an OBJ rig's thin layers: the fade the renderer gives them, as COLOR_0 alpha
+        self.opacity = vertex_opacity(c).astype(np.float32) if c.look is None and has_layers(c) else None
         self.delta_pos = self._points(c.delta_positions, scale)
         self.delta_nrm = self._points(c.delta_normals)
         doc: dict[str, Any] = {"asset": self._asset(), "scene": 0}
@@ -588,7 +583,7 @@ class _Exporter:
                 if kind == MATERIAL_KINDS["hidden"]:
                     pbr["baseColorFactor"] = [1.0, 1.0, 1.0, 0.0]
                     mat["alphaMode"] = "BLEND"
-                elif kind in _LAYER_KINDS:  # thin see-through layers: COLOR_0 alpha holds their fade
+                elif kind in LAYER_KINDS:  # thin see-through layers: COLOR_0 alpha holds their fade
                     mat["alphaMode"] = "BLEND"
                     mat["doubleSided"] = True
                 mats.append(mat)

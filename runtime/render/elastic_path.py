@@ -87,8 +87,10 @@ def setup_elastic(ctx: moderngl.Context, character: Character, model: ElasticMod
     prog["u_basis_index"].value = 1
     if model.n_rigid:
         prog["u_rigid_label"].value = 2
-    return {"prog": prog, "vao": make_vao(prog, vbo), "vbo": vbo, "textures": basis_textures(ctx, model),
-            "model": model}
+    vao = make_vao(prog, vbo)
+    # "programs" / "vaos" keyed as the renderer's other paths (one program here)
+    return {"prog": prog, "programs": {None: prog}, "vaos": {None: vao}, "vbo": vbo,
+            "textures": basis_textures(ctx, model), "model": model}
 
 
 def upload_controls(state: dict, controls: np.ndarray) -> None:

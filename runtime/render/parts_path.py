@@ -70,7 +70,7 @@ def vertex_attributes(character: Character, opacity: np.ndarray | None = None) -
     """Per-vertex [colour 3, uv 2, joints 4, weights 4, opacity 1] float32 (joints exact as floats), (n, 14).
 
     ``opacity`` (n,), default 1: multiplies the material's alpha (the renderer gives the thin layers of an
-    OBJ rig's kinds, eye occlusion, films, lashes, their fade: ``renderer.vertex_opacity``).
+    OBJ rig's kinds, eye occlusion, films, lashes, their fade: ``layers.vertex_opacity``).
     """
     c = character
     out = np.zeros((c.n_vertices, 14), np.float32)

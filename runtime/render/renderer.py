@@ -35,6 +35,7 @@ from facepuppet.runtime.geometry import bounds
 from facepuppet.runtime.render.camera import frame_bounds, model_matrix
 from facepuppet.runtime.render.cpu_deform import CpuDeformer, check_weights
 from facepuppet.runtime.render.elastic_path import check_model, setup_elastic, upload_controls
+from facepuppet.runtime.render.layers import LAYER_KINDS, has_layers, vertex_opacity
 from facepuppet.runtime.render.options import FRAMINGS
 from facepuppet.runtime.render.parts_path import (
     CpuSkinner,
@@ -62,9 +63,7 @@ PATHS = ("auto", "gpu", "cpu", "elastic")
 _JOINT_UNIT, _TEXTURE_UNIT = 2, 3
 _HIDDEN = MATERIAL_KINDS["hidden"]
 # Thin layers drawn two-sided and blended after the surfaces, in this order (each over the ones before).
-_TWO_SIDED = (MATERIAL_KINDS["occlusion"], MATERIAL_KINDS["film"], MATERIAL_KINDS["lashes"])
-# Opacity of the thin layers (vertex_opacity): lashes at the root, the eye occlusion at the lids, films.
-LASH_ROOT_OPACITY, OCCLUSION_OPACITY, FILM_OPACITY = 0.9, 0.6, 0.22
+_TWO_SIDED = LAYER_KINDS
 
 
 def realistic_weights(n_shapes: int, n_active: int = 10) -> np.ndarray:
@@ -91,44 +90,6 @@ def vertex_materials(character: Character) -> np.ndarray:
     # Reverse order so the first triangle that names a vertex is the last write.
     out[tris[::-1].reshape(-1)] = np.repeat(per_tri[::-1], 3, axis=0)
     return out.astype(np.float32)
-
-
-def vertex_opacity(character: Character) -> np.ndarray:
-    """Per-vertex opacity (n_vertices,) float32: 1 on surfaces; on the thin layers a fade with a distance
-    ``d``, ``s = (d - d_min) / (d_90 - d_min)`` clipped to [0, 1] (units cancel):
-
-    * lashes: ``LASH_ROOT_OPACITY (1 - s)^3``, ``d`` to the nearest eye vertex: dense at the lid margin,
-      fading to the tips (the cards carry no strand texture here; drawn at one opacity, the lower lash
-      card lying on the cheek read as a grey band under every ICT eye);
-    * occlusion: ``OCCLUSION_OPACITY (1 - s)^2``, ``d`` to the nearest skin vertex: the soft shadow the
-      lids cast on the eye, clear over the iris;
-    * film (lacrimal fluid, eye blend): ``FILM_OPACITY``, a faint wet layer with a highlight.
-    """
-    from scipy.spatial import cKDTree
-
-    c = character
-    kinds = c.material_params[:, 2].round().astype(int)
-    out = np.ones(c.n_vertices, np.float32)
-    tri_kind = kinds[c.triangle_material]
-    trees = {}
-    for name, near in (("skin", ("skin", "lips")), ("eye", ("eye",))):
-        verts = np.unique(c.triangles[np.isin(tri_kind, [MATERIAL_KINDS[k] for k in near])])
-        trees[name] = cKDTree(c.vertices[verts]) if len(verts) else None
-    for kind, opacity, power, near in ((MATERIAL_KINDS["lashes"], LASH_ROOT_OPACITY, 3.0, "eye"),
-                                       (MATERIAL_KINDS["occlusion"], OCCLUSION_OPACITY, 2.0, "skin"),
-                                       (MATERIAL_KINDS["film"], FILM_OPACITY, 0.0, "skin")):
-        v = np.unique(c.triangles[tri_kind == kind])
-        tree = trees[near]
-        if not len(v):
-            continue
-        if tree is None or power == 0.0:  # no eye to measure from (a lash card alone): one opacity
-            out[v] = opacity
-            continue
-        d, _ = tree.query(c.vertices[v])
-        lo, hi = float(d.min()), float(np.percentile(d, 90))
-        s = np.clip((d - lo) / max(hi - lo, 1e-9), 0.0, 1.0)
-        out[v] = opacity * (1.0 - s) ** power
-    return out
 
 
 def visible_triangles(character: Character) -> tuple[np.ndarray, int]:
@@ -313,9 +274,8 @@ class FaceRenderer:
     def _setup_buffers(self) -> None:
         c, ctx = self.character, self.ctx
         if self.parts:
-            kinds = c.material_params[:, 2].round().astype(int)
-            layered = np.isin(kinds, _TWO_SIDED).any()  # thin layers of an OBJ rig (kept through glTF)
-            self._attr_vbo = ctx.buffer(vertex_attributes(c, vertex_opacity(c) if layered else None).tobytes())
+            # the thin layers of an OBJ rig (kinds kept through glTF) fade as on the OBJ path
+            self._attr_vbo = ctx.buffer(vertex_attributes(c, vertex_opacity(c) if has_layers(c) else None).tobytes())
             view_dir = self.camera.view[2, :3] * -1.0  # the camera looks along -z of its frame
             tris, self._groups = draw_groups(c, view_dir, self.cull_back_faces)
             self._variant_of = [material_variant(c, m) for m in range(len(c.material_names))]
@@ -352,8 +312,6 @@ class FaceRenderer:
                     prog[name].value = unit
         return {
             "joints": joints,
-            "prog": next(iter(programs.values())),
-            "vao": next(iter(vaos.values())),
             "programs": programs,
             "vaos": vaos,
             "vbo": vbo,
@@ -370,8 +328,7 @@ class FaceRenderer:
         skinner = None
         if self.parts and self._head_pose.available:
             skinner = CpuSkinner(self.character, self._head_pose.moved_nodes)
-        return {"prog": next(iter(programs.values())), "vao": next(iter(vaos.values())), "programs": programs,
-                "vaos": vaos, "vbo": vbo, "deformer": deformer, "skinner": skinner}
+        return {"programs": programs, "vaos": vaos, "vbo": vbo, "deformer": deformer, "skinner": skinner}
 
     def _programs(self, defines: dict, vbo) -> tuple[dict, dict]:
         """The programs and vertex arrays of one deformation path, by fragment variant.
@@ -522,7 +479,7 @@ class FaceRenderer:
         state = {"gpu": self._gpu, "cpu": self._cpu, "elastic": self._elastic}[self.path]
         model, view_projection = self._pose.T.tobytes(), self.camera.view_projection.T.tobytes()
         eye = tuple(float(x) for x in self.camera.eye)
-        for prog in state.get("programs", {None: state["prog"]}).values():
+        for prog in state["programs"].values():
             prog["u_model"].write(model)
             prog["u_view_projection"].write(view_projection)
             if "u_eye" in prog:  # an unlit or toon variant does not read it
@@ -551,14 +508,14 @@ class FaceRenderer:
         if culled:
             self.ctx.front_face = "ccw"
             self.ctx.enable(moderngl.CULL_FACE)
-            state["vao"].render(moderngl.TRIANGLES, vertices=culled)
+            state["vaos"][None].render(moderngl.TRIANGLES, vertices=culled)
         self.ctx.disable(moderngl.CULL_FACE)
         if self.n_indices > culled:
             # Thin two-sided layers (eye occlusion, films, lashes) last, blended over the finished surfaces,
             # without writing depth so that each shows through the ones drawn after it.
             self.ctx.enable(moderngl.BLEND)
             self.fbo.depth_mask = False
-            state["vao"].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
+            state["vaos"][None].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
             self.fbo.depth_mask = True
             self.ctx.disable(moderngl.BLEND)
 
@@ -640,8 +597,7 @@ class FaceRenderer:
         """Release every GL object this renderer made."""
         for state in (self._gpu, self._cpu, self._elastic):
             if state:
-                for obj in (*state.get("vaos", {None: state["vao"]}).values(),
-                            *state.get("programs", {None: state["prog"]}).values(), state["vbo"]):
+                for obj in (*state["vaos"].values(), *state["programs"].values(), state["vbo"]):
                     obj.release()
                 for tex in state.get("textures", ()):
                     tex.release()
