@@ -23,7 +23,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -93,24 +92,20 @@ def _side_by_side(args: argparse.Namespace, original: Character, synced: Charact
 def run_bench(args: argparse.Namespace) -> dict:
     from facepuppet.runtime.progress import Progress
 
-    from facepuppet.offline.elastic.commands import main_front
-    from facepuppet.offline.elastic.control_points import ict_control_points
-    from facepuppet.offline.elastic.params import fit_character
     from facepuppet.offline.io.gltf_read import read_gltf
     from facepuppet.offline.io.rig_import import import_rig
     from facepuppet.offline.kpls.targets import stylise
     from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
     from facepuppet.offline.perfect_sync.evaluate import GODETTE_PAIRS, pair_similarity, truth_errors
     from facepuppet.offline.perfect_sync.face import find_face
+    from facepuppet.offline.perfect_sync.source import fit_kit_source
 
     kit = data_dir(args.data)
     ict = import_rig(kit / "ict-facekit" / "generic_neutral_mesh.obj", kit / "ict-facekit")
     if args.source:
         source = load_source(args.source)
     else:
-        marks = json.loads((kit / "ict-facekit" / "vertex_indices.json").read_text(encoding="utf-8"))
-        points = ict_control_points(marks["idx_to_landmark_verts"], ict.vertices, ict.triangles, main_front(ict))
-        source = fit_character(ict, points, with_muscles=False)[0]
+        source = fit_kit_source(kit / "ict-facekit")
     result: dict = {"goals": {"median": GOAL_MEDIAN, "worst": GOAL_WORST, "cosine": GOAL_COSINE,
                               "godette_s": GOAL_GODETTE_S, "face_30k_s": GOAL_30K_S}, "ict_variants": {}}
     for label, variant in (("identical", ict), ("proportions", proportions(ict)), ("stylised", stylise(ict))):

@@ -67,7 +67,12 @@ def _run(args: argparse.Namespace) -> int:
 
         open_recording(args.take)  # a take that cannot be read is refused before the work, nothing written
     character = Character.load(args.character)
-    source = load_source(args.source)
+    if args.source is not None:
+        source = load_source(args.source)
+    else:
+        from facepuppet.offline.perfect_sync.source import default_source
+
+        source = default_source(args.data)
     with Progress("perfect-sync", total=None, unit="shapes") as bar:
         out, report, points = perfect_sync(character, source, args.landmarks, args.replace, bar)
     from facepuppet.runtime.outputs import OutputSet
@@ -110,8 +115,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("perfect-sync", help="add the 52 ARKit shapes to a character by elastic cloning")
     p.add_argument("character", type=Path, help="character table (.npz, from import-rig of OBJ/GLB/VRM)")
     p.add_argument("-o", "--output", type=Path, required=True, help="character table to write (.npz)")
-    p.add_argument("--source", type=Path, required=True,
-                   help="source elastic table (fit-elastic of the ICT head: ict_elastic.npz)")
+    p.add_argument("--source", type=Path,
+                   help="source elastic table (fit-elastic of a head with ARKit shapes; default: the ICT head "
+                        "of the data kit, fitted once and cached under ~/.cache/facepuppet)")
+    p.add_argument("--data", type=Path, default=None,
+                   help="the data kit folder holding ict-facekit/, for the default source (default: "
+                        "$FACEPUPPET_DATA)")
     p.add_argument("--landmarks", type=Path, help="control points to use (the JSON --pictures writes, edited)")
     p.add_argument("--pictures", type=Path, help="folder for the proposed points (PNG, JSON) and the report")
     p.add_argument("--sheet", action="store_true",
