@@ -44,6 +44,7 @@ import numpy as np
 from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.inputs.counted import Dropped, counted
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES, FLOAT32_MAX
 from facepuppet.runtime.inputs.phone import eyes_into
 
@@ -57,28 +58,24 @@ COUNTERS = (*COUNTER_NAMES, "unknown_key")
 _EYES = {"rightEye": "Right", "leftEye": "Left"}
 
 
-class _Bad(Exception):
-    """A datagram to drop: the counter to count it in."""
-
-
 def _number(text: str) -> float:
-    """A float of an item's value text; _Bad("malformed") for anything else, _Bad("nonfinite") for NaN/inf."""
+    """A float of an item's value text; Dropped("malformed") for anything else, Dropped("nonfinite") for NaN/inf."""
     text = text.strip()
     if not text or text.lower().lstrip("+-") in ("nan", "inf", "infinity"):
-        raise _Bad("nonfinite" if text else "malformed")
+        raise Dropped("nonfinite" if text else "malformed")
     try:
         value = float(text)
     except ValueError:
-        raise _Bad("malformed") from None
+        raise Dropped("malformed") from None
     if not abs(value) <= FLOAT32_MAX:
-        raise _Bad("nonfinite")
+        raise Dropped("nonfinite")
     return value
 
 
 def _numbers(text: str, n: int) -> list[float]:
     parts = text.split(",")
     if len(parts) != n:
-        raise _Bad("malformed")
+        raise Dropped("malformed")
     return [_number(p) for p in parts]
 
 
@@ -102,26 +99,13 @@ class IFacialMocapAdapter:
 
     def handle(self, data: bytes, t_receive: float) -> Frame | None:
         """Decode one datagram received at ``t_receive`` (seconds); the frame, or None. Never raises."""
-        counters = self.counters
-        counters["datagrams"] += 1
-        try:
-            if len(data) > MAX_PACKET:
-                raise _Bad("oversized")
-            frame = self._decode(data, t_receive)
-        except _Bad as bad:
-            counters[str(bad)] += 1
-            return None
-        except Exception:  # a bug here: count it and go on
-            counters["internal_error"] += 1
-            return None
-        counters["frames"] += 1
-        return frame
+        return counted(self.counters, self._decode, data, t_receive, MAX_PACKET)
 
     def _decode(self, data: bytes, t: float) -> Frame:
         try:
             text = data.decode("utf-8")
         except UnicodeDecodeError:
-            raise _Bad("malformed") from None
+            raise Dropped("malformed") from None
         weights = np.full(len(ARKIT_NAMES), np.nan, dtype=np.float32)
         seen: set[str] = set()
         head = None
@@ -135,24 +119,24 @@ class IFacialMocapAdapter:
                 name, _, values = item.partition("#")
                 name = name.lstrip("=")
                 if name in seen:
-                    raise _Bad("malformed")
+                    raise Dropped("malformed")
                 seen.add(name)
                 if name == "head":
                     head = _numbers(values, 6)
                 elif name in _EYES:
                     eyes[_EYES[name]] = _numbers(values, 3)
                 else:
-                    raise _Bad("malformed")
+                    raise Dropped("malformed")
                 continue
             if "&" in item:
                 name, _, value = item.partition("&")
             elif "-" in item:
                 name, _, value = item.partition("-")
             else:
-                raise _Bad("malformed")
+                raise Dropped("malformed")
             name = name.strip()
             if not name or name in seen:
-                raise _Bad("malformed")
+                raise Dropped("malformed")
             seen.add(name)
             number = _number(value)
             index = arkit_index(name)
@@ -162,7 +146,7 @@ class IFacialMocapAdapter:
             weights[index] = number / 100.0
         known = bool(np.isfinite(weights).any())
         if not known and head is None:
-            raise _Bad("malformed")
+            raise Dropped("malformed")
         self.counters["unknown_key"] += unknown
         rotation = translation = None
         if head is not None:

@@ -45,6 +45,7 @@ import numpy as np
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.inputs.counted import counted
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES
 
 VERSION = 6
@@ -68,16 +69,7 @@ class LiveLinkFaceAdapter:
 
     def handle(self, data: bytes, t_receive: float) -> Frame | None:
         """Decode one packet received at ``t_receive`` (seconds); the frame, or None. Never raises."""
-        counters = self.counters
-        counters["datagrams"] += 1
-        try:
-            frame = self._decode(data, t_receive)
-        except Exception:  # a bug here: count it and go on
-            counters["internal_error"] += 1
-            return None
-        if frame is not None:
-            counters["frames"] += 1
-        return frame
+        return counted(self.counters, self._decode, data, t_receive)
 
     def _decode(self, data: bytes, t: float) -> Frame | None:
         counters = self.counters

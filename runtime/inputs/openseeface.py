@@ -90,6 +90,7 @@ import numpy as np
 from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import quat_mul
+from facepuppet.runtime.inputs.counted import counted
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES
 
 N_POINTS = 68
@@ -195,16 +196,7 @@ class OpenSeeFaceAdapter:
 
     def handle(self, data: bytes, t_receive: float) -> Frame | None:
         """Decode one datagram received at ``t_receive`` (seconds); the frame, or None. Never raises."""
-        counters = self.counters
-        counters["datagrams"] += 1
-        try:
-            frame = self._decode(data, t_receive)
-        except Exception:  # a bug here: count it and go on
-            counters["internal_error"] += 1
-            return None
-        if frame is not None:
-            counters["frames"] += 1
-        return frame
+        return counted(self.counters, self._decode, data, t_receive)
 
     def _pick(self, data: bytes, n: int) -> int | None:
         if self.face_id is None:

@@ -51,6 +51,7 @@ import numpy as np
 from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.inputs.counted import Dropped, counted
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES, FLOAT32_MAX
 from facepuppet.runtime.inputs.phone import eyes_into
 
@@ -64,19 +65,15 @@ COUNTERS = (*COUNTER_NAMES, "unknown_key", "face_lost")
 
 
 
-class _Bad(Exception):
-    """A datagram to drop: the counter to count it in."""
-
-
 def _reject_constant(name: str) -> float:
-    raise _Bad("nonfinite")
+    raise Dropped("nonfinite")
 
 
 def _num(value: object) -> float:
     if type(value) not in (int, float):  # bool is not a number here
-        raise _Bad("malformed")
+        raise Dropped("malformed")
     if not abs(value) <= FLOAT32_MAX:
-        raise _Bad("nonfinite")
+        raise Dropped("nonfinite")
     return float(value)
 
 
@@ -85,11 +82,11 @@ def _vector(obj: dict, key: str) -> tuple[float, float, float] | None:
     if v is None:
         return None
     if not isinstance(v, dict):
-        raise _Bad("malformed")
+        raise Dropped("malformed")
     try:
         return _num(v["x"]), _num(v["y"]), _num(v["z"])
     except KeyError:
-        raise _Bad("malformed") from None
+        raise Dropped("malformed") from None
 
 
 def vts_request(listen_port: int, time_s: float = REQUEST_TIME_S, sent_by: str = SENT_BY) -> bytes:
@@ -120,53 +117,37 @@ class VTubeStudioAdapter:
 
     def handle(self, data: bytes, t_receive: float) -> Frame | None:
         """Decode one datagram received at ``t_receive`` (seconds); the frame, or None. Never raises."""
-        counters = self.counters
-        counters["datagrams"] += 1
-        try:
-            if len(data) > MAX_MESSAGE:
-                raise _Bad("oversized")
-            frame = self._decode(data, t_receive)
-        except _Bad as bad:
-            counters[str(bad)] += 1
-            return None
-        except Exception:  # a bug here: count it and go on
-            counters["internal_error"] += 1
-            return None
-        if frame is None:
-            counters["face_lost"] += 1
-            return None
-        counters["frames"] += 1
-        return frame
+        return counted(self.counters, self._decode, data, t_receive, MAX_MESSAGE, none_counter="face_lost")
 
     def _decode(self, data: bytes, t: float) -> Frame | None:
         try:
             obj = json.loads(data.decode("utf-8"), parse_constant=_reject_constant)
         except (UnicodeDecodeError, ValueError, RecursionError):
-            raise _Bad("malformed") from None
+            raise Dropped("malformed") from None
         if not isinstance(obj, dict):
-            raise _Bad("malformed")
+            raise Dropped("malformed")
         found = obj.get("FaceFound")
         if type(found) is not bool:
-            raise _Bad("malformed")
+            raise Dropped("malformed")
         shapes = obj.get("BlendShapes", [])
         if not isinstance(shapes, list):
-            raise _Bad("malformed")
+            raise Dropped("malformed")
         rotation, position = _vector(obj, "Rotation"), _vector(obj, "Position")
         eyes = {"Left": _vector(obj, "EyeLeft"), "Right": _vector(obj, "EyeRight")}
         stamp = obj.get("Timestamp")
         t_sender = math.nan if stamp is None else _num(stamp) / 1000.0
         hotkey = obj.get("Hotkey", -1)
         if type(hotkey) is not int:
-            raise _Bad("malformed")
+            raise Dropped("malformed")
         weights = np.full(len(ARKIT_NAMES), np.nan, dtype=np.float32)
         unknown = 0
         seen: set[str] = set()
         for entry in shapes:
             if not isinstance(entry, dict) or not isinstance(entry.get("k"), str):
-                raise _Bad("malformed")
+                raise Dropped("malformed")
             value = _num(entry.get("v"))
             if entry["k"] in seen:
-                raise _Bad("malformed")
+                raise Dropped("malformed")
             seen.add(entry["k"])
             index = arkit_index(entry["k"])
             if index is None:
@@ -177,7 +158,7 @@ class VTubeStudioAdapter:
         if not found:
             return None
         if not np.isfinite(weights).any() and rotation is None:
-            raise _Bad("malformed")
+            raise Dropped("malformed")
         self.counters["unknown_key"] += unknown
         for side, angles in eyes.items():
             if angles is not None:
