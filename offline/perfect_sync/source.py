@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 from facepuppet.runtime.elastic.model import ElasticModel
@@ -72,7 +73,7 @@ def fit_kit_source(folder: Path) -> ElasticModel:
     return fit_character(ict, points, with_muscles=False)[0]
 
 
-def default_source(data: str | os.PathLike | None = None, log=print) -> ElasticModel:
+def default_source(data: str | os.PathLike | None = None, log: Callable[[str], None] = print) -> ElasticModel:
     """The kit's ICT head as an elastic table: from the cache, else fitted and cached (see the module doc)."""
     folder = kit_folder(data)
     path = cache_dir() / f"ict_elastic_{_key(folder)}.npz"
