@@ -869,6 +869,11 @@ class _Reader:
         groups = bsm.get("blendShapeGroups", []) if isinstance(bsm, dict) else None
         if not isinstance(groups, list):
             f.fail(w, "expected an array")
+
+        def mesh_of(bind: dict, bw: str) -> tuple[int, str]:
+            mesh = f.get(bind, "mesh", int, bw)
+            return mesh, f"mesh {mesh}"
+
         rows = []
         for g, group in enumerate(groups):
             gw = f"{w}[{g}]"
@@ -877,26 +882,40 @@ class _Reader:
             preset_name = f.get(group, "presetName", str, gw, "unknown").lower()
             preset = _VRM0_BY_LOWER.get(preset_name, "")
             name = preset or f.get(group, "name", str, gw, "") or f"expression{g}"
-            shapes, weights = [], []
-            for b, bind in enumerate(f.get(group, "binds", list, gw, [])):
-                bw = f"{gw}.binds[{b}]"
-                if not isinstance(bind, dict):
-                    f.fail(bw, "expected an object")
-                mesh = f.get(bind, "mesh", int, bw)
-                index = f.get(bind, "index", int, bw)
-                weight = f.get(bind, "weight", float, bw, 100.0)
-                tname = self._target_name_of(mesh, index)
-                if tname is None or tname not in shape_index:
-                    self.warn(f"{bw}: mesh {mesh} target {index} is not a morph target in the scene (dropped)")
-                    continue
-                shapes.append(shape_index[tname])
-                weights.append(float(np.clip(weight / 100.0, 0.0, 1.0)))
+            shapes, weights = self._binds(f.get(group, "binds", list, gw, []), f"{gw}.binds", mesh_of, 100.0,
+                                          shape_index)
             binary = 1 if f.get(group, "isBinary", bool, gw, False) else 0
             rows.append((name, preset, shapes, weights, [binary, 0, 0, 0]))
         return rows
 
+    def _binds(self, binds: list, where: str, mesh_of: Callable[[dict, str], tuple[int | None, str]],
+               full: float, shape_index: dict) -> tuple[list, list]:
+        """(shapes, weights in 0..1) of a VRM expression's morph-target binds (``full``: the weight of 100 %);
+        a bind naming no morph target of the scene is dropped with a warning."""
+        f = self.f
+        shapes, weights = [], []
+        for b, bind in enumerate(binds):
+            bw = f"{where}[{b}]"
+            if not isinstance(bind, dict):
+                f.fail(bw, "expected an object")
+            mesh, label = mesh_of(bind, bw)
+            index = f.get(bind, "index", int, bw)
+            weight = f.get(bind, "weight", float, bw, full)
+            tname = self._target_name_of(mesh, index)
+            if tname is None or tname not in shape_index:
+                self.warn(f"{bw}: {label} target {index} is not a morph target in the scene (dropped)")
+                continue
+            shapes.append(shape_index[tname])
+            weights.append(float(np.clip(weight / full, 0.0, 1.0)))
+        return shapes, weights
+
     def _vrm1_expressions(self, geo: dict, shape_index: dict) -> list:
         f = self.f
+
+        def node_mesh(bind: dict, bw: str) -> tuple[int | None, str]:
+            node = f.get(bind, "node", int, bw)
+            return f.obj("nodes", node, f"{bw}.node").get("mesh"), f"node {node}"
+
         ex = self.vrm1.get("expressions", {})
         w = "extensions.VRMC_vrm.expressions"
         if not isinstance(ex, dict):
@@ -912,21 +931,8 @@ class _Reader:
                     f.fail(ew, "expected an object")
                 preset = _VRM0_FROM_VRM1.get(key, "") if group == "preset" else ""
                 name = preset or key
-                shapes, weights = [], []
-                for b, bind in enumerate(f.get(e, "morphTargetBinds", list, ew, [])):
-                    bw = f"{ew}.morphTargetBinds[{b}]"
-                    if not isinstance(bind, dict):
-                        f.fail(bw, "expected an object")
-                    node = f.get(bind, "node", int, bw)
-                    index = f.get(bind, "index", int, bw)
-                    weight = f.get(bind, "weight", float, bw, 1.0)
-                    nd = f.obj("nodes", node, f"{bw}.node")
-                    tname = self._target_name_of(nd.get("mesh"), index)
-                    if tname is None or tname not in shape_index:
-                        self.warn(f"{bw}: node {node} target {index} is not a morph target in the scene (dropped)")
-                        continue
-                    shapes.append(shape_index[tname])
-                    weights.append(float(np.clip(weight, 0.0, 1.0)))
+                shapes, weights = self._binds(f.get(e, "morphTargetBinds", list, ew, []), f"{ew}.morphTargetBinds",
+                                              node_mesh, 1.0, shape_index)
                 flag = [1 if f.get(e, "isBinary", bool, ew, False) else 0]
                 for k in ("overrideBlink", "overrideLookAt", "overrideMouth"):
                     v = f.get(e, k, str, ew, "none")
