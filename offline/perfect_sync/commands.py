@@ -15,10 +15,13 @@ from facepuppet.runtime.progress import Progress
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import find_face
-from facepuppet.offline.perfect_sync.proposal import doubts, picture, propose, read_landmarks
+from facepuppet.offline.perfect_sync.proposal import doubts, fapu_of, picture, propose, read_landmarks
 from facepuppet.offline.perfect_sync.transfer import add_shapes, clone_face
 
-IMPLAUSIBLE = 0.3  # a cloned shape moving a vertex this many face widths is reported (ICT's jawOpen: 0.12)
+#: a cloned shape moving a vertex this many inner-eye distances (ES, the FAPU of the cloning) is reported; the
+#: ICT head's own largest, jawOpen, moves 1.14 ES (in face widths the check depended on how much head a mesh has:
+#: a face mask's width is about its features', a whole head's includes the ears)
+IMPLAUSIBLE = 2.5
 
 
 def load_source(path: str | os.PathLike) -> ElasticModel:
@@ -48,9 +51,10 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
     info: dict = {}
     keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
     out, added = add_shapes(character, keys, dense, replace)
-    largest = np.linalg.norm(dense, axis=2).max(axis=1) / face.width
-    implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} face widths (> {IMPLAUSIBLE}): check the points"}
-                   for k, r in zip(keys, largest) if r > IMPLAUSIBLE]
+    es = max(fapu_of(points, character.vertices), 1e-12)
+    largest = np.linalg.norm(dense, axis=2).max(axis=1) / es
+    implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} inner-eye distances (> {IMPLAUSIBLE}): check the "
+                                       "points"} for k, r in zip(keys, largest) if r > IMPLAUSIBLE]
     report = {"face": {"evidence": face.evidence, "mesh_vertices": int(len(face.mesh)), "skin_vertices":
                        int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
               "pieces": info["pieces"], "doubts": doubtful, "implausible_shapes": implausible, **added}
