@@ -243,9 +243,10 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
 
 
 def holes(points: ControlPoints, vertices: np.ndarray, face: Face) -> list[dict]:
-    """Doubts for holes in the face: skin boundary loops within the control points' extent that are not an
-    eye or the mouth opening (their centre more than an inner-eye distance from the eye corners' and the
-    mouth corners' mid-points), each naming the control point nearest to it."""
+    """Doubts for holes in the face: skin boundary loops within the control points' extent, smaller than half
+    of it (a face mask's own border is not a hole), that are not an eye or the mouth opening (their centre
+    more than an inner-eye distance from the eye corners' and the mouth corners' mid-points), each naming
+    the control point nearest to it."""
     from facepuppet.offline.elastic.lip_line import boundary_loops
 
     v = np.asarray(vertices, np.float64)
@@ -262,6 +263,8 @@ def holes(points: ControlPoints, vertices: np.ndarray, face: Face) -> list[dict]
         c = face.to_frame(centre)
         if np.any(c[:2] < lo[:2]) or np.any(c[:2] > hi[:2]) or c[2] < lo[2]:
             continue  # outside the face (the neck, the back of the head)
+        if np.any(np.ptp(face.to_frame(v[loop])[:, :2], axis=0) > 0.5 * (hi - lo)[:2]):
+            continue  # the border around a face mask (its centre is the face's), not a hole in it
         if any(np.linalg.norm(centre - o) < es for o in openings):
             continue
         near = points.names[int(np.argmin(np.linalg.norm(v[points.vertices] - centre, axis=1)))]
