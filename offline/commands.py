@@ -62,6 +62,9 @@ def _register_import_rig(subparsers) -> None:
         "--tolerance", type=float, default=1e-5, help="smallest stored vertex displacement, in units (default 1e-5)"
     )
     p.add_argument("--landmarks", type=Path, help="ICT vertex_indices.json (default: the one beside the neutral)")
+    p.add_argument("--forward", choices=("+z", "-z", "+x", "-x"), default="+z",
+                   help="the axis the OBJ's face looks along, Y up (default +z; write --forward=-z); it is "
+                        "turned to face +Z, its shapes with it")
     p.set_defaults(func=_import_rig)
 
 
@@ -88,6 +91,7 @@ def _import_rig(args: argparse.Namespace) -> int:
             name=args.name,
             units=args.units,
             landmarks=args.landmarks,
+            forward=args.forward,
             progress=progress,
         )
     out = character.save(args.output)
@@ -116,9 +120,11 @@ def _import_gltf(args: argparse.Namespace) -> int:
 
     if args.shapes_dir is not None:
         raise ValueError(f"{args.shapes_dir}: a glTF/VRM file carries its own morph targets; give no shapes folder")
-    for flag, value, default in (("--units", args.units, "cm"), ("--landmarks", args.landmarks, None)):
+    for flag, value, default in (("--units", args.units, "cm"), ("--landmarks", args.landmarks, None),
+                                 ("--forward", args.forward, "+z")):
         if value != default:
-            raise ValueError(f"{flag}: not used for glTF/VRM (glTF is in metres, landmarks are ICT's)")
+            raise ValueError(f"{flag}: not used for glTF/VRM (glTF is in metres and faces +Z, VRM 0.x is turned "
+                             "on import; landmarks are ICT's)")
     start = time.perf_counter()
     bar = Progress("import-rig", unit="meshes")
 

@@ -18,6 +18,7 @@ ICT format) gets a lip tint with a soft edge.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from collections.abc import Callable, Sequence
@@ -37,6 +38,8 @@ __all__ = ["import_rig", "material_kind", "NORMAL_TOLERANCE", "KIND_WORDS"]
 
 NORMAL_TOLERANCE = 1e-4
 UNITS_PER_CM = {"cm": 1.0, "mm": 10.0, "m": 0.01}
+#: degrees about +Y that turn a mesh facing each axis to the stored convention (facing +Z, Y up)
+FORWARD_TURNS = {"+z": 0.0, "-z": 180.0, "+x": -90.0, "-x": 90.0}
 
 # First match wins, in this order; a name matching none is skin. "cornea" is
 # hidden, not eye: it is a transparent shell and, drawn opaque, would cover the iris. The eye's thin
@@ -93,6 +96,7 @@ def import_rig(
     units: str = "cm",
     landmarks: str | os.PathLike | None = None,
     pivot: Sequence[float] | None = None,
+    forward: str = "+z",
     progress: Progress | None = None,
 ) -> Character:
     """Import a blendshape rig as a character.
@@ -110,6 +114,8 @@ def import_rig(
     landmarks : ICT ``vertex_indices.json``; default the one beside the neutral, if any
     pivot : (3,) float, units; default (centre x, min y + 0.35 height, centre z - 0.1 depth)
         of the bounding box, a point near the top of the neck for a head with neck
+    forward : the axis the face looks along in the files ("+z", "-z", "+x" or "-x", Y up); the character is
+        turned about +Y to the stored convention (facing +Z), its shapes with it
     progress : callable(i, n, shape_name) called after each shape is read, i from 1
 
     Returns
@@ -132,6 +138,8 @@ def import_rig(
         raise ValueError(f"units: expected one of {sorted(UNITS_PER_CM)}, got {units!r}")
     if not (tolerance >= 0 and np.isfinite(tolerance)):
         raise ValueError(f"tolerance: expected a finite number >= 0, got {tolerance!r}")
+    if forward not in FORWARD_TURNS:
+        raise ValueError(f"forward: expected one of {', '.join(FORWARD_TURNS)}, got {forward!r}")
     if not neutral_path.is_file():
         raise FileNotFoundError(f"{neutral_path}: neutral OBJ not found")
     refuse_non_obj(neutral_path, "the neutral")
@@ -145,6 +153,8 @@ def import_rig(
     if len(mesh.triangles) == 0:
         raise ObjError(neutral_path, None, "no faces ('f' lines): a character needs a surface")
     deltas, per_shape = _sparse_deltas(mesh, neutral_path, shape_paths, tolerance, progress)
+    if forward != "+z":
+        mesh, deltas = _turned(mesh, deltas, FORWARD_TURNS[forward])
 
     mtl_path, mtl = _read_materials(neutral_path, mesh)
     kinds = [material_kind(m) for m in mesh.material_names]
@@ -163,10 +173,21 @@ def import_rig(
         "mtl": str(mtl_path) if mtl else None,
         "landmarks": str(landmark_path) if marks is not None else None,
         "pivot_rule": pivot_rule,
+        **({"forward": forward} if forward != "+z" else {}),
     }
     with naming_file(neutral_path):  # the character's own refusals name the neutral OBJ, not "<tables>"
         return _character(name or neutral_path.parent.name or neutral_path.stem, units, mesh, color, kinds, mtl,
                           pivot, shape_paths, deltas, settings, per_shape, inputs)
+
+
+def _turned(mesh: ObjMesh, deltas: dict, degrees: float) -> tuple[ObjMesh, dict]:
+    """The mesh and its shapes' position and normal deltas turned by ``degrees`` about +Y."""
+    a = np.radians(degrees)
+    r = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    turned = dict(deltas)
+    for key in ("delta_positions", "delta_normals"):
+        turned[key] = (deltas[key].astype(np.float64) @ r.T).astype(deltas[key].dtype)
+    return dataclasses.replace(mesh, vertices=mesh.vertices @ r.T, normals=mesh.normals @ r.T), turned
 
 
 def _character(name, units, mesh, color, kinds, mtl, pivot, shape_paths, deltas, settings, per_shape,

@@ -142,8 +142,50 @@ def symmetry_plane(points: np.ndarray, normal: np.ndarray, iterations: int = 8) 
     return n, d, dist
 
 
+def _turned(character: Character, degrees: float) -> Character:
+    a = np.radians(degrees)
+    r = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]], np.float32)
+    return character.with_parts(vertices=character.vertices @ r.T, normals=None, skeleton=None)
+
+
+#: the other ways an OBJ's face may look, and the turn about +Y that would bring each to +Z
+OTHER_FACINGS = (("-z", 180.0), ("+x", -90.0), ("-x", 90.0))
+SYMMETRY_SLACK = 0.005  # facings whose symmetry error is within this (face widths) of the best compete on the nose
+NOSE_MARGIN = 1.2  # another facing's nose must stand out this many times more than +Z's to be called the face
+
+
 def find_face(character: Character) -> Face:
-    """The face of ``character`` (see the module docstring); FaceError when there is none."""
+    """The face of ``character`` (see the module docstring); FaceError when there is none.
+
+    A character with no layout (an OBJ: glTF faces +Z by its spec, VRM 0.x is turned on import) is also
+    looked at facing -Z, +X and -X; when it is a face there and not facing +Z (the most symmetric facing
+    whose nose stands out most), the error says so and how to import it turned."""
+    try:
+        face, protrusion = _find_face(character)
+    except FaceError as exc:
+        face, protrusion, failure = None, 0.0, exc
+    if character.layout is not None and face is not None:
+        return face
+    found = [("+z", face.symmetry_error, protrusion)] if face is not None else []
+    for axis, degrees in OTHER_FACINGS:
+        try:
+            other, p = _find_face(_turned(character, degrees))
+        except FaceError:
+            continue
+        found.append((axis, other.symmetry_error, p))
+    if found:
+        best_symmetry = min(f[1] for f in found)
+        axis, _, p = max((f for f in found if f[1] <= best_symmetry + SYMMETRY_SLACK), key=lambda f: f[2])
+        if axis != "+z" and (face is None or p > NOSE_MARGIN * protrusion):
+            why = f"{failure}; " if face is None else f"{character.name}: "
+            raise FaceError(f"{why}the face looks along {axis}, not +Z: import the OBJ again with "
+                            f"import-rig --forward={axis} (characters are stored facing +Z, Y up)")
+    if face is None:
+        raise failure
+    return face
+
+
+def _find_face(character: Character) -> Face:
     name = character.name
     mesh, evidence = face_mesh(character)
     keep = np.isin(character.triangles, mesh).all(axis=1)
@@ -203,4 +245,4 @@ def find_face(character: Character) -> Face:
     face = Face(mesh=np.unique(tris), triangles=tris, skin=skin, frame=frame, plane_offset=d, nose_tip=tip,
                 width=width, symmetry_error=dist / max(width, 1e-12), evidence=evidence,
                 origin=np.array([d, local[tip, 1], local[tip, 2]]))
-    return face
+    return face, protrusion / width

@@ -255,3 +255,31 @@ def test_a_shape_moving_a_vertex_beyond_float32_is_refused_naming_the_shape(rig)
         with pytest.raises(ObjError, match=r"jawOpen\.obj: moves vertex 5 by \[-6e\+38, 0\.0, 0\.0\], beyond the "
                                            r"float32 range"):
             import_rig(root / "neutral.obj", root / "shapes")
+
+
+@pytest.mark.parametrize("forward, turn", [("-z", lambda p: p * (-1, 1, -1)),
+                                           ("+x", lambda p: p[:, [2, 1, 0]] * (1, 1, -1)),
+                                           ("-x", lambda p: p[:, [2, 1, 0]] * (-1, 1, 1))])
+def test_a_rig_facing_another_axis_is_turned_to_face_plus_z(rig, tmp_path_factory, forward, turn):
+    """The same rig written facing -Z / +X / -X and imported with ``forward`` is the +Z import (shapes too)."""
+    root, shapes = rig
+    want = import_rig(root / "neutral.obj", root / "shapes")
+    other = tmp_path_factory.mktemp("turned")
+    (other / "neutral.obj").write_text(obj_text(turn(GRID)))
+    (other / "rig.mtl").write_text((root / "rig.mtl").read_text())
+    (other / "shapes").mkdir()
+    for name, verts in shapes.items():
+        (other / "shapes" / f"{name}.obj").write_text(obj_text(turn(verts)))
+    # the turned grid faces the other way: its quads wind the same, so its normals point along ``forward``
+    got = import_rig(other / "neutral.obj", other / "shapes", forward=forward)
+    np.testing.assert_allclose(got.vertices, want.vertices, atol=1e-6)
+    np.testing.assert_allclose(got.dense_deltas(), want.dense_deltas(), atol=1e-6)
+    np.testing.assert_allclose(got.rest_normals(), want.rest_normals(), atol=1e-6)
+    np.testing.assert_allclose(got.pivot, want.pivot, atol=1e-6)
+    assert got.metadata["settings"]["forward"] == forward
+
+
+def test_an_unknown_forward_is_refused(rig):
+    root, _ = rig
+    with pytest.raises(ValueError, match="forward: expected one of"):
+        import_rig(root / "neutral.obj", None, forward="up")

@@ -1,5 +1,7 @@
 """Finding the face: the demo head's face and frame; a cube and a face cut in two refused."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -38,6 +40,21 @@ def test_demo_head_face_is_found_with_its_frame():
     assert abs(face.plane_offset) < 0.01 * face.width
     assert face.symmetry_error < 0.01
     assert c.vertices[face.nose_tip, 2] > np.percentile(c.vertices[face.skin, 2], 95)
+
+
+@pytest.mark.parametrize("axis, degrees", [("-z", 180.0), ("+x", 90.0), ("-x", -90.0)])
+def test_a_face_looking_another_way_is_refused_saying_how_to_import_it(axis, degrees):
+    """The demo head turned to look along -Z, +X or -X (as OBJ exports of other tools do): its back or side
+    must not be taken for a face (the back of a round head has a bump that passes the nose test)."""
+    c = build_demo_character()
+    a = np.radians(degrees)
+    r = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]], np.float32)
+    turned = c.with_parts(vertices=c.vertices @ r.T, delta_positions=c.delta_positions @ r.T, normals=None)
+    assert np.allclose(np.asarray([0, 0, 1.0]) @ r.T, {"-z": [0, 0, -1], "+x": [1, 0, 0], "-x": [-1, 0, 0]}[axis],
+                       atol=1e-6)
+    with pytest.raises(FaceError, match=re.escape(f"looks along {axis}, not +Z: import the OBJ again with "
+                                                  f"import-rig --forward={axis}")):
+        find_face(turned)
 
 
 @pytest.mark.parametrize("n", [1, 12])
