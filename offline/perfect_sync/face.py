@@ -150,36 +150,49 @@ def _turned(character: Character, degrees: float) -> Character:
 
 #: the other ways an OBJ's face may look, and the turn about +Y that would bring each to +Z
 OTHER_FACINGS = (("-z", 180.0), ("+x", -90.0), ("-x", 90.0))
+SHAPES_LEAN = 0.02  # the shapes' vertices' centre this fraction of the mesh's size off its centre shows the face
 SYMMETRY_SLACK = 0.005  # facings whose symmetry error is within this (face widths) of the best compete on the nose
-NOSE_MARGIN = 1.2  # another facing's nose must stand out this many times more than +Z's to be called the face
 
 
 def find_face(character: Character) -> Face:
     """The face of ``character`` (see the module docstring); FaceError when there is none.
 
-    A character with no layout (an OBJ: glTF faces +Z by its spec, VRM 0.x is turned on import) is also
-    looked at facing -Z, +X and -X; when it is a face there and not facing +Z (the most symmetric facing
-    whose nose stands out most), the error says so and how to import it turned."""
+    A character with no layout (an OBJ: glTF faces +Z by its spec, VRM 0.x is turned on import) may have
+    been exported looking along another axis. With shapes, the way it looks is where its shapes move
+    (their vertices' centre against the face mesh's); without, when no face is found facing +Z, it is
+    looked for facing -Z, +X and -X (the most symmetric facing whose nose stands out most). Either way a
+    face looking elsewhere is refused saying so and how to import it turned."""
     try:
-        face, protrusion = _find_face(character)
+        face, _ = _find_face(character)
     except FaceError as exc:
-        face, protrusion, failure = None, 0.0, exc
+        face, failure = None, exc
     if character.layout is not None and face is not None:
         return face
-    found = [("+z", face.symmetry_error, protrusion)] if face is not None else []
-    for axis, degrees in OTHER_FACINGS:
-        try:
-            other, p = _find_face(_turned(character, degrees))
-        except FaceError:
-            continue
-        found.append((axis, other.symmetry_error, p))
-    if found:
-        best_symmetry = min(f[1] for f in found)
-        axis, _, p = max((f for f in found if f[1] <= best_symmetry + SYMMETRY_SLACK), key=lambda f: f[2])
-        if axis != "+z" and (face is None or p > NOSE_MARGIN * protrusion):
-            why = f"{failure}; " if face is None else f"{character.name}: "
-            raise FaceError(f"{why}the face looks along {axis}, not +Z: import the OBJ again with "
-                            f"import-rig --forward={axis} (characters are stored facing +Z, Y up)")
+    axis = None
+    moved = moving_vertices(character)
+    if len(moved):
+        v = character.vertices.astype(np.float64)
+        mesh = face.mesh if face is not None else face_mesh(character)[0]
+        lean = v[moved].mean(0) - v[mesh].mean(0)
+        options = {"+z": lean[2], "-z": -lean[2], "+x": lean[0], "-x": -lean[0]}
+        best = max(options, key=options.get)
+        if options[best] > SHAPES_LEAN * float(np.ptp(v[mesh], axis=0).max()):  # else the shapes say nothing
+            axis = best
+    elif face is None:
+        found = []
+        for name, degrees in OTHER_FACINGS:
+            try:
+                other, p = _find_face(_turned(character, degrees))
+            except FaceError:
+                continue
+            found.append((name, other.symmetry_error, p))
+        if found:
+            best_symmetry = min(f[1] for f in found)
+            axis = max((f for f in found if f[1] <= best_symmetry + SYMMETRY_SLACK), key=lambda f: f[2])[0]
+    if axis is not None and axis != "+z":
+        why = f"{failure}; " if face is None else f"{character.name}: its shapes move the side facing {axis}: "
+        raise FaceError(f"{why}the face looks along {axis}, not +Z: import the OBJ again with "
+                        f"import-rig --forward={axis} (characters are stored facing +Z, Y up)")
     if face is None:
         raise failure
     return face

@@ -76,3 +76,15 @@ def test_a_face_cut_in_two_pieces_is_refused():
     assert len(face.skin) > 1000
     with pytest.raises(FaceError, match="split: the face is in several disconnected pieces"):
         find_face(cut)
+
+
+@pytest.mark.data
+def test_the_ict_head_turned_round_is_refused_by_where_its_shapes_move(ict_character):
+    """The back of the ICT head passes the nose test (a bump at the neck); its shapes tell the front."""
+    c = ict_character
+    turned = c.with_parts(vertices=c.vertices * np.float32((-1, 1, -1)),
+                          delta_positions=c.delta_positions * np.float32((-1, 1, -1)), normals=None)
+    with pytest.raises(FaceError, match=re.escape("looks along -z, not +Z: import the OBJ again with "
+                                                  "import-rig --forward=-z")):
+        find_face(turned)
+    assert find_face(c).evidence == "shapes"
