@@ -157,7 +157,9 @@ def find_pieces(vertices: np.ndarray, face: Face, skin_triangles: np.ndarray, st
     v = np.asarray(vertices, np.float64)
     tris = face.triangles
     n = len(v)
-    _, labels = components(n, tris)
+    _, labels = components(n, tris)  # the face's triangles are welded: a seam's copies take their first's piece
+    if face.weld is not None:
+        labels = labels[face.weld]
     labels = np.where(np.isin(np.arange(n), face.mesh), labels, -1)
     skin_label = int(labels[face.skin[0]])
     local = face.to_frame(v)

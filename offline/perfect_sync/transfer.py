@@ -193,9 +193,12 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
     ``info``, when given, receives {"pieces": ...}: how the pieces that are not skin were moved
     (:func:`carry_pieces`)."""
     names, params = fold_source(source)
+    weld = face.weld if face.weld is not None else np.arange(character.n_vertices)
+    sub = np.unique(face.triangles)  # one vertex per position (the face's triangles are welded)
     local = np.full(character.n_vertices, -1, np.int64)
-    local[face.mesh] = np.arange(len(face.mesh))
-    sub_v = character.vertices[face.mesh].astype(np.float64)
+    local[sub] = np.arange(len(sub))
+    local[face.mesh] = local[weld[face.mesh]]  # a seam's copies: their first copy's place in the solve
+    sub_v = character.vertices[sub].astype(np.float64)
     sub_t = local[face.triangles]
     sub_points = ControlPoints(points.names, local[points.vertices])
     if (sub_points.vertices < 0).any():
@@ -233,13 +236,14 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
             d[lid_skin[side]] = clear_eyeball(sub_v, d, members, centre, lid_skin[side])
         if inside is not None:
             d[inside[1]] = clear_mouth_parts(sub_v, d, *inside)
-        dense[s, face.mesh] = d
+        dense[s, face.mesh] = d[local[face.mesh]]
         if progress is not None:
             progress(s + 1, len(names), name)
     carried = carry_pieces(dense, source, names, fold_source(source)[1], character.vertices, face,
-                 rigid=face.mesh[model.arrays["rigid_labels"] >= 0],
-                 eyeballs=np.concatenate([face.mesh[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]),
+                 rigid=sub[model.arrays["rigid_labels"] >= 0],
+                 eyeballs=np.concatenate([sub[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]),
                  mouth=_mouth_ball(points, character.vertices))
+    dense[:, face.mesh] = dense[:, weld[face.mesh]]  # a seam's copies move as one vertex
     if info is not None:
         info["pieces"] = carried
     return names, dense

@@ -35,7 +35,7 @@ def test_godette_perfect_sync_exports_and_reads_back_its_expressions(synced, tmp
     added = out.shape_names[godette.n_shapes:]
     assert len(added) == 51 and added[0] == "eyeBlinkLeft"  # Godette has no ARKit names: Apple's spelling
     assert out.expressions.names == godette.expressions.names  # the binds still point at its own shapes
-    assert report["face"]["evidence"] == "shapes" and report["face"]["skin_vertices"] == 79
+    assert report["face"]["evidence"] == "shapes" and report["face"]["skin_vertices"] == 91
     assert len(report["doubts"]) > 10  # the proposal on its 79-vertex skin is not to be trusted
     # her features are decals moved by their own size (measured: jawOpen moves a vertex 0.09 face widths; 0.76,
     # implausible, while the skin's jaw was cloned from the misplaced points)

@@ -176,3 +176,54 @@ def test_contact_sheet_of_godettes_cloned_shapes(godette, egl_ctx, tmp_path):
     assert len(mouth[0]) and mouth[0].mean() > ys.mean()
     path = shape_sheet(godette, ["eyeBlinkLeft", "jawOpen"], tmp_path / "sheet.png", columns=3, ctx=egl_ctx)
     assert Image.open(path).size[0] >= 3 * 160
+
+
+def _welded_pieces(character, vertices_of_face):
+    """The face mesh's pieces connected by position (the test's own weld: positions rounded to 1e-6 of the
+    character's size): (piece label per vertex of the character, -1 off the face; piece areas)."""
+    v = character.vertices.astype(np.float64)
+    tol = 1e-6 * np.linalg.norm(np.ptp(v, 0))
+    t = character.triangles[np.isin(character.triangles, vertices_of_face).all(1)].astype(np.int64)
+    _, pos = np.unique(np.round(v / tol).astype(np.int64), axis=0, return_inverse=True)
+    pos = pos.ravel()
+    n, lab = components(pos.max() + 1, pos[t])
+    area = 0.5 * np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1)
+    areas = np.bincount(lab[pos[t[:, 0]]], weights=area, minlength=n)
+    out = np.full(len(v), -1)
+    out[np.unique(t)] = lab[pos[np.unique(t)]]
+    return out, areas, pos
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_godette_face_skin_is_her_welded_head_box(godette):
+    """Her face mesh is cut by UV seams into 2507 index components; the skin is the largest piece by position
+    (the head box: 107 vertex copies at 91 positions), not the 79-vertex fragment of it found by index."""
+    from facepuppet.offline.perfect_sync.face import find_face
+
+    face = find_face(godette)
+    labels, areas, pos = _welded_pieces(godette, face.mesh)
+    box = int(np.argmax(areas))
+    copies = np.flatnonzero(labels == box)
+    assert len(copies) == 107 and len(np.unique(pos[copies])) == 91
+    assert len(face.skin) == 91 and set(pos[face.skin]) == set(pos[copies])  # one vertex per position
+    assert areas[box] > 2 * np.sort(areas)[-2]  # the box, not a hair ball or an eye decal
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_godette_seam_copies_move_identically_in_every_cloned_shape(godette):
+    from facepuppet.offline.perfect_sync.face import find_face
+
+    face = find_face(godette)
+    _, _, pos = _welded_pieces(godette, face.mesh)
+    mesh = face.mesh
+    first = np.full(pos.max() + 1, -1)
+    first[pos[mesh][::-1]] = mesh[::-1]  # each position's first copy
+    partner = first[pos[mesh]]
+    seam = partner != mesh
+    assert seam.sum() > 100  # her seams: 142 copies beyond the first of their position
+    n_own = godette.shape_names.index("angled_eyebrows") + 1
+    d = godette.dense_deltas()[n_own:]
+    assert np.abs(d[:, mesh]).max() > 0
+    np.testing.assert_array_equal(d[:, mesh[seam]], d[:, partner[seam]])
