@@ -240,16 +240,13 @@ def _prefixed(name: str, prefixes: tuple) -> bool:
     return any(name == p or name.startswith(p + "_") for p in prefixes)
 
 
-def feature_field(pieces: Pieces, face: Face, vertices: np.ndarray, source_positions: np.ndarray,
-                  names: tuple, params: np.ndarray, shape_names: tuple, targets: np.ndarray) -> np.ndarray:
-    """Displacements (n_shapes, len(targets), 3) in world axes of the ``targets`` vertices by the landmark field
-    (see the module doc). ``params``: the source's (n_shapes, n_c, 3), source units and axes (+Y up, +Z
-    forward); ``source_positions`` (n_c, 3)."""
+def feature_places(pieces: Pieces, source_positions: np.ndarray, names: tuple) -> tuple[np.ndarray, np.ndarray,
+                                                                                           np.ndarray]:
+    """Where the source's control points lie on a decal face, relative to its features (see the module doc):
+    (places (n_c, 2) x, y in the face frame; scales (n_c, 3) of their displacements; placed by a feature (n_c,)
+    bool, the others by the affine map these define). Places are NaN when fewer than 3 are placed."""
     src = np.asarray(source_positions, np.float64)
-    prm = np.asarray(params, np.float64)
     idx = {n: i for i, n in enumerate(names)}
-    v = np.asarray(vertices, np.float64)
-    local = face.to_frame(v)
     n_c = len(names)
     pos = np.full((n_c, 2), np.nan)  # target places in the face frame (x, y)
     scale = np.full((n_c, 3), np.nan)
@@ -275,9 +272,6 @@ def feature_field(pieces: Pieces, face: Face, vertices: np.ndarray, source_posit
                 y = y0 + (p[1] - s_low) / (s_up - s_low) * (y1 - y0)
             pos[idx[name]] = (t_in + u * (t_out - t_in), y)
             scale[idx[name]] = (sx, sy if not name.startswith("brow") else sx, sx)
-    lower = np.array([_prefixed(n, LOWER_JAW) for n in names])
-    upper_lip = np.array([_prefixed(n, ("lip_upper",)) for n in names])
-    line = None
     if pieces.mouth is not None and all(n in idx for n in ("mouth_corner_L", "mouth_corner_R",
                                                           "lip_upper_inner", "lip_lower_inner")):
         _, (xr, xl), line = pieces.mouth
@@ -293,13 +287,33 @@ def feature_field(pieces: Pieces, face: Face, vertices: np.ndarray, source_posit
             scale[idx[name]] = sm
     placed = ~np.isnan(pos[:, 0])
     if placed.sum() < 3:
-        return np.zeros((len(prm), len(targets), 3))
+        return pos, scale, placed
     # the others by the affine map the placed ones define, at their mean scale
     a = np.column_stack([src[placed, :2], np.ones(placed.sum())])
     affine = np.linalg.lstsq(a, pos[placed], rcond=None)[0]
     rest = ~placed
     pos[rest] = np.column_stack([src[rest, :2], np.ones(rest.sum())]) @ affine
     scale[rest] = float(np.sqrt(abs(np.linalg.det(affine[:2]))))
+    return pos, scale, placed
+
+
+def feature_field(pieces: Pieces, face: Face, vertices: np.ndarray, source_positions: np.ndarray,
+                  names: tuple, params: np.ndarray, shape_names: tuple, targets: np.ndarray) -> np.ndarray:
+    """Displacements (n_shapes, len(targets), 3) in world axes of the ``targets`` vertices by the landmark field
+    (see the module doc). ``params``: the source's (n_shapes, n_c, 3), source units and axes (+Y up, +Z
+    forward); ``source_positions`` (n_c, 3)."""
+    prm = np.asarray(params, np.float64)
+    idx = {n: i for i, n in enumerate(names)}
+    v = np.asarray(vertices, np.float64)
+    local = face.to_frame(v)
+    n_c = len(names)
+    lower = np.array([_prefixed(n, LOWER_JAW) for n in names])
+    upper_lip = np.array([_prefixed(n, ("lip_upper",)) for n in names])
+    line = pieces.mouth[2] if pieces.mouth is not None and all(n in idx for n in (
+        "mouth_corner_L", "mouth_corner_R", "lip_upper_inner", "lip_lower_inner")) else None
+    pos, scale, placed = feature_places(pieces, source_positions, names)
+    if placed.sum() < 3:
+        return np.zeros((len(prm), len(targets), 3))
     disp = prm * scale[None]  # (s, n_c, 3) in the source's axes = the face frame's
     for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
         if key not in shape_names or side not in pieces.eyes:

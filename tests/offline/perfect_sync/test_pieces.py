@@ -47,13 +47,18 @@ def source(ict_character):
 
 
 @pytest.fixture(scope="module")
-def godette(source):
+def godette_run(source):
+    """(Godette as read, her perfect-sync character, the report, the control points proposed)."""
     from facepuppet.offline.io.gltf_read import read_gltf
     from facepuppet.offline.perfect_sync.commands import perfect_sync
 
     g = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
-    out, _, _ = perfect_sync(g, source)
-    return out
+    return (g, *perfect_sync(g, source))
+
+
+@pytest.fixture(scope="module")
+def godette(godette_run):
+    return godette_run[1]
 
 
 def _eye(character, artist_blink):
@@ -227,3 +232,64 @@ def test_godette_seam_copies_move_identically_in_every_cloned_shape(godette):
     d = godette.dense_deltas()[n_own:]
     assert np.abs(d[:, mesh]).max() > 0
     np.testing.assert_array_equal(d[:, mesh[seam]], d[:, partner[seam]])
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_godette_proposal_puts_the_points_on_her_drawn_features(godette_run):
+    """Her eyes and mouth are decals in front of a box skin with no vertex inside them: the points go onto the
+    decals (on main they lay in a grid over the box and hair balls, 45 of 47 doubted)."""
+    from facepuppet.offline.perfect_sync.face import find_face
+
+    g, _, report, points = godette_run
+    face = find_face(g)
+    labels, areas, pos = _welded_pieces(g, face.mesh)
+    d_blink = {s: g.dense_deltas()[g.shape_names.index(f"blink_{side}")] for s, side in (("L", "left"),
+                                                                                          ("R", "right"))}
+    for side in ("L", "R"):  # the eye's points on the pieces her own blink moves
+        moving = set(labels[np.linalg.norm(d_blink[side], axis=1) > 1e-6].tolist()) - {-1}
+        for name in ("eye_inner", "eye_outer", "lid_upper_inner", "lid_upper_outer", "lid_lower_inner",
+                     "lid_lower_outer"):
+            assert labels[points.vertex(f"{name}_{side}")] in moving, (name, side)
+    d_ah = g.dense_deltas()[g.shape_names.index("ah")]
+    mouth = set(labels[np.linalg.norm(d_ah, axis=1) > 1e-6].tolist()) - {-1}
+    local = face.to_frame(g.vertices)
+    for name in ("mouth_corner_L", "mouth_corner_R", "lip_upper_inner", "lip_lower_inner"):
+        assert labels[points.vertex(name)] in mouth, name
+    ends = local[[i for i in range(g.n_vertices) if labels[i] in mouth], 0]
+    for name, end in (("mouth_corner_L", ends.max()), ("mouth_corner_R", ends.min())):
+        assert abs(local[points.vertex(name), 0] - end) < 0.15 * np.ptp(ends), name  # at the mouth's ends
+    assert points.vertex("nose_tip") == face.nose_tip
+    doubted = {n for d in report["doubts"] for n in d["points"]}
+    features = {n for n in points.names if n.startswith(("eye_", "lid_", "mouth_", "lip_", "brow_", "nose"))}
+    assert not doubted & features, report["doubts"]
+    assert len(report["doubts"]) <= 3, report["doubts"]
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_a_wrong_landmarks_file_on_godette_is_doubted(godette_run):
+    """The eyes' points swapped side for side, a mouth corner put on a hair ball: each named."""
+    from facepuppet.offline.elastic.control_points import ControlPoints
+    from facepuppet.offline.perfect_sync.face import find_face
+    from facepuppet.offline.perfect_sync.pieces import find_pieces
+    from facepuppet.offline.perfect_sync.proposal import doubts, skin_triangles
+
+    g, _, _, points = godette_run
+    face = find_face(g)
+    labels, areas, _ = _welded_pieces(g, face.mesh)
+    local = face.to_frame(g.vertices)
+    ball = [lab for lab in np.argsort(areas)[::-1][1:4]]  # the three hair balls, after the box
+    top = max(ball, key=lambda lab: local[labels == lab, 1].mean())
+    v = points.vertices.copy()
+    for name in ("eye_outer", "lid_upper_outer"):
+        i, j = points.index(f"{name}_L"), points.index(f"{name}_R")
+        v[i], v[j] = v[j], v[i]
+    v[points.index("mouth_corner_L")] = int(np.flatnonzero(labels == top)[0])
+    wrong = ControlPoints(points.names, v)
+    pieces = find_pieces(g.vertices, face, skin_triangles(face))
+    found = doubts(wrong, g.vertices, face, None, pieces)
+    named = {n for d in found for n in d["points"]}
+    assert {"eye_outer_L", "eye_outer_R", "lid_upper_outer_L", "lid_upper_outer_R", "mouth_corner_L"} <= named
+    assert any("mouth_corner_L" in d["points"] and "off the surface" in d["why"] for d in found)
+    assert doubts(points, g.vertices, face, None, pieces) != found
