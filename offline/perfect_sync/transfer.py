@@ -349,7 +349,7 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too.
 
     Returns {"decal_eyes": sides, "decal_mouth": bool, "carried_vertices": n, "field_vertices": n}."""
-    from facepuppet.offline.perfect_sync.pieces import embed, feature_field, find_pieces
+    from facepuppet.offline.perfect_sync.pieces import decal_blink, embed, feature_field, find_pieces
     from facepuppet.offline.perfect_sync.proposal import skin_triangles
 
     skin_t = skin_triangles(face)
@@ -375,6 +375,10 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     moved = np.concatenate([features, pieces.on_skin])
     dense[:, moved] = feature_field(pieces, face, vertices, source.arrays["control_positions"],
                                     tuple(source.control_names), params, names, moved)
+    for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
+        if key in names and side in pieces.eyes:  # the drawn eye closes on the line between its corners
+            members, d = decal_blink(pieces, face, vertices, skin_t, side)
+            dense[names.index(key), members] = d
     decal_eye_looks(dense, names, vertices, face, pieces)
     return {"decal_eyes": sorted(pieces.eyes), "decal_mouth": pieces.mouth is not None, "carried_vertices": 0,
             "field_vertices": int(len(np.unique(moved)))}
