@@ -328,3 +328,24 @@ def test_a_wrong_landmarks_file_on_godette_is_doubted(godette_run):
     assert {"eye_outer_L", "eye_outer_R", "lid_upper_outer_L", "lid_upper_outer_R", "mouth_corner_L"} <= named
     assert any("mouth_corner_L" in d["points"] and "off the surface" in d["why"] for d in found)
     assert doubts(points, g.vertices, face, None, pieces) != found
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_godette_cloned_jaw_open_opens_her_drawn_mouth_about_its_line(godette):
+    """Her skin does not move (no mouth hole, no lips): the drawn mouth shows the lips' opening, not the jaw's
+    drop, so in each column its upper and lower vertices move opposite ways (her artist's "ah" too); on main the
+    whole mouth slid down with the jaw, upper row included."""
+    v = godette.vertices.astype(np.float64)
+    d = godette.dense_deltas()[godette.shape_names.index("jawOpen")].astype(np.float64)
+    d_ah = godette.dense_deltas()[godette.shape_names.index("ah")]
+    mouth = np.flatnonzero(np.linalg.norm(d_ah, axis=1) > 1e-6)
+    width = float(np.ptp(v[mouth, 0]))
+    mid = mouth[np.abs(v[mouth, 0] - v[mouth, 0].mean()) < 0.1 * width]
+    line = np.median(v[mid, 1])
+    up, low = mid[v[mid, 1] > line], mid[v[mid, 1] < line]
+    assert len(up) and len(low)
+    opening = d[up, 1].mean() - d[low, 1].mean()
+    assert opening > 0.3 * width  # it opens
+    assert d[up, 1].mean() > 0 > d[low, 1].mean()  # the upper lip up, the lower down
+    assert abs(d[up, 1].mean() + d[low, 1].mean()) < 0.2 * opening  # about the line
