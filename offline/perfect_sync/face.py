@@ -191,8 +191,9 @@ def find_face(character: Character) -> Face:
     mesh, evidence = face_mesh(character)
     keep = np.isin(character.triangles, mesh).all(axis=1)
     weld = weld_map(character)
-    copies = np.unique(character.triangles[keep])  # every copy of the face mesh's vertices in triangles
     tris = welded_triangles(character.triangles[keep], weld)
+    # every copy of the face mesh's vertices in triangles, and the first copies the welded triangles use
+    copies = np.union1d(np.unique(character.triangles[keep]), np.unique(tris))
     v = character.vertices.astype(np.float64)
     if len(np.unique(tris)) < MIN_SKIN_VERTICES:
         raise FaceError(f"{name}: no recognisable face: the face mesh ({evidence}) has "
