@@ -372,6 +372,7 @@ def box_head(source):
     return c, parts, out, report, points
 
 
+@pytest.mark.data
 @pytest.mark.slow
 def test_a_second_decal_face_its_points_blink_and_open_mouth(box_head):
     """A box head built here with drawn eyes (iris disc, lash arc) and mouth (two strips), seamed like a glTF:
