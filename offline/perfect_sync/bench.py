@@ -134,7 +134,7 @@ def run_bench(args: argparse.Namespace) -> dict:
         face = find_face(godette)
         pairs = {}
         for key, artist in GODETTE_PAIRS:
-            if artist in out.shape_names and key in out.shape_names:
+            if artist in out.shape_names and all(k in out.shape_names for k in key.split("+")):
                 pairs[f"{key}~{artist}"] = pair_similarity(out, key, artist, face.mesh)
         result["godette"] = {"n_vertices": godette.n_vertices, "face_vertices": int(len(face.mesh)),
                              "skin_vertices": int(len(face.skin)), "seconds": seconds, "pairs": pairs,

@@ -37,13 +37,17 @@ def load_source(path: str | os.PathLike) -> ElasticModel:
 def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | None = None,
                  replace: bool = False, progress: Progress | None = None) -> tuple[Character, dict, ControlPoints]:
     """(character with the ARKit shapes, report, control points used); see the module doc."""
+    from facepuppet.offline.perfect_sync.pieces import find_pieces
+    from facepuppet.offline.perfect_sync.proposal import skin_triangles
+
     face = find_face(character)
     names = tuple(source.control_names)
+    pieces = find_pieces(character.vertices, face, skin_triangles(face))  # decal features place the points
     if landmarks is not None:
         points, fitted = read_landmarks(landmarks, names, character.n_vertices), None
     else:
-        points, fitted = propose(source.arrays["control_positions"], names, character.vertices, face)
-    doubtful = doubts(points, character.vertices, face, fitted)
+        points, fitted = propose(source.arrays["control_positions"], names, character.vertices, face, pieces)
+    doubtful = doubts(points, character.vertices, face, fitted, pieces)
     def step(i: int, n: int, name: str) -> None:
         progress.total = n
         progress.update(i, name)

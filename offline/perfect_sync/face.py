@@ -9,7 +9,17 @@ Where the face is, in order of evidence:
 3. otherwise the whole character.
 
 The skin is the largest connected piece of that mesh (by area); eyes, teeth,
-lashes are the other pieces. The frame: characters are stored +Y up, facing
+lashes are the other pieces. Pieces are connected **by position**, not by
+vertex index: glTF stores one index per vertex for all its attributes, so a
+surface is split into copies of a vertex wherever its UVs or normals change
+(Godette's 630-vertex face mesh falls into 2507 index components, 17 pieces
+once welded). Coincident vertices (within ``WELD`` of the character's size)
+of one glTF primitive are one vertex (:func:`weld_map`); the face's triangles
+are stored welded (onto each position's first copy), and whatever is
+computed for a vertex is carried to its copies, which move identically. A
+character without a glTF layout (OBJ, which indexes positions once) is not
+welded: its coincident vertices are distinct pieces (ICT's tear film and eye
+occlusion meet its lids there). The frame: characters are stored +Y up, facing
 +Z (:mod:`facepuppet.runtime.character_parts`); the symmetry plane is fitted
 to the skin by mirror ICP (reflect, match nearest points, refit the plane
 from the matched pairs), up comes from the humanoid neck → head bones when
@@ -39,6 +49,7 @@ from facepuppet.offline.elastic.laplacian import components
 MIN_SKIN_VERTICES = 60  # 47 control points need distinct vertices, with some room
 NOSE_PROTRUSION = 0.04  # nose tip in front of its surroundings by this fraction of the skin width
 BONE_UP_COS = 0.985  # the neck → head bone is taken as up within 10 degrees of +Y (anime necks lean)
+WELD = 1e-6  # coincident glTF copies: within this fraction of the character's bounding-box diagonal
 PIECE_OFFSET = 0.15  # the skin's centroid off the face's plane by this fraction of its width: split face
 
 
@@ -62,6 +73,8 @@ class Face:
     symmetry_error : float, median distance of the mirrored skin to itself / width
     evidence : str, how the face mesh was found ("shapes", "head bone", "whole character")
     origin : ndarray of shape (3,), float64, the face frame's origin in frame coordinates (see :meth:`to_frame`)
+    weld : ndarray of shape (n_vertices,), int64, each vertex's first coincident copy (itself when none;
+        :func:`weld_map`); ``triangles`` and ``skin`` hold these only, ``mesh`` every copy
     """
 
     mesh: np.ndarray
@@ -74,11 +87,41 @@ class Face:
     symmetry_error: float
     evidence: str
     origin: np.ndarray
+    weld: np.ndarray | None = None
 
     def to_frame(self, points: np.ndarray) -> np.ndarray:
         """Points (…, 3) in the face frame: origin on the plane at the nose tip's height and depth."""
         return np.asarray(points, np.float64) @ self.frame.T - self.origin
 
+
+
+def weld_map(character: Character) -> np.ndarray:
+    """(n_vertices,) int64: every vertex's first coincident copy in its glTF primitive (itself when it has none or
+    the character has no layout); see the module doc."""
+    n = character.n_vertices
+    rep = np.arange(n, dtype=np.int64)
+    lay = character.layout
+    if lay is None or not n:
+        return rep
+    v = character.vertices.astype(np.float64)
+    tol = WELD * max(float(np.linalg.norm(np.ptp(v, axis=0))), 1e-30)
+    for first, count, *_ in lay.primitives:
+        if count < 2:
+            continue
+        idx = np.arange(first, first + count)
+        cell = np.round(v[idx] / tol).astype(np.int64)
+        _, inverse = np.unique(cell, axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        head = np.full(inverse.max() + 1, np.iinfo(np.int64).max)
+        np.minimum.at(head, inverse, idx)
+        rep[idx] = head[inverse]
+    return rep
+
+
+def welded_triangles(triangles: np.ndarray, weld: np.ndarray) -> np.ndarray:
+    """``triangles`` (q, 3) onto the first copies of ``weld``, without those collapsed by it."""
+    t = np.asarray(weld)[np.asarray(triangles, np.int64)]
+    return t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]
 
 
 def _mesh_of(character: Character, vertices: np.ndarray) -> np.ndarray | None:
@@ -198,11 +241,15 @@ def find_face(character: Character) -> Face:
     return face
 
 
-def _find_face(character: Character) -> Face:
+def _find_face(character: Character) -> tuple[Face, float]:
+    """The face facing +Z and how far its nose stands out (face widths); FaceError when there is none."""
     name = character.name
     mesh, evidence = face_mesh(character)
     keep = np.isin(character.triangles, mesh).all(axis=1)
-    tris = character.triangles[keep].astype(np.int64)
+    weld = weld_map(character)
+    tris = welded_triangles(character.triangles[keep], weld)
+    # every copy of the face mesh's vertices in triangles, and the first copies the welded triangles use
+    copies = np.union1d(np.unique(character.triangles[keep]), np.unique(tris))
     v = character.vertices.astype(np.float64)
     if len(np.unique(tris)) < MIN_SKIN_VERTICES:
         raise FaceError(f"{name}: no recognisable face: the face mesh ({evidence}) has "
@@ -240,7 +287,7 @@ def _find_face(character: Character) -> Face:
     local = v @ frame.T
     width = float(np.ptp(local[skin, 0]))
     # nose tip: the most forward skin vertex near the plane, among vertices facing forward
-    normals = vertex_normals(character.vertices, character.triangles[keep]).astype(np.float64) @ frame.T
+    normals = vertex_normals(character.vertices, tris.astype(np.uint32)).astype(np.float64) @ frame.T
     near = skin[(np.abs(local[skin, 0] - d) < 0.08 * width) & (normals[skin, 2] > 0.3)]
     if not len(near):
         raise FaceError(f"{name}: no recognisable face: no forward-facing skin on the symmetry plane")
@@ -255,7 +302,7 @@ def _find_face(character: Character) -> Face:
         raise FaceError(f"{name}: no recognisable face: no nose (the most forward point on the symmetry plane "
                         f"stands {protrusion:.3g} {character.units} in front of its surroundings, a face's nose "
                         f"at least {NOSE_PROTRUSION * width:.3g})")
-    face = Face(mesh=np.unique(tris), triangles=tris, skin=skin, frame=frame, plane_offset=d, nose_tip=tip,
+    face = Face(mesh=copies, triangles=tris, skin=skin, frame=frame, plane_offset=d, nose_tip=tip,
                 width=width, symmetry_error=dist / max(width, 1e-12), evidence=evidence,
-                origin=np.array([d, local[tip, 1], local[tip, 2]]))
+                origin=np.array([d, local[tip, 1], local[tip, 2]]), weld=weld)
     return face, protrusion / width

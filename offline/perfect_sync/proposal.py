@@ -17,6 +17,11 @@ ICT head's 47) are fitted to the target's skin coarsely and non-rigidly:
    detected nose tip unless the fit's lies within 0.3 FAPU of it; the inner lips the nearest skin vertex facing down
    (upper) or up (lower), then put in order (:func:`fix_inner_lips`).
 
+On a decal face (its eyes or mouth drawn on pieces in front of a skin with no
+openings, :func:`~.pieces.find_pieces`: Godette's box head) the skin has no
+vertex where the features are, so the points are put on the features instead
+(:func:`_decal_proposal`), where the landmark field moving them places them.
+
 Doubts (:func:`doubts`): a sided point on the wrong side of the symmetry
 plane or far from its mirrored partner (asymmetric), a point off the skin or
 facing away (off the surface), the inner lips in the wrong order, on one
@@ -41,6 +46,7 @@ from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.offline.elastic.control_points import ControlPoints, read_control_points
 from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, fix_inner_lips, mouth_slit
 from facepuppet.offline.perfect_sync.face import Face
+from facepuppet.offline.perfect_sync.pieces import Pieces
 
 START_SCALES = (0.6, 0.8, 1.0, 1.25, 1.6)
 NOSE_SNAP = 0.3  # the fitted nose tip is kept within this many FAPU of the detected one
@@ -119,10 +125,69 @@ def fit_points(source_positions: np.ndarray, source_names: Sequence[str], vertic
     return world, cand
 
 
+def _decal_proposal(names: tuple, source_positions: np.ndarray, vertices: np.ndarray, face: Face,
+                    pieces: Pieces) -> tuple[ControlPoints, np.ndarray] | None:
+    """On a decal face (:func:`~.pieces.find_pieces` found its eyes or mouth drawn on pieces in front of a skin
+    with no openings), the points where the features are: each at the place :func:`~.pieces.feature_places`
+    gives it (eye points by the eye's box of corners and lids, mouth points by the mouth's corners and line, the
+    others by the affine map these define), on the nearest vertex (across the face's front) of what draws it:
+    the eye's pieces for the eye's corners and lids, the mouth's pieces for the lips (the upper lip's above the
+    mouth's line, the lower's below it), the pieces on the skin or the skin for the brows, the detected nose tip,
+    the forward-facing skin for the rest. None when the features place fewer than 3 points."""
+    from facepuppet.offline.perfect_sync.pieces import EYE_NAMES, MOUTH_NAMES, feature_places
+
+    pos, _, placed = feature_places(pieces, source_positions, names)
+    if placed.sum() < 3:
+        return None
+    v = np.asarray(vertices, np.float64)
+    local = face.to_frame(v)
+    weld = face.weld if face.weld is not None else np.arange(len(v))
+    first = lambda m: np.unique(weld[np.asarray(m, np.int64)])  # noqa: E731  one vertex per position
+    normals = vertex_normals(v.astype(np.float32), face.triangles.astype(np.uint32)).astype(np.float64)
+    front = face.skin[normals[face.skin] @ face.frame[2] > 0.2]
+    skin = first(front if len(front) >= len(names) else face.skin)
+    drawn = first(pieces.on_skin) if len(pieces.on_skin) else np.zeros(0, np.int64)
+    mouth = first(pieces.mouth[0]) if pieces.mouth is not None else None
+    taken: set = {int(face.nose_tip)}
+    chosen = []
+    for i, name in enumerate(names):
+        side = name[-1] if name.endswith(("_L", "_R")) else None
+        if name == "nose_tip":
+            chosen.append(int(face.nose_tip))
+            continue
+        if side in pieces.eyes and any(name == f"{e}_{side}" for e in EYE_NAMES):
+            cand = first(pieces.eyes[side][0])
+        elif name.startswith("brow"):
+            cand = np.concatenate([drawn, skin])
+        elif mouth is not None and any(name == p or name.startswith(p + "_") for p in MOUTH_NAMES):
+            line = np.polyval(pieces.mouth[2], local[mouth, 0])
+            above = local[mouth, 1] > line
+            cand = mouth[above] if name.startswith("lip_upper") else mouth[~above] if name.startswith(
+                "lip_lower") else mouth
+        else:
+            cand = skin
+        cand = np.array([c for c in cand if int(c) not in taken], np.int64)
+        if not len(cand):
+            cand = np.array([c for c in skin if int(c) not in taken], np.int64)
+        pick = int(cand[np.argmin(np.linalg.norm(local[cand, :2] - pos[i], axis=1))])
+        taken.add(pick)
+        chosen.append(pick)
+    fitted = np.column_stack([pos, local[chosen, 2]])
+    fitted[names.index("nose_tip")] = local[face.nose_tip]
+    return ControlPoints(names, np.array(chosen, np.int64)), (fitted + face.origin) @ face.frame
+
+
 def propose(source_positions: np.ndarray, source_names: Sequence[str], vertices: np.ndarray,
-            face: Face) -> tuple[ControlPoints, np.ndarray]:
-    """Proposed target control points (source names, source order) and the fitted positions (n_c, 3)."""
+            face: Face, pieces: Pieces | None = None) -> tuple[ControlPoints, np.ndarray]:
+    """Proposed target control points (source names, source order) and the fitted positions (n_c, 3).
+
+    ``pieces`` (:func:`~.pieces.find_pieces`), when they hold decal features, place the points on them
+    (:func:`_decal_proposal`) rather than by fitting the source's points to the skin."""
     names = tuple(source_names)
+    if pieces is not None and (pieces.eyes or pieces.mouth is not None):
+        decal = _decal_proposal(names, source_positions, vertices, face, pieces)
+        if decal is not None:
+            return decal
     fitted, cand = fit_points(source_positions, names, vertices, face)
     v = np.asarray(vertices, np.float64)
     tree = cKDTree(v[cand])
@@ -194,13 +259,24 @@ def fapu_of(points: ControlPoints, vertices: np.ndarray) -> float:
 
 
 def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
-           fitted: np.ndarray | None = None) -> list[dict]:
-    """Doubtful points: a list of {"points": [names], "why": text} (empty when none); see the module doc."""
+           fitted: np.ndarray | None = None, pieces: Pieces | None = None) -> list[dict]:
+    """Doubtful points: a list of {"points": [names], "why": text} (empty when none); see the module doc.
+
+    With decal ``pieces`` (:func:`~.pieces.find_pieces`), the surface is the skin and what is drawn on it (the
+    decal eyes, mouth and the pieces lying on the skin), and inner lips on a decal mouth need not have an opening
+    between them (the drawn mouth opens along its line, :func:`~.pieces.feature_field`)."""
     v = np.asarray(vertices, np.float64)
     local = face.to_frame(v[points.vertices])
     es = max(fapu_of(points, v), 1e-12)
     out = []
+    weld = face.weld if face.weld is not None else np.arange(len(v))
     skin = set(int(i) for i in face.skin)
+    decal_mouth = set()
+    if pieces is not None and (pieces.eyes or pieces.mouth is not None):
+        skin |= set(int(i) for i in weld[pieces.feature_vertices]) | set(int(i) for i in weld[pieces.on_skin])
+        if pieces.mouth is not None:
+            decal_mouth = set(int(i) for i in weld[pieces.mouth[0]])
+    skin |= {int(i) for i in np.flatnonzero(np.isin(weld, list(skin)))}  # every copy of a surface vertex
     for name, vertex, p in zip(points.names, points.vertices, local):
         side = 1.0 if name.endswith("_L") else -1.0 if name.endswith("_R") else 0.0
         if side and side * p[0] < 0:
@@ -235,7 +311,9 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
             corners = [n for n in ("mouth_corner_R", "mouth_corner_L") if n in points.names]
             width = np.ptp(v[[points.vertex(n) for n in corners]] @ face.frame[0]) if len(corners) == 2 else es
             joined = np.isin(skin_triangles(face), [up, low]).sum(axis=1) == 2
-            if joined.any() and mouth_slit(v, skin_triangles(face), 0.5 * (v[up] + v[low]), 1.5 * width) is None:
+            on_decal = int(weld[up]) in decal_mouth and int(weld[low]) in decal_mouth
+            if not on_decal and joined.any() and mouth_slit(v, skin_triangles(face), 0.5 * (v[up] + v[low]),
+                                                            1.5 * width) is None:
                 out.append({"points": [UPPER, LOWER], "why": "lips not separated: the inner lip points share a "
                                                              "triangle and no opening runs between the lips (a "
                                                              "closed mouth); jawOpen stretches them apart"})
@@ -290,7 +368,9 @@ def read_landmarks(path: str | os.PathLike, names: Sequence[str], n_vertices: in
 
 def picture(path: str | os.PathLike, vertices: np.ndarray, face: Face, points: ControlPoints,
             doubtful: Sequence[str] = (), size: int = 720) -> Path:
-    """A front view of the face mesh (grey, shaded by facing) with the points: green, doubtful ones red."""
+    """A front view of the face mesh (the skin grey, its other pieces blue-grey, shaded by facing) with the
+    points: green, doubtful ones red. Triangles are painted back to front by their hindmost corner, so a decal
+    a hair in front of a large skin triangle shows over it."""
     v = face.to_frame(np.asarray(vertices, np.float64))
     tris = face.triangles
     used = np.unique(tris)
@@ -306,13 +386,15 @@ def picture(path: str | os.PathLike, vertices: np.ndarray, face: Face, points: C
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-18)
     img = Image.new("RGB", (size, size), (24, 24, 28))
     draw = ImageDraw.Draw(img)
-    depth = v[tris].mean(1)[:, 2]
-    for k in np.argsort(depth):  # painter's order, back to front
+    depth = v[tris].min(1)[:, 2]
+    on_skin = np.isin(tris, face.skin).all(1)
+    for k in np.argsort(depth, kind="stable"):  # painter's order, back to front
         if n[k, 2] <= 0:
             continue
         shade = int(60 + 170 * n[k, 2])
         x, y = xy(v[tris[k]])
-        draw.polygon(list(zip(x.tolist(), y.tolist())), fill=(shade, shade, shade))
+        fill = (shade, shade, shade) if on_skin[k] else (int(0.55 * shade), int(0.7 * shade), shade)
+        draw.polygon(list(zip(x.tolist(), y.tolist())), fill=fill)
     bad = set(doubtful)
     for name, vertex in zip(points.names, points.vertices):
         x, y = xy(v[vertex])

@@ -42,6 +42,10 @@ CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between
 # (ICT's eyeLook shapes move the lids only: its eyes are turned by the app); a judgement, about the eye's
 # comfortable range: 25 degrees sideways, 15 up and down (at 25 the ICT iris went under the upper lid).
 EYE_LOOK_DEGREES = (25.0, 15.0)  # (about the up axis, about the across axis)
+# The shapes that open the jaw (mouthClose closes the lips within jawOpen): on a decal mouth over a skin that
+# does not move, the drawn mouth shows only the lips' motion relative to each other in these, not the jaw's
+# translation (which would slide the mouth down its unmoving chin).
+JAW_OPENINGS = ("jawOpen", "mouthClose")
 EYE_CLEARANCE = 0.03  # a lid passing over an eyeball keeps at most this fraction of its radius clear of it
 MOUTH_CLEARANCE = 0.25  # outer skin pushed towards the teeth or gums keeps this fraction of its rest gap to them
 # (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
@@ -193,9 +197,12 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
     ``info``, when given, receives {"pieces": ...}: how the pieces that are not skin were moved
     (:func:`carry_pieces`)."""
     names, params = fold_source(source)
+    weld = face.weld if face.weld is not None else np.arange(character.n_vertices)
+    sub = np.unique(face.triangles)  # one vertex per position (the face's triangles are welded)
     local = np.full(character.n_vertices, -1, np.int64)
-    local[face.mesh] = np.arange(len(face.mesh))
-    sub_v = character.vertices[face.mesh].astype(np.float64)
+    local[sub] = np.arange(len(sub))
+    local[face.mesh] = local[weld[face.mesh]]  # a seam's copies: their first copy's place in the solve
+    sub_v = character.vertices[sub].astype(np.float64)
     sub_t = local[face.triangles]
     sub_points = ControlPoints(points.names, local[points.vertices])
     if (sub_points.vertices < 0).any():
@@ -233,13 +240,14 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
             d[lid_skin[side]] = clear_eyeball(sub_v, d, members, centre, lid_skin[side])
         if inside is not None:
             d[inside[1]] = clear_mouth_parts(sub_v, d, *inside)
-        dense[s, face.mesh] = d
+        dense[s, face.mesh] = d[local[face.mesh]]
         if progress is not None:
             progress(s + 1, len(names), name)
     carried = carry_pieces(dense, source, names, fold_source(source)[1], character.vertices, face,
-                 rigid=face.mesh[model.arrays["rigid_labels"] >= 0],
-                 eyeballs=np.concatenate([face.mesh[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]),
+                 rigid=sub[model.arrays["rigid_labels"] >= 0],
+                 eyeballs=np.concatenate([sub[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]),
                  mouth=_mouth_ball(points, character.vertices))
+    dense[:, face.mesh] = dense[:, weld[face.mesh]]  # a seam's copies move as one vertex
     if info is not None:
         info["pieces"] = carried
     return names, dense
@@ -345,7 +353,7 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too.
 
     Returns {"decal_eyes": sides, "decal_mouth": bool, "carried_vertices": n, "field_vertices": n}."""
-    from facepuppet.offline.perfect_sync.pieces import embed, feature_field, find_pieces
+    from facepuppet.offline.perfect_sync.pieces import decal_blink, embed, feature_field, find_pieces, lip_line_motion
     from facepuppet.offline.perfect_sync.proposal import skin_triangles
 
     skin_t = skin_triangles(face)
@@ -371,6 +379,15 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     moved = np.concatenate([features, pieces.on_skin])
     dense[:, moved] = feature_field(pieces, face, vertices, source.arrays["control_positions"],
                                     tuple(source.control_names), params, names, moved)
+    jaw = [s for s, key in enumerate(names) if key in JAW_OPENINGS]
+    if pieces.mouth is not None and jaw:  # the skin has no jaw to open: the drawn mouth shows the lips' opening
+        dense[np.ix_(jaw, pieces.mouth[0])] -= lip_line_motion(
+            pieces, face, vertices, source.arrays["control_positions"], tuple(source.control_names), params[jaw],
+            tuple(names[s] for s in jaw)).astype(dense.dtype)
+    for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
+        if key in names and side in pieces.eyes:  # the drawn eye closes on the line between its corners
+            members, d = decal_blink(pieces, face, vertices, skin_t, side)
+            dense[names.index(key), members] = d
     decal_eye_looks(dense, names, vertices, face, pieces)
     return {"decal_eyes": sorted(pieces.eyes), "decal_mouth": pieces.mouth is not None, "carried_vertices": 0,
             "field_vertices": int(len(np.unique(moved)))}
