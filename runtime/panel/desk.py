@@ -73,6 +73,8 @@ REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed
 #: again (its buffers are uploaded already; only the draw calls), e.g. every other tick at 120 frames/s on arrival
 REBUILD_HZ = 60.0
 PANEL_WIDTH = 430
+METER_W, METER_H, METER_GAP = 80.0, 12.0, 6.0  # a channel meter's size in pixels and the gap after it
+METERS_W = 3 * (METER_W + METER_GAP) + 2.0  # the three meters of a row, before its name
 #: meter colours (RGBA 0..1): raw, after the stages, after mapping; distinct so tests and eyes can tell them apart
 METER_COLOURS = ((0.35, 0.55, 0.95, 1.0), (0.30, 0.85, 0.40, 1.0), (0.98, 0.60, 0.15, 1.0))
 #: a counter is a drop reason when its name has one of these (malformed, unknown_address, non_finite, oversized,
@@ -84,6 +86,12 @@ DROP_WORDS = ("drop", "malformed", "unknown", "finite", "oversized", "filtered",
 #: characters the panel's font (ImGui's built-in, ASCII) lacks, written as ASCII
 _NOT_IN_FONT = str.maketrans({"→": "->", "—": "-", "–": "-", "×": "x", "µ": "u", "©": "(c)", "’": "'", "“": '"',
                               "”": '"'})
+
+
+def _value_text(name: str, values: tuple[float, float, float]) -> str:
+    """A channel's three meter values as text (``-``: not sent / no shape)."""
+    return f"{name}: " + "  ".join(f"{what} {v:.2f}" if math.isfinite(v) else f"{what} -"
+                                  for what, v in zip(("raw", "filtered", "mapped"), values))
 
 
 def _ascii(text: str) -> str:
@@ -172,6 +180,8 @@ class DeskPanel:
         self._ticks = 0
         self._last_raw_at: float | None = None
         self._shape_index: dict[tuple, np.ndarray] = {}
+        self._mapped_lists: dict[int, tuple[np.ndarray, list[int]]] = {}
+        self._values: tuple | None = None  # this frame's channels and values (raw, filtered, rig, mapped index)
         self.sent_only = True
         self.selected: str | None = None  # the channel the response editor edits
         self.profile_name = ""  # the Save as field
@@ -183,6 +193,10 @@ class DeskPanel:
         self._row_pitch = 0.0  # height of a channel row, as ImGui's list clipper measured it
         self._lines: dict[str, str] = {}  # status lines built at each refresh, not every frame
         self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
+        self._spacing_y = imgui.get_style().item_spacing.y
+        self._section_h: dict[str, float] = {}  # a settings section's height when last built (skipped unseen)
+        self._section_rects: dict[str, set[str]] = {}  # the rects' labels of each settings section
+        self._collect: set[str] | None = None  # the labels remembered by the section being built
 
     # -- the loop's overlay ----------------------------------------------------------------------
 
@@ -223,6 +237,7 @@ class DeskPanel:
             self._refresh(now)
         imgui.new_frame()
         self._config = None  # read afresh this frame
+        self._values = None  # set by the channel section
         self._build(info, now)
         imgui.render()
         t1 = time.perf_counter()
@@ -282,6 +297,8 @@ class DeskPanel:
     def _remember(self, label: str) -> None:
         a, b = self.imgui.get_item_rect_min(), self.imgui.get_item_rect_max()
         self.rects[label] = (a.x, a.y, b.x, b.y)
+        if self._collect is not None:
+            self._collect.add(label)
 
     def _build(self, info: TickInfo, now: float) -> None:
         imgui = self.imgui
@@ -300,14 +317,36 @@ class DeskPanel:
             imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
             imgui.set_next_window_bg_alpha(0.85)
             imgui.begin("settings")
-        self._filter_section()
-        self._calibration_section()
-        self._face_section()
-        self._profile_section()
-        self._loss_section()
-        self._record_section(info)
-        self._info_section()
+        section = self._section
+        section("filter", self._filter_section)
+        section("calibration", self._calibration_section)
+        section("face", self._face_section)
+        section("profile", self._profile_section)
+        section("loss", self._loss_section)
+        section("record", self._record_section, info)
+        section("info", self._info_section)
         imgui.end()
+
+    def _section(self, key: str, build: Callable[..., None], *args: Any) -> None:
+        """Build a settings section, or, when the window shows none of it (scrolled out, or below the window's
+        bottom), only a blank item as tall as it was when last built: ImGui's clipping still costs a Python call
+        per widget, this costs one. Its widgets' :attr:`rects` are dropped while it is not drawn (nothing to
+        click). A section comes back the frame its space scrolls into view."""
+        imgui = self.imgui
+        h = self._section_h.get(key, 0.0)
+        if h > self._spacing_y and not imgui.is_rect_visible(imgui.ImVec2(1.0, h)):
+            imgui.dummy(imgui.ImVec2(0.0, h - self._spacing_y))  # the cursor moves on by h, as after the section
+            for label in self._section_rects.pop(key, ()):
+                self.rects.pop(label, None)
+            return
+        y0 = imgui.get_cursor_pos_y()
+        self._collect = labels = set()
+        try:
+            build(*args)
+        finally:
+            self._collect = None
+        self._section_h[key] = imgui.get_cursor_pos_y() - y0
+        self._section_rects[key] = labels
 
     def _input_section(self, now: float) -> None:
         imgui = self.imgui
@@ -375,6 +414,19 @@ class DeskPanel:
         self._remember(f"response.{label}")
         return changed, float(v)
 
+    def _selected_values(self, name: str) -> tuple[float, float, float] | None:
+        """This frame's raw, filtered and mapped value of channel ``name`` (None: not among the channels)."""
+        if self._values is None:
+            return None
+        channels, raw_v, flt_v, rig_v, mapped = self._values
+        try:
+            i = channels.index(name)
+        except ValueError:
+            return None
+        m = mapped[i]
+        return (raw_v[i] if raw_v is not None else math.nan, flt_v[i] if flt_v is not None else math.nan,
+                rig_v[m] if rig_v is not None and m >= 0 else math.nan)
+
     def _response_section(self) -> None:
         """The response of the selected channel: gain, clamp, input range -> output range, curve."""
         imgui, pipeline = self.imgui, self.pipeline
@@ -389,6 +441,11 @@ class DeskPanel:
         key = canonical(name)
         cs = config.channel(name)
         imgui.text(f"{name}" + ("" if key in config.channels else " (default response)"))
+        self._remember("response.name")
+        values = self._selected_values(name)
+        if values is not None:  # the meters' numbers of this channel, every frame
+            imgui.text(_value_text("now", values))
+            self._remember("response.values")
         imgui.push_id("response")
         new = cs
         c, v = self._slider("gain", cs.gain, 0.0, 3.0, "gain %.2f")
@@ -626,8 +683,19 @@ class DeskPanel:
         ch = self.character
         if ch is not None:
             imgui.text_wrapped(_ascii(f"character: {ch.name}, {len(ch.shape_names)} shapes"))
+            self._remember("character.text")
             if getattr(ch, "credits", None):
                 imgui.text_wrapped(_ascii(f"credits: {ch.credits}"))
+
+    def _mapped_list(self, channels: tuple) -> list[int]:
+        """:meth:`_mapped_index` as a list of ints (read per row without NumPy), kept with it."""
+        idx = self._mapped_index(channels)
+        as_list = self._mapped_lists.get(id(idx))
+        if as_list is None or as_list[0] is not idx:
+            if len(self._mapped_lists) > 16:
+                self._mapped_lists.clear()
+            as_list = self._mapped_lists[id(idx)] = (idx, idx.tolist())
+        return as_list[1]
 
     def _mapped_index(self, channels: tuple) -> np.ndarray:
         """For each input channel the rig shape it drives (-1: none): the shape of the same name, else the
@@ -647,6 +715,13 @@ class DeskPanel:
         return idx
 
     def _channel_section(self, info: TickInfo) -> None:
+        """One row per channel: three meters (raw, after the stages, after mapping) and the name (click: select).
+
+        The meters are plain rectangles in the child window's draw list (a frame and a bar each, no text: the
+        values of the selected channel are in the Response section, those of a row under the mouse in its
+        tooltip), their lengths from this tick's values; ImGui lays out only the names. The values are read as
+        Python floats once per frame (three ``tolist``), not through NumPy per row.
+        """
         imgui = self.imgui
         if not imgui.collapsing_header("Channels: raw | filtered | mapped", imgui.TreeNodeFlags_.default_open):
             return
@@ -664,53 +739,65 @@ class DeskPanel:
         elif getattr(self, "_last_raw_w", None) is not None and len(self._last_raw_w) == len(channels):
             raw_w = self._last_raw_w
         flt = frame.weights if frame is not None and frame.channels == channels else None
-        mapped = self._mapped_index(channels)
+        mapped = self._mapped_list(channels)
         rig = info.weights
+        nan = math.nan
+        raw_v = raw_w.tolist() if raw_w is not None else None
+        flt_v = flt.tolist() if flt is not None else None
+        rig_v = rig.tolist() if rig is not None else None
+        self._values = (channels, raw_v, flt_v, rig_v, mapped)  # the Response section reads the selected one's
         _, self.sent_only = imgui.checkbox("only the channels the input sends", self.sent_only)
-        rows = np.arange(len(channels))
-        if self.sent_only and raw_w is not None:  # NaN: not sent (a VMC sender names only some channels)
-            rows = np.flatnonzero(np.isfinite(raw_w))
+        if self.sent_only and raw_v is not None:  # NaN: not sent (a VMC sender names only some channels)
+            rows = [i for i, v in enumerate(raw_v) if v == v]
+        else:
+            rows = range(len(channels))
         # as tall as its rows, at most a third of the window (then it scrolls; the sections below stay in view)
         pitch = self._row_pitch or imgui.get_frame_height_with_spacing()  # measured by the clipper once drawn
         fit = max(len(rows), 1) * pitch + 2 * imgui.get_style().window_padding.y
         height = min(fit, max(120.0, 0.35 * self.window_size[1]))
         imgui.begin_child("channels", imgui.ImVec2(0, height))
+        dl = imgui.get_window_draw_list()
+        vec, rect, line = imgui.ImVec2, dl.add_rect_filled, dl.add_line
+        frame_col, dash_col = imgui.get_color_u32(imgui.Col_.frame_bg), imgui.get_color_u32(imgui.Col_.text_disabled)
+        colours = self._colours
+        step = METER_W + METER_GAP
+        imgui.indent(METERS_W)  # the names start after the meters; the meters are drawn in the indent
+        line_h = imgui.get_text_line_height()
+        dy = 0.5 * (line_h - METER_H)
         clipper = imgui.ListClipper()
         clipper.begin(len(rows))
-        bar = imgui.ImVec2(80, 12)
-        push, pop, progress, same_line = imgui.push_style_color, imgui.pop_style_color, imgui.progress_bar, \
-            imgui.same_line
-        hist, colours, isfinite = imgui.Col_.plot_histogram, self._colours, math.isfinite
-        nan = math.nan
+        selected, selectable, cursor, hovered = self.selected, imgui.selectable, imgui.get_cursor_screen_pos, \
+            imgui.is_item_hovered
         while clipper.step():
-            start, end = clipper.display_start, clipper.display_end
-            if end <= start:
-                continue
-            idx = rows[start:end]  # the visible rows' values in three array reads, then plain floats
-            raw_v = raw_w[idx].tolist() if raw_w is not None else [nan] * len(idx)
-            flt_v = flt[idx].tolist() if flt is not None else [nan] * len(idx)
-            where = mapped[idx]
-            rig_v = (np.where(where >= 0, rig[np.maximum(where, 0)], nan).tolist() if rig is not None
-                     else [nan] * len(idx))
-            for n, i in enumerate(idx.tolist()):
-                row = start + n
-                for j, v in enumerate((raw_v[n], flt_v[n], rig_v[n])):
-                    push(hist, colours[j])
-                    if isfinite(v):
-                        progress(min(max(v, 0.0), 1.0), bar, f"{v:.2f}")
-                    else:
-                        progress(0.0, bar, "-")
-                    pop()
+            for row in range(clipper.display_start, clipper.display_end):
+                i = rows[row]
+                m = mapped[i]
+                values = (raw_v[i] if raw_v is not None else nan, flt_v[i] if flt_v is not None else nan,
+                          rig_v[m] if rig_v is not None and m >= 0 else nan)
+                p = cursor()
+                x, y0 = p.x - METERS_W, p.y + dy
+                y1 = y0 + METER_H
+                for j in range(3):
+                    v = values[j]
+                    rect(vec(x, y0), vec(x + METER_W, y1), frame_col)
+                    if v > 0.0:
+                        rect(vec(x, y0), vec(x + METER_W * (v if v < 1.0 else 1.0), y1), colours[j])
+                    elif v != v:  # not sent, or no shape of it: a dash
+                        line(vec(x + 0.3 * METER_W, y0 + 0.5 * METER_H), vec(x + 0.7 * METER_W, y0 + 0.5 * METER_H),
+                             dash_col)
                     if row == 0:
-                        self._remember(f"meter.0.{j}")  # the first row shown
-                    same_line()
+                        self.rects[f"meter.0.{j}"] = (x, y0, x + METER_W, y1)  # the first row shown
+                    x += step
                 name = channels[i]
-                if imgui.selectable(name, name == self.selected)[0]:
+                if selectable(name, name == selected)[0]:
                     self.selected = name
                 self._remember(f"channel.{name}")
+                if hovered():
+                    imgui.set_tooltip(_value_text(name, values))
         if clipper.items_height > 0:
             self._row_pitch = clipper.items_height
         clipper.end()
+        imgui.unindent(METERS_W)
         imgui.end_child()
 
     # -- edits --------------------------------------------------------------------------------------
