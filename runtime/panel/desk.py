@@ -763,7 +763,7 @@ class DeskPanel:
         step = METER_W + METER_GAP
         imgui.indent(METERS_W)  # the names start after the meters; the meters are drawn in the indent
         line_h = imgui.get_text_line_height()
-        dy = 0.5 * (line_h - METER_H)
+        dy = float(int(0.5 * (line_h - METER_H)))  # whole pixels: see below
         clipper = imgui.ListClipper()
         clipper.begin(len(rows))
         selected, selectable, cursor, hovered = self.selected, imgui.selectable, imgui.get_cursor_screen_pos, \
@@ -775,13 +775,16 @@ class DeskPanel:
                 values = (raw_v[i] if raw_v is not None else nan, flt_v[i] if flt_v is not None else nan,
                           rig_v[m] if rig_v is not None and m >= 0 else nan)
                 p = cursor()
-                x, y0 = p.x - METERS_W, p.y + dy
+                # whole pixels: ImGui draws a rectangle with a fractional corner with anti-aliased edges (30
+                # indices instead of 6, and llvmpipe's draw call costs by the index)
+                x, y0 = float(int(p.x - METERS_W)), float(int(p.y + dy))
                 y1 = y0 + METER_H
                 for j in range(3):
                     v = values[j]
                     rect(vec(x, y0), vec(x + METER_W, y1), frame_col)
                     if v > 0.0:
-                        rect(vec(x, y0), vec(x + METER_W * (v if v < 1.0 else 1.0), y1), colours[j])
+                        rect(vec(x, y0), vec(x + float(int(METER_W * (v if v < 1.0 else 1.0) + 0.5)), y1),
+                             colours[j])
                     elif v != v:  # not sent, or no shape of it: a dash
                         line(vec(x + 0.3 * METER_W, y0 + 0.5 * METER_H), vec(x + 0.7 * METER_W, y0 + 0.5 * METER_H),
                              dash_col)

@@ -96,6 +96,17 @@ def test_the_meter_bars_are_as_long_as_the_values(egl_ctx):
         assert 2.6 < long / short < 3.4
 
 
+def test_a_bar_ends_on_a_whole_pixel_without_a_blended_edge(run):
+    """0.37 of an 80 px meter is 29.6 px: drawn as 30 whole pixels of the bar's colour (a fractional corner would
+    make ImGui anti-alias the edge: a blended pixel, and five times the triangles)."""
+    image = run.run(40, jaw=0.37)
+    x0, y0, x1, y1 = (int(round(v)) for v in run.panel.rects["meter.0.0"])
+    row = image[(y0 + y1) // 2, x0:x1, :3].astype(int)
+    want = np.round(np.array(METER_COLOURS[0][:3]) * 255).astype(int)
+    off = np.abs(row - want).max(axis=1)
+    assert (off[:30] <= 3).all() and (off[30:] > 40).all(), off[25:35]
+
+
 def test_a_settings_section_out_of_view_is_not_built_and_comes_back_clickable_when_scrolled_to(run):
     run.run(6)
     rects = run.panel.rects
