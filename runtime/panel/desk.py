@@ -756,18 +756,13 @@ class DeskPanel:
         fit = max(len(rows), 1) * pitch + 2 * imgui.get_style().window_padding.y
         height = min(fit, max(120.0, 0.35 * self.window_size[1]))
         imgui.begin_child("channels", imgui.ImVec2(0, height))
-        dl = imgui.get_window_draw_list()
-        vec, rect, line = imgui.ImVec2, dl.add_rect_filled, dl.add_line
-        frame_col, dash_col = imgui.get_color_u32(imgui.Col_.frame_bg), imgui.get_color_u32(imgui.Col_.text_disabled)
-        colours = self._colours
-        step = METER_W + METER_GAP
         imgui.indent(METERS_W)  # the names start after the meters; the meters are drawn in the indent
-        line_h = imgui.get_text_line_height()
-        dy = float(int(0.5 * (line_h - METER_H)))  # whole pixels: see below
+        dy = float(int(0.5 * (imgui.get_text_line_height() - METER_H)))  # whole pixels: see _draw_meters
         clipper = imgui.ListClipper()
         clipper.begin(len(rows))
         selected, selectable, cursor, hovered = self.selected, imgui.selectable, imgui.get_cursor_screen_pos, \
             imgui.is_item_hovered
+        shown = []  # (left, top, values) of each row drawn (ImGui's clipper: the first row, then those in view)
         while clipper.step():
             for row in range(clipper.display_start, clipper.display_end):
                 i = rows[row]
@@ -775,33 +770,50 @@ class DeskPanel:
                 values = (raw_v[i] if raw_v is not None else nan, flt_v[i] if flt_v is not None else nan,
                           rig_v[m] if rig_v is not None and m >= 0 else nan)
                 p = cursor()
-                # whole pixels: ImGui draws a rectangle with a fractional corner with anti-aliased edges (30
-                # indices instead of 6, and llvmpipe's draw call costs by the index)
-                x, y0 = float(int(p.x - METERS_W)), float(int(p.y + dy))
-                y1 = y0 + METER_H
-                for j in range(3):
-                    v = values[j]
-                    rect(vec(x, y0), vec(x + METER_W, y1), frame_col)
-                    if v > 0.0:
-                        rect(vec(x, y0), vec(x + float(int(METER_W * (v if v < 1.0 else 1.0) + 0.5)), y1),
-                             colours[j])
-                    elif v != v:  # not sent, or no shape of it: a dash
-                        line(vec(x + 0.3 * METER_W, y0 + 0.5 * METER_H), vec(x + 0.7 * METER_W, y0 + 0.5 * METER_H),
-                             dash_col)
-                    if row == 0:
-                        self.rects[f"meter.0.{j}"] = (x, y0, x + METER_W, y1)  # the first row shown
-                    x += step
+                shown.append((float(int(p.x - METERS_W)), float(int(p.y + dy)), values))
                 name = channels[i]
                 if selectable(name, name == selected)[0]:
                     self.selected = name
                 self._remember(f"channel.{name}")
                 if hovered():
                     imgui.set_tooltip(_value_text(name, values))
+        if shown:
+            self._draw_meters(imgui.get_window_draw_list(), shown)
         if clipper.items_height > 0:
             self._row_pitch = clipper.items_height
         clipper.end()
         imgui.unindent(METERS_W)
         imgui.end_child()
+
+    def _draw_meters(self, dl: Any, shown: list) -> None:
+        """The meters of the rows drawn, into the child window's draw list ``dl``: per column one background
+        strip from the first row's top to the last row's bottom, then per meter a bar as long as its value (a
+        dash for none). Corners on whole pixels: ImGui draws a rectangle with a fractional corner as an
+        anti-aliased path (30 indices instead of 6; llvmpipe's draw call costs by the index)."""
+        imgui = self.imgui
+        vec, rect, line = imgui.ImVec2, dl.add_rect_filled, dl.add_line
+        step = METER_W + METER_GAP
+        left, top = shown[0][0], shown[0][1]
+        bottom = shown[-1][1] + METER_H
+        frame_col = imgui.get_color_u32(imgui.Col_.frame_bg)
+        for j in range(3):
+            x = left + j * step
+            rect(vec(x, top), vec(x + METER_W, bottom), frame_col)
+        for j in range(3):  # the first row's (the clipper always lays it out first)
+            self.rects[f"meter.0.{j}"] = (left + j * step, top, left + j * step + METER_W, top + METER_H)
+        colours, dash_col = self._colours, None
+        for x, y0, values in shown:
+            y1 = y0 + METER_H
+            for j in range(3):
+                v = values[j]
+                if v > 0.0:
+                    rect(vec(x, y0), vec(x + float(int(METER_W * (v if v < 1.0 else 1.0) + 0.5)), y1), colours[j])
+                elif v != v:  # not sent, or no shape of it: a dash
+                    if dash_col is None:
+                        dash_col = imgui.get_color_u32(imgui.Col_.text_disabled)
+                    line(vec(x + 0.3 * METER_W, y0 + 0.5 * METER_H), vec(x + 0.7 * METER_W, y0 + 0.5 * METER_H),
+                         dash_col)
+                x += step
 
     # -- edits --------------------------------------------------------------------------------------
 
