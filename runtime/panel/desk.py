@@ -68,6 +68,9 @@ if TYPE_CHECKING:
     from facepuppet.runtime.recording.switch import SwitchableRecorder
 
 WEIGHT_REGIONS = ("eyes", "brows", "mouth", "other", "head")
+#: per region: the ImGui ids of its two filter sliders and their :attr:`DeskPanel.rects` labels (made once)
+_FILTER_LABELS = {r: (f"##cutoff.{r}", f"##beta.{r}", f"filter.{r}.min_cutoff", f"filter.{r}.beta")
+                  for r in WEIGHT_REGIONS}
 REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed this often
 #: ImGui frames per second at most: a tick closer than 0.9 / REBUILD_HZ to the last frame draws that frame
 #: again (its buffers are uploaded already; only the draw calls), e.g. every other tick at 120 frames/s on arrival
@@ -355,14 +358,13 @@ class DeskPanel:
         if not self._lines:
             self._status_lines()
         lines = self._lines
-        imgui.text(lines["where"])
-        imgui.text(lines["rates"])
         age = "no frame yet" if self._last_raw_at is None else f"{(now - self._last_raw_at) * 1e3:.0f} ms"
         state = getattr(self.pipeline, "tracking_state", "-")  # waiting / live / lost / easing
         events = getattr(self.pipeline, "events", ())
         last = (f" ({'found' if events[-1][1] else 'lost'} at {events[-1][0]:.1f} s)" if events else "")
-        imgui.text(f"last frame: {age}   tracking: {state}{last}")
-        imgui.text(lines["latency"])
+        # one text item of four lines (ImGui lays out the line breaks), not four items
+        imgui.text_unformatted(f"{lines['where']}\n{lines['rates']}\nlast frame: {age}   tracking: {state}{last}\n"
+                               f"{lines['latency']}")
         imgui.text_wrapped(lines["drops"])
 
     def _status_lines(self) -> None:
@@ -385,25 +387,24 @@ class DeskPanel:
         config = self._config_now()
         filters = dict(config.filters)
         changed = False
-        for region in WEIGHT_REGIONS:
+        slider, same_line, remember, log = imgui.slider_float, imgui.same_line, self._remember, \
+            imgui.SliderFlags_.logarithmic
+        imgui.push_item_width(130)  # one width for the section's sliders, not one call per slider
+        for region, (cutoff_id, beta_id, cutoff_rect, beta_rect) in _FILTER_LABELS.items():
             fs = filters[region]
-            imgui.push_id(region)
-            imgui.set_next_item_width(130)
-            c1, cutoff = imgui.slider_float("##cutoff", fs.min_cutoff, 0.05, 10.0, "%.2f Hz",
-                                            imgui.SliderFlags_.logarithmic)
-            self._remember(f"filter.{region}.min_cutoff")
-            imgui.same_line()
-            imgui.set_next_item_width(130)
-            c2, beta = imgui.slider_float("##beta", fs.beta, 0.0, 5.0, "beta %.2f")
-            self._remember(f"filter.{region}.beta")
-            imgui.same_line()
-            imgui.text(region)
-            imgui.pop_id()
+            c1, cutoff = slider(cutoff_id, fs.min_cutoff, 0.05, 10.0, "%.2f Hz", log)
+            remember(cutoff_rect)
+            same_line()
+            c2, beta = slider(beta_id, fs.beta, 0.0, 5.0, "beta %.2f")
+            remember(beta_rect)
+            same_line()
+            imgui.text_unformatted(region)
             if c1 or c2:
                 # only the value dragged changes: ImGui hands back float32, the other keeps its exact value
                 filters[region] = replace(fs, min_cutoff=max(float(cutoff), 1e-3) if c1 else fs.min_cutoff,
                                           beta=max(float(beta), 0.0) if c2 else fs.beta)
                 changed = True
+        imgui.pop_item_width()
         if changed:
             self.apply(replace(config, filters=filters))
 
