@@ -15,7 +15,8 @@ frame on screen, not the one before.
   p50/p99 (``end_to_end`` of the live stats over the last half second).
 * **Channels**: one row per input channel (by default only those the input sends) with three meters:
   raw input, after the stages (filter and calibration), after mapping (the rig weight of the shape of that
-  name: what the character gets).
+  name: what the character gets). The meters are bars (the numbers of the selected channel are under
+  Response, those of a row under the mouse in its tooltip).
 * **Filters**: One Euro min cutoff and beta per region.
 * **Response** of the channel selected (click its name in the channel rows): gain, clamp, input range ->
   output range, curve (linear / ease / threshold, with the threshold value); Reset drops the channel's entry.
@@ -31,7 +32,9 @@ frame on screen, not the one before.
 
 Every edit is a config change: a copy of the pipeline's ``LiveConfig`` (``dataclasses.replace``) handed
 to the pipeline's ``apply_config``, which applies it at the next tick. The status numbers that need a
-percentile or a file size are refreshed twice a second, not every frame, so the panel's cost stays small.
+percentile or a file size are refreshed twice a second, not every frame, so the panel's cost stays small;
+so do the meters as plain whole-pixel rectangles in the list's draw list, and the settings sections out of
+view built as one blank item (:meth:`DeskPanel._section`).
 Nothing is kept per frame.
 """
 
