@@ -15,7 +15,8 @@ frame on screen, not the one before.
   p50/p99 (``end_to_end`` of the live stats over the last half second).
 * **Channels**: one row per input channel (by default only those the input sends) with three meters:
   raw input, after the stages (filter and calibration), after mapping (the rig weight of the shape of that
-  name: what the character gets).
+  name: what the character gets). The meters are bars (the numbers of the selected channel are under
+  Response, those of a row under the mouse in its tooltip).
 * **Filters**: One Euro min cutoff and beta per region.
 * **Response** of the channel selected (click its name in the channel rows): gain, clamp, input range ->
   output range, curve (linear / ease / threshold, with the threshold value); Reset drops the channel's entry.
@@ -31,7 +32,9 @@ frame on screen, not the one before.
 
 Every edit is a config change: a copy of the pipeline's ``LiveConfig`` (``dataclasses.replace``) handed
 to the pipeline's ``apply_config``, which applies it at the next tick. The status numbers that need a
-percentile or a file size are refreshed twice a second, not every frame, so the panel's cost stays small.
+percentile or a file size are refreshed twice a second, not every frame, so the panel's cost stays small;
+so do the meters as plain whole-pixel rectangles in the list's draw list, and the settings sections out of
+view built as one blank item (:meth:`DeskPanel._section`).
 Nothing is kept per frame.
 """
 
@@ -68,11 +71,16 @@ if TYPE_CHECKING:
     from facepuppet.runtime.recording.switch import SwitchableRecorder
 
 WEIGHT_REGIONS = ("eyes", "brows", "mouth", "other", "head")
+#: per region: the ImGui ids of its two filter sliders and their :attr:`DeskPanel.rects` labels (made once)
+_FILTER_LABELS = {r: (f"##cutoff.{r}", f"##beta.{r}", f"filter.{r}.min_cutoff", f"filter.{r}.beta")
+                  for r in WEIGHT_REGIONS}
 REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed this often
 #: ImGui frames per second at most: a tick closer than 0.9 / REBUILD_HZ to the last frame draws that frame
 #: again (its buffers are uploaded already; only the draw calls), e.g. every other tick at 120 frames/s on arrival
 REBUILD_HZ = 60.0
 PANEL_WIDTH = 430
+METER_W, METER_H, METER_GAP = 80.0, 12.0, 6.0  # a channel meter's size in pixels and the gap after it
+METERS_W = 3 * (METER_W + METER_GAP) + 2.0  # the three meters of a row, before its name
 #: meter colours (RGBA 0..1): raw, after the stages, after mapping; distinct so tests and eyes can tell them apart
 METER_COLOURS = ((0.35, 0.55, 0.95, 1.0), (0.30, 0.85, 0.40, 1.0), (0.98, 0.60, 0.15, 1.0))
 #: a counter is a drop reason when its name has one of these (malformed, unknown_address, non_finite, oversized,
@@ -84,6 +92,12 @@ DROP_WORDS = ("drop", "malformed", "unknown", "finite", "oversized", "filtered",
 #: characters the panel's font (ImGui's built-in, ASCII) lacks, written as ASCII
 _NOT_IN_FONT = str.maketrans({"→": "->", "—": "-", "–": "-", "×": "x", "µ": "u", "©": "(c)", "’": "'", "“": '"',
                               "”": '"'})
+
+
+def _value_text(name: str, values: tuple[float, float, float]) -> str:
+    """A channel's three meter values as text (``-``: not sent / no shape)."""
+    return f"{name}: " + "  ".join(f"{what} {v:.2f}" if math.isfinite(v) else f"{what} -"
+                                  for what, v in zip(("raw", "filtered", "mapped"), values))
 
 
 def _ascii(text: str) -> str:
@@ -172,6 +186,8 @@ class DeskPanel:
         self._ticks = 0
         self._last_raw_at: float | None = None
         self._shape_index: dict[tuple, np.ndarray] = {}
+        self._mapped_lists: dict[int, tuple[np.ndarray, list[int]]] = {}
+        self._values: tuple | None = None  # this frame's channels and values (raw, filtered, rig, mapped index)
         self.sent_only = True
         self.selected: str | None = None  # the channel the response editor edits
         self.profile_name = ""  # the Save as field
@@ -183,6 +199,10 @@ class DeskPanel:
         self._row_pitch = 0.0  # height of a channel row, as ImGui's list clipper measured it
         self._lines: dict[str, str] = {}  # status lines built at each refresh, not every frame
         self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
+        self._spacing_y = imgui.get_style().item_spacing.y
+        self._section_h: dict[str, float] = {}  # a settings section's height when last built (skipped unseen)
+        self._section_rects: dict[str, set[str]] = {}  # the rects' labels of each settings section
+        self._collect: set[str] | None = None  # the labels remembered by the section being built
 
     # -- the loop's overlay ----------------------------------------------------------------------
 
@@ -223,6 +243,7 @@ class DeskPanel:
             self._refresh(now)
         imgui.new_frame()
         self._config = None  # read afresh this frame
+        self._values = None  # set by the channel section
         self._build(info, now)
         imgui.render()
         t1 = time.perf_counter()
@@ -282,6 +303,8 @@ class DeskPanel:
     def _remember(self, label: str) -> None:
         a, b = self.imgui.get_item_rect_min(), self.imgui.get_item_rect_max()
         self.rects[label] = (a.x, a.y, b.x, b.y)
+        if self._collect is not None:
+            self._collect.add(label)
 
     def _build(self, info: TickInfo, now: float) -> None:
         imgui = self.imgui
@@ -300,14 +323,36 @@ class DeskPanel:
             imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
             imgui.set_next_window_bg_alpha(0.85)
             imgui.begin("settings")
-        self._filter_section()
-        self._calibration_section()
-        self._face_section()
-        self._profile_section()
-        self._loss_section()
-        self._record_section(info)
-        self._info_section()
+        section = self._section
+        section("filter", self._filter_section)
+        section("calibration", self._calibration_section)
+        section("face", self._face_section)
+        section("profile", self._profile_section)
+        section("loss", self._loss_section)
+        section("record", self._record_section, info)
+        section("info", self._info_section)
         imgui.end()
+
+    def _section(self, key: str, build: Callable[..., None], *args: Any) -> None:
+        """Build a settings section, or, when the window shows none of it (scrolled out, or below the window's
+        bottom), only a blank item as tall as it was when last built: ImGui's clipping still costs a Python call
+        per widget, this costs one. Its widgets' :attr:`rects` are dropped while it is not drawn (nothing to
+        click). A section comes back the frame its space scrolls into view."""
+        imgui = self.imgui
+        h = self._section_h.get(key, 0.0)
+        if h > self._spacing_y and not imgui.is_rect_visible(imgui.ImVec2(1.0, h)):
+            imgui.dummy(imgui.ImVec2(0.0, h - self._spacing_y))  # the cursor moves on by h, as after the section
+            for label in self._section_rects.pop(key, ()):
+                self.rects.pop(label, None)
+            return
+        y0 = imgui.get_cursor_pos_y()
+        self._collect = labels = set()
+        try:
+            build(*args)
+        finally:
+            self._collect = None
+        self._section_h[key] = imgui.get_cursor_pos_y() - y0
+        self._section_rects[key] = labels
 
     def _input_section(self, now: float) -> None:
         imgui = self.imgui
@@ -316,14 +361,13 @@ class DeskPanel:
         if not self._lines:
             self._status_lines()
         lines = self._lines
-        imgui.text(lines["where"])
-        imgui.text(lines["rates"])
         age = "no frame yet" if self._last_raw_at is None else f"{(now - self._last_raw_at) * 1e3:.0f} ms"
         state = getattr(self.pipeline, "tracking_state", "-")  # waiting / live / lost / easing
         events = getattr(self.pipeline, "events", ())
         last = (f" ({'found' if events[-1][1] else 'lost'} at {events[-1][0]:.1f} s)" if events else "")
-        imgui.text(f"last frame: {age}   tracking: {state}{last}")
-        imgui.text(lines["latency"])
+        # one text item of four lines (ImGui lays out the line breaks), not four items
+        imgui.text_unformatted(f"{lines['where']}\n{lines['rates']}\nlast frame: {age}   tracking: {state}{last}\n"
+                               f"{lines['latency']}")
         imgui.text_wrapped(lines["drops"])
 
     def _status_lines(self) -> None:
@@ -346,25 +390,24 @@ class DeskPanel:
         config = self._config_now()
         filters = dict(config.filters)
         changed = False
-        for region in WEIGHT_REGIONS:
+        slider, same_line, remember, log = imgui.slider_float, imgui.same_line, self._remember, \
+            imgui.SliderFlags_.logarithmic
+        imgui.push_item_width(130)  # one width for the section's sliders, not one call per slider
+        for region, (cutoff_id, beta_id, cutoff_rect, beta_rect) in _FILTER_LABELS.items():
             fs = filters[region]
-            imgui.push_id(region)
-            imgui.set_next_item_width(130)
-            c1, cutoff = imgui.slider_float("##cutoff", fs.min_cutoff, 0.05, 10.0, "%.2f Hz",
-                                            imgui.SliderFlags_.logarithmic)
-            self._remember(f"filter.{region}.min_cutoff")
-            imgui.same_line()
-            imgui.set_next_item_width(130)
-            c2, beta = imgui.slider_float("##beta", fs.beta, 0.0, 5.0, "beta %.2f")
-            self._remember(f"filter.{region}.beta")
-            imgui.same_line()
-            imgui.text(region)
-            imgui.pop_id()
+            c1, cutoff = slider(cutoff_id, fs.min_cutoff, 0.05, 10.0, "%.2f Hz", log)
+            remember(cutoff_rect)
+            same_line()
+            c2, beta = slider(beta_id, fs.beta, 0.0, 5.0, "beta %.2f")
+            remember(beta_rect)
+            same_line()
+            imgui.text_unformatted(region)
             if c1 or c2:
                 # only the value dragged changes: ImGui hands back float32, the other keeps its exact value
                 filters[region] = replace(fs, min_cutoff=max(float(cutoff), 1e-3) if c1 else fs.min_cutoff,
                                           beta=max(float(beta), 0.0) if c2 else fs.beta)
                 changed = True
+        imgui.pop_item_width()
         if changed:
             self.apply(replace(config, filters=filters))
 
@@ -374,6 +417,19 @@ class DeskPanel:
         changed, v = imgui.slider_float(f"##{label}", float(value), lo, hi, fmt)
         self._remember(f"response.{label}")
         return changed, float(v)
+
+    def _selected_values(self, name: str) -> tuple[float, float, float] | None:
+        """This frame's raw, filtered and mapped value of channel ``name`` (None: not among the channels)."""
+        if self._values is None:
+            return None
+        channels, raw_v, flt_v, rig_v, mapped = self._values
+        try:
+            i = channels.index(name)
+        except ValueError:
+            return None
+        m = mapped[i]
+        return (raw_v[i] if raw_v is not None else math.nan, flt_v[i] if flt_v is not None else math.nan,
+                rig_v[m] if rig_v is not None and m >= 0 else math.nan)
 
     def _response_section(self) -> None:
         """The response of the selected channel: gain, clamp, input range -> output range, curve."""
@@ -389,6 +445,11 @@ class DeskPanel:
         key = canonical(name)
         cs = config.channel(name)
         imgui.text(f"{name}" + ("" if key in config.channels else " (default response)"))
+        self._remember("response.name")
+        values = self._selected_values(name)
+        if values is not None:  # the meters' numbers of this channel, every frame
+            imgui.text(_value_text("now", values))
+            self._remember("response.values")
         imgui.push_id("response")
         new = cs
         c, v = self._slider("gain", cs.gain, 0.0, 3.0, "gain %.2f")
@@ -626,8 +687,19 @@ class DeskPanel:
         ch = self.character
         if ch is not None:
             imgui.text_wrapped(_ascii(f"character: {ch.name}, {len(ch.shape_names)} shapes"))
+            self._remember("character.text")
             if getattr(ch, "credits", None):
                 imgui.text_wrapped(_ascii(f"credits: {ch.credits}"))
+
+    def _mapped_list(self, channels: tuple) -> list[int]:
+        """:meth:`_mapped_index` as a list of ints (read per row without NumPy), kept with it."""
+        idx = self._mapped_index(channels)
+        as_list = self._mapped_lists.get(id(idx))
+        if as_list is None or as_list[0] is not idx:
+            if len(self._mapped_lists) > 16:
+                self._mapped_lists.clear()
+            as_list = self._mapped_lists[id(idx)] = (idx, idx.tolist())
+        return as_list[1]
 
     def _mapped_index(self, channels: tuple) -> np.ndarray:
         """For each input channel the rig shape it drives (-1: none): the shape of the same name, else the
@@ -647,6 +719,13 @@ class DeskPanel:
         return idx
 
     def _channel_section(self, info: TickInfo) -> None:
+        """One row per channel: three meters (raw, after the stages, after mapping) and the name (click: select).
+
+        The meters are plain rectangles in the child window's draw list (a frame and a bar each, no text: the
+        values of the selected channel are in the Response section, those of a row under the mouse in its
+        tooltip), their lengths from this tick's values; ImGui lays out only the names. The values are read as
+        Python floats once per frame (three ``tolist``), not through NumPy per row.
+        """
         imgui = self.imgui
         if not imgui.collapsing_header("Channels: raw | filtered | mapped", imgui.TreeNodeFlags_.default_open):
             return
@@ -664,54 +743,81 @@ class DeskPanel:
         elif getattr(self, "_last_raw_w", None) is not None and len(self._last_raw_w) == len(channels):
             raw_w = self._last_raw_w
         flt = frame.weights if frame is not None and frame.channels == channels else None
-        mapped = self._mapped_index(channels)
+        mapped = self._mapped_list(channels)
         rig = info.weights
+        nan = math.nan
+        raw_v = raw_w.tolist() if raw_w is not None else None
+        flt_v = flt.tolist() if flt is not None else None
+        rig_v = rig.tolist() if rig is not None else None
+        self._values = (channels, raw_v, flt_v, rig_v, mapped)  # the Response section reads the selected one's
         _, self.sent_only = imgui.checkbox("only the channels the input sends", self.sent_only)
-        rows = np.arange(len(channels))
-        if self.sent_only and raw_w is not None:  # NaN: not sent (a VMC sender names only some channels)
-            rows = np.flatnonzero(np.isfinite(raw_w))
+        if self.sent_only and raw_v is not None:  # NaN: not sent (a VMC sender names only some channels)
+            rows = [i for i, v in enumerate(raw_v) if v == v]
+        else:
+            rows = range(len(channels))
         # as tall as its rows, at most a third of the window (then it scrolls; the sections below stay in view)
         pitch = self._row_pitch or imgui.get_frame_height_with_spacing()  # measured by the clipper once drawn
         fit = max(len(rows), 1) * pitch + 2 * imgui.get_style().window_padding.y
         height = min(fit, max(120.0, 0.35 * self.window_size[1]))
         imgui.begin_child("channels", imgui.ImVec2(0, height))
+        imgui.indent(METERS_W)  # the names start after the meters; the meters are drawn in the indent
+        dy = float(int(0.5 * (imgui.get_text_line_height() - METER_H)))  # whole pixels: see _draw_meters
         clipper = imgui.ListClipper()
         clipper.begin(len(rows))
-        bar = imgui.ImVec2(80, 12)
-        push, pop, progress, same_line = imgui.push_style_color, imgui.pop_style_color, imgui.progress_bar, \
-            imgui.same_line
-        hist, colours, isfinite = imgui.Col_.plot_histogram, self._colours, math.isfinite
-        nan = math.nan
+        selected, selectable, cursor, hovered = self.selected, imgui.selectable, imgui.get_cursor_screen_pos, \
+            imgui.is_item_hovered
+        shown = []  # (left, top, values) of each row drawn (ImGui's clipper: the first row, then those in view)
         while clipper.step():
-            start, end = clipper.display_start, clipper.display_end
-            if end <= start:
-                continue
-            idx = rows[start:end]  # the visible rows' values in three array reads, then plain floats
-            raw_v = raw_w[idx].tolist() if raw_w is not None else [nan] * len(idx)
-            flt_v = flt[idx].tolist() if flt is not None else [nan] * len(idx)
-            where = mapped[idx]
-            rig_v = (np.where(where >= 0, rig[np.maximum(where, 0)], nan).tolist() if rig is not None
-                     else [nan] * len(idx))
-            for n, i in enumerate(idx.tolist()):
-                row = start + n
-                for j, v in enumerate((raw_v[n], flt_v[n], rig_v[n])):
-                    push(hist, colours[j])
-                    if isfinite(v):
-                        progress(min(max(v, 0.0), 1.0), bar, f"{v:.2f}")
-                    else:
-                        progress(0.0, bar, "-")
-                    pop()
-                    if row == 0:
-                        self._remember(f"meter.0.{j}")  # the first row shown
-                    same_line()
+            for row in range(clipper.display_start, clipper.display_end):
+                i = rows[row]
+                m = mapped[i]
+                values = (raw_v[i] if raw_v is not None else nan, flt_v[i] if flt_v is not None else nan,
+                          rig_v[m] if rig_v is not None and m >= 0 else nan)
+                p = cursor()
+                shown.append((float(int(p.x - METERS_W)), float(int(p.y + dy)), values))
                 name = channels[i]
-                if imgui.selectable(name, name == self.selected)[0]:
+                if selectable(name, name == selected)[0]:
                     self.selected = name
                 self._remember(f"channel.{name}")
+                if hovered():
+                    imgui.set_tooltip(_value_text(name, values))
+        if shown:
+            self._draw_meters(imgui.get_window_draw_list(), shown)
         if clipper.items_height > 0:
             self._row_pitch = clipper.items_height
         clipper.end()
+        imgui.unindent(METERS_W)
         imgui.end_child()
+
+    def _draw_meters(self, dl: Any, shown: list) -> None:
+        """The meters of the rows drawn, into the child window's draw list ``dl``: per column one background
+        strip from the first row's top to the last row's bottom, then per meter a bar as long as its value (a
+        dash for none). Corners on whole pixels: ImGui draws a rectangle with a fractional corner as an
+        anti-aliased path (30 indices instead of 6; llvmpipe's draw call costs by the index)."""
+        imgui = self.imgui
+        vec, rect, line = imgui.ImVec2, dl.add_rect_filled, dl.add_line
+        step = METER_W + METER_GAP
+        left, top = shown[0][0], shown[0][1]
+        bottom = shown[-1][1] + METER_H
+        frame_col = imgui.get_color_u32(imgui.Col_.frame_bg)
+        for j in range(3):
+            x = left + j * step
+            rect(vec(x, top), vec(x + METER_W, bottom), frame_col)
+        for j in range(3):  # the first row's (the clipper always lays it out first)
+            self.rects[f"meter.0.{j}"] = (left + j * step, top, left + j * step + METER_W, top + METER_H)
+        colours, dash_col = self._colours, None
+        for x, y0, values in shown:
+            y1 = y0 + METER_H
+            for j in range(3):
+                v = values[j]
+                if v > 0.0:
+                    rect(vec(x, y0), vec(x + float(int(METER_W * (v if v < 1.0 else 1.0) + 0.5)), y1), colours[j])
+                elif v != v:  # not sent, or no shape of it: a dash
+                    if dash_col is None:
+                        dash_col = imgui.get_color_u32(imgui.Col_.text_disabled)
+                    line(vec(x + 0.3 * METER_W, y0 + 0.5 * METER_H), vec(x + 0.7 * METER_W, y0 + 0.5 * METER_H),
+                         dash_col)
+                x += step
 
     # -- edits --------------------------------------------------------------------------------------
 
