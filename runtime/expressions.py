@@ -376,6 +376,7 @@ class ExpressionMap:
             driven_e[self._blink_split[1]] = True
             driven_e[[p for p in self._blink_split[2] if p >= 0]] = True
         self.drives_expressions = bool(driven_e.any())
+        self._first_targets = self._first_of(n, n_s)
         reach = (drive.binds[driven_e] != 0).any(axis=0) if n_e else np.zeros(n_s, bool)
         self.undriven_target = tuple(s for k, s in enumerate(drive.shape_names)
                                      if not self._direct_mask[k] and not reach[k])
@@ -387,6 +388,32 @@ class ExpressionMap:
         self._unit = np.zeros(n, np.float32)
         self.expression_values = np.zeros(n_e, np.float32)
         self._shapes = np.zeros(n_s, np.float32)
+
+    def _first_of(self, n: int, n_s: int) -> np.ndarray:
+        first = np.full(n, -1, np.int64)
+        for i in range(n):
+            shapes = np.flatnonzero(self._direct[:, i])
+            exprs = np.flatnonzero(self._linear[:, i])
+            if shapes.size:
+                first[i] = shapes[0]
+            elif exprs.size:
+                first[i] = n_s + exprs[0]
+        for r, e in enumerate(self._named_e):
+            for i in self._named_src[r]:
+                if i < n and first[i] < 0:
+                    first[i] = n_s + e
+        if self._blink_split is not None:
+            sides, both, (left, right) = self._blink_split
+            for side, own in zip(sides, (left, right)):
+                for i in np.flatnonzero(side):
+                    if first[i] < 0:
+                        first[i] = n_s + (own if own >= 0 else int(both))
+        return first
+
+    def first_targets(self) -> np.ndarray:
+        """Per source channel the first thing it drives, (n_source,) int64: a shape s, ``n_shapes + e`` for an
+        expression e (what an operator's meter of "what the character gets" reads), or -1 for nothing."""
+        return self._first_targets
 
     @staticmethod
     def _default_rows(drive: ExpressionDrive) -> np.ndarray:

@@ -273,6 +273,8 @@ class DeskPanel:
         drops = {}
         for group in ("udp", "loop"):
             for name, value in dict(groups.get(group, {})).items():
+                if group == "loop" and name in drops:
+                    continue  # the loop's stale_dropped counts the frames the receiver superseded: shown once
                 if any(w in name for w in DROP_WORDS) and isinstance(value, (int, np.integer)) and value:
                     drops[f"{name}" if group == "udp" else f"{group}.{name}"] = int(value)
         s["drops"] = drops
@@ -702,9 +704,19 @@ class DeskPanel:
         return as_list[1]
 
     def _mapped_index(self, channels: tuple) -> np.ndarray:
-        """For each input channel the rig shape it drives (-1: none): the shape of the same name, else the
-        first the by-name channel map sends it to (an unsided browInnerUp drives browInnerUp_L and _R)."""
+        """For each input channel what it drives (-1: none): with the run's expression drive (a VRM character,
+        a ``[mapping]``) the first shape or expression its map sends it to (``n_shapes + e`` for expression e:
+        the meters read the shapes' weights followed by the expressions' values); else the shape of the same
+        name, or the first the by-name channel map sends it to (an unsided browInnerUp drives browInnerUp_L)."""
         idx = self._shape_index.get(channels)
+        drive = getattr(self.chain, "drive", None)
+        if idx is None and drive is not None and tuple(drive.shape_names) == self.names:
+            from facepuppet.runtime.expressions import ExpressionMap
+
+            idx = ExpressionMap(drive, channels).first_targets()
+            if len(self._shape_index) > 16:
+                self._shape_index.clear()
+            self._shape_index[channels] = idx
         if idx is None:
             where = {canonical(n): i for i, n in enumerate(self.names)}
             idx = np.array([where.get(canonical(c), -1) for c in channels], dtype=np.int64)
@@ -749,6 +761,10 @@ class DeskPanel:
         raw_v = raw_w.tolist() if raw_w is not None else None
         flt_v = flt.tolist() if flt is not None else None
         rig_v = rig.tolist() if rig is not None else None
+        drive = getattr(self.chain, "drive", None)
+        if rig_v is not None and drive is not None and len(drive.expression_names):  # then the expressions' values
+            ex = info.expressions
+            rig_v += ex.tolist() if ex is not None else [nan] * len(drive.expression_names)
         self._values = (channels, raw_v, flt_v, rig_v, mapped)  # the Response section reads the selected one's
         _, self.sent_only = imgui.checkbox("only the channels the input sends", self.sent_only)
         if self.sent_only and raw_v is not None:  # NaN: not sent (a VMC sender names only some channels)
