@@ -402,18 +402,25 @@ class ExpressionMap:
             for i in self._named_src[r]:
                 if i < n and first[i] < 0:
                     first[i] = n_s + e
-        if self._blink_split is not None:
-            sides, both, (left, right) = self._blink_split
-            for side, own in zip(sides, (left, right)):
-                for i in np.flatnonzero(side):
-                    if first[i] < 0:
-                        first[i] = n_s + (own if own >= 0 else int(both))
+        if self._blink_split is not None:  # an eye's closing is the both-eyes Blink plus its own
+            for k, side in enumerate(self._blink_split[0]):
+                first[(side != 0) & (first < 0)] = n_s + len(self._linear) + k
         return first
 
     def first_targets(self) -> np.ndarray:
         """Per source channel the first thing it drives, (n_source,) int64: a shape s, ``n_shapes + e`` for an
-        expression e (what an operator's meter of "what the character gets" reads), or -1 for nothing."""
+        expression e, ``n_shapes + n_expressions + k`` for eye k's blink when the blinks are split into Blink and
+        Blink_L/R (:meth:`eye_blinks`), or -1 for nothing: what an operator's meter of "what the character gets"
+        reads from the shapes' weights, the expressions' values and the eyes' blinks, in that order."""
         return self._first_targets
+
+    def eye_blinks(self, expression_values: np.ndarray) -> tuple[float, float]:
+        """(left, right) closing of the eyes in ``expression_values`` when the blinks are split: Blink plus the
+        eye's own Blink_L/R, at most 1 (both 0.0 without a split)."""
+        if self._blink_split is None:
+            return 0.0, 0.0
+        both, own = float(expression_values[self._blink_split[1]]), self._blink_split[2]
+        return tuple(min(1.0, both + (float(expression_values[o]) if o >= 0 else 0.0)) for o in own)
 
     @staticmethod
     def _default_rows(drive: ExpressionDrive) -> np.ndarray:

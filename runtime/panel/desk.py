@@ -187,6 +187,7 @@ class DeskPanel:
         self._last_raw_at: float | None = None
         self._shape_index: dict[tuple, np.ndarray] = {}
         self._mapped_lists: dict[int, tuple[np.ndarray, list[int]]] = {}
+        self._expression_maps: dict[tuple, Any] = {}  # the run drive's map per channel layout (VRM expressions)
         self._values: tuple | None = None  # this frame's channels and values (raw, filtered, rig, mapped index)
         self.sent_only = True
         self.selected: str | None = None  # the channel the response editor edits
@@ -713,10 +714,13 @@ class DeskPanel:
         if idx is None and drive is not None and tuple(drive.shape_names) == self.names:
             from facepuppet.runtime.expressions import ExpressionMap
 
-            idx = ExpressionMap(drive, channels).first_targets()
+            emap = ExpressionMap(drive, channels)
+            idx = emap.first_targets()
             if len(self._shape_index) > 16:
                 self._shape_index.clear()
+                self._expression_maps.clear()
             self._shape_index[channels] = idx
+            self._expression_maps[channels] = emap
         if idx is None:
             where = {canonical(n): i for i, n in enumerate(self.names)}
             idx = np.array([where.get(canonical(c), -1) for c in channels], dtype=np.int64)
@@ -765,6 +769,8 @@ class DeskPanel:
         if rig_v is not None and drive is not None and len(drive.expression_names):  # then the expressions' values
             ex = info.expressions
             rig_v += ex.tolist() if ex is not None else [nan] * len(drive.expression_names)
+            emap = self._expression_maps.get(channels)  # then the eyes' blinks (Blink + Blink_L/R)
+            rig_v += list(emap.eye_blinks(ex)) if ex is not None and emap is not None else [nan, nan]
         self._values = (channels, raw_v, flt_v, rig_v, mapped)  # the Response section reads the selected one's
         _, self.sent_only = imgui.checkbox("only the channels the input sends", self.sent_only)
         if self.sent_only and raw_v is not None:  # NaN: not sent (a VMC sender names only some channels)

@@ -74,3 +74,31 @@ def test_a_drop_counted_by_the_receiver_and_the_loop_is_shown_once(egl_ctx):
                       address="127.0.0.1:1", clock=lambda: 1.0, counters=lambda: counters)
     panel._refresh(1.0)
     assert panel._status["drops"] == {"stale_dropped": 5, "malformed": 2}
+
+
+@pytest.mark.gl
+@pytest.mark.data
+def test_the_mapped_meter_of_a_blink_is_the_eyes_closing_on_godette(egl_ctx):
+    """Godette has Blink, Blink_L and Blink_R (binary): what both eyes share goes to Blink, the rest to each
+    eye's own; an eye's meter shows the sum, at most 1 (the right eye's own Blink_R alone would read 0 here)."""
+    from facepuppet.offline.io.gltf_read import read_gltf
+    from tests.conftest import need_shared
+
+    c = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
+    drive = make_drive(c.shape_names, c.expressions)
+    renderer = FaceRenderer(egl_ctx, c, 320, 240, path="gpu", log=lambda s: None)
+    chain = Chain(input="test", stages=(), names=c.shape_names, drive=drive)
+    seen = []
+    panel = DeskPanel(egl_ctx, renderer.fbo, 320, 240, chain=chain, character=c, input_kind="test",
+                      address="127.0.0.1:1", clock=lambda: len(seen) / 30)
+    channels = ("eyeBlinkLeft", "eyeBlinkRight")
+    frames = [Frame(t=i / 30, source="test", channels=channels, weights=np.array([0.9, 0.2])) for i in range(6)]
+    loop = FrameLoop(c.shape_names, renderer, RecordedClock(), fps=30.0, log=lambda s: None, drive=drive,
+                     on_tick=[lambda info: seen.append(info)], overlays=(panel.overlay,))
+    loop.run(ReplaySource(frames), duration=5 / 30)
+    ex, names = seen[-1].expressions, c.expressions.names
+    assert ex[names.index("Blink")] == pytest.approx(0.2)  # shared
+    assert ex[names.index("Blink_L")] == 1.0 and ex[names.index("Blink_R")] == 0.0  # 0.7 and 0: binary
+    assert panel._selected_values("eyeBlinkLeft")[2] == pytest.approx(1.0)
+    assert panel._selected_values("eyeBlinkRight")[2] == pytest.approx(0.2)
+    renderer.close()
