@@ -26,6 +26,23 @@ from facepuppet.runtime.panel.desk import DeskPanel  # noqa: E402
 CHANNELS = ("eyeBlinkLeft", "jawOpen", "A", "nothingAtAll")
 
 
+def _drive(egl_ctx, c, channels, values, n):
+    """A panel over ``c`` driven through its expressions by ``n`` frames of ``values`` in a real frame loop:
+    (panel, the last tick's info)."""
+    drive = make_drive(c.shape_names, c.expressions)
+    renderer = FaceRenderer(egl_ctx, c, 320, 240, path="gpu", log=lambda s: None)
+    chain = Chain(input="test", stages=(), names=c.shape_names, drive=drive)
+    seen = []
+    panel = DeskPanel(egl_ctx, renderer.fbo, 320, 240, chain=chain, character=c, input_kind="test",
+                      address="127.0.0.1:1", clock=lambda: len(seen) / 30)
+    frames = [Frame(t=i / 30, source="test", channels=channels, weights=np.array(values)) for i in range(n)]
+    loop = FrameLoop(c.shape_names, renderer, RecordedClock(), fps=30.0, log=lambda s: None, drive=drive,
+                     on_tick=[lambda info: seen.append(info)], overlays=(panel.overlay,))
+    loop.run(ReplaySource(frames), duration=(n - 1) / 30)
+    renderer.close()
+    return panel, seen[-1]
+
+
 def test_first_targets_name_the_shape_or_expression_each_channel_drives():
     c = parts_character()
     drive = make_drive(c.shape_names, c.expressions)
@@ -41,28 +58,17 @@ def test_first_targets_name_the_shape_or_expression_each_channel_drives():
 @pytest.mark.gl
 def test_the_mapped_meter_shows_the_expression_a_channel_drives(egl_ctx):
     c = parts_character()
-    drive = make_drive(c.shape_names, c.expressions)
-    renderer = FaceRenderer(egl_ctx, c, 320, 240, path="gpu", log=lambda s: None)
-    chain = Chain(input="test", stages=(), names=c.shape_names, drive=drive)
-    seen = []
-    panel = DeskPanel(egl_ctx, renderer.fbo, 320, 240, chain=chain, character=c, input_kind="test",
-                      address="127.0.0.1:1", clock=lambda: len(seen) / 30)
-    frames = [Frame(t=i / 30, source="test", channels=CHANNELS, weights=np.array([0.7, 0.4, 0.9, 0.5]))
-              for i in range(8)]
-    loop = FrameLoop(c.shape_names, renderer, RecordedClock(), fps=30.0, log=lambda s: None, drive=drive,
-                     on_tick=[lambda info: seen.append(info)], overlays=(panel.overlay,))
-    loop.run(ReplaySource(frames), duration=7 / 30)
+    panel, last = _drive(egl_ctx, c, CHANNELS, [0.7, 0.4, 0.9, 0.5], 8)
     names = c.expressions.names
-    expressions = seen[-1].expressions
+    expressions = last.expressions
     assert expressions is not None and expressions[names.index("Blink")] == pytest.approx(0.35)  # half of a side
     raw, _, mapped = panel._selected_values("eyeBlinkLeft")
     assert raw == pytest.approx(0.7) and mapped == pytest.approx(float(expressions[names.index("Blink")]))
     assert expressions[names.index("A")] == 1.0  # binary: 0.9 -> 1
     assert panel._selected_values("A")[2] == 1.0
     assert panel._selected_values("jawOpen")[2] == pytest.approx(
-        float(seen[-1].weights[c.shape_names.index("jawOpen")]))
+        float(last.weights[c.shape_names.index("jawOpen")]))
     assert math.isnan(panel._selected_values("nothingAtAll")[2])
-    renderer.close()
 
 
 @pytest.mark.gl
@@ -85,20 +91,9 @@ def test_the_mapped_meter_of_a_blink_is_the_eyes_closing_on_godette(egl_ctx):
     from tests.conftest import need_shared
 
     c = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
-    drive = make_drive(c.shape_names, c.expressions)
-    renderer = FaceRenderer(egl_ctx, c, 320, 240, path="gpu", log=lambda s: None)
-    chain = Chain(input="test", stages=(), names=c.shape_names, drive=drive)
-    seen = []
-    panel = DeskPanel(egl_ctx, renderer.fbo, 320, 240, chain=chain, character=c, input_kind="test",
-                      address="127.0.0.1:1", clock=lambda: len(seen) / 30)
-    channels = ("eyeBlinkLeft", "eyeBlinkRight")
-    frames = [Frame(t=i / 30, source="test", channels=channels, weights=np.array([0.9, 0.2])) for i in range(6)]
-    loop = FrameLoop(c.shape_names, renderer, RecordedClock(), fps=30.0, log=lambda s: None, drive=drive,
-                     on_tick=[lambda info: seen.append(info)], overlays=(panel.overlay,))
-    loop.run(ReplaySource(frames), duration=5 / 30)
-    ex, names = seen[-1].expressions, c.expressions.names
+    panel, last = _drive(egl_ctx, c, ("eyeBlinkLeft", "eyeBlinkRight"), [0.9, 0.2], 6)
+    ex, names = last.expressions, c.expressions.names
     assert ex[names.index("Blink")] == pytest.approx(0.2)  # shared
     assert ex[names.index("Blink_L")] == 1.0 and ex[names.index("Blink_R")] == 0.0  # 0.7 and 0: binary
     assert panel._selected_values("eyeBlinkLeft")[2] == pytest.approx(1.0)
     assert panel._selected_values("eyeBlinkRight")[2] == pytest.approx(0.2)
-    renderer.close()
