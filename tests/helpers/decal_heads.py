@@ -21,7 +21,8 @@ FRONT = 5.0  # the box's front face (z)
 LIFT = 0.1  # the decals in front of it
 
 
-def _box(n: int = 8) -> tuple[np.ndarray, np.ndarray]:
+def closed_box(n: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """A closed (welded) cube of side 10 about the origin, n x n quads a side, every face outward."""
     verts, tris = [], []
     g = np.linspace(-5, 5, n + 1)
     for axis in range(3):
@@ -79,7 +80,7 @@ def decal_box_head() -> tuple[Character, dict]:
     """The box head with drawn eyes and mouth (see the module doc), and its pieces' vertices by name: "skin",
     "iris_L", "lash_L", "iris_R", "lash_R", "mouth" (the two strips; "mouth_upper" the upper one's top row,
     "mouth_lower" the lower one's bottom row)."""
-    parts = [_box()]
+    parts = [closed_box()]
     names = ["skin"]
     skin_v, _ = parts[0]
     nose = np.flatnonzero((np.abs(skin_v[:, 0]) < 1e-6) & (np.abs(skin_v[:, 1]) < 1e-6) & (skin_v[:, 2] > 4.9))

@@ -9,27 +9,12 @@ from facepuppet.runtime.demo.head import build_demo_character
 
 from facepuppet.offline.elastic.clone import mesh_character
 from facepuppet.offline.perfect_sync.face import FaceError, find_face
+from helpers.decal_heads import closed_box
 
 
 def _box(n: int = 12) -> tuple[np.ndarray, np.ndarray]:
-    """A closed (welded) cube of side 10 with n x n quads per side (each quad two triangles)."""
-    verts, tris = [], []
-    g = np.linspace(-5, 5, n + 1)
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            base = len(verts)
-            for a in g:
-                for b in g:
-                    p = [0.0, 0.0, 0.0]
-                    p[axis], p[(axis + 1) % 3], p[(axis + 2) % 3] = 5 * sign, a, b
-                    verts.append(p)
-            for i in range(n):
-                for j in range(n):
-                    q = base + i * (n + 1) + j
-                    t1, t2 = (q, q + n + 1, q + 1), (q + 1, q + n + 1, q + n + 2)
-                    tris += [t1, t2] if sign > 0 else [t1[::-1], t2[::-1]]
-    v, inverse = np.unique(np.round(np.array(verts), 6), axis=0, return_inverse=True)  # weld the edges
-    return v.astype(np.float32), inverse.reshape(-1)[np.array(tris)].astype(np.uint32)
+    v, t = closed_box(n)
+    return v.astype(np.float32), t.astype(np.uint32)
 
 
 def test_demo_head_face_is_found_with_its_frame():
