@@ -209,7 +209,9 @@ def find_face(character: Character) -> Face:
         face, _ = _find_face(character)
     except FaceError as exc:
         face, failure = None, exc
-    if character.layout is not None and face is not None:
+    if character.layout is not None:  # glTF faces +Z by its spec, a VRM 0.x is turned on import: no --forward
+        if face is None:
+            raise failure
         return face
     axis = None
     moved = moving_vertices(character)
@@ -221,6 +223,11 @@ def find_face(character: Character) -> Face:
         best = max(options, key=options.get)
         if options[best] > SHAPES_LEAN * float(np.ptp(v[mesh], axis=0).max()):  # else the shapes say nothing
             axis = best
+        if face is None and axis not in (None, "+z"):  # no face here: one must be there for the hint to help
+            try:
+                _find_face(_turned(character, dict(OTHER_FACINGS)[axis]))
+            except FaceError:
+                axis = None
     elif face is None:
         found = []
         for name, degrees in OTHER_FACINGS:

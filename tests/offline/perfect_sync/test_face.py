@@ -73,3 +73,20 @@ def test_the_ict_head_turned_round_is_refused_by_where_its_shapes_move(ict_chara
                                                   "import-rig --forward=-z")):
         find_face(turned)
     assert find_face(c).evidence == "shapes"
+
+
+def test_a_mesh_too_small_for_a_face_is_refused_without_a_turn_hint():
+    """SimpleMorph-like: a triangle whose shape leans sideways is not a face looking along +X; and a glTF
+    character (it has a layout) is never told to use the OBJ import's --forward."""
+    from helpers.gltf_characters import parts_character
+
+    c = build_demo_character()
+    tiny = mesh_character(c.vertices[:3], np.array([[0, 1, 2]], np.uint32), "tiny")
+    tiny = tiny.with_parts(shape_names=("side",), delta_offsets=np.array([0, 3]),
+                           delta_indices=np.arange(3, dtype=np.uint32),
+                           delta_positions=np.array([[5, 0, 0]] * 3, np.float32),
+                           delta_normals=np.zeros((3, 3), np.float32))
+    for character in (tiny, parts_character()):
+        with pytest.raises(FaceError) as caught:
+            find_face(character)
+        assert "no recognisable face" in str(caught.value) and "--forward" not in str(caught.value)
