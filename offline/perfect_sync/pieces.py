@@ -43,7 +43,25 @@ moves nothing that the artist's shapes move. This module:
   behind the skin in front of it, by its stand-off plus ``HIDDEN`` of the
   eye's width. ``CLOSED`` and ``HIDDEN`` are chosen constants (5 %), not
   fitted to a character: Godette's blink cosine moves 0.72–0.74 for
-  ``HIDDEN`` from 0 to 0.2;
+  ``HIDDEN`` from 0 to 0.2. (5 % of a thin lash strip is a hair-line: in the
+  take's side-by-side her closed eye reads as a faint broken line, where her
+  artist lowers the stroke whole; lowering each outline column whole onto
+  the line read better but took her blink cosine to 0.67, below the goal,
+  so it is not done);
+* narrows a decal eye in the squints the same drawn way (:func:`decal_squint`):
+  toward the corner line, what lies above it by the fraction of the blink's
+  way that the source's squint lowers its upper lid points, what lies below
+  by the fraction it raises the lower ones (:func:`squint_fractions`,
+  measured on the source: ICT 0.03 and 0.42), the iris with it; the field
+  squashed the lash outline into a V and pulled the iris (in the kit's take
+  the blinks come with eyeSquint and eyeLookDown at partial weights);
+* gives a decal eye's looks to what lies inside it only (iris, white; the
+  outline, the lashes and the skin stay): the character's own VRM look
+  expressions' part on that eye where it has them (:func:`look_expressions`,
+  :func:`look_keys`: Godette's ``look_up`` etc.; these come from her lookAt,
+  not from cloning), otherwise the inside slides by the source's eye turn on
+  a ball of half the eye's width, held inside the outline
+  (:func:`decal_look_slide`);
 * opens a decal mouth in the jaw's shapes (``JAW_OPENINGS`` of
   :mod:`.transfer`) by the lips' motion relative to each other: the skin
   around it does not move (no mouth hole, no lips), so the jaw's drop, the
@@ -61,6 +79,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 from scipy.spatial import cKDTree
+
+from facepuppet.runtime.character_parts import Expressions
 
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.lip_line import boundary_loops
@@ -418,6 +438,15 @@ def skin_front_depth(xy: np.ndarray, local: np.ndarray, triangles: np.ndarray) -
     return np.where(np.isfinite(out), out, np.nan)
 
 
+def _above_corner_line(pieces: Pieces, local: np.ndarray, side: str) -> np.ndarray:
+    """Height (face-frame y) of each vertex of the ``side`` decal eye's pieces above the line through its drawn
+    corners (:func:`drawn_corners`); negative below it."""
+    members, _ = pieces.eyes[side]
+    inner, outer = drawn_corners(pieces, local, side)
+    slope = (outer[1] - inner[1]) / (outer[0] - inner[0]) if abs(outer[0] - inner[0]) > 1e-12 else 0.0
+    return local[members, 1] - (inner[1] + slope * (local[members, 0] - inner[0]))
+
+
 def decal_blink(pieces: Pieces, face: Face, vertices: np.ndarray, skin_triangles: np.ndarray,
                 side: str) -> tuple[np.ndarray, np.ndarray]:
     """The closed drawn eye of ``side``: (its pieces' vertices, their displacements (m, 3) in world axes).
@@ -432,11 +461,9 @@ def decal_blink(pieces: Pieces, face: Face, vertices: np.ndarray, skin_triangles
     v = np.asarray(vertices, np.float64)
     local = face.to_frame(v)
     members, (x0, x1, _, _) = pieces.eyes[side]
-    inner, outer = drawn_corners(pieces, local, side)
-    slope = (outer[1] - inner[1]) / (outer[0] - inner[0]) if abs(outer[0] - inner[0]) > 1e-12 else 0.0
-    line = inner[1] + slope * (local[members, 0] - inner[0])
+    height = _above_corner_line(pieces, local, side)
     d = np.zeros((len(members), 3))
-    d[:, 1] = -(1.0 - CLOSED) * (local[members, 1] - line)
+    d[:, 1] = -(1.0 - CLOSED) * height
     hide = np.isin(members, eye_inside(pieces, local, side))
     d[hide, 1] = 0.0  # covered, not folded: what lies inside the eye keeps its shape and goes behind the skin
     if hide.any() and len(skin_triangles):
@@ -458,3 +485,124 @@ def lip_line_motion(pieces: Pieces, face: Face, vertices: np.ndarray, source_pos
     args = (pieces, face, vertices, source_positions, names, params, shape_names, m, on)
     return 0.5 * (feature_field(*args, below=np.zeros(len(m), bool)) + feature_field(*args, below=np.ones(len(m),
                                                                                                            bool)))
+
+
+def squint_fractions(source_positions: np.ndarray, names: tuple, params: np.ndarray, shape_names: tuple,
+                     key: str, side: str) -> tuple[float, float]:
+    """(upper, lower): how far the source's shape ``key`` (an eyeSquint) brings the ``side`` eye's upper lid down
+    and its lower lid up, each as a fraction of the gap its blink closes (the mean over the inner and outer lid
+    points; each in [0, 1]; (0, 0) without the lid points or the blink). Measured on the source's parameters, not
+    a chosen constant: ICT's squint raises the lower lid 0.42 of the blink's closure and lowers the upper 0.03."""
+    idx = {n: i for i, n in enumerate(names)}
+    blink = {"L": "eyeBlinkLeft", "R": "eyeBlinkRight"}[side]
+    if key not in shape_names or blink not in shape_names:
+        return 0.0, 0.0
+    prm = np.asarray(params, np.float64)
+    sq, bl = prm[shape_names.index(key)], prm[shape_names.index(blink)]
+    up, low = [], []
+    for part in ("inner", "outer"):
+        i, j = idx.get(f"lid_upper_{part}_{side}"), idx.get(f"lid_lower_{part}_{side}")
+        if i is None or j is None:
+            continue
+        closure = bl[j, 1] - bl[i, 1]  # the blink's closing of the gap (upper down, lower up)
+        if closure <= 1e-12:
+            continue
+        up.append(-sq[i, 1] / closure)
+        low.append(sq[j, 1] / closure)
+    if not up:
+        return 0.0, 0.0
+    return float(np.clip(np.mean(up), 0.0, 1.0)), float(np.clip(np.mean(low), 0.0, 1.0))
+
+
+def decal_squint(pieces: Pieces, face: Face, vertices: np.ndarray, side: str, upper: float,
+                 lower: float) -> tuple[np.ndarray, np.ndarray]:
+    """The narrowed drawn eye of ``side``: (its pieces' vertices, their displacements (m, 3) in world axes). A drawn
+    eye narrows the way it closes (:func:`decal_blink`): toward the line through its corners along the face's up,
+    what lies above the line by ``upper`` of the blink's way there, what lies below by ``lower``
+    (:func:`squint_fractions`), the iris and white with it (a squint does not hide them)."""
+    local = face.to_frame(np.asarray(vertices, np.float64))
+    members, _ = pieces.eyes[side]
+    height = _above_corner_line(pieces, local, side)
+    d = np.zeros((len(members), 3))
+    d[:, 1] = -(1.0 - CLOSED) * height * np.where(height > 0, upper, lower)
+    return members, d @ face.frame
+
+
+#: The VRM 0.x look presets whose shapes give a decal eye's looks where a character has them.
+LOOK_PRESETS = ("LookUp", "LookDown", "LookLeft", "LookRight")
+
+
+def look_expressions(expressions: Expressions | None, delta_offsets: np.ndarray, delta_indices: np.ndarray,
+                     delta_positions: np.ndarray, n_vertices: int) -> dict:
+    """{preset: dense displacements (n_vertices, 3) float64} of the character's own VRM look expressions
+    (``expressions``: its :class:`~facepuppet.runtime.character_parts.Expressions`, or None), each its binds'
+    weighted sum of the character's sparse shape deltas; an expression that binds no shape is left out."""
+    out: dict = {}
+    if expressions is None:
+        return out
+    for e, preset in enumerate(expressions.presets):
+        if preset not in LOOK_PRESETS or preset in out:
+            continue
+        shapes, weights = expressions.binds(e)
+        d = np.zeros((n_vertices, 3))
+        for s, w in zip(shapes.astype(np.int64), weights):
+            sl = slice(int(delta_offsets[s]), int(delta_offsets[s + 1]))
+            np.add.at(d, delta_indices[sl].astype(np.int64), float(w) * delta_positions[sl].astype(np.float64))
+        if np.abs(d).max(initial=0.0) > 0:
+            out[preset] = d
+    return out
+
+
+def look_keys(looks: dict, pieces: Pieces, face: Face, vertices: np.ndarray) -> dict:
+    """{(ARKit eye-look key, side): (preset, the ``side`` eye's inside vertices)} for the character's own look
+    expressions ``looks`` (:func:`look_expressions`): which ARKit look of which eye each is, told by where it moves
+    that eye's iris (the mean motion of :func:`eye_inside` in the face frame), not by its name: a horizontal one
+    toward +x (the character's left) is eyeLookOutLeft on the left eye and eyeLookInRight on the right one, an
+    upward one eyeLookUp. Of two giving one key, the one moving the iris farther."""
+    local = face.to_frame(np.asarray(vertices, np.float64))
+    best: dict = {}
+    for preset, d in looks.items():
+        motion = d @ face.frame.T  # face-frame axes
+        for side in pieces.eyes:
+            inside = eye_inside(pieces, local, side)
+            if not len(inside):
+                continue
+            mean = motion[inside].mean(0)
+            if preset in ("LookUp", "LookDown"):
+                amount, key = abs(mean[1]), "eyeLookUp" if mean[1] > 0 else "eyeLookDown"
+            else:
+                toward_left = mean[0] > 0
+                amount = abs(mean[0])
+                key = ("eyeLookOut" if toward_left else "eyeLookIn") if side == "L" else (
+                    "eyeLookIn" if toward_left else "eyeLookOut")
+            if amount <= 1e-9:
+                continue
+            key += "Left" if side == "L" else "Right"
+            if (key, side) not in best or amount > best[(key, side)][0]:
+                best[(key, side)] = (amount, preset, inside)
+    return {k: (preset, inside) for k, (_, preset, inside) in best.items()}
+
+
+def decal_look_slide(pieces: Pieces, face: Face, vertices: np.ndarray, side: str, axis: int,
+                     slide: float) -> tuple[np.ndarray, np.ndarray]:
+    """A drawn eye's look where the character has no look expression: (the ``side`` eye's inside vertices
+    (:func:`eye_inside`), their displacement (m, 3) in world axes). They slide together by ``slide`` along the
+    face frame's ``axis`` (0 across, + toward the character's left; 1 up), held inside the outline (the eye's other
+    pieces): across, the iris stays between the outline's ends; up, its top stays below the outline's top, and
+    down it goes no farther than up may (a drawn eye's outline is often its upper lid only). An eye with no outline
+    piece slides unheld."""
+    local = face.to_frame(np.asarray(vertices, np.float64))
+    members, _ = pieces.eyes[side]
+    inside = eye_inside(pieces, local, side)
+    outline = members[~np.isin(members, inside)]
+    if len(outline) and len(inside):
+        p, o = local[inside, axis], local[outline, axis]
+        if axis == 0:
+            room_low, room_high = max(p.min() - o.min(), 0.0), max(o.max() - p.max(), 0.0)
+        else:
+            room_high = max(o.max() - p.max(), 0.0)
+            room_low = room_high
+        slide = float(np.clip(slide, -room_low, room_high))
+    d = np.zeros((len(inside), 3))
+    d[:, axis] = slide
+    return inside, d @ face.frame
