@@ -539,3 +539,21 @@ def test_godette_closed_eye_looking_down_and_squinting_stays_a_line(godette_run,
     for k in range(len(lash)):  # no crossing within a column
         col = (np.abs(x - x[k]) < 0.02 * width) & (rest < rest[k] - 1e-9)
         assert (closed[col] <= closed[k] + 1e-9).all()
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_godettes_looks_are_reported_from_her_look_at_and_her_blinks_as_cloned(godette_run):
+    """bench perfect-sync's Godette pairs: her eye looks come from her own look expressions, so their cosines are
+    not cloning figures (on main all were reported alike, as cloned); the blinks are cloned and keep the goal."""
+    from facepuppet.offline.perfect_sync.evaluate import LOOKAT, godette_pairs
+    from facepuppet.offline.perfect_sync.face import find_face
+
+    _, out, report, _ = godette_run
+    pairs = godette_pairs(out, report["pieces"]["eye_looks"], find_face(out).mesh)
+    for key in ("eyeLookUpLeft~look_up", "eyeLookDownLeft+eyeLookDownRight~look_down",
+                "eyeLookOutLeft+eyeLookInRight~look_left", "eyeLookInLeft~look_right"):
+        assert pairs[key]["from"] == LOOKAT, key
+    for key in ("eyeBlinkLeft~blink_left", "eyeBlinkRight~blink_right", "jawOpen~ah"):
+        assert pairs[key]["from"] == "cloned", key
+    assert pairs["eyeBlinkLeft~blink_left"]["cosine"] >= 0.7 and pairs["eyeBlinkRight~blink_right"]["cosine"] >= 0.7
