@@ -357,19 +357,19 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     keep their motion, except that on a decal face the jaw found from the skin's points is not trusted: what of it
     the field does not move stays. A piece centred within the ``mouth`` ball (centre, radius) is the inside of
     the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too. A decal eye
-    closes, narrows and looks as a drawn eye does (:func:`~.pieces.decal_blink`, :func:`~.pieces.decal_squint`,
+    closes, narrows and looks as a drawn eye does (:func:`~.pieces.decal_blink`, :func:`~.pieces.decal_narrow`,
     :func:`decal_eye_looks`, the last from the character's own look expressions ``looks`` where it has them).
 
     Returns {"decal_eyes": sides, "decal_mouth": bool, "carried_vertices": n, "field_vertices": n} and, on a decal
     face, "eye_looks": where each decal eye's look came from (:func:`decal_eye_looks`)."""
     from facepuppet.offline.perfect_sync.pieces import (
         decal_blink,
-        decal_squint,
+        decal_narrow,
         embed,
         feature_field,
         find_pieces,
+        lid_fractions,
         lip_line_motion,
-        squint_fractions,
     )
     from facepuppet.offline.perfect_sync.proposal import skin_triangles
 
@@ -405,12 +405,14 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
         if key in names and side in pieces.eyes:  # the drawn eye closes on the line between its corners
             members, d = decal_blink(pieces, face, vertices, skin_t, side)
             dense[names.index(key), members] = d
-    for key, side in (("eyeSquintLeft", "L"), ("eyeSquintRight", "R")):
-        if key in names and side in pieces.eyes:  # and narrows toward that line, as far as the source's lids say
-            upper, lower = squint_fractions(source.arrays["control_positions"], tuple(source.control_names),
+    for s, key in enumerate(names):
+        if key in ("eyeBlinkLeft", "eyeBlinkRight") or any((key, side) in EYE_TURNS for side in "LR"):
+            continue
+        for side in pieces.eyes:  # the others narrow (or open) it toward that line, as far as the source's lids say
+            upper, lower = lid_fractions(source.arrays["control_positions"], tuple(source.control_names),
                                             params, names, key, side)
-            members, d = decal_squint(pieces, face, vertices, side, upper, lower)
-            dense[names.index(key), members] = d
+            members, d = decal_narrow(pieces, face, vertices, side, upper, lower)
+            dense[s, members] = d
     looks_from = decal_eye_looks(dense, names, vertices, face, pieces, looks)
     return {"decal_eyes": sorted(pieces.eyes), "decal_mouth": pieces.mouth is not None, "carried_vertices": 0,
             "field_vertices": int(len(np.unique(moved))), "eye_looks": looks_from}

@@ -506,21 +506,24 @@ def _take_weights(t: float) -> dict:
 
 @pytest.mark.data
 @pytest.mark.slow
-@pytest.mark.parametrize("t", [1.83, 2.07])
-def test_godette_closed_eye_looking_down_and_squinting_stays_a_line(godette_run, t):
+@pytest.mark.parametrize("t, channels", [(1.83, "eyes"), (2.07, "eyes"), (1.83, "all"), (2.07, "all")])
+def test_godette_closed_eye_looking_down_and_squinting_stays_a_line(godette_run, t, channels):
     """In the take she blinks while looking down and squinting (at 1.83 s: eyeBlinkLeft 0.87, eyeLookDownLeft
-    0.45, eyeSquintLeft 0.21): her left lash outline under these weights lies between the line through its rest
-    ends and 10 % of the eye's height above it, within 5 % below it, and keeps its order in each column (on
-    main the looks' and the squint's landmark field pulled it 40 % of the eye's height below that line: the V
-    blob of the side-by-side picture)."""
+    0.46, eyeSquintLeft 0.20): her left lash outline under these weights lies between the line through its rest
+    ends and a quarter of the eye's height above it (at rest two thirds; the blink at 0.87 leaves 13 % of the way
+    and the closed stroke's thickness), within 5 % below it, within 5 % of where the blink alone puts it, and
+    keeps its order in each column (on main the looks' and the squint's landmark field pulled it 40 % of the
+    eye's height below that line, 32 % from the blink alone: the V blob of the side-by-side picture)."""
     _, out, _, _ = godette_run
     w = _take_weights(t)
     assert w["eyeBlinkLeft"] > 0.8 and w["eyeLookDownLeft"] > 0.4 and w["eyeSquintLeft"] > 0.15  # what is tested
     dense = out.dense_deltas().astype(np.float64)
     iris, lash, height = _eye(out, "blink_left")
     v = out.vertices.astype(np.float64)
-    shut = v + sum(w[k] * dense[out.shape_names.index(k)] for k in (
-        "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft"))
+    keys = ("eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft")
+    if channels == "all":  # the whole frame: her brows down (0.82, 0.91) and cheeks squinting (0.46, 0.66) too
+        keys = tuple(k for k in w if k in out.shape_names)
+    shut = v + sum(w[k] * dense[out.shape_names.index(k)] for k in keys)
     x = v[lash, 0]
     width = np.ptp(x)
     ends = [v[lash[np.abs(x - e) < 0.02 * width]].mean(0) for e in (x.min(), x.max())]
@@ -531,14 +534,21 @@ def test_godette_closed_eye_looking_down_and_squinting_stays_a_line(godette_run,
 
     closed = off_line(shut[lash])
     blink = off_line(v[lash] + w["eyeBlinkLeft"] * dense[out.shape_names.index("eyeBlinkLeft")][lash])
-    assert blink.min() > -0.05 * height and blink.max() < 0.15 * height  # the blink alone, 13 % open
-    # the looks and the squint neither open it nor bend it: within 5 % of the eye's height of the blink alone
-    assert np.abs(closed - blink).max() < 0.05 * height, np.abs(closed - blink).max() / height
-    assert closed.min() > -0.05 * height and closed.max() < 0.15 * height, (closed.min(), closed.max(), height)
+    assert off_line(v[lash]).max() > 0.6 * height  # open at rest
+    assert blink.min() > -0.05 * height and blink.max() < 0.25 * height  # the blink alone (13 % open)
+    # the looks and the squint neither open it nor bend it: within 5 % of the eye's height of the blink alone;
+    # the brows and cheeks of the whole frame may close it further (by the source's lids), not open it: no vertex
+    # farther from the line than the blink alone leaves it
+    change = np.abs(closed) - np.abs(blink) if channels == "all" else np.abs(closed - blink)
+    assert change.max() < 0.05 * height, change.max() / height
+    assert closed.min() > -0.05 * height and closed.max() < 0.25 * height, (closed.min(), closed.max(), height)
     rest = off_line(v[lash])
-    for k in range(len(lash)):  # no crossing within a column
+    # no crossing within a column; in the whole frame the brows' and cheeks' narrowing adds to the blink's, and
+    # linear shapes cannot stop at the line: at most 2 % of the eye's height past it (on main: 40 %)
+    slack = 1e-9 if channels == "eyes" else 0.02 * height
+    for k in range(len(lash)):
         col = (np.abs(x - x[k]) < 0.02 * width) & (rest < rest[k] - 1e-9)
-        assert (closed[col] <= closed[k] + 1e-9).all()
+        assert (closed[col] <= closed[k] + slack).all(), (closed[col].max() - closed[k]) / height
 
 
 @pytest.mark.data
@@ -557,3 +567,26 @@ def test_godettes_looks_are_reported_from_her_look_at_and_her_blinks_as_cloned(g
     for key in ("eyeBlinkLeft~blink_left", "eyeBlinkRight~blink_right", "jawOpen~ah"):
         assert pairs[key]["from"] == "cloned", key
     assert pairs["eyeBlinkLeft~blink_left"]["cosine"] >= 0.7 and pairs["eyeBlinkRight~blink_right"]["cosine"] >= 0.7
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_godettes_closed_eye_is_a_visible_line(godette_run):
+    """Her closed lash outline is a line a picture shows: its closed stroke spans at least 6 % of the eye's height
+    across the line through its ends in the middle half of the eye, and at most a quarter (still closed; at rest
+    two thirds). On main it was squashed to 5 % of each vertex's height: 3 % of the eye's height at most, a
+    broken hair-line in the take's side-by-side picture."""
+    _, out, _, _ = godette_run
+    iris, lash, height = _eye(out, "blink_left")
+    v = out.vertices.astype(np.float64)
+    shut = v + out.dense_deltas()[out.shape_names.index("eyeBlinkLeft")]
+    x = v[lash, 0]
+    width = np.ptp(x)
+    ends = [v[lash[np.abs(x - e) < 0.02 * width]].mean(0) for e in (x.min(), x.max())]
+    slope = (ends[1][1] - ends[0][1]) / (ends[1][0] - ends[0][0])
+    closed = shut[lash, 1] - (ends[0][1] + slope * (shut[lash, 0] - ends[0][0]))
+    rest = v[lash, 1] - (ends[0][1] + slope * (v[lash, 0] - ends[0][0]))
+    middle = np.abs(x - 0.5 * (x.min() + x.max())) < 0.25 * width
+    assert np.ptp(rest) > 0.6 * height
+    assert 0.06 * height < np.ptp(closed[middle]) and np.ptp(closed) < 0.25 * height, (np.ptp(closed[middle]) / height,
+                                                                                      np.ptp(closed) / height)
