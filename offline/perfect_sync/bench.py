@@ -11,7 +11,9 @@
   turn: the elastic skin model has no handle on them).
 * Godette (the data kit's VRM): cosine and magnitude ratio of each cloned
   shape against the artist's shape meaning the same (goal cosine >= 0.7 on
-  the blinks and the open mouth), and the doubts of the proposal.
+  the blinks and the open mouth), and the doubts of the proposal. Her decal
+  eyes' looks are her own look expressions (:func:`.transfer.decal_eye_looks`):
+  those pairs are reported "from the character's lookAt", not as cloned.
 * With ``--pictures DIR``: contact sheets of the cloned shapes and
   ``godette_llf_side_by_side.png``, a Live Link Face take of the kit replayed
   at 8 moments on Godette through her VRM presets (top) and on her clone
@@ -96,7 +98,7 @@ def run_bench(args: argparse.Namespace) -> dict:
     from facepuppet.offline.io.rig_import import import_rig
     from facepuppet.offline.kpls.targets import stylise
     from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
-    from facepuppet.offline.perfect_sync.evaluate import GODETTE_PAIRS, pair_similarity, truth_errors
+    from facepuppet.offline.perfect_sync.evaluate import godette_pairs, truth_errors
     from facepuppet.offline.perfect_sync.face import find_face
     from facepuppet.offline.perfect_sync.source import fit_kit_source
 
@@ -132,10 +134,7 @@ def run_bench(args: argparse.Namespace) -> dict:
         _sheet(args, out, report, "godette")
         side = _side_by_side(args, godette, out, kit / "tracker" / TAKE)
         face = find_face(godette)
-        pairs = {}
-        for key, artist in GODETTE_PAIRS:
-            if artist in out.shape_names and all(k in out.shape_names for k in key.split("+")):
-                pairs[f"{key}~{artist}"] = pair_similarity(out, key, artist, face.mesh)
+        pairs = godette_pairs(out, report["pieces"].get("eye_looks", {}), face.mesh)
         result["godette"] = {"n_vertices": godette.n_vertices, "face_vertices": int(len(face.mesh)),
                              "skin_vertices": int(len(face.skin)), "seconds": seconds, "pairs": pairs,
                              "pieces": report["pieces"], "meets_cosine_goal": {
@@ -144,9 +143,11 @@ def run_bench(args: argparse.Namespace) -> dict:
                              "n_doubts": len(report["doubts"]), "doubts": report["doubts"],
                              "meets_time_goal": seconds < GOAL_GODETTE_S,
                              **({"side_by_side": side} if side else {})}
-        print(f"bench perfect-sync: Godette {seconds:.1f} s; " + ", ".join(
+        print(f"bench perfect-sync: Godette {seconds:.1f} s; cloned: " + ", ".join(
             f"{k} cos {v['cosine']:.2f} x{v['magnitude_ratio']:.2f}" for k, v in pairs.items()
-            if v["cosine"] is not None))
+            if v["cosine"] is not None and v["from"] == "cloned"))
+        print("bench perfect-sync: Godette, from the character's lookAt (not cloned): " + ", ".join(
+            k for k, v in pairs.items() if v["from"] != "cloned"))
     else:
         result["godette"] = {"note": f"{godette_path} not in the data kit: not measured"}
     result["face_30k"] = {"n_vertices": ict.n_vertices, "seconds": result["ict_variants"]["identical"]["seconds"],

@@ -10,6 +10,11 @@
   cloned side written ``a+b`` is the sum of those shapes (her ``look_up``
   turns both eyes: ``eyeLookUpLeft+eyeLookUpRight``; against one eye's
   shape alone the cosine cannot pass 0.71);
+* :func:`godette_pairs`: every pair of :data:`GODETTE_PAIRS` the character
+  has, each with where its cloned side came from: an eye look of a decal
+  eye given by the character's own look expression is "from the character's
+  lookAt" (not cloned: its cosine says nothing of the cloning), the others
+  "cloned";
 * :func:`mid_lid_gap`: the vertical gap between the lids half way between
   their inner and outer control points, at rest and in a shape.
 """
@@ -73,6 +78,25 @@ def pair_similarity(character: Character, cloned_name: str, artist_name: str, ve
     na, nb = np.linalg.norm(a), np.linalg.norm(b)
     return {"cosine": float(a @ b / (na * nb)) if na > 0 and nb > 0 else None,
             "magnitude_ratio": float(na / nb) if nb > 0 else None}
+
+
+LOOKAT = "the character's lookAt"
+
+
+def godette_pairs(character: Character, eye_looks: dict, vertices: np.ndarray) -> dict:
+    """{"<cloned>~<artist>": {"cosine", "magnitude_ratio", "from"}} for each pair of :data:`GODETTE_PAIRS` whose
+    shapes ``character`` has, over ``vertices``; "from" is :data:`LOOKAT` when every cloned shape of the pair took
+    its look from the character's own look expression (``eye_looks``: perfect-sync's report["pieces"]
+    ["eye_looks"]), else "cloned"."""
+    out = {}
+    for key, artist in GODETTE_PAIRS:
+        parts = key.split("+")
+        if artist not in character.shape_names or not all(k in character.shape_names for k in parts):
+            continue
+        own = all("lookAt" in str(eye_looks.get(k, "")) for k in parts)
+        out[f"{key}~{artist}"] = {**pair_similarity(character, key, artist, vertices),
+                                  "from": LOOKAT if own else "cloned"}
+    return out
 
 
 def mid_lid_gap(character: Character, face: Face, points: ControlPoints, side: str,

@@ -43,7 +43,32 @@ moves nothing that the artist's shapes move. This module:
   behind the skin in front of it, by its stand-off plus ``HIDDEN`` of the
   eye's width. ``CLOSED`` and ``HIDDEN`` are chosen constants (5 %), not
   fitted to a character: Godette's blink cosine moves 0.72–0.74 for
-  ``HIDDEN`` from 0 to 0.2;
+  ``HIDDEN`` from 0 to 0.2. The outline above the line is lowered as a
+  drawn stroke (:func:`closed_heights`): its edge nearest the line comes to
+  ``CLOSED`` of its height, what lies beyond keeps up to ``LINE`` (10 %, a
+  chosen constant: about the thickness of Godette's lash stroke at rest,
+  0.012 of her 0.087 eye) of the eye's height and ``CLOSED`` of the rest.
+  Squashed whole to 5 % her closed lash read as a faint broken hair-line in
+  the take's side-by-side; lowering each column whole, keeping the lashes'
+  tips, read as a line too but took her blink cosine to 0.67, below the
+  goal (with ``LINE``: 0.73, 0.74);
+* narrows a decal eye the same drawn way in every other shape that moves the
+  lids (:func:`decal_narrow`; eyeSquint, browDown, cheekSquint; eyeWide
+  opens it): toward its closed place, what lies above the corner line by the
+  fraction of the blink's way that the source's shape lowers its upper lid
+  points, what lies below by the fraction it raises the lower ones
+  (:func:`lid_fractions`, measured on the source: ICT's eyeSquint 0.03 and
+  0.42), the iris with it; a shape that moves no lid point leaves the eye.
+  The landmark field squashed the lash outline into a V and pulled the iris
+  (in the kit's take the blinks come with eyeSquint, eyeLookDown, browDown
+  and cheekSquint at partial weights);
+* gives a decal eye's looks to what lies inside it only (iris, white; the
+  outline, the lashes and the skin stay): the character's own VRM look
+  expressions' part on that eye where it has them (:func:`look_expressions`,
+  :func:`look_keys`: Godette's ``look_up`` etc.; these come from her lookAt,
+  not from cloning), otherwise the inside slides by the source's eye turn on
+  a ball of half the eye's width, held inside the outline
+  (:func:`decal_look_slide`);
 * opens a decal mouth in the jaw's shapes (``JAW_OPENINGS`` of
   :mod:`.transfer`) by the lips' motion relative to each other: the skin
   around it does not move (no mouth hole, no lips), so the jaw's drop, the
@@ -62,6 +87,8 @@ import numpy as np
 from scipy.interpolate import RBFInterpolator
 from scipy.spatial import cKDTree
 
+from facepuppet.runtime.character_parts import Expressions
+
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.lip_line import boundary_loops
 from facepuppet.offline.perfect_sync.face import Face
@@ -71,6 +98,8 @@ OPENING = 0.5  # a skin boundary loop within this many eye widths of a feature i
 DECAL_DEPTH = 0.6  # a decal eye's largest piece is no deeper than this fraction of its width
 CLOSED = 0.05  # a decal blink leaves this fraction of each vertex's rest height about the closing line
 CORNER = 0.02  # a drawn eye's corner: its vertices within this fraction of its width of its inner/outer end
+STROKE = 0.05  # a drawn eye's outline column: its vertices within this fraction of the eye's width across
+LINE = 0.1  # a closed drawn eye's outline keeps up to this fraction of the eye's height of its stroke
 HIDDEN = 0.05  # a closed drawn eye's iris goes this fraction of the eye's width behind the skin (past its stand-off)
 EYE_NAMES = ("eye_inner", "eye_outer", "lid_upper_inner", "lid_upper_outer", "lid_lower_inner", "lid_lower_outer")
 MOUTH_NAMES = ("mouth_corner", "lip_upper", "lip_lower", "mouth_inner")  # prefixes
@@ -418,25 +447,56 @@ def skin_front_depth(xy: np.ndarray, local: np.ndarray, triangles: np.ndarray) -
     return np.where(np.isfinite(out), out, np.nan)
 
 
+def _above_corner_line(pieces: Pieces, local: np.ndarray, side: str) -> np.ndarray:
+    """Height (face-frame y) of each vertex of the ``side`` decal eye's pieces above the line through its drawn
+    corners (:func:`drawn_corners`); negative below it."""
+    members, _ = pieces.eyes[side]
+    inner, outer = drawn_corners(pieces, local, side)
+    slope = (outer[1] - inner[1]) / (outer[0] - inner[0]) if abs(outer[0] - inner[0]) > 1e-12 else 0.0
+    return local[members, 1] - (inner[1] + slope * (local[members, 0] - inner[0]))
+
+
+def closed_heights(pieces: Pieces, local: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """(rest, closed) height of each vertex of the ``side`` decal eye's pieces above the line through its drawn
+    corners (:func:`_above_corner_line`; negative below it). Closed, what lies inside the eye (:func:`eye_inside`)
+    keeps ``CLOSED`` of its height, and so does what of the outline lies below the line (a lash tail at the
+    outer corner); the outline above it comes down onto the line as a drawn stroke: in each column (its
+    vertices above the line within ``STROKE`` of the eye's width across) the edge nearest the line keeps
+    ``CLOSED`` of its height, what lies beyond that edge keeps up to ``LINE`` of the eye's height of its distance
+    from it and ``CLOSED`` of the rest (the lashes' tips), so that the closed eye is a visible line rather than a
+    hair-line (Godette: her lash strip squashed whole to 5 % read as nothing in the take's side-by-side)."""
+    members, (_, _, y0, y1) = pieces.eyes[side]
+    rest = _above_corner_line(pieces, local, side)
+    closed = CLOSED * rest
+    outline = ~np.isin(members, eye_inside(pieces, local, side))
+    x = local[members, 0]
+    reach = STROKE * float(np.ptp(x))
+    keep = LINE * (y1 - y0)
+    for k in np.flatnonzero(outline & (rest > 0)):
+        col = outline & (np.abs(x - x[k]) <= reach) & (rest > 0)
+        edge = float(rest[col].min())
+        beyond = rest[k] - edge
+        closed[k] = CLOSED * edge + min(beyond, keep) + CLOSED * max(beyond - keep, 0.0)
+    return rest, closed
+
+
 def decal_blink(pieces: Pieces, face: Face, vertices: np.ndarray, skin_triangles: np.ndarray,
                 side: str) -> tuple[np.ndarray, np.ndarray]:
     """The closed drawn eye of ``side``: (its pieces' vertices, their displacements (m, 3) in world axes).
 
     A drawn eye's lids meet on the curve joining its corners, where they meet at rest already (a closed eye
-    is drawn as the line from corner to corner): every vertex of the eye's pieces comes onto the line through
-    the corners (:func:`drawn_corners`) along the face's up, to within ``CLOSED`` of its rest height above or
-    below it, the upper part down, the lower part up, the outline so keeping a thin line. What lies inside the
+    is drawn as the line from corner to corner): every vertex of the eye's pieces comes toward the line through
+    the corners (:func:`drawn_corners`) along the face's up, to its closed height (:func:`closed_heights`), the
+    upper part down, the lower part up, the outline so keeping a line. What lies inside the
     eye (:func:`eye_inside`: the iris and the eye's white) is covered instead, not folded: it keeps its shape
     and goes back along the line of sight behind the skin in front of it (:func:`skin_front_depth`), by its
     stand-off plus ``HIDDEN`` of the eye's width."""
     v = np.asarray(vertices, np.float64)
     local = face.to_frame(v)
     members, (x0, x1, _, _) = pieces.eyes[side]
-    inner, outer = drawn_corners(pieces, local, side)
-    slope = (outer[1] - inner[1]) / (outer[0] - inner[0]) if abs(outer[0] - inner[0]) > 1e-12 else 0.0
-    line = inner[1] + slope * (local[members, 0] - inner[0])
+    rest, closed = closed_heights(pieces, local, side)
     d = np.zeros((len(members), 3))
-    d[:, 1] = -(1.0 - CLOSED) * (local[members, 1] - line)
+    d[:, 1] = closed - rest
     hide = np.isin(members, eye_inside(pieces, local, side))
     d[hide, 1] = 0.0  # covered, not folded: what lies inside the eye keeps its shape and goes behind the skin
     if hide.any() and len(skin_triangles):
@@ -458,3 +518,129 @@ def lip_line_motion(pieces: Pieces, face: Face, vertices: np.ndarray, source_pos
     args = (pieces, face, vertices, source_positions, names, params, shape_names, m, on)
     return 0.5 * (feature_field(*args, below=np.zeros(len(m), bool)) + feature_field(*args, below=np.ones(len(m),
                                                                                                            bool)))
+
+
+def lid_fractions(source_positions: np.ndarray, names: tuple, params: np.ndarray, shape_names: tuple,
+                     key: str, side: str) -> tuple[float, float]:
+    """(upper, lower): how far the source's shape ``key`` brings the ``side`` eye's upper lid down and its lower
+    lid up, each as a fraction of the gap its blink closes (the mean over the inner and outer lid points; each in
+    [-1, 1], negative where the shape opens the eye (eyeWide); (0, 0) without the lid points or the blink).
+    Measured on the source's parameters, not a chosen constant: ICT's eyeSquint raises the lower lid 0.42 of the
+    blink's closure and lowers the upper 0.03; its browDown lowers the upper lid 0.14, its cheekSquint raises
+    the lower lid 0.45."""
+    idx = {n: i for i, n in enumerate(names)}
+    blink = {"L": "eyeBlinkLeft", "R": "eyeBlinkRight"}[side]
+    if key not in shape_names or blink not in shape_names:
+        return 0.0, 0.0
+    prm = np.asarray(params, np.float64)
+    sq, bl = prm[shape_names.index(key)], prm[shape_names.index(blink)]
+    up, low = [], []
+    for part in ("inner", "outer"):
+        i, j = idx.get(f"lid_upper_{part}_{side}"), idx.get(f"lid_lower_{part}_{side}")
+        if i is None or j is None:
+            continue
+        closure = bl[j, 1] - bl[i, 1]  # the blink's closing of the gap (upper down, lower up)
+        if closure <= 1e-12:
+            continue
+        up.append(-sq[i, 1] / closure)
+        low.append(sq[j, 1] / closure)
+    if not up:
+        return 0.0, 0.0
+    return float(np.clip(np.mean(up), -1.0, 1.0)), float(np.clip(np.mean(low), -1.0, 1.0))
+
+
+def decal_narrow(pieces: Pieces, face: Face, vertices: np.ndarray, side: str, upper: float,
+                 lower: float) -> tuple[np.ndarray, np.ndarray]:
+    """The narrowed (or, by negative fractions, opened) drawn eye of ``side``: (its pieces' vertices, their
+    displacements (m, 3) in world axes). A drawn eye narrows the way it closes (:func:`decal_blink`): toward its
+    closed place (:func:`closed_heights`) along the face's up, what lies above the corner line by ``upper`` of
+    the blink's way there, what lies below by ``lower`` (:func:`lid_fractions`), the iris and white with it (a
+    squint does not hide them); the outline's tail below the line stays (it is the upper stroke's)."""
+    local = face.to_frame(np.asarray(vertices, np.float64))
+    members, _ = pieces.eyes[side]
+    rest, closed = closed_heights(pieces, local, side)
+    d = np.zeros((len(members), 3))
+    d[:, 1] = (closed - rest) * np.where(rest > 0, upper, lower)
+    tail = (rest < 0) & ~np.isin(members, eye_inside(pieces, local, side))
+    d[tail] = 0.0  # the upper stroke's tail below the corner: the lower lid's rise moves what lies inside the eye
+    return members, d @ face.frame
+
+
+#: The VRM 0.x look presets whose shapes give a decal eye's looks where a character has them.
+LOOK_PRESETS = ("LookUp", "LookDown", "LookLeft", "LookRight")
+
+
+def look_expressions(expressions: Expressions | None, delta_offsets: np.ndarray, delta_indices: np.ndarray,
+                     delta_positions: np.ndarray, n_vertices: int) -> dict:
+    """{preset: dense displacements (n_vertices, 3) float64} of the character's own VRM look expressions
+    (``expressions``: its :class:`~facepuppet.runtime.character_parts.Expressions`, or None), each its binds'
+    weighted sum of the character's sparse shape deltas; an expression that binds no shape is left out."""
+    out: dict = {}
+    if expressions is None:
+        return out
+    for e, preset in enumerate(expressions.presets):
+        if preset not in LOOK_PRESETS or preset in out:
+            continue
+        shapes, weights = expressions.binds(e)
+        d = np.zeros((n_vertices, 3))
+        for s, w in zip(shapes.astype(np.int64), weights):
+            sl = slice(int(delta_offsets[s]), int(delta_offsets[s + 1]))
+            np.add.at(d, delta_indices[sl].astype(np.int64), float(w) * delta_positions[sl].astype(np.float64))
+        if np.abs(d).max(initial=0.0) > 0:
+            out[preset] = d
+    return out
+
+
+def look_keys(looks: dict, pieces: Pieces, face: Face, vertices: np.ndarray) -> dict:
+    """{(ARKit eye-look key, side): (preset, the ``side`` eye's inside vertices)} for the character's own look
+    expressions ``looks`` (:func:`look_expressions`): which ARKit look of which eye each is, told by where it moves
+    that eye's iris (the mean motion of :func:`eye_inside` in the face frame), not by its name: a horizontal one
+    toward +x (the character's left) is eyeLookOutLeft on the left eye and eyeLookInRight on the right one, an
+    upward one eyeLookUp. Of two giving one key, the one moving the iris farther."""
+    local = face.to_frame(np.asarray(vertices, np.float64))
+    best: dict = {}
+    for preset, d in looks.items():
+        motion = d @ face.frame.T  # face-frame axes
+        for side in pieces.eyes:
+            inside = eye_inside(pieces, local, side)
+            if not len(inside):
+                continue
+            mean = motion[inside].mean(0)
+            if preset in ("LookUp", "LookDown"):
+                amount, key = abs(mean[1]), "eyeLookUp" if mean[1] > 0 else "eyeLookDown"
+            else:
+                toward_left = mean[0] > 0
+                amount = abs(mean[0])
+                key = ("eyeLookOut" if toward_left else "eyeLookIn") if side == "L" else (
+                    "eyeLookIn" if toward_left else "eyeLookOut")
+            if amount <= 1e-9:
+                continue
+            key += "Left" if side == "L" else "Right"
+            if (key, side) not in best or amount > best[(key, side)][0]:
+                best[(key, side)] = (amount, preset, inside)
+    return {k: (preset, inside) for k, (_, preset, inside) in best.items()}
+
+
+def decal_look_slide(pieces: Pieces, face: Face, vertices: np.ndarray, side: str, axis: int,
+                     slide: float) -> tuple[np.ndarray, np.ndarray]:
+    """A drawn eye's look where the character has no look expression: (the ``side`` eye's inside vertices
+    (:func:`eye_inside`), their displacement (m, 3) in world axes). They slide together by ``slide`` along the
+    face frame's ``axis`` (0 across, + toward the character's left; 1 up), held inside the outline (the eye's other
+    pieces): across, the iris stays between the outline's ends; up, its top stays below the outline's top, and
+    down it goes no farther than up may (a drawn eye's outline is often its upper lid only). An eye with no outline
+    piece slides unheld."""
+    local = face.to_frame(np.asarray(vertices, np.float64))
+    members, _ = pieces.eyes[side]
+    inside = eye_inside(pieces, local, side)
+    outline = members[~np.isin(members, inside)]
+    if len(outline) and len(inside):
+        p, o = local[inside, axis], local[outline, axis]
+        if axis == 0:
+            room_low, room_high = max(p.min() - o.min(), 0.0), max(o.max() - p.max(), 0.0)
+        else:
+            room_high = max(o.max() - p.max(), 0.0)
+            room_low = room_high
+        slide = float(np.clip(slide, -room_low, room_high))
+    d = np.zeros((len(inside), 3))
+    d[:, axis] = slide
+    return inside, d @ face.frame

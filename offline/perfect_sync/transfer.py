@@ -15,7 +15,11 @@ shape the source splits (ICT's ``browInnerUp_L`` / ``_R``, ``cheekPuff_L`` /
 others (ICT's ``cheekRaiser``, ``PupilDilate``) are left out. The blinks'
 upper lid points are then put onto the lower ones (:func:`close_lids`), and
 the eye looks turn the eyeball pieces where the character has them
-(:func:`eyeballs`) instead of leaving the eyes still under moving lids.
+(:func:`eyeballs`) instead of leaving the eyes still under moving lids. On
+a decal eye (drawn on pieces, :mod:`.pieces`) the looks move only the iris
+and white inside its outline, taken from the character's own VRM look
+expressions where it has them (:func:`decal_eye_looks`): those looks are
+the character's lookAt, not cloned.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from facepuppet.offline.elastic.clone import clone_model
 from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.elastic.params import build_model
 from facepuppet.offline.perfect_sync.face import Face
-from facepuppet.offline.perfect_sync.pieces import Pieces
+from facepuppet.offline.perfect_sync.pieces import Pieces, look_expressions
 
 CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between the lid points
 # An eye look at weight 1 turns the eyeball this far (sideways, up or down). The source's shapes do not say
@@ -246,7 +250,9 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
     carried = carry_pieces(dense, source, names, fold_source(source)[1], character.vertices, face,
                  rigid=sub[model.arrays["rigid_labels"] >= 0],
                  eyeballs=np.concatenate([sub[m] for m, _ in eyes.values()] + [np.zeros(0, np.int64)]),
-                 mouth=_mouth_ball(points, character.vertices))
+                 mouth=_mouth_ball(points, character.vertices),
+                 looks=look_expressions(character.expressions, character.delta_offsets, character.delta_indices,
+                                        character.delta_positions, character.n_vertices))
     dense[:, face.mesh] = dense[:, weld[face.mesh]]  # a seam's copies move as one vertex
     if info is not None:
         info["pieces"] = carried
@@ -344,16 +350,27 @@ def clear_mouth_parts(rest: np.ndarray, d: np.ndarray, part_t: np.ndarray, near:
 
 def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...], params: np.ndarray,
                  vertices: np.ndarray, face: Face, rigid: np.ndarray, eyeballs: np.ndarray,
-                 mouth: tuple | None = None) -> dict:
+                 mouth: tuple | None = None, looks: dict | None = None) -> dict:
     """Carry the cloned skin motion in ``dense`` (n, n_vertices, 3), in place, onto the face's other pieces
     (:mod:`.pieces`): those on the skin follow their skin triangle, decal eyes and mouths the landmark field of
     the source's ``params`` (the folded (n, n_c, 3)). The ``eyeballs`` (their vertices) and the ``rigid`` jaw
     keep their motion, except that on a decal face the jaw found from the skin's points is not trusted: what of it
     the field does not move stays. A piece centred within the ``mouth`` ball (centre, radius) is the inside of
-    the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too.
+    the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too. A decal eye
+    closes, narrows and looks as a drawn eye does (:func:`~.pieces.decal_blink`, :func:`~.pieces.decal_narrow`,
+    :func:`decal_eye_looks`, the last from the character's own look expressions ``looks`` where it has them).
 
-    Returns {"decal_eyes": sides, "decal_mouth": bool, "carried_vertices": n, "field_vertices": n}."""
-    from facepuppet.offline.perfect_sync.pieces import decal_blink, embed, feature_field, find_pieces, lip_line_motion
+    Returns {"decal_eyes": sides, "decal_mouth": bool, "carried_vertices": n, "field_vertices": n} and, on a decal
+    face, "eye_looks": where each decal eye's look came from (:func:`decal_eye_looks`)."""
+    from facepuppet.offline.perfect_sync.pieces import (
+        decal_blink,
+        decal_narrow,
+        embed,
+        feature_field,
+        find_pieces,
+        lid_fractions,
+        lip_line_motion,
+    )
     from facepuppet.offline.perfect_sync.proposal import skin_triangles
 
     skin_t = skin_triangles(face)
@@ -388,9 +405,17 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
         if key in names and side in pieces.eyes:  # the drawn eye closes on the line between its corners
             members, d = decal_blink(pieces, face, vertices, skin_t, side)
             dense[names.index(key), members] = d
-    decal_eye_looks(dense, names, vertices, face, pieces)
+    for s, key in enumerate(names):
+        if key in ("eyeBlinkLeft", "eyeBlinkRight") or any((key, side) in EYE_TURNS for side in "LR"):
+            continue
+        for side in pieces.eyes:  # the others narrow (or open) it toward that line, as far as the source's lids say
+            upper, lower = lid_fractions(source.arrays["control_positions"], tuple(source.control_names),
+                                            params, names, key, side)
+            members, d = decal_narrow(pieces, face, vertices, side, upper, lower)
+            dense[s, members] = d
+    looks_from = decal_eye_looks(dense, names, vertices, face, pieces, looks)
     return {"decal_eyes": sorted(pieces.eyes), "decal_mouth": pieces.mouth is not None, "carried_vertices": 0,
-            "field_vertices": int(len(np.unique(moved)))}
+            "field_vertices": int(len(np.unique(moved))), "eye_looks": looks_from}
 
 
 def _mouth_ball(points: ControlPoints, vertices: np.ndarray) -> tuple | None:
@@ -405,28 +430,46 @@ def _mouth_ball(points: ControlPoints, vertices: np.ndarray) -> tuple | None:
 
 
 def decal_eye_looks(dense: np.ndarray, names: tuple[str, ...], vertices: np.ndarray, face: Face,
-                    pieces: Pieces) -> None:
-    """The eye looks turn a decal eye (in place in ``dense``): the eye's pieces that lie within its largest
-    piece's box (iris, pupil, highlights; not the lashes reaching beyond it) slide across the face as the front
-    of a ball of half the eye's width would turn by ``EYE_LOOK_DEGREES``, on top of the lids' field."""
-    v = face.to_frame(vertices)
+                    pieces: Pieces, looks: dict | None = None) -> dict:
+    """The eye looks of a decal eye (in place in ``dense``), as a drawn eye looks: only what lies inside the eye
+    (:func:`~.pieces.eye_inside`: iris, pupil, highlights, the white) moves; the outline, the lashes, the other
+    eye, the mouth and everything else the landmark field moved stay.
+
+    Where the character has its own look expression for the look (``looks``: :func:`~.pieces.look_expressions`;
+    which ARKit look of which eye each is, by where it moves that eye's iris: :func:`~.pieces.look_keys`), the
+    look is that expression's part on the eye's inside: from the character's lookAt, not cloned (Godette:
+    eyeLookUpLeft is the left eye's part of her ``look_up``; her ``look_down`` also lowers the lashes, which is
+    left out, so that a closed eye looking down stays a line). Otherwise the inside slides
+    (:func:`~.pieces.decal_look_slide`) as the front of a ball of half the eye's width would move turned by
+    ``EYE_LOOK_DEGREES``, held inside the outline. Returns {ARKit key: "<preset> (the character's lookAt)" or
+    "slid"} for each look given to a decal eye."""
+    from facepuppet.offline.perfect_sync.pieces import decal_look_slide, look_keys
+
+    if not pieces.eyes:
+        return {}
+    own = look_keys(looks or {}, pieces, face, vertices)
+    still = np.concatenate([pieces.feature_vertices, pieces.on_skin])  # what the landmark field moved
+    origin: dict = {}
     for s, name in enumerate(names):
-        for side, (members, (x0, x1, y0, y1)) in pieces.eyes.items():
-            turn = EYE_TURNS.get((name, side))
-            if turn is None:
+        turns = [(side, EYE_TURNS[(name, side)]) for side in pieces.eyes if (name, side) in EYE_TURNS]
+        if not turns:
+            continue
+        dense[s, still] = 0.0
+        for side, (axis, sign) in turns:
+            if (name, side) in own:
+                preset, inside = own[(name, side)]
+                dense[s, inside] = looks[preset][inside].astype(dense.dtype)
+                origin[name] = f"{preset} (the character's lookAt)"
                 continue
-            labels = pieces.labels[members]
-            inside = [lab for lab in np.unique(labels) if np.all(
-                (v[members[labels == lab], 0] >= x0 - 1e-9) & (v[members[labels == lab], 0] <= x1 + 1e-9)
-                & (v[members[labels == lab], 1] >= y0 - 1e-9) & (v[members[labels == lab], 1] <= y1 + 1e-9))]
-            iris = members[np.isin(labels, inside)]
-            axis, sign = turn
+            _, (x0, x1, _, _) = pieces.eyes[side]
             angle = np.radians(EYE_LOOK_DEGREES[0 if axis == 1 else 1])
-            radius = 0.5 * (x1 - x0)
             # about up (axis 1) by +a: the front moves to +x; about across (axis 0) by -a: the front moves up
-            slide = np.zeros(3)
-            slide[0 if axis == 1 else 1] = (sign if axis == 1 else -sign) * radius * np.sin(angle)
-            dense[s, iris] += (slide @ face.frame).astype(dense.dtype)
+            along = 0 if axis == 1 else 1
+            amount = (sign if axis == 1 else -sign) * 0.5 * abs(x1 - x0) * np.sin(angle)
+            inside, d = decal_look_slide(pieces, face, vertices, side, along, amount)
+            dense[s, inside] = d.astype(dense.dtype)
+            origin[name] = "slid"
+    return origin
 
 
 def add_shapes(character: Character, keys: tuple[str, ...], dense: np.ndarray,
