@@ -194,6 +194,7 @@ def _turned(character: Character, degrees: float) -> Character:
 #: the other ways an OBJ's face may look, and the turn about +Y that would bring each to +Z
 OTHER_FACINGS = (("-z", 180.0), ("+x", -90.0), ("-x", 90.0))
 SHAPES_LEAN = 0.02  # the shapes' vertices' centre this fraction of the mesh's size off its centre shows the face
+DETAIL_MARGIN = 1.25  # a static head's back with this many times the front's skin vertices is its face
 SYMMETRY_SLACK = 0.005  # facings whose symmetry error is within this (face widths) of the best compete on the nose
 
 
@@ -202,7 +203,9 @@ def find_face(character: Character) -> Face:
 
     A character with no layout (an OBJ: glTF faces +Z by its spec, VRM 0.x is turned on import) may have
     been exported looking along another axis. With shapes, the way it looks is where its shapes move
-    (their vertices' centre against the face mesh's); without, when no face is found facing +Z, it is
+    (their vertices' centre against the face mesh's); without, a face found facing +Z whose back half has
+    clearly more skin vertices than its front is the back of a head (a face is where the detail is: the
+    ICT head has 4 times as many in front, the demo head 1.6), and when no face is found facing +Z it is
     looked for facing -Z, +X and -X (the most symmetric facing whose nose stands out most). Either way a
     face looking elsewhere is refused saying so and how to import it turned."""
     try:
@@ -228,7 +231,13 @@ def find_face(character: Character) -> Face:
                 _find_face(_turned(character, dict(OTHER_FACINGS)[axis]))
             except FaceError:
                 axis = None
-    elif face is None:
+    elif face is not None:  # a static head: a face has more detail (vertices) than the back of its head
+        depth = character.vertices[face.skin].astype(np.float64) @ face.frame[2]
+        middle = 0.5 * (depth.min() + depth.max())
+        front, back = int((depth > middle).sum()), int((depth < middle).sum())
+        if back > DETAIL_MARGIN * front:
+            axis = "-z"
+    else:
         found = []
         for name, degrees in OTHER_FACINGS:
             try:

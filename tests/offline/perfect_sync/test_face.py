@@ -90,3 +90,26 @@ def test_a_mesh_too_small_for_a_face_is_refused_without_a_turn_hint():
         with pytest.raises(FaceError) as caught:
             find_face(character)
         assert "no recognisable face" in str(caught.value) and "--forward" not in str(caught.value)
+
+
+def _static(c, turn=(1, 1, 1)):
+    """``c`` without its shapes (a static head, as ``import-rig head.obj`` makes), optionally mirrored."""
+    return c.with_parts(vertices=c.vertices * np.float32(turn), normals=None, shape_names=(),
+                        delta_offsets=np.zeros(1, np.int64), delta_indices=np.zeros(0, np.uint32),
+                        delta_positions=np.zeros((0, 3), np.float32), delta_normals=np.zeros((0, 3), np.float32),
+                        expressions=None)
+
+
+def test_a_static_head_turned_round_is_refused_by_where_its_detail_is():
+    """Without shapes the back of the demo head passes the nose test; its front has 1.6 times the vertices."""
+    c = build_demo_character()
+    assert find_face(_static(c)).nose_tip == find_face(c).nose_tip  # facing +Z: found as before
+    with pytest.raises(FaceError, match=re.escape("looks along -z, not +Z")):
+        find_face(_static(c, (-1, 1, -1)))
+
+
+@pytest.mark.data
+def test_the_static_ict_head_turned_round_is_refused(ict_character):
+    find_face(_static(ict_character))
+    with pytest.raises(FaceError, match=re.escape("import-rig --forward=-z")):
+        find_face(_static(ict_character, (-1, 1, -1)))
