@@ -180,10 +180,15 @@ def import_rig(
                           pivot, shape_paths, deltas, settings, per_shape, inputs)
 
 
+def turn_about_y(degrees: float) -> np.ndarray:
+    """(3, 3) float64 rotation by ``degrees`` about +Y (row vectors turn as ``v @ r.T``)."""
+    a = np.radians(degrees)
+    return np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+
+
 def _turned(mesh: ObjMesh, deltas: dict, degrees: float) -> tuple[ObjMesh, dict]:
     """The mesh and its shapes' position and normal deltas turned by ``degrees`` about +Y."""
-    a = np.radians(degrees)
-    r = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    r = turn_about_y(degrees)
     turned = dict(deltas)
     for key in ("delta_positions", "delta_normals"):
         turned[key] = (deltas[key].astype(np.float64) @ r.T).astype(deltas[key].dtype)

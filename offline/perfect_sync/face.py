@@ -45,6 +45,7 @@ from facepuppet.runtime.errors import FacepuppetError
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.elastic.laplacian import components
+from facepuppet.offline.io.rig_import import FORWARD_TURNS, turn_about_y
 
 MIN_SKIN_VERTICES = 60  # 47 control points need distinct vertices, with some room
 NOSE_PROTRUSION = 0.04  # nose tip in front of its surroundings by this fraction of the skin width
@@ -186,13 +187,12 @@ def symmetry_plane(points: np.ndarray, normal: np.ndarray, iterations: int = 8) 
 
 
 def _turned(character: Character, degrees: float) -> Character:
-    a = np.radians(degrees)
-    r = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]], np.float32)
+    r = turn_about_y(degrees).astype(np.float32)
     return character.with_parts(vertices=character.vertices @ r.T, normals=None, skeleton=None)
 
 
-#: the other ways an OBJ's face may look, and the turn about +Y that would bring each to +Z
-OTHER_FACINGS = (("-z", 180.0), ("+x", -90.0), ("-x", 90.0))
+#: the other ways an OBJ's face may look, and the turn about +Y that would bring each to +Z (import-rig --forward)
+OTHER_FACINGS = tuple((axis, degrees) for axis, degrees in FORWARD_TURNS.items() if axis != "+z")
 SHAPES_LEAN = 0.02  # the shapes' vertices' centre this fraction of the mesh's size off its centre shows the face
 DETAIL_MARGIN = 1.25  # a static head's back with this many times the front's skin vertices is its face
 SYMMETRY_SLACK = 0.005  # facings whose symmetry error is within this (face widths) of the best compete on the nose
