@@ -372,7 +372,8 @@ def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> 
 
         extra = {"panel": panel, "panel_draws": p.draw_sketch.n, "panel_cpu_ms": q(p.draw_sketch),
                  "panel_gl_submit_ms": q(p.submit_sketch), "panel_build_ms": q(p.build_sketch),
-                 "panel_draw_calls_ms": q(p.calls_sketch), "panel_cpu_without_draw_calls_ms": q(p.cpu_sketch)}
+                 "panel_draw_calls_ms": q(p.calls_sketch), "panel_cpu_without_draw_calls_ms": q(p.cpu_sketch),
+                 "panel_settings_builds": p.settings_builds, "panel_settings_build_ms": q(p.settings_sketch)}
         if len(calls_ms) == cpu.size:  # one sample per tick in both: the tick's CPU less the panel's draw calls
             extra["cpu_per_tick_less_panel_draw_calls_ms"] = _percentiles(cpu - np.asarray(calls_ms))
         gpu = result.loop.timer.samples("gpu_finish") * 1e3

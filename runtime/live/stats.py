@@ -29,7 +29,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -100,14 +100,15 @@ class LiveStats:
             self._last_counters = now
             self._window_start = self._n
 
-    def latency(self, since: int = 0) -> dict:
-        """Per stage ``{"n", "p50_ms", "p99_ms", "max_ms"}`` over samples ``since`` .. now (ring-limited)."""
+    def latency(self, since: int = 0, stages: Sequence[str] = STAGES) -> dict:
+        """Per stage (of ``stages``, default all) ``{"n", "p50_ms", "p99_ms", "max_ms"}`` over samples ``since`` ..
+        now (ring-limited)."""
         cap = self._samples.shape[1]
         start = max(since, self._n - cap)
         idx = np.arange(start, self._n) % cap
         out = {}
-        for j, name in enumerate(STAGES):
-            a = self._samples[j, idx] * 1e3
+        for name in stages:
+            a = self._samples[STAGES.index(name), idx] * 1e3
             if a.size:
                 p50, p99 = np.percentile(a, [50, 99])
                 out[name] = {"n": int(a.size), "p50_ms": float(p50), "p99_ms": float(p99), "max_ms": float(a.max())}

@@ -1,8 +1,12 @@
 """What the panel shows and edits: input status, per-channel meters, filters per region, calibration, record, chain.
 
-The panel is one ImGui window (two in a window wide enough for both and some face: the settings at the right edge)
-drawn after the character, into the same
-framebuffer (:class:`~facepuppet.runtime.panel.gl.ImguiGL`). It runs as a
+The panel is two ImGui windows, each in its own ImGui context: the desk (input, channels, response) and the
+settings (the rest; at the right edge of a window wide enough for both and some face, else under the desk),
+drawn after the character, into the same framebuffer (:class:`~facepuppet.runtime.panel.gl.ImguiGL`). The desk
+is built every frame (its meters); the settings only when what they show changes (the config in force, the
+calibration's state, the recording, the profile's messages, the layout: :meth:`DeskPanel._settings_key`), when
+an event arrives (the window's events go to both contexts: :class:`~facepuppet.runtime.panel.fanout.PanelIO`)
+and while the mouse is over them; the other frames draw their last frame again. It runs as a
 :class:`~facepuppet.runtime.live.loop.FrameLoop` overlay: after the character's
 draw call of a tick, before the GPU wait, with that tick's
 :class:`~facepuppet.runtime.live.loop.TickInfo` (the raw frame the snapshot took,
@@ -33,8 +37,9 @@ frame on screen, not the one before.
 Every edit is a config change: a copy of the pipeline's ``LiveConfig`` (``dataclasses.replace``) handed
 to the pipeline's ``apply_config``, which applies it at the next tick. The status numbers that need a
 percentile or a file size are refreshed twice a second, not every frame, so the panel's cost stays small;
-so do the meters as plain whole-pixel rectangles in the list's draw list, and the settings sections out of
-view built as one blank item (:meth:`DeskPanel._section`).
+so do the settings built only on a change, the channel rows as one item whose names and meters (plain
+whole-pixel rectangles) go straight into the list's draw list, and the settings sections out of view built
+as one blank item (:meth:`DeskPanel._section`).
 Nothing is kept per frame.
 """
 
@@ -56,6 +61,7 @@ from facepuppet.runtime.live.timing import DurationSketch
 from facepuppet.runtime.live.tracking_loss import LOSS_MODES, LOSS_REGIONS, VOICE_REGIONS
 from facepuppet.runtime.panel import load_imgui
 from facepuppet.runtime.panel.apply import apply_config, clear_calibration, config_in_force
+from facepuppet.runtime.panel.fanout import PanelIO
 from facepuppet.runtime.panel.gl import ImguiGL
 
 if TYPE_CHECKING:
@@ -78,6 +84,9 @@ REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed
 #: ImGui frames per second at most: a tick closer than 0.9 / REBUILD_HZ to the last frame draws that frame
 #: again (its buffers are uploaded already; only the draw calls), e.g. every other tick at 120 frames/s on arrival
 REBUILD_HZ = 60.0
+#: frames the settings' context is still built after an input event (ImGui takes one event per frame)
+SETTLE_FRAMES = 3
+SETTINGS_MIN_H = 150.0  # the settings' window under the desk's (a narrow window) is at least this tall
 PANEL_WIDTH = 430
 METER_W, METER_H, METER_GAP = 80.0, 12.0, 6.0  # a channel meter's size in pixels and the gap after it
 METERS_W = 3 * (METER_W + METER_GAP) + 2.0  # the three meters of a row, before its name
@@ -152,14 +161,15 @@ class DeskPanel:
                  names: tuple[str, ...] | None = None) -> None:
         self.imgui = imgui = load_imgui()
         self._prev_context = imgui.get_current_context()
-        self._context = imgui.create_context()
+        # two ImGui contexts: the desk's (rebuilt every frame) and the settings' (a window of their own in a wide
+        # window, rebuilt only when what they show changes); the window's events go to both (PanelIO)
+        self._context, desk_io, self.gl = self._new_context(ctx)
+        self._settings_context, settings_io, self.gl_settings = self._new_context(ctx)
         imgui.set_current_context(self._context)
-        self.io = imgui.get_io()
-        self.io.set_ini_filename("")  # no imgui.ini written into the working folder
-        self.io.config_input_trickle_event_queue = True
+        self.io = PanelIO(desk_io, settings_io)
+        self._settings_io = settings_io
         self.width, self.height = int(width), int(height)
         self.window_size = window_size or (self.width, self.height)
-        self.gl = ImguiGL(ctx, imgui)
         self.fbo = fbo
         self.pipeline, self.chain, self.character = pipeline, chain, character
         self.names = tuple(names) if names is not None else tuple(chain.names) if chain is not None else ()
@@ -175,11 +185,21 @@ class DeskPanel:
         self.build_sketch = DurationSketch()
         self.calls_sketch = DurationSketch()
         self.cpu_sketch = DurationSketch()
+        self.settings_sketch = DurationSketch()
         self.draw_calls_s = 0.0
         self.rebuild_hz = REBUILD_HZ
         self.reused = 0  # ticks that drew the last ImGui frame again
+        self.desk_builds = 0  # ImGui frames of the desk's window built (the other ticks drew the last one again)
+        self.settings_builds = 0  # ImGui frames of the settings' window built (the other ticks drew the last again)
         self._built = False
         self._last = clock()
+        self._settings_built = False
+        self._settings_last = self._last
+        self._settings_shown: tuple | None = None  # what the settings showed when last built (_settings_key)
+        self._settings_events = -1  # PanelIO.events at their last build
+        self._settings_settle = 0  # frames still to build after an event (ImGui takes a click over frames)
+        self._desk_bottom = 0.0  # the desk window's foot when last built (a narrow window: the settings go under)
+        self._settings_busy = False  # the mouse is over them, an item is active or a text field has the keyboard
         self._status: dict[str, Any] = {}
         self._refresh_at = -math.inf
         self._rate_base: tuple[float, int, int] | None = None
@@ -197,7 +217,6 @@ class DeskPanel:
         self.profile_warning = ""  # the profile was made for another character or input
         self._profile_checked: object = None  # the profile path the warning was computed for
         self._config: LiveConfig | None = None
-        self._row_pitch = 0.0  # height of a channel row, as ImGui's list clipper measured it
         self._lines: dict[str, str] = {}  # status lines built at each refresh, not every frame
         self._colours = [imgui.color_convert_float4_to_u32(imgui.ImVec4(*c)) for c in METER_COLOURS]
         self._spacing_y = imgui.get_style().item_spacing.y
@@ -210,6 +229,16 @@ class DeskPanel:
     def toggle(self) -> None:
         self.visible = not self.visible
 
+    def _new_context(self, ctx: moderngl.Context) -> tuple[Any, Any, ImguiGL]:
+        """A fresh ImGui context (no imgui.ini, one input event per frame), its IO and its renderer."""
+        imgui = self.imgui
+        context = imgui.create_context()
+        imgui.set_current_context(context)
+        io = imgui.get_io()
+        io.set_ini_filename("")  # no imgui.ini written into the working folder
+        io.config_input_trickle_event_queue = True
+        return context, io, ImguiGL(ctx, imgui)
+
     def overlay(self, info: TickInfo) -> None:
         """FrameLoop overlay: count the tick, and when shown draw the panel into ``fbo`` (after the character)."""
         now = self.clock()
@@ -219,45 +248,98 @@ class DeskPanel:
         if not self.visible:
             self._last = now
             self.draw_calls_s = 0.0
-            self._built = False
+            self._built = False  # the meters' frame is stale; the settings' is not unless its key or an event says
             return
         t0 = time.perf_counter()
+        wide = self.window_size[0] >= 2 * PANEL_WIDTH + 200  # room for the settings beside the desk
+        build_s = calls = 0.0
+        rebuilt = False
         if self._built and now - self._last < 0.9 / self.rebuild_hz:  # the last ImGui frame is recent: drawn again
             self.gl.redraw(self.fbo)
-            self.draw_s = time.perf_counter() - t0
-            self.draw_calls_s = calls = self.gl.draw_calls_s
             self.reused += 1
-            self.draw_sketch.add(self.draw_s)
-            self.submit_sketch.add(self.draw_s)
-            self.calls_sketch.add(calls)
-            self.cpu_sketch.add(self.draw_s - calls)
-            return
+        else:
+            if now >= self._refresh_at:
+                self._refresh(now)
+            self._config = None  # read afresh this frame
+            self._values = None  # set by the channel section
+            t1 = time.perf_counter()
+            self._begin_frame(self._context, now - self._last)
+            self._last = now
+            self._build(info, now, wide)
+            self.imgui.render()
+            build_s += time.perf_counter() - t1
+            self.gl.render(self.imgui.get_draw_data(), self.fbo)
+            self._built = rebuilt = True
+            self.desk_builds += 1
+        calls += self.gl.draw_calls_s
+        if self._settings_due(now, wide):
+            t1 = time.perf_counter()
+            self._begin_frame(self._settings_context, now - self._settings_last)
+            self._settings_last = now
+            self._settings_window(info, wide)
+            self.imgui.render()
+            t2 = time.perf_counter()
+            build_s += t2 - t1
+            self.gl_settings.render(self.imgui.get_draw_data(), self.fbo)
+            self._settings_done(wide)
+            self.settings_sketch.add(t2 - t1)
+            rebuilt = True
+        else:
+            self.gl_settings.redraw(self.fbo)
+        calls += self.gl_settings.draw_calls_s
+        self.imgui.set_current_context(self._context)
+        self.draw_s = time.perf_counter() - t0
+        self.draw_calls_s = calls
+        self.draw_sketch.add(self.draw_s)
+        self.submit_sketch.add(self.draw_s - build_s)
+        if rebuilt:
+            self.build_sketch.add(build_s)
+        self.calls_sketch.add(calls)
+        self.cpu_sketch.add(self.draw_s - calls)
+
+    def _begin_frame(self, context: Any, dt: float) -> None:
+        """Make ``context`` current and start its ImGui frame (display size and scale, ``dt`` since its last)."""
         imgui = self.imgui
-        imgui.set_current_context(self._context)
-        io = self.io
+        imgui.set_current_context(context)
+        io = imgui.get_io()
         io.display_size = imgui.ImVec2(*self.window_size)
         io.display_framebuffer_scale = imgui.ImVec2(self.width / self.window_size[0],
                                                     self.height / self.window_size[1])
-        io.delta_time = max(now - self._last, 1e-4)
-        self._last = now
-        if now >= self._refresh_at:
-            self._refresh(now)
+        io.delta_time = max(dt, 1e-4)
         imgui.new_frame()
-        self._config = None  # read afresh this frame
-        self._values = None  # set by the channel section
-        self._build(info, now)
-        imgui.render()
-        t1 = time.perf_counter()
-        self.gl.render(imgui.get_draw_data(), self.fbo)
-        t2 = time.perf_counter()
-        self.draw_s = t2 - t0
-        self.draw_calls_s = calls = self.gl.draw_calls_s
-        self._built = True
-        self.draw_sketch.add(self.draw_s)
-        self.submit_sketch.add(t2 - t1)
-        self.build_sketch.add(t1 - t0)
-        self.calls_sketch.add(calls)
-        self.cpu_sketch.add(self.draw_s - calls)
+
+    def _settings_key(self, wide: bool) -> tuple:
+        """What the settings show that can change without an event on them: the config in force (an edit in the
+        desk's Response, a Revert, a Clear), the calibration's state, the recording's file, size and message,
+        the profile's message and warning, the window's size and, in a narrow one, the desk's foot (the
+        settings' window goes under it)."""
+        p, rec = self.pipeline, self.recorder
+        return (id(getattr(p, "config", None)), bool(getattr(p, "calibrating", False)),
+                getattr(p, "counters", {}).get("calibrations", 0), getattr(p, "neutral_weights", None) is not None,
+                self._status.get("record"), getattr(rec, "recording", None), getattr(rec, "message", None),
+                getattr(getattr(self.chain, "profile", None), "exists", None), self.profile_message,
+                self.profile_warning, self.window_size, wide, 0.0 if wide else self._desk_bottom)
+
+    def _settings_due(self, now: float, wide: bool) -> bool:
+        """Whether the settings' window is built this tick (else its last frame is drawn again): never built
+        since shown, an event arrived or what it shows changed (:meth:`_settings_key`), and the few frames after
+        either (ImGui takes a click over frames, and lays out a moved or resized window's scrollbar a frame
+        late), or the mouse is over it or it is being used."""
+        if not self._settings_built or self._settings_busy or self._settings_settle > 0:
+            return True
+        return self.io.events != self._settings_events or self._settings_key(wide) != self._settings_shown
+
+    def _settings_done(self, wide: bool) -> None:
+        """After a settings frame: remember what it showed and whether the operator is on it."""
+        imgui, io = self.imgui, self._settings_io
+        key = self._settings_key(wide)
+        if not self._settings_built or self.io.events != self._settings_events or key != self._settings_shown:
+            self._settings_settle = SETTLE_FRAMES  # a change: this frame and the next ones
+        self._settings_built = True
+        self.settings_builds += 1
+        self._settings_events, self._settings_shown = self.io.events, key
+        self._settings_settle = max(self._settings_settle - 1, 0)
+        self._settings_busy = bool(io.want_capture_mouse or io.want_text_input or imgui.is_any_item_active())
 
     def _refresh(self, now: float) -> None:
         """Rates, drops, latency percentiles and the record size: twice a second."""
@@ -282,7 +364,7 @@ class DeskPanel:
         s["latency"] = None
         if self.stats is not None:
             since = s.get("stats_n", 0)
-            lat = self.stats.latency(since=since).get("end_to_end", {})
+            lat = self.stats.latency(since=since, stages=("end_to_end",)).get("end_to_end", {})  # one: not all
             s["stats_n"] = getattr(self.stats, "_n", 0)
             if lat.get("n"):
                 s["latency"] = (lat["p50_ms"], lat["p99_ms"], lat["n"])
@@ -309,23 +391,43 @@ class DeskPanel:
         if self._collect is not None:
             self._collect.add(label)
 
-    def _build(self, info: TickInfo, now: float) -> None:
+    def _build(self, info: TickInfo, now: float, wide: bool) -> None:
+        """The desk's window: input, channels, response. In a ``wide`` window it is as tall as the window; in a
+        narrow one as tall as its content, and the settings' window goes under it."""
         imgui = self.imgui
         w, h = self.window_size
-        two = w >= 2 * PANEL_WIDTH + 200  # room for the settings in a window of their own, at the right edge
         imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
-        imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
+        if wide:
+            imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
+        else:
+            imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, 0.0), imgui.Cond_.always)  # 0: fit the content
         imgui.set_next_window_bg_alpha(0.85)
         imgui.begin("facepuppet desk (Tab hides)")
         self._input_section(now)
         self._channel_section(info)
         self._response_section()
-        if two:
-            imgui.end()
+        self._desk_bottom = float(int(imgui.get_window_pos().y + imgui.get_window_height()))
+        imgui.end()
+
+    def _settings_window(self, info: TickInfo, wide: bool) -> None:
+        """The settings in a window of their own (their own ImGui context): at the right edge of a ``wide``
+        window, else under the desk's (at least :data:`SETTINGS_MIN_H` tall, over the desk's foot if need be)."""
+        imgui = self.imgui
+        w, h = self.window_size
+        if wide:
             imgui.set_next_window_pos(imgui.ImVec2(w - PANEL_WIDTH - 8, 8), imgui.Cond_.first_use_ever)
             imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 16), imgui.Cond_.first_use_ever)
-            imgui.set_next_window_bg_alpha(0.85)
-            imgui.begin("settings")
+        else:
+            top = max(min(self._desk_bottom + 8.0, h - SETTINGS_MIN_H - 8.0), 8.0)
+            imgui.set_next_window_pos(imgui.ImVec2(8, top), imgui.Cond_.always)
+            imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h - 8.0 - top), imgui.Cond_.always)
+        imgui.set_next_window_bg_alpha(0.85)
+        imgui.begin("settings")
+        self._config = None  # read afresh: the desk's frame may be an older one drawn again
+        self._settings_sections(info)
+        imgui.end()
+
+    def _settings_sections(self, info: TickInfo) -> None:
         section = self._section
         section("filter", self._filter_section)
         section("calibration", self._calibration_section)
@@ -334,7 +436,6 @@ class DeskPanel:
         section("loss", self._loss_section)
         section("record", self._record_section, info)
         section("info", self._info_section)
-        imgui.end()
 
     def _section(self, key: str, build: Callable[..., None], *args: Any) -> None:
         """Build a settings section, or, when the window shows none of it (scrolled out, or below the window's
@@ -737,10 +838,11 @@ class DeskPanel:
     def _channel_section(self, info: TickInfo) -> None:
         """One row per channel: three meters (raw, after the stages, after mapping) and the name (click: select).
 
-        The meters are plain rectangles in the child window's draw list (a frame and a bar each, no text: the
-        values of the selected channel are in the Response section, those of a row under the mouse in its
-        tooltip), their lengths from this tick's values; ImGui lays out only the names. The values are read as
-        Python floats once per frame (three ``tolist``), not through NumPy per row.
+        The rows are one invisible button (a click selects the row under the mouse, a hover shows its numbers in
+        a tooltip); the names and the meters of the rows in view are drawn straight into the child window's draw
+        list: a text and plain rectangles per row (a frame and a bar per meter, no text: the values of the
+        selected channel are in the Response section), the bars' lengths from this tick's values. The values are
+        read as Python floats once per frame (three ``tolist``), not through NumPy per row.
         """
         imgui = self.imgui
         if not imgui.collapsing_header("Channels: raw | filtered | mapped", imgui.TreeNodeFlags_.default_open):
@@ -778,37 +880,53 @@ class DeskPanel:
         else:
             rows = range(len(channels))
         # as tall as its rows, at most a third of the window (then it scrolls; the sections below stay in view)
-        pitch = self._row_pitch or imgui.get_frame_height_with_spacing()  # measured by the clipper once drawn
-        fit = max(len(rows), 1) * pitch + 2 * imgui.get_style().window_padding.y
+        n = len(rows)
+        pitch = imgui.get_text_line_height_with_spacing()
+        fit = max(n, 1) * pitch + 2 * imgui.get_style().window_padding.y
         height = min(fit, max(120.0, 0.35 * self.window_size[1]))
         imgui.begin_child("channels", imgui.ImVec2(0, height))
-        imgui.indent(METERS_W)  # the names start after the meters; the meters are drawn in the indent
-        dy = float(int(0.5 * (imgui.get_text_line_height() - METER_H)))  # whole pixels: see _draw_meters
-        clipper = imgui.ListClipper()
-        clipper.begin(len(rows))
-        selected, selectable, cursor, hovered = self.selected, imgui.selectable, imgui.get_cursor_screen_pos, \
-            imgui.is_item_hovered
-        shown = []  # (left, top, values) of each row drawn (ImGui's clipper: the first row, then those in view)
-        while clipper.step():
-            for row in range(clipper.display_start, clipper.display_end):
-                i = rows[row]
-                m = mapped[i]
-                values = (raw_v[i] if raw_v is not None else nan, flt_v[i] if flt_v is not None else nan,
-                          rig_v[m] if rig_v is not None and m >= 0 else nan)
-                p = cursor()
-                shown.append((float(int(p.x - METERS_W)), float(int(p.y + dy)), values))
-                name = channels[i]
-                if selectable(name, name == selected)[0]:
-                    self.selected = name
-                self._remember(f"channel.{name}")
-                if hovered():
-                    imgui.set_tooltip(_value_text(name, values))
+        # the rows are one item (an invisible button as tall as all of them): a click selects the row under the
+        # mouse, a hover shows that row's numbers; the names and meters of the rows in view are drawn into the
+        # child window's draw list, not laid out as widgets (a Python call per widget is the panel's cost)
+        origin = imgui.get_cursor_screen_pos()  # row 0's top left, scrolled
+        vec = imgui.ImVec2
+        imgui.invisible_button("##channel_rows", vec(max(imgui.get_content_region_avail().x, 1.0), max(n, 1) * pitch))
+        hovered = imgui.is_item_hovered()
+        under = -1
+        if hovered:
+            under = int((imgui.get_mouse_pos().y - origin.y) // pitch)
+            under = under if 0 <= under < n else -1
+            if under >= 0 and imgui.is_item_clicked():
+                self.selected = channels[rows[under]]
+        scroll, view = imgui.get_scroll_y(), imgui.get_window_height()
+        first, last = max(int(scroll // pitch), 0), min(n, int((scroll + view) // pitch) + 1)
+        left = float(int(origin.x))
+        names_x = left + METERS_W
+        right = names_x + max(imgui.get_content_region_avail().x - METERS_W, 1.0)
+        dy = float(int(0.5 * (pitch - METER_H)))  # whole pixels: see _draw_meters
+        ty = 0.5 * (pitch - imgui.get_text_line_height())
+        dl = imgui.get_window_draw_list()
+        selected = self.selected
+        text_col = imgui.get_color_u32(imgui.Col_.text)
+        add_text, rects = dl.add_text, self.rects
+        shown = []  # (left, top, values) of each row in view
+        for row in range(first, last):
+            i = rows[row]
+            m = mapped[i]
+            values = (raw_v[i] if raw_v is not None else nan, flt_v[i] if flt_v is not None else nan,
+                      rig_v[m] if rig_v is not None and m >= 0 else nan)
+            top = float(int(origin.y + row * pitch))
+            shown.append((left, top + dy, values))
+            name = channels[i]
+            if name == selected or row == under:
+                dl.add_rect_filled(vec(names_x - 2.0, top), vec(right, top + pitch), imgui.get_color_u32(
+                    imgui.Col_.header if name == selected else imgui.Col_.header_hovered))
+            add_text(vec(names_x, top + ty), text_col, name)
+            rects[f"channel.{name}"] = (names_x, top, right, top + pitch)
+            if row == under:
+                imgui.set_tooltip(_value_text(name, values))
         if shown:
-            self._draw_meters(imgui.get_window_draw_list(), shown)
-        if clipper.items_height > 0:
-            self._row_pitch = clipper.items_height
-        clipper.end()
-        imgui.unindent(METERS_W)
+            self._draw_meters(dl, shown)
         imgui.end_child()
 
     def _draw_meters(self, dl: Any, shown: list) -> None:
@@ -825,7 +943,7 @@ class DeskPanel:
         for j in range(3):
             x = left + j * step
             rect(vec(x, top), vec(x + METER_W, bottom), frame_col)
-        for j in range(3):  # the first row's (the clipper always lays it out first)
+        for j in range(3):  # the first row in view's
             self.rects[f"meter.0.{j}"] = (left + j * step, top, left + j * step + METER_W, top + METER_H)
         colours, dash_col = self._colours, None
         for x, y0, values in shown:
@@ -859,5 +977,7 @@ class DeskPanel:
         if self._context is None:
             return
         self.gl.release()
+        self.gl_settings.release()
+        self.imgui.destroy_context(self._settings_context)
         self.imgui.destroy_context(self._context)
-        self._context = None
+        self._context = self._settings_context = None

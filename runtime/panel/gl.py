@@ -66,6 +66,7 @@ class ImguiGL:
         self._ibo: moderngl.Buffer | None = None
         self._vao: moderngl.VertexArray | None = None
         self._vtx = self._idx = None  # staging arrays the draw lists are copied into
+        self._addresses = (0, 0)  # their data addresses
         self._display: tuple | None = None
         self._cmds: list = []  # the last frame's draw commands (redraw)
         self.draw_calls_s = 0.0  # seconds in the last frame's draw calls (llvmpipe: its vertex work runs in them)
@@ -121,6 +122,7 @@ class ImguiGL:
                                               index_buffer=self._ibo, index_element_size=INDEX_BYTES)
             self._vtx = np.empty(vbo_size, dtype=np.uint8)
             self._idx = np.empty(ibo_size // INDEX_BYTES, dtype=np.uint32)
+            self._addresses = (self._vtx.ctypes.data, self._idx.ctypes.data)  # read once: .ctypes is not free
         return self._vbo, self._ibo, self._vao
 
     def render(self, draw_data: Any, fbo: moderngl.Framebuffer) -> int:
@@ -153,7 +155,7 @@ class ImguiGL:
             return 0
         vbo, ibo, vao = self._buffers(nv_all * VERTEX_BYTES, ni_all)
         vtx, idx = self._vtx, self._idx
-        vtx_at, idx_at = vtx.ctypes.data, idx.ctypes.data
+        vtx_at, idx_at = self._addresses
         for dl, nv, ni, v0, i0 in lists:  # straight from ImGui's memory into the staging arrays
             ctypes.memmove(vtx_at + v0 * VERTEX_BYTES, dl.vtx_buffer.data_address(), nv * VERTEX_BYTES)
             ctypes.memmove(idx_at + i0 * INDEX_BYTES, dl.idx_buffer.data_address(), ni * INDEX_BYTES)
