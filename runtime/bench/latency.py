@@ -374,10 +374,13 @@ def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> 
                  "panel_gl_submit_ms": q(p.submit_sketch), "panel_build_ms": q(p.build_sketch),
                  "panel_draw_calls_ms": q(p.calls_sketch), "panel_cpu_without_draw_calls_ms": q(p.cpu_sketch),
                  "panel_settings_builds": p.settings_builds, "panel_settings_build_ms": q(p.settings_sketch)}
-        if len(calls_ms) == cpu.size:  # one sample per tick in both: the tick's CPU less the panel's draw calls
+        # one sample per tick in each; the loop's timer keeps the last RING ticks (a long run): the same last ticks
+        n = cpu.size
+        calls_ms, shown_ticks = calls_ms[len(calls_ms) - n:], shown_ticks[len(shown_ticks) - n:]
+        if len(calls_ms) == n:  # the tick's CPU less the panel's draw calls
             extra["cpu_per_tick_less_panel_draw_calls_ms"] = _percentiles(cpu - np.asarray(calls_ms))
         gpu = result.loop.timer.samples("gpu_finish") * 1e3
-        if panel == "alternate" and len(shown_ticks) == cpu.size == gpu.size:
+        if panel == "alternate" and len(shown_ticks) == n == gpu.size:
             on = np.asarray(shown_ticks)
             less = cpu - np.asarray(calls_ms)
             extra["interleaved"] = {

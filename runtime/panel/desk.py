@@ -114,6 +114,33 @@ def _ascii(text: str) -> str:
     return text.translate(_NOT_IN_FONT).encode("ascii", "replace").decode("ascii")
 
 
+class _Retained:
+    """An ImGui window built only when needed (:meth:`due`), its last frame drawn again the other ticks.
+
+    Built when never built, when what it shows changed (its key), when an event arrived, in the
+    :data:`SETTLE_FRAMES` frames after either (ImGui takes a click over frames and lays out a moved or resized
+    window's scrollbar a frame late), and while the operator is on it (the mouse over it, an item active, a text
+    field with the keyboard).
+    """
+
+    __slots__ = ("built", "shown", "events", "settle", "busy", "builds", "last")
+
+    def __init__(self, now: float) -> None:
+        self.built, self.shown, self.events, self.settle, self.busy, self.builds = False, None, -1, 0, False, 0
+        self.last = now  # when its last frame was built (ImGui's delta time)
+
+    def due(self, key: tuple, events: int) -> bool:
+        return not self.built or self.busy or self.settle > 0 or events != self.events or key != self.shown
+
+    def done(self, key: tuple, events: int, io: Any, imgui: Any) -> None:
+        """After a frame: remember what it showed (``key``, the events seen) and whether the operator is on it."""
+        if not self.built or events != self.events or key != self.shown:
+            self.settle = SETTLE_FRAMES  # a change: this frame and the next ones
+        self.built, self.builds, self.events, self.shown = True, self.builds + 1, events, key
+        self.settle = max(self.settle - 1, 0)
+        self.busy = bool(io.want_capture_mouse or io.want_text_input or imgui.is_any_item_active())
+
+
 class DeskPanel:
     """The live panel of one run.
 
@@ -161,13 +188,15 @@ class DeskPanel:
                  names: tuple[str, ...] | None = None) -> None:
         self.imgui = imgui = load_imgui()
         self._prev_context = imgui.get_current_context()
-        # two ImGui contexts: the desk's (rebuilt every frame) and the settings' (a window of their own in a wide
-        # window, rebuilt only when what they show changes); the window's events go to both (PanelIO)
+        # three ImGui contexts: the desk's and the settings' windows, each built only when what it shows changes,
+        # and the live layer over the desk (its status lines, meters and the selected channel's numbers), built
+        # every frame; the window's events go to the two windows' contexts (PanelIO), none to the live layer
         self._context, desk_io, self.gl = self._new_context(ctx)
         self._settings_context, settings_io, self.gl_settings = self._new_context(ctx)
+        self._live_context, _, self.gl_live = self._new_context(ctx)
         imgui.set_current_context(self._context)
         self.io = PanelIO(desk_io, settings_io)
-        self._settings_io = settings_io
+        self._desk_io, self._settings_io = desk_io, settings_io
         self.width, self.height = int(width), int(height)
         self.window_size = window_size or (self.width, self.height)
         self.fbo = fbo
@@ -188,18 +217,19 @@ class DeskPanel:
         self.settings_sketch = DurationSketch()
         self.draw_calls_s = 0.0
         self.rebuild_hz = REBUILD_HZ
-        self.reused = 0  # ticks that drew the last ImGui frame again
-        self.desk_builds = 0  # ImGui frames of the desk's window built (the other ticks drew the last one again)
-        self.settings_builds = 0  # ImGui frames of the settings' window built (the other ticks drew the last again)
-        self._built = False
+        self.reused = 0  # ticks that drew the live layer's last ImGui frame again
+        self.live_builds = 0  # ImGui frames of the live layer built
+        self._built = False  # the live layer's last frame is there to draw again
         self._last = clock()
-        self._settings_built = False
-        self._settings_last = self._last
-        self._settings_shown: tuple | None = None  # what the settings showed when last built (_settings_key)
-        self._settings_events = -1  # PanelIO.events at their last build
-        self._settings_settle = 0  # frames still to build after an event (ImGui takes a click over frames)
+        self._desk = _Retained(self._last)
+        self._settings = _Retained(self._last)
         self._desk_bottom = 0.0  # the desk window's foot when last built (a narrow window: the settings go under)
-        self._settings_busy = False  # the mouse is over them, an item is active or a text field has the keyboard
+        #: where the desk's last frame left room for the live layer: "status" (x, y, wrap width), "meters"
+        #: (left, row 0's top, row pitch, bar offset, first row, end row, clip rectangle), "values" (x, y)
+        self._live_at: dict[str, tuple] = {}
+        self._status_h = 0.0  # the height of the status lines, as the live layer last laid them out
+        self._rows: tuple = ()  # the channel rows shown this tick (indices into the channels)
+        self._channels: tuple | None = None
         self._status: dict[str, Any] = {}
         self._refresh_at = -math.inf
         self._rate_base: tuple[float, int, int] | None = None
@@ -239,8 +269,19 @@ class DeskPanel:
         io.config_input_trickle_event_queue = True
         return context, io, ImguiGL(ctx, imgui)
 
+    @property
+    def desk_builds(self) -> int:
+        """ImGui frames of the desk's window built (the other ticks drew its last frame again)."""
+        return self._desk.builds
+
+    @property
+    def settings_builds(self) -> int:
+        """ImGui frames of the settings' window built (the other ticks drew its last frame again)."""
+        return self._settings.builds
+
     def overlay(self, info: TickInfo) -> None:
-        """FrameLoop overlay: count the tick, and when shown draw the panel into ``fbo`` (after the character)."""
+        """FrameLoop overlay: count the tick, and when shown draw the panel into ``fbo`` (after the character):
+        the desk's window, the live layer over it, the settings' window."""
         now = self.clock()
         self._ticks += 1
         if info.raw is not None:
@@ -248,52 +289,62 @@ class DeskPanel:
         if not self.visible:
             self._last = now
             self.draw_calls_s = 0.0
-            self._built = False  # the meters' frame is stale; the settings' is not unless its key or an event says
+            self._built = False  # the live layer's frame is stale; the windows' are not unless a key or event says
             return
         t0 = time.perf_counter()
         wide = self.window_size[0] >= 2 * PANEL_WIDTH + 200  # room for the settings beside the desk
-        build_s = calls = 0.0
-        rebuilt = False
-        if self._built and now - self._last < 0.9 / self.rebuild_hz:  # the last ImGui frame is recent: drawn again
+        build_s = 0.0
+        if now >= self._refresh_at:
+            self._refresh(now)
+        self._tick_values(info)
+        desk, settings, imgui = self._desk, self._settings, self.imgui
+        if desk.due(self._desk_key(wide), self.io.events):
+            t1 = time.perf_counter()
+            self._begin_frame(self._context, now - desk.last)
+            desk.last = now
+            self._config = None  # read afresh this frame
+            self._build(now, wide)
+            imgui.render()
+            build_s += time.perf_counter() - t1
+            self.gl.render(imgui.get_draw_data(), self.fbo)
+            desk.done(self._desk_key(wide), self.io.events, self._desk_io, imgui)
+        else:
             self.gl.redraw(self.fbo)
+        calls = self.gl.draw_calls_s
+        if self._built and now - self._last < 0.9 / self.rebuild_hz:  # the live layer's last frame is recent
+            self.gl_live.redraw(self.fbo)
             self.reused += 1
         else:
-            if now >= self._refresh_at:
-                self._refresh(now)
-            self._config = None  # read afresh this frame
-            self._values = None  # set by the channel section
             t1 = time.perf_counter()
-            self._begin_frame(self._context, now - self._last)
+            self._begin_frame(self._live_context, now - self._last)
             self._last = now
-            self._build(info, now, wide)
-            self.imgui.render()
+            self._live_layer(now)
+            imgui.render()
             build_s += time.perf_counter() - t1
-            self.gl.render(self.imgui.get_draw_data(), self.fbo)
-            self._built = rebuilt = True
-            self.desk_builds += 1
-        calls += self.gl.draw_calls_s
-        if self._settings_due(now, wide):
+            self.gl_live.render(imgui.get_draw_data(), self.fbo)
+            self._built = True
+            self.live_builds += 1
+        calls += self.gl_live.draw_calls_s
+        if settings.due(self._settings_key(wide), self.io.events):
             t1 = time.perf_counter()
-            self._begin_frame(self._settings_context, now - self._settings_last)
-            self._settings_last = now
+            self._begin_frame(self._settings_context, now - settings.last)
+            settings.last = now
             self._settings_window(info, wide)
-            self.imgui.render()
+            imgui.render()
             t2 = time.perf_counter()
             build_s += t2 - t1
-            self.gl_settings.render(self.imgui.get_draw_data(), self.fbo)
-            self._settings_done(wide)
+            self.gl_settings.render(imgui.get_draw_data(), self.fbo)
+            settings.done(self._settings_key(wide), self.io.events, self._settings_io, imgui)
             self.settings_sketch.add(t2 - t1)
-            rebuilt = True
         else:
             self.gl_settings.redraw(self.fbo)
         calls += self.gl_settings.draw_calls_s
-        self.imgui.set_current_context(self._context)
+        imgui.set_current_context(self._context)
         self.draw_s = time.perf_counter() - t0
         self.draw_calls_s = calls
         self.draw_sketch.add(self.draw_s)
         self.submit_sketch.add(self.draw_s - build_s)
-        if rebuilt:
-            self.build_sketch.add(build_s)
+        self.build_sketch.add(build_s)
         self.calls_sketch.add(calls)
         self.cpu_sketch.add(self.draw_s - calls)
 
@@ -308,6 +359,13 @@ class DeskPanel:
         io.delta_time = max(dt, 1e-4)
         imgui.new_frame()
 
+    def _desk_key(self, wide: bool) -> tuple:
+        """What the desk's window shows that can change without an event on it: the channels and the rows shown,
+        the selection, the config in force (the Response section's values), the room the status lines need, the
+        layout (the live layer draws the values that change every frame)."""
+        return (self._channels, self._rows, self.selected, self.sent_only, id(getattr(self.pipeline, "config", None)),
+                self._status_h, self.window_size, wide)
+
     def _settings_key(self, wide: bool) -> tuple:
         """What the settings show that can change without an event on them: the config in force (an edit in the
         desk's Response, a Revert, a Clear), the calibration's state, the recording's file, size and message,
@@ -319,27 +377,6 @@ class DeskPanel:
                 self._status.get("record"), getattr(rec, "recording", None), getattr(rec, "message", None),
                 getattr(getattr(self.chain, "profile", None), "exists", None), self.profile_message,
                 self.profile_warning, self.window_size, wide, 0.0 if wide else self._desk_bottom)
-
-    def _settings_due(self, now: float, wide: bool) -> bool:
-        """Whether the settings' window is built this tick (else its last frame is drawn again): never built
-        since shown, an event arrived or what it shows changed (:meth:`_settings_key`), and the few frames after
-        either (ImGui takes a click over frames, and lays out a moved or resized window's scrollbar a frame
-        late), or the mouse is over it or it is being used."""
-        if not self._settings_built or self._settings_busy or self._settings_settle > 0:
-            return True
-        return self.io.events != self._settings_events or self._settings_key(wide) != self._settings_shown
-
-    def _settings_done(self, wide: bool) -> None:
-        """After a settings frame: remember what it showed and whether the operator is on it."""
-        imgui, io = self.imgui, self._settings_io
-        key = self._settings_key(wide)
-        if not self._settings_built or self.io.events != self._settings_events or key != self._settings_shown:
-            self._settings_settle = SETTLE_FRAMES  # a change: this frame and the next ones
-        self._settings_built = True
-        self.settings_builds += 1
-        self._settings_events, self._settings_shown = self.io.events, key
-        self._settings_settle = max(self._settings_settle - 1, 0)
-        self._settings_busy = bool(io.want_capture_mouse or io.want_text_input or imgui.is_any_item_active())
 
     def _refresh(self, now: float) -> None:
         """Rates, drops, latency percentiles and the record size: twice a second."""
@@ -391,9 +428,10 @@ class DeskPanel:
         if self._collect is not None:
             self._collect.add(label)
 
-    def _build(self, info: TickInfo, now: float, wide: bool) -> None:
-        """The desk's window: input, channels, response. In a ``wide`` window it is as tall as the window; in a
-        narrow one as tall as its content, and the settings' window goes under it."""
+    def _build(self, now: float, wide: bool) -> None:
+        """The desk's window: input, channels, response, with room left for the live layer's lines and meters.
+        In a ``wide`` window it is as tall as the window; in a narrow one as tall as its content, and the
+        settings' window goes under it."""
         imgui = self.imgui
         w, h = self.window_size
         imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
@@ -403,8 +441,9 @@ class DeskPanel:
             imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, 0.0), imgui.Cond_.always)  # 0: fit the content
         imgui.set_next_window_bg_alpha(0.85)
         imgui.begin("facepuppet desk (Tab hides)")
-        self._input_section(now)
-        self._channel_section(info)
+        self._live_at = {}
+        self._input_section()
+        self._channel_section()
         self._response_section()
         self._desk_bottom = float(int(imgui.get_window_pos().y + imgui.get_window_height()))
         imgui.end()
@@ -458,10 +497,18 @@ class DeskPanel:
         self._section_h[key] = imgui.get_cursor_pos_y() - y0
         self._section_rects[key] = labels
 
-    def _input_section(self, now: float) -> None:
+    def _input_section(self) -> None:
+        """The Input header and room for the status lines (the live layer writes them: :meth:`_status_text`)."""
         imgui = self.imgui
         if not imgui.collapsing_header("Input", imgui.TreeNodeFlags_.default_open):
             return
+        p = imgui.get_cursor_screen_pos()
+        wrap = imgui.get_content_region_avail().x
+        imgui.dummy(imgui.ImVec2(wrap, max(self._status_h, imgui.get_text_line_height())))
+        self._live_at["status"] = (float(int(p.x)), float(int(p.y)), wrap)
+
+    def _status_text(self, now: float) -> tuple[str, str]:
+        """The status lines (where, rates, last frame and tracking, latency) and the drops line, this tick."""
         if not self._lines:
             self._status_lines()
         lines = self._lines
@@ -469,10 +516,8 @@ class DeskPanel:
         state = getattr(self.pipeline, "tracking_state", "-")  # waiting / live / lost / easing
         events = getattr(self.pipeline, "events", ())
         last = (f" ({'found' if events[-1][1] else 'lost'} at {events[-1][0]:.1f} s)" if events else "")
-        # one text item of four lines (ImGui lays out the line breaks), not four items
-        imgui.text_unformatted(f"{lines['where']}\n{lines['rates']}\nlast frame: {age}   tracking: {state}{last}\n"
-                               f"{lines['latency']}")
-        imgui.text_wrapped(lines["drops"])
+        return (f"{lines['where']}\n{lines['rates']}\nlast frame: {age}   tracking: {state}{last}\n{lines['latency']}",
+                lines["drops"])
 
     def _status_lines(self) -> None:
         """The input section's lines that change only with the status numbers (at each refresh)."""
@@ -550,10 +595,11 @@ class DeskPanel:
         cs = config.channel(name)
         imgui.text(f"{name}" + ("" if key in config.channels else " (default response)"))
         self._remember("response.name")
-        values = self._selected_values(name)
-        if values is not None:  # the meters' numbers of this channel, every frame
-            imgui.text(_value_text("now", values))
+        if self._selected_values(name) is not None:  # room for the meters' numbers of it (the live layer's)
+            p = imgui.get_cursor_screen_pos()
+            imgui.dummy(imgui.ImVec2(imgui.get_content_region_avail().x, imgui.get_text_line_height()))
             self._remember("response.values")
+            self._live_at["values"] = (float(int(p.x)), float(int(p.y)))
         imgui.push_id("response")
         new = cs
         c, v = self._slider("gain", cs.gain, 0.0, 3.0, "gain %.2f")
@@ -835,26 +881,18 @@ class DeskPanel:
             self._shape_index[channels] = idx
         return idx
 
-    def _channel_section(self, info: TickInfo) -> None:
-        """One row per channel: three meters (raw, after the stages, after mapping) and the name (click: select).
-
-        The rows are one invisible button (a click selects the row under the mouse, a hover shows its numbers in
-        a tooltip); the names and the meters of the rows in view are drawn straight into the child window's draw
-        list: a text and plain rectangles per row (a frame and a bar per meter, no text: the values of the
-        selected channel are in the Response section), the bars' lengths from this tick's values. The values are
-        read as Python floats once per frame (three ``tolist``), not through NumPy per row.
-        """
-        imgui = self.imgui
-        if not imgui.collapsing_header("Channels: raw | filtered | mapped", imgui.TreeNodeFlags_.default_open):
-            return
+    def _tick_values(self, info: TickInfo) -> None:
+        """This tick's channels and values (raw, after the stages, the rig's; :attr:`_values`) and the rows shown
+        (:attr:`_rows`: all channels, or those the input sends). The values are read as Python floats once per
+        tick (three ``tolist``), not through NumPy per row."""
         raw = info.raw
         frame = info.frame
         channels = (raw.channels if raw is not None and raw.channels else
                     frame.channels if frame is not None and frame.channels else None)
-        if channels is None:
-            imgui.text("no channels yet")
-            return
         self._channels = channels
+        if channels is None:
+            self._values, self._rows = None, ()
+            return
         raw_w = raw.weights if raw is not None and raw.channels == channels else None
         if raw_w is not None:
             self._last_raw_w = raw_w
@@ -874,26 +912,48 @@ class DeskPanel:
             emap = self._expression_maps.get(channels)  # then the eyes' blinks (Blink + Blink_L/R)
             rig_v += list(emap.eye_blinks(ex)) if ex is not None and emap is not None else [nan, nan]
         self._values = (channels, raw_v, flt_v, rig_v, mapped)  # the Response section reads the selected one's
-        _, self.sent_only = imgui.checkbox("only the channels the input sends", self.sent_only)
         if self.sent_only and raw_v is not None:  # NaN: not sent (a VMC sender names only some channels)
-            rows = [i for i, v in enumerate(raw_v) if v == v]
+            self._rows = tuple(i for i, v in enumerate(raw_v) if v == v)
         else:
-            rows = range(len(channels))
+            self._rows = tuple(range(len(channels)))
+
+    def _row_values(self, i: int) -> tuple[float, float, float]:
+        """Channel ``i``'s raw, filtered and mapped value this tick (NaN: not sent / no shape)."""
+        _, raw_v, flt_v, rig_v, mapped = self._values
+        m = mapped[i]
+        nan = math.nan
+        return (raw_v[i] if raw_v is not None else nan, flt_v[i] if flt_v is not None else nan,
+                rig_v[m] if rig_v is not None and m >= 0 else nan)
+
+    def _channel_section(self) -> None:
+        """One row per channel: three meters (raw, after the stages, after mapping) and the name (click: select).
+
+        The rows are one invisible button (a click selects the row under the mouse, a hover shows its numbers in
+        a tooltip); the names of the rows in view, the selection and the meters' frames are drawn straight into
+        the child window's draw list; the meters' bars, whose lengths are this tick's values, by the live layer
+        (:meth:`_draw_meters`) where this leaves them room (the numbers of the selected channel are in the
+        Response section).
+        """
+        imgui = self.imgui
+        if not imgui.collapsing_header("Channels: raw | filtered | mapped", imgui.TreeNodeFlags_.default_open):
+            return
+        channels = self._channels
+        if channels is None:
+            imgui.text("no channels yet")
+            return
+        _, self.sent_only = imgui.checkbox("only the channels the input sends", self.sent_only)
+        rows = self._rows
         # as tall as its rows, at most a third of the window (then it scrolls; the sections below stay in view)
         n = len(rows)
         pitch = imgui.get_text_line_height_with_spacing()
         fit = max(n, 1) * pitch + 2 * imgui.get_style().window_padding.y
         height = min(fit, max(120.0, 0.35 * self.window_size[1]))
         imgui.begin_child("channels", imgui.ImVec2(0, height))
-        # the rows are one item (an invisible button as tall as all of them): a click selects the row under the
-        # mouse, a hover shows that row's numbers; the names and meters of the rows in view are drawn into the
-        # child window's draw list, not laid out as widgets (a Python call per widget is the panel's cost)
         origin = imgui.get_cursor_screen_pos()  # row 0's top left, scrolled
         vec = imgui.ImVec2
         imgui.invisible_button("##channel_rows", vec(max(imgui.get_content_region_avail().x, 1.0), max(n, 1) * pitch))
-        hovered = imgui.is_item_hovered()
         under = -1
-        if hovered:
+        if imgui.is_item_hovered():
             under = int((imgui.get_mouse_pos().y - origin.y) // pitch)
             under = under if 0 <= under < n else -1
             if under >= 0 and imgui.is_item_clicked():
@@ -909,14 +969,9 @@ class DeskPanel:
         selected = self.selected
         text_col = imgui.get_color_u32(imgui.Col_.text)
         add_text, rects = dl.add_text, self.rects
-        shown = []  # (left, top, values) of each row in view
         for row in range(first, last):
             i = rows[row]
-            m = mapped[i]
-            values = (raw_v[i] if raw_v is not None else nan, flt_v[i] if flt_v is not None else nan,
-                      rig_v[m] if rig_v is not None and m >= 0 else nan)
             top = float(int(origin.y + row * pitch))
-            shown.append((left, top + dy, values))
             name = channels[i]
             if name == selected or row == under:
                 dl.add_rect_filled(vec(names_x - 2.0, top), vec(right, top + pitch), imgui.get_color_u32(
@@ -924,30 +979,63 @@ class DeskPanel:
             add_text(vec(names_x, top + ty), text_col, name)
             rects[f"channel.{name}"] = (names_x, top, right, top + pitch)
             if row == under:
-                imgui.set_tooltip(_value_text(name, values))
-        if shown:
-            self._draw_meters(dl, shown)
+                imgui.set_tooltip(_value_text(name, self._row_values(i)))
+        if last > first:  # per column one background strip from the first row's top to the last row's bottom
+            top0 = float(int(origin.y + first * pitch)) + dy
+            bottom = float(int(origin.y + (last - 1) * pitch)) + dy + METER_H
+            frame_col = imgui.get_color_u32(imgui.Col_.frame_bg)
+            for j in range(3):
+                x = left + j * (METER_W + METER_GAP)
+                dl.add_rect_filled(vec(x, top0), vec(x + METER_W, bottom), frame_col)
+                self.rects[f"meter.0.{j}"] = (x, top0, x + METER_W, top0 + METER_H)  # the first row in view's
+            wp, ws = imgui.get_window_pos(), imgui.get_window_size()
+            self._live_at["meters"] = (left, float(int(origin.y)), pitch, dy, first, last,
+                                       (wp.x, wp.y, wp.x + ws.x, wp.y + ws.y))
         imgui.end_child()
 
-    def _draw_meters(self, dl: Any, shown: list) -> None:
-        """The meters of the rows drawn, into the child window's draw list ``dl``: per column one background
-        strip from the first row's top to the last row's bottom, then per meter a bar as long as its value (a
-        dash for none). Corners on whole pixels: ImGui draws a rectangle with a fractional corner as an
-        anti-aliased path (30 indices instead of 6; llvmpipe's draw call costs by the index)."""
+    def _live_layer(self, now: float) -> None:
+        """This tick's values over the desk's last frame, into the live context's foreground list: the status
+        lines, the meters' bars and the selected channel's numbers, where the desk left them room. When the
+        status lines need more (or less) room than the desk left, the desk is built again next tick."""
         imgui = self.imgui
+        at = self._live_at
+        fg = imgui.get_foreground_draw_list()
+        col = imgui.get_color_u32(imgui.Col_.text)
+        where = at.get("status")
+        if where is not None:
+            x, y, wrap = where
+            lines, drops = self._status_text(now)
+            fg.add_text(imgui.ImVec2(x, y), col, lines)
+            lines_h = imgui.calc_text_size(lines).y + self._spacing_y
+            fg.add_text(imgui.get_font(), imgui.get_font_size(), imgui.ImVec2(x, y + lines_h), col, drops, wrap)
+            self._status_h = float(lines_h + imgui.calc_text_size(drops, wrap_width=wrap).y)  # the desk's key
+        meters = at.get("meters")
+        if meters is not None and self._values is not None:
+            self._draw_meters(fg, meters)
+        where = at.get("values")
+        if where is not None and self.selected is not None:
+            values = self._selected_values(self.selected)
+            if values is not None:
+                fg.add_text(imgui.ImVec2(*where), col, _value_text("now", values))
+
+    def _draw_meters(self, dl: Any, layout: tuple) -> None:
+        """The bars of the rows in view, into the live layer's draw list ``dl`` (the desk drew their frames):
+        per meter a bar as long as its value, a dash for none, clipped to the channel list. Corners on whole
+        pixels: ImGui draws a rectangle with a fractional corner as an anti-aliased path (30 indices instead of
+        6; llvmpipe's draw call costs by the index)."""
+        imgui = self.imgui
+        left, top0, pitch, dy, first, last, clip = layout
+        rows = self._rows
         vec, rect, line = imgui.ImVec2, dl.add_rect_filled, dl.add_line
         step = METER_W + METER_GAP
-        left, top = shown[0][0], shown[0][1]
-        bottom = shown[-1][1] + METER_H
-        frame_col = imgui.get_color_u32(imgui.Col_.frame_bg)
-        for j in range(3):
-            x = left + j * step
-            rect(vec(x, top), vec(x + METER_W, bottom), frame_col)
-        for j in range(3):  # the first row in view's
-            self.rects[f"meter.0.{j}"] = (left + j * step, top, left + j * step + METER_W, top + METER_H)
         colours, dash_col = self._colours, None
-        for x, y0, values in shown:
+        row_values = self._row_values
+        dl.push_clip_rect(vec(clip[0], clip[1]), vec(clip[2], clip[3]))
+        for row in range(first, min(last, len(rows))):
+            values = row_values(rows[row])
+            y0 = float(int(top0 + row * pitch)) + dy
             y1 = y0 + METER_H
+            x = left
             for j in range(3):
                 v = values[j]
                 if v > 0.0:
@@ -958,6 +1046,7 @@ class DeskPanel:
                     line(vec(x + 0.3 * METER_W, y0 + 0.5 * METER_H), vec(x + 0.7 * METER_W, y0 + 0.5 * METER_H),
                          dash_col)
                 x += step
+        dl.pop_clip_rect()
 
     # -- edits --------------------------------------------------------------------------------------
 
@@ -976,8 +1065,8 @@ class DeskPanel:
     def close(self) -> None:
         if self._context is None:
             return
-        self.gl.release()
-        self.gl_settings.release()
-        self.imgui.destroy_context(self._settings_context)
-        self.imgui.destroy_context(self._context)
-        self._context = self._settings_context = None
+        for gl in (self.gl, self.gl_settings, self.gl_live):
+            gl.release()
+        for context in (self._live_context, self._settings_context, self._context):
+            self.imgui.destroy_context(context)
+        self._context = self._settings_context = self._live_context = None

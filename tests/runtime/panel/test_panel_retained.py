@@ -25,7 +25,9 @@ CHANNELS = ("jawOpen", "eyeBlinkLeft", "puff", "browInnerUp", "mouthSmileLeft")
 
 
 def _frames(n, jaw=0.4):
-    return [Frame(t=i / FPS, source="test", channels=CHANNELS, weights=np.array([jaw, 0.2, 0.5, 0.1, 0.3]))
+    """``n`` frames; ``jaw`` a number, or a callable of the frame's index."""
+    value = jaw if callable(jaw) else (lambda i: jaw)
+    return [Frame(t=i / FPS, source="test", channels=CHANNELS, weights=np.array([value(i), 0.2, 0.5, 0.1, 0.3]))
             for i in range(n)]
 
 
@@ -77,9 +79,12 @@ def test_the_settings_are_built_again_only_when_something_on_them_changes(run):
     run.run(12)
     settled = run.panel.settings_builds
     assert settled <= 2 * SETTLE_FRAMES + 1  # the first frames (and the desk's foot settling), not one per tick
-    assert run.panel.desk_builds == 12  # the desk's meters: every tick
+    assert run.panel.live_builds == 12  # the live layer (meters, status lines): every tick
+    desk = run.panel.desk_builds
+    assert desk <= 2 * SETTLE_FRAMES + 1
     run.run(20)
     assert run.panel.settings_builds == settled  # nothing changed: the last frame drawn again, 20 times
+    assert run.panel.desk_builds == desk
     before = run.renderer.read_pixels()
     image = run.press("calibrate", n=10)  # "no neutral" -> "capturing...": an event and a change of what it shows
     assert run.panel.settings_builds > settled
@@ -126,3 +131,25 @@ def test_a_click_on_a_channel_row_selects_that_row(run):
     assert run.panel.selected == "browInnerUp"
     raw, filtered, _ = run.panel._selected_values("browInnerUp")
     assert raw == pytest.approx(0.1) and filtered == pytest.approx(0.1, abs=0.02)
+
+
+def _bar(image, rect):
+    """Pixels of the raw meter's colour along the middle row of the meter ``rect``."""
+    from facepuppet.runtime.panel.desk import METER_COLOURS
+
+    x0, y0, x1, y1 = (int(round(v)) for v in rect)
+    row = image[(y0 + y1) // 2, x0:x1, :3].astype(int)
+    want = np.round(np.array(METER_COLOURS[0][:3]) * 255).astype(int)
+    return int((np.abs(row - want).max(axis=1) <= 3).sum())
+
+
+def test_the_meters_follow_the_values_while_the_desk_window_is_not_built_again(run):
+    run.run(12, jaw=0.2)
+    desk, rect = run.panel.desk_builds, run.panel.rects["meter.0.0"]
+    low = _bar(run.renderer.read_pixels(), rect)
+    high = _bar(run.run(12, jaw=0.9), rect)
+    assert run.panel.desk_builds == desk  # the same channels, rows and layout: its last frame drawn again
+    assert high > 3 * low > 0  # the live layer drew this tick's bar (jawOpen's raw meter: the first row)
+    ramp = run.run(30, jaw=lambda i: 0.9 if i < 15 else 0.2)
+    assert _bar(ramp, rect) == pytest.approx(low, abs=2)
+    assert run.panel.desk_builds == desk
