@@ -344,7 +344,8 @@ class DeskPanel:
         self.draw_calls_s = calls
         self.draw_sketch.add(self.draw_s)
         self.submit_sketch.add(self.draw_s - build_s)
-        self.build_sketch.add(build_s)
+        if build_s > 0.0:  # a tick that built an ImGui frame (the others drew the last ones again)
+            self.build_sketch.add(build_s)
         self.calls_sketch.add(calls)
         self.cpu_sketch.add(self.draw_s - calls)
 
