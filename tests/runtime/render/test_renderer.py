@@ -159,19 +159,15 @@ def test_window_without_display_raises_and_headless_works(monkeypatch):
 def gpu_deformed(ctx, character, weights):
     """Deformed positions and normals read back from face.glsl's vertex shader (transform feedback)."""
     from facepuppet.runtime.render.cpu_deform import CpuDeformer
-    from facepuppet.runtime.render.renderer import delta_textures, gpu_defines
+    from facepuppet.runtime.render.renderer import active_uniforms, delta_texture, gpu_defines
     from facepuppet.runtime.render.shader_loader import load_program
 
     prog = load_program(ctx, "face.glsl", gpu_defines(character), varyings=("v_world", "v_normal"))
-    textures = delta_textures(ctx, character)
-    for unit, tex in enumerate(textures):
-        tex.use(unit)
-    prog["u_delta_positions"].value, prog["u_delta_normals"].value = 0, 1
-    active = np.flatnonzero(weights)
-    shapes = np.zeros(gpu_defines(character)["MAX_ACTIVE"], np.int32)
-    values = np.zeros(len(shapes), np.float32)
-    shapes[: len(active)], values[: len(active)] = active, weights[active]
-    prog["u_active_count"].value = len(active)
+    texture, steps = delta_texture(ctx, character)
+    texture.use(0)
+    prog["u_deltas"].value = 0
+    count, shapes, values = active_uniforms(weights, steps, gpu_defines(character)["MAX_ACTIVE"])
+    prog["u_active_count"].value = count
     prog["u_active_shape"].write(shapes.tobytes())
     prog["u_active_weight"].write(values.tobytes())
     prog["u_model"].write(np.eye(4, dtype=np.float32).tobytes())
@@ -187,7 +183,7 @@ def gpu_deformed(ctx, character, weights):
     result = np.frombuffer(out.read(), np.float32).reshape(n, 6)
     assert ctx.error == "GL_NO_ERROR"
     previous.use()
-    for obj in [vao, rest, out, prog, fbo, *textures]:
+    for obj in [vao, rest, out, prog, fbo, texture]:
         obj.release()
     return result[:, :3], result[:, 3:]
 
@@ -206,9 +202,21 @@ def test_vertex_shader_deforms_like_the_cpu_deformer(egl_ctx, request, which):
     w = realistic_weights(c.n_shapes) if which == "ict" else np.array([0.7, -0.2], np.float32)
     gpu_pos, gpu_nrm = gpu_deformed(egl_ctx, c, w)
     cpu_pos, cpu_nrm = CpuDeformer(c).deform(w)
-    np.testing.assert_allclose(gpu_pos, cpu_pos, atol=2e-5 * max(1.0, float(np.abs(cpu_pos).max())))
+    # The texture keeps each delta component to 1/65534 of its shape's largest (16-bit offsets):
+    # a component of the sum is off by at most sum_s |w_s| max_s / 65534, plus float32 rounding.
+    largest = np.array([[np.abs(d[c.shape_slice(s)]).max(initial=0.0) for d in (c.delta_positions, c.delta_normals)]
+                        for s in range(c.n_shapes)])
+    bound_pos, bound_nrm = np.abs(w) @ largest / 65534
+    np.testing.assert_allclose(gpu_pos, cpu_pos, atol=bound_pos + 2e-6 * max(1.0, float(np.abs(cpu_pos).max())))
     used = np.unique(c.triangles)
-    np.testing.assert_allclose(gpu_nrm[used], cpu_nrm[used], atol=1e-5)
+    np.testing.assert_allclose(gpu_nrm[used], cpu_nrm[used], atol=bound_nrm + 2e-6)
+    # a vertex no active shape moves stays exactly at rest (offset 32768 is exactly zero)
+    moved = np.zeros(c.n_vertices, bool)
+    for s in np.flatnonzero(w):
+        moved[c.delta_indices[c.shape_slice(s)]] = True
+    np.testing.assert_array_equal(gpu_pos[~moved], c.vertices[~moved].astype(np.float32))
+    # the bound is tight enough to mean something: far below what a picture shows
+    assert bound_pos < 1e-4 * np.ptp(c.vertices, axis=0).max() and bound_nrm < 1e-3
 
 
 def test_face_framing_of_a_character_nothing_moves_frames_it_whole(egl_ctx, sphere):
