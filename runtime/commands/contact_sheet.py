@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     from facepuppet.runtime.render.gl_context import create_context
     from facepuppet.runtime.render.options import render_options
 
-    character = Character.load(args.character)
+    character = Character.load(character_argument(args))
     picture = render_options(args).renderer_kwargs()
     if character.credits:
         print(f"credits: {character.credits}")
@@ -104,11 +104,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def character_argument(args: argparse.Namespace) -> str:
+    """The character file, given as the positional argument or as ``-c`` (exactly one of them)."""
+    given = [x for x in (args.character, args.character_option) if x is not None]
+    if len(given) != 1:
+        raise SystemExit("contact-sheet: give the character once, as CHARACTER or -c CHARACTER"
+                         + (f" (got {given[0]!r} and {given[1]!r})" if given else ""))
+    return given[0]
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "contact-sheet", help="render every expression shape at weight 1 into one labelled PNG grid"
     )
-    parser.add_argument("character", help="character tables file (.npz)")
+    parser.add_argument("character", nargs="?", help="character tables file (.npz)")
+    # -c as every other command that takes a character spells it
+    parser.add_argument("-c", "--character", dest="character_option", metavar="CHARACTER",
+                        help="the same, as an option")
     parser.add_argument("-o", "--output", required=True, help="PNG file to write")
     parser.add_argument("--cell", type=parse_cell, default=(320, 320), help="cell size WIDTHxHEIGHT (320x320)")
     parser.add_argument("--columns", type=int, default=0, help="grid columns (default: about 16:9)")

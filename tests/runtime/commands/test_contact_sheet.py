@@ -71,6 +71,19 @@ def test_contact_sheet_command_writes_the_grid(tmp_path, capsys):
     assert np.abs(neutral - jaw).sum(axis=2).max() > 50
 
 
+@pytest.mark.gl
+def test_the_character_may_be_given_as_c_like_every_other_command(tmp_path, capsys):
+    character_path = sphere_character().save(tmp_path / "sphere.npz")
+    out = tmp_path / "sheet.png"
+    args = parse(contact_sheet, ["contact-sheet", "-c", str(character_path), "-o", str(out), "--cell", "64x48"])
+    assert args.func(args) == 0
+    assert Image.open(out).size[0] > 0 and "3 cells" in capsys.readouterr().out
+    for argv in (["-o", str(out)], [str(character_path), "-c", str(character_path), "-o", str(out)]):
+        args = parse(contact_sheet, ["contact-sheet", *argv])
+        with pytest.raises(SystemExit, match="give the character once, as CHARACTER or -c CHARACTER"):
+            args.func(args)
+
+
 def test_cell_option_is_validated():
     with pytest.raises(SystemExit):
         parse(contact_sheet, ["contact-sheet", "x.npz", "-o", "y.png", "--cell", "big"])
