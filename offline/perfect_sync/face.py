@@ -76,6 +76,8 @@ class Face:
     origin : ndarray of shape (3,), float64, the face frame's origin in frame coordinates (see :meth:`to_frame`)
     weld : ndarray of shape (n_vertices,), int64, each vertex's first coincident copy (itself when none;
         :func:`weld_map`); ``triangles`` and ``skin`` hold these only, ``mesh`` every copy
+    unwelded : ndarray of shape (q', 3), int64, or None: the face mesh's triangles as the character has them
+        (every copy): where the artist's pieces meet along a seam of coincident vertices
     """
 
     mesh: np.ndarray
@@ -89,6 +91,7 @@ class Face:
     evidence: str
     origin: np.ndarray
     weld: np.ndarray | None = None
+    unwelded: np.ndarray | None = None
 
     def to_frame(self, points: np.ndarray) -> np.ndarray:
         """Points (…, 3) in the face frame: origin on the plane at the nose tip's height and depth."""
@@ -320,5 +323,6 @@ def _find_face(character: Character) -> tuple[Face, float]:
                         f"at least {NOSE_PROTRUSION * width:.3g})")
     face = Face(mesh=copies, triangles=tris, skin=skin, frame=frame, plane_offset=d, nose_tip=tip,
                 width=width, symmetry_error=dist / max(width, 1e-12), evidence=evidence,
-                origin=np.array([d, local[tip, 1], local[tip, 2]]), weld=weld)
+                origin=np.array([d, local[tip, 1], local[tip, 2]]), weld=weld,
+                unwelded=np.asarray(character.triangles[keep], np.int64))
     return face, protrusion / width

@@ -253,7 +253,6 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
                  mouth=_mouth_ball(points, character.vertices),
                  looks=look_expressions(character.expressions, character.delta_offsets, character.delta_indices,
                                         character.delta_positions, character.n_vertices))
-    dense[:, face.mesh] = dense[:, weld[face.mesh]]  # a seam's copies move as one vertex
     if info is not None:
         info["pieces"] = carried
     return names, dense
@@ -386,6 +385,7 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
             carried = carried[np.linalg.norm(centres - mouth[0], axis=1)[inverse] > mouth[1]]
         if len(carried):
             dense[:, carried] = embed(vertices, carried, skin_t, dense)
+        _move_copies_as_one(dense, face)
         return {"decal_eyes": [], "decal_mouth": False, "carried_vertices": int(len(carried)), "field_vertices": 0}
     # a decal face (Godette): its features are pieces in front of a skin too coarse for them, which the skin's
     # control points cannot find; the features and the pieces on the skin move by the features' landmark field,
@@ -401,6 +401,7 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
         dense[np.ix_(jaw, pieces.mouth[0])] -= lip_line_motion(
             pieces, face, vertices, source.arrays["control_positions"], tuple(source.control_names), params[jaw],
             tuple(names[s] for s in jaw)).astype(dense.dtype)
+    dense[:, pieces.upper_teeth] = 0.0  # fixed to the skull (pieces.mouth_sides)
     for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
         if key in names and side in pieces.eyes:  # the drawn eye closes on the line between its corners
             members, d = decal_blink(pieces, face, vertices, skin_t, side)
@@ -414,8 +415,22 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
             members, d = decal_narrow(pieces, face, vertices, side, upper, lower)
             dense[s, members] = d
     looks_from = decal_eye_looks(dense, names, vertices, face, pieces, looks)
+    m = pieces.mouth[0] if pieces.mouth is not None else np.zeros(0, np.int64)
+    side = np.zeros(len(vertices), np.int8)
+    side[m] = np.where(pieces.mouth_below, 1, 2)
+    parted = m[side[m] != side[face.weld[m]]] if face.weld is not None else m[:0]
+    _move_copies_as_one(dense, face, keep=parted)
     return {"decal_eyes": sorted(pieces.eyes), "decal_mouth": pieces.mouth is not None, "carried_vertices": 0,
             "field_vertices": int(len(np.unique(moved))), "eye_looks": looks_from}
+
+
+def _move_copies_as_one(dense: np.ndarray, face: Face, keep: np.ndarray = ()) -> None:
+    """A seam's copies move as their first copy (in place), except the ``keep`` vertices: the copies of a decal
+    mouth's seam that the lip line's cut parts (:func:`~.pieces.mouth_sides`)."""
+    if face.weld is None:
+        return
+    mesh = face.mesh[~np.isin(face.mesh, np.asarray(keep, np.int64))]
+    dense[:, mesh] = dense[:, face.weld[mesh]]
 
 
 def _mouth_ball(points: ControlPoints, vertices: np.ndarray) -> tuple | None:

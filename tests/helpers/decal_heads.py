@@ -4,7 +4,8 @@ beside Godette, built here so that the decal rules are not fitted to one file).
 The skin is a closed box of side 10 (8 x 8 quads a side) with a nose (its front centre pulled forward); each eye
 is an iris disc (two rings of a fan, taller than wide) and a lash outline (a strip along an arc over the iris from
 its inner to its outer corner) lying 0.1 in front of the box's front; the mouth is two thin strips (upper and lower
-row) on one line below the nose. Stored with a glTF layout of one primitive, its skin split by a seam (copies of
+row) on one line below the nose (optionally meeting on a seam, and with a strip of upper teeth hidden behind the
+skin above them). Stored with a glTF layout of one primitive, its skin split by a seam (copies of
 the vertices of the box's right half), as glTF would hold it.
 """
 
@@ -76,10 +77,14 @@ def _strip(points: np.ndarray, thickness: float, z: float):
     return v, np.array(t)
 
 
-def decal_box_head() -> tuple[Character, dict]:
+def decal_box_head(seamed_lips: bool = False, teeth: bool = False) -> tuple[Character, dict]:
     """The box head with drawn eyes and mouth (see the module doc), and its pieces' vertices by name: "skin",
     "iris_L", "lash_L", "iris_R", "lash_R", "mouth" (the two strips; "mouth_upper" the upper one's top row,
-    "mouth_lower" the lower one's bottom row)."""
+    "mouth_lower" the lower one's bottom row; "lip_upper", "lip_lower" the strips).
+
+    ``seamed_lips``: the strips at one depth, the upper one's lower edge on the lower one's upper edge (coincident
+    copies, as Godette's); ``teeth``: a strip ("teeth") above the lips' seam and behind the box's front, hidden
+    from the front at rest."""
     parts = [closed_box()]
     names = ["skin"]
     skin_v, _ = parts[0]
@@ -97,8 +102,11 @@ def decal_box_head() -> tuple[Character, dict]:
             names.append(name)
     line = np.column_stack([np.linspace(-1.2, 1.2, 7), np.full(7, -2.4)])
     parts.append(_strip(line, 0.04, FRONT + LIFT))
-    parts.append(_strip(line - [0.0, 0.04], 0.04, FRONT + 1.2 * LIFT))
+    parts.append(_strip(line - [0.0, 0.04], 0.04, FRONT + (1.0 if seamed_lips else 1.2) * LIFT))
     names += ["mouth_a", "mouth_b"]
+    if teeth:
+        parts.append(_strip(line * [0.9, 1.0] + [0.0, 0.02], 0.18, FRONT - 0.3 * LIFT))
+        names.append("teeth")
     vs, ts, base, index = [], [], 0, {}
     for name, (v, t) in zip(names, parts):
         vs.append(v)
@@ -120,7 +128,8 @@ def decal_box_head() -> tuple[Character, dict]:
     c = mesh_character(v, t.astype(np.uint32), "decal box head")
     c = c.with_parts(layout=Layout(mesh_names=("head",), primitives=np.array(
         [[0, c.n_vertices, 0, len(c.triangles), 0, 0]], np.int64)))
-    mouth = np.concatenate([index.pop("mouth_a"), index.pop("mouth_b")])
+    index["lip_upper"], index["lip_lower"] = index.pop("mouth_a"), index.pop("mouth_b")
+    mouth = np.concatenate([index["lip_upper"], index["lip_lower"]])
     index["mouth"] = mouth
     index["mouth_upper"] = mouth[v[mouth, 1] > -2.4 + 1e-3]  # the top row of the upper strip
     index["mouth_lower"] = mouth[v[mouth, 1] < -2.4 - 1e-3]  # the bottom row of the lower one

@@ -263,7 +263,9 @@ def test_godette_face_skin_is_her_welded_head_box(godette):
 
 @pytest.mark.data
 @pytest.mark.slow
-def test_godette_seam_copies_move_identically_in_every_cloned_shape(godette):
+def test_godette_seam_copies_move_identically_in_every_cloned_shape_but_where_her_lips_part(godette):
+    """Copies of one place move as one, so no seam tears, except where her upper and lower lip strips meet: there
+    the mouth opens (her artist's own "ah" parts those copies too), and not at the mouth's corners."""
     from facepuppet.offline.perfect_sync.face import find_face
 
     face = find_face(godette)
@@ -275,9 +277,17 @@ def test_godette_seam_copies_move_identically_in_every_cloned_shape(godette):
     seam = partner != mesh
     assert seam.sum() > 100  # her seams: 142 copies beyond the first of their position
     n_own = godette.shape_names.index("angled_eyebrows") + 1
-    d = godette.dense_deltas()[n_own:]
-    assert np.abs(d[:, mesh]).max() > 0
-    np.testing.assert_array_equal(d[:, mesh[seam]], d[:, partner[seam]])
+    d = godette.dense_deltas()
+    cloned = d[n_own:]
+    assert np.abs(cloned[:, mesh]).max() > 0
+    apart = np.abs(cloned[:, mesh[seam]] - cloned[:, partner[seam]]).max(axis=(0, 2)) > 0
+    ah = d[godette.shape_names.index("ah")]
+    artist_apart = np.linalg.norm(ah[mesh[seam]] - ah[partner[seam]], axis=1) > 1e-6
+    # her upper lip strip's lower edge lies on her lower lip strip's upper edge at x = -8.7, 0.4 and 9.4 mm; at
+    # the corners (x = -17.7, 18.5 mm) the strips meet too, and her artist keeps them together
+    assert apart.sum() == 3
+    assert artist_apart[apart].all()  # every copy parted is one her artist parts (so no corner)
+    np.testing.assert_array_equal(cloned[:, mesh[seam][~apart]], cloned[:, partner[seam][~apart]])
 
 
 @pytest.mark.data
@@ -590,3 +600,49 @@ def test_godettes_closed_eye_is_a_visible_line(godette_run):
     assert np.ptp(rest) > 0.6 * height
     assert 0.06 * height < np.ptp(closed[middle]) and np.ptp(closed) < 0.25 * height, (np.ptp(closed[middle]) / height,
                                                                                       np.ptp(closed) / height)
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_a_decal_mouth_opens_at_the_seam_of_its_lip_strips_and_holds_its_upper_teeth(source):
+    """The box head's lips drawn as two strips meeting on a seam (coincident copies), upper teeth hidden behind
+    the skin above them: in jawOpen each strip moves whole with its lip, whatever side of the fitted line its seam
+    copies fall on (before, the upper strip's lower edge went down with the lower lip: the strip was cut through),
+    the corners stay together, and the teeth, fixed to the skull, move in no shape."""
+    from facepuppet.offline.perfect_sync.commands import perfect_sync
+    from facepuppet.offline.perfect_sync.face import find_face
+    from helpers.decal_heads import decal_box_head
+
+    c, parts = decal_box_head(seamed_lips=True, teeth=True)
+    out, report, _ = perfect_sync(c, source)
+    assert report["pieces"]["decal_mouth"]
+    v = c.vertices.astype(np.float64)
+    dense = out.dense_deltas().astype(np.float64)
+    d = dense[out.shape_names.index("jawOpen")]
+    inner = lambda ix: ix[np.abs(v[ix, 0]) < 1.2 - 1e-6]  # noqa: E731  (not the corner columns)
+    upper, lower = inner(parts["lip_upper"]), inner(parts["lip_lower"])
+    assert (d[upper, 1] > 0).all() and (d[lower, 1] < 0).all(), (d[upper, 1], d[lower, 1])
+    opening = d[upper, 1].min() - d[lower, 1].max()
+    assert opening > 0.1 * np.ptp(v[parts["lip_upper"], 0])
+    assert np.abs(dense[:, parts["teeth"]]).max() == 0
+    assert np.abs(dense[:, parts["lip_upper"]]).max() > 0  # other shapes move the lips
+    face = find_face(c)
+    corner = parts["lip_upper"][np.abs(v[parts["lip_upper"], 0]) > 1.2 - 1e-6]
+    np.testing.assert_array_equal(dense[:, corner], dense[:, face.weld[corner]])
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_godettes_upper_teeth_strip_moves_in_no_cloned_shape(godette):
+    """Her mouth is four strips (as drawn, before welding): the highest is her white upper teeth, behind her skin
+    at rest; the clone lifted it with the upper lip (a quarter of her cloned jawOpen's motion)."""
+    d = godette.dense_deltas()
+    mouth = np.flatnonzero(np.linalg.norm(d[godette.shape_names.index("ah")], axis=1) > 1e-6)
+    _, comp = components(godette.n_vertices, godette.triangles)
+    strips = [mouth[comp[mouth] == k] for k in np.unique(comp[mouth])]
+    assert len(strips) == 4 and all(len(s) == 10 for s in strips)
+    teeth = max(strips, key=lambda s: godette.vertices[s, 1].mean())
+    n_own = godette.shape_names.index("angled_eyebrows") + 1
+    assert np.abs(d[n_own:][:, teeth]).max() == 0
+    jaw = d[godette.shape_names.index("jawOpen")]
+    assert all(np.abs(jaw[s]).max() > 0 for s in strips if s is not teeth)
