@@ -12,7 +12,7 @@ import numpy as np
 from PIL import Image
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.render.images import contact_sheet, save_png
+from facepuppet.runtime.render.images import contact_sheet, save_png, with_footer
 
 if TYPE_CHECKING:
     import moderngl
@@ -69,7 +69,8 @@ def shape_sheet(character: Character, names: Sequence[str], path: str | os.PathL
         except Exception as exc:
             raise GLUnavailable(f"no headless EGL OpenGL 3.3 context for the contact sheet ({exc})") from None
     try:
-        return save_png(path, contact_sheet(shape_images(character, names, ctx), columns))
+        sheet = contact_sheet(shape_images(character, names, ctx), columns)
+        return save_png(path, with_footer(sheet, character.credits) if character.credits else sheet)
     finally:
         if own:
             ctx.release()
@@ -181,7 +182,9 @@ def take_side_by_side(original: Character, synced: Character, take: str | os.Pat
         for k, image in zip(ticks, images):
             small = np.asarray(Image.fromarray(image).resize(size, Image.LANCZOS))
             cells.append((f"{label} {k / fps:.2f} s", small))
-    return save_png(path, contact_sheet(cells, len(ticks)))
+    sheet = contact_sheet(cells, len(ticks))
+    credits = synced.credits or original.credits  # the attribution the character's licence asks for
+    return save_png(path, with_footer(sheet, credits) if credits else sheet)
 
 
 def _standalone() -> moderngl.Context:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.character import Character
-from facepuppet.runtime.render.images import contact_sheet, label_image, save_png
+from facepuppet.runtime.render.images import contact_sheet, save_png, with_footer
 
 if TYPE_CHECKING:
     import moderngl
@@ -65,18 +65,6 @@ def render_shapes(ctx: moderngl.Context, character: Character, cell: tuple[int, 
         return frames
     finally:
         renderer.close()
-
-
-def with_footer(sheet: np.ndarray, text: str) -> np.ndarray:
-    """``sheet`` (h, w, 3) uint8 with a row below it holding ``text`` (the attribution), left-aligned."""
-    label = label_image(text)
-    h, w = label.shape[:2]
-    footer = np.empty((h + 4, sheet.shape[1], 3), np.uint8)
-    footer[:] = sheet[-1, -1]
-    w = min(w, sheet.shape[1] - 4)
-    a = label[:, :w, 3:4].astype(np.float32) / 255.0
-    footer[2:2 + h, 4:4 + w] = (label[:, :w, :3] * a + footer[2:2 + h, 4:4 + w] * (1 - a)).astype(np.uint8)
-    return np.vstack([sheet, footer])
 
 
 def run(args: argparse.Namespace) -> int:

@@ -84,3 +84,15 @@ def label_image(text: str, scale: int = 1, pad: int = 4) -> np.ndarray:
     if scale > 1:
         image = image.resize((w * scale, h * scale), Image.NEAREST)
     return np.asarray(image)
+
+
+def with_footer(sheet: np.ndarray, text: str) -> np.ndarray:
+    """``sheet`` (h, w, 3) uint8 with a row below it holding ``text`` (the attribution), left-aligned."""
+    label = label_image(text)
+    h, w = label.shape[:2]
+    footer = np.empty((h + 4, sheet.shape[1], 3), np.uint8)
+    footer[:] = sheet[-1, -1]
+    w = min(w, sheet.shape[1] - 4)
+    a = label[:, :w, 3:4].astype(np.float32) / 255.0
+    footer[2:2 + h, 4:4 + w] = (label[:, :w, :3] * a + footer[2:2 + h, 4:4 + w] * (1 - a)).astype(np.uint8)
+    return np.vstack([sheet, footer])

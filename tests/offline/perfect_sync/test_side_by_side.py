@@ -25,7 +25,7 @@ CELL = 240
 
 def _rows(path):
     """(top cells, bottom cells) without their labels, (8, h, w, 3) int each."""
-    p = np.asarray(Image.open(path).convert("RGB")).astype(int)
+    p = np.asarray(Image.open(path).convert("RGB")).astype(int)[:2 * (CELL + LABEL_HEIGHT)]  # without the credits
     h = p.shape[0] // 2
     cells = [[row[:, c * CELL:(c + 1) * CELL] for c in range(p.shape[1] // CELL)]
              for row in (p[:h - LABEL_HEIGHT], p[h:2 * h - LABEL_HEIGHT])]
@@ -44,7 +44,10 @@ def test_the_take_replayed_on_the_presets_and_on_arkit_brows_differs_where_the_b
 
     path = take_side_by_side(godette, synced, take, tmp_path / "side.png", ctx=egl_ctx)
     picture = np.asarray(Image.open(path).convert("RGB"))
-    assert picture.shape == (2 * (CELL + LABEL_HEIGHT), 8 * CELL, 3)  # two rows of 8 moments
+    grid = 2 * (CELL + LABEL_HEIGHT)  # two rows of 8 moments, then her credits (CC BY asks for them)
+    assert picture.shape[1] == 8 * CELL and grid < picture.shape[0] < grid + 40
+    footer = picture[grid:].astype(int)
+    assert (np.abs(footer - footer[0, -1]).max(axis=-1) > 100).sum() > 50  # text drawn
     top, bottom = _rows(path)
 
     frames = open_recording(take)
