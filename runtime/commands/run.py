@@ -402,6 +402,17 @@ def _open_mix(args, mix_inputs: list[MixInput], chain, opts: _Options, recorder,
         + (f"; {len(settings.channels)} channels with their own order" if settings.channels else ""))
 
 
+def _arrival_wake(source, chain):
+    """With other tracker inputs (the mix), what wakes the loop when any input has a frame (inputs.arrival);
+    None: the loop's own source's ``wait_for_frame``."""
+    from facepuppet.runtime.inputs.arrival import ArrivalWaiter
+
+    trackers = [s for _, s in chain.mix.tracker_sources()] if chain.mix is not None else []
+    if not trackers or not all(hasattr(s, "pending") for s in (source, *trackers)):
+        return None
+    return ArrivalWaiter([source, *trackers]).wait
+
+
 def _open_source(args, adapter, opts: _Options, recorder):
     """The live frame source: the UDP receiver of ``--receiver``, or none for ``--input audio``."""
     from facepuppet.runtime.gestures.layer import VoiceOnlySource
@@ -526,7 +537,7 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
         loop = FrameLoop(chain.names, renderer, WallClock(), sinks=sinks, fps=opts.loop_fps, log=log,
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
                          catch_up=True, idle_fps=opts.idle_fps, drive=chain.drive,
-                         overlays=() if panel is None else (panel.overlay,))
+                         overlays=() if panel is None else (panel.overlay,), wake=_arrival_wake(source, chain))
         counters["loop"] = loop.counters
         stats.counters = _LiveCounters(source, counters, dict(chain.mix.tracker_sources()) if chain.mix else {})
         if on_ready is not None:

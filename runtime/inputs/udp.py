@@ -239,6 +239,7 @@ class UdpSource:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._arrived = threading.Event()   # set by the thread on each new frame (wait_for_frame)
+        self._also: tuple[threading.Event, ...] = ()  # set with it (arrival.ArrivalWaiter: several inputs)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -309,6 +310,8 @@ class UdpSource:
                 if frame is not None:
                     self._slot = (self._slot[0] + 1, frame)
                     self._arrived.set()
+                    for event in self._also:
+                        event.set()
             except Exception as exc:  # nothing escapes the thread
                 own["internal_error"] += 1
                 self.last_error = exc
@@ -317,6 +320,14 @@ class UdpSource:
     def frames_taken(self) -> int:
         """Frames completed up to the newest one :meth:`latest` handed out (0 before any)."""
         return self._taken
+
+    def pending(self) -> bool:
+        """A frame not yet taken is there (:meth:`latest` would hand it out)."""
+        return self._slot[0] != self._taken
+
+    def notify(self, event: threading.Event) -> None:
+        """Also set ``event`` on each new frame (:class:`~facepuppet.runtime.inputs.arrival.ArrivalWaiter`)."""
+        self._also = (*self._also, event)
 
     def wait_for_frame(self, timeout_s: float) -> bool:
         """Sleep until a frame not yet taken is there (True) or ``timeout_s`` passes (False)."""

@@ -252,6 +252,17 @@ class UdpProcessSource:
         """Frames completed up to the newest one :meth:`latest` handed out (0 before any)."""
         return self._taken
 
+    def pending(self) -> bool:
+        """A frame not yet taken is there (:meth:`latest` would hand it out)."""
+        shared = self._shared
+        return shared is not None and shared.ctl[COMPLETED] != self._taken
+
+    @property
+    def wake_fd(self) -> int | None:
+        """The read end of the pipe the child writes a byte to per published frame (None before start);
+        non-blocking: :class:`~facepuppet.runtime.inputs.arrival.ArrivalWaiter` drains it and selects on it."""
+        return None if self._wake is None else self._wake[0]
+
     def wait_for_frame(self, timeout_s: float) -> bool:
         """Sleep until a frame not yet taken is there (True) or ``timeout_s`` passes (False)."""
         shared, wake = self._shared, self._wake

@@ -179,6 +179,9 @@ class FrameLoop:
     overlays : sequence of callables taking a :class:`TickInfo`, called every tick right after the
         renderer's draw call and before the GPU wait, to draw over the character into the same framebuffer
         (the panel, :mod:`~facepuppet.runtime.panel`); their time counts in ``draw_submit``
+    wake : callable(timeout_s) -> bool or None; with ``idle_fps``, what the loop sleeps in instead of the
+        source's ``wait_for_frame`` (several inputs: :class:`~facepuppet.runtime.inputs.arrival.ArrivalWaiter`,
+        so a frame of any of them is drawn on arrival)
 
     A frame with an infinite weight or a non-finite head pose is rejected here, once, before the
     stages (``counters["nonfinite_rejected"]``; NaN weights mean "not sent" and pass).
@@ -190,7 +193,8 @@ class FrameLoop:
                  on_tick: Sequence[Callable[[TickInfo], None]] = (), stop: Callable[[], bool] | None = None,
                  catch_up: bool = False, idle_fps: float | None = None,
                  drive: ExpressionDrive | None = None,
-                 overlays: Sequence[Callable[[TickInfo], None]] = ()) -> None:
+                 overlays: Sequence[Callable[[TickInfo], None]] = (),
+                 wake: Callable[[float], bool] | None = None) -> None:
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
         if idle_fps is not None and not (isinstance(idle_fps, (int, float)) and 0 < idle_fps <= fps):
@@ -198,6 +202,7 @@ class FrameLoop:
         if isinstance(names, str) or not all(isinstance(n, str) for n in names):
             raise ValueError(f"FrameLoop names: expected a sequence of channel names, got {names!r}")
         self.idle_fps = None if idle_fps is None else float(idle_fps)
+        self.wake = wake
         self.shape_names = tuple(names)
         self.renderer = renderer
         self.clock = clock
@@ -256,7 +261,8 @@ class FrameLoop:
         info = TickInfo()
         n_ticks = 0
         closed = False
-        arrival = schedule is None and self.idle_fps is not None and hasattr(source, "wait_for_frame")
+        wait = self.wake if self.wake is not None else getattr(source, "wait_for_frame", None)
+        arrival = schedule is None and self.idle_fps is not None and wait is not None
         idle_s = 0.0 if self.idle_fps is None else 1.0 / self.idle_fps
         self.clock.start()
         k = i = 0
@@ -268,7 +274,7 @@ class FrameLoop:
                 k, i = schedule[i], i + 1
             if arrival:
                 # sleep until a frame arrives or the idle redraw is due; label: the next grid index
-                source.wait_for_frame(max(0.0, drawn_at + idle_s - self.clock.now()))
+                wait(max(0.0, drawn_at + idle_s - self.clock.now()))
                 k = max(k, math.ceil(self.clock.now() * self.fps - 1e-9))
                 if k > last:
                     break

@@ -137,6 +137,41 @@ def test_two_inputs_over_udp_per_channel_order_and_the_loss_of_one_hands_its_cha
     np.testing.assert_allclose(replayed[:, 0], j, atol=1e-6)
 
 
+@pytest.mark.gl
+@pytest.mark.parametrize("receiver", ["process", "thread"])
+def test_a_frame_of_the_second_input_alone_is_drawn_on_arrival(tmp_path, receiver):
+    """Drawing on arrival (the default), the first input silent, the second sending a head every 20 ms, the idle
+    redraw at 2 frames/s: each of the second's frames wakes the loop. Before, the loop slept in the first input's
+    wait and drew only at the idle redraw (5 ticks in 2.5 s)."""
+    character = tmp_path / "sphere.npz"
+    sphere_character().save(character)
+    port_a, port_b = free_udp_port(), free_udp_port()
+    ns = parse(run, ["run", "-c", str(character), "--input", "vmc", "--input", "vmc", "--receiver", receiver,
+                     "--listen", f"127.0.0.1:{port_a}", "--listen", f"127.0.0.1:{port_b}", "--headless",
+                     "--size", "48x40", "--fps", "2", "--duration", "2.5"])
+    stop = threading.Event()
+    ticks: list[tuple[float, object]] = []
+
+    def sender():
+        client = SimpleUDPClient("127.0.0.1", port_b)
+        while not stop.is_set():
+            send_vmc(client, {"JawOpen": 0.5}, head(0.3))
+            time.sleep(0.02)
+
+    th = threading.Thread(target=sender, daemon=True)
+    try:
+        th.start()
+        result = run.run_live(ns, log=lambda s: None, stop_event=stop,
+                              hooks=[lambda info: ticks.append((info.t, info.rotation))])
+    finally:
+        stop.set()
+        th.join(timeout=10)
+    c = result.counters
+    assert c["udp"]["packets"] == 0 and c["udp:vmc#2"]["packets"] > 50
+    turned = [t for t, r in ticks if r is not None]
+    assert len(turned) > 25, (len(ticks), len(turned))  # 50 frames a second arrive; the idle redraw gives 5
+
+
 @pytest.mark.parametrize("argv, match", [
     (["--input", "vmc", "--input", "openseeface", "--listen", "127.0.0.1:40001"],
      "--listen: 1 given for 2 tracker input(s) (vmc, openseeface); give one per tracker input"),

@@ -111,3 +111,32 @@ def test_a_flood_of_new_marker_layouts_never_shuts_out_the_next_one(receiver, ud
         taken = sum(accepted(1000 + k, [f"bridge{k}_m{i}" for i in range(200)], 5000 + k) for k in range(40))
         assert taken == 40
         assert source.counters.get("names_full", 0) == 0 and source.counters["internal_error"] == 0
+
+
+def test_the_arrival_waiter_wakes_on_a_frame_of_any_of_its_receivers(receiver, udp_sender):
+    """Two receivers of one kind; a frame reaches the second only: the first's own wait times out (what the
+    loop slept in before), the waiter wakes; once taken, nothing is pending."""
+    from facepuppet.runtime.inputs.arrival import ArrivalWaiter
+
+    with receiver(VmcAdapter(), port=0) as first, receiver(VmcAdapter(), port=0) as second:
+        waiter = ArrivalWaiter([first, second])
+        assert waiter.wait(0.0) is False
+        udp_sender.sendto(vmc_frame(0.4), second.address)
+        assert waiter.wait(30.0) is True  # only an arrival ends the wait before its timeout
+        wait_for(second.pending, "the second receiver's frame")
+        assert first.wait_for_frame(0.05) is False and not first.pending()
+        frame, _ = second.latest()
+        assert frame is not None
+        assert waiter.wait(0.0) is False  # taken: nothing pending
+        udp_sender.sendto(vmc_frame(0.5), first.address)
+        assert waiter.wait(30.0) is True
+        wait_for(first.pending, "the first receiver's frame")
+
+
+def test_the_arrival_waiter_refuses_sources_it_cannot_wait_on():
+    from facepuppet.runtime.inputs.arrival import ArrivalWaiter
+
+    with pytest.raises(ValueError, match="every source needs pending"):
+        ArrivalWaiter([object()])
+    with pytest.raises(ValueError, match="neither all thread receivers nor all started process receivers"):
+        ArrivalWaiter([UdpSource(VmcAdapter(), port=0), UdpProcessSource(VmcAdapter(), port=0)])
