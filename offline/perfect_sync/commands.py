@@ -14,7 +14,7 @@ from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.progress import Progress
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
-from facepuppet.offline.perfect_sync.face import find_face
+from facepuppet.offline.perfect_sync.face import FaceError, find_face
 from facepuppet.offline.perfect_sync.proposal import doubts, fapu_of, picture, propose, read_landmarks
 from facepuppet.offline.perfect_sync.transfer import add_shapes, clone_face
 
@@ -82,7 +82,12 @@ def _run(args: argparse.Namespace) -> int:
 
         source = default_source(args.data)
     with Progress("perfect-sync", total=None, unit="shapes") as bar:
-        out, report, points = perfect_sync(character, source, args.landmarks, args.replace, bar)
+        try:
+            out, report, points = perfect_sync(character, source, args.landmarks, args.replace, bar)
+        except FaceError as exc:  # the message names the character by its name; say which file too
+            text, own = str(exc), f"{character.name}: "
+            raise FaceError(f"{args.character} ({character.name!r}): {text.removeprefix(own)}"
+                            if text.startswith(own) else f"{args.character}: {text}") from None
     from facepuppet.runtime.outputs import OutputSet
 
     with OutputSet() as outputs:

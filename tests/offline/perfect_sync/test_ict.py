@@ -353,3 +353,19 @@ def test_the_gums_stay_behind_the_cheeks(identical, ict_character):
     # measured 78 and 34 (185 and 34 before the outer skin was kept out of the gums' front; the rest, which the
     # push does not reach, lie in the nostrils and along the lips, where the nearest-triangle sign is no guide)
     assert inside["mouthFunnel"] < 120 and inside["jawForward"] <= 34, inside
+
+
+def test_command_on_a_character_without_a_face_names_the_file_and_writes_nothing(source, tmp_path, capsys):
+    """A VRM's title may say nothing ("undefined" in two of the kit's files): the refusal names the file too."""
+    from facepuppet.runtime.cli import main
+
+    from facepuppet.offline.elastic.clone import mesh_character
+    from helpers.decal_heads import closed_box
+
+    v, t = closed_box()
+    path = mesh_character(v.astype(np.float32), t.astype(np.uint32), "undefined").save(tmp_path / "box.npz")
+    out = tmp_path / "never.npz"
+    assert main(["perfect-sync", str(path), "-o", str(out), "--source", str(source[1])]) == 2
+    err = capsys.readouterr().err
+    assert f"{path} ('undefined'): no recognisable face" in err, err
+    assert not out.exists()
