@@ -39,7 +39,13 @@ from facepuppet.runtime.commands.options import parse_host_port, parse_size
 from facepuppet.runtime.live.llf_out import LlfSender
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock, WallClock
 from facepuppet.runtime.live.sinks import PngSink, WeightLog
-from facepuppet.runtime.live.stages import RecordedLevels, add_stage_arguments, build_chain, make_input_adapter
+from facepuppet.runtime.live.stages import (
+    RecordedLevels,
+    add_stage_arguments,
+    build_chain,
+    follow_mapping,
+    make_input_adapter,
+)
 from facepuppet.runtime.live.video_out import VideoSink, add_video_arguments, plan_video_from_args
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
@@ -178,6 +184,8 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         clock = RecordedClock() if target.headless and llf is None else replay_wall_clock(ticks, fps)
         loop = FrameLoop(chain.names, renderer, clock, sinks=sinks, fps=fps, log=log, target=target,
                          stages=chain.stages, on_tick=hooks, drive=chain.drive)
+        if chain.filter is not None:  # a [mapping] applied live (the panel, a recorded change) maps from then on
+            chain.filter.on_config.append(follow_mapping(chain, loop, character.expressions, log))
         with progress:           # on a terminal: ticks done, rate, time left (quiet when piped)
             result = loop.run(source, duration=args.duration, ticks=ticks)
         if video is not None:

@@ -64,7 +64,7 @@ from facepuppet.runtime.live.events_out import TrackingEventSender
 from facepuppet.runtime.live.llf_out import LlfSender
 from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, WallClock
 from facepuppet.runtime.live.sinks import PngSink, RecordingHook, WeightLog
-from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, make_input_adapter
+from facepuppet.runtime.live.stages import add_stage_arguments, build_chain, follow_mapping, make_input_adapter
 from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.live.video_out import VideoPlan, VideoSink, add_video_arguments, plan_video_from_args
 from facepuppet.runtime.live.vmc_out import VMC_NAMES, VmcSender, pipeline_status
@@ -538,6 +538,8 @@ def run_live(args: argparse.Namespace, log: Callable[[str], None] = print, stop_
                          target=target, stages=chain.stages, on_tick=hooks, stop=stop_event.is_set,
                          catch_up=True, idle_fps=opts.idle_fps, drive=chain.drive,
                          overlays=() if panel is None else (panel.overlay,), wake=_arrival_wake(source, chain))
+        if chain.filter is not None:  # a [mapping] applied live (the panel, a recorded change) maps from then on
+            chain.filter.on_config.append(follow_mapping(chain, loop, character.expressions, log))
         counters["loop"] = loop.counters
         stats.counters = _LiveCounters(source, counters, dict(chain.mix.tracker_sources()) if chain.mix else {})
         if on_ready is not None:

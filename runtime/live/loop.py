@@ -226,6 +226,15 @@ class FrameLoop:
         self._translation: np.ndarray | None = None
         self._frame: Frame | None = None
 
+    def set_drive(self, drive: ExpressionDrive | None) -> None:
+        """Map with ``drive`` from now on (a ``[mapping]`` applied live, :func:`~facepuppet.runtime.live.stages.
+        follow_mapping`): each channel layout's map is built again at its next frame. Call it on the loop's
+        thread (a stage does), so a tick maps with one drive throughout."""
+        if drive is not None and tuple(drive.shape_names) != self.shape_names:
+            raise ValueError("FrameLoop drive: its shapes are not the renderer's channels")
+        self.drive = drive
+        self._maps.clear()
+
     def channel_map(self, channels: tuple[str, ...], source: str = "") -> ChannelMap | ExpressionMap:
         """The cached map for a channel tuple; built (and its report logged) on first sight."""
         cmap = self._maps.get(channels)

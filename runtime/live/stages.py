@@ -41,7 +41,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from facepuppet.runtime.expressions import ExpressionDrive, expression_spellings, make_drive
+from facepuppet.runtime.expressions import (
+    ExpressionDrive,
+    MappingError,
+    MappingSettings,
+    expression_spellings,
+    make_drive,
+)
 from facepuppet.runtime.frames import Frame
 
 if TYPE_CHECKING:
@@ -50,8 +56,10 @@ if TYPE_CHECKING:
     import moderngl
 
     from facepuppet.runtime.character import Character
+    from facepuppet.runtime.character_parts import Expressions
     from facepuppet.runtime.elastic.model import ElasticModel
     from facepuppet.runtime.kpls.stage import KplsRetarget
+    from facepuppet.runtime.live.loop import FrameLoop
     from facepuppet.runtime.live.pipeline import LivePipeline
     from facepuppet.runtime.protocols import InputAdapter, Renderer, Stage
 
@@ -416,3 +424,30 @@ def make_input_adapter(kind: str, extra_names: Sequence[str] = (),
     if extra_names:
         log(f"note: --input {kind} cannot name channels {tuple(extra_names)[:3]}...; only VMC blend names reach them")
     return make_adapter(kind)
+
+
+def same_mapping(a: MappingSettings, b: MappingSettings) -> bool:
+    """``[mapping]``s that map alike (how a file spelled the channels and where it was aside)."""
+    return a.emotions == b.emotions and a.channels == b.channels
+
+
+def follow_mapping(chain: Chain, loop: FrameLoop, expressions: Expressions | None,
+                   log: Callable[[str], None]) -> Callable[[float, object], None]:
+    """An ``on_config`` hook for the filter stage (``LivePipeline.on_config``): a config applied live (the panel,
+    a profile, a recording's schedule) whose ``[mapping]`` differs from the one in force builds the drive again
+    (:func:`~facepuppet.runtime.expressions.make_drive`) and hands it to ``loop`` (:meth:`FrameLoop.set_drive`)
+    and to ``chain.drive`` (the panel's meters read it), from this tick's map on. A mapping naming what the
+    character lacks is refused with a warning (the mapping in force stays)."""
+    def hook(t: float, config) -> None:
+        current = chain.drive.mapping if chain.drive is not None else MappingSettings()
+        if chain.elastic is not None or same_mapping(config.mapping, current):
+            return
+        try:
+            drive = make_drive(chain.names, expressions, config.mapping)
+        except MappingError as exc:
+            log(f"mapping: warning: {exc}; the mapping in force stays")
+            return
+        chain.drive = drive
+        loop.set_drive(drive)
+        log(f"mapping: {len(config.mapping.channels)} channel(s) of [mapping.channels] in force from t = {t:.3f} s")
+    return hook

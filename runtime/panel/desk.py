@@ -23,7 +23,9 @@ frame on screen, not the one before.
   Response, those of a row under the mouse in its tooltip).
 * **Filters**: One Euro min cutoff and beta per region.
 * **Response** of the channel selected (click its name in the channel rows): gain, clamp, input range ->
-  output range, curve (linear / ease / threshold, with the threshold value); Reset drops the channel's entry.
+  output range, curve (linear / ease / threshold, with the threshold value); Reset drops the channel's entry;
+  **drives**: what it maps onto (``[mapping.channels]``: by name, nothing, or one shape or expression;
+  :func:`~facepuppet.runtime.live.stages.follow_mapping` maps with it from the next tick).
 * **Face**: blink linking and mirror (``[face]``).
 * **Tracking loss**: the mode per region (hold / neutral / voice for the mouth / idle, ``[tracking_loss]``).
 * **Calibrate** (neutral capture over ``capture_s``) and **Clear** (no neutral).
@@ -81,6 +83,7 @@ WEIGHT_REGIONS = ("eyes", "brows", "mouth", "other", "head")
 _FILTER_LABELS = {r: (f"##cutoff.{r}", f"##beta.{r}", f"filter.{r}.min_cutoff", f"filter.{r}.beta")
                   for r in WEIGHT_REGIONS}
 REFRESH_S = 0.5  # status numbers (rates, percentiles, file size) are recomputed this often
+DRIVES_ROWS = 6  # rows of the selected channel's "drives" list shown at once (it scrolls)
 #: ImGui frames per second at most: a tick closer than 0.9 / REBUILD_HZ to the last frame draws that frame
 #: again (its buffers are uploaded already; only the draw calls), e.g. every other tick at 120 frames/s on arrival
 REBUILD_HZ = 60.0
@@ -238,6 +241,7 @@ class DeskPanel:
         self._shape_index: dict[tuple, np.ndarray] = {}
         self._mapped_lists: dict[int, tuple[np.ndarray, list[int]]] = {}
         self._expression_maps: dict[tuple, Any] = {}  # the run drive's map per channel layout (VRM expressions)
+        self._drive_seen = getattr(chain, "drive", None)  # the drive those were built with
         self._values: tuple | None = None  # this frame's channels and values (raw, filtered, rig, mapped index)
         self.sent_only = True
         self.selected: str | None = None  # the channel the response editor edits
@@ -636,9 +640,13 @@ class DeskPanel:
             c, v = self._slider("threshold", cs.threshold, 0.0, 1.0, "threshold %.2f")
             if c:
                 new = replace(new, threshold=v)
+        mapping = self._drives_combo(name, config) if getattr(self.chain, "elastic", None) is None else None
         reset = imgui.button("Reset")
         self._remember("response.reset")
         imgui.pop_id()
+        if mapping is not None:
+            self.apply(replace(config, mapping=mapping))
+            return
         channels = dict(config.channels)
         if reset and key in channels:
             del channels[key]
@@ -646,6 +654,51 @@ class DeskPanel:
         elif new != cs:
             channels[key] = new
             self.apply(replace(config, channels=channels))
+
+    def _drives_combo(self, name: str, config) -> Any:
+        """What the selected channel drives, as ``[mapping.channels]`` says it (runtime.expressions): by name (no
+        entry: the routes a channel takes without one), nothing, or one shape or expression of the character at
+        weight 1. Returns the new MappingSettings when one is picked, else None. An entry of several targets or
+        weights written in ``--config`` is shown as written and kept until another choice replaces it."""
+        from facepuppet.runtime.expressions import MappingTarget
+
+        imgui = self.imgui
+        key = canonical(name)
+        targets = config.mapping.channels.get(key)
+        drive = getattr(self.chain, "drive", None)
+        choices = list(self.names) + [e for e in (drive.expression_names if drive is not None else ())
+                                      if e not in self.names]
+        if targets is None:
+            shown = "(by name)"
+        elif not targets:
+            shown = "(nothing)"
+        else:
+            shown = ", ".join(t.to if t.weight == 1.0 else f"{t.to} x{t.weight:g}" for t in targets)
+        picked = None
+        imgui.text(f"drives: {shown}")
+        self._remember("response.drives")
+        # a list in the window, not a pop-up: a pop-up would open under the settings' window (a context of its
+        # own, drawn after the desk) and a click on it would reach the settings too
+        rows = min(DRIVES_ROWS, 2 + len(choices))
+        size = imgui.ImVec2(min(300.0, imgui.get_content_region_avail().x),
+                            rows * imgui.get_text_line_height_with_spacing() + 4.0)
+        if imgui.begin_list_box("##drives", size):
+            for i, label in enumerate(["(by name)", "(nothing)", *choices]):
+                current = label == shown
+                if imgui.selectable(f"{label}##drive{i}", current)[0] and not current:
+                    picked = label
+                self._remember(f"response.drives.{label}")
+            imgui.end_list_box()
+        if picked is None:
+            return None
+        channels, written = dict(config.mapping.channels), dict(config.mapping.written)
+        if picked == "(by name)":
+            channels.pop(key, None)
+            written.pop(key, None)
+        else:
+            channels[key] = () if picked == "(nothing)" else (MappingTarget(picked),)
+            written[key] = name
+        return replace(config.mapping, channels=channels, written=written)
 
     def _face_section(self) -> None:
         imgui, pipeline = self.imgui, self.pipeline
@@ -857,8 +910,13 @@ class DeskPanel:
         a ``[mapping]``) the first shape or expression its map sends it to (``n_shapes + e`` for expression e:
         the meters read the shapes' weights followed by the expressions' values); else the shape of the same
         name, or the first the by-name channel map sends it to (an unsided browInnerUp drives browInnerUp_L)."""
-        idx = self._shape_index.get(channels)
         drive = getattr(self.chain, "drive", None)
+        if drive is not self._drive_seen:  # a [mapping] applied live: the channels drive other targets now
+            self._drive_seen = drive
+            self._shape_index.clear()
+            self._expression_maps.clear()
+            self._mapped_lists.clear()
+        idx = self._shape_index.get(channels)
         if idx is None and drive is not None and tuple(drive.shape_names) == self.names:
             from facepuppet.runtime.expressions import ExpressionMap
 

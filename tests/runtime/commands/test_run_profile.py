@@ -108,6 +108,61 @@ def test_a_recording_made_with_a_profile_and_a_live_change_replays_to_the_same_w
 
 
 @pytest.mark.gl
+def test_a_mapping_changed_mid_run_maps_from_then_on_and_replays_to_the_same_weights(tmp_path):
+    """The panel's "drives" menu hands over a [mapping] (jawOpen onto the sphere's puff): the run maps with it
+    from the next tick, the recording keeps the change, and its replay draws the same weights."""
+    from facepuppet.runtime.expressions import MappingTarget
+
+    char = sphere_character().save(tmp_path / "sphere.npz")
+    config = tmp_path / "plain.toml"
+    config.write_text(NO_SMOOTHING)
+    record, port = tmp_path / "live.fps", free_udp_port()
+    parser = argparse.ArgumentParser()
+    run.register(parser.add_subparsers())
+    ns = parser.parse_args(["run", "-c", str(char), "--input", "vmc", "--listen", f"127.0.0.1:{port}", "--headless",
+                            "--size", "48x40", "--duration", "60", "--config", str(config), "--record", str(record)])
+    stop, drawn, chains = threading.Event(), [], []
+
+    def on_ready(address):
+        def send():
+            client = SimpleUDPClient("127.0.0.1", port)
+            while not stop.is_set():
+                send_vmc(client, {"JawOpen": 0.5})
+                time.sleep(0.01)
+        threading.Thread(target=send, daemon=True).start()
+
+    def hook(info):
+        if info.raw is None:
+            return
+        drawn.append(info.k)
+        if len(drawn) == PHASE:
+            pipeline = chains[0].filter
+            cfg = pipeline.current_config()
+            mapping = replace(cfg.mapping, channels={"jawOpen": (MappingTarget("puff"),)},
+                              written={"jawOpen": "JawOpen"})
+            pipeline.apply_config(replace(cfg, mapping=mapping))
+        if len(drawn) >= 2 * PHASE:
+            stop.set()
+
+    logs: list[str] = []
+    try:
+        result = run.run_live(ns, log=logs.append, stop_event=stop, on_ready=on_ready, hooks=[hook],
+                              keep_weights=True, on_chain=chains.append)
+    finally:
+        stop.set()
+    live = result.weights.array  # (ticks, [jawOpen, puff])
+    assert np.any(np.all(np.isclose(live, [0.5, 0.0], atol=1e-4), axis=1)), live  # by name first
+    np.testing.assert_allclose(live[-1], [0.0, 0.5], atol=1e-4)  # then onto puff
+    assert any(line.startswith("mapping: 1 channel(s)") for line in logs), logs
+
+    replayed = tmp_path / "replay.npy"
+    assert main(["replay", str(record), "-c", str(char), "--headless", "--size", "48x40",
+                 "--dump-weights", str(replayed)]) == 0
+    back = np.load(replayed)
+    np.testing.assert_allclose(back[-len(live):], live, atol=1e-6)
+
+
+@pytest.mark.gl
 def test_run_warns_when_the_profile_was_made_for_another_character(tmp_path):
     char = sphere_character().save(tmp_path / "ball.npz")
     profile = tmp_path / "show.toml"

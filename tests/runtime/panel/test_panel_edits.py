@@ -9,12 +9,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.config import load_live_config
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
 from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.live.profiles import Profile, config_to_toml, parse_config_text, read_made_for
-from facepuppet.runtime.live.stages import Chain
+from facepuppet.runtime.live.stages import Chain, follow_mapping
 from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.render.renderer import FaceRenderer
 
@@ -66,7 +67,10 @@ class _Run:
         self.events = events or {}
         self.ticks = []
         loop = FrameLoop(self.character.shape_names, self.renderer, RecordedClock(), fps=FPS, log=lambda s: None,
-                         stages=[self.pipeline], on_tick=[self._hook], overlays=(self.panel.overlay,))
+                         stages=[self.pipeline], on_tick=[self._hook], overlays=(self.panel.overlay,),
+                         drive=self.chain.drive)
+        # as run and replay wire it: a [mapping] applied live maps from then on
+        self.pipeline.on_config[:] = [follow_mapping(self.chain, loop, self.character.expressions, lambda s: None)]
         loop.run(ReplaySource(_frames(n)), duration=(n - 1) / FPS)
 
     def rect(self, label):
@@ -96,7 +100,10 @@ class _Run:
 def _assert_round_trips(config):
     """What the panel made is a valid config of the ``--config`` schema: written and read back, the same."""
     back = parse_config_text(config_to_toml(config), "<panel>")
-    assert replace(back, path="") == replace(config, path="")
+
+    def unplaced(c):  # where a config (and its mapping, for messages) was read from aside
+        return replace(c, path="", mapping=replace(c.mapping, path=""))
+    assert unplaced(back) == unplaced(config)
 
 
 @pytest.fixture
@@ -104,6 +111,32 @@ def run(egl_ctx):
     r = _Run(egl_ctx)
     yield r
     r.close()
+
+
+def test_the_drives_menu_maps_the_selected_channel_onto_another_shape_from_the_next_tick(run):
+    """jawOpen (0.4 in every frame) drives the sphere's jawOpen by name; picked in the list, the shape puff
+    instead (a [mapping.channels] entry), then nothing, then by name again. The list lies in the desk's window,
+    above the settings' (a pop-up would open under them)."""
+    run.run(6)
+    run.click("channel.jawOpen")
+    run.run(3)
+    assert [t[1].tolist() for t in run.ticks][-1] == pytest.approx([0.4, 0.0])
+    assert "response.drives.puff" in run.panel.rects  # the list of what it may drive
+    edits = run.panel.edits
+    run.click("response.drives.puff")
+    k = run.first_edit(edits)
+    rig = [t[1].tolist() for t in run.ticks]
+    assert rig[k] == pytest.approx([0.4, 0.0])  # the tick the panel handed the config over maps as before
+    assert rig[k + 1] == pytest.approx([0.0, 0.4]) and rig[-1] == pytest.approx([0.0, 0.4])
+    mapping = run.pipeline.config.mapping
+    assert [t.to for t in mapping.channels[canonical("jawOpen")]] == ["puff"]
+    _assert_round_trips(run.pipeline.current_config())
+    settings_top = min(y0 for label, (_, y0, _, _) in run.panel.rects.items() if label.startswith("filter."))
+    assert all(run.rect(f"response.drives.{n}")[3] < settings_top for n in ("(by name)", "(nothing)", "puff"))
+    for choice, want in (("(nothing)", [0.0, 0.0]), ("(by name)", [0.4, 0.0])):
+        run.click(f"response.drives.{choice}")
+        assert [t[1].tolist() for t in run.ticks][-1] == pytest.approx(want), choice
+    assert canonical("jawOpen") not in run.pipeline.config.mapping.channels
 
 
 def test_a_curve_change_changes_the_mapped_value_of_that_channel_at_the_next_tick(run):
