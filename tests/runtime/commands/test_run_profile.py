@@ -41,86 +41,15 @@ input = "vmc"
 PHASE = 8  # ticks with a drawn frame before the change, and after it
 
 
-@pytest.mark.gl
-def test_a_recording_made_with_a_profile_and_a_live_change_replays_to_the_same_weights(tmp_path):
-    char = sphere_character().save(tmp_path / "sphere.npz")
-    profile = tmp_path / "show.toml"
-    profile.write_text(PROFILE)
-    before = profile.read_bytes()
-    record, port = tmp_path / "live.fps", free_udp_port()
+def _run_with_a_live_change(char, record, options, change):
+    """``run`` of ``char`` over VMC on loopback (JawOpen 0.5 every 10 ms) with ``options`` and ``--record``;
+    after PHASE ticks with a drawn frame ``change(config in force)`` is applied as the panel would, and the run
+    stops PHASE ticks later. Returns (LiveRunResult, logs, ticks drawn)."""
+    port = free_udp_port()
     parser = argparse.ArgumentParser()
     run.register(parser.add_subparsers())
     ns = parser.parse_args(["run", "-c", str(char), "--input", "vmc", "--listen", f"127.0.0.1:{port}", "--headless",
-                            "--size", "48x40", "--duration", "60", "--profile", str(profile), "--record", str(record)])
-    stop, drawn, chains = threading.Event(), [], []
-
-    def on_ready(address):
-        def send():
-            client = SimpleUDPClient("127.0.0.1", port)
-            while not stop.is_set():
-                send_vmc(client, {"JawOpen": 0.5})
-                time.sleep(0.01)
-        threading.Thread(target=send, daemon=True).start()
-
-    def hook(info):
-        if info.raw is None:
-            return
-        drawn.append(info.k)
-        if len(drawn) == PHASE:  # the panel's move: gain 0.5 on jawOpen, the rest as in force
-            pipeline = chains[0].filter
-            cfg = pipeline.current_config()
-            pipeline.apply_config(replace(cfg, channels={**cfg.channels, "jawOpen": replace(
-                cfg.channels["jawOpen"], gain=0.5)}))
-        if len(drawn) >= 2 * PHASE:
-            stop.set()
-
-    logs: list[str] = []
-    try:
-        result = run.run_live(ns, log=logs.append, stop_event=stop, on_ready=on_ready, hooks=[hook],
-                              keep_weights=True, on_chain=chains.append)
-    finally:
-        stop.set()
-    assert len(drawn) >= 2 * PHASE, "\n".join(logs)
-    live = result.weights.array[:, 0]  # the sphere's jawOpen
-    # x = 0.4 -> gain 0.5: 0.2 -> u = 0 (below the input range) -> 0.0 after the change
-    assert np.any(np.isclose(live, 0.4, atol=1e-4)), live
-    assert live[-1] == pytest.approx(0.0, abs=1e-4)
-    assert not any("warning" in line for line in logs)  # made for this character and input
-    assert profile.read_bytes() == before  # a run does not write its profile unasked
-
-    session = read_session(record)
-    assert isinstance(session.header["info"]["config"], str) and len(session.configs) == 1
-    assert session.header["info"]["options"]["profile"] == str(profile)
-
-    replayed = tmp_path / "replay.npy"
-    assert main(["replay", str(record), "-c", str(char), "--headless", "--size", "48x40",
-                 "--dump-weights", str(replayed)]) == 0
-    back = np.load(replayed)
-    np.testing.assert_allclose(back[-len(result.weights.array):], result.weights.array, atol=1e-6)
-
-    # the same recording told another config draws something else: the recorded config was what made it match
-    plain = tmp_path / "plain.toml"
-    plain.write_text(NO_SMOOTHING)
-    other = tmp_path / "other.npy"
-    assert main(["replay", str(record), "-c", str(char), "--headless", "--size", "48x40", "--config", str(plain),
-                 "--dump-weights", str(other)]) == 0
-    assert np.load(other)[-1, 0] == pytest.approx(0.5, abs=1e-4)  # the raw value, no profile
-
-
-@pytest.mark.gl
-def test_a_mapping_changed_mid_run_maps_from_then_on_and_replays_to_the_same_weights(tmp_path):
-    """The panel's "drives" menu hands over a [mapping] (jawOpen onto the sphere's puff): the run maps with it
-    from the next tick, the recording keeps the change, and its replay draws the same weights."""
-    from facepuppet.runtime.expressions import MappingTarget
-
-    char = sphere_character().save(tmp_path / "sphere.npz")
-    config = tmp_path / "plain.toml"
-    config.write_text(NO_SMOOTHING)
-    record, port = tmp_path / "live.fps", free_udp_port()
-    parser = argparse.ArgumentParser()
-    run.register(parser.add_subparsers())
-    ns = parser.parse_args(["run", "-c", str(char), "--input", "vmc", "--listen", f"127.0.0.1:{port}", "--headless",
-                            "--size", "48x40", "--duration", "60", "--config", str(config), "--record", str(record)])
+                            "--size", "48x40", "--duration", "60", *options, "--record", str(record)])
     stop, drawn, chains = threading.Event(), [], []
 
     def on_ready(address):
@@ -137,10 +66,7 @@ def test_a_mapping_changed_mid_run_maps_from_then_on_and_replays_to_the_same_wei
         drawn.append(info.k)
         if len(drawn) == PHASE:
             pipeline = chains[0].filter
-            cfg = pipeline.current_config()
-            mapping = replace(cfg.mapping, channels={"jawOpen": (MappingTarget("puff"),)},
-                              written={"jawOpen": "JawOpen"})
-            pipeline.apply_config(replace(cfg, mapping=mapping))
+            pipeline.apply_config(change(pipeline.current_config()))
         if len(drawn) >= 2 * PHASE:
             stop.set()
 
@@ -150,15 +76,70 @@ def test_a_mapping_changed_mid_run_maps_from_then_on_and_replays_to_the_same_wei
                               keep_weights=True, on_chain=chains.append)
     finally:
         stop.set()
+    return result, logs, drawn
+
+
+def _replayed(char, record, tmp_path, *options):
+    out = tmp_path / f"replay{len(list(tmp_path.glob('replay*.npy')))}.npy"
+    assert main(["replay", str(record), "-c", str(char), "--headless", "--size", "48x40", *options,
+                 "--dump-weights", str(out)]) == 0
+    return np.load(out)
+
+
+@pytest.mark.gl
+def test_a_recording_made_with_a_profile_and_a_live_change_replays_to_the_same_weights(tmp_path):
+    char = sphere_character().save(tmp_path / "sphere.npz")
+    profile = tmp_path / "show.toml"
+    profile.write_text(PROFILE)
+    before = profile.read_bytes()
+    record = tmp_path / "live.fps"
+
+    def gain(cfg):  # the panel's move: gain 0.5 on jawOpen, the rest as in force
+        return replace(cfg, channels={**cfg.channels, "jawOpen": replace(cfg.channels["jawOpen"], gain=0.5)})
+
+    result, logs, drawn = _run_with_a_live_change(char, record, ["--profile", str(profile)], gain)
+    assert len(drawn) >= 2 * PHASE, "\n".join(logs)
+    live = result.weights.array[:, 0]  # the sphere's jawOpen
+    # x = 0.4 -> gain 0.5: 0.2 -> u = 0 (below the input range) -> 0.0 after the change
+    assert np.any(np.isclose(live, 0.4, atol=1e-4)), live
+    assert live[-1] == pytest.approx(0.0, abs=1e-4)
+    assert not any("warning" in line for line in logs)  # made for this character and input
+    assert profile.read_bytes() == before  # a run does not write its profile unasked
+
+    session = read_session(record)
+    assert isinstance(session.header["info"]["config"], str) and len(session.configs) == 1
+    assert session.header["info"]["options"]["profile"] == str(profile)
+
+    back = _replayed(char, record, tmp_path)
+    np.testing.assert_allclose(back[-len(result.weights.array):], result.weights.array, atol=1e-6)
+
+    # the same recording told another config draws something else: the recorded config was what made it match
+    plain = tmp_path / "plain.toml"
+    plain.write_text(NO_SMOOTHING)
+    assert _replayed(char, record, tmp_path, "--config", str(plain))[-1, 0] == pytest.approx(0.5, abs=1e-4)
+
+
+@pytest.mark.gl
+def test_a_mapping_changed_mid_run_maps_from_then_on_and_replays_to_the_same_weights(tmp_path):
+    """The panel's "drives" list hands over a [mapping] (jawOpen onto the sphere's puff): the run maps with it
+    from the next tick, the recording keeps the change, and its replay draws the same weights."""
+    from facepuppet.runtime.expressions import MappingTarget
+
+    char = sphere_character().save(tmp_path / "sphere.npz")
+    config = tmp_path / "plain.toml"
+    config.write_text(NO_SMOOTHING)
+    record = tmp_path / "live.fps"
+
+    def onto_puff(cfg):
+        return replace(cfg, mapping=replace(cfg.mapping, channels={"jawOpen": (MappingTarget("puff"),)},
+                                            written={"jawOpen": "JawOpen"}))
+
+    result, logs, _ = _run_with_a_live_change(char, record, ["--config", str(config)], onto_puff)
     live = result.weights.array  # (ticks, [jawOpen, puff])
     assert np.any(np.all(np.isclose(live, [0.5, 0.0], atol=1e-4), axis=1)), live  # by name first
     np.testing.assert_allclose(live[-1], [0.0, 0.5], atol=1e-4)  # then onto puff
     assert any(line.startswith("mapping: 1 channel(s)") for line in logs), logs
-
-    replayed = tmp_path / "replay.npy"
-    assert main(["replay", str(record), "-c", str(char), "--headless", "--size", "48x40",
-                 "--dump-weights", str(replayed)]) == 0
-    back = np.load(replayed)
+    back = _replayed(char, record, tmp_path)
     np.testing.assert_allclose(back[-len(live):], live, atol=1e-6)
 
 
