@@ -154,6 +154,8 @@ def run_replay(args: argparse.Namespace, log: Callable[[str], None] = print) -> 
         source, ticks, fps = _source(args, live, getattr(args, "fps", None), lambda s: None)
     if live is not None and live.header.get("info", {}).get("mix_sources") is not None:
         _replay_mix(live, chain, ticks, log)
+    if live is not None and live.states and chain.filter is not None and filtered:
+        _restore_state(chain.filter, live.states[0], args.session, log)
     log(chain.describe())
     target = create_context(headless=True if args.headless else None, width=width, height=height,
                             title=f"facepuppet replay {args.session.name}", log=log, samples=picture.msaa,
@@ -257,6 +259,21 @@ def _replay_mix(live, chain, ticks, log) -> None:
     chain.add_mix(stage, label=f"replay({'+'.join(names)})")
     if chain.filter is not None:  # the live run's config changes (its CONFIG records) reach the mix as they did
         chain.filter.on_config.append(follow_config(stage, names, log))
+
+
+def _restore_state(pipeline, state: tuple[float, str], path, log: Callable[[str], None]) -> None:
+    """A recording started mid-run: the filter stage goes on from the state it had then (its STATE record).
+    One that cannot be used is said and left: the replay then starts the stage afresh, as before STATE."""
+    import json
+
+    t, text = state
+    try:
+        pipeline.restore_state(json.loads(text))
+    except (ValueError, json.JSONDecodeError) as exc:
+        log(f"replay: warning: {path}: the filter stage's state at the recording's start (t = {t:.3f} s) is not "
+            f"usable ({exc}); its first ticks may differ from the run")
+        return
+    log(f"replay: the filter stage goes on from its state at the recording's start (t = {t:.3f} s)")
 
 
 def _compare_events(recorded: list, replayed: list) -> str:

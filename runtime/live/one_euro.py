@@ -76,6 +76,16 @@ class OneEuroFilter:
         self.dx_hat.fill(0.0)
         self._ready = self.n == 0
 
+    def set_state(self, x_hat: np.ndarray, dx_hat: np.ndarray) -> None:
+        """Take another filter's state (a recording started mid-run): X̂ (NaN: no sample yet) and dX̂, (n,) each."""
+        x_hat, dx_hat = np.asarray(x_hat, np.float64), np.asarray(dx_hat, np.float64)
+        if x_hat.shape != (self.n,) or dx_hat.shape != (self.n,) or not np.isfinite(dx_hat).all() or \
+                np.isinf(x_hat).any():
+            raise ValueError(f"OneEuroFilter.set_state: expected X̂ (finite or NaN) and finite dX̂ of shape "
+                             f"({self.n},), got {x_hat.shape} and {dx_hat.shape}")
+        self.x_hat[:], self.dx_hat[:] = x_hat, dx_hat
+        self._ready = not np.isnan(self.x_hat).any()
+
     def filter(self, x: np.ndarray, dt: float) -> np.ndarray:
         """Filter one sample per channel.
 

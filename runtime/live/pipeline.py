@@ -70,6 +70,56 @@ def _conj(q: np.ndarray) -> np.ndarray:
     return np.array([-q[0], -q[1], -q[2], q[3]])
 
 
+def _float(x) -> float | None:
+    """A float for JSON: None for NaN and infinities."""
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _floats(a: np.ndarray) -> list:
+    return [_float(x) for x in np.asarray(a, np.float64).ravel()]
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _array(values, n: int, where: str) -> np.ndarray:
+    """(n,) float64 from a JSON list (None: NaN); ValueError naming ``where`` otherwise."""
+    if not isinstance(values, list) or len(values) != n or not all(v is None or _finite(v) for v in values):
+        raise ValueError(f"pipeline state: '{where}' is not a list of {n} numbers")
+    return np.array([math.nan if v is None else float(v) for v in values], np.float64)
+
+
+def _parts(parts: tuple | None) -> list | None:
+    """(weights, rotation, translation), each an array or None, for JSON."""
+    return None if parts is None else [None if p is None else _floats(p) for p in parts]
+
+
+def _snapshot_doc(raw: tuple | None) -> dict | None:
+    """The JSON-able :meth:`LivePipeline.state_snapshot` of a :meth:`LivePipeline._raw_state`."""
+    if raw is None:
+        return None
+    channels, filters, last_q, last, last_tick, live, out = raw
+    return {
+        "version": 1, "channels": list(channels),
+        "filters": {name: [_floats(x), _floats(dx)] for name, (x, dx) in zip(("weights", "rotation",
+                                                                             "translation"), filters)},
+        "last_q": None if last_q is None else _floats(last_q),
+        "last_frame": {"t": float(last.t), "t_sender": _float(last.t_sender), "number": int(last.number),
+                       "source": str(last.source), "weights": last.weights is not None},
+        "last_tick": float(last_tick), "live": _parts(live), "out": _parts(out),
+    }
+
+
+def _unparts(doc, n: int, where: str) -> tuple | None:
+    if doc is None:
+        return None
+    if not isinstance(doc, list) or len(doc) != 3:
+        raise ValueError(f"pipeline state: '{where}' is not [weights, rotation, translation]")
+    return tuple(None if p is None else _array(p, k, f"{where}[{i}]") for i, (p, k) in enumerate(zip(doc, (n, 4, 3))))
+
+
 class _ChannelState:
     """Filters, neutral and limits for one tuple of channel names."""
 
@@ -175,6 +225,70 @@ class LivePipeline:
         self._take_neutral(self._neutral_pose)
         self._calib_pending = False
         self._capture: dict | None = None
+        self.keep_snapshots = False  # keep :meth:`before_tick` (a run that may start a recording mid-run)
+        self._before: tuple | None = None
+
+    # -- the state a recording started mid-run carries ----------------------------------------------
+
+    def state_snapshot(self) -> dict | None:
+        """What a replay of a recording started now needs to go on as this run does (JSON-able): the filters'
+        state, the last input frame's times, the last processed and emitted values; None unless tracking is
+        live and no calibration is being captured (an ease in or out, a capture, in progress is not kept: such
+        a recording's first ticks replay from a fresh stage, as before)."""
+        return _snapshot_doc(self._raw_state())
+
+    @property
+    def before_tick(self) -> dict | None:
+        """:meth:`state_snapshot` as it was before the newest tick (with ``keep_snapshots``; else None)."""
+        return None if self._before is None else _snapshot_doc(self._before)
+
+    def _raw_state(self) -> tuple | None:
+        """The parts of :meth:`state_snapshot`, copied where they change in place (cheap: every tick with
+        ``keep_snapshots``)."""
+        if self.state != "live" or self._cs is None or self._last_frame is None or self.calibrating:
+            return None
+        cs = self._cs
+        return (cs.channels, tuple((f.x_hat.copy(), f.dx_hat.copy()) for f in (cs.weights, cs.rotation,
+                                                                               cs.translation)),
+                cs.last_q, self._last_frame, self._last_tick, self._live, self._out)
+
+    def restore_state(self, doc: dict) -> None:
+        """Go on from :meth:`state_snapshot`'s ``doc`` (before the first tick of a replay). Raises ValueError
+        naming what is wrong when ``doc`` is not such a snapshot (nothing is changed then)."""
+        if not isinstance(doc, dict) or doc.get("version") != 1:
+            raise ValueError("pipeline state: expected a version 1 snapshot")
+        channels = doc.get("channels")
+        if not isinstance(channels, list) or not all(isinstance(c, str) for c in channels):
+            raise ValueError("pipeline state: 'channels' is not a list of names")
+        channels = tuple(channels)
+        cs = _ChannelState(channels, self.config)
+        filters = doc.get("filters")
+        if not isinstance(filters, dict):
+            raise ValueError("pipeline state: 'filters' missing")
+        for name, f in (("weights", cs.weights), ("rotation", cs.rotation), ("translation", cs.translation)):
+            pair = filters.get(name)
+            if not isinstance(pair, list) or len(pair) != 2:
+                raise ValueError(f"pipeline state: 'filters.{name}' is not [x_hat, dx_hat]")
+            f.set_state(_array(pair[0], f.n, f"filters.{name}"), _array(pair[1], f.n, f"filters.{name}"))
+        last_q = None if doc.get("last_q") is None else _array(doc["last_q"], 4, "last_q")
+        last = doc.get("last_frame")
+        if not isinstance(last, dict) or not _finite(last.get("t")) or not isinstance(last.get("number"), int):
+            raise ValueError("pipeline state: 'last_frame' lacks its time and number")
+        if not _finite(doc.get("last_tick")):
+            raise ValueError("pipeline state: 'last_tick' is not a number")
+        live = _unparts(doc.get("live"), len(channels), "live")
+        out = _unparts(doc.get("out"), len(channels), "out")
+        n = len(channels)
+        frame = Frame(t=float(last["t"]), source=str(last.get("source", "")),
+                      channels=channels if last.get("weights") else None,
+                      weights=np.full(n, np.nan) if last.get("weights") else None,
+                      t_sender=float(last["t_sender"]) if _finite(last.get("t_sender")) else math.nan,
+                      number=int(last["number"]))
+        cs.last_q = last_q
+        self._channels, self._cs = channels, cs
+        self.neutral_weights = self._neutral_on(channels)
+        self._last_frame, self._last_tick = frame, float(doc["last_tick"])
+        self._live, self._out, self.state = live, out, "live"
 
     def apply_config(self, config: LiveConfig) -> None:
         """Hand over a new config (safe from any thread); it takes effect at the start of the next tick.
@@ -243,6 +357,8 @@ class LivePipeline:
             listener(t, found)
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
+        if self.keep_snapshots:
+            self._before = self._raw_state()
         while self._schedule and self._schedule[0][0] <= t:
             self._switch(self._schedule.pop(0)[1], t)
         if self._pending is not None:

@@ -25,6 +25,7 @@ from facepuppet.runtime.recording.records import (
     encode_event,
     encode_packet_record,
     encode_sources,
+    encode_state,
     encode_tick,
 )
 from facepuppet.runtime.recording.session import SessionWriter
@@ -96,6 +97,12 @@ class PacketRecorder:
         self._queue.append((RecordKind.CONFIG, t, text))
         self._wake.set()
 
+    def put_state(self, t: float, text: str) -> None:
+        """Queue the STATE record of a recording started mid-run: the filter stage's state (JSON text) at tick
+        time ``t``. Never blocks; not dropped for a full queue (one per recording)."""
+        self._queue.append((RecordKind.STATE, t, text))
+        self._wake.set()
+
     def tagged(self, label: str) -> Callable[..., None]:
         """An ``on_packet`` callable for another input of the run: its datagrams are recorded under ``label``
         (a mix source name such as ``openseeface`` or ``vmc#2``) instead of this recorder's kind."""
@@ -137,6 +144,8 @@ class PacketRecorder:
                 elif kind == RecordKind.CONFIG:
                     write(kind, encode_config(t, value))
                     self.counters["configs_recorded"] += 1
+                elif kind == RecordKind.STATE:
+                    write(kind, encode_state(t, value))
                 elif kind == RecordKind.TICK:
                     write(kind, encode_tick(value[0], t, value[1], value[2]))
                     self.counters["ticks_recorded"] += 1

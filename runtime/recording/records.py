@@ -60,6 +60,7 @@ _PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
 _AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
 _TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames completed, snapshot time
 _CONFIG_HEAD = struct.Struct("<2sd")  # b"C1", tick time
+_STATE_HEAD = struct.Struct("<2sd")  # b"T1", tick time (then the JSON text)
 _EVENT = struct.Struct("<2sdB")  # b"E1", tick time, found
 _SOURCES_HEAD = struct.Struct("<2sqH")  # b"S1", tick index, count (then count x i64)
 
@@ -76,10 +77,11 @@ class RecordKind(enum.IntEnum):
     CONFIG = 6  # live recording: a config change and the tick it took effect at
     EVENT = 7  # live recording: tracking lost / found
     SOURCES = 8  # live recording, several inputs: frames each mix source had per tick
+    STATE = 9  # live recording started mid-run: the filter stage's state at its start (JSON)
 
 
 RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG,
-                            RecordKind.EVENT, RecordKind.SOURCES})
+                            RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE})
 
 
 class FrameFlags(enum.IntFlag):
@@ -202,6 +204,22 @@ def decode_config(payload: bytes) -> tuple[float, str] | None:
     _, t = _CONFIG_HEAD.unpack_from(payload)
     try:
         return t, payload[_CONFIG_HEAD.size:].decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+
+
+def encode_state(t: float, text: str) -> bytes:
+    """STATE payload: the filter stage's state (JSON text, LivePipeline.state_snapshot) at tick time ``t``."""
+    return _STATE_HEAD.pack(b"T1", float(t)) + text.encode("utf-8")
+
+
+def decode_state(payload: bytes) -> tuple[float, str] | None:
+    """(t, JSON text) from a STATE payload; None when it is not one this reader knows."""
+    if len(payload) < _STATE_HEAD.size or payload[:2] != b"T1":
+        return None
+    _, t = _STATE_HEAD.unpack_from(payload)
+    try:
+        return t, payload[_STATE_HEAD.size:].decode("utf-8")
     except UnicodeDecodeError:
         return None
 

@@ -51,6 +51,7 @@ from facepuppet.runtime.recording.records import (
     decode_layout,
     decode_packet_record,
     decode_sources,
+    decode_state,
     decode_tick,
     encode_frame,
     layout_of,
@@ -162,6 +163,7 @@ class Session:
     configs : list of (tick time, TOML text), the live config changes of a live recording (CONFIG records)
     events : list of (tick time, found) pairs, the tracking lost (False) / found (True) events of a live run
     sources : list of (tick index, frames per mix source), one per tick of a run with several inputs
+    states : list of (tick time, JSON text), the filter stage's state where a recording started mid-run (STATE)
     skipped_bytes : int, bytes skipped over damaged records in the middle of the file
     damaged : list of (byte offset, bytes skipped), each damaged stretch that reading resynchronised past
     """
@@ -179,6 +181,7 @@ class Session:
     configs: list[tuple[float, str]] = field(default_factory=list)
     events: list[tuple[float, bool]] = field(default_factory=list)
     sources: list[tuple[int, tuple[int, ...]]] = field(default_factory=list)
+    states: list[tuple[float, str]] = field(default_factory=list)
     skipped_bytes: int = 0
     damaged: list[tuple[int, int]] = field(default_factory=list)
 
@@ -338,6 +341,8 @@ def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, paylo
         session.events.append(event)
     elif kind == RecordKind.SOURCES and (sources := decode_sources(payload)) is not None:
         session.sources.append(sources)
+    elif kind == RecordKind.STATE and (state := decode_state(payload)) is not None:
+        session.states.append(state)
     elif kind in RESERVED_KINDS:
         name = RecordKind(kind).name.lower()
         session.skipped[name] = session.skipped.get(name, 0) + 1

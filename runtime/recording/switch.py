@@ -15,8 +15,10 @@ packets decode to. So the first frames of the run, whose packets went by before 
 are taken off: until a tick takes a frame whose packet was recorded, the recording decodes its own packets
 with a fresh adapter of the input kind (as ``replay`` does; a few datagrams) and the tick that takes the
 first recorded frame, found by its receive time, fixes the offset; TICK records before it say "no frame
-yet". The pipeline's state when the recording starts (a filter's history, an easing in progress) is not
-in the file: the first ticks of its replay may differ, from the first frame on it follows the run.
+yet". The filter stage's state before that tick (its filters' history, the last frame's times, what it
+drew) is the STATE record written with it, and a replay goes on from it, so from that frame on it draws
+what the run drew. An ease in or out or a calibration being captured then is not kept (no STATE): such a
+replay's first ticks may differ, as may a run's gestures.
 The config in force is the header's (``info.config``) and the first CONFIG record.
 """
 
@@ -125,6 +127,8 @@ class SwitchableRecorder:
         ``replay`` decodes), to align a recording started mid-run; None: frames are counted from the start
     frames_taken : callable() -> int, the source's frame count (the base of a recording of a source
         without datagrams, ``--input audio``)
+    pipeline : LivePipeline or None, the run's filter stage: a recording started mid-run takes its state
+        before the tick of the first recorded frame (its ``keep_snapshots`` / ``before_tick``) as a STATE record
     refuse_midrun : str, why a recording cannot start once the run ticks ("" when it can: a run with several
         inputs says so, their frame counts are not aligned)
     clock : callable() -> seconds since the epoch, for default names (injectable for tests)
@@ -141,12 +145,18 @@ class SwitchableRecorder:
     def __init__(self, open_recorder: Callable[[Path], PacketRecorder], directory: Path | None = None, *,
                  make_adapter: Callable[[], InputAdapter] | None = None,
                  frames_taken: Callable[[], int] | None = None, refuse_midrun: str = "",
+                 pipeline: Any = None,
                  clock: Callable[[], float] = time.time, log: Callable[[str], None] | None = None) -> None:
         self.open_recorder = open_recorder
         self.directory = Path(directory) if directory is not None else Path(".")
         self.make_adapter = make_adapter
         self.frames_taken = frames_taken
         self.refuse_midrun = refuse_midrun
+        self.pipeline = pipeline
+        if pipeline is not None:
+            pipeline.keep_snapshots = True  # its state before each tick: a start's first recorded frame may be
+            # the very tick's (a process receiver's datagrams reach the recorder at the tick hook)
+        self._state_due = False
         self.clock = clock
         self.log = log
         self.path: Path | None = None
@@ -221,6 +231,7 @@ class SwitchableRecorder:
             align = _Aligner(None, base=int(self.frames_taken()) if self.frames_taken is not None else 0)
         if config_text is not None:
             recorder.put_config(self.last_t, config_text)
+        self._state_due = midrun and self.pipeline is not None and align.base is None
         self._align = align
         self._tagged = {}
         self.path = Path(recorder.path)
@@ -234,6 +245,7 @@ class SwitchableRecorder:
     def stop(self) -> Path | None:
         """Stop the recording in force (its file completed on a background thread; :meth:`close` waits)."""
         recorder, self._recorder = self._recorder, None
+        self._state_due = False  # (stopped before its first recorded frame)
         if recorder is None:
             return None
         self._align = None
@@ -294,9 +306,26 @@ class SwitchableRecorder:
             r.put_audio(t, level_db)
 
     def tick_frames(self, frames_taken: int, raw: Any) -> int:
-        """The frame count a TICK record stores for this tick (see the module docstring)."""
+        """The frame count a TICK record stores for this tick (see the module docstring); at the tick that took
+        the first recorded frame of a recording started mid-run, the filter stage's state before it is
+        written (a STATE record, before this tick's TICK)."""
         align = self._align
-        return frames_taken if align is None else align.frames(frames_taken, raw)
+        if align is None:
+            return frames_taken
+        aligned = align.base is not None
+        frames = align.frames(frames_taken, raw)
+        if not aligned and align.base is not None and self._state_due:
+            self._write_state()
+        return frames
+
+    def _write_state(self) -> None:
+        import json
+
+        self._state_due = False
+        snapshot = self.pipeline.before_tick
+        recorder = self._recorder
+        if snapshot is not None and recorder is not None:
+            recorder.put_state(self.last_t, json.dumps(snapshot, allow_nan=False))
 
     def put_tick(self, k: int, t: float, frames: int, t_clock: float) -> None:
         r = self._recorder

@@ -49,6 +49,7 @@ class LiveRecording:
     audio_levels : list of (t, level_db), the audio level of each live tick (the tick's time)
     configs : list of (t, TOML text), the config changes of the live run and the tick times they took effect
     events : list of (t, found), the tracking lost / found events of the live run (EVENT records)
+    states : list of (t, JSON text), the filter stage's state where the recording started mid-run (STATE)
     mix : dict of source name -> LiveRecording, the other tracker inputs of a run with several
         (``info.mix_sources``): each one's frames and, per tick, how many it had completed (SOURCES records)
     """
@@ -62,6 +63,7 @@ class LiveRecording:
     configs: list = field(default_factory=list)
     events: list = field(default_factory=list)
     mix: dict = field(default_factory=dict)
+    states: list = field(default_factory=list)
 
 
 def read_live_recording(path: str | os.PathLike,
@@ -108,7 +110,8 @@ def read_live_recording(path: str | os.PathLike,
     if not frames and not session.ticks:
         raise ValueError(f"{path}: the recorded packets decode to no frame")
     return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header),
-                         list(session.audio_levels), list(session.configs), list(session.events), mix)
+                         list(session.audio_levels), list(session.configs), list(session.events), mix,
+                         list(session.states))
 
 
 class TickedSource:

@@ -85,11 +85,11 @@ class _Operator:
             self.plan.pop(0)
 
 
-def _run(tmp_path, extra=()):
+def _run(tmp_path, extra=(), config_text=NO_SMOOTHING, plan=None):
     character = tmp_path / "sphere.npz"
     sphere_character().save(character)
     config = tmp_path / "live.toml"
-    config.write_text(NO_SMOOTHING)
+    config.write_text(config_text)
     port = free_udp_port()
     parser = argparse.ArgumentParser()
     run.register(parser.add_subparsers())
@@ -98,7 +98,7 @@ def _run(tmp_path, extra=()):
                             str(config), "--draw", "tick", "--fps", "30", *extra])
     stop = threading.Event()
     op = _Operator(stop)
-    op.plan = ["wait"] * 5 + ["start", "stop"] + ["wait"] * 5 + ["start", "stop"] + ["wait"] * 3
+    op.plan = plan or ["wait"] * 5 + ["start", "stop"] + ["wait"] * 5 + ["start", "stop"] + ["wait"] * 3
 
     def on_ready(address):
         def send():
@@ -154,11 +154,51 @@ def test_record_then_stop_in_the_panel_twice_makes_two_files_that_replay_the_run
         drawn = np.flatnonzero(np.abs(replayed).sum(axis=1) > 0)
         assert drawn.size >= TICKS_RECORDED - 2  # the ticks before the first recorded frame draw the rest pose
         first = drawn[0]
-        # from a few frames after the first on (the filter's history before the recording is not in it) the
-        # replay draws what the run drew, tick for tick
-        later = np.arange(first + 3, len(ticks))
+        # from the first recorded frame on (the filter stage's state then is the recording's STATE) the replay
+        # draws what the run drew, tick for tick
+        assert len(session.states) == 1
+        later = np.arange(first, len(ticks))
         assert later.size >= 5
-        np.testing.assert_allclose(replayed[later], live[later], atol=2e-3)
+        np.testing.assert_allclose(replayed[later], live[later], atol=1e-6)
     # the two recordings hold different stretches of the run: nothing of the first is in the second
     a, b = (read_session(p) for p in op.files)
     assert max(t.k for t in a.ticks) < min(t.k for t in b.ticks)
+
+
+@pytest.mark.parametrize("receiver", ["process", "thread"])
+def test_a_recording_started_mid_run_replays_the_smoothed_run_exactly_from_its_first_frame(tmp_path, monkeypatch,
+                                                                                           receiver):
+    """With the filters smoothing (the mouth at 1 Hz: each frame moves the jaw a few per cent of the way), a
+    replay that started them afresh at the recording's first frame drew something else for a second or more.
+    The recording keeps the filter stage's state before the tick of its first recorded frame (a STATE record)
+    and the replay goes on from it: from that frame on it draws what the run drew."""
+    monkeypatch.chdir(tmp_path)
+    smooth = "[filter.mouth]\nmin_cutoff = 1.0\nbeta = 0.0\n"
+    result, op, character, config = _run(tmp_path, ("--receiver", receiver), smooth,
+                                         plan=["wait"] * 20 + ["start", "stop"] + ["wait"] * 3)
+    assert not op.plan and len(op.files) == 1
+    session = read_session(op.files[0])
+    assert len(session.states) == 1
+    ticks = [t.k for t in session.ticks]
+    lines: list[str] = []
+    dump = tmp_path / "replay.npy"
+    from facepuppet.runtime.commands import replay
+    ns = argparse.ArgumentParser()
+    replay.register(ns.add_subparsers())
+    args = ns.parse_args(["replay", str(op.files[0]), "-c", str(character), "--headless", "--size", "64x64",
+                          "--dump-weights", str(dump)])
+    assert replay.run_replay(args, log=lines.append) == 0
+    assert any("goes on from its state at the recording's start" in line for line in lines), lines
+    replayed = np.load(dump)
+    live = np.array([op.live[k] for k in ticks])
+    drawn = np.flatnonzero(np.abs(replayed).sum(axis=1) > 0)
+    first = drawn[0]
+    assert len(ticks) - first >= TICKS_RECORDED - 2
+    np.testing.assert_allclose(replayed[first:], live[first:], atol=1e-6)
+    # without it the replay starts the filters afresh: the first frame passes unsmoothed, far off the run
+    monkeypatch.setattr(replay, "_restore_state", lambda *a, **k: None)
+    fresh = tmp_path / "fresh.npy"
+    args = ns.parse_args(["replay", str(op.files[0]), "-c", str(character), "--headless", "--size", "64x64",
+                          "--dump-weights", str(fresh)])
+    assert replay.run_replay(args, log=lambda s: None) == 0
+    assert np.abs(np.load(fresh)[first:] - live[first:]).max() > 0.02
