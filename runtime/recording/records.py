@@ -59,8 +59,7 @@ _FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
 _PACKET_HEAD = struct.Struct("<2sdH")  # b"P1", receive time, input kind length
 _AUDIO = struct.Struct("<2sdf")  # b"A1", time, level dBFS
 _TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames completed, snapshot time
-_CONFIG_HEAD = struct.Struct("<2sd")  # b"C1", tick time
-_STATE_HEAD = struct.Struct("<2sd")  # b"T1", tick time (then the JSON text)
+_CONFIG_HEAD = struct.Struct("<2sd")  # b"C1" (CONFIG) or b"T1" (STATE), tick time; then the text
 _EVENT = struct.Struct("<2sdB")  # b"E1", tick time, found
 _SOURCES_HEAD = struct.Struct("<2sqH")  # b"S1", tick index, count (then count x i64)
 
@@ -192,14 +191,13 @@ def encode_tick(k: int, t: float, frames: int, t_clock: float) -> bytes:
     return _TICK.pack(b"K1", int(k), float(t), int(frames), float(t_clock))
 
 
-def encode_config(t: float, text: str) -> bytes:
-    """CONFIG payload: the config (TOML text) that took effect at tick time ``t``."""
-    return _CONFIG_HEAD.pack(b"C1", float(t)) + text.encode("utf-8")
+def _encode_text(tag: bytes, t: float, text: str) -> bytes:
+    return _CONFIG_HEAD.pack(tag, float(t)) + text.encode("utf-8")
 
 
-def decode_config(payload: bytes) -> tuple[float, str] | None:
-    """(t, TOML text) from a CONFIG payload; None when it is not one this reader knows."""
-    if len(payload) < _CONFIG_HEAD.size or payload[:2] != b"C1":
+def _decode_text(tag: bytes, payload: bytes) -> tuple[float, str] | None:
+    """(t, text) of a payload of ``tag``, tick time and UTF-8 text (CONFIG, STATE); None when not one."""
+    if len(payload) < _CONFIG_HEAD.size or payload[:2] != tag:
         return None
     _, t = _CONFIG_HEAD.unpack_from(payload)
     try:
@@ -208,20 +206,24 @@ def decode_config(payload: bytes) -> tuple[float, str] | None:
         return None
 
 
+def encode_config(t: float, text: str) -> bytes:
+    """CONFIG payload: the config (TOML text) that took effect at tick time ``t``."""
+    return _encode_text(b"C1", t, text)
+
+
+def decode_config(payload: bytes) -> tuple[float, str] | None:
+    """(t, TOML text) from a CONFIG payload; None when it is not one this reader knows."""
+    return _decode_text(b"C1", payload)
+
+
 def encode_state(t: float, text: str) -> bytes:
     """STATE payload: the filter stage's state (JSON text, LivePipeline.state_snapshot) at tick time ``t``."""
-    return _STATE_HEAD.pack(b"T1", float(t)) + text.encode("utf-8")
+    return _encode_text(b"T1", t, text)
 
 
 def decode_state(payload: bytes) -> tuple[float, str] | None:
     """(t, JSON text) from a STATE payload; None when it is not one this reader knows."""
-    if len(payload) < _STATE_HEAD.size or payload[:2] != b"T1":
-        return None
-    _, t = _STATE_HEAD.unpack_from(payload)
-    try:
-        return t, payload[_STATE_HEAD.size:].decode("utf-8")
-    except UnicodeDecodeError:
-        return None
+    return _decode_text(b"T1", payload)
 
 
 def decode_packet_record(payload: bytes) -> Packet | None:
