@@ -124,10 +124,11 @@ class _GrabSink:
 
 def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence[int], fps: float,
                   ctx: moderngl.Context, size: tuple[int, int],
-                  camera_from: Character | None = None) -> list[np.ndarray]:
+                  camera_from: Character | None = None, path: str = "auto") -> tuple[list[np.ndarray], str]:
     """The images ``facepuppet replay TAKE -c CHARACTER --headless`` draws at the given ticks (the same frame
     source, stage chain, channel map and renderer; no filter stage, as replay of a CSV by default), framed on
-    the face of ``camera_from`` (default: ``character``) so two characters are seen from one camera."""
+    the face of ``camera_from`` (default: ``character``) so two characters are seen from one camera; and the
+    deformation path they were drawn on (``path``; "auto": the faster, as replay chooses)."""
     from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
     from facepuppet.runtime.live.stages import build_chain
     from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
@@ -136,7 +137,7 @@ def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence
     source = ReplaySource(open_recording(take), max_gap=DEFAULT_MAX_GAP_S)
     chain = build_chain(argparse.Namespace(character=None), character, None, filtered=False, label="replay",
                         log=quiet)
-    renderer = chain.renderer(ctx, character, size[0], size[1], "auto", None, quiet, framing="face")
+    renderer = chain.renderer(ctx, character, size[0], size[1], path, None, quiet, framing="face")
     if camera_from is not None and camera_from is not character:
         from facepuppet.runtime.render.renderer import FaceRenderer
 
@@ -149,7 +150,7 @@ def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence
                   drive=chain.drive).run(source, ticks=list(ticks))
     finally:
         renderer.close()
-    return grab.images
+    return grab.images, renderer.path
 
 
 def take_side_by_side(original: Character, synced: Character, take: str | os.PathLike,
@@ -172,7 +173,10 @@ def take_side_by_side(original: Character, synced: Character, take: str | os.Pat
     try:
         zoom = 2
         big = (size[0] * zoom, size[1] * zoom)
-        rows = [replay_images(c, take, ticks, fps, ctx, big, camera_from=synced) for c in (original, synced)]
+        # both rows on one deformation path: the two paths may differ by a pixel where an edge crosses one,
+        # and the rows are compared by eye (and by the tests: one character in both rows gives one picture)
+        top, path = replay_images(original, take, ticks, fps, ctx, big, camera_from=synced)
+        rows = [top, replay_images(synced, take, ticks, fps, ctx, big, camera_from=synced, path=path)[0]]
     finally:
         if own:
             ctx.release()
