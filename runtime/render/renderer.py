@@ -144,6 +144,25 @@ def delta_steps(character: Character) -> np.ndarray:
     return steps
 
 
+def on_delta_grid(character: Character) -> Character:
+    """``character`` with every delta component on its shape's 16-bit grid (:func:`delta_steps`), as the
+    gpu path's texture holds them: the cpu path draws these, so both paths draw the same surface (with the
+    file's deltas a vertex moved up to 1/65534 of its shape's largest delta apart, and where that moved an
+    edge across a pixel's centre the two paths' pictures differed by that pixel)."""
+    import dataclasses
+
+    steps = delta_steps(character)
+    out = []
+    for k, src in enumerate((character.delta_positions, character.delta_normals)):
+        grid = src.astype(np.float64, copy=True)
+        for s in range(character.n_shapes):
+            sl = character.shape_slice(s)
+            if steps[s, k] > 0:
+                grid[sl] = np.rint(grid[sl] / steps[s, k]) * steps[s, k]
+        out.append(grid.astype(np.float32))
+    return dataclasses.replace(character, delta_positions=out[0], delta_normals=out[1])
+
+
 def delta_texture(ctx: moderngl.Context, character: Character) -> tuple[moderngl.Texture, np.ndarray]:
     """Position and normal deltas of every shape in one RGB32UI texture of width DELTA_TEXTURE_WIDTH.
 
@@ -377,7 +396,7 @@ class FaceRenderer:
         }
 
     def _setup_cpu(self) -> dict:
-        deformer = CpuDeformer(self.character)
+        deformer = CpuDeformer(on_delta_grid(self.character))  # the deltas the gpu path draws
         vbo = self.ctx.buffer(deformer.rest.tobytes(), dynamic=True)
         programs, vaos = self._programs({}, vbo)
         skinner = None

@@ -15,7 +15,7 @@ from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.render.images import LABEL_HEIGHT
 
 from facepuppet.offline.io.gltf_read import read_gltf
-from facepuppet.offline.perfect_sync.pictures import take_moments, take_side_by_side
+from facepuppet.offline.perfect_sync.pictures import replay_images, take_moments, take_side_by_side
 from facepuppet.offline.perfect_sync.transfer import add_shapes
 from tests.conftest import need_shared
 
@@ -66,3 +66,17 @@ def test_the_take_replayed_on_the_presets_and_on_arkit_brows_differs_where_the_b
     # the same character in both rows: the same pictures (the difference above is the shapes', not the camera's)
     same_top, same_bottom = _rows(take_side_by_side(godette, godette, take, tmp_path / "same.png", ctx=egl_ctx))
     assert all(_changed(t, b) == 0 for t, b in zip(same_top, same_bottom))
+
+
+def test_the_two_deformation_paths_draw_the_takes_moments_alike(egl_ctx):
+    """The cpu path draws the deltas the gpu path's 16-bit texture holds (renderer.on_delta_grid): with the file's
+    float deltas one pixel of one moment differed by 225 levels (an edge moved across its centre)."""
+    take = need_shared("tracker", "livelinkface_myslate_3.csv")
+    godette = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
+    frames = open_recording(take)
+    ticks = sorted({int(np.ceil(frames[i].t * 60 - 1e-9)) for i in take_moments(frames)})
+    gpu, used = replay_images(godette, take, ticks, 60.0, egl_ctx, (480, 480), path="gpu")
+    cpu, _ = replay_images(godette, take, ticks, 60.0, egl_ctx, (480, 480), path="cpu")
+    assert used == "gpu" and len(gpu) == len(cpu) == 8
+    for a, b in zip(gpu, cpu):
+        assert (np.abs(a.astype(int) - b.astype(int)).max(axis=-1) > 2).sum() == 0
