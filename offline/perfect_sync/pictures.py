@@ -175,8 +175,8 @@ def take_side_by_side(original: Character, synced: Character, take: str | os.Pat
         big = (size[0] * zoom, size[1] * zoom)
         # both rows on one deformation path: the two paths may differ by a pixel where an edge crosses one,
         # and the rows are compared by eye (and by the tests: one character in both rows gives one picture)
-        top, path = replay_images(original, take, ticks, fps, ctx, big, camera_from=synced)
-        rows = [top, replay_images(synced, take, ticks, fps, ctx, big, camera_from=synced, path=path)[0]]
+        top, drawn_on = replay_images(original, take, ticks, fps, ctx, big, camera_from=synced)
+        rows = [top, replay_images(synced, take, ticks, fps, ctx, big, camera_from=synced, path=drawn_on)[0]]
     finally:
         if own:
             ctx.release()

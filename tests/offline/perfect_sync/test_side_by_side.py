@@ -43,6 +43,7 @@ def test_the_take_replayed_on_the_presets_and_on_arkit_brows_differs_where_the_b
     synced, _ = add_shapes(godette, ("browDownLeft", "browDownRight"), np.stack([brows, brows]))
 
     path = take_side_by_side(godette, synced, take, tmp_path / "side.png", ctx=egl_ctx)
+    assert path == tmp_path / "side.png" and path.exists()  # written where asked (and nothing elsewhere)
     picture = np.asarray(Image.open(path).convert("RGB"))
     grid = 2 * (CELL + LABEL_HEIGHT)  # two rows of 8 moments, then her credits (CC BY asks for them)
     assert picture.shape[1] == 8 * CELL and grid < picture.shape[0] < grid + 40
