@@ -318,14 +318,9 @@ def mouth_sides(mouth: tuple, labels: np.ndarray, local: np.ndarray, face: Face,
     if face.weld is not None and face.unwelded is not None and len(face.unwelded):
         _, strip = components(len(local), face.unwelded)  # the pieces as drawn, before welding
         rep = face.weld[m]
-        # a seam copy: its place is shared by a vertex of another strip
-        first_strip = {}
-        seam = np.zeros(len(m), bool)
-        for i, (r, st) in enumerate(zip(rep.tolist(), strip[m].tolist())):
-            if first_strip.setdefault(r, st) != st:
-                seam[i] = True
-        shared = set(rep[seam].tolist())
-        seam |= np.isin(rep, list(shared))
+        # a seam copy: its place (welded vertex) is shared by vertices of two strips or more
+        places, n_strips = np.unique(np.unique(np.column_stack([rep, strip[m]]), axis=0)[:, 0], return_counts=True)
+        seam = np.isin(rep, places[n_strips > 1])
         for st in np.unique(strip[m[seam]]):
             mine = strip[m] == st
             rest = below[mine & ~seam]

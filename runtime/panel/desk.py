@@ -640,7 +640,7 @@ class DeskPanel:
             c, v = self._slider("threshold", cs.threshold, 0.0, 1.0, "threshold %.2f")
             if c:
                 new = replace(new, threshold=v)
-        mapping = self._drives_combo(name, config) if getattr(self.chain, "elastic", None) is None else None
+        mapping = self._drives_list(name, config) if getattr(self.chain, "elastic", None) is None else None
         reset = imgui.button("Reset")
         self._remember("response.reset")
         imgui.pop_id()
@@ -655,7 +655,7 @@ class DeskPanel:
             channels[key] = new
             self.apply(replace(config, channels=channels))
 
-    def _drives_combo(self, name: str, config) -> Any:
+    def _drives_list(self, name: str, config) -> Any:
         """What the selected channel drives, as ``[mapping.channels]`` says it (runtime.expressions): by name (no
         entry: the routes a channel takes without one), nothing, or one shape or expression of the character at
         weight 1. Returns the new MappingSettings when one is picked, else None. An entry of several targets or

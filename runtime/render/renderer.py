@@ -144,30 +144,47 @@ def delta_steps(character: Character) -> np.ndarray:
     return steps
 
 
+def delta_offsets(character: Character) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every stored delta component as its 16-bit offset from zero, in steps of its shape (:func:`delta_steps`).
+
+    Returns
+    -------
+    positions, normals : ndarray of shape (len(delta_indices), 3), int32, in [-32767, 32767], row for row
+        with ``delta_positions`` / ``delta_normals``
+    steps : ndarray of shape (n_shapes, 2), float64
+    """
+    c = character
+    steps = delta_steps(c)
+    out = []
+    for k, src in enumerate((c.delta_positions, c.delta_normals)):
+        q = np.zeros(src.shape, np.int32)
+        for s in range(c.n_shapes):
+            sl = c.shape_slice(s)
+            if steps[s, k] > 0:
+                q[sl] = np.rint(src[sl] / steps[s, k])
+        out.append(q)
+    return out[0], out[1], steps
+
+
 def on_delta_grid(character: Character) -> Character:
-    """``character`` with every delta component on its shape's 16-bit grid (:func:`delta_steps`), as the
+    """``character`` with every delta component on its shape's 16-bit grid (:func:`delta_offsets`), as the
     gpu path's texture holds them: the cpu path draws these, so both paths draw the same surface (with the
     file's deltas a vertex moved up to 1/65534 of its shape's largest delta apart, and where that moved an
     edge across a pixel's centre the two paths' pictures differed by that pixel)."""
     import dataclasses
 
-    steps = delta_steps(character)
-    out = []
-    for k, src in enumerate((character.delta_positions, character.delta_normals)):
-        grid = src.astype(np.float64, copy=True)
-        for s in range(character.n_shapes):
-            sl = character.shape_slice(s)
-            if steps[s, k] > 0:
-                grid[sl] = np.rint(grid[sl] / steps[s, k]) * steps[s, k]
-        out.append(grid.astype(np.float32))
-    return dataclasses.replace(character, delta_positions=out[0], delta_normals=out[1])
+    c = character
+    q_pos, q_nrm, steps = delta_offsets(c)
+    step_of_row = np.repeat(steps, np.diff(c.delta_offsets), axis=0)  # (len(delta_indices), 2)
+    return dataclasses.replace(c, delta_positions=(q_pos * step_of_row[:, :1]).astype(np.float32),
+                               delta_normals=(q_nrm * step_of_row[:, 1:]).astype(np.float32))
 
 
 def delta_texture(ctx: moderngl.Context, character: Character) -> tuple[moderngl.Texture, np.ndarray]:
     """Position and normal deltas of every shape in one RGB32UI texture of width DELTA_TEXTURE_WIDTH.
 
     Texel ``shape * n_vertices + vertex`` holds that shape's six delta components (position x y z,
-    normal x y z) as 16-bit offsets ``q = round(d / step) + 32768``, two per word, low half first;
+    normal x y z) as 16-bit offsets ``q + 32768`` (:func:`delta_offsets`), two per word, low half first;
     32768 (exactly zero) where the shape does not move the vertex. One fetch per active shape and
     vertex where two float textures took two: on llvmpipe the fetches are the whole cost of the
     vertex shader's sum (the ICT head, 10 shapes active: 6.4 ms of the vertex stage with two
@@ -180,17 +197,14 @@ def delta_texture(ctx: moderngl.Context, character: Character) -> tuple[moderngl
     """
     c = character
     n = c.n_vertices
-    steps = delta_steps(c)
+    q_pos, q_nrm, steps = delta_offsets(c)
     rows = max(1, -(-(c.n_shapes * n) // DELTA_TEXTURE_WIDTH))
-    q = np.full((rows * DELTA_TEXTURE_WIDTH, 6), 32768, dtype=np.uint16)
-    for s in range(c.n_shapes):
-        sl = c.shape_slice(s)
-        texel = s * n + c.delta_indices[sl].astype(np.int64)
-        for k, src in enumerate((c.delta_positions, c.delta_normals)):
-            if steps[s, k] > 0:
-                q[texel, 3 * k : 3 * k + 3] = np.rint(src[sl] / steps[s, k]) + 32768
+    texels = np.full((rows * DELTA_TEXTURE_WIDTH, 6), 32768, dtype=np.uint16)
+    shape_of_row = np.repeat(np.arange(c.n_shapes), np.diff(c.delta_offsets))
+    texel = shape_of_row * n + c.delta_indices.astype(np.int64)
+    texels[texel] = np.hstack([q_pos, q_nrm]) + 32768
     # little-endian uint16 pairs read as uint32: the first of each pair is the low half
-    tex = ctx.texture((DELTA_TEXTURE_WIDTH, rows), 3, q.astype("<u2").tobytes(), dtype="u4")
+    tex = ctx.texture((DELTA_TEXTURE_WIDTH, rows), 3, texels.astype("<u2").tobytes(), dtype="u4")
     tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
     return tex, steps.astype(np.float32)
 
