@@ -288,7 +288,8 @@ def _open_recorder(args, opts: _Options, chain, late, mix_inputs, log):
         lambda: make_input_adapter(args.input, (), log=lambda s: None, face_id=getattr(args, "face_id", None)))
     holder = SwitchableRecorder(
         open_recorder, record.parent if record is not None else Path.cwd(), make_adapter=make_adapter,
-        frames_taken=lambda: getattr(late.source, "frames_taken", 0), log=log, pipeline=chain.filter,
+        frames_taken=lambda: getattr(late.source, "frames_taken", 0), log=log,
+        pipeline=chain.filter if _wants_panel(args) else None,  # only the panel starts one mid-run
         refuse_midrun="not with several inputs (their frame counts cannot be aligned mid-run); use --record FILE"
         if mix_inputs else "")
     return holder

@@ -100,15 +100,22 @@ def _snapshot_doc(raw: tuple | None) -> dict | None:
     """The JSON-able :meth:`LivePipeline.state_snapshot` of a :meth:`LivePipeline._raw_state`."""
     if raw is None:
         return None
-    channels, filters, last_q, last, last_tick, live, out = raw
+    state, channels, filters, last_q, last, last_tick, live, out, ease, capture, calib_pending = raw
+    held, ease_start, loss_from, lost_done = ease
     return {
-        "version": 1, "channels": list(channels),
+        "version": 2, "state": state, "channels": list(channels),
         "filters": {name: [_floats(x), _floats(dx)] for name, (x, dx) in zip(("weights", "rotation",
                                                                              "translation"), filters)},
         "last_q": None if last_q is None else _floats(last_q),
         "last_frame": {"t": float(last.t), "t_sender": _float(last.t_sender), "number": int(last.number),
                        "source": str(last.source), "weights": last.weights is not None},
         "last_tick": float(last_tick), "live": _parts(live), "out": _parts(out),
+        "held": _parts(held), "ease_start": float(ease_start), "loss_from": float(loss_from),
+        "lost_done": bool(lost_done), "calib_pending": bool(calib_pending),
+        "capture": None if capture is None else {
+            "t0": float(capture["t0"]), "n": int(capture["n"]), "ntr": int(capture["ntr"]),
+            "channels": None if capture["channels"] is None else list(capture["channels"]),
+            **{k: _floats(capture[k]) for k in ("w", "wn", "q", "tr")}},
     }
 
 
@@ -118,6 +125,22 @@ def _unparts(doc, n: int, where: str) -> tuple | None:
     if not isinstance(doc, list) or len(doc) != 3:
         raise ValueError(f"pipeline state: '{where}' is not [weights, rotation, translation]")
     return tuple(None if p is None else _array(p, k, f"{where}[{i}]") for i, (p, k) in enumerate(zip(doc, (n, 4, 3))))
+
+
+def _capture_of(doc) -> dict | None:
+    """A neutral capture in progress from its snapshot (None: none)."""
+    if doc is None:
+        return None
+    if not isinstance(doc, dict) or not _finite(doc.get("t0")) or not isinstance(doc.get("n"), int) or \
+            not isinstance(doc.get("ntr"), int):
+        raise ValueError("pipeline state: 'capture' lacks its start, frame count or head count")
+    names = doc.get("channels")
+    if names is not None and (not isinstance(names, list) or not all(isinstance(c, str) for c in names)):
+        raise ValueError("pipeline state: 'capture.channels' is not a list of names")
+    k = len(names or ())
+    return {"t0": float(doc["t0"]), "n": doc["n"], "ntr": doc["ntr"],
+            "channels": None if names is None else tuple(names),
+            **{key: _array(doc.get(key), m, f"capture.{key}") for key, m in (("w", k), ("wn", k), ("q", 4), ("tr", 3))}}
 
 
 class _ChannelState:
@@ -232,9 +255,9 @@ class LivePipeline:
 
     def state_snapshot(self) -> dict | None:
         """What a replay of a recording started now needs to go on as this run does (JSON-able): the filters'
-        state, the last input frame's times, the last processed and emitted values; None unless tracking is
-        live and no calibration is being captured (an ease in or out, a capture, in progress is not kept: such
-        a recording's first ticks replay from a fresh stage, as before)."""
+        state, the last input frame's times, the last processed and emitted values, an ease in or out and a
+        neutral capture in progress; None while waiting for the first frame (a fresh stage is that state).
+        The gesture layer's own state (``generator``) is not in it."""
         return _snapshot_doc(self._raw_state())
 
     @property
@@ -242,25 +265,38 @@ class LivePipeline:
         """:meth:`state_snapshot` as it was before the newest tick (with ``keep_snapshots``; else None)."""
         return None if self._before is None else _snapshot_doc(self._before)
 
+    @property
+    def before_tick_state(self) -> str | None:
+        """The tracking state (``live``, ``returning``, ``lost``) of :attr:`before_tick`, None without one."""
+        return None if self._before is None else self._before[0]
+
     def _raw_state(self) -> tuple | None:
         """The parts of :meth:`state_snapshot`, copied where they change in place (cheap: every tick with
-        ``keep_snapshots``)."""
-        if self.state != "live" or self._cs is None or self._last_frame is None or self.calibrating:
+        ``keep_snapshots``; the capture's sums only while a neutral is captured)."""
+        if self.state == "waiting" or self._cs is None or self._last_frame is None:
             return None
-        cs = self._cs
-        return (cs.channels, tuple((f.x_hat.copy(), f.dx_hat.copy()) for f in (cs.weights, cs.rotation,
-                                                                               cs.translation)),
-                cs.last_q, self._last_frame, self._last_tick, self._live, self._out)
+        cs, c = self._cs, self._capture
+        capture = None if c is None else {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in c.items()}
+        return (self.state, cs.channels,
+                tuple((f.x_hat.copy(), f.dx_hat.copy()) for f in (cs.weights, cs.rotation, cs.translation)),
+                cs.last_q, self._last_frame, self._last_tick, self._live, self._out,
+                (self._held, self._ease_start, self._loss_from, self._lost_done), capture, self._calib_pending)
 
     def restore_state(self, doc: dict) -> None:
-        """Go on from :meth:`state_snapshot`'s ``doc`` (before the first tick of a replay). Raises ValueError
-        naming what is wrong when ``doc`` is not such a snapshot (nothing is changed then)."""
-        if not isinstance(doc, dict) or doc.get("version") != 1:
-            raise ValueError("pipeline state: expected a version 1 snapshot")
+        """Go on from :meth:`state_snapshot`'s ``doc`` (before the first tick of a replay; a version 1 doc, live
+        only, too). Raises ValueError naming what is wrong when ``doc`` is not such a snapshot (nothing is
+        changed then)."""
+        if not isinstance(doc, dict) or doc.get("version") not in (1, 2):
+            raise ValueError("pipeline state: expected a version 1 or 2 snapshot")
+        v2 = doc["version"] == 2
+        state = doc.get("state") if v2 else "live"
+        if state not in ("live", "returning", "lost"):
+            raise ValueError("pipeline state: 'state' is not live, returning or lost")
         channels = doc.get("channels")
         if not isinstance(channels, list) or not all(isinstance(c, str) for c in channels):
             raise ValueError("pipeline state: 'channels' is not a list of names")
         channels = tuple(channels)
+        n = len(channels)
         cs = _ChannelState(channels, self.config)
         filters = doc.get("filters")
         if not isinstance(filters, dict):
@@ -276,9 +312,20 @@ class LivePipeline:
             raise ValueError("pipeline state: 'last_frame' lacks its time and number")
         if not _finite(doc.get("last_tick")):
             raise ValueError("pipeline state: 'last_tick' is not a number")
-        live = _unparts(doc.get("live"), len(channels), "live")
-        out = _unparts(doc.get("out"), len(channels), "out")
-        n = len(channels)
+        live = _unparts(doc.get("live"), n, "live")
+        out = _unparts(doc.get("out"), n, "out")
+        held, ease, capture, pending = None, (0.0, 0.0, False), None, False
+        if v2:
+            held = _unparts(doc.get("held"), n, "held")
+            for key in ("ease_start", "loss_from"):
+                if not _finite(doc.get(key)):
+                    raise ValueError(f"pipeline state: '{key}' is not a number")
+            if not isinstance(doc.get("lost_done"), bool) or not isinstance(doc.get("calib_pending"), bool):
+                raise ValueError("pipeline state: 'lost_done' and 'calib_pending' must be true or false")
+            if state != "live" and out is None:
+                raise ValueError(f"pipeline state: '{state}' needs 'out', what was shown")
+            ease = (float(doc["ease_start"]), float(doc["loss_from"]), doc["lost_done"])
+            capture, pending = _capture_of(doc.get("capture")), doc["calib_pending"]
         frame = Frame(t=float(last["t"]), source=str(last.get("source", "")),
                       channels=channels if last.get("weights") else None,
                       weights=np.full(n, np.nan) if last.get("weights") else None,
@@ -288,7 +335,10 @@ class LivePipeline:
         self._channels, self._cs = channels, cs
         self.neutral_weights = self._neutral_on(channels)
         self._last_frame, self._last_tick = frame, float(doc["last_tick"])
-        self._live, self._out, self.state = live, out, "live"
+        self._live, self._out, self.state = live, out, state
+        self._held = held if held is not None else out
+        self._ease_start, self._loss_from, self._lost_done = ease
+        self._capture, self._calib_pending = capture, pending
 
     def apply_config(self, config: LiveConfig) -> None:
         """Hand over a new config (safe from any thread); it takes effect at the start of the next tick.
@@ -306,6 +356,7 @@ class LivePipeline:
         return replace(self.config, neutral=self._neutral_pose)
 
     def _switch(self, config: LiveConfig, t: float) -> None:
+        changed = replace(config, path=self.config.path) != self.config  # (where it was read is not a change)
         if (config.loss.idle_blink_s, config.loss.idle_seed) != (self.config.loss.idle_blink_s,
                                                                   self.config.loss.idle_seed):
             self.idle = IdleMotion(config.loss.idle_blink_s, config.loss.idle_seed)
@@ -315,8 +366,9 @@ class LivePipeline:
             self._take_neutral(config.neutral)
         if self._cs is not None:
             self._cs.configure(config)  # the response and the tracking-loss targets per channel, rebuilt
-        if self.state == "lost" and self._out is not None:
-            # lost already: ease from what is shown to the new config's loss targets (a changed mode moves now)
+        if self.state == "lost" and self._out is not None and changed:
+            # lost already: ease from what is shown to the new config's loss targets (a changed mode moves now;
+            # the same config again, as a recording's first CONFIG record is, changes nothing)
             self._held, self._loss_from, self._lost_done = self._out, t, False
         for hook in self.on_config:
             hook(t, config)

@@ -16,9 +16,11 @@ are taken off: until a tick takes a frame whose packet was recorded, the recordi
 with a fresh adapter of the input kind (as ``replay`` does; a few datagrams) and the tick that takes the
 first recorded frame, found by its receive time, fixes the offset; TICK records before it say "no frame
 yet". The filter stage's state before that tick (its filters' history, the last frame's times, what it
-drew) is the STATE record written with it, and a replay goes on from it, so from that frame on it draws
-what the run drew. An ease in or out or a calibration being captured then is not kept (no STATE): such a
-replay's first ticks may differ, as may a run's gestures.
+drew, an ease in or a neutral capture in progress) is the STATE record written with it, and a replay goes
+on from it, so from that frame on it draws what the run drew. A recording started while tracking is lost
+takes the state before its first tick instead (no frames come while lost), so its replay follows the voice
+and the idle motion, the ease out and then the ease in as the run did, from its first tick. The gesture
+layer's state (``--gestures``) is not kept: its first moments may differ.
 The config in force is the header's (``info.config``) and the first CONFIG record.
 """
 
@@ -306,12 +308,14 @@ class SwitchableRecorder:
             r.put_audio(t, level_db)
 
     def tick_frames(self, frames_taken: int, raw: Any) -> int:
-        """The frame count a TICK record stores for this tick (see the module docstring); at the tick that took
-        the first recorded frame of a recording started mid-run, the filter stage's state before it is
-        written (a STATE record, before this tick's TICK)."""
+        """The frame count a TICK record stores for this tick (see the module docstring). The filter stage's
+        state before a tick is written as a STATE record (before this tick's TICK): at the recording's first
+        tick when tracking was lost then, else at the tick that took the first recorded frame."""
         align = self._align
         if align is None:
             return frames_taken
+        if self._state_due and self.pipeline.before_tick_state == "lost":
+            self._write_state()  # no frames come while lost: every recorded tick goes on from the state then
         aligned = align.base is not None
         frames = align.frames(frames_taken, raw)
         if not aligned and align.base is not None and self._state_due:

@@ -39,6 +39,7 @@ class _Operator:
         self.sizes: list[tuple[int, int]] = []  # (recording number, size shown) while recording
         self.files: list = []
         self.with_frames = 0
+        self.quiet = threading.Event()  # set: the tracker sends nothing
 
     def click(self, label):
         x0, y0, x1, y1 = self.panel.rects[label]
@@ -83,6 +84,18 @@ class _Operator:
             self.plan.pop(0)
         elif what == "wait":
             self.plan.pop(0)
+        elif what == "halt" and rec.recording and "record.stop" in self.panel.rects:  # stop, frames or not
+            self.files.append(rec.path)
+            self.click("record.stop")
+            self.plan.pop(0)
+        elif what == "quiet":
+            self.quiet.set()
+            self.plan.pop(0)
+        elif what == "loud":
+            self.quiet.clear()
+            self.plan.pop(0)
+        elif what == "lost" and self.panel.pipeline.tracking_state == "lost":
+            self.plan.pop(0)
 
 
 def _run(tmp_path, extra=(), config_text=NO_SMOOTHING, plan=None):
@@ -105,8 +118,9 @@ def _run(tmp_path, extra=(), config_text=NO_SMOOTHING, plan=None):
             client = SimpleUDPClient("127.0.0.1", port)
             i = 0
             while not stop.is_set():  # every frame its own jaw value: a replay taking another frame shows it
-                send_vmc(client, {"JawOpen": 0.05 + 0.9 * ((i * 7) % 97) / 97})
-                i += 1
+                if not op.quiet.is_set():
+                    send_vmc(client, {"JawOpen": 0.05 + 0.9 * ((i * 7) % 97) / 97})
+                    i += 1
                 time.sleep(0.011)
         threading.Thread(target=send, daemon=True).start()
 
@@ -202,3 +216,54 @@ def test_a_recording_started_mid_run_replays_the_smoothed_run_exactly_from_its_f
                           "--dump-weights", str(fresh)])
     assert replay.run_replay(args, log=lambda s: None) == 0
     assert np.abs(np.load(fresh)[first:] - live[first:]).max() > 0.02
+
+
+@pytest.mark.parametrize("receiver", ["process", "thread"])
+def test_recordings_started_while_tracking_is_lost_replay_the_voice_and_the_ease_in_exactly(tmp_path, monkeypatch,
+                                                                                          receiver):
+    """Record clicked while the tracker is silent and the mouth follows the voice (``[tracking_loss] mouth =
+    "voice"``, ``--audio-file``), in the ease out: a first recording stopped before the tracker came back, a
+    second one during which it came back. Each keeps the filter stage's state before its first tick, so its
+    replay draws what the run drew from that tick on: the jaw on the voice, then the ease back in to the
+    tracker. A stage started afresh drew the rest pose until a first frame came, and took it without the ease in;
+    the first recording, which had no frame, kept no state at all before."""
+    from helpers.swinging_voice import write_voice
+
+    monkeypatch.chdir(tmp_path)
+    wav = tmp_path / "voice.wav"
+    write_voice(wav, seconds=80.0)
+    loss = ("[tracking_loss]\ntimeout_s = 0.3\nease_out_s = 1.0\nease_in_s = 0.3\nmouth = \"voice\"\n"
+            "voice_floor_db = -40.0\nvoice_ceiling_db = -5.0\n")
+    result, op, character, config = _run(
+        tmp_path, ("--receiver", receiver, "--audio-file", str(wav)), loss,
+        plan=["wait"] * 15 + ["quiet", "lost"] + ["wait"] * 3 + ["start"] + ["wait"] * 8 + ["halt"]
+        + ["wait"] * 2 + ["start"] + ["wait"] * 8 + ["loud", "stop"] + ["wait"] * 3)
+    assert not op.plan and len(op.files) == 2
+    from facepuppet.runtime.commands import replay
+    ns = argparse.ArgumentParser()
+    replay.register(ns.add_subparsers())
+    jaw = list(sphere_character().shape_names).index("jawOpen")
+
+    def replayed(path, name):
+        dump = tmp_path / name
+        args = ns.parse_args(["replay", str(path), "-c", str(character), "--headless", "--size", "64x64",
+                              "--dump-weights", str(dump)])
+        assert replay.run_replay(args, log=lambda s: None) == 0
+        return np.load(dump)
+
+    for n, path in enumerate(op.files):
+        session = read_session(path)
+        assert len(session.states) == 1 and '"state": "lost"' in session.states[0][1]
+        ticks = [t.k for t in session.ticks]
+        live = np.array([op.live[k] for k in ticks])
+        framed = [i for i, t in enumerate(session.ticks) if t.frames > 0]
+        first_frame = framed[0] if framed else len(ticks)
+        assert (not framed) == (n == 0)  # the tracker came back during the second recording only
+        assert first_frame >= 8  # ticks on the voice alone
+        assert np.ptp(live[:first_frame, jaw]) > 0.01  # the jaw moved with the voice then
+        got = replayed(path, f"replay{n}.npy")
+        assert got.shape == live.shape
+        np.testing.assert_allclose(got, live, atol=1e-6)  # from the first tick: the voice, the ease out and in
+    monkeypatch.setattr(replay, "_restore_state", lambda *a, **k: None)
+    fresh = replayed(op.files[1], "fresh.npy")
+    assert np.abs(fresh[:first_frame] - live[:first_frame]).max() > 0.01
