@@ -20,6 +20,11 @@ objects (``tracemalloc.get_traced_memory``) is sampled too: it is what the
 program retains, free of the allocator's and the GL driver's noise, at the
 cost of a slower run.
 
+With ``--panel`` the run draws the operator's panel into every frame (``run --headless --panel``) and, as
+an operator would, presses its Record at 25 % of each cycle and Stop at 40 % (a new file each time, started
+mid-run, in the temporary folder; each is deleted once the next starts, its size counted): the panel's
+retained windows, its rings and the recorder's switching meet the whole show.
+
 Length: 10 minutes by default; ``--hours``, ``--minutes`` or ``--seconds``
 (summed when several are given) for another length.
 
@@ -162,7 +167,7 @@ def bench_soak(args: argparse.Namespace) -> dict:
         character=args.character, input="vmc", listen=f"127.0.0.1:{port}", allow=None, config=None,
         calibrate=False, audio=None, audio_file=None, record=str(record), vmc_out=None, stats=False, headless=True,
         out=None, dump_weights=None, size=args.size, fps=args.fps, duration=seconds + 120, path=args.path,
-        receiver=args.receiver, draw="arrival")
+        receiver=args.receiver, draw="arrival", panel=bool(args.panel))
     stop = threading.Event()
     procs: list[subprocess.Popen] = []
     sender_out: list[str] = []
@@ -171,6 +176,9 @@ def bench_soak(args: argparse.Namespace) -> dict:
     traced: list[tuple[float, float]] = []
     t0 = [0.0]
     next_sample = [0.0]
+    panels: list = []  # the run's DeskPanel (--panel)
+    presses = {"cycle": -1, "started": 0, "stopped": 0, "bytes": 0}
+    done_files: list[Path] = []
     if args.tracemalloc:
         tracemalloc.start()
 
@@ -186,8 +194,30 @@ def bench_soak(args: argparse.Namespace) -> dict:
 
         threading.Thread(target=wait_for_sender, daemon=True).start()
 
+    def operate(now: float) -> None:
+        """--panel: Record at 25 % of each cycle, Stop at 40 %, through the panel's own action."""
+        panel = panels[0]
+        rec = panel.recorder
+        f = (now % cycle_s) / cycle_s
+        cycle = int(now // cycle_s)
+        if 0.25 <= f < 0.4 and presses["cycle"] != cycle and not (rec.recording and rec.path != record):
+            presses["cycle"] = cycle
+            rec.wait_closed()  # the recording stopped last cycle is complete: count it and make room
+            for path in done_files:
+                presses["bytes"] += path.stat().st_size
+                path.unlink()
+            done_files.clear()
+            panel.record_action("start")
+            presses["started"] += 1
+        elif f >= 0.4 and rec.recording and rec.path != record:
+            done_files.append(rec.path)
+            panel.record_action("stop")
+            presses["stopped"] += 1
+
     def sample(info):
         now = time.monotonic() - t0[0]
+        if panels:
+            operate(now)
         if now < next_sample[0]:
             return
         next_sample[0] += sample_s
@@ -200,14 +230,15 @@ def bench_soak(args: argparse.Namespace) -> dict:
                                                                         else ""), flush=True)
 
     try:
-        result = run_live(run_args, log=log, stop_event=stop, on_ready=on_ready, hooks=[sample])
+        result = run_live(run_args, log=log, stop_event=stop, on_ready=on_ready, hooks=[sample],
+                          on_panel=panels.append if args.panel else None)
     finally:
         for proc in procs:
             proc.kill()
             proc.wait()
         if args.tracemalloc:
             tracemalloc.stop()
-        record_bytes = record.stat().st_size if record.exists() else 0
+        record_bytes = sum(p.stat().st_size for p in workdir.iterdir()) + presses["bytes"]
         for p in workdir.iterdir():
             p.unlink()
         workdir.rmdir()
@@ -226,6 +257,10 @@ def bench_soak(args: argparse.Namespace) -> dict:
         "sent": sent,
         "counters": result.counters,
         "record_bytes": record_bytes,
+        "panel": None if not args.panel else {
+            "records_started": presses["started"], "records_stopped": presses["stopped"],
+            "desk_builds": result.panel.desk_builds if result.panel is not None else None,
+            "settings_builds": result.panel.settings_builds if result.panel is not None else None},
         "rss_mb": [{"t_s": t, "mb": m, **p} for (t, m), p in zip(rss, parts)],
         "rss_slope_mb_per_hour": slope,
         "goal_mb_per_hour": GOAL_MB_PER_HOUR,
@@ -238,7 +273,9 @@ def bench_soak(args: argparse.Namespace) -> dict:
     verdict = "PASS" if out["passed"] else ("n/a (too few samples)" if not math.isfinite(slope) else "FAIL")
     print(f"soak: {seconds:g} s, {out['ticks']} ticks, {sent.get('frames', -1)} frames sent; RSS slope after "
           f"{warmup_s:g} s: {slope:.3f} MB/hour (goal < {GOAL_MB_PER_HOUR:g}): {verdict}"
-          + (f"; python objects {out['python_slope_mb_per_hour']:.3f} MB/hour" if args.tracemalloc else ""))
+          + (f"; python objects {out['python_slope_mb_per_hour']:.3f} MB/hour" if args.tracemalloc else "")
+          + (f"; panel shown, Record pressed {presses['started']} times, Stop {presses['stopped']}" if args.panel
+             else ""))
     return out
 
 
@@ -257,6 +294,9 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
     parser.add_argument("--receiver", choices=("process", "thread"), default="process", help="the run's receiver")
     parser.add_argument("--tracemalloc", action="store_true", help="also sample the memory Python objects hold")
+    parser.add_argument("--panel", action="store_true",
+                        help="draw the operator's panel into every frame and press its Record / Stop each cycle "
+                             "(needs imgui-bundle)")
     parser.add_argument("--quiet", action="store_true", help="no line per sample")
     parser.add_argument("--verbose", action="store_true", help="show the run's own log")
 

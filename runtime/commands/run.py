@@ -60,6 +60,7 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.commands.options import parse_allow, parse_host_port, parse_size
+from facepuppet.runtime.inputs.osc import CALIBRATE_ADDRESS
 from facepuppet.runtime.live.events_out import TrackingEventSender
 from facepuppet.runtime.live.llf_out import LlfSender
 from facepuppet.runtime.live.loop import ARRIVAL_GRID_HZ, FrameLoop, LoopResult, WallClock
@@ -74,7 +75,6 @@ if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
     from facepuppet.runtime.live.stages import Chain
 
-CALIBRATE_ADDRESS = "/facepuppet/calibrate"  # the receivers count decoded OSC messages to it
 RECEIVERS = ("process", "thread")
 THREAD_SWITCH_INTERVAL_S = 0.0005  # GIL switch interval while a receive *thread* shares the loop's process
 

@@ -38,7 +38,9 @@ malformed         one per datagram :func:`decode` refuses (empty, truncated,
                   bad type tags) and one per message with too few arguments or
                   an argument of the wrong type; extra arguments are ignored
 unknown_address   messages whose address the adapter does not handle (ignored,
-                  not an error: VMC receiver rules, PROTOCOLS.md §1)
+                  not an error: VMC receiver rules, PROTOCOLS.md §1); the
+                  runtime's own control messages (:data:`CONTROL_ADDRESSES`,
+                  counted by the receiver) are not among them
 nonfinite         frames (or stand-alone pose messages) rejected because a
                   value was NaN or infinite
 oversized         datagrams or payloads over the adapter's size limit
@@ -61,6 +63,10 @@ COUNTER_NAMES: tuple[str, ...] = (
 )
 
 MAX_UDP_PAYLOAD = 65507  # the largest IPv4 UDP payload
+CALIBRATE_ADDRESS = "/facepuppet/calibrate"  # capture the neutral: the receivers count decoded messages to it
+#: Addresses of the runtime's own control messages, sent to any input's port: the receivers count them, an
+#: adapter passes over them (neither a frame's part nor an unknown address)
+CONTROL_ADDRESSES = frozenset({CALIBRATE_ADDRESS})
 
 
 MAX_DEPTH = 8  # nested bundle levels accepted
@@ -254,7 +260,8 @@ class OscAdapter:
                 return None
             self._pending = None
             for address, params in messages:
-                self._message(address, params, t_receive)
+                if address not in CONTROL_ADDRESSES:
+                    self._message(address, params, t_receive)
             end = self._end_datagram(t_receive)
             if end is not None:
                 self._emit(end)

@@ -112,6 +112,14 @@ def watch_needle(address: str | None) -> bytes | None:
     return None if address is None else address.encode("utf-8") + b"\x00"
 
 
+def control_only(data: bytes, watched: int) -> bool:
+    """Whether a datagram in which :func:`count_messages` found ``watched`` messages is one plain OSC message
+    to the watched (control) address: the receiver then keeps it from the adapter, whose protocol it is not
+    (a Live Link Face adapter counted it malformed, the panel showed a drop). A bundle goes on to the
+    adapter, which passes over the control messages in it (:data:`~facepuppet.runtime.inputs.osc.CONTROL_ADDRESSES`)."""
+    return watched > 0 and data[:1] == b"/"
+
+
 def count_messages(data: bytes, address: str, needle: bytes) -> int:
     """OSC messages addressed exactly ``address`` in ``data`` (bundles unpacked); 0 for anything else.
 
@@ -302,10 +310,12 @@ class UdpSource:
                 if allow is not None and not sender_allowed(sender[0], allow):
                     own["filtered_sender"] += 1
                     continue
-                if watch is not None:
-                    self.watched += count_messages(data, watch, needle)
+                watched = 0 if watch is None else count_messages(data, watch, needle)
+                self.watched += watched
                 if on_packet is not None:
                     on_packet(data, t, sender)
+                if control_only(data, watched):
+                    continue
                 frame = handle(data, t)
                 if frame is not None:
                     self._slot = (self._slot[0] + 1, frame)

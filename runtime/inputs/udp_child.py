@@ -24,6 +24,7 @@ from multiprocessing import shared_memory
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.udp import (
     POLL_TIMEOUT_S,
+    control_only,
     count_messages,
     enable_kernel_stamps,
     receive,
@@ -283,11 +284,11 @@ def _child(shm_name: str, ring_bytes: int, sock: socket.socket, adapter, allow, 
                 if allow is not None and not sender_allowed(sender[0], allow):
                     own["filtered_sender"] += 1
                 else:
-                    if watch is not None:
-                        ctl[WATCHED] += count_messages(data, watch, needle)
+                    watched = 0 if watch is None else count_messages(data, watch, needle)
+                    ctl[WATCHED] += watched
                     if want_packets:
                         writer.put_packet(data, t, sender)
-                    frame = handle(data, t)
+                    frame = None if control_only(data, watched) else handle(data, t)
                     if frame is not None:
                         writer.publish(frame)
                         if wake_fd is not None:

@@ -80,6 +80,25 @@ def test_bench_soak_runs_short_and_reports_the_rss_series_and_slope(tmp_path):
     assert sent / 2 < r["counters"]["udp"]["packets"] <= sent  # the last few may be unread when the run stops
 
 
+@pytest.mark.gl
+@pytest.mark.slow
+def test_bench_soak_with_the_panel_presses_record_and_stop_each_cycle(tmp_path):
+    pytest.importorskip("imgui_bundle", reason="the panel's extra (imgui-bundle) is not installed")
+    character_path = sphere_character().save(tmp_path / "sphere.npz")
+    out = tmp_path / "soak.json"
+    args = parse(["bench", "soak", "--json", str(out), "-c", str(character_path), "--seconds", "8", "--cycle", "4",
+                  "--sample-s", "0.5", "--size", "320x240", "--quiet", "--panel"])
+    assert args.func(args) == 0
+    r = json.loads(out.read_text())["results"]
+    panel = r["panel"]
+    assert panel["records_started"] == panel["records_stopped"] == 2  # at 25 % and 40 % of each cycle
+    assert r["counters"]["record"]["recordings"] == 3  # --record's own, then the panel's two
+    assert r["counters"]["record"]["record_failed"] == 0
+    assert panel["settings_builds"] >= 2  # the lost / found and calibrations changed what it shows
+    assert r["counters"]["udp"]["unknown_address"] == 0  # the calibrate messages are not drops
+    assert r["record_bytes"] > 0
+
+
 def test_soak_slope_and_phases():
     from facepuppet.runtime.bench.soak import phase, slope_per_hour
 

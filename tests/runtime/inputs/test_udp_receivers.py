@@ -9,8 +9,8 @@ import socket
 import pytest
 
 from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.commands.run import CALIBRATE_ADDRESS
 from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter, encode_llf_packet
+from facepuppet.runtime.inputs.osc import CALIBRATE_ADDRESS
 from facepuppet.runtime.inputs.udp import UdpSource, normalise_host
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
@@ -35,9 +35,11 @@ def test_only_decoded_calibrate_messages_count_not_the_bytes_anywhere(receiver, 
         udp_sender.sendto(tricky, source.address)
         assert poll_frame(source) is not None  # the packet is a good frame ...
         assert source.watched == 0  # ... and no calibration request
-        udp_sender.sendto(osc("/facepuppet/calibrate"), source.address)  # a real request (not LLF: malformed)
+        udp_sender.sendto(osc("/facepuppet/calibrate"), source.address)  # a real request
         wait_for(lambda: source.counters["packets"] == 2, "the calibrate message")
         assert source.watched == 1
+        # kept from the Live Link Face adapter: not its protocol, and not a drop (it counted malformed before)
+        assert source.counters["malformed"] == 0
     with receiver(VmcAdapter(), port=0, watch=CALIBRATE_ADDRESS) as source:
         sent = [
             osc("/VMC/Ext/Blend/Val", "/facepuppet/calibrate", 0.5),  # the address as a string argument: no
@@ -50,6 +52,8 @@ def test_only_decoded_calibrate_messages_count_not_the_bytes_anywhere(receiver, 
             udp_sender.sendto(data, source.address)
         wait_for(lambda: source.counters["packets"] == len(sent), "every datagram")
         assert source.watched == 1
+        # the request in the bundle is not an unknown address (the look-alike is), the truncated one malformed
+        assert source.counters["unknown_address"] == 1 and source.counters["malformed"] == 1
 
 
 def dual_stack_listener(receiver, allow):
