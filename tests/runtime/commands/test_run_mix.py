@@ -117,9 +117,10 @@ def test_two_inputs_over_udp_per_channel_order_and_the_loss_of_one_hands_its_cha
     # the hand-overs are crossfades: no tick moves the jaw more than the smoothstep's slope allows
     first = int(np.flatnonzero(j > 0)[0])  # before the first frame nothing is drawn open
     dt, step = np.diff(t[first:]), np.abs(np.diff(j[first:]))
-    # (x 1.05: the pass-through filter, alpha ~0.97 a frame, keeps ~3 % of a step as lag, which frame intervals
-    # of 10 vs 17 ms release unevenly)
-    bad = np.flatnonzero(step > 1.05 * 1.5 * (JAW_A - JAW_B) * dt / EASE + 1e-5)
+    # (x 1.2: the pass-through filter keeps (1 - alpha) of a step as lag, alpha from the receive times' interval:
+    # ~3 % at 10 ms, but ~14 % when a loaded machine reads two datagrams 2 ms apart, and the next tick releases
+    # it; a CI run beside a soak bench once stepped 1.09 x. A cut without the crossfade steps 0.3, 8 x the bound)
+    bad = np.flatnonzero(step > 1.2 * 1.5 * (JAW_A - JAW_B) * dt / EASE + 1e-5)
     assert bad.size == 0, [(t[first + i], j[first + i], j[first + i + 1]) for i in bad[:5]]
     between = (t > state["a_off_t"] + 0.2 + EASE + 0.05) & (t < state["a_on_t"])
     assert between.sum() >= 5
