@@ -356,7 +356,8 @@ class LivePipeline:
         return replace(self.config, neutral=self._neutral_pose)
 
     def _switch(self, config: LiveConfig, t: float) -> None:
-        changed = replace(config, path=self.config.path) != self.config  # (where it was read is not a change)
+        # the config in force (with the neutral in force), apart from where it was read, again is no change
+        changed = replace(config, path=None) != replace(self.current_config(), path=None)
         if (config.loss.idle_blink_s, config.loss.idle_seed) != (self.config.loss.idle_blink_s,
                                                                   self.config.loss.idle_seed):
             self.idle = IdleMotion(config.loss.idle_blink_s, config.loss.idle_seed)

@@ -26,13 +26,14 @@ from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.inputs.osc import CALIBRATE_ADDRESS
+from facepuppet.runtime.inputs.udp import count_messages, watch_needle
 
 if TYPE_CHECKING:
     import os
 
     from facepuppet.runtime.protocols import InputAdapter
 
-CALIBRATE_ADDRESS = b"/facepuppet/calibrate\x00"  # OSC address with its first padding byte
 
 
 @dataclass
@@ -103,7 +104,8 @@ def read_live_recording(path: str | os.PathLike,
             ticks = [Tick(t.k, t.t, counts[j] if j < len(counts) else 0, t.t_clock)
                      for t, (_, counts) in zip(session.ticks, session.sources)]
             mix[name] = LiveRecording([f for _, f in own], [i for i, _ in own], [], ticks, {})
-    calibrate = [i for i, packet in enumerate(packets) if CALIBRATE_ADDRESS in packet.data]
+    needle = watch_needle(CALIBRATE_ADDRESS)  # what the live receivers count: decoded messages, not the bytes
+    calibrate = [i for i, packet in enumerate(packets) if count_messages(packet.data, CALIBRATE_ADDRESS, needle)]
     decoded = decode_packets(packets, make_adapter)
     frames = [frame for _, frame in decoded]
     frame_packets = [i for i, _ in decoded]

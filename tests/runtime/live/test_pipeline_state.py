@@ -212,3 +212,17 @@ def test_the_same_config_again_while_lost_changes_nothing_and_a_new_one_eases_to
     assert np.isfinite(base[-1]).all()
     np.testing.assert_array_equal(rest_b, rest_a)
     assert np.abs(rest_c[:, 0] - rest_a[:, 0]).max() > 0.05  # jawOpen: the voice's no more
+
+
+def test_the_config_in_force_with_a_captured_neutral_again_while_lost_changes_nothing():
+    """What a profile Save or a recording started mid-run hands back is ``current_config()``: its neutral is the
+    one captured during the run, which the stage's own ``config`` does not hold."""
+    frames = LOST_TICKS
+    a, b = _pipeline(LOSS), _pipeline(LOSS)
+    for p in (a, b):
+        _outputs(p, frames[:5], 0)
+        p.request_calibration()
+        _outputs(p, frames[5:75], 5)  # the neutral captured from frames 5..35, then lost in the silence
+        assert p.current_config().neutral is not None and p.state == "lost"
+    b.apply_config(b.current_config())
+    np.testing.assert_array_equal(_outputs(b, frames[75:140], 75), _outputs(a, frames[75:140], 75))

@@ -195,3 +195,24 @@ def test_kill_9_mid_record_leaves_a_file_that_replays_up_to_the_last_complete_re
     assert len(partial.packets) + len(partial.ticks) == len(session.packets) + len(session.ticks) - 1
     with pytest.warns(UserWarning, match="torn record"):
         assert len(open_recording(torn)) == len(partial.packets)
+
+
+def test_a_replay_finds_the_calibrate_requests_the_live_receivers_counted_not_the_bytes(tmp_path):
+    """The recording's calibrate requests are the decoded OSC messages to the address, as the receivers count
+    them: a Live Link Face device whose name carries the address's bytes is a frame, not a request (a byte
+    search took it for one, so a replay calibrated where the run did not)."""
+    from facepuppet.runtime.channels import ARKIT_NAMES
+    from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
+    from facepuppet.runtime.recording.ticked_source import read_live_recording
+
+    path = tmp_path / "take.fps"
+    rec = PacketRecorder(path, "livelinkface")
+    tricky = encode_llf_packet([0.2] * len(ARKIT_NAMES), name="phone /facepuppet/calibrate\x00\x00\x00,\x00\x00\x00")
+    assert b"/facepuppet/calibrate\x00" in tricky
+    request = OscMessageBuilder("/facepuppet/calibrate").build().dgram
+    for i, data in enumerate((tricky, request, tricky)):
+        rec.put(data, 0.01 * i)
+    rec.close()
+    live = read_live_recording(path, lambda kind: make_adapter(kind))
+    assert live.calibrate_packets == [1]
+    assert len(live.frames) == 2
