@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -118,8 +117,8 @@ class _GrabSink:
     def __init__(self) -> None:
         self.images: list[np.ndarray] = []
 
-    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame, renderer) -> None:
-        self.images.append(np.array(renderer.read_pixels(), copy=True))
+    def __call__(self, info) -> None:
+        self.images.append(np.array(info.renderer.read_pixels(), copy=True))
 
 
 def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence[int], fps: float,
@@ -132,11 +131,11 @@ def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence
     from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
     from facepuppet.runtime.live.stages import build_chain
     from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
+    from facepuppet.runtime.session.options import StageOptions
 
     quiet = lambda line: None  # noqa: E731
     source = ReplaySource(open_recording(take), max_gap=DEFAULT_MAX_GAP_S)
-    chain = build_chain(argparse.Namespace(character=None), character, None, filtered=False, label="replay",
-                        log=quiet)
+    chain = build_chain(StageOptions(), character, None, filtered=False, label="replay", log=quiet)
     renderer = chain.renderer(ctx, character, size[0], size[1], path, None, quiet, framing="face")
     if camera_from is not None and camera_from is not character:
         from facepuppet.runtime.render.renderer import FaceRenderer
@@ -146,8 +145,8 @@ def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence
         probe.close()
     grab = _GrabSink()
     try:
-        FrameLoop(chain.names, renderer, RecordedClock(), sinks=[grab], fps=fps, log=quiet, stages=chain.stages,
-                  drive=chain.drive).run(source, ticks=list(ticks))
+        FrameLoop(chain.names, renderer, RecordedClock(), observers=[grab], fps=fps, log=quiet, stages=chain.stages,
+                  mapper=chain.mapper).run(source, ticks=list(ticks))
     finally:
         renderer.close()
     return grab.images, renderer.path

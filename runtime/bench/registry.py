@@ -11,8 +11,10 @@ Benchmarks are code, not timed tests: they print medians and write JSON.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import logging
 import os
 import platform
 import resource
@@ -39,6 +41,20 @@ class Bench:
 
 _REGISTRY: dict[str, Bench] = {}
 _LOADED = False
+
+
+@contextlib.contextmanager
+def session_log(shown: bool):
+    """Within the block, the log of the session a benchmark runs (facepuppet's INFO lines: what it loaded,
+    where it listens) is shown only when ``shown`` (``--verbose``); warnings always are."""
+    ours = logging.getLogger("facepuppet.runtime")
+    level = ours.level
+    if not shown:
+        ours.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        ours.setLevel(level)
 
 
 def register_bench(name: str, func: Callable[[argparse.Namespace], dict], help: str,
