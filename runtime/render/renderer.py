@@ -99,6 +99,9 @@ class FaceRenderer:
     ----------
     path : str, "gpu", "cpu" or "elastic"
     path_report : str
+    fbo : moderngl.Framebuffer, drawn into (``target_fbo`` or the own one)
+    samples : int, multisamples of the own framebuffer (0: none)
+    camera : Camera, framed once at construction
     """
 
     def __init__(
