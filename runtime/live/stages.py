@@ -21,7 +21,7 @@ kpls       the tracker's channels -> the character's     :class:`KplsStage` (her
 
 then the frame loop maps the last frame's channels by name onto what the
 renderer draws (``map``) and draws (``draw``; through the elastic path with
-``--elastic``, :mod:`facepuppet.runtime.render.elastic_path`). The chain is
+``--elastic``, :mod:`facepuppet.runtime.render.paths.elastic`). The chain is
 printed at start, e.g. ``stages: markers→solve→filter→gestures→kpls→map→draw``.
 
 Why this order: the solve turns markers into the character's weights, so the
@@ -193,13 +193,13 @@ class Chain:
 
     def renderer(self, ctx: moderngl.Context, character: Character, width: int, height: int, path: str,
                  target_fbo: moderngl.Framebuffer | None, log: Callable[[str], None], **options: Any) -> Renderer:
-        """The renderer the loop draws with (an :class:`~facepuppet.runtime.render.elastic_path.ElasticDraw`
+        """The renderer the loop draws with (an :class:`~facepuppet.runtime.render.paths.elastic.ElasticDraw`
         with ``--elastic``); ``options`` are FaceRenderer's picture options (framing, background, ...)."""
         from facepuppet.runtime.render.renderer import FaceRenderer
 
         if self.elastic is None:
             return FaceRenderer(ctx, character, width, height, path=path, target_fbo=target_fbo, log=log, **options)
-        from facepuppet.runtime.render.elastic_path import ElasticDraw
+        from facepuppet.runtime.render.paths.elastic import ElasticDraw
 
         r = FaceRenderer(ctx, character, width, height, path="elastic", target_fbo=target_fbo, log=log,
                          elastic=self.elastic, **options)

@@ -474,7 +474,7 @@ def layered_rig() -> Character:
 
 
 def test_an_obj_rigs_thin_layers_export_see_through_and_their_kinds_come_back(tmp_path):
-    from facepuppet.runtime.render.renderer import vertex_opacity
+    from facepuppet.runtime.render.layers import vertex_opacity
 
     c = layered_rig()
     _, out, _ = write(tmp_path, "glb", character=c)

@@ -70,7 +70,7 @@ def test_the_take_replayed_on_the_presets_and_on_arkit_brows_differs_where_the_b
 
 
 def test_the_two_deformation_paths_draw_the_takes_moments_alike(egl_ctx):
-    """The cpu path draws the deltas the gpu path's 16-bit texture holds (renderer.on_delta_grid): with the file's
+    """The cpu path draws the deltas the gpu path's 16-bit texture holds (paths.deltas.on_delta_grid): with the file's
     float deltas one pixel of one moment differed by 225 levels (an edge moved across its centre)."""
     take = need_shared("tracker", "livelinkface_myslate_3.csv")
     godette = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
