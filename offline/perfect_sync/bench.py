@@ -94,7 +94,7 @@ def _side_by_side(args: argparse.Namespace, original: Character, synced: Charact
 def run_bench(args: argparse.Namespace) -> dict:
     from facepuppet.runtime.progress import Progress
 
-    from facepuppet.offline.io.gltf_read import read_gltf
+    from facepuppet.offline.io.gltf.read import read_gltf
     from facepuppet.offline.io.rig_import import import_rig
     from facepuppet.offline.kpls.targets import stylise
     from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync

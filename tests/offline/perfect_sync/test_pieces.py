@@ -49,7 +49,7 @@ def source(ict_character):
 @pytest.fixture(scope="module")
 def godette_run(source):
     """(Godette as read, her perfect-sync character, the report, the control points proposed)."""
-    from facepuppet.offline.io.gltf_read import read_gltf
+    from facepuppet.offline.io.gltf.read import read_gltf
     from facepuppet.offline.perfect_sync.commands import perfect_sync
 
     g = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
