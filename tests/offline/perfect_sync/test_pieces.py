@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from facepuppet.offline.elastic.laplacian import components
-from facepuppet.offline.perfect_sync.pieces import closest_on_triangles
+from facepuppet.offline.perfect_sync.triangles import closest_on_triangles
 from tests.conftest import need_shared
 
 
