@@ -66,7 +66,7 @@ def shape_sheet(character: Character, names: Sequence[str], path: str | os.PathL
     if own:
         import moderngl
 
-        from facepuppet.runtime.render.gl_context import GLUnavailable
+        from facepuppet.runtime.render.gl_context import GLUnavailable  # GL: importing it loads moderngl
 
         try:
             ctx = moderngl.create_standalone_context(backend="egl", require=330)
@@ -190,7 +190,7 @@ def take_side_by_side(original: Character, synced: Character, take: str | os.Pat
 def _standalone() -> moderngl.Context:
     import moderngl
 
-    from facepuppet.runtime.render.gl_context import GLUnavailable
+    from facepuppet.runtime.render.gl_context import GLUnavailable  # GL: importing it loads moderngl
 
     try:
         return moderngl.create_standalone_context(backend="egl", require=330)
