@@ -22,9 +22,9 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.cli import main
 
 from conftest import need_shared
-from facepuppet.offline.io import gltf_read
+from facepuppet.offline.io.gltf import read as gltf_read
+from facepuppet.offline.io.gltf.write import ExportError, export_character
 from facepuppet.offline.io.gltf_check import check_gltf
-from facepuppet.offline.io.gltf_export import ExportError, export_character
 from helpers.gltf_characters import BONES, decode, node_worlds, parts_character, view_bytes
 
 TABLES_V1 = Path(__file__).resolve().parents[2] / "runtime" / "data" / "tables_v1" / "character.npz"

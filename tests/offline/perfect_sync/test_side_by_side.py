@@ -14,7 +14,7 @@ from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.render.images import LABEL_HEIGHT
 
-from facepuppet.offline.io.gltf_read import read_gltf
+from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.perfect_sync.pictures import replay_images, take_moments, take_side_by_side
 from facepuppet.offline.perfect_sync.transfer import add_shapes
 from tests.conftest import need_shared

@@ -88,7 +88,7 @@ def test_a_drop_counted_by_the_receiver_and_the_loop_is_shown_once(egl_ctx):
 def test_the_mapped_meter_of_a_blink_is_the_eyes_closing_on_godette(egl_ctx):
     """Godette has Blink, Blink_L and Blink_R (binary): what both eyes share goes to Blink, the rest to each
     eye's own; an eye's meter shows the sum, at most 1 (the right eye's own Blink_R alone would read 0 here)."""
-    from facepuppet.offline.io.gltf_read import read_gltf
+    from facepuppet.offline.io.gltf.read import read_gltf
     from tests.conftest import need_shared
 
     c = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
