@@ -37,14 +37,14 @@ def reference() -> str:
     parser = build_parser()
     commands = _subcommands(parser)
     lines = [HEADER, "| command | what it does |", "|---|---|"]
-    lines += [f"| [`{name}`](#{_anchor(sub.prog)}) | {_inline(summary)} |" for name, (sub, summary) in commands.items()]
+    lines += [f"| [`{name}`](#{anchor(sub.prog)}) | {_inline(summary)} |" for name, (sub, summary) in commands.items()]
     lines.append("")
-    lines += _section(parser, "")
+    lines += section(parser, "")
     for sub, summary in commands.values():
-        lines += _section(sub, summary)
+        lines += section(sub, summary)
         if sub.prog == f"{parser.prog} bench":
             for bench in benches().values():
-                lines += _section(bench_parser(bench), bench.help, level="###")
+                lines += section(bench_parser(bench), bench.help, level="###")
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
@@ -59,7 +59,9 @@ def _subcommands(parser: argparse.ArgumentParser) -> dict[str, tuple[argparse.Ar
     return found
 
 
-def _section(parser: argparse.ArgumentParser, summary: str, level: str = "##") -> list[str]:
+def section(parser: argparse.ArgumentParser, summary: str, level: str = "##") -> list[str]:
+    """The lines of one command's part of the page: heading, summary and description, synopsis, and its
+    options group by group."""
     lines = [f"{level} {parser.prog}", ""]
     for text in (summary, parser.description):
         if text and _flat(text) not in lines:
@@ -180,7 +182,7 @@ def _inline(text: str) -> str:
     return "".join(p if p.startswith("`") else re.sub(r"([*<>|])", r"\\\1", p) for p in pieces)
 
 
-def _anchor(heading: str) -> str:
+def anchor(heading: str) -> str:
     """GitHub's anchor of a heading: lower case, spaces to hyphens, other punctuation dropped."""
     return re.sub(r"[^\w\- ]", "", heading.lower()).replace(" ", "-")
 
