@@ -29,8 +29,10 @@ COMMANDS_MD = DOCS / "commands.md"
 WRITTEN = [README, *sorted(p for p in DOCS.glob("*.md") if p != COMMANDS_MD)]
 EVERY_PAGE = [*WRITTEN, COMMANDS_MD]
 
-FENCE = re.compile(r"^```[^\n]*\n(.*?)^```", re.S | re.M)
-INLINE = re.compile(r"`([^`\n]+)`")
+# a fenced block, also one indented under a list item
+FENCE = re.compile(r"^[ \t]*```[^\n]*\n(.*?)^[ \t]*```", re.S | re.M)
+# inline code; a span broken over two lines is read as one, as Markdown renders it
+INLINE = re.compile(r"`([^`]+)`")
 
 
 def _text(path: Path) -> str:
@@ -51,6 +53,7 @@ def _command_lines(path: Path) -> list[str]:
             if line.strip().startswith("facepuppet "):
                 found.append(line.strip())
     for span in INLINE.findall(FENCE.sub("", text)):
+        span = " ".join(span.split())
         if span.startswith("facepuppet "):
             found.append(span)
     return found
