@@ -137,10 +137,11 @@ class UdpProcessSource:
         self._chan: socket.socket | None = None        # this process's end of the channel
         self._chan_child: socket.socket | None = None  # the child's end, held here too: never end of file here
         self._inbox: Inbox | None = None
+        self._own = {"snapshot_busy": 0, "internal_error": 0, "packets_ring_dropped": 0}
         self._reset()
 
     def _reset(self) -> None:
-        self._own = {"snapshot_busy": 0, "internal_error": 0, "packets_ring_dropped": 0}
+        """What a (re)start begins afresh: the new child's counters, names and frame numbers."""
         self._stale_dropped = 0
         self._taken = 0
         self._ready = False
