@@ -37,11 +37,16 @@ MAX_MESSAGE.
 from __future__ import annotations
 
 import collections
+import json
 import math
 import socket
 import struct
 import time
 from collections.abc import Callable
+
+import numpy as np
+
+from facepuppet.runtime.frames import Frame
 
 MAX_WEIGHTS = 1024
 MAX_MARKERS = 2048
@@ -60,7 +65,11 @@ HEAD = struct.Struct("<IB")  # body length, kind
 READY, FRAME, PACKET, COUNTERS, COUNTER_NAME, ERROR = range(1, 7)
 # completed, number, watched, flags, n_weights, n_markers, t, t_sender, audio_level, pose (rotation 4,
 # translation 3), name slots (channels, marker names, source; -1: none), lengths of the names defined here
-FRAME_HEAD = struct.Struct("<qqqBII3d7f3i3I")
+FRAME_FIELDS = struct.Struct("<qqqBII3d7f")  # packed when the frame is queued (what could fail, fails there)
+FRAME_NAMES = struct.Struct("<3i3I")  # packed when it is sent
+FRAME_HEAD = struct.Struct(FRAME_FIELDS.format + FRAME_NAMES.format[1:])
+COMPLETED, NUMBER, WATCHED, FLAGS, N_WEIGHTS, N_MARKERS, T, T_SENDER, AUDIO_LEVEL = range(9)
+POSE, SLOTS, LENGTHS = slice(9, 16), slice(16, 19), slice(19, 22)
 HAS_WEIGHTS, HAS_MARKERS, HAS_ROTATION, HAS_TRANSLATION = 1, 2, 4, 8
 NAME_FIELDS = ("channels", "markers", "source")  # a frame's names, in the order of FRAME_HEAD's slots
 PACKET_HEAD = struct.Struct("<dHB")  # receive time, sender port, sender host length
@@ -76,6 +85,51 @@ def packet_cost(host_len: int, data_len: int) -> int:
     """What one waiting datagram counts against ``ring_bytes``: a 16-byte record header, the sender's host and
     the bytes, rounded up to 16 (so a ring of ``ring_bytes`` holds as many datagrams on either side)."""
     return (16 + host_len + data_len + 15) & ~15
+
+
+class ChannelError(RuntimeError):
+    """The channel's bytes are not the messages the child sends (a message over MAX_MESSAGE, a name slot
+    never defined): the receiver's own bug, never the sender's."""
+
+
+def read_frame(body: bytes, table: list) -> tuple[tuple, list, int]:
+    """A FRAME message's header, its names and where its arrays start. The names it defines are entered in
+    ``table`` (the child's MAX_NAMES slots, kept alike here) first.
+
+    Raises
+    ------
+    ChannelError
+        when a name is defined in the wrong field or a slot used was never defined.
+    """
+    head = FRAME_HEAD.unpack_from(body)
+    off = FRAME_HEAD.size
+    for field, slot, length in zip(NAME_FIELDS, head[SLOTS], head[LENGTHS]):
+        if length:
+            kind, value = json.loads(body[off:off + length])
+            if kind != field or not 0 <= slot < MAX_NAMES:
+                raise ChannelError(f"receiver channel: name slot {slot} defined as {kind!r}, expected {field!r}")
+            table[slot] = tuple(value) if isinstance(value, list) else value
+            off += length
+    names = []
+    for field, slot in zip(NAME_FIELDS, head[SLOTS]):
+        if slot != -1 and (not 0 <= slot < MAX_NAMES or table[slot] is None):
+            raise ChannelError(f"receiver channel: a frame names its {field} by slot {slot}, never defined")
+        names.append(None if slot == -1 else table[slot])
+    return head, names, off
+
+
+def frame_from(head: tuple, names: list, body: bytes, off: int) -> Frame:
+    """The :class:`Frame` of a message :func:`read_frame` read (arrays copied out of ``body``)."""
+    flags, n_weights, n_markers = head[FLAGS], head[N_WEIGHTS], head[N_MARKERS]
+    weights = np.frombuffer(body, "<f4", n_weights, off).copy() if flags & HAS_WEIGHTS else None
+    off += 4 * n_weights
+    markers = (np.frombuffer(body, "<f4", 3 * n_markers, off).reshape(n_markers, 3).copy()
+               if flags & HAS_MARKERS else None)
+    pose = np.array(head[POSE], dtype=np.float32)
+    return Frame(t=head[T], source=names[2], channels=names[0], weights=weights,
+                 head_rotation=pose[:4] if flags & HAS_ROTATION else None,
+                 head_translation=pose[4:7] if flags & HAS_TRANSLATION else None, audio_level=head[AUDIO_LEVEL],
+                 markers=markers, marker_names=names[1], t_sender=head[T_SENDER], number=head[NUMBER])
 
 
 class Outbox:
@@ -172,10 +226,6 @@ class Outbox:
                 self.sent += self.chan.send(memoryview(self.out)[self.sent:])
             except (BlockingIOError, InterruptedError):
                 return False
-
-
-class ChannelError(RuntimeError):
-    """The channel's bytes are not messages (a message over MAX_MESSAGE): the receiver's own bug."""
 
 
 class Inbox:

@@ -39,7 +39,8 @@ from facepuppet.runtime.inputs.udp_channel import (
     COUNTERS,
     ERROR,
     FRAME,
-    FRAME_HEAD,
+    FRAME_FIELDS,
+    FRAME_NAMES,
     HAS_MARKERS,
     HAS_ROTATION,
     HAS_TRANSLATION,
@@ -160,15 +161,15 @@ class _Publisher:
             arrays += np.asarray(frame.weights, "<f4").tobytes()
         if n_markers:
             arrays += np.asarray(frame.markers, "<f4").reshape(-1).tobytes()
+        fields = FRAME_FIELDS.pack(self.completed + 1, int(frame.number), self.watched, flags, n_weights,
+                                   n_markers, frame.t, frame.t_sender, frame.audio_level, *rotation, *translation)
         self.completed += 1
-        head = (self.completed, int(frame.number), self.watched, flags, n_weights, n_markers, frame.t,
-                frame.t_sender, frame.audio_level, *rotation, *translation)
-        self.outbox.put_frame((head, names, arrays))
+        self.outbox.put_frame((fields, names, arrays))
 
     def _encode_frame(self, item) -> bytes:
         """The FRAME message, when its turn to be sent comes: a name the parent does not hold yet is defined
         in it, in the slot of the least recently used one (never one this frame uses)."""
-        head, names, arrays = item
+        fields, names, arrays = item
         slots, lengths, records = [-1, -1, -1], [0, 0, 0], []
         for i, entry in enumerate(names):
             if entry is not None and entry[0] in self.names:
@@ -184,7 +185,18 @@ class _Publisher:
             self.names[key] = slot
             slots[i], lengths[i] = slot, len(record)
             records.append(record)
-        return message(FRAME, FRAME_HEAD.pack(*head, *slots, *lengths) + b"".join(records) + arrays)
+        return message(FRAME, b"".join((fields, FRAME_NAMES.pack(*slots, *lengths), *records, arrays)))
+
+    def flush(self) -> None:
+        """Send what the channel takes now; an error of this side is counted (the messages it took are lost,
+        the stream stays whole). Raises OSError when the parent is gone."""
+        try:
+            self.outbox.flush()
+        except OSError:
+            raise
+        except Exception as exc:
+            self.own["internal_error"] += 1
+            self.error(exc)
 
     def put_packet(self, data: bytes, t: float, sender) -> None:
         """Queue one datagram for the parent's ``on_packet``; drop and count when the queue is full."""
@@ -235,15 +247,16 @@ def _parent_wants(chan: socket.socket) -> str:
         return "gone"
 
 
-def _flush_before_leaving(outbox: Outbox, chan: socket.socket) -> None:
+def _flush_before_leaving(publisher: _Publisher, chan: socket.socket) -> None:
     """Send what is queued, waiting on the socket (the parent reads while it waits for this process to exit),
     for at most STOP_FLUSH_S."""
     deadline = time.monotonic() + STOP_FLUSH_S
     poller = select.poll()
     poller.register(chan.fileno(), select.POLLOUT)
-    while not outbox.flush():
+    while True:
+        publisher.flush()
         left = deadline - time.monotonic()
-        if left <= 0:
+        if publisher.outbox.empty or left <= 0:
             return
         poller.poll(int(math.ceil(left * 1000)))
 
@@ -271,7 +284,7 @@ def _child(sock: socket.socket, chan: socket.socket, adapter, allow, want_packet
     poller.register(chan_fd, chan_events)
     try:
         publisher.ready()
-        outbox.flush()
+        publisher.flush()
         while True:
             wait_s = POLL_TIMEOUT_S
             if not outbox.blocked and outbox.due_at != math.inf:
@@ -285,7 +298,7 @@ def _child(sock: socket.socket, chan: socket.socket, adapter, allow, want_packet
                     wants = _parent_wants(chan)
                     if wants == "stop":
                         publisher.publish_counters()
-                        _flush_before_leaving(outbox, chan)
+                        _flush_before_leaving(publisher, chan)
                         return
                     if wants == "gone":
                         return
@@ -294,7 +307,7 @@ def _child(sock: socket.socket, chan: socket.socket, adapter, allow, want_packet
             if readable:
                 _take_one(sock, stamped, publisher, allow, watch, needle, want_packets, handle)
             if outbox.blocked or outbox.due_at <= time.monotonic():
-                outbox.flush()
+                publisher.flush()
             wanted = select.POLLIN | (select.POLLOUT if outbox.blocked else 0)
             if wanted != chan_events:
                 poller.modify(chan_fd, wanted)

@@ -46,7 +46,6 @@ numbers the child gives them. The child's side is
 from __future__ import annotations
 
 import collections
-import json
 import os
 import pickle
 import select
@@ -59,30 +58,26 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.udp import bind_udp, bound_address, normalise_allow
 from facepuppet.runtime.inputs.udp_channel import (
+    COMPLETED,
     COUNTER_NAME,
     COUNTERS,
     ERROR,
     FRAME,
-    FRAME_HEAD,
-    HAS_MARKERS,
-    HAS_ROTATION,
-    HAS_TRANSLATION,
-    HAS_WEIGHTS,
     INDEX,
     MAX_NAMES,
-    NAME_FIELDS,
     PACKET,
     PACKET_HEAD,
     READY,
     RING_BYTES,
+    WATCHED,
     ChannelError,
     Inbox,
+    frame_from,
     packet_cost,
+    read_frame,
 )
 
 if TYPE_CHECKING:
@@ -90,9 +85,6 @@ if TYPE_CHECKING:
 
 START_TIMEOUT_S = 30.0  # a spawned interpreter importing NumPy on a loaded 2-core machine
 STOP_TIMEOUT_S = 5.0  # the child flushes for at most 4 s (udp_child.STOP_FLUSH_S), then is killed
-# FRAME_HEAD's fields: completed, number, watched, flags, n_weights, n_markers, t, t_sender, audio_level,
-# pose (7), name slots (3), lengths of the names defined (3)
-_POSE, _SLOTS, _LENGTHS = slice(9, 16), slice(16, 19), slice(19, 22)
 
 
 class UdpProcessSource:
@@ -282,25 +274,10 @@ class UdpProcessSource:
                 self.last_error = exc
 
     def _on_frame(self, body: bytes) -> None:
-        """Take the names a frame defines and keep it as the newest (the one before, if not taken, is stale).
-
-        Its names are looked up now: a later frame may give their slots to other names.
-        """
-        head = FRAME_HEAD.unpack_from(body)
-        off = FRAME_HEAD.size
-        for field, slot, length in zip(NAME_FIELDS, head[_SLOTS], head[_LENGTHS]):
-            if length:
-                kind, value = json.loads(body[off:off + length])
-                if kind != field or not 0 <= slot < MAX_NAMES:
-                    raise ChannelError(f"receiver channel: name slot {slot} defined as {kind!r}, expected {field!r}")
-                self._names[slot] = tuple(value) if isinstance(value, list) else value
-                off += length
-        names = []
-        for field, slot in zip(NAME_FIELDS, head[_SLOTS]):
-            if slot != -1 and (not 0 <= slot < MAX_NAMES or self._names[slot] is None):
-                raise ChannelError(f"receiver channel: a frame names {field} by slot {slot}, never defined")
-            names.append(None if slot == -1 else self._names[slot])
-        self._watched = max(self._watched, head[2])
+        """Keep a frame as the newest (the one before, if not taken, is stale), its names looked up now: a
+        later frame may give their slots to other names."""
+        head, names, off = read_frame(body, self._names)
+        self._watched = max(self._watched, head[WATCHED])
         self._newest = (head, names, body, off)
 
     def _on_packet(self, body: bytes) -> None:
@@ -367,29 +344,16 @@ class UdpProcessSource:
             if newest is None:
                 return None, 0
             try:
-                frame = self._frame(*newest)
+                frame = frame_from(*newest)
             except Exception as exc:  # a message this side cannot read: count, never raise
                 self._own["internal_error"] += 1
                 self.last_error = exc
                 return None, 0
-            completed = newest[0][0]
+            completed = newest[0][COMPLETED]
             stale = completed - self._taken - 1
             self._taken = completed
             self._stale_dropped += stale
             return frame, stale
-
-    @staticmethod
-    def _frame(head: tuple, names: list, body: bytes, off: int) -> Frame:
-        flags, n_weights, n_markers = head[3], head[4], head[5]
-        weights = np.frombuffer(body, "<f4", n_weights, off).copy() if flags & HAS_WEIGHTS else None
-        off += 4 * n_weights
-        markers = (np.frombuffer(body, "<f4", 3 * n_markers, off).reshape(n_markers, 3).copy()
-                   if flags & HAS_MARKERS else None)
-        pose = np.array(head[_POSE], dtype=np.float32)
-        return Frame(t=head[6], source=names[2], channels=names[0], weights=weights,
-                     head_rotation=pose[:4] if flags & HAS_ROTATION else None,
-                     head_translation=pose[4:7] if flags & HAS_TRANSLATION else None, audio_level=head[8],
-                     markers=markers, marker_names=names[1], t_sender=head[7], number=head[1])
 
     def deliver_packets(self) -> None:
         """Hand every datagram received to ``on_packet``, in order (its errors are counted, never raised).
