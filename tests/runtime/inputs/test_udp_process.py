@@ -207,6 +207,26 @@ def test_the_child_leaves_when_the_parent_is_gone(tmp_path):
     wait_for(gone, "the orphaned child to exit")
 
 
+def test_kill_9_of_the_child_leaves_what_it_sent_and_the_source_answering(udp_sender):
+    """What the child sent before it died is still read; then nothing comes: a wait sleeps its timeout (no spin
+    on a dead channel) and stop() returns at once, handing on the datagrams received."""
+    seen = []
+    with UdpProcessSource(make_adapter("livelinkface"), port=0, on_packet=lambda *a: seen.append(a)) as source:
+        for i in range(10):
+            udp_sender.sendto(encode_llf_packet([0.5] * 52, number=i), source.address)
+        wait_for(lambda: source.counters["packets"] == 10, "10 datagrams")
+        source._process.kill()
+        source._process.wait()
+        udp_sender.sendto(encode_llf_packet([0.5] * 52, number=100), source.address)
+        assert source.latest()[0].number == 9
+        cpu = time.thread_time()
+        assert source.wait_for_frame(0.3) is False
+        assert time.thread_time() - cpu < 0.15
+        assert source.latest() == (None, 0) and source.counters["packets"] == 10
+        t_stop = time.monotonic()
+    assert time.monotonic() - t_stop < 2.0 and len(seen) == 10
+
+
 def test_watched_messages_are_counted_without_on_packet_and_without_callbacks(udp_sender):
     with UdpProcessSource(VmcAdapter(), port=0, watch="/facepuppet/calibrate") as source:
         udp_sender.sendto(vmc_frame(0.2), source.address)
