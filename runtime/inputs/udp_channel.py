@@ -5,16 +5,18 @@ Why the kernel carries everything: the child writes while the parent reads, on d
 ordered CPU (ARM: a Raspberry Pi, an Apple-silicon Linux box) plain stores into shared memory may become
 visible to the other CPU in any order, so a reader checking a sequence number can see the new number
 beside old weights; Python offers no memory barrier to forbid that. Here nothing is shared: the newest
-frame, the names it uses, the counters, the error log and the recorder's datagrams all cross as bytes
-written with ``send`` and read with ``recv``. The kernel copies them under the socket's lock, and a
-stream socket hands them over in the order they were sent, so a message the parent has read whole was
-written whole before it, and everything sent before it was read before it, on any CPU. The same socket
-wakes the parent (it becomes readable) and tells the child to stop (the parent sends a byte) or that the
-parent is gone (end of file).
+frame, the names it uses, the counters, the error log and the recorder's datagrams all cross as bytes.
+``send`` copies them into a kernel buffer and queues it on the socket under the socket's lock; ``recv``
+takes it off under the same lock and copies out. The lock's release and acquire order the copy in before
+the copy out on every CPU the kernel runs on, and a stream socket delivers in the order sent: once the
+parent holds a message whole, every byte of it, and of everything sent before it, is what the child wrote.
+The same socket wakes the parent (it becomes readable) and tells the child to stop (the parent sends a
+byte) or that the parent is gone (end of file).
 
 Why a stream and not datagrams: a message (a marker layout's names, a 64 KiB datagram for the recorder) can
-be larger than a datagram socket takes in one piece, and a stream pair exists wherever Python runs. A send
-the socket takes only in part is finished later (:class:`Outbox`); the child never blocks on the parent.
+be larger than a datagram socket takes in one piece, and ``socket.socketpair()`` gives a stream everywhere.
+A send the socket takes only in part is finished later (:class:`Outbox`); the child never blocks on the
+parent.
 
 Messages: ``u32 body length | u8 kind | body`` (:data:`HEAD`), little-endian, kinds:
 

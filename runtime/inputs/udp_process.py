@@ -105,7 +105,9 @@ class UdpProcessSource:
         address (bundles included) in accepted datagrams in :attr:`watched`, without shipping every
         datagram to this process as ``on_packet`` does
 
-    Every method may be called from any thread: reading the channel is done under a lock.
+    :meth:`latest`, :meth:`pending`, :meth:`deliver_packets`, :attr:`counters` and :attr:`watched` may be
+    called from any thread (the panel reads counters while the loop takes frames): each reads the channel
+    under one lock.
     """
 
     def __init__(self, adapter: InputAdapter, host: str = "127.0.0.1", port: int | None = None,
