@@ -264,6 +264,8 @@ class Inbox:
                 self.buf += data
             if len(data) < RECV_BYTES:  # the socket is empty: no need to ask again
                 break
+        if len(self.buf) < HEAD.size:  # the common case between frames: nothing
+            return []
         messages, bad = [], None
         n, off = len(self.buf), 0
         with memoryview(self.buf) as view:
