@@ -67,7 +67,7 @@ PR_SET_PDEATHSIG = 1  # linux/prctl.h
 STOP_FLUSH_S = 4.0  # asked to stop, the child sends what it queued for at most this long
 
 
-def name_record(kind: str, value) -> bytes:
+def name_record(kind: str, value: object) -> bytes:
     """A name's definition as the parent reads it: JSON ``[kind, value]`` (a tuple as a list)."""
     return json.dumps([kind, list(value) if isinstance(value, tuple) else value], ensure_ascii=False).encode()
 
