@@ -1,12 +1,14 @@
 # Quick start: `make demo` and `make test`. Both set up .venv first (system
 # libraries too, when missing and we may install them). `make test-quick`
 # leaves out the tests marked slow (pytest -m "not slow"); `make test` runs all.
+# `make docs` rewrites docs/commands.md from the argparse definitions (a test
+# fails when it is stale: run it after changing an option).
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-quick lint setup system-deps bench clean
+.PHONY: demo test test-quick lint docs setup system-deps bench clean
 
 demo: $(STAMP)
 	$(VENV)/bin/facepuppet demo --out demo-out --force
@@ -19,6 +21,9 @@ test-quick: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+
+docs: $(STAMP)
+	$(PY) -m facepuppet.runtime.cli_reference docs/commands.md
 
 setup: $(STAMP)
 

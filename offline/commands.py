@@ -8,7 +8,13 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from facepuppet.runtime.character import MATERIAL_KINDS
+from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.progress import Progress
+
+from facepuppet.offline.io import capture_replay
+from facepuppet.offline.io.gltf.read import read_gltf
+from facepuppet.offline.io.gltf_container import is_gltf_file
+from facepuppet.offline.io.rig_import import import_rig
 
 # Offline modules with their own ``register(subparsers)``; each must exist and import
 # (a missing one is an error, never a silently dropped command).
@@ -34,8 +40,6 @@ def register_benches(register_bench: Callable[..., None]) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the offline commands to the ``facepuppet`` parser (and let ``replay`` read marker captures)."""
-    from facepuppet.offline.io import capture_replay
-
     capture_replay.register()
     _register_import_rig(subparsers)
     for module in _modules(_COMMAND_MODULES):
@@ -69,11 +73,6 @@ def _register_import_rig(subparsers) -> None:
 
 
 def _import_rig(args: argparse.Namespace) -> int:
-    from facepuppet.runtime.progress import Progress
-
-    from facepuppet.offline.io.gltf_container import is_gltf_file
-    from facepuppet.offline.io.rig_import import import_rig
-
     if args.neutral.is_file() and is_gltf_file(args.neutral):
         return _import_gltf(args)
     start = time.perf_counter()
@@ -114,10 +113,6 @@ def _import_rig(args: argparse.Namespace) -> int:
 
 
 def _import_gltf(args: argparse.Namespace) -> int:
-    from facepuppet.runtime.progress import Progress
-
-    from facepuppet.offline.io.gltf_read import print_summary, read_gltf
-
     if args.shapes_dir is not None:
         raise ValueError(f"{args.shapes_dir}: a glTF/VRM file carries its own morph targets; give no shapes folder")
     for flag, value, default in (("--units", args.units, "cm"), ("--landmarks", args.landmarks, None),
@@ -135,5 +130,35 @@ def _import_gltf(args: argparse.Namespace) -> int:
     with bar:
         character = read_gltf(args.neutral, name=args.name, progress=progress)
     out = character.save(args.output)
-    print_summary(character, time.perf_counter() - start, out)
+    _print_gltf_summary(character, time.perf_counter() - start, out)
     return 0
+
+
+def _print_gltf_summary(character: Character, seconds: float, out: Path) -> None:
+    """The import summary of a glTF/VRM character: sizes, humanoid head and neck, VRM meta, credits, the reader's
+    warnings."""
+    src = character.source
+    m = character.metadata.get("metrics", {})
+    bones = character.skeleton.bones if character.skeleton is not None else {}
+    head = "head" + ("" if "head" in bones else " (not found)")
+    neck = "neck" + ("" if "neck" in bones else " (not found)")
+    print(f"{out}: character '{character.name}' from {src.get('format')} {src.get('file')}: "
+          f"{character.n_vertices} vertices, {len(character.triangles)} triangles, "
+          f"{m.get('n_meshes')} meshes / {m.get('n_primitives')} primitives, metres"
+          f"{', turned 180° about +Y (VRM 0.x faces -Z)' if src.get('turned_y180') else ''}\n"
+          f"  shapes: {character.n_shapes}; expressions: {character.n_expressions}; "
+          f"nodes: {m.get('n_nodes')} ({m.get('n_joints')} joints used); textures: {m.get('n_textures')}; "
+          f"humanoid {head}, {neck}")
+    meta = src.get("meta") or {}
+    if src.get("format") in ("vrm0", "vrm1"):
+        keys = (("title", "version", "author", "licenseName", "allowedUserName", "commercialUssageName",
+                 "violentUssageName", "sexualUssageName") if src.get("format") == "vrm0" else
+                ("name", "version", "authors", "licenseUrl", "avatarPermission", "commercialUsage",
+                 "allowExcessivelyViolentUsage", "allowExcessivelySexualUsage", "allowRedistribution"))
+        shown = ", ".join(f"{k}={meta[k]}" for k in keys if k in meta)
+        print(f"  VRM meta: {shown}")
+    if character.credits:
+        print(f"  credits: {character.credits}")
+    for line in src.get("warnings", []):
+        print(f"  warning: {line}")
+    print(f"  file {out.stat().st_size / 1e6:.2f} MB, {seconds:.2f} s")

@@ -222,6 +222,17 @@ class ChannelMap:
             return out
         return np.matmul(self.matrix, values, out=out)
 
+    def first_targets(self) -> np.ndarray:
+        """Per source channel the first rig shape it drives, (n_source,) int64, -1 for none: the shape of the
+        same name where there is one (an unsided browInnerUp that also drives browInnerUp_L/R meters as
+        browInnerUp), else the first the matrix sends it to. What an operator's meter reads."""
+        where = {canonical(n): i for i, n in enumerate(self.target_names)}
+        first = np.array([where.get(canonical(c), -1) for c in self.source_names], dtype=np.int64)
+        for i in np.flatnonzero(first < 0):
+            targets = np.flatnonzero(self.matrix[:, i])
+            first[i] = targets[0] if targets.size else -1
+        return first
+
     def report(self) -> str:
         """One human-readable paragraph on what does not match (empty when all do)."""
         lines = []

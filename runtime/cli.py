@@ -86,12 +86,29 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+class _Stderr(logging.StreamHandler):
+    """A handler writing to whatever ``sys.stderr`` is when a line is logged (not the stream of the moment it
+    was made: a caller that swaps stderr, as a test's capture does, gets the lines)."""
+
+    def __init__(self) -> None:
+        super().__init__(sys.stderr)
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
+
+
 def _configure_logging() -> None:
     """Library modules log through ``logging.getLogger(__name__)``; the command shows facepuppet's INFO
-    lines as plain text on stderr (other libraries' only from WARNING up)."""
+    lines as plain text on stderr (other libraries' only from WARNING up); what a command finds, it prints
+    on stdout."""
     ours = logging.getLogger("facepuppet")
-    if not ours.handlers:
-        handler = logging.StreamHandler(sys.stderr)
+    if not any(isinstance(h, _Stderr) for h in ours.handlers):
+        handler = _Stderr()
         handler.setFormatter(logging.Formatter("%(message)s"))
         ours.addHandler(handler)
         ours.setLevel(logging.INFO)

@@ -11,17 +11,21 @@ FrameSource     the newest Frame by tick time, stale ones counted           runt
 Stage           one step of the per-frame chain: (frame or None, t) ->      runtime/live/stages.py builds
                 frame or None                                               the chain
 Renderer        weights + head pose -> an image                             runtime/render/renderer.py
-Sink            what the loop hands each drawn tick to                      runtime/live/sinks.py
+TickObserver    what the loop hands each drawn tick to: pictures, weights,  runtime/live/sinks.py,
+                video, OSC outputs, the recorder, the live stats            runtime/session/outputs.py
 ==============  ==========================================================  ===============================
 """
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
 from facepuppet.runtime.frames import Frame
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.live.loop import TickInfo
 
 
 @runtime_checkable
@@ -82,9 +86,10 @@ class Renderer(Protocol):
 
 
 @runtime_checkable
-class Sink(Protocol):
-    """Takes every drawn tick: index, time (s), the weights drawn (the loop's buffer: copy to keep),
-    the frame on screen and the renderer (for pixels)."""
+class TickObserver(Protocol):
+    """Takes every drawn tick once the GPU is done with it: a :class:`~facepuppet.runtime.live.loop.TickInfo`
+    (index, time, the new raw frame, the frame on screen, the weights and pose drawn, the stage stamps and
+    the renderer, for pixels). The info object and its arrays are the loop's, reused next tick: copy to keep.
+    Runs on the frame-loop thread: it must not block (hand slow work to a thread of its own)."""
 
-    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
-                renderer: Renderer) -> None: ...
+    def __call__(self, info: TickInfo) -> None: ...

@@ -4,7 +4,7 @@
 // texel index = shape * N_VERTICES + vertex. A texel holds the six delta components
 // (position x y z, normal x y z) as 16-bit offsets q = round(d / s * 32767) + 32768, two
 // per word, low half first; s is the shape's largest |component| of that kind
-// (runtime/render/renderer.py, delta_texture). q = 32768 is exactly zero.
+// (runtime/render/paths/deltas.py, delta_texture). q = 32768 is exactly zero.
 // Per frame only the active shapes are uploaded: u_active_count pairs of shape index and
 // (position, normal) weight, each weight already multiplied by the shape's step s / 32767.
 // MAX_ACTIVE, N_VERTICES and DELTA_TEXTURE_WIDTH are injected by the loader.

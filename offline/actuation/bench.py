@@ -15,14 +15,16 @@ from collections.abc import Callable
 
 import numpy as np
 
+from facepuppet.runtime.actuation.solver import MarkerSolver
+
+from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
 from facepuppet.offline.bench_data import add_data_argument, data_dir
+from facepuppet.offline.io.capture import read_capture
 
 TAKES = ("animface_jaw.trc", "animface_cheeks.trc")
 
 
 def _solve_times(actor, markers: np.ndarray, n_given: int | None, seed: int = 0) -> dict:
-    from facepuppet.runtime.actuation.solver import MarkerSolver
-
     rng = np.random.default_rng(seed)
     solver = MarkerSolver(actor)
     movable = np.setdiff1d(np.arange(actor.n_markers), actor.head_markers)
@@ -67,6 +69,7 @@ def machine_load() -> dict:
 
 
 def _train(capture, k: int, **settings) -> tuple[object, dict]:
+    # imported here, not at the top: it loads scipy.signal, which every `facepuppet` start would pay
     from facepuppet.offline.actuation.train import train_actor
 
     with warnings.catch_warnings():
@@ -82,9 +85,6 @@ def _train(capture, k: int, **settings) -> tuple[object, dict]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from facepuppet.offline.actuation.synthetic_capture import synthetic_capture
-    from facepuppet.offline.io.capture import read_capture
-
     results: dict = {"solve": {}, "training": {}, "machine_before": machine_load()}
     cap, _ = synthetic_capture(n_frames=3500, n_markers=68, k=13, seed=0)
     model, row = _train(cap, 13, head_markers=["M00", "M01", "M02", "M03"])

@@ -7,6 +7,15 @@ import sys
 import time
 from pathlib import Path
 
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.progress import Progress
+
+from facepuppet.offline.actuation import transfer
+from facepuppet.offline.actuation.pictures import actuation_sheet, face_actuation_sheet, signal_plot
+from facepuppet.offline.actuation.transfer_eval import transfer_error
+from facepuppet.offline.io.capture import read_capture
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``train-actor`` and ``retarget-actor`` to the ``facepuppet`` parser."""
@@ -69,8 +78,8 @@ def _progress(bar):
 
 
 def _train_actor(args: argparse.Namespace) -> int:
+    # imported here, not at the top: it loads scipy.signal, which every `facepuppet` start would pay
     from facepuppet.offline.actuation.train import train_actor
-    from facepuppet.offline.io.capture import read_capture
 
     start = time.perf_counter()
     capture = read_capture(args.capture, max_gap=args.max_gap)
@@ -78,16 +87,12 @@ def _train_actor(args: argparse.Namespace) -> int:
           f"{capture.units}; {capture.filled} samples filled, {len(capture.gaps)} long gaps"
           + "".join(f"\n  long gap: {g.marker} frames {g.start}..{g.start + g.length - 1}" for g in capture.gaps[:10]),
           file=sys.stderr)
-    from facepuppet.runtime.progress import Progress
-
     with Progress("train-actor", total=len(TRAIN_STAGES), unit="stages") as bar:
         model = train_actor(capture, k=args.k, progress=_progress(bar), head_markers=args.head_markers,
                             neutral_frame=args.neutral_frame)
     out = model.actor_.save(args.output)
     print(f"{out}: written, {time.perf_counter() - start:.2f} s\n{model.summary()}")
     if args.pictures:
-        from facepuppet.offline.actuation.pictures import actuation_sheet, signal_plot
-
         args.pictures.mkdir(parents=True, exist_ok=True)
         sheet = actuation_sheet(model.actor_, args.pictures / "actuations.png")
         plot = signal_plot(model.s_, capture.rate, args.pictures / "signals.png")
@@ -96,10 +101,6 @@ def _train_actor(args: argparse.Namespace) -> int:
 
 
 def _retarget_actor(args: argparse.Namespace) -> int:
-    from facepuppet.runtime.actuation.actor import Actor
-    from facepuppet.runtime.character import Character
-
-    from facepuppet.offline.actuation import transfer
     start = time.perf_counter()
     actor = Actor.load(args.actor)
     character = Character.load(args.character)
@@ -126,9 +127,6 @@ def _retarget_actor(args: argparse.Namespace) -> int:
           f"  weights fit: {m['frames']} parameter-shape pairs, s from {m['s_source']}, marker RMS "
           f"{m['marker_fit_rms']:.3f} {u}, cubic weight RMS {m['weight_fit_rms']:.3f}")
     if args.evaluate:
-        from facepuppet.offline.actuation.transfer_eval import transfer_error
-        from facepuppet.offline.io.capture import read_capture
-
         capture = read_capture(args.evaluate)
         missing = [n for n in actor.names if n not in capture.names]
         if missing:
@@ -139,8 +137,6 @@ def _retarget_actor(args: argparse.Namespace) -> int:
               f"(neutral {e['zero_rms']:.3f}, per-frame best {e['oracle_rms']:.3f}; relative "
               f"{e['relative']:.3f}); actor solve RMS {e['solve_rms']:.3f} {actor.units}")
     if args.pictures:
-        from facepuppet.offline.actuation.pictures import face_actuation_sheet
-
         args.pictures.mkdir(parents=True, exist_ok=True)
         print(f"pictures: {face_actuation_sheet(pair, character, args.pictures / 'face_actuations.png')}")
     return 0

@@ -10,13 +10,12 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
+from facepuppet.runtime.character import Character
 from facepuppet.runtime.render.images import contact_sheet, save_png
 
 if TYPE_CHECKING:
     import moderngl
-
-    from facepuppet.runtime.actuation.pair import ActorPair
-    from facepuppet.runtime.character import Character
 
 _BG, _NEUTRAL, _MOVED, _LINK = (250, 250, 248), (150, 150, 150), (200, 40, 30), (60, 90, 200)
 
@@ -99,7 +98,7 @@ def face_actuation_images(pair: ActorPair, character: Character, ctx: moderngl.C
     Returns [(label, ndarray of shape (height, width, 3), uint8)], the neutral first; each label names
     the actuation and its two largest weights.
     """
-    from facepuppet.runtime.render.renderer import FaceRenderer
+    from facepuppet.runtime.render.renderer import FaceRenderer  # GL: the renderer imports moderngl
 
     k = pair.cubic.shape[1]
     zoom = 2                                      # render larger, then crop to the marked region of the face

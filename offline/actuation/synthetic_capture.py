@@ -13,7 +13,7 @@ import numpy as np
 
 from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix
 
-from facepuppet.offline.io.capture import Capture
+from facepuppet.offline.io.capture import Capture, fill_gaps
 
 
 def synthetic_actuations(n_frames: int, k: int, rng: np.random.Generator, rate: float = 60.0) -> np.ndarray:
@@ -88,8 +88,6 @@ def synthetic_capture(n_frames: int = 3500, n_markers: int = 68, k: int = 13, no
         markers[start:start + length, j] = np.nan
     capture = Capture(markers.astype(np.float32), tuple(f"M{i:02d}" for i in range(n_markers)), 60.0, "cm",
                       "synthetic")
-    from facepuppet.offline.io.capture import fill_gaps
-
     filled, gaps, n_filled = fill_gaps(capture.markers, capture.names)
     capture = Capture(filled, capture.names, 60.0, "cm", "synthetic", tuple(gaps), n_filled)
     return capture, {"s": s, "neutral": neutral, "coef": coef, "head_markers": np.arange(4), "clean": clean}

@@ -16,11 +16,14 @@ from collections.abc import Callable
 
 import numpy as np
 
+from facepuppet.runtime.bench.render import measure_path, synthetic_performance
+
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis
 from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.elastic.params import fit_character, target_fixed_mask
+from facepuppet.offline.io.rig_import import import_rig
 
 
 def midpoint_subdivide(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -38,8 +41,7 @@ def midpoint_subdivide(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.
 
 
 def _frame_costs(character, model, frames, width, height) -> dict:
-    from facepuppet.runtime.bench.render import measure_path, synthetic_performance
-    from facepuppet.runtime.render.gl_context import create_context
+    from facepuppet.runtime.render.gl_context import create_context  # GL: these import moderngl
     from facepuppet.runtime.render.renderer import FaceRenderer
 
     ctx = create_context(headless=True).ctx
@@ -55,8 +57,6 @@ def _frame_costs(character, model, frames, width, height) -> dict:
 
 def bench_elastic(args: argparse.Namespace) -> dict:
     ict = data_dir(args.data) / "ict-facekit"
-    from facepuppet.offline.io.rig_import import import_rig
-
     character = import_rig(ict / "generic_neutral_mesh.obj", ict)
     marks = json.loads((ict / "vertex_indices.json").read_text(encoding="utf-8"))["idx_to_landmark_verts"]
     points = ict_control_points(marks, character.vertices, character.triangles, main_front(character))

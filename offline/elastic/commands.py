@@ -9,7 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.demo.head import build_demo_character
+from facepuppet.runtime.demo.head_parts import EYE_XY, MOUTH_HALF_WIDTH, MOUTH_Y
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.outputs import OutputSet
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
 from facepuppet.offline.elastic.clone import character_with_shapes, clone_model, mesh_character
@@ -27,6 +30,7 @@ from facepuppet.offline.elastic.control_points import (
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
 from facepuppet.offline.elastic.params import build_model, fit_character
+from facepuppet.offline.io.obj import read_obj
 
 # Anchor groups (control_points.ANCHOR_NAMES) by control-point name.
 POINT_ANCHORS = {
@@ -37,8 +41,6 @@ POINT_ANCHORS = {
 
 def demo_anchors(character: Character) -> dict:
     """Anchor groups on the procedural demo head, from its construction constants."""
-    from facepuppet.runtime.demo.head_parts import EYE_XY, MOUTH_HALF_WIDTH, MOUTH_Y
-
     v = character.vertices.astype(np.float64)
     front = main_front(character)
 
@@ -65,13 +67,9 @@ def main_front(character: Character) -> np.ndarray:
 def load_target(spec: str) -> Character:
     """A target character: ``demo``, a character table (.npz) or a bare OBJ mesh."""
     if spec == "demo":
-        from facepuppet.runtime.demo.head import build_demo_character
-
         return build_demo_character()
     path = Path(spec)
     if path.suffix.lower() == ".obj":
-        from facepuppet.offline.io.obj import read_obj
-
         mesh = read_obj(path)
         return mesh_character(mesh.vertices, mesh.triangles, path.stem)
     return Character.load(path)
@@ -89,8 +87,6 @@ def _fit(args: argparse.Namespace) -> int:
         marks = json.loads(Path(landmarks).read_text(encoding="utf-8"))["idx_to_landmark_verts"]
         points = ict_control_points(marks, character.vertices, character.triangles, main_front(character))
     model, basis, report = fit_character(character, points, k=args.k, fixed_ratio=args.fixed_ratio)
-    from facepuppet.runtime.outputs import OutputSet
-
     with OutputSet() as outputs:        # both files, or neither
         model.save(outputs.path(args.output))
         if args.save_controls:
@@ -101,7 +97,7 @@ def _fit(args: argparse.Namespace) -> int:
           f"(truncation adds {100 * report['truncation_added_median']:.2f}% median); "
           f"tables {report['ratio']:.1f}x smaller than dense deltas")
     if args.pictures:
-        from facepuppet.runtime.render.gl_context import create_context
+        from facepuppet.runtime.render.gl_context import create_context  # GL: these import moderngl
 
         from facepuppet.offline.elastic.pictures import overlay, reconstruction_sheets
 
@@ -169,15 +165,13 @@ def _clone(args: argparse.Namespace) -> int:
         pos, _ = model.deform(model.blend(w), target.vertices, np.tile([0, 0, 1.0], (target.n_vertices, 1)))
         basis_shapes[name] = pos - target.vertices
     character = character_with_shapes(target, basis_shapes)
-    from facepuppet.runtime.outputs import OutputSet
-
     out, char_out = Path(args.output), _clone_character_path(args)
     with OutputSet() as outputs:        # the elastic table and its character, or neither
         model.save(outputs.path(out))
         character.save(outputs.path(char_out))
     print(f"{out}: cloned {len(model.shape_names)} expressions onto {target.n_vertices} vertices; character {char_out}")
     if args.pictures:
-        from facepuppet.runtime.render.gl_context import create_context
+        from facepuppet.runtime.render.gl_context import create_context  # GL: these import moderngl
 
         from facepuppet.offline.elastic.pictures import expression_sheet, overlay
 

@@ -20,23 +20,19 @@ displacement.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import qr, solve_triangular
 
+from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
+from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.muscles import default_muscles, muscle_sections
 from facepuppet.offline.elastic.rigid_parts import rigid_labels
-
-if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
-
-    from facepuppet.offline.elastic.control_points import ControlPoints
 
 MOVED_FRACTION = 0.01
 

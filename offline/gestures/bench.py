@@ -50,6 +50,10 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.bench.registry import load_average
+from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
+from facepuppet.runtime.gestures.synth import GestureSynth
+from facepuppet.runtime.gestures.tables import load_gesture_db
+from facepuppet.runtime.progress import Progress
 
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 
@@ -226,10 +230,7 @@ def _goals(ref, boot, runs, noise):
 
 
 def run_bench(args: argparse.Namespace) -> dict:
-    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
-    from facepuppet.runtime.gestures.synth import GestureSynth
-    from facepuppet.runtime.gestures.tables import load_gesture_db
-
+    # imported here, not at the top: they load scipy.signal and .ndimage, which every `facepuppet` start would pay
     from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
     from facepuppet.offline.gestures.database import build_gesture_db, read_llf_take
     from facepuppet.offline.gestures.speech_intensity import speech_intensity
@@ -263,8 +264,6 @@ def run_bench(args: argparse.Namespace) -> dict:
     ref_takes = [read_llf_take(p, z_all[:cut], fps) for p in llf]
     take_names = list(db.channels["takes"])
     frame_take = np.asarray(db["frame_take"])
-    from facepuppet.runtime.progress import Progress
-
     runs, steps, index_s, occupancy = [], [], [], []
     bar = Progress("bench gestures", total=args.seeds * len(drive), unit="steps")
     for seed in range(args.seed, args.seed + args.seeds):

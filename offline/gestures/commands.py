@@ -22,10 +22,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
-    from facepuppet.runtime.gestures.synth import GestureSynth
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.gestures.layer import GestureLayer
+from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
+from facepuppet.runtime.gestures.synth import GestureSynth
+from facepuppet.runtime.gestures.tables import load_gesture_db
+from facepuppet.runtime.outputs import OutputSet, atomic_path, check_path
+from facepuppet.runtime.recording.session import SessionWriter
+from facepuppet.runtime.render.images import contact_sheet, save_png
+from facepuppet.runtime.tables import save_tables
 
+from facepuppet.offline.io.capture import read_capture
+
+if TYPE_CHECKING:  # the command functions import them when they run (scipy.signal, scipy.ndimage)
     from facepuppet.offline.gestures.detail_transfer import DetailTransfer, MarkerDetail
 
 
@@ -107,10 +117,7 @@ def synthesize(database: str | os.PathLike, speech: str | os.PathLike, seed: int
                style: dict[str, str] | None = None, sigma: float = 0.01, n_candidates: int = 3, history: int = 10,
                stereo: str = "refuse") -> tuple[GestureSynth, np.ndarray, np.ndarray, float]:
     """Synthesised tracks for a WAV; returns (synth, level_db (n,), tracks (n, n_out) float32, seconds)."""
-    from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
-    from facepuppet.runtime.gestures.synth import GestureSynth
-    from facepuppet.runtime.gestures.tables import load_gesture_db
-
+    # imported here, not at the top: it loads scipy.signal, which every `facepuppet` start would pay
     from facepuppet.offline.gestures.speech_intensity import speech_intensity
 
     db = load_gesture_db(database)
@@ -126,6 +133,7 @@ def synthesize(database: str | os.PathLike, speech: str | os.PathLike, seed: int
 
 
 def _build(args: argparse.Namespace) -> int:
+    # imported here, not at the top: it loads scipy.signal and .ndimage, which every `facepuppet` start would pay
     from facepuppet.offline.gestures.database import build_gesture_db
 
     start = time.perf_counter()
@@ -139,11 +147,6 @@ def _build(args: argparse.Namespace) -> int:
 
 
 def _synthesize(args: argparse.Namespace) -> int:
-    from facepuppet.runtime.frames import Frame
-    from facepuppet.runtime.gestures.layer import GestureLayer
-    from facepuppet.runtime.outputs import atomic_path
-    from facepuppet.runtime.recording.session import SessionWriter
-
     synth, level, tracks, seconds = synthesize(args.database, args.speech, args.seed, parse_style(args.style),
                                                args.sigma, args.candidates, args.history, args.stereo)
     fps = float(synth_fps(args.database))
@@ -167,8 +170,6 @@ def _synthesize(args: argparse.Namespace) -> int:
 
 
 def synth_fps(database: str | os.PathLike) -> float:
-    from facepuppet.runtime.gestures.tables import load_gesture_db
-
     return float(load_gesture_db(database).settings.get("fps", 30.0))
 
 
@@ -207,8 +208,6 @@ def plot_tracks(path: str | os.PathLike, level_db: np.ndarray, tracks: np.ndarra
         x = left + s * fps * (width - left - 10) / max(n - 1, 1)
         d.line([(x, y_axis - 5), (x, y_axis)], fill="black")
         d.text((x - 3, y_axis + 2), f"{s}s", fill="black")
-    from facepuppet.runtime.outputs import atomic_path
-
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as temp:
@@ -249,13 +248,13 @@ def transfer_detail(
     ----------
     character : Character; marker_paths : marker takes (same markers in each); landmarks : (68,) int
     """
+    # imported here, not at the top: it loads scipy.ndimage, which every `facepuppet` start would pay
     from facepuppet.offline.gestures.detail_transfer import (
         DetailTransfer,
         detail_character,
         marker_detail,
         place_markers,
     )
-    from facepuppet.offline.io.capture import read_capture
 
     start = time.perf_counter()
     caps = [read_capture(p) for p in marker_paths]
@@ -295,8 +294,7 @@ def render_detail_sheet(character: Character, names: Sequence[str], weight: floa
     import dataclasses
     import math
 
-    from facepuppet.runtime.render.gl_context import create_context
-    from facepuppet.runtime.render.images import contact_sheet
+    from facepuppet.runtime.render.gl_context import create_context  # GL: these import moderngl
     from facepuppet.runtime.render.renderer import FaceRenderer
 
     dense = character.dense_deltas()
@@ -328,11 +326,7 @@ def render_detail_sheet(character: Character, names: Sequence[str], weight: floa
 
 
 def _transfer_detail(args: argparse.Namespace) -> int:
-    from facepuppet.runtime.character import Character
-    from facepuppet.runtime.gestures.tables import load_gesture_db
-    from facepuppet.runtime.outputs import OutputSet, check_path
-    from facepuppet.runtime.tables import save_tables
-
+    # imported here, not at the top: it loads scipy.ndimage, which every `facepuppet` start would pay
     from facepuppet.offline.gestures.detail_transfer import detail_table
 
     if (args.gestures is None) != (args.gestures_out is None):
@@ -374,8 +368,6 @@ def _transfer_detail(args: argparse.Namespace) -> int:
         print(f"{g}: gesture tables with detail weights ({rows} of {len(table)} reference frames from the "
               f"marker takes); run --gestures {g} --character {path} drives the detail shapes")
     if args.pictures is not None:
-        from facepuppet.runtime.render.images import save_png
-
         args.pictures.mkdir(parents=True, exist_ok=True)
         print(f"wrote {save_png(args.pictures / 'detail_shapes.png', sheet)}")
     return 0

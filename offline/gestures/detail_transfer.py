@@ -49,6 +49,7 @@ from scipy.spatial import cKDTree
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.geometry import smoothstep, vertex_normals
+from facepuppet.runtime.tables import Tables
 
 from facepuppet.offline.actuation.stabilise import stabilise
 from facepuppet.offline.actuation.transfer import umeyama
@@ -58,8 +59,6 @@ from facepuppet.offline.gestures.regional_features import STABLE_MARKERS
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
-
-    from facepuppet.runtime.tables import Tables
 
 DETAIL_REGIONS = ("brows", "eyes", "lips", "rest")
 RADIUS_FACTOR = 1.5

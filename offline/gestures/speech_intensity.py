@@ -34,6 +34,7 @@ from fractions import Fraction
 import numpy as np
 from scipy.signal import resample_poly
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.gestures.layer import SILENCE_Z
 from facepuppet.runtime.inputs.audio import read_wav
 
@@ -44,7 +45,7 @@ GATE_MARGIN_DB = 6.0
 GATE_BELOW_PEAKS_DB = 20.0
 
 
-class SpeechInputError(ValueError):
+class SpeechInputError(InputFileError):
     """A speech WAV that cannot be used; the message names the file and says why."""
 
 

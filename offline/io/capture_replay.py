@@ -8,6 +8,8 @@ from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.recording.livelinkface_csv import looks_like_llf_csv
 from facepuppet.runtime.recording.readers import Recording, RecordingReader, register_reader
 
+from facepuppet.offline.io.capture import read_capture
+
 SUFFIXES = (".trc", ".c3d", ".csv")
 
 
@@ -21,8 +23,6 @@ def accepts(path: Path, head: bytes) -> bool:
 
 def read(path: Path) -> Recording:
     """One markers frame per capture frame, at ``i / rate`` s, NaN where occluded after gap filling."""
-    from facepuppet.offline.io.capture import read_capture
-
     capture = read_capture(path)
     names = tuple(capture.names)
     frames = [Frame(t=i / capture.rate, source="markers", markers=capture.markers[i], marker_names=names,

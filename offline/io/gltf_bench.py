@@ -1,8 +1,8 @@
 """``facepuppet bench gltf -c character.npz --json OUT.json``: export (and re-import) times of a character as GLB.
 
 Each repeat writes the character as a GLB into a temporary folder (build, PNG
-encoding, GLB packing, atomic write), runs the structural check on it, and,
-when the glTF reader is installed, imports it again. Medians and the worst
+encoding, GLB packing, atomic write), runs the structural check on it and
+imports it again. Medians and the worst
 repeat are reported against the issue's goal (export and import of the ICT
 head as GLB, 26k vertices and 57 morph targets, under 3 s each).
 """
@@ -10,13 +10,18 @@ head as GLB, 26k vertices and 57 morph targets, under 3 s each).
 from __future__ import annotations
 
 import argparse
-import importlib
 import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+
+from facepuppet.runtime.character import Character
+
+from facepuppet.offline.io.gltf.read import read_gltf
+from facepuppet.offline.io.gltf.write import export_character
+from facepuppet.offline.io.gltf_check import check_gltf
 
 GOAL_S = 3.0
 
@@ -27,18 +32,9 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run_bench(args: argparse.Namespace) -> dict:
-    from facepuppet.runtime.character import Character
-
-    from facepuppet.offline.io.gltf_check import check_gltf
-    from facepuppet.offline.io.gltf_export import export_character
-
     if args.repeats < 1:
         raise ValueError(f"--repeats {args.repeats}: must be at least 1")
     character = Character.load(args.character)
-    try:
-        reader = importlib.import_module("facepuppet.offline.io.gltf_read")
-    except ModuleNotFoundError:
-        reader = None
     times: dict[str, list[float]] = {"export_s": [], "check_s": [], "import_s": []}
     size, problems = 0, []
     with tempfile.TemporaryDirectory(prefix="bench-gltf-") as tmp:
@@ -50,10 +46,9 @@ def run_bench(args: argparse.Namespace) -> dict:
             t = time.perf_counter()
             problems = check_gltf(out)
             times["check_s"].append(time.perf_counter() - t)
-            if reader is not None:
-                t = time.perf_counter()
-                reader.read_gltf(out)
-                times["import_s"].append(time.perf_counter() - t)
+            t = time.perf_counter()
+            read_gltf(out)
+            times["import_s"].append(time.perf_counter() - t)
             size = out.stat().st_size
             out.unlink()
     result: dict = {"character": str(args.character), "n_vertices": character.n_vertices,
@@ -65,8 +60,6 @@ def run_bench(args: argparse.Namespace) -> dict:
             result[key] = {"median": float(np.median(values)), "max": float(np.max(values))}
         else:
             result[key] = None
-    if reader is None:
-        result["import_note"] = "the glTF reader (offline/io/gltf_read.py) is not installed: import not timed"
     for key in ("export_s", "import_s"):
         if result[key] is not None:
             result[key]["meets_goal"] = result[key]["median"] < GOAL_S

@@ -5,7 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from facepuppet.runtime.character import Character
 from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.progress import Progress
+
+from facepuppet.offline.io.gltf.write import describe, export_character
+from facepuppet.offline.io.gltf_check import check_gltf
 
 
 class GltfProblems(FacepuppetError, ValueError):
@@ -37,12 +42,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from facepuppet.runtime.character import Character
-    from facepuppet.runtime.progress import Progress
-
-    from facepuppet.offline.io.gltf_check import check_gltf
-    from facepuppet.offline.io.gltf_export import describe, export_character
-
     character = Character.load(args.character)
     # a progress line for big characters (drawn only on a terminal, as every command's)
     bar = Progress("export-character", unit="primitives", enabled=None if character.n_vertices > 20000 else False)
@@ -64,8 +63,6 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from facepuppet.offline.io.gltf_check import check_gltf
-
     problems = check_gltf(args.file)
     for p in problems:
         print(f"{args.file}: {p}")

@@ -45,6 +45,8 @@ import numpy as np
 
 from facepuppet.runtime.errors import InputFileError
 
+from facepuppet.offline.io.mesh_format import sniff_mesh_format
+
 GLB_MAGIC = b"glTF"
 CHUNK_JSON = 0x4E4F534A
 CHUNK_BIN = 0x004E4942
@@ -66,8 +68,6 @@ class GltfError(InputFileError):
 
 def is_gltf_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is glTF: a ``.gltf``/``.glb``/``.vrm`` name, GLB magic, or glTF JSON text."""
-    from facepuppet.offline.io.mesh_format import sniff_mesh_format
-
     path = Path(path)
     if path.suffix.lower() in (".gltf", ".glb", ".vrm"):
         return True

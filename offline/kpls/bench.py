@@ -13,14 +13,28 @@ import argparse
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.offline.bench_data import add_data_argument, data_dir
+from facepuppet.runtime.character import Character
+from facepuppet.runtime.demo.head import build_demo_character
+from facepuppet.runtime.kpls.stage import KplsRetarget
+from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 
-if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
+from facepuppet.offline.bench_data import add_data_argument, data_dir
+from facepuppet.offline.io.rig_import import import_rig
+from facepuppet.offline.kpls.commands import fit_kpls, to_runtime
+from facepuppet.offline.kpls.cyclic_eval import (
+    bar_plot,
+    default_methods,
+    evaluate,
+    format_table,
+    improvements,
+    motion_weights,
+)
+from facepuppet.offline.kpls.pairs import match_matrix
+from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
 
 
 def _add_arguments(parser) -> None:
@@ -39,10 +53,6 @@ def real_take_channels(source: Character, targets: dict, frames: list, log: Call
     and that the take moves (source peak >= 0.05): peak ratio and correlation r. Goals: identity
     within 0.02 on the identical character; elsewhere peak within 15 % and r >= 0.95.
     """
-    from facepuppet.offline.kpls.commands import fit_kpls, to_runtime
-    from facepuppet.offline.kpls.cyclic_eval import motion_weights
-    from facepuppet.offline.kpls.pairs import match_matrix
-
     W = motion_weights(frames, source)
     frames = [f for f in frames if f.weights is not None]
     out = {}
@@ -80,10 +90,6 @@ def real_take_channels(source: Character, targets: dict, frames: list, log: Call
 
 
 def _runtime_timing(source, target, frames, log) -> dict:
-    from facepuppet.runtime.kpls.stage import KplsRetarget
-
-    from facepuppet.offline.kpls.commands import fit_kpls, to_runtime
-
     model, pairs = fit_kpls(source, target, label="bench kpls: runtime stage")  # fit-retarget's defaults
     stage = to_runtime(model, pairs, source, target)
     import tempfile
@@ -110,13 +116,6 @@ def _runtime_timing(source, target, frames, log) -> dict:
 
 
 def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> dict:
-    from facepuppet.runtime.demo.head import build_demo_character
-    from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
-
-    from facepuppet.offline.io.rig_import import import_rig
-    from facepuppet.offline.kpls.cyclic_eval import bar_plot, evaluate, format_table, improvements, motion_weights
-    from facepuppet.offline.kpls.targets import ExaggeratedRigTarget, LinearRigTarget, WarpedSourceTarget, stylise
-
     data = data_dir(args.data)
     ict_dir = data / "ict-facekit"
     take = data / "tracker" / args.take
@@ -139,10 +138,6 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     log(f"bench kpls: {take.name}, {len(motion)} frames driving the ICT head; targets: {', '.join(targets)} "
         f"(setup {time.perf_counter() - t0:.1f} s)")
     from threadpoolctl import threadpool_limits
-
-    from facepuppet.runtime.progress import Progress
-
-    from facepuppet.offline.kpls.cyclic_eval import default_methods
 
     # one row per (target, method) fit, the spatial Dutreve method included; the rows' lines are results
     with Progress("bench kpls: cyclic error", len(targets) * (len(default_methods()) + 1), unit="fits") as bar:

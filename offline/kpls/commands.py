@@ -12,19 +12,16 @@ import argparse
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from facepuppet.runtime.character import Character
 from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.pairs import TrainingPairs, expression_pairs, match_matrix, pair_weights, read_pairing
-
-if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
 
 
 def to_runtime(model: KernelPLS, pairs: TrainingPairs, source: Character, target: Character,
@@ -159,8 +156,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def fit_retarget_command(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:
     """Run ``fit-retarget`` from parsed ``args``; returns the exit code."""
-    from facepuppet.runtime.character import Character
-
     start = time.perf_counter()
     source, target = Character.load(args.source), Character.load(args.target)
     pairing = read_pairing(args.pairing) if args.pairing is not None else None

@@ -24,21 +24,18 @@ import os
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.frames import Frame
 
 from facepuppet.offline.kpls.baselines import KernelRidgeRetarget, LinearPLS, LinearRetarget, PairRBF, PCARBFRetarget
 from facepuppet.offline.kpls.dutreve_rbf import DutreveRBF, corresponding_vertices
 from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.pairs import feature_matrix, feature_points, moving_region, pair_weights
 from facepuppet.offline.kpls.targets import stylise  # noqa: F401  (kept importable from here)
-
-if TYPE_CHECKING:
-    from facepuppet.runtime.frames import Frame
 
 REFERENCE = "KPLS rbf"
 DUTREVE = "Dutreve spatial RBF"

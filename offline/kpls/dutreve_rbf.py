@@ -32,13 +32,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
+from facepuppet.runtime.character import Character
+
 from facepuppet.offline.kpls.model import check_inputs
 from facepuppet.offline.kpls.pairs import moving_region
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
-
-    from facepuppet.runtime.character import Character
 
 
 def corresponding_vertices(a: Character, b: Character, idx_a: np.ndarray) -> np.ndarray:

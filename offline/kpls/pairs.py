@@ -49,12 +49,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap, canonical
-from facepuppet.runtime.character import moving_vertices
+from facepuppet.runtime.character import Character, moving_vertices
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
-
-    from facepuppet.runtime.character import Character
 
 
 def moving_region(character: Character, fraction: float = 0.05) -> np.ndarray:

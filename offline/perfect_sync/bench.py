@@ -32,8 +32,17 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.progress import Progress
 
 from facepuppet.offline.bench_data import add_data_argument, data_dir
+from facepuppet.offline.io.gltf.read import read_gltf
+from facepuppet.offline.io.rig_import import import_rig
+from facepuppet.offline.kpls.targets import stylise
+from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
+from facepuppet.offline.perfect_sync.evaluate import godette_pairs, truth_errors
+from facepuppet.offline.perfect_sync.face import find_face
+from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
+from facepuppet.offline.perfect_sync.source import fit_kit_source
 
 GOAL_MEDIAN, GOAL_WORST, GOAL_COSINE = 0.15, 0.40, 0.7
 GOAL_GODETTE_S, GOAL_30K_S = 30.0, 120.0
@@ -70,8 +79,6 @@ def _summary(errs: dict) -> dict:
 def _sheet(args: argparse.Namespace, character: Character, report: dict, label: str) -> None:
     if not getattr(args, "pictures", None):
         return
-    from facepuppet.offline.perfect_sync.pictures import shape_sheet
-
     args.pictures.mkdir(parents=True, exist_ok=True)
     print(f"bench perfect-sync: {shape_sheet(character, report['added'], args.pictures / f'{label}_shapes.png')}")
 
@@ -83,8 +90,6 @@ def _side_by_side(args: argparse.Namespace, original: Character, synced: Charact
     if not take.exists():
         print(f"bench perfect-sync: no side-by-side picture: {take} not in the data kit")
         return None
-    from facepuppet.offline.perfect_sync.pictures import take_side_by_side
-
     args.pictures.mkdir(parents=True, exist_ok=True)
     path = take_side_by_side(original, synced, take, args.pictures / "godette_llf_side_by_side.png")
     print(f"bench perfect-sync: {path} (top: {take.name} through the VRM presets, bottom: perfect sync)")
@@ -92,16 +97,6 @@ def _side_by_side(args: argparse.Namespace, original: Character, synced: Charact
 
 
 def run_bench(args: argparse.Namespace) -> dict:
-    from facepuppet.runtime.progress import Progress
-
-    from facepuppet.offline.io.gltf_read import read_gltf
-    from facepuppet.offline.io.rig_import import import_rig
-    from facepuppet.offline.kpls.targets import stylise
-    from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
-    from facepuppet.offline.perfect_sync.evaluate import godette_pairs, truth_errors
-    from facepuppet.offline.perfect_sync.face import find_face
-    from facepuppet.offline.perfect_sync.source import fit_kit_source
-
     kit = data_dir(args.data)
     ict = import_rig(kit / "ict-facekit" / "generic_neutral_mesh.obj", kit / "ict-facekit")
     if args.source:

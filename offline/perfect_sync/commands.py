@@ -11,11 +11,16 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.outputs import OutputSet
 from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.recording.replay_source import open_recording
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import FaceError, find_face
-from facepuppet.offline.perfect_sync.proposal import doubts, fapu_of, picture, propose, read_landmarks
+from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
+from facepuppet.offline.perfect_sync.pieces import find_pieces
+from facepuppet.offline.perfect_sync.proposal import doubts, fapu_of, picture, propose, read_landmarks, skin_triangles
+from facepuppet.offline.perfect_sync.source import default_source
 from facepuppet.offline.perfect_sync.transfer import add_shapes, clone_face
 
 #: a cloned shape moving a vertex this many inner-eye distances (ES, the FAPU of the cloning) is reported; the
@@ -37,9 +42,6 @@ def load_source(path: str | os.PathLike) -> ElasticModel:
 def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | None = None,
                  replace: bool = False, progress: Progress | None = None) -> tuple[Character, dict, ControlPoints]:
     """(character with the ARKit shapes, report, control points used); see the module doc."""
-    from facepuppet.offline.perfect_sync.pieces import find_pieces
-    from facepuppet.offline.perfect_sync.proposal import skin_triangles
-
     face = find_face(character)
     names = tuple(source.control_names)
     pieces = find_pieces(character.vertices, face, skin_triangles(face))  # decal features place the points
@@ -71,15 +73,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.take is not None and not args.sheet:
         raise ValueError("--take: needs --pictures DIR --sheet (the side-by-side picture is one of the sheets)")
     if args.take is not None:
-        from facepuppet.runtime.recording.replay_source import open_recording
-
         open_recording(args.take)  # a take that cannot be read is refused before the work, nothing written
     character = Character.load(args.character)
     if args.source is not None:
         source = load_source(args.source)
     else:
-        from facepuppet.offline.perfect_sync.source import default_source
-
         source = default_source(args.data)
     with Progress("perfect-sync", total=None, unit="shapes") as bar:
         try:
@@ -88,8 +86,6 @@ def _run(args: argparse.Namespace) -> int:
             text, own = str(exc), f"{character.name}: "
             raise FaceError(f"{args.character} ({character.name!r}): {text.removeprefix(own)}"
                             if text.startswith(own) else f"{args.character}: {text}") from None
-    from facepuppet.runtime.outputs import OutputSet
-
     with OutputSet() as outputs:
         out.save(outputs.path(args.output))
     if args.pictures:
@@ -99,16 +95,12 @@ def _run(args: argparse.Namespace) -> int:
         bad = [n for d in report["doubts"] for n in d["points"]]
         print(picture(args.pictures / "landmarks.png", character.vertices, face, points, bad))
         (args.pictures / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-        from facepuppet.runtime.render.gl_context import GLUnavailable
-
-        from facepuppet.offline.perfect_sync.pictures import shape_sheet
+        from facepuppet.runtime.render.gl_context import GLUnavailable  # GL: importing it loads moderngl
 
         if args.sheet:
             try:
                 print(shape_sheet(out, report["added"] + report["replaced"], args.pictures / "shapes.png"))
                 if args.take is not None:
-                    from facepuppet.offline.perfect_sync.pictures import take_side_by_side
-
                     side = take_side_by_side(character, out, args.take, args.pictures / "side_by_side.png")
                     print(f"{side} (top: {args.take.name} on the character as it was, bottom: perfect sync)")
             except GLUnavailable as exc:

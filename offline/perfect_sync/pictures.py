@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -11,8 +10,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from PIL import Image
 
+from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
+from facepuppet.runtime.live.stages import build_chain
+from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
 from facepuppet.runtime.render.images import contact_sheet, save_png, with_footer
+from facepuppet.runtime.session.options import StageOptions
 
 if TYPE_CHECKING:
     import moderngl
@@ -22,7 +26,7 @@ def shape_images(character: Character, names: Sequence[str], ctx: moderngl.Conte
                  size: tuple[int, int] = (240, 240)) -> list[tuple[str, np.ndarray]]:
     """[(label, (h, w, 3) uint8)]: the neutral, then each named shape at weight 1, all cropped to the square
     around every pixel any of them changes (grown by a third), so that small features fill the cells."""
-    from facepuppet.runtime.render.renderer import FaceRenderer
+    from facepuppet.runtime.render.renderer import FaceRenderer  # GL: the renderer imports moderngl
 
     zoom = 4
     renderer = FaceRenderer(ctx, character, size[0] * zoom, size[1] * zoom, framing="face", log=lambda line: None)
@@ -62,7 +66,7 @@ def shape_sheet(character: Character, names: Sequence[str], path: str | os.PathL
     if own:
         import moderngl
 
-        from facepuppet.runtime.render.gl_context import GLUnavailable
+        from facepuppet.runtime.render.gl_context import GLUnavailable  # GL: importing it loads moderngl
 
         try:
             ctx = moderngl.create_standalone_context(backend="egl", require=330)
@@ -90,8 +94,6 @@ ACTIVE = (*PRESET_BLIND, "jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthFunne
 def take_moments(frames: Sequence, n: int = 8) -> list[int]:
     """Indices of ``n`` frames spread over a take: in each of ``n`` equal spans of its time, the frame where the
     channels of :data:`ACTIVE` (what the presets cannot show, the jaw, the blinks) add up highest."""
-    from facepuppet.runtime.channels import canonical
-
     if not frames:
         raise ValueError("take_moments: the take has no frames")
     wanted = {canonical(k) for k in ACTIVE}
@@ -118,8 +120,8 @@ class _GrabSink:
     def __init__(self) -> None:
         self.images: list[np.ndarray] = []
 
-    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame, renderer) -> None:
-        self.images.append(np.array(renderer.read_pixels(), copy=True))
+    def __call__(self, info) -> None:
+        self.images.append(np.array(info.renderer.read_pixels(), copy=True))
 
 
 def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence[int], fps: float,
@@ -129,25 +131,20 @@ def replay_images(character: Character, take: str | os.PathLike, ticks: Sequence
     source, stage chain, channel map and renderer; no filter stage, as replay of a CSV by default), framed on
     the face of ``camera_from`` (default: ``character``) so two characters are seen from one camera; and the
     deformation path they were drawn on (``path``; "auto": the faster, as replay chooses)."""
-    from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
-    from facepuppet.runtime.live.stages import build_chain
-    from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
-
     quiet = lambda line: None  # noqa: E731
     source = ReplaySource(open_recording(take), max_gap=DEFAULT_MAX_GAP_S)
-    chain = build_chain(argparse.Namespace(character=None), character, None, filtered=False, label="replay",
-                        log=quiet)
+    chain = build_chain(StageOptions(), character, None, filtered=False, label="replay", log=quiet)
     renderer = chain.renderer(ctx, character, size[0], size[1], path, None, quiet, framing="face")
     if camera_from is not None and camera_from is not character:
-        from facepuppet.runtime.render.renderer import FaceRenderer
+        from facepuppet.runtime.render.renderer import FaceRenderer  # GL: the renderer imports moderngl
 
         probe = FaceRenderer(ctx, camera_from, size[0], size[1], framing="face", log=quiet)
         renderer.camera = probe.camera  # the same view of the same head (both are one mesh, one pose)
         probe.close()
     grab = _GrabSink()
     try:
-        FrameLoop(chain.names, renderer, RecordedClock(), sinks=[grab], fps=fps, log=quiet, stages=chain.stages,
-                  drive=chain.drive).run(source, ticks=list(ticks))
+        FrameLoop(chain.names, renderer, RecordedClock(), observers=[grab], fps=fps, log=quiet, stages=chain.stages,
+                  mapper=chain.mapper).run(source, ticks=list(ticks))
     finally:
         renderer.close()
     return grab.images, renderer.path
@@ -162,8 +159,6 @@ def take_side_by_side(original: Character, synced: Character, take: str | os.Pat
     name, labelled "as imported"); each cell labelled with the take time. Both rows are
     drawn by the replay's own chain and seen from one camera (the synced character's face framing).
     Returns the path; GLUnavailable without a headless EGL context."""
-    from facepuppet.runtime.recording.replay_source import open_recording
-
     frames = open_recording(take)
     picked = take_moments(frames, moments)
     ticks = sorted({int(np.ceil(frames[i].t * fps - 1e-9)) for i in picked})
@@ -194,7 +189,7 @@ def take_side_by_side(original: Character, synced: Character, take: str | os.Pat
 def _standalone() -> moderngl.Context:
     import moderngl
 
-    from facepuppet.runtime.render.gl_context import GLUnavailable
+    from facepuppet.runtime.render.gl_context import GLUnavailable  # GL: importing it loads moderngl
 
     try:
         return moderngl.create_standalone_context(backend="egl", require=330)

@@ -44,8 +44,9 @@ from scipy.spatial import cKDTree
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.elastic.control_points import ControlPoints, read_control_points
-from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, fix_inner_lips, mouth_slit
+from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, boundary_loops, fix_inner_lips, mouth_slit
 from facepuppet.offline.perfect_sync.face import Face
+from facepuppet.offline.perfect_sync.landmark_field import EYE_NAMES, MOUTH_NAMES, feature_places
 from facepuppet.offline.perfect_sync.pieces import Pieces
 
 START_SCALES = (0.6, 0.8, 1.0, 1.25, 1.6)
@@ -128,14 +129,12 @@ def fit_points(source_positions: np.ndarray, source_names: Sequence[str], vertic
 def _decal_proposal(names: tuple, source_positions: np.ndarray, vertices: np.ndarray, face: Face,
                     pieces: Pieces) -> tuple[ControlPoints, np.ndarray] | None:
     """On a decal face (:func:`~.pieces.find_pieces` found its eyes or mouth drawn on pieces in front of a skin
-    with no openings), the points where the features are: each at the place :func:`~.pieces.feature_places`
+    with no openings), the points where the features are: each at the place :func:`~.landmark_field.feature_places`
     gives it (eye points by the eye's box of corners and lids, mouth points by the mouth's corners and line, the
     others by the affine map these define), on the nearest vertex (across the face's front) of what draws it:
     the eye's pieces for the eye's corners and lids, the mouth's pieces for the lips (the upper lip's above the
     mouth's line, the lower's below it), the pieces on the skin or the skin for the brows, the detected nose tip,
     the forward-facing skin for the rest. None when the features place fewer than 3 points."""
-    from facepuppet.offline.perfect_sync.pieces import EYE_NAMES, MOUTH_NAMES, feature_places
-
     pos, _, placed = feature_places(pieces, source_positions, names)
     if placed.sum() < 3:
         return None
@@ -264,7 +263,7 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
 
     With decal ``pieces`` (:func:`~.pieces.find_pieces`), the surface is the skin and what is drawn on it (the
     decal eyes, mouth and the pieces lying on the skin), and inner lips on a decal mouth need not have an opening
-    between them (the drawn mouth opens along its line, :func:`~.pieces.feature_field`)."""
+    between them (the drawn mouth opens along its line, :func:`~.landmark_field.feature_field`)."""
     v = np.asarray(vertices, np.float64)
     local = face.to_frame(v[points.vertices])
     es = max(fapu_of(points, v), 1e-12)
@@ -325,8 +324,6 @@ def holes(points: ControlPoints, vertices: np.ndarray, face: Face) -> list[dict]
     of it (a face mask's own border is not a hole), that are not an eye or the mouth opening (their centre
     more than an inner-eye distance from the eye corners' and the mouth corners' mid-points), each naming
     the control point nearest to it."""
-    from facepuppet.offline.elastic.lip_line import boundary_loops
-
     v = np.asarray(vertices, np.float64)
     es = max(fapu_of(points, v), 1e-12)
     local_points = face.to_frame(v[points.vertices])

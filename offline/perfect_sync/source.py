@@ -20,9 +20,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.outputs import OutputSet
 from facepuppet.runtime.tables import TablesError
 
 from facepuppet.offline.bench_data import ENV
+from facepuppet.offline.elastic.commands import main_front
+from facepuppet.offline.elastic.control_points import ict_control_points
+from facepuppet.offline.elastic.params import fit_character
+from facepuppet.offline.io.rig_import import import_rig
 
 KIT_FOLDER = "ict-facekit"
 NEUTRAL = "generic_neutral_mesh.obj"
@@ -62,11 +67,6 @@ def _key(folder: Path) -> str:
 
 def fit_kit_source(folder: Path) -> ElasticModel:
     """fit-elastic of the ICT head in ``folder`` with the kit's control points (no muscles)."""
-    from facepuppet.offline.elastic.commands import main_front
-    from facepuppet.offline.elastic.control_points import ict_control_points
-    from facepuppet.offline.elastic.params import fit_character
-    from facepuppet.offline.io.rig_import import import_rig
-
     ict = import_rig(folder / NEUTRAL, folder)
     marks = json.loads((folder / LANDMARKS).read_text(encoding="utf-8"))
     points = ict_control_points(marks["idx_to_landmark_verts"], ict.vertices, ict.triangles, main_front(ict))
@@ -86,8 +86,6 @@ def default_source(data: str | os.PathLike | None = None, log: Callable[[str], N
             log(f"perfect-sync: the cached source {path} does not load ({exc}); fitting it again")
     log(f"perfect-sync: source: fitting the ICT head of {folder} (once; kept in {path.parent})")
     model = fit_kit_source(folder)
-    from facepuppet.runtime.outputs import OutputSet
-
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with OutputSet() as outputs:

@@ -37,9 +37,16 @@ from facepuppet.runtime.geometry import vertex_normals
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
 from facepuppet.offline.elastic.clone import clone_model
 from facepuppet.offline.elastic.control_points import ControlPoints
+from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.params import build_model
+from facepuppet.offline.perfect_sync.drawn_eyes import decal_blink, decal_narrow, lid_fractions
+from facepuppet.offline.perfect_sync.eye_looks import decal_look_slide, look_expressions, look_keys
 from facepuppet.offline.perfect_sync.face import Face
-from facepuppet.offline.perfect_sync.pieces import Pieces, look_expressions
+from facepuppet.offline.perfect_sync.landmark_field import feature_field, lip_line_motion
+from facepuppet.offline.perfect_sync.on_skin import embed
+from facepuppet.offline.perfect_sync.pieces import Pieces, find_pieces
+from facepuppet.offline.perfect_sync.proposal import skin_triangles
+from facepuppet.offline.perfect_sync.triangles import nearest_triangles
 
 CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between the lid points
 # An eye look at weight 1 turns the eyeball this far (sideways, up or down). The source's shapes do not say
@@ -98,8 +105,6 @@ def eyeballs(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints)
     their mid-point. A character whose eyes are flat decals or part of the skin has none, and its eye
     looks stay skin-only.
     """
-    from facepuppet.offline.elastic.laplacian import components
-
     v = np.asarray(vertices, np.float64)
     t = np.asarray(triangles, np.int64)
     need = ("eye_inner_L", "eye_outer_L", "eye_inner_R", "eye_outer_R")
@@ -293,8 +298,6 @@ def mouth_parts(vertices: np.ndarray, triangles: np.ndarray, skin: np.ndarray, m
     ``forward``; not the lips' inner sides, which the true shapes press onto the teeth) within a third of the
     ball's radius of them and outside them at rest, those vertices' rest clearance), or None when there are none.
     """
-    from facepuppet.offline.elastic.laplacian import components
-
     if mouth is None:
         return None
     v = np.asarray(vertices, np.float64)
@@ -320,8 +323,6 @@ def mouth_parts(vertices: np.ndarray, triangles: np.ndarray, skin: np.ndarray, m
 def _surface_push(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> tuple:
     """(signed distance along the nearest triangle's normal, distance, that normal) of ``points`` to the
     surface of ``triangles``."""
-    from facepuppet.offline.perfect_sync.pieces import nearest_triangles
-
     tri_i, bary, dist = nearest_triangles(points, vertices, triangles)
     tri = vertices[triangles[tri_i]]
     closest = (bary[:, :, None] * tri).sum(1)
@@ -356,22 +357,11 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
     keep their motion, except that on a decal face the jaw found from the skin's points is not trusted: what of it
     the field does not move stays. A piece centred within the ``mouth`` ball (centre, radius) is the inside of
     the mouth (ICT's upper teeth lie within 0.8 cm of the mouth's skin): it keeps its motion too. A decal eye
-    closes, narrows and looks as a drawn eye does (:func:`~.pieces.decal_blink`, :func:`~.pieces.decal_narrow`,
+    closes, narrows and looks as a drawn eye does (:func:`~.drawn_eyes.decal_blink`, :func:`~.drawn_eyes.decal_narrow`,
     :func:`decal_eye_looks`, the last from the character's own look expressions ``looks`` where it has them).
 
     Returns {"decal_eyes": sides, "decal_mouth": bool, "carried_vertices": n, "field_vertices": n} and, on a decal
     face, "eye_looks": where each decal eye's look came from (:func:`decal_eye_looks`)."""
-    from facepuppet.offline.perfect_sync.pieces import (
-        decal_blink,
-        decal_narrow,
-        embed,
-        feature_field,
-        find_pieces,
-        lid_fractions,
-        lip_line_motion,
-    )
-    from facepuppet.offline.perfect_sync.proposal import skin_triangles
-
     skin_t = skin_triangles(face)
     pieces = find_pieces(vertices, face, skin_t, still=eyeballs)
     features = pieces.feature_vertices
@@ -447,19 +437,17 @@ def _mouth_ball(points: ControlPoints, vertices: np.ndarray) -> tuple | None:
 def decal_eye_looks(dense: np.ndarray, names: tuple[str, ...], vertices: np.ndarray, face: Face,
                     pieces: Pieces, looks: dict | None = None) -> dict:
     """The eye looks of a decal eye (in place in ``dense``), as a drawn eye looks: only what lies inside the eye
-    (:func:`~.pieces.eye_inside`: iris, pupil, highlights, the white) moves; the outline, the lashes, the other
+    (:func:`~.drawn_eyes.eye_inside`: iris, pupil, highlights, the white) moves; the outline, the lashes, the other
     eye, the mouth and everything else the landmark field moved stay.
 
-    Where the character has its own look expression for the look (``looks``: :func:`~.pieces.look_expressions`;
-    which ARKit look of which eye each is, by where it moves that eye's iris: :func:`~.pieces.look_keys`), the
+    Where the character has its own look expression for the look (``looks``: :func:`~.eye_looks.look_expressions`;
+    which ARKit look of which eye each is, by where it moves that eye's iris: :func:`~.eye_looks.look_keys`), the
     look is that expression's part on the eye's inside: from the character's lookAt, not cloned (Godette:
     eyeLookUpLeft is the left eye's part of her ``look_up``; her ``look_down`` also lowers the lashes, which is
     left out, so that a closed eye looking down stays a line). Otherwise the inside slides
-    (:func:`~.pieces.decal_look_slide`) as the front of a ball of half the eye's width would move turned by
+    (:func:`~.eye_looks.decal_look_slide`) as the front of a ball of half the eye's width would move turned by
     ``EYE_LOOK_DEGREES``, held inside the outline. Returns {ARKit key: "<preset> (the character's lookAt)" or
     "slid"} for each look given to a decal eye."""
-    from facepuppet.offline.perfect_sync.pieces import decal_look_slide, look_keys
-
     if not pieces.eyes:
         return {}
     own = look_keys(looks or {}, pieces, face, vertices)

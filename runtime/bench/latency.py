@@ -49,11 +49,13 @@ import subprocess
 import sys
 import threading
 import time
-from types import SimpleNamespace
+from dataclasses import replace
 
 import numpy as np
 
-from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench
+from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench, session_log
+from facepuppet.runtime.commands.run import plan_from_argv, run_live
+from facepuppet.runtime.session.options import PanelOptions
 
 _PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2**20 if hasattr(os, "sysconf") else 4096 / 2**20
 
@@ -267,9 +269,8 @@ def send(host: str, port: int, rate: float, seconds: float, kind: str = "vmc") -
     return k
 
 
-def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> dict:
+def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
     """One sender process at ``rate`` for ``seconds`` against one headless live run."""
-    from facepuppet.runtime.commands.run import run_live
 
     kind = getattr(args, "input", "vmc")
     probe = SENDERS[kind]("127.0.0.1", 9)  # datagrams per frame (VMC: status + the blend bundles); sends nothing
@@ -293,12 +294,12 @@ def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> 
         phone = f"127.0.0.1:{first[1]}"
     # the run stops shortly after the sender process ends (its start-up time varies with load);
     # the duration is only a safety net
-    run_args = SimpleNamespace(
-        character=args.character, input=kind, listen=f"127.0.0.1:{port}", allow=None, config=None, phone=phone,
-        calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False, headless=True,
-        out=None, dump_weights=None, size=args.size, fps=args.fps, duration=3 * seconds + 60, path=args.path,
-        receiver=getattr(args, "receiver", "process"), draw=getattr(args, "draw", "arrival"),
-        panel=panel is not None, panel_hidden=panel == "hidden")
+    argv = ["-c", str(args.character), "--input", kind, "--listen", f"127.0.0.1:{port}", "--headless",
+            "--size", args.size, "--fps", repr(float(args.fps)), "--duration", repr(3 * seconds + 60),
+            "--path", args.path, "--receiver", getattr(args, "receiver", "process"),
+            "--draw", getattr(args, "draw", "arrival"), *(["--phone", phone] if phone else []),
+            *(["--panel"] if panel is not None else [])]
+    plan = replace(plan_from_argv(argv), panel=PanelOptions(panel is not None, hidden=panel == "hidden"))
     stop = threading.Event()
     sender_out: list[str] = []
     rss: list[tuple[float, float]] = []
@@ -346,8 +347,7 @@ def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> 
             t_first_last[1] = info.stamps[4]
 
     try:
-        result = run_live(run_args, log=log, stop_event=stop, on_ready=on_ready, hooks=[sample],
-                          on_panel=shown_panel.append)
+        result = run_live(plan, stop_event=stop, on_ready=on_ready, hooks=[sample], on_panel=shown_panel.append)
     finally:
         for proc in procs:
             proc.kill()
@@ -404,8 +404,8 @@ def _phase(args, rate: float, seconds: float, log, panel: str | None = None) -> 
         "frames_drawn": int(e2e.size),
         "ticks": result.loop.n_ticks,
         "new_frames_drawn_per_s": float(e2e.size / drawing_s) if drawing_s > 0 else math.nan,
-        "receiver": run_args.receiver,
-        "draw": run_args.draw,
+        "receiver": plan.inputs.receiver,
+        "draw": plan.pacing.draw,
         "waited_over_1ms": udp.get("waited_over_1ms", None),
         "stale_dropped": result.loop.counters["stale_dropped"],
         "late_ticks": result.loop.counters["late_ticks"],
@@ -461,7 +461,6 @@ def _percentiles(ms: np.ndarray) -> dict:
 
 
 def bench_latency(args: argparse.Namespace) -> dict:
-    log = print if args.verbose else (lambda s: None)
     kind = getattr(args, "input", "vmc")
     results = {"character": str(args.character), "size": args.size, "fps": args.fps,
                "draw": getattr(args, "draw", "arrival"), "input": kind}
@@ -470,15 +469,18 @@ def bench_latency(args: argparse.Namespace) -> dict:
           f"handle() p50 {d['p50_us']:.1f} us, "
           f"p99 {d['p99_us']:.1f} us, max {d['max_us']:.1f} us; per frame ({d['datagrams_per_frame']} datagrams) "
           f"p50 {d['per_frame_p50_us']:.1f} us, p99 {d['per_frame_p99_us']:.1f} us")
-    results["nominal"] = _phase(args, args.rate, args.seconds, log)
+    with session_log(args.verbose):
+        results["nominal"] = _phase(args, args.rate, args.seconds)
     _print("nominal", results["nominal"])
     m = results["map_step"] = map_step_cost(args.character)
     print(f"  map step alone ({m['map']}, {m['channels']} channels -> {m['shapes']} shapes, "
           f"{m['expressions']} expressions): p50 {m['p50_us']:.1f} µs, p99 {m['p99_us']:.1f} µs over {m['n']}")
     if getattr(args, "panel", False):
-        _panel_phases(args, results, log)
+        with session_log(args.verbose):
+            _panel_phases(args, results)
     if args.flood:
-        results["flood"] = _phase(args, args.rate * args.flood_factor, args.flood_seconds, log)
+        with session_log(args.verbose):
+            results["flood"] = _phase(args, args.rate * args.flood_factor, args.flood_seconds)
         _print("flood", results["flood"])
         rss = results["flood"]["rss_mb_per_second"]
         if len(rss) > 2:
@@ -486,14 +488,14 @@ def bench_latency(args: argparse.Namespace) -> dict:
     return results
 
 
-def _panel_phases(args, results: dict, log) -> None:
+def _panel_phases(args, results: dict) -> None:
     """``--panel``: one run whose ticks alternate the panel shown and hidden (Tab every tick), so that both
     modes meet the same load; what the panel adds per tick on the CPU (snapshot + stages + map + draw
     submit, the panel's build and submit included: p50/p99 of the shown ticks less those of the hidden
     ones) and in the GPU wait (on llvmpipe the rasterising of the panel's triangles happens there). Every
     shown tick builds an ImGui frame (the one before was hidden), so this is the panel's dearest case;
     a run showing it throughout reuses the last frame on ticks closer than 1/REBUILD_HZ."""
-    results["panel_alternate"] = r = _phase(args, args.rate, args.seconds, log, panel="alternate")
+    results["panel_alternate"] = r = _phase(args, args.rate, args.seconds, panel="alternate")
     _print("panel alternating shown/hidden", r)
     inter = r.get("interleaved")
     if inter is None:

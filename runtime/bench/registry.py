@@ -11,8 +11,10 @@ Benchmarks are code, not timed tests: they print medians and write JSON.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import logging
 import os
 import platform
 import resource
@@ -39,6 +41,20 @@ class Bench:
 
 _REGISTRY: dict[str, Bench] = {}
 _LOADED = False
+
+
+@contextlib.contextmanager
+def session_log(shown: bool):
+    """Within the block, the log of the session a benchmark runs (facepuppet's INFO lines: what it loaded,
+    where it listens) is shown only when ``shown`` (``--verbose``); warnings always are."""
+    ours = logging.getLogger("facepuppet.runtime")
+    level = ours.level
+    if not shown:
+        ours.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        ours.setLevel(level)
 
 
 def register_bench(name: str, func: Callable[[argparse.Namespace], dict], help: str,
@@ -84,6 +100,16 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def bench_parser(bench: Bench) -> argparse.ArgumentParser:
+    """The options of one benchmark: ``--json``, ``--force`` and its own; the commands reference lists the same."""
+    parser = argparse.ArgumentParser(prog=f"facepuppet bench {bench.name}", description=bench.help)
+    parser.add_argument("--json", metavar="OUT.json", help="write the results as JSON here")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing --json file")
+    if bench.add_arguments:
+        bench.add_arguments(parser)
+    return parser
+
+
 def run(args: argparse.Namespace) -> int:
     registry = benches()
     if not args.name or args.name not in registry:
@@ -95,12 +121,7 @@ def run(args: argparse.Namespace) -> int:
         print("benchmarks:\n" + "\n".join(lines))
         return 0
     bench = registry[args.name]
-    parser = argparse.ArgumentParser(prog=f"facepuppet bench {bench.name}", description=bench.help)
-    parser.add_argument("--json", metavar="OUT.json", help="write the results as JSON here")
-    parser.add_argument("--force", action="store_true", help="overwrite an existing --json file")
-    if bench.add_arguments:
-        bench.add_arguments(parser)
-    options = parser.parse_args(args.options)
+    options = bench_parser(bench).parse_args(args.options)
     if options.json:
         from facepuppet.runtime.outputs import check_path
 

@@ -43,12 +43,12 @@ import threading
 import time
 import tracemalloc
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
 from facepuppet.runtime.bench.latency import rss_mb
-from facepuppet.runtime.bench.registry import load_average, register_bench
+from facepuppet.runtime.bench.registry import load_average, register_bench, session_log
+from facepuppet.runtime.commands.run import plan_from_argv, run_live
 
 GOAL_MB_PER_HOUR = 1.0
 MOVE_END, IDLE_END, LOSS_END = 0.5, 2 / 3, 5 / 6  # phase boundaries, fractions of a cycle
@@ -149,25 +149,21 @@ def duration_s(args: argparse.Namespace) -> float:
 
 
 def bench_soak(args: argparse.Namespace) -> dict:
-    from facepuppet.runtime.commands.run import run_live
-
     seconds = duration_s(args)
     cycle_s = float(args.cycle)
     if not (math.isfinite(cycle_s) and cycle_s > 0):
         raise ValueError(f"bench soak --cycle: expected seconds > 0, got {args.cycle!r}")
     sample_s = float(args.sample_s)
     warmup_s = min(float(args.warmup_s), seconds / 3)
-    log = print if args.verbose else (lambda s: None)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     workdir = Path(tempfile.mkdtemp(prefix="facepuppet-soak-"))
     record = workdir / "soak.fps"
-    run_args = SimpleNamespace(
-        character=args.character, input="vmc", listen=f"127.0.0.1:{port}", allow=None, config=None,
-        calibrate=False, audio=None, audio_file=None, record=str(record), vmc_out=None, stats=False, headless=True,
-        out=None, dump_weights=None, size=args.size, fps=args.fps, duration=seconds + 120, path=args.path,
-        receiver=args.receiver, draw="arrival", panel=bool(args.panel))
+    plan = plan_from_argv(["-c", str(args.character), "--input", "vmc", "--listen", f"127.0.0.1:{port}",
+                           "--record", str(record), "--headless", "--size", args.size, "--fps", repr(float(args.fps)),
+                           "--duration", repr(seconds + 120), "--path", args.path, "--receiver", args.receiver,
+                           "--draw", "arrival", *(["--panel"] if args.panel else [])])
     stop = threading.Event()
     procs: list[subprocess.Popen] = []
     sender_out: list[str] = []
@@ -195,12 +191,15 @@ def bench_soak(args: argparse.Namespace) -> dict:
         threading.Thread(target=wait_for_sender, daemon=True).start()
 
     def operate(now: float) -> None:
-        """--panel: Record at 25 % of each cycle, Stop at 40 %, through the panel's own action."""
+        """--panel: Record at 25 % of each cycle, Stop at 40 %, through the panel's own action; no Record once
+        the show's time is up (the run only waits for the sender process to end, however long it took to
+        start)."""
         panel = panels[0]
         rec = panel.recorder
         f = (now % cycle_s) / cycle_s
         cycle = int(now // cycle_s)
-        if 0.25 <= f < 0.4 and presses["cycle"] != cycle and not (rec.recording and rec.path != record):
+        if 0.25 <= f < 0.4 and presses["cycle"] != cycle and not (rec.recording and rec.path != record) \
+                and cycle < seconds / cycle_s:
             presses["cycle"] = cycle
             rec.wait_closed()  # the recording stopped last cycle is complete: count it and make room
             for path in done_files:
@@ -230,8 +229,9 @@ def bench_soak(args: argparse.Namespace) -> dict:
                                                                         else ""), flush=True)
 
     try:
-        result = run_live(run_args, log=log, stop_event=stop, on_ready=on_ready, hooks=[sample],
-                          on_panel=panels.append if args.panel else None)
+        with session_log(args.verbose):
+            result = run_live(plan, stop_event=stop, on_ready=on_ready, hooks=[sample],
+                              on_panel=panels.append if args.panel else None)
     finally:
         for proc in procs:
             proc.kill()

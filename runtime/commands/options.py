@@ -8,12 +8,14 @@ from __future__ import annotations
 import ipaddress
 import re
 
+from facepuppet.runtime.errors import UsageError
+
 
 def parse_size(text: str) -> tuple[int, int]:
     """(width, height) of ``"1280x720"``; ValueError otherwise."""
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
     if m is None or int(m.group(1)) <= 0 or int(m.group(2)) <= 0:
-        raise ValueError(f"--size: expected WIDTHxHEIGHT in pixels such as 1280x720, got {text!r}")
+        raise UsageError(f"--size: expected WIDTHxHEIGHT in pixels such as 1280x720, got {text!r}")
     return int(m.group(1)), int(m.group(2))
 
 
@@ -21,7 +23,7 @@ def parse_host_port(text: str, option: str = "--vmc-out") -> tuple[str, int]:
     """(host, port) of ``"HOST:PORT"``; ValueError naming the option otherwise."""
     m = re.fullmatch(r"\s*(\[[^\]]+\]|[^:\s]+):(\d+)\s*", text or "")
     if m is None or not 0 < int(m.group(2)) < 65536:
-        raise ValueError(f"{option}: expected HOST:PORT such as 127.0.0.1:39539, got {text!r}")
+        raise UsageError(f"{option}: expected HOST:PORT such as 127.0.0.1:39539, got {text!r}")
     return m.group(1).strip("[]"), int(m.group(2))
 
 
@@ -34,5 +36,5 @@ def parse_allow(text: str | None) -> set[str] | None:
         try:
             allow.add(str(ipaddress.ip_address(part.strip())))
         except ValueError:
-            raise ValueError(f"--allow: expected comma-separated IP addresses, got {part.strip()!r}") from None
+            raise UsageError(f"--allow: expected comma-separated IP addresses, got {part.strip()!r}") from None
     return allow

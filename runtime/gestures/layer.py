@@ -155,6 +155,7 @@ class VoiceOnlySource:
 
     address = ("voice", 0)
     frames_taken = 0  # never a frame: a recording's TICK records say so, and replay ticks as the run did
+    watched = 0  # no datagrams, so no calibrate messages
 
     def __init__(self, duration: float | None = None) -> None:
         self.duration = duration

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.errors import FacepuppetError, InputFileError
 from facepuppet.runtime.input_files import regular_file
 
 if TYPE_CHECKING:
@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 
-class AudioUnavailable(RuntimeError):
+class AudioUnavailable(FacepuppetError, RuntimeError):
     """No audio input could be opened; the message says why."""
 
 

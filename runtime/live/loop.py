@@ -8,7 +8,9 @@ stage's channels onto the renderer's by name with a
 :class:`~facepuppet.runtime.channels.ChannelMap` cached per channel tuple (an
 :class:`~facepuppet.runtime.expressions.ExpressionMap` for a character with VRM
 expressions: channels onto morphs and expressions),
-draws, waits for the GPU, and hands the result to the sinks and hooks.
+draws, waits for the GPU, and hands the tick to its observers (one interface,
+:class:`~facepuppet.runtime.protocols.TickObserver`: PNG frames, the weight log, video, OSC
+outputs, the recorder, the live stats).
 
 The clock only paces the ticks; it never decides what is drawn. With a
 :class:`RecordedClock` (headless replay) ticks follow one another at once; with
@@ -35,20 +37,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.channels import ChannelMap
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.live.mapper import Mapper
 from facepuppet.runtime.live.timing import StageTimer
 
 if TYPE_CHECKING:
+    from facepuppet.runtime.channels import ChannelMap
     from facepuppet.runtime.expressions import ExpressionDrive, ExpressionMap
-    from facepuppet.runtime.protocols import FrameSource, Renderer, Sink, Stage
+    from facepuppet.runtime.protocols import FrameSource, Renderer, Stage, TickObserver
     from facepuppet.runtime.render.gl_context import GLTarget
 
 logger = logging.getLogger(__name__)
 
 STAGES = ("snapshot", "map", "draw_submit", "gpu_finish", "sink")
 ARRIVAL_GRID_HZ = 1000.0  # tick-label grid of a run that draws on arrival (see the module docstring)
-MAX_CHANNEL_MAPS = 64  # channel maps cached (one per distinct channel tuple); the oldest goes first
 
 
 class RecordedClock:
@@ -101,7 +103,7 @@ class WallClock:
 
 
 class TickInfo:
-    """What one tick did, handed to the ``on_tick`` hooks (one object, reused every tick).
+    """What one tick did, handed to the tick observers and overlays (one object, reused every tick).
 
     Attributes
     ----------
@@ -115,14 +117,18 @@ class TickInfo:
         expressions drawn (after isBinary and overrides; the map's buffer), None when the map drives none
     stamps : tuple of 5 floats on the loop's timer clock (``time.perf_counter``, which is the
         monotonic clock on Linux): snapshot start, snapshot end, map end, draw submitted, GPU finished
+        (for the overlays, which run before the GPU wait: the previous tick's)
+    renderer : Renderer, what drew the tick (``read_pixels()`` for its picture)
     """
 
-    __slots__ = ("k", "t", "raw", "frame", "weights", "rotation", "translation", "expressions", "stamps")
+    __slots__ = ("k", "t", "raw", "frame", "weights", "rotation", "translation", "expressions", "stamps",
+                 "renderer")
 
-    def __init__(self) -> None:
+    def __init__(self, renderer: Renderer | None = None) -> None:
         self.k, self.t, self.raw, self.frame, self.weights = 0, 0.0, None, None, None
         self.rotation = self.translation = self.expressions = None
         self.stamps = (0.0,) * 5
+        self.renderer = renderer
 
 
 @dataclass
@@ -157,17 +163,17 @@ class FrameLoop:
     renderer : Renderer (:class:`~facepuppet.runtime.protocols.Renderer`): ``draw(weights, head_rotation,
         head_translation)``, ``finish()`` and ``read_pixels()``
     clock : RecordedClock or WallClock (anything with start/now/wait_until)
-    sinks : sequence of Sink, each with ``consume(tick_index, t, weights, frame, renderer)``
+    observers : sequence of TickObserver (callables taking a :class:`TickInfo`), called in order after the
+        GPU wait on every tick (PNG frames, the weight log, video, OSC outputs, the recorder, live stats)
     fps : float, ticks per second of recorded time
     log : callable taking one str; the channel-map report goes here, once per distinct channel tuple
-        (the last MAX_CHANNEL_MAPS tuples' maps are cached; an older tuple seen again is reported again)
+        (the :class:`~facepuppet.runtime.live.mapper.Mapper` caches the last MAX_CHANNEL_MAPS tuples' maps;
+        an older tuple seen again is reported again)
     target : GLTarget or None; when it has a window (``headless`` False) each
         tick polls events, stops on ``should_close()`` and swaps buffers
     stages : sequence of Stage (:func:`~facepuppet.runtime.live.stages.build_chain`), run in order every
         tick on the new finite frame (None when there is none); the last one's frame, when not None,
         is mapped by channel name onto ``names`` and drawn
-    on_tick : sequence of callables taking a :class:`TickInfo`, called after the sinks on every tick
-        (live stats, OSC output, the recorder)
     stop : callable returning bool or None; checked before each tick, True ends the run
     catch_up : bool; a tick later than one period skips the ticks it missed
         (live runs: never fall behind real time) instead of drawing each one
@@ -176,6 +182,8 @@ class FrameLoop:
         often without new frames; ``fps`` is then the grid of the tick labels
     drive : ExpressionDrive or None (:func:`~facepuppet.runtime.expressions.make_drive`): maps each channel
         tuple onto the character's morphs and VRM expressions; None: a plain ChannelMap by name, as for an OBJ rig
+    mapper : Mapper or None, the map step to use (a session's, shared with its panel); None: one of its own
+        from ``names`` and ``drive``
     overlays : sequence of callables taking a :class:`TickInfo`, called every tick right after the
         renderer's draw call and before the GPU wait, to draw over the character into the same framebuffer
         (the panel, :mod:`~facepuppet.runtime.panel`); their time counts in ``draw_submit``
@@ -188,13 +196,13 @@ class FrameLoop:
     """
 
     def __init__(self, names: Sequence[str], renderer: Renderer, clock: RecordedClock | WallClock,
-                 sinks: Sequence[Sink] = (), fps: float = 60.0, log: Callable[[str], None] = logger.info,
-                 target: GLTarget | None = None, stages: Sequence[Stage] = (),
-                 on_tick: Sequence[Callable[[TickInfo], None]] = (), stop: Callable[[], bool] | None = None,
+                 observers: Sequence[TickObserver] = (), fps: float = 60.0,
+                 log: Callable[[str], None] = logger.info, target: GLTarget | None = None,
+                 stages: Sequence[Stage] = (), stop: Callable[[], bool] | None = None,
                  catch_up: bool = False, idle_fps: float | None = None,
                  drive: ExpressionDrive | None = None,
                  overlays: Sequence[Callable[[TickInfo], None]] = (),
-                 wake: Callable[[float], bool] | None = None) -> None:
+                 wake: Callable[[float], bool] | None = None, mapper: Mapper | None = None) -> None:
         if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
             raise ValueError(f"FrameLoop fps: expected a positive finite number, got {fps!r}")
         if idle_fps is not None and not (isinstance(idle_fps, (int, float)) and 0 < idle_fps <= fps):
@@ -206,49 +214,35 @@ class FrameLoop:
         self.shape_names = tuple(names)
         self.renderer = renderer
         self.clock = clock
-        self.sinks = tuple(sinks)
+        self.observers = tuple(observers)
         self.fps = float(fps)
         self.log = log
         self.target = target
         self.stages = tuple(stages)
-        self.on_tick = tuple(on_tick)
         self.overlays = tuple(overlays)
         self.stop = stop
         self.catch_up = bool(catch_up)
         self.counters: dict[str, int] = {}
-        self.drive = drive
-        if drive is not None and tuple(drive.shape_names) != self.shape_names:
-            raise ValueError("FrameLoop drive: its shapes are not the renderer's channels")
-        self._maps: dict[tuple[str, ...], ChannelMap | ExpressionMap] = {}
+        if mapper is None:
+            if drive is not None and tuple(drive.shape_names) != self.shape_names:
+                raise ValueError("FrameLoop drive: its shapes are not the renderer's channels")
+            mapper = Mapper(self.shape_names, drive, log=log)
+        elif mapper.names != self.shape_names:
+            raise ValueError("FrameLoop mapper: its channels are not the renderer's")
+        self.mapper = mapper
         self._expressions: np.ndarray | None = None
         self._weights = np.zeros(len(self.shape_names), dtype=np.float32)
         self._rotation: np.ndarray | None = None
         self._translation: np.ndarray | None = None
         self._frame: Frame | None = None
 
-    def set_drive(self, drive: ExpressionDrive | None) -> None:
-        """Map with ``drive`` from now on (a ``[mapping]`` applied live, :func:`~facepuppet.runtime.live.stages.
-        follow_mapping`): each channel layout's map is built again at its next frame. Call it on the loop's
-        thread (a stage does), so a tick maps with one drive throughout."""
-        if drive is not None and tuple(drive.shape_names) != self.shape_names:
-            raise ValueError("FrameLoop drive: its shapes are not the renderer's channels")
-        self.drive = drive
-        self._maps.clear()
+    @property
+    def drive(self) -> ExpressionDrive | None:
+        return self.mapper.drive
 
     def channel_map(self, channels: tuple[str, ...], source: str = "") -> ChannelMap | ExpressionMap:
         """The cached map for a channel tuple; built (and its report logged) on first sight."""
-        cmap = self._maps.get(channels)
-        if cmap is None:
-            if len(self._maps) >= MAX_CHANNEL_MAPS:  # a sender whose channel set keeps changing: bounded
-                del self._maps[next(iter(self._maps))]
-            cmap = self._maps[channels] = (ChannelMap.build(channels, self.shape_names) if self.drive is None
-                                           else self.drive.build(channels))
-            n_driven = len(self.shape_names) - len(cmap.undriven_target)
-            head = (f"channel map ({source or 'source'}): {len(channels)} source channels -> "
-                    f"{n_driven} of {len(self.shape_names)} rig shapes driven")
-            report = cmap.report()
-            self.log(head + ("\n" + report if report else "; every channel matched"))
-        return cmap
+        return self.mapper.map_for(channels, source)
 
     def run(self, source: FrameSource, duration: float | None = None,
             ticks: Sequence[int] | None = None) -> LoopResult:
@@ -267,7 +261,7 @@ class FrameLoop:
         counters.update(dict.fromkeys(
             ("frames_received", "stale_dropped", "nonfinite_rejected", "ticks_without_new_frame", "late_ticks",
              "skipped_ticks"), 0))
-        info = TickInfo()
+        info = TickInfo(self.renderer)
         n_ticks = 0
         closed = False
         wait = self.wake if self.wake is not None else getattr(source, "wait_for_frame", None)
@@ -327,7 +321,7 @@ class FrameLoop:
         return k
 
     def _tick(self, k: int, t: float, source, timer: StageTimer, info: TickInfo) -> None:
-        """One tick: snapshot, the stages and the map, draw, wait for the GPU, sinks and hooks."""
+        """One tick: snapshot, the stages and the map, draw, wait for the GPU, the observers."""
         now, add, counters = timer.now, timer.add, self.counters
         t0 = now()
         frame, stale = source.latest(t)
@@ -360,14 +354,12 @@ class FrameLoop:
         self.renderer.finish()
         t4 = now()
         add("gpu_finish", t4 - t3)
-        for sink in self.sinks:
-            sink.consume(k, t, self._weights, self._frame, self.renderer)
-        if self.on_tick:
+        if self.observers:
             info.k, info.t, info.raw, info.frame, info.weights = k, t, raw, self._frame, self._weights
             info.rotation, info.translation, info.expressions = self._rotation, self._translation, self._expressions
             info.stamps = (t0, t1, t2, t3, t4)
-            for hook in self.on_tick:
-                hook(info)
+            for observer in self.observers:
+                observer(info)
         add("sink", now() - t4)
 
     def _accept(self, frame: Frame) -> None:

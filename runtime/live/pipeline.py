@@ -9,13 +9,13 @@ For each accepted frame (finite: the frame loop rejects non-finite frames before
 2. **Calibrate**: subtract the neutral pose (weights and translation; the
    rotation is taken relative to the neutral rotation). The neutral is the mean
    of the raw frames over ``capture_s`` seconds after :meth:`request_calibration`
-   (``--calibrate`` at start, the key C in a window) or after the source's count
+   (``--calibrate`` at start, the key C in a window) or after the session's count
    of calibrate messages (``/facepuppet/calibrate``) grows: the stage reads that
-   count each tick (``calibrate_requests``); nothing calls into it from the receiver.
+   count from the session's bus each tick; nothing calls into it from the receiver.
 3. **Response** per channel (:mod:`~facepuppet.runtime.live.response`): mirror, gain, input range ->
    output range through a curve (linear, ease, threshold), clamp, blink linking; the head mirrored.
-4. **Tracking loss**: with no frame for ``timeout_s`` the input is *lost* (an event, counted, handed to the
-   ``listeners``: the recorder, the OSC ``/facepuppet/tracking`` sender); each region then eases over
+4. **Tracking loss**: with no frame for ``timeout_s`` the input is *lost* (an event, counted, published on
+   the session's bus: the recorder, the OSC ``/facepuppet/tracking`` sender hear it); each region then eases over
    ``ease_out_s`` (smoothstep) to its loss target (``[tracking_loss]`` per region: hold, neutral, voice,
    idle; :mod:`~facepuppet.runtime.live.tracking_loss`); when frames return (event *found*) the output
    blends from wherever it was to the live value over ``ease_in_s``, so no tick jumps by more than the
@@ -25,8 +25,9 @@ For each accepted frame (finite: the frame loop rejects non-finite frames before
 effect at the start of the next tick. The filters keep their state (new cutoffs apply from that sample on, so
 the output moves no faster than the filter lets it), the response arrays are rebuilt, and the config's
 ``neutral`` becomes the neutral in force. :meth:`LivePipeline.current_config` is the config in force with the
-captured neutral, what a profile saves. ``on_config`` callables hear each change (the recorder writes it), and
-``schedule`` replays recorded changes at their tick times.
+captured neutral, what a profile saves. Each change is published on the session's bus (the recorder writes
+it, the mix and the map follow it), and ``schedule`` replays recorded changes at their tick times. The state a
+recording started mid-run carries is :mod:`~facepuppet.runtime.live.pipeline_state`.
 
 Times ``t`` are the frame loop's tick times (seconds), so a replay on recorded
 time gives the same output as the live run it came from.
@@ -46,8 +47,10 @@ import numpy as np
 from facepuppet.runtime.channels import canonical, filter_region
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import quat_mul, smoothstep
+from facepuppet.runtime.live.bus import SessionBus
 from facepuppet.runtime.live.config import LiveConfig, Neutral
 from facepuppet.runtime.live.one_euro import OneEuroFilter
+from facepuppet.runtime.live.pipeline_state import RawState, read_snapshot, snapshot_doc
 from facepuppet.runtime.live.response import Response
 from facepuppet.runtime.live.tracking_loss import IdleMotion, LossTargets, voice_jaw
 
@@ -68,79 +71,6 @@ def nlerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
 
 def _conj(q: np.ndarray) -> np.ndarray:
     return np.array([-q[0], -q[1], -q[2], q[3]])
-
-
-def _float(x) -> float | None:
-    """A float for JSON: None for NaN and infinities."""
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-def _floats(a: np.ndarray) -> list:
-    return [_float(x) for x in np.asarray(a, np.float64).ravel()]
-
-
-def _finite(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def _array(values, n: int, where: str) -> np.ndarray:
-    """(n,) float64 from a JSON list (None: NaN); ValueError naming ``where`` otherwise."""
-    if not isinstance(values, list) or len(values) != n or not all(v is None or _finite(v) for v in values):
-        raise ValueError(f"pipeline state: '{where}' is not a list of {n} numbers")
-    return np.array([math.nan if v is None else float(v) for v in values], np.float64)
-
-
-def _parts(parts: tuple | None) -> list | None:
-    """(weights, rotation, translation), each an array or None, for JSON."""
-    return None if parts is None else [None if p is None else _floats(p) for p in parts]
-
-
-def _snapshot_doc(raw: tuple | None) -> dict | None:
-    """The JSON-able :meth:`LivePipeline.state_snapshot` of a :meth:`LivePipeline._raw_state`."""
-    if raw is None:
-        return None
-    state, channels, filters, last_q, last, last_tick, live, out, ease, capture, calib_pending = raw
-    held, ease_start, loss_from, lost_done = ease
-    return {
-        "version": 2, "state": state, "channels": list(channels),
-        "filters": {name: [_floats(x), _floats(dx)] for name, (x, dx) in zip(("weights", "rotation",
-                                                                             "translation"), filters)},
-        "last_q": None if last_q is None else _floats(last_q),
-        "last_frame": {"t": float(last.t), "t_sender": _float(last.t_sender), "number": int(last.number),
-                       "source": str(last.source), "weights": last.weights is not None},
-        "last_tick": float(last_tick), "live": _parts(live), "out": _parts(out),
-        "held": _parts(held), "ease_start": float(ease_start), "loss_from": float(loss_from),
-        "lost_done": bool(lost_done), "calib_pending": bool(calib_pending),
-        "capture": None if capture is None else {
-            "t0": float(capture["t0"]), "n": int(capture["n"]), "ntr": int(capture["ntr"]),
-            "channels": None if capture["channels"] is None else list(capture["channels"]),
-            **{k: _floats(capture[k]) for k in ("w", "wn", "q", "tr")}},
-    }
-
-
-def _unparts(doc, n: int, where: str) -> tuple | None:
-    if doc is None:
-        return None
-    if not isinstance(doc, list) or len(doc) != 3:
-        raise ValueError(f"pipeline state: '{where}' is not [weights, rotation, translation]")
-    return tuple(None if p is None else _array(p, k, f"{where}[{i}]") for i, (p, k) in enumerate(zip(doc, (n, 4, 3))))
-
-
-def _capture_of(doc) -> dict | None:
-    """A neutral capture in progress from its snapshot (None: none)."""
-    if doc is None:
-        return None
-    if not isinstance(doc, dict) or not _finite(doc.get("t0")) or not isinstance(doc.get("n"), int) or \
-            not isinstance(doc.get("ntr"), int):
-        raise ValueError("pipeline state: 'capture' lacks its start, frame count or head count")
-    names = doc.get("channels")
-    if names is not None and (not isinstance(names, list) or not all(isinstance(c, str) for c in names)):
-        raise ValueError("pipeline state: 'capture.channels' is not a list of names")
-    k = len(names or ())
-    return {"t0": float(doc["t0"]), "n": doc["n"], "ntr": doc["ntr"],
-            "channels": None if names is None else tuple(names),
-            **{key: _array(doc.get(key), m, f"capture.{key}") for key, m in (("w", k), ("wn", k), ("q", 4), ("tr", 3))}}
 
 
 class _ChannelState:
@@ -183,12 +113,14 @@ class LivePipeline:
     audio_level : callable taking the tick time (s) and returning dBFS (NaN for
         none), or None; its value is stamped on the frames this emits
     log : callable taking one str
-    calibrate_requests : callable returning an int or None: a count of calibration requests that only
-        grows (the source's calibrate messages); read every tick, each increase requests a calibration
-    on_config : callables taking (tick time, LiveConfig), called when the config in force changes: an applied
-        config takes effect, or a calibration captures a neutral (the config then carries it)
+    bus : SessionBus or None, the session's (None: one of its own, :attr:`bus`). The stage publishes on it each
+        config taking effect (an applied config, a scheduled one, or a calibration capturing a neutral: the
+        config then carries it) and each tracking event, and reads its count of calibration requests every
+        tick (each increase requests a calibration)
     schedule : iterable of (tick time, LiveConfig), changes to apply at the first tick at or after each time
         (a replay of the changes a recording kept)
+    keep_snapshots : bool, keep the state before each tick (:attr:`before_tick`): a run that may start a
+        recording mid-run (its first recorded frame may be the very tick's)
 
     Call it once per tick as ``pipeline(frame, t)`` (the frame loop's
     ``pipeline`` hook): ``frame`` is the newest new frame or None; the return
@@ -202,7 +134,6 @@ class LivePipeline:
     tracking_state : str, for the panel: ``waiting``, ``live``, ``lost`` or ``easing`` (frames are back and
         the output is still blending in)
     events : deque of (tick time s, found bool), the last EVENTS_KEPT tracking events
-    listeners : list of callables ``(t, found)`` called on each event (tick thread; must not block)
     generator : callable taking the tick time and returning a Frame (or None), or None: the voice/idle face
         of the gesture layer (:meth:`~facepuppet.runtime.gestures.layer.GestureLayer.compose` over nothing),
         used by the ``voice`` and ``idle`` loss modes instead of the built-in line and IdleMotion
@@ -212,23 +143,20 @@ class LivePipeline:
     name = "filter"
 
     def __init__(self, config: LiveConfig | None = None, audio_level: Callable[[float], float] | None = None,
-                 log: Callable[[str], None] = logger.info,
-                 calibrate_requests: Callable[[], int] | None = None,
-                 on_config: Iterable[Callable[[float, LiveConfig], None]] = (),
-                 schedule: Iterable[tuple[float, LiveConfig]] = ()) -> None:
+                 log: Callable[[str], None] = logger.info, bus: SessionBus | None = None,
+                 schedule: Iterable[tuple[float, LiveConfig]] = (), keep_snapshots: bool = False) -> None:
         self.config = config or LiveConfig()
-        self.on_config = list(on_config)
+        self.bus = bus if bus is not None else SessionBus()
+        self.bus.config = self.config
         self._schedule = sorted(schedule, key=lambda item: item[0])
         self._pending: LiveConfig | None = None
         self._lock = threading.Lock()
         self.audio_level = audio_level
         self.log = log
-        self.calibrate_requests = calibrate_requests
-        self._requests_seen = 0 if calibrate_requests is None else int(calibrate_requests())
+        self._requests_seen = self.bus.calibration_requests()
         self.counters = {"tracking_lost": 0, "tracking_found": 0, "calibrations": 0}
         self.state = "waiting"
         self.events: collections.deque = collections.deque(maxlen=EVENTS_KEPT)
-        self.listeners: list[Callable[[float, bool], None]] = []
         self.generator: Callable[[float], Frame | None] | None = None
         self.idle = IdleMotion(self.config.loss.idle_blink_s, self.config.loss.idle_seed)
         self._channels: tuple[str, ...] | None = None
@@ -248,97 +176,58 @@ class LivePipeline:
         self._take_neutral(self._neutral_pose)
         self._calib_pending = False
         self._capture: dict | None = None
-        self.keep_snapshots = False  # keep :meth:`before_tick` (a run that may start a recording mid-run)
-        self._before: tuple | None = None
+        self.keep_snapshots = bool(keep_snapshots)
+        self._before: RawState | None = None
 
-    # -- the state a recording started mid-run carries ----------------------------------------------
+    # -- the state a recording started mid-run carries (pipeline_state) -------------------------------
 
     def state_snapshot(self) -> dict | None:
         """What a replay of a recording started now needs to go on as this run does (JSON-able): the filters'
         state, the last input frame's times, the last processed and emitted values, an ease in or out and a
         neutral capture in progress; None while waiting for the first frame (a fresh stage is that state).
         The gesture layer's own state (``generator``) is not in it."""
-        return _snapshot_doc(self._raw_state())
+        return snapshot_doc(self._raw_state())
 
     @property
     def before_tick(self) -> dict | None:
         """:meth:`state_snapshot` as it was before the newest tick (with ``keep_snapshots``; else None)."""
-        return None if self._before is None else _snapshot_doc(self._before)
+        return None if self._before is None else snapshot_doc(self._before)
 
     @property
     def before_tick_state(self) -> str | None:
         """The tracking state (``live``, ``returning``, ``lost``) of :attr:`before_tick`, None without one."""
-        return None if self._before is None else self._before[0]
+        return None if self._before is None else self._before.state
 
-    def _raw_state(self) -> tuple | None:
+    def _raw_state(self) -> RawState | None:
         """The parts of :meth:`state_snapshot`, copied where they change in place (cheap: every tick with
         ``keep_snapshots``; the capture's sums only while a neutral is captured)."""
         if self.state == "waiting" or self._cs is None or self._last_frame is None:
             return None
         cs, c = self._cs, self._capture
         capture = None if c is None else {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in c.items()}
-        return (self.state, cs.channels,
-                tuple((f.x_hat.copy(), f.dx_hat.copy()) for f in (cs.weights, cs.rotation, cs.translation)),
-                cs.last_q, self._last_frame, self._last_tick, self._live, self._out,
-                (self._held, self._ease_start, self._loss_from, self._lost_done), capture, self._calib_pending)
+        return RawState(self.state, cs.channels,
+                        tuple((f.x_hat.copy(), f.dx_hat.copy()) for f in (cs.weights, cs.rotation, cs.translation)),
+                        cs.last_q, self._last_frame, self._last_tick, self._live, self._out,
+                        (self._held, self._ease_start, self._loss_from, self._lost_done), capture,
+                        self._calib_pending)
 
     def restore_state(self, doc: dict) -> None:
         """Go on from :meth:`state_snapshot`'s ``doc`` (before the first tick of a replay; a version 1 doc, live
         only, too). Raises ValueError naming what is wrong when ``doc`` is not such a snapshot (nothing is
         changed then)."""
-        if not isinstance(doc, dict) or doc.get("version") not in (1, 2):
-            raise ValueError("pipeline state: expected a version 1 or 2 snapshot")
-        v2 = doc["version"] == 2
-        state = doc.get("state") if v2 else "live"
-        if state not in ("live", "returning", "lost"):
-            raise ValueError("pipeline state: 'state' is not live, returning or lost")
-        channels = doc.get("channels")
-        if not isinstance(channels, list) or not all(isinstance(c, str) for c in channels):
-            raise ValueError("pipeline state: 'channels' is not a list of names")
-        channels = tuple(channels)
-        n = len(channels)
+        raw = read_snapshot(doc)
+        channels = raw.channels
         cs = _ChannelState(channels, self.config)
-        filters = doc.get("filters")
-        if not isinstance(filters, dict):
-            raise ValueError("pipeline state: 'filters' missing")
-        for name, f in (("weights", cs.weights), ("rotation", cs.rotation), ("translation", cs.translation)):
-            pair = filters.get(name)
-            if not isinstance(pair, list) or len(pair) != 2:
-                raise ValueError(f"pipeline state: 'filters.{name}' is not [x_hat, dx_hat]")
-            f.set_state(_array(pair[0], f.n, f"filters.{name}"), _array(pair[1], f.n, f"filters.{name}"))
-        last_q = None if doc.get("last_q") is None else _array(doc["last_q"], 4, "last_q")
-        last = doc.get("last_frame")
-        if not isinstance(last, dict) or not _finite(last.get("t")) or not isinstance(last.get("number"), int):
-            raise ValueError("pipeline state: 'last_frame' lacks its time and number")
-        if not _finite(doc.get("last_tick")):
-            raise ValueError("pipeline state: 'last_tick' is not a number")
-        live = _unparts(doc.get("live"), n, "live")
-        out = _unparts(doc.get("out"), n, "out")
-        held, ease, capture, pending = None, (0.0, 0.0, False), None, False
-        if v2:
-            held = _unparts(doc.get("held"), n, "held")
-            for key in ("ease_start", "loss_from"):
-                if not _finite(doc.get(key)):
-                    raise ValueError(f"pipeline state: '{key}' is not a number")
-            if not isinstance(doc.get("lost_done"), bool) or not isinstance(doc.get("calib_pending"), bool):
-                raise ValueError("pipeline state: 'lost_done' and 'calib_pending' must be true or false")
-            if state != "live" and out is None:
-                raise ValueError(f"pipeline state: '{state}' needs 'out', what was shown")
-            ease = (float(doc["ease_start"]), float(doc["loss_from"]), doc["lost_done"])
-            capture, pending = _capture_of(doc.get("capture")), doc["calib_pending"]
-        frame = Frame(t=float(last["t"]), source=str(last.get("source", "")),
-                      channels=channels if last.get("weights") else None,
-                      weights=np.full(n, np.nan) if last.get("weights") else None,
-                      t_sender=float(last["t_sender"]) if _finite(last.get("t_sender")) else math.nan,
-                      number=int(last["number"]))
-        cs.last_q = last_q
+        for f, (x_hat, dx_hat) in zip((cs.weights, cs.rotation, cs.translation), raw.filters):
+            f.set_state(x_hat, dx_hat)
+        cs.last_q = raw.last_q
         self._channels, self._cs = channels, cs
         self.neutral_weights = self._neutral_on(channels)
-        self._last_frame, self._last_tick = frame, float(doc["last_tick"])
-        self._live, self._out, self.state = live, out, state
-        self._held = held if held is not None else out
-        self._ease_start, self._loss_from, self._lost_done = ease
-        self._capture, self._calib_pending = capture, pending
+        self._last_frame, self._last_tick = raw.last_frame, raw.last_tick
+        self._live, self._out, self.state = raw.live, raw.out, raw.state
+        held, self._ease_start, self._loss_from, self._lost_done = raw.ease
+        self._held = held if held is not None else raw.out
+        self._capture, self._calib_pending = raw.capture, raw.calib_pending
 
     def apply_config(self, config: LiveConfig) -> None:
         """Hand over a new config (safe from any thread); it takes effect at the start of the next tick.
@@ -371,8 +260,7 @@ class LivePipeline:
             # lost already: ease from what is shown to the new config's loss targets (a changed mode moves now;
             # the same config again, as a recording's first CONFIG record is, changes nothing)
             self._held, self._loss_from, self._lost_done = self._out, t, False
-        for hook in self.on_config:
-            hook(t, config)
+        self.bus.publish_config(t, config)
 
     def _take_neutral(self, neutral: Neutral | None) -> None:
         """Make ``neutral`` the neutral in force (the weights by name onto the current channels)."""
@@ -406,8 +294,7 @@ class LivePipeline:
     def _event(self, t: float, found: bool) -> None:
         self.counters["tracking_found" if found else "tracking_lost"] += 1
         self.events.append((t, found))
-        for listener in self.listeners:
-            listener(t, found)
+        self.bus.publish_tracking(t, found)
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
         if self.keep_snapshots:
@@ -418,11 +305,10 @@ class LivePipeline:
             with self._lock:
                 config, self._pending = self._pending, None
             self._switch(config, t)
-        if self.calibrate_requests is not None:
-            requests = int(self.calibrate_requests())
-            if requests != self._requests_seen:
-                self._requests_seen = requests
-                self.request_calibration()
+        requests = self.bus.calibration_requests()
+        if requests != self._requests_seen:
+            self._requests_seen = requests
+            self.request_calibration()
         if frame is None:
             return self._quiet(t)
         if frame.channels != self._channels:
@@ -511,9 +397,8 @@ class LivePipeline:
             self._capture = None
             self.counters["calibrations"] += 1
             self.log(f"calibration: neutral captured from {c['n']} frames")
-            config = self.current_config()
-            for hook in self.on_config:  # the neutral in force changed: a recording keeps it like any change
-                hook(t, config)
+            # the neutral in force changed: a recording keeps it like any change
+            self.bus.publish_config(t, self.current_config())
 
     def _quiet(self, t: float) -> Frame | None:
         """A tick without a usable new frame: hold, keep blending in, or ease out to neutral."""

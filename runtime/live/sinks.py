@@ -1,9 +1,10 @@
-"""What the frame loop hands each drawn tick to: PNG frames, the weight log, the recording.
+"""Tick observers that keep what was drawn: PNG frames, the weight log, the recording's per-tick records.
 
-Sinks (``consume(tick_index, t, weights, frame, renderer)``) see the picture; tick hooks
-(``hook(info)`` with a :class:`~facepuppet.runtime.live.loop.TickInfo`) see the whole tick.
-VMC output is :mod:`facepuppet.runtime.live.vmc_out`; the live stats are
-:mod:`facepuppet.runtime.live.stats`.
+Each is a :class:`~facepuppet.runtime.protocols.TickObserver`: called with the loop's
+:class:`~facepuppet.runtime.live.loop.TickInfo` once the GPU is done with the tick. The other observers
+are the outputs that send (VMC :mod:`facepuppet.runtime.live.vmc_out`, Live Link Face
+:mod:`facepuppet.runtime.live.llf_out`), the video (:mod:`facepuppet.runtime.live.video_out`) and the
+live stats (:mod:`facepuppet.runtime.live.stats`).
 """
 
 from __future__ import annotations
@@ -12,20 +13,20 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+from PIL import Image
 
 if TYPE_CHECKING:
     import os
     from collections.abc import Sequence
 
-    from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.live.loop import TickInfo
     from facepuppet.runtime.live.stages import AudioTap
-    from facepuppet.runtime.protocols import FrameSource, Renderer
+    from facepuppet.runtime.protocols import FrameSource
     from facepuppet.runtime.recording.recorder import PacketRecorder
 
 
 class PngSink:
-    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``renderer.read_pixels()``.
+    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``info.renderer.read_pixels()``.
 
     Keeps no list of what it wrote (a long run writes many): ``written`` counts, ``last_path`` is the newest.
     """
@@ -36,12 +37,9 @@ class PngSink:
         self.written = 0
         self.last_path: Path | None = None
 
-    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
-                renderer: Renderer) -> None:
-        from PIL import Image
-
-        path = self.out_dir / f"frame_{tick_index:05d}.png"
-        Image.fromarray(np.ascontiguousarray(renderer.read_pixels())).save(path)
+    def __call__(self, info: TickInfo) -> None:
+        path = self.out_dir / f"frame_{info.k:05d}.png"
+        Image.fromarray(np.ascontiguousarray(info.renderer.read_pixels())).save(path)
         self.written += 1
         self.last_path = path
 
@@ -60,10 +58,9 @@ class WeightLog:
         self._rows: list[np.ndarray] = []
         self._times: list[float] = []
 
-    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
-                renderer: Renderer) -> None:
-        self._rows.append(np.array(weights, dtype=np.float32, copy=True))
-        self._times.append(t)
+    def __call__(self, info: TickInfo) -> None:
+        self._rows.append(np.array(info.weights, dtype=np.float32, copy=True))
+        self._times.append(info.t)
 
     @property
     def array(self) -> np.ndarray:

@@ -21,7 +21,7 @@ kpls       the tracker's channels -> the character's     :class:`KplsStage` (her
 
 then the frame loop maps the last frame's channels by name onto what the
 renderer draws (``map``) and draws (``draw``; through the elastic path with
-``--elastic``, :mod:`facepuppet.runtime.render.elastic_path`). The chain is
+``--elastic``, :mod:`facepuppet.runtime.render.paths.elastic`). The chain is
 printed at start, e.g. ``stages: markers→solve→filter→gestures→kpls→map→draw``.
 
 Why this order: the solve turns markers into the character's weights, so the
@@ -41,27 +41,30 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from facepuppet.runtime.expressions import (
-    ExpressionDrive,
-    MappingError,
-    MappingSettings,
-    expression_spellings,
-    make_drive,
-)
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
+from facepuppet.runtime.actuation.stage import ActorRetarget
+from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.expressions import ExpressionDrive, expression_spellings, make_drive
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.gestures.layer import gesture_layer
+from facepuppet.runtime.inputs.kinds import make_adapter
+from facepuppet.runtime.inputs.markers import UNIT_METRES, MarkersAdapter
+from facepuppet.runtime.inputs.openseeface import OpenSeeFaceAdapter
+from facepuppet.runtime.inputs.vmc import VmcAdapter
+from facepuppet.runtime.kpls.stage import KplsRetarget
+from facepuppet.runtime.live.bus import SessionBus
+from facepuppet.runtime.live.config import LiveConfig, load_live_config
+from facepuppet.runtime.live.mapper import Mapper, follow_mapping
+from facepuppet.runtime.live.pipeline import LivePipeline
+from facepuppet.runtime.live.profiles import Profile, parse_config_text, profile_path
 
 if TYPE_CHECKING:
-    import argparse
-
     import moderngl
 
     from facepuppet.runtime.character import Character
-    from facepuppet.runtime.character_parts import Expressions
-    from facepuppet.runtime.elastic.model import ElasticModel
-    from facepuppet.runtime.kpls.stage import KplsRetarget
-    from facepuppet.runtime.live.loop import FrameLoop
-    from facepuppet.runtime.live.pipeline import LivePipeline
     from facepuppet.runtime.protocols import InputAdapter, Renderer, Stage
+    from facepuppet.runtime.session.options import StageOptions
 
 logger = logging.getLogger(__name__)
 
@@ -146,8 +149,10 @@ class Chain:
     elastic : ElasticModel or None, the elastic path's tables
     extra_names : tuple of str, input channel names beyond the trackers' own (muscles)
     marker_units : str or None, the units the solve wants marker frames in (the actor's), None without one
-    drive : ExpressionDrive or None, what maps channels onto a character with VRM expressions (or with a
-        ``[mapping]`` in ``--config``); None: the plain ChannelMap by name (``FrameLoop(drive=...)``)
+    mapper : Mapper, the ``map`` step: channels onto ``names``, through the drive of a character with VRM
+        expressions (or a ``[mapping]`` in ``--config``), else a ChannelMap by name (``FrameLoop(mapper=...)``;
+        the panel reads the same maps)
+    drive : ExpressionDrive or None, the mapper's drive in force
     config : LiveConfig, the live config the chain started with (``--config``, ``--profile`` or a recording's)
     profile : Profile or None, ``--profile``'s file (Save / Save as / Revert)
     known_channels : tuple of str, the names a config's ``[channels.NAME]`` may use (to parse a config later)
@@ -162,11 +167,15 @@ class Chain:
     elastic: ElasticModel | None = None
     extra_names: tuple[str, ...] = field(default_factory=tuple)
     marker_units: str | None = None
-    drive: ExpressionDrive | None = None
+    mapper: Mapper | None = None
     config: Any = None
     profile: Any = None
     known_channels: tuple[str, ...] = ()
     mix: Any = None
+
+    @property
+    def drive(self) -> ExpressionDrive | None:
+        return self.mapper.drive if self.mapper is not None else None
 
     def add_mix(self, mix: Any, label: str | None = None) -> None:
         """Put the ``mix`` stage in the chain: after the audio tap, before every other stage; ``label`` names the
@@ -184,73 +193,43 @@ class Chain:
 
     def renderer(self, ctx: moderngl.Context, character: Character, width: int, height: int, path: str,
                  target_fbo: moderngl.Framebuffer | None, log: Callable[[str], None], **options: Any) -> Renderer:
-        """The renderer the loop draws with (an :class:`~facepuppet.runtime.render.elastic_path.ElasticDraw`
+        """The renderer the loop draws with (an :class:`~facepuppet.runtime.render.paths.elastic.ElasticDraw`
         with ``--elastic``); ``options`` are FaceRenderer's picture options (framing, background, ...)."""
         from facepuppet.runtime.render.renderer import FaceRenderer
 
         if self.elastic is None:
             return FaceRenderer(ctx, character, width, height, path=path, target_fbo=target_fbo, log=log, **options)
-        from facepuppet.runtime.render.elastic_path import ElasticDraw
+        from facepuppet.runtime.render.paths.elastic import ElasticDraw
 
         r = FaceRenderer(ctx, character, width, height, path="elastic", target_fbo=target_fbo, log=log,
                          elastic=self.elastic, **options)
         return ElasticDraw(r, self.elastic)
 
 
-def add_stage_arguments(parser: argparse.ArgumentParser, markers: bool = True) -> None:
-    """The options of the stage chain, shared by ``run`` and ``replay`` (one group in ``--help``)."""
-    parser = parser.add_argument_group(
-        "stage chain", "what turns input frames into what is drawn; the same options give the same chain in run "
-        "and replay (audio, solve, filter, gestures, kpls, then map and draw)")
-    if markers:
-        parser.add_argument("--actor", type=Path, default=None, metavar="ACTOR.npz",
-                            help="actor table (train-actor): markers input is solved to actuations s")
-        parser.add_argument("--pair", type=Path, default=None, metavar="PAIR.npz",
-                            help="pair table (retarget-actor): actuations s -> the character's weights")
-        parser.add_argument("--marker-units", choices=("mm", "cm", "m"), default=None,
-                            help="units of marker frames whose layout declares none (/facepuppet/markers/units); "
-                                 "frames are converted to the actor's units (default: taken to be the actor's)")
-    parser.add_argument("--retarget", type=Path, default=None, metavar="RETARGET.npz",
-                        help="kernel-PLS retarget tables (fit-retarget): the source channels -> the character's "
-                             "shapes, instead of matching channel names")
-    parser.add_argument("--elastic", type=Path, default=None, metavar="ELASTIC.npz",
-                        help="elastic tables of the character: draw through the elastic path; input channels "
-                             "named after its muscles drive contractions")
-    parser.add_argument("--config", type=Path, default=None,
-                        help="TOML config: filters, per-channel response, blink linking, mirror, tracking loss")
-    parser.add_argument("--profile", default=None, metavar="NAME|PATH",
-                        help="a saved live config, neutral included: NAME under $XDG_CONFIG_HOME/facepuppet/profiles "
-                             "(~/.config/...), or a .toml path; created by its first Save; instead of --config")
-    parser.add_argument("--calibrate", action="store_true",
-                        help="capture the neutral pose from the first 0.5 s of frames")
-    parser.add_argument("--gestures", type=Path, default=None, metavar="GESTURES.npz",
-                        help="gesture tables (build-gestures): add voice-driven blinks, brows and head motion")
-    parser.add_argument("--gesture-seed", type=int, default=0, help="seed of the gesture synthesis (default 0)")
-
-
-def build_chain(args: argparse.Namespace, character: Character, input_kind: str | None, *, filtered: bool = True,
-                audio_level: Callable[[float], float] | None = None,
-                calibrate_requests: Callable[[], int] | None = None, voice_only: bool = False,
+def build_chain(options: StageOptions, character: Character, input_kind: str | None, *,
+                bus: SessionBus | None = None, filtered: bool = True,
+                audio_level: Callable[[float], float] | None = None, voice_only: bool = False,
                 label: str | None = None, log: Callable[[str], None] = logger.info,
                 config_text: tuple[str, str] | None = None, schedule: Sequence[tuple[float, str]] = (),
-                on_config: Sequence[Callable] = ()) -> Chain:
-    """The stage chain for parsed options (``actor``, ``pair``, ``retarget``, ``elastic``, ``config``,
-    ``calibrate``, ``gestures``, ``gesture_seed``), checked against the character; logs what it loaded.
+                keep_snapshots: bool = False) -> Chain:
+    """The stage chain for the stage options, checked against the character; logs what it loaded.
 
     Parameters
     ----------
-    args : argparse.Namespace (missing options count as not given)
+    options : StageOptions (``--actor``, ``--pair``, ``--retarget``, ``--elastic``, ``--config``, ``--profile``,
+        ``--calibrate``, ``--gestures``, ``--gesture-seed``)
     character : Character, what is drawn
     input_kind : str or None, the input kind of the frames (None: unknown, e.g. a recording of frames)
+    bus : SessionBus or None, the session's: the filter stage publishes config changes and tracking events on
+        it and reads its calibration requests (None: a bus of the chain's own)
     filtered : bool, include the ``filter`` stage (``run`` always; ``replay`` with ``--pipeline``)
     audio_level : callable t -> dBFS or None; adds the ``audio`` stage
-    calibrate_requests : callable returning a growing count, or None (see LivePipeline)
     voice_only : bool, the face from the voice alone (``run --input audio``): the gestures drive it
     label : str or None, what :meth:`Chain.describe` names as the input (default ``input_kind``)
     config_text : (where, TOML text) or None, the config to start from when neither ``--config`` nor
         ``--profile`` is given (a recording's config in force)
     schedule : (tick time, TOML text) pairs, config changes the filter applies at those ticks (a recording's)
-    on_config : callables (tick time, LiveConfig) the filter calls when a config change takes effect
+    keep_snapshots : bool, the filter keeps its state before each tick (a recording may start mid-run)
 
     Raises
     ------
@@ -258,16 +237,16 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
         naming the option and file when a table does not fit the character or the input,
         or when markers input lacks ``--actor``/``--pair``.
     """
-    opt = lambda name: getattr(args, name, None)  # noqa: E731
+    bus = bus if bus is not None else SessionBus()
     shapes = tuple(character.shape_names)
     chain = Chain(input=label or input_kind or "recording", names=shapes)
-    elastic = _load_elastic(opt("elastic"), character, log) if opt("elastic") is not None else None
+    elastic = _load_elastic(options.elastic, character, log) if options.elastic is not None else None
     if elastic is not None:
         chain.elastic, chain.names, chain.extra_names = elastic, tuple(elastic.channel_names), \
             tuple(elastic.muscle_names)
-    solve = _load_solve(opt("actor"), opt("pair"), opt("retarget"), shapes, input_kind, log)
-    kpls = _load_kpls(opt("retarget"), shapes, log) if opt("retarget") is not None else None
-    if voice_only and opt("gestures") is None:
+    solve = _load_solve(options.actor, options.pair, options.retarget, shapes, input_kind, log)
+    kpls = _load_kpls(options.retarget, shapes, log) if options.retarget is not None else None
+    if voice_only and options.gestures is None:
         raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
     stages = []
     if audio_level is not None:
@@ -277,54 +256,46 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
         stages.append(solve)
         chain.marker_units = solve.actor.units
     level = chain.audio.level if chain.audio is not None else None
-    from facepuppet.runtime.live.config import LiveConfig, load_live_config
-
     known = (*shapes, *chain.names, *chain.extra_names, *(kpls.model.source_names if kpls is not None else ()),
              *expression_spellings(character))
     chain.known_channels = known
-    if opt("config") is not None and opt("profile") is not None:
+    if options.config is not None and options.profile is not None:
         raise ValueError("--config and --profile: choose one (a profile is a config file with its neutral; "
                          "--profile PATH.toml reads any config file)")
-    if opt("profile") is not None:
-        from facepuppet.runtime.live.profiles import Profile, profile_path
-
-        character_path = opt("character")
-        chain.profile = Profile(profile_path(opt("profile")), character=Path(character_path).name if
-                                character_path is not None else "", input_kind=input_kind or "",
+    if options.profile is not None:
+        chain.profile = Profile(profile_path(options.profile), character=Path(options.character).name if
+                                options.character is not None else "", input_kind=input_kind or "",
                                 known_channels=known, log=log)
         config = chain.profile.load()
-    elif opt("config") is not None:
-        config = load_live_config(opt("config"), known)
+    elif options.config is not None:
+        config = load_live_config(options.config, known)
     elif config_text is not None:
-        from facepuppet.runtime.live.profiles import parse_config_text
-
         config = parse_config_text(config_text[1], config_text[0], known)
     else:
         config = LiveConfig()
     chain.config = config
+    drive = None
     if elastic is None:  # the elastic path draws its own channels, not the character's shapes
-        chain.drive = make_drive(shapes, character.expressions, config.mapping)
-        if chain.drive is not None and input_kind == "vmc":
+        drive = make_drive(shapes, character.expressions, config.mapping)
+        if drive is not None and input_kind == "vmc":
             # VMC names its channels: the avatar's expression names arrive as channels of their own
-            chain.extra_names = tuple(dict.fromkeys((*chain.extra_names, *chain.drive.receive_names())))
+            chain.extra_names = tuple(dict.fromkeys((*chain.extra_names, *drive.receive_names())))
     elif not config.mapping.empty:
-        raise ValueError(f"--config {opt('config')}: [mapping] drives a character's shapes and expressions; "
+        raise ValueError(f"--config {options.config}: [mapping] drives a character's shapes and expressions; "
                          "it does not apply with --elastic")
+    chain.mapper = Mapper(chain.names, drive, log=log)
     if filtered:
-        from facepuppet.runtime.live.pipeline import LivePipeline
-        from facepuppet.runtime.live.profiles import parse_config_text
-
         changes = [(float(t), parse_config_text(text, f"config change at t={t:.3f} s", known)) for t, text in schedule]
-        chain.filter = LivePipeline(config, audio_level=level, log=log, calibrate_requests=calibrate_requests,
-                                    on_config=on_config, schedule=changes)
-        if opt("calibrate"):
+        chain.filter = LivePipeline(config, audio_level=level, log=log, bus=bus, schedule=changes,
+                                    keep_snapshots=keep_snapshots)
+        if options.calibrate:
             chain.filter.request_calibration()
         stages.append(chain.filter)
-    if opt("gestures") is not None:
-        from facepuppet.runtime.gestures.layer import gesture_layer
-
-        layer = gesture_layer(opt("gestures"), voice_only=voice_only, log=log, level=level,
-                              seed=opt("gesture_seed") or 0)
+        if elastic is None:  # a [mapping] applied live (the panel, a recorded change) maps from then on
+            bus.on_config(follow_mapping(chain.mapper, character.expressions, log))
+    if options.gestures is not None:
+        layer = gesture_layer(options.gestures, voice_only=voice_only, log=log, level=level,
+                              seed=options.gesture_seed)
         stages.append(layer)
         if chain.filter is not None:  # tracking lost: the voice / idle regions take the layer's face
             chain.filter.generator = lambda t: layer.compose(None, t)
@@ -335,8 +306,6 @@ def build_chain(args: argparse.Namespace, character: Character, input_kind: str 
 
 
 def _load_elastic(path, character, log):
-    from facepuppet.runtime.elastic.model import ElasticModel
-
     model = ElasticModel.load(path)
     if model.n_vertices != character.n_vertices or tuple(model.shape_names) != tuple(character.shape_names):
         raise ValueError(f"--elastic {path}: made for {model.n_vertices} vertices and "
@@ -360,10 +329,6 @@ def _load_solve(actor_path, pair_path, retarget_path, shapes, input_kind, log):
         raise ValueError(f"--actor/--pair: only for --input markers, not {input_kind!r}")
     if retarget_path is not None:
         raise ValueError("--actor/--pair and --retarget: choose one parameter space")
-    from facepuppet.runtime.actuation.actor import Actor
-    from facepuppet.runtime.actuation.pair import ActorPair
-    from facepuppet.runtime.actuation.stage import ActorRetarget
-
     pair = ActorPair.load(pair_path)
     if tuple(pair.shape_names) != shapes:
         raise ValueError(f"--pair {pair_path}: its shapes ({len(pair.shape_names)}) are not the shapes of the "
@@ -378,8 +343,6 @@ def _load_solve(actor_path, pair_path, retarget_path, shapes, input_kind, log):
 
 
 def _load_kpls(path, shapes, log) -> KplsStage:
-    from facepuppet.runtime.kpls.stage import KplsRetarget
-
     model = KplsRetarget.load(path)
     if tuple(model.target_names) != shapes:
         raise ValueError(f"--retarget {path}: its target shapes ({len(model.target_names)}) "
@@ -399,55 +362,20 @@ def make_input_adapter(kind: str, extra_names: Sequence[str] = (),
     For ``markers``: ``marker_units`` are the frames' units where a layout declares none
     (``--marker-units``), ``to_units`` the units the solve wants (the actor's); frames are converted.
     """
-    from facepuppet.runtime.inputs.kinds import make_adapter
-
     if kind == "markers" and (marker_units is not None or to_units is not None):
-        from facepuppet.runtime.inputs.markers import UNIT_METRES, MarkersAdapter
-
         if to_units is not None and to_units not in UNIT_METRES:
             log(f"note: the actor's units {to_units!r} are not one of {', '.join(UNIT_METRES)}; "
                 "marker frames are not converted")
             to_units = None
         return MarkersAdapter(units=marker_units, to_units=to_units)
     if kind == "openseeface" and face_id is not None:
-        from facepuppet.runtime.inputs.openseeface import OpenSeeFaceAdapter
-
         adapter = OpenSeeFaceAdapter(face_id=face_id)
         if extra_names:
             log(f"note: --input {kind} cannot name channels {tuple(extra_names)[:3]}...; "
                 "only VMC blend names reach them")
         return adapter
     if extra_names and kind == "vmc":
-        from facepuppet.runtime.inputs.vmc import VmcAdapter
-
         return VmcAdapter(extra_names=extra_names)
     if extra_names:
         log(f"note: --input {kind} cannot name channels {tuple(extra_names)[:3]}...; only VMC blend names reach them")
     return make_adapter(kind)
-
-
-def same_mapping(a: MappingSettings, b: MappingSettings) -> bool:
-    """``[mapping]``s that map alike (how a file spelled the channels and where it was aside)."""
-    return a.emotions == b.emotions and a.channels == b.channels
-
-
-def follow_mapping(chain: Chain, loop: FrameLoop, expressions: Expressions | None,
-                   log: Callable[[str], None]) -> Callable[[float, object], None]:
-    """An ``on_config`` hook for the filter stage (``LivePipeline.on_config``): a config applied live (the panel,
-    a profile, a recording's schedule) whose ``[mapping]`` differs from the one in force builds the drive again
-    (:func:`~facepuppet.runtime.expressions.make_drive`) and hands it to ``loop`` (:meth:`FrameLoop.set_drive`)
-    and to ``chain.drive`` (the panel's meters read it), from this tick's map on. A mapping naming what the
-    character lacks is refused with a warning (the mapping in force stays)."""
-    def hook(t: float, config) -> None:
-        current = chain.drive.mapping if chain.drive is not None else MappingSettings()
-        if chain.elastic is not None or same_mapping(config.mapping, current):
-            return
-        try:
-            drive = make_drive(chain.names, expressions, config.mapping)
-        except MappingError as exc:
-            log(f"mapping: warning: {exc}; the mapping in force stays")
-            return
-        chain.drive = drive
-        loop.set_drive(drive)
-        log(f"mapping: {len(config.mapping.channels)} channel(s) of [mapping.channels] in force from t = {t:.3f} s")
-    return hook

@@ -167,7 +167,6 @@ class LiveStats:
         """Counters and latency over the whole run (JSON-serialisable)."""
         return {"ticks": self.ticks, "counters": self.counter_snapshot(), "latency_ms": self.whole_run()}
 
-    def final(self) -> None:
-        """Print the whole-run line and the JSON summary (at exit)."""
-        self.log(self.line(self.whole_run(), "whole run"))
-        self.log("stats json: " + json.dumps(self.summary(), sort_keys=True))
+    def final(self) -> list[str]:
+        """The whole-run line and the JSON summary (``--stats`` at exit: the command prints them)."""
+        return [self.line(self.whole_run(), "whole run"), "stats json: " + json.dumps(self.summary(), sort_keys=True)]

@@ -67,9 +67,8 @@ import numpy as np
 from facepuppet.runtime.errors import FacepuppetError
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.frames import Frame
+    from facepuppet.runtime.live.loop import TickInfo
     from facepuppet.runtime.progress import Progress
-    from facepuppet.runtime.protocols import Renderer
 
 AUDIO_RATE = 48000
 H264_OPTIONS = {"crf": "18", "preset": "veryfast", "x264-params": "mbtree=0"}  # mbtree: see the module doc
@@ -247,18 +246,6 @@ def add_video_arguments(parser: argparse.ArgumentParser, audio_help: str | None)
         parser.add_argument("--audio-file", type=Path, default=None, metavar="WAV", help=audio_help)
 
 
-def plan_video_from_args(args: argparse.Namespace, width: int, height: int,
-                         alpha: bool | None = None) -> VideoPlan | None:
-    """The plan of a command's ``--video`` options (None without ``--video``); refuses a stray ``--video-codec``."""
-    video = getattr(args, "video", None)
-    codec = getattr(args, "video_codec", None)
-    if video is None:
-        if codec is not None:
-            raise VideoError("--video-codec: needs --video FILE")
-        return None
-    return plan_video(video, width, height, codec=codec, alpha=alpha, audio_file=getattr(args, "audio_file", None))
-
-
 class VideoSink:
     """The frame loop's ``--video`` sink: each tick's pixels encoded as one frame (see the module doc).
 
@@ -321,10 +308,9 @@ class VideoSink:
             self._audio = audio
         self.channels = channels
 
-    def consume(self, tick_index: int, t: float, weights: np.ndarray, frame: Frame | None,
-                renderer: Renderer) -> None:
-        """FrameLoop sink: encode the tick's picture (``renderer.read_pixels()``) at tick ``tick_index``."""
-        self.write(tick_index, renderer.read_pixels())
+    def __call__(self, info: TickInfo) -> None:
+        """Tick observer: encode the tick's picture (``renderer.read_pixels()``) as the frame of tick ``k``."""
+        self.write(info.k, info.renderer.read_pixels())
 
     def write(self, k: int, pixels: np.ndarray) -> None:
         """Encode ``pixels`` (h, w, 3) or (h, w, 4) uint8, top row first, as the frame of tick ``k``."""

@@ -56,9 +56,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from facepuppet.runtime.channels import ChannelMap, canonical
+from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.errors import FacepuppetError
 from facepuppet.runtime.live.config import CURVES
+from facepuppet.runtime.live.mapper import Mapper
 from facepuppet.runtime.live.timing import DurationSketch
 from facepuppet.runtime.live.tracking_loss import LOSS_MODES, LOSS_REGIONS, VOICE_REGIONS
 from facepuppet.runtime.panel import load_imgui
@@ -153,7 +154,8 @@ class DeskPanel:
     fbo : moderngl.Framebuffer the character is drawn into (the renderer's ``fbo``: offscreen, or the window's)
     width, height : int, the framebuffer size in pixels (and, in a window, ``window_size`` the window's)
     pipeline : LivePipeline or None, the filter stage (edited through its ``apply_config``)
-    chain : Chain or None, for the stage chain and the rig's channel names
+    chain : Chain or None, for the stage chain, the rig's channel names and the map step (its ``mapper``, shared
+        with the frame loop)
     character : Character or None
     counters : callable returning the run's counter groups (``{"udp": {...}, "loop": {...}, ...}``) or None
     stats : LiveStats or None, for the receive→draw latency
@@ -205,6 +207,9 @@ class DeskPanel:
         self.fbo = fbo
         self.pipeline, self.chain, self.character = pipeline, chain, character
         self.names = tuple(names) if names is not None else tuple(chain.names) if chain is not None else ()
+        mapper = getattr(chain, "mapper", None)
+        # the session's map step: the meters read what the loop maps each channel to (one cache, one drive)
+        self.mapper = mapper if mapper is not None and mapper.names == self.names else Mapper(self.names)
         self.counters, self.stats, self.recorder = counters, stats, recorder
         self.input_kind, self.address = input_kind, address
         self.visible = bool(visible)
@@ -238,10 +243,6 @@ class DeskPanel:
         self._rate_base: tuple[float, int, int] | None = None
         self._ticks = 0
         self._last_raw_at: float | None = None
-        self._shape_index: dict[tuple, np.ndarray] = {}
-        self._mapped_lists: dict[int, tuple[np.ndarray, list[int]]] = {}
-        self._expression_maps: dict[tuple, Any] = {}  # the run drive's map per channel layout (VRM expressions)
-        self._drive_seen = getattr(chain, "drive", None)  # the drive those were built with
         self._values: tuple | None = None  # this frame's channels and values (raw, filtered, rig, mapped index)
         self.sent_only = True
         self.selected: str | None = None  # the channel the response editor edits
@@ -665,7 +666,7 @@ class DeskPanel:
         imgui = self.imgui
         key = canonical(name)
         targets = config.mapping.channels.get(key)
-        drive = getattr(self.chain, "drive", None)
+        drive = self.mapper.drive
         choices = list(self.names) + [e for e in (drive.expression_names if drive is not None else ())
                                       if e not in self.names]
         if targets is None:
@@ -895,50 +896,13 @@ class DeskPanel:
             if getattr(ch, "credits", None):
                 imgui.text_wrapped(_ascii(f"credits: {ch.credits}"))
 
-    def _mapped_list(self, channels: tuple) -> list[int]:
-        """:meth:`_mapped_index` as a list of ints (read per row without NumPy), kept with it."""
-        idx = self._mapped_index(channels)
-        as_list = self._mapped_lists.get(id(idx))
-        if as_list is None or as_list[0] is not idx:
-            if len(self._mapped_lists) > 16:
-                self._mapped_lists.clear()
-            as_list = self._mapped_lists[id(idx)] = (idx, idx.tolist())
-        return as_list[1]
-
     def _mapped_index(self, channels: tuple) -> np.ndarray:
-        """For each input channel what it drives (-1: none): with the run's expression drive (a VRM character,
-        a ``[mapping]``) the first shape or expression its map sends it to (``n_shapes + e`` for expression e:
-        the meters read the shapes' weights followed by the expressions' values); else the shape of the same
-        name, or the first the by-name channel map sends it to (an unsided browInnerUp drives browInnerUp_L)."""
-        drive = getattr(self.chain, "drive", None)
-        if drive is not self._drive_seen:  # a [mapping] applied live: the channels drive other targets now
-            self._drive_seen = drive
-            self._shape_index.clear()
-            self._expression_maps.clear()
-            self._mapped_lists.clear()
-        idx = self._shape_index.get(channels)
-        if idx is None and drive is not None and tuple(drive.shape_names) == self.names:
-            from facepuppet.runtime.expressions import ExpressionMap
-
-            emap = ExpressionMap(drive, channels)
-            idx = emap.first_targets()
-            if len(self._shape_index) > 16:
-                self._shape_index.clear()
-                self._expression_maps.clear()
-            self._shape_index[channels] = idx
-            self._expression_maps[channels] = emap
-        if idx is None:
-            where = {canonical(n): i for i, n in enumerate(self.names)}
-            idx = np.array([where.get(canonical(c), -1) for c in channels], dtype=np.int64)
-            if (idx < 0).any() and self.names:
-                matrix = ChannelMap.build(channels, self.names).matrix
-                for i in np.flatnonzero(idx < 0):
-                    targets = np.flatnonzero(matrix[:, i])
-                    idx[i] = targets[0] if targets.size else -1
-            if len(self._shape_index) > 16:
-                self._shape_index.clear()
-            self._shape_index[channels] = idx
-        return idx
+        """For each input channel what it drives (-1: none), from the session's map step (the loop's own maps):
+        with an expression drive (a VRM character, a ``[mapping]``) the first shape or expression its map sends
+        it to (``n_shapes + e`` for expression e: the meters read the shapes' weights followed by the
+        expressions' values); else the shape of the same name, or the first the by-name channel map sends it to
+        (an unsided browInnerUp drives browInnerUp_L)."""
+        return self.mapper.first_targets(channels)[0]
 
     def _tick_values(self, info: TickInfo) -> None:
         """This tick's channels and values (raw, after the stages, the rig's; :attr:`_values`) and the rows shown
@@ -958,18 +922,18 @@ class DeskPanel:
         elif getattr(self, "_last_raw_w", None) is not None and len(self._last_raw_w) == len(channels):
             raw_w = self._last_raw_w
         flt = frame.weights if frame is not None and frame.channels == channels else None
-        mapped = self._mapped_list(channels)
+        mapped = self.mapper.first_targets(channels)[1]
         rig = info.weights
         nan = math.nan
         raw_v = raw_w.tolist() if raw_w is not None else None
         flt_v = flt.tolist() if flt is not None else None
         rig_v = rig.tolist() if rig is not None else None
-        drive = getattr(self.chain, "drive", None)
+        drive = self.mapper.drive
         if rig_v is not None and drive is not None and len(drive.expression_names):  # then the expressions' values
             ex = info.expressions
             rig_v += ex.tolist() if ex is not None else [nan] * len(drive.expression_names)
-            emap = self._expression_maps.get(channels)  # then the eyes' blinks (Blink + Blink_L/R)
-            rig_v += list(emap.eye_blinks(ex)) if ex is not None and emap is not None else [nan, nan]
+            emap = self.mapper.map_for(channels, report=False)  # then the eyes' blinks (Blink + Blink_L/R)
+            rig_v += list(emap.eye_blinks(ex)) if ex is not None else [nan, nan]
         self._values = (channels, raw_v, flt_v, rig_v, mapped)  # the Response section reads the selected one's
         if self.sent_only and raw_v is not None:  # NaN: not sent (a VMC sender names only some channels)
             self._rows = tuple(i for i, v in enumerate(raw_v) if v == v)

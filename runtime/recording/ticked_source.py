@@ -24,10 +24,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.input_files import regular_file
 from facepuppet.runtime.inputs.osc import CALIBRATE_ADDRESS
 from facepuppet.runtime.inputs.udp import count_messages, watch_needle
+from facepuppet.runtime.recording.records import Tick
+from facepuppet.runtime.recording.replay_source import decode_packets
+from facepuppet.runtime.recording.session import MAGIC, Session, read_session
 
 if TYPE_CHECKING:
     import os
@@ -67,18 +71,10 @@ class LiveRecording:
     states: list = field(default_factory=list)
 
 
-def read_live_recording(path: str | os.PathLike,
-                        make_adapter: Callable[[str], InputAdapter]) -> LiveRecording | None:
-    """Decode a live recording with ``make_adapter(kind)``; None when ``path`` is not one (no PACKET or TICK
-    records). A run whose tracker sent nothing (or ``--input audio``) has ticks and no frames: it replays too.
-
-    Raises
-    ------
-    ValueError
-        naming the file when its packets decode to no frame and it has no ticks.
-    """
-    from facepuppet.runtime.recording.session import MAGIC, read_session
-
+def read_live_session(path: str | os.PathLike) -> Session | None:
+    """The session file of a live recording, read once (its header says the input kind and the options a
+    replay needs before decoding); None when ``path`` is not one (not a session file, or one holding frames
+    rather than PACKET or TICK records). A torn tail is kept up to the tear, with a warning."""
     path = regular_file(path, "recording (session file or Live Link Face CSV)")
     with open(path, "rb") as f:
         if f.read(len(MAGIC)) != MAGIC:
@@ -88,9 +84,18 @@ def read_live_recording(path: str | os.PathLike,
         session = read_session(path)
     if session.frames or not (session.packets or session.ticks):
         return None
-    from facepuppet.runtime.recording.records import Tick
-    from facepuppet.runtime.recording.replay_source import decode_packets
+    return session
 
+
+def decode_live_recording(session: Session, make_adapter: Callable[[str], InputAdapter]) -> LiveRecording:
+    """Decode a live recording's packets with ``make_adapter(kind)``. A run whose tracker sent nothing (or
+    ``--input audio``) has ticks and no frames: it replays too.
+
+    Raises
+    ------
+    ValueError
+        naming the file when its packets decode to no frame and it has no ticks.
+    """
     info = session.header.get("info", {}) if isinstance(session.header, dict) else {}
     mix_sources = info.get("mix_sources") or []
     packets = session.packets
@@ -110,10 +115,18 @@ def read_live_recording(path: str | os.PathLike,
     frames = [frame for _, frame in decoded]
     frame_packets = [i for i, _ in decoded]
     if not frames and not session.ticks:
-        raise ValueError(f"{path}: the recorded packets decode to no frame")
+        raise InputFileError(f"{session.path}: the recorded packets decode to no frame")
     return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header),
                          list(session.audio_levels), list(session.configs), list(session.events), mix,
                          list(session.states))
+
+
+def read_live_recording(path: str | os.PathLike,
+                        make_adapter: Callable[[str], InputAdapter]) -> LiveRecording | None:
+    """:func:`read_live_session` then :func:`decode_live_recording`; None when ``path`` is not a live
+    recording."""
+    session = read_live_session(path)
+    return None if session is None else decode_live_recording(session, make_adapter)
 
 
 class TickedSource:

@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from facepuppet.runtime.outputs import atomic_path
+
 LABEL_HEIGHT = 18  # pixels under each cell for its label
 _SHEET_BACKGROUND = (24, 25, 28)
 _LABEL_COLOR = (225, 225, 225)
@@ -27,8 +29,6 @@ def check_rgb(image: np.ndarray, name: str = "image", alpha: bool = False) -> np
 def save_png(path: str | os.PathLike, rgb: np.ndarray) -> Path:
     """Write ``rgb`` (ndarray of shape (h, w, 3) RGB or (h, w, 4) RGBA, uint8, top row first) as a PNG;
     returns the path."""
-    from facepuppet.runtime.outputs import atomic_path
-
     path = Path(path)
     image = Image.fromarray(check_rgb(rgb, str(path), alpha=True))
     with atomic_path(path) as temp:       # never a half-written PNG under the final name

@@ -23,6 +23,8 @@ from typing import TYPE_CHECKING
 
 import moderngl
 
+from facepuppet.runtime.errors import FacepuppetError
+
 if TYPE_CHECKING:
     import os
 
@@ -35,7 +37,7 @@ _MESA_LOCATION = re.compile(r"(?m)^\s*(\d+):(\d+)\((\d+)\):\s*(.*)$")
 _NVIDIA_LOCATION = re.compile(r"(?m)^\s*(\d+)\((\d+)\)\s*:\s*(.*)$")
 
 
-class ShaderError(RuntimeError):
+class ShaderError(FacepuppetError, RuntimeError):
     """A shader file is missing, has an include cycle, or fails to compile or link."""
 
 

@@ -193,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # helpers.*
     from facepuppet.runtime.commands import run
 
+    from helpers.logs import logged
     from helpers.udp_helpers import free_udp_port
 
     port = free_udp_port()
@@ -220,8 +221,9 @@ def main(argv: list[str] | None = None) -> int:
 
     logs: list[str] = []
     try:
-        result = run.run_live(ns, log=logs.append, stop_event=stop, on_ready=on_ready, hooks=[hook],
-                              on_panel=on_panel)
+        with logged(logs):
+            result = run.run_live(ns, stop_event=stop, on_ready=on_ready, hooks=[hook],
+                                  on_panel=on_panel)
     finally:
         stop.set()
         xtest.close()

@@ -15,6 +15,7 @@ from pythonosc.udp_client import SimpleUDPClient
 
 from facepuppet.runtime.commands import run
 
+from helpers.logs import logged
 from helpers.udp_helpers import free_udp_port
 
 NO_SMOOTHING = "\n".join(f"[filter.{r}]\nmin_cutoff = 500.0\nbeta = 0.0" for r in ("eyes", "brows", "mouth", "other",
@@ -73,8 +74,9 @@ def drive(character, values: dict, tmp_path, extra: tuple = (), bones: dict | No
 
     logs: list[str] = []
     try:
-        result = run.run_live(ns, log=logs.append, stop_event=stop, on_ready=on_ready, hooks=[hook],
-                              keep_weights=True)
+        with logged(logs):
+            result = run.run_live(ns, stop_event=stop, on_ready=on_ready, hooks=[hook],
+                                  keep_weights=True)
     finally:
         stop.set()
     assert len(drawn) >= TICKS_WITH_FRAMES, "the run ended before drawing the sent frames"

@@ -72,7 +72,7 @@ def test_the_loop_draws_each_arriving_frame_between_rare_idle_ticks(kind, udp_se
                 udp_sender.sendto(vmc_frame((i + 1) / n_frames), source.address)
 
         log = WeightLog()
-        loop = FrameLoop(ARKIT_NAMES, _Renderer(), WallClock(), sinks=[log],
+        loop = FrameLoop(ARKIT_NAMES, _Renderer(), WallClock(), observers=[log],
                          fps=1000.0, idle_fps=2.0, log=lambda *a: None)
         thread = threading.Thread(target=send)
         thread.start()

@@ -226,7 +226,7 @@ def _readers(tmp: Path):
     """{name: (read, real bytes, suffix, extra cases)}, built lazily per test."""
     pytest.importorskip("c3d")
     from facepuppet.offline.io.capture import read_c3d, read_csv, read_trc
-    from facepuppet.offline.io.gltf_read import read_gltf
+    from facepuppet.offline.io.gltf.read import read_gltf
     from facepuppet.offline.io.mtl import read_mtl
     from facepuppet.offline.io.obj import read_obj
 

@@ -19,9 +19,9 @@ from PIL import Image
 from facepuppet.runtime.render.renderer import FaceRenderer
 
 from conftest import need_shared
+from facepuppet.offline.io.gltf.read import read_gltf
+from facepuppet.offline.io.gltf.write import export_character
 from facepuppet.offline.io.gltf_check import check_gltf
-from facepuppet.offline.io.gltf_export import export_character
-from facepuppet.offline.io.gltf_read import read_gltf
 from helpers.vmc_run import drive, last_weights
 
 pytestmark = [pytest.mark.data, pytest.mark.gl]

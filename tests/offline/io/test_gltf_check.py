@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from conftest import need_shared
+from facepuppet.offline.io.gltf.write import build_gltf, encode_glb
 from facepuppet.offline.io.gltf_check import check_gltf, check_gltf_bytes
-from facepuppet.offline.io.gltf_export import build_gltf, encode_glb
 from helpers.gltf_characters import parts_character
 
 

@@ -22,9 +22,9 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.cli import main
 
 from conftest import need_shared
-from facepuppet.offline.io import gltf_read
+from facepuppet.offline.io.gltf import read as gltf_read
+from facepuppet.offline.io.gltf.write import ExportError, export_character
 from facepuppet.offline.io.gltf_check import check_gltf
-from facepuppet.offline.io.gltf_export import ExportError, export_character
 from helpers.gltf_characters import BONES, decode, node_worlds, parts_character, view_bytes
 
 TABLES_V1 = Path(__file__).resolve().parents[2] / "runtime" / "data" / "tables_v1" / "character.npz"
@@ -474,7 +474,7 @@ def layered_rig() -> Character:
 
 
 def test_an_obj_rigs_thin_layers_export_see_through_and_their_kinds_come_back(tmp_path):
-    from facepuppet.runtime.render.renderer import vertex_opacity
+    from facepuppet.runtime.render.layers import vertex_opacity
 
     c = layered_rig()
     _, out, _ = write(tmp_path, "glb", character=c)

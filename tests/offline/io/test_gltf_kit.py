@@ -7,7 +7,7 @@ import pytest
 
 from facepuppet.runtime.vrm_names import VRM0_PRESETS, VRM1_FROM_VRM0
 
-from facepuppet.offline.io.gltf_read import read_gltf
+from facepuppet.offline.io.gltf.read import read_gltf
 from helpers.gltf_writer import raw_accessor, read_doc
 
 pytestmark = pytest.mark.data

@@ -15,8 +15,8 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.character_parts import ALPHA_MODES, LINEAR, NEAREST, REPEAT, SHADING
 from facepuppet.runtime.cli import main
 
+from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf_container import GltfError
-from facepuppet.offline.io.gltf_read import read_gltf
 from helpers.gltf_writer import GltfBuilder, write_glb
 
 TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)

@@ -5,8 +5,8 @@ import pytest
 
 from facepuppet.runtime.channels import pascal
 
-from facepuppet.offline.io.gltf_export import export_character
-from facepuppet.offline.io.gltf_read import read_gltf
+from facepuppet.offline.io.gltf.read import read_gltf
+from facepuppet.offline.io.gltf.write import export_character
 from facepuppet.offline.perfect_sync.commands import perfect_sync
 from tests.conftest import need_shared
 

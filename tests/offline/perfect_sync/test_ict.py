@@ -319,7 +319,7 @@ def test_the_gums_stay_behind_the_cheeks(identical, ict_character):
     shapes do, and the gums came through it (dark patches beside the nostrils in the contact sheet). Now the outer
     skin (facing forward) within 12 mm outside the gums' front at rest ends up more than 0.2 mm inside it (signed
     distance to the nearest front gum triangle, along its normal) far less often; the contact sheet shows no gums."""
-    from facepuppet.offline.perfect_sync.pieces import nearest_triangles
+    from facepuppet.offline.perfect_sync.triangles import nearest_triangles
 
     _, out, _, _ = identical
     c = ict_character

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from facepuppet.offline.elastic.laplacian import components
-from facepuppet.offline.perfect_sync.pieces import closest_on_triangles
+from facepuppet.offline.perfect_sync.triangles import closest_on_triangles
 from tests.conftest import need_shared
 
 
@@ -49,7 +49,7 @@ def source(ict_character):
 @pytest.fixture(scope="module")
 def godette_run(source):
     """(Godette as read, her perfect-sync character, the report, the control points proposed)."""
-    from facepuppet.offline.io.gltf_read import read_gltf
+    from facepuppet.offline.io.gltf.read import read_gltf
     from facepuppet.offline.perfect_sync.commands import perfect_sync
 
     g = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))

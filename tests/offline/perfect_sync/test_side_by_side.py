@@ -14,7 +14,7 @@ from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.render.images import LABEL_HEIGHT
 
-from facepuppet.offline.io.gltf_read import read_gltf
+from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.perfect_sync.pictures import replay_images, take_moments, take_side_by_side
 from facepuppet.offline.perfect_sync.transfer import add_shapes
 from tests.conftest import need_shared
@@ -70,7 +70,7 @@ def test_the_take_replayed_on_the_presets_and_on_arkit_brows_differs_where_the_b
 
 
 def test_the_two_deformation_paths_draw_the_takes_moments_alike(egl_ctx):
-    """The cpu path draws the deltas the gpu path's 16-bit texture holds (renderer.on_delta_grid): with the file's
+    """The cpu path draws the deltas the gpu path's 16-bit texture holds (paths.deltas.on_delta_grid): with the file's
     float deltas one pixel of one moment differed by 225 levels (an edge moved across its centre)."""
     take = need_shared("tracker", "livelinkface_myslate_3.csv")
     godette = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))

@@ -19,6 +19,7 @@ from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.recording.session import SessionWriter
 
 from conftest import need_shared
+from helpers.logs import logged
 
 MYSLATE = ("tracker", "livelinkface_myslate_3.csv")
 N_TICKS = 30
@@ -30,7 +31,7 @@ def _replay(ctx, character, frames, out_dir, path):
 
     renderer = FaceRenderer(ctx, character, W, H, path=path, log=lambda s: None)
     weights, messages = WeightLog(), []
-    loop = FrameLoop(character.shape_names, renderer, RecordedClock(), sinks=[weights, PngSink(out_dir)],
+    loop = FrameLoop(character.shape_names, renderer, RecordedClock(), observers=[weights, PngSink(out_dir)],
                      log=messages.append)
     result = loop.run(ReplaySource(frames), duration=(N_TICKS - 1) / 60)
     renderer.close()
@@ -108,10 +109,11 @@ def test_replay_command_headless_writes_pngs_and_a_session_replays_like_its_csv(
         for f in read_llf_csv(csv_path):
             w.write_frame(f)
     for name, rec in (("csv", csv_path), ("session", session_path)):
-        rc = _command(["replay", str(rec), "-c", str(char_path), "--headless", "--out", str(tmp_path / name),
-                       "--size", "160x120", "--duration", "0.25", "--path", "cpu", "--stats"])
+        with logged() as lines:
+            rc = _command(["replay", str(rec), "-c", str(char_path), "--headless", "--out", str(tmp_path / name),
+                           "--size", "160x120", "--duration", "0.25", "--path", "cpu", "--stats"])
         assert rc == 0
-        out = capsys.readouterr().out
+        out = "\n".join(lines)
         assert out.count("channel map (livelinkface_csv)") == 1 and "TongueOut" in out
         assert "16 ticks at 60 fps" in out and "gpu_finish" in out
     assert _pngs(tmp_path / "csv") == _pngs(tmp_path / "session") and len(_pngs(tmp_path / "csv")) == 16

@@ -18,10 +18,11 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
 
 from facepuppet.runtime.cli import main
-from facepuppet.runtime.commands.run import CALIBRATE_ADDRESS
+from facepuppet.runtime.inputs.osc import CALIBRATE_ADDRESS
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.recording.session import read_session
 
+from helpers.logs import said
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port, wait_for
 
@@ -89,7 +90,7 @@ def test_run_end_to_end_python_osc_then_oscsend(character, tmp_path, capsys):
     finally:
         done.set()
         thread.join(timeout=30)
-    out = capsys.readouterr().out
+    out = said(capsys)
     assert code == 0, out
     assert "no audio" in out and "no-such-microphone-4242" in out  # and the run went on
     stats = json.loads(next(line for line in out.splitlines() if line.startswith("stats json: "))[12:])
@@ -178,7 +179,7 @@ def test_run_vmc_out_sends_perfect_sync_and_presets_and_says_so(character, capsy
                 datagrams.append(receiver.recv(65536))
             except BlockingIOError:
                 break
-    out = capsys.readouterr().out
+    out = said(capsys)
     assert code == 0, out
     assert "vmc-out: 127.0.0.1:" in out and "52 ARKit (perfect sync) + 17 VRM presets" in out
     assert "not sent (not ARKit; --vmc-extra sends them): puff" in out
@@ -230,7 +231,7 @@ def test_both_receivers_record_every_packet_and_see_the_calibrate_message(charac
         character=character, input="vmc", listen=f"127.0.0.1:{free_udp_port()}", allow=None, config=config,
         calibrate=False, audio=None, audio_file=None, record=record, vmc_out=None, stats=False, headless=True,
         out=None, dump_weights=None, size="64x48", fps=60.0, duration=30.0, path="auto", receiver=receiver)
-    result = run_live(args, log=lambda s: None, stop_event=stop, on_ready=on_ready)
+    result = run_live(args, stop_event=stop, on_ready=on_ready)
     assert stop.is_set(), "the run ended before the sender"
     udp = result.counters["udp"]
     assert udp["packets"] == len(sent) + 1 == 81 and udp["internal_error"] == 0
@@ -246,4 +247,4 @@ def test_unknown_receiver_is_refused(character):
     from facepuppet.runtime.commands.run import run_live
 
     with pytest.raises(ValueError, match="--receiver: expected one of"):
-        run_live(SimpleNamespace(receiver="fiber"), log=lambda s: None)
+        run_live(SimpleNamespace(receiver="fiber"))

@@ -19,6 +19,7 @@ from pythonosc.udp_client import SimpleUDPClient
 
 from facepuppet.runtime.commands import replay, run
 
+from helpers.logs import logged
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port
 from helpers.vmc_run import send_vmc
@@ -95,7 +96,8 @@ def test_two_inputs_over_udp_per_channel_order_and_the_loss_of_one_hands_its_cha
     try:
         for th in threads:
             th.start()
-        result = run.run_live(ns, log=logs.append, stop_event=stop, hooks=[hook])
+        with logged(logs):
+            result = run.run_live(ns, stop_event=stop, hooks=[hook])
     finally:
         stop.set()
         for th in threads:
@@ -131,7 +133,8 @@ def test_two_inputs_over_udp_per_channel_order_and_the_loss_of_one_hands_its_cha
     lines: list[str] = []
     args = parse(replay, ["replay", str(rec), "-c", str(character), "--headless", "--size", "48x40", "--config",
                           str(config), "--dump-weights", str(dump)])
-    assert replay.run_replay(args, log=lines.append) == 0
+    with logged(lines):
+        assert replay.run_replay(args) == 0
     assert "stages: replay(vmc+vmc#2)→mix→filter→map→draw" in lines
     replayed = np.load(dump)
     assert replayed.shape[0] == len(j)
@@ -162,7 +165,7 @@ def test_a_frame_of_the_second_input_alone_is_drawn_on_arrival(tmp_path, receive
     th = threading.Thread(target=sender, daemon=True)
     try:
         th.start()
-        result = run.run_live(ns, log=lambda s: None, stop_event=stop,
+        result = run.run_live(ns, stop_event=stop,
                               hooks=[lambda info: ticks.append((info.t, info.rotation))])
     finally:
         stop.set()
@@ -249,7 +252,8 @@ def test_the_voice_as_an_input_fills_the_jaw_the_tracker_does_not_send(tmp_path)
     thread = threading.Thread(target=sender, daemon=True)
     try:
         thread.start()
-        result = run.run_live(ns, log=logs.append, stop_event=stop, hooks=[hook], keep_weights=True)
+        with logged(logs):
+            result = run.run_live(ns, stop_event=stop, hooks=[hook], keep_weights=True)
     finally:
         stop.set()
         thread.join(timeout=10)
@@ -265,6 +269,7 @@ def test_the_voice_as_an_input_fills_the_jaw_the_tracker_does_not_send(tmp_path)
     dump, lines = tmp_path / "replay.npy", []
     args = parse(replay, ["replay", str(tmp_path / "voice.fps"), "-c", str(character), "--headless", "--size",
                           "48x40", "--config", str(config), "--dump-weights", str(dump)])
-    assert replay.run_replay(args, log=lines.append) == 0
+    with logged(lines):
+        assert replay.run_replay(args) == 0
     assert "stages: replay(vmc+audio)→audio→mix→filter→map→draw" in lines
     np.testing.assert_allclose(np.load(dump), result.weights.array, atol=1e-6)

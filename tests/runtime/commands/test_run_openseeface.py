@@ -18,6 +18,7 @@ import pytest
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.recording.session import read_session
 
+from helpers.logs import said
 from helpers.openseeface_sender import osf_record
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port
@@ -66,7 +67,7 @@ def test_run_follows_the_chosen_face_and_its_replay_does_too(character, tmp_path
     finally:
         done.set()
         thread.join(timeout=30)
-    out = capsys.readouterr().out
+    out = said(capsys)
     assert code == 0, out
     assert "listening for openseeface on 127.0.0.1:" in out
     stats = json.loads(next(line for line in out.splitlines() if line.startswith("stats json: "))[12:])

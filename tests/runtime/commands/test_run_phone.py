@@ -21,6 +21,7 @@ from facepuppet.runtime.cli import main
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.recording.session import read_session
 
+from helpers.logs import said
 from helpers.phone_senders import IFM_START, ifm_frame, vts_frame
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port
@@ -123,7 +124,7 @@ def test_run_ifacialmocap_triggers_the_phone_and_draws_its_frames(character, tmp
                      "--receiver", receiver])
     finally:
         phone.done.wait(DEADLINE_S)
-    out = capsys.readouterr().out
+    out = said(capsys)
     assert phone.error is None, phone.error
     assert code == 0, out
     payload, sender = phone.requests[0]
@@ -176,7 +177,7 @@ def test_run_vtubestudio_requests_repeatedly_and_face_lost_is_tracking_loss(char
                      "--receiver", receiver])
     finally:
         phone.done.wait(DEADLINE_S)
-    out = capsys.readouterr().out
+    out = said(capsys)
     assert phone.error is None, phone.error
     assert code == 0, out
     request = seen["request"]

@@ -18,6 +18,7 @@ from facepuppet.runtime.commands import run
 from facepuppet.runtime.live.profiles import Profile
 from facepuppet.runtime.recording.session import read_session
 
+from helpers.logs import logged
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port
 from helpers.vmc_run import NO_SMOOTHING, send_vmc
@@ -72,8 +73,9 @@ def _run_with_a_live_change(char, record, options, change):
 
     logs: list[str] = []
     try:
-        result = run.run_live(ns, log=logs.append, stop_event=stop, on_ready=on_ready, hooks=[hook],
-                              keep_weights=True, on_chain=chains.append)
+        with logged(logs):
+            result = run.run_live(ns, stop_event=stop, on_ready=on_ready, hooks=[hook],
+                                  keep_weights=True, on_chain=chains.append)
     finally:
         stop.set()
     return result, logs, drawn
@@ -153,7 +155,8 @@ def test_run_warns_when_the_profile_was_made_for_another_character(tmp_path):
     run.register(parser.add_subparsers())
     ns = parser.parse_args(["run", "-c", str(char), "--input", "vmc", "--listen", f"127.0.0.1:{free_udp_port()}",
                             "--headless", "--size", "32x24", "--duration", "0.1", "--profile", str(profile)])
-    run.run_live(ns, log=logs.append)
+    with logged(logs):
+        run.run_live(ns)
     warning = next(line for line in logs if "warning" in line)
     assert "made for character 'sphere.npz'" in warning and "'ball.npz'" in warning
 
@@ -191,8 +194,9 @@ def test_a_calibrated_run_saves_its_neutral_to_a_new_profile_by_name(tmp_path, m
     result_counters: list = []
     logs: list[str] = []
     try:
-        run.run_live(ns, log=logs.append, stop_event=stop, on_ready=on_ready, hooks=[hook],
-                     on_chain=lambda chain: result_counters.append(chain.filter.counters))
+        with logged(logs):
+            run.run_live(ns, stop_event=stop, on_ready=on_ready, hooks=[hook],
+                         on_chain=lambda chain: result_counters.append(chain.filter.counters))
     finally:
         stop.set()
     path = tmp_path / "xdg" / "facepuppet" / "profiles" / "rehearsal.toml"

@@ -21,6 +21,7 @@ from facepuppet.runtime.inputs.osc import decode
 from facepuppet.runtime.live.tracking_loss import LossSettings, voice_jaw
 from facepuppet.runtime.recording.session import read_session
 
+from helpers.logs import logged
 from helpers.osc_helpers import vmc_frame
 from helpers.small_characters import sphere_character
 from helpers.swinging_voice import write_voice
@@ -100,7 +101,7 @@ def test_jaw_hands_over_to_the_voice_while_the_tracker_is_silent_and_back_withou
     thread = threading.Thread(target=sender, daemon=True)
     try:
         thread.start()
-        result = run.run_live(ns, log=lambda s: None, stop_event=stop, hooks=[hook])
+        result = run.run_live(ns, stop_event=stop, hooks=[hook])
     finally:
         stop.set()
         thread.join(timeout=10)
@@ -138,7 +139,8 @@ def test_jaw_hands_over_to_the_voice_while_the_tracker_is_silent_and_back_withou
     lines: list[str] = []
     args = parse(replay, ["replay", str(rec), "-c", str(character), "--headless", "--size", "48x40", "--config",
                           str(config), "--dump-weights", str(dump)])
-    assert replay.run_replay(args, log=lines.append) == 0
+    with logged(lines):
+        assert replay.run_replay(args) == 0
     assert any(line.startswith("replay: tracking events as recorded (2: lost at") for line in lines), lines
     replayed = np.load(dump)[:, 0]
     np.testing.assert_allclose(replayed, jaw[:len(replayed)], atol=1e-6)

@@ -35,7 +35,7 @@ def gpu_elastic(ctx, character, model, controls):
     """Deformed positions and normals read back from face.glsl's elastic variant (transform feedback)."""
     import moderngl
 
-    from facepuppet.runtime.render.elastic_path import basis_textures, elastic_defines
+    from facepuppet.runtime.render.paths.elastic import basis_textures, elastic_defines
     from facepuppet.runtime.render.shader_loader import load_program
 
     prog = load_program(ctx, "face.glsl", elastic_defines(model), varyings=("v_world", "v_normal"))

@@ -12,6 +12,7 @@ from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.tables import TablesError, load_tables, save_tables
 
 from helpers.kpls_stages import random_stage
+from helpers.logs import logged
 
 
 def _reference(stage, w):
@@ -107,8 +108,10 @@ def test_replay_command_uses_the_retarget(tmp_path, egl_ctx):
     logs = []
     args = parser.parse_args(["replay", str(session), "-c", str(char_path), "--headless", "--size", "64x48",
                               "--retarget", str(tmp_path / "r.npz"), "--path", "cpu"])
-    assert run_replay(args, log=logs.append) == 0
+    with logged(logs):
+        assert run_replay(args) == 0
     assert any("retarget" in line and "rbf kernel" in line for line in logs)
     args.retarget = wrong
     with pytest.raises(ValueError, match="its target shapes \\(4\\) are not the shapes of"):
-        run_replay(args, log=logs.append)
+        with logged(logs):
+            run_replay(args)

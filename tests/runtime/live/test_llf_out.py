@@ -5,6 +5,7 @@ livelinkface``."""
 from __future__ import annotations
 
 import math
+import re
 import socket
 import struct
 import threading
@@ -18,6 +19,7 @@ from facepuppet.runtime.geometry import euler_to_quat, quat_to_euler, quat_to_ma
 from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter
 from facepuppet.runtime.live.llf_out import EYE_PITCH_MAX, EYE_YAW_MAX, LlfSender, device_id
 
+from helpers.logs import said
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port, wait_for
 
@@ -230,7 +232,7 @@ def test_round_trip_into_run_input_livelinkface(tmp_path):
         config=config, calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False,
         headless=True, out=None, dump_weights=None, size="48x40", fps=60.0, duration=30.0, path="auto",
         receiver="thread")
-    result = run_live(args, log=lambda s: None, stop_event=stop, on_ready=on_ready, keep_weights=True,
+    result = run_live(args, stop_event=stop, on_ready=on_ready, keep_weights=True,
                       hooks=[watch])
     assert stop.is_set() and len(sent) == 40
     udp = result.counters["udp"]
@@ -248,11 +250,11 @@ def test_run_llf_out_sends_one_packet_a_tick_and_says_so(tmp_path, receiver, cap
     code = main(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{free_udp_port()}",
                  "--headless", "--duration", "0.5", "--size", "48x40", "--draw", "tick", "--fps", "20", "--stats",
                  "--llf-out", f"127.0.0.1:{receiver.getsockname()[1]}"])
-    out = capsys.readouterr().out
+    out = said(capsys)
     assert code == 0, out
     assert "llf-out: 127.0.0.1:" in out and "subject 'facepuppet'" in out
     assert "51 ARKit shapes the character lacks sent as 0" in out  # the sphere: jawOpen and its own "puff"
-    n_ticks = int(out.split("run: ")[-1].split(" ticks")[0])
+    n_ticks = int(re.search(r"run: (\d+) ticks", out).group(1))
     datagrams = drain(receiver)
     # one packet per drawn tick; a live run skips a tick it is late for (a loaded machine), so the count is
     # what the run reports, at most the 11 ticks of 0.5 s at 20 fps, and each packet's frame number is its
@@ -283,7 +285,7 @@ def test_replay_llf_out_sends_the_takes_values(tmp_path, receiver, capsys):
     dumped = tmp_path / "w.npy"
     code = main(["replay", str(take), "-c", str(character), "--headless", "--size", "48x40", "--fps", "10",
                  "--llf-out", f"127.0.0.1:{receiver.getsockname()[1]}", "--dump-weights", str(dumped)])
-    out = capsys.readouterr().out
+    out = said(capsys)
     assert code == 0, out
     assert "(paced to real time)" in out
     adapter = LiveLinkFaceAdapter()

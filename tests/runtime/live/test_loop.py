@@ -44,7 +44,7 @@ def test_newest_frame_wins_stale_frames_are_dropped_and_counted():
     frames = [_frame(0.0, 0.0), _frame(0.11, 0.1), _frame(0.13, 0.2), _frame(0.15, 0.3), _frame(0.19, 0.4),
               _frame(0.31, 0.5)]
     renderer, log = StubRenderer(), WeightLog()
-    loop = FrameLoop(RIG.shape_names, renderer, RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None)
+    loop = FrameLoop(RIG.shape_names, renderer, RecordedClock(), observers=[log], fps=10.0, log=lambda s: None)
     result = loop.run(ReplaySource(frames), duration=0.4)
     assert result.n_ticks == 5  # t = 0, 0.1, 0.2, 0.3, 0.4
     np.testing.assert_array_equal(log.times, [0.0, 0.1, 0.2, 0.3, 0.4])
@@ -62,7 +62,7 @@ def test_non_finite_frames_are_rejected_not_drawn():
     frames = [_frame(0.0, 0.25), _frame(0.1, math.inf), _frame(0.2, 0.5, head_rotation=[0, 0, math.nan, 1]),
               _frame(0.3, 0.75, head_rotation=[0, 0, 0, 1])]
     renderer, log = StubRenderer(), WeightLog()
-    result = FrameLoop(RIG.shape_names, renderer, RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None).run(
+    result = FrameLoop(RIG.shape_names, renderer, RecordedClock(), observers=[log], fps=10.0, log=lambda s: None).run(
         ReplaySource(frames))
     assert result.counters["nonfinite_rejected"] == 2
     np.testing.assert_array_equal(log.array[:, 0], np.float32([0.25, 0.25, 0.25, 0.75]))
@@ -75,7 +75,7 @@ def test_channels_mapped_by_name_and_report_logged_once_per_channel_tuple():
               Frame(t=0.2, source="other", channels=other, weights=[0.9, 0.8]), _frame(0.3, 0.7, 0.45)]
     messages = []
     log = WeightLog()
-    FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=messages.append).run(
+    FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), observers=[log], fps=10.0, log=messages.append).run(
         ReplaySource(frames))
     assert len(messages) == 2  # one per distinct channel tuple, not per frame
     assert "TongueOut" in messages[0] and "cheekRaiser_L" in messages[0]
@@ -95,8 +95,9 @@ def test_a_character_with_expressions_is_mapped_through_them_and_the_report_name
               Frame(t=0.1, source="vmc", channels=channels, weights=[0.0, 0.0, 0.2, 0.0, 0.0])]
     messages, log, seen = [], WeightLog(), []
     drive = make_drive(c.shape_names, c.expressions)
-    loop = FrameLoop(c.shape_names, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=messages.append,
-                     drive=drive, on_tick=[lambda info: seen.append(np.array(info.expressions))])
+    loop = FrameLoop(c.shape_names, StubRenderer(), RecordedClock(),
+                     observers=[log, lambda info: seen.append(np.array(info.expressions))], fps=10.0,
+                     log=messages.append, drive=drive)
     loop.run(ReplaySource(frames))
     assert len(messages) == 1
     assert "default preset mapping (2): EyeBlinkLeft→Blink+Blink_L, EyeBlinkRight→Blink+Blink_R" in messages[0]
@@ -113,7 +114,7 @@ def test_a_character_with_expressions_is_mapped_through_them_and_the_report_name
 def test_a_frame_loop_without_a_drive_reports_no_expressions():
     seen = []
     FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), fps=10.0, log=lambda s: None,
-              on_tick=[lambda info: seen.append(info.expressions)]).run(ReplaySource([_frame(0.0, 0.5)]))
+              observers=[lambda info: seen.append(info.expressions)]).run(ReplaySource([_frame(0.0, 0.5)]))
     assert seen == [None]
 
 
@@ -141,7 +142,7 @@ def test_wall_clock_sleeps_to_each_tick_and_counts_late_ones():
     frames = [_frame(i / 10, 0.1 * i) for i in range(5)]
     clock = WallClock(monotonic=fake.monotonic, sleep=fake.sleep)
     log = WeightLog()
-    result = FrameLoop(RIG.shape_names, SlowRenderer(), clock, sinks=[log], fps=10.0, log=lambda s: None).run(
+    result = FrameLoop(RIG.shape_names, SlowRenderer(), clock, observers=[log], fps=10.0, log=lambda s: None).run(
         ReplaySource(frames))
     assert result.counters["late_ticks"] == 1
     # late or not, each tick shows the recording at its own recorded time
@@ -206,7 +207,7 @@ def test_stage_timer_summary():
 def test_default_duration_reaches_the_last_frame():
     frames = [_frame(0.0, 0.1), _frame(0.1, 0.2), _frame(0.25, 0.3)]  # the last falls between ticks
     src, log = ReplaySource(frames), WeightLog()
-    loop = FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), sinks=[log], fps=10.0, log=lambda s: None)
+    loop = FrameLoop(RIG.shape_names, StubRenderer(), RecordedClock(), observers=[log], fps=10.0, log=lambda s: None)
     result = loop.run(src)
     assert result.n_ticks == 4 and result.counters["frames_received"] == 3 and src.done(0.3)
     assert log.array[-1, 0] == np.float32(0.3)
@@ -244,7 +245,7 @@ def test_stages_run_in_order_and_the_last_frame_is_mapped_by_name():
 
     frames = [Frame(t=0.0, channels=("x", "y"), weights=[1.0, 0.4]), Frame(t=0.1)]
     log = WeightLog()
-    FrameLoop(("a", "b"), NullRenderer(), RecordedClock(), sinks=[log], fps=10, log=lambda s: None,
+    FrameLoop(("a", "b"), NullRenderer(), RecordedClock(), observers=[log], fps=10, log=lambda s: None,
               stages=[Halve(), AddOne()]).run(ReplaySource(frames), duration=0.2)
     # halve then add one: b = 1.0 * 0.5 + 1, a = 0.4 * 0.5 + 1 (the stage renamed the channels)
     np.testing.assert_allclose(log.array, [[1.2, 1.5]] * 3)

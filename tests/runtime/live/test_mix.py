@@ -135,7 +135,7 @@ def test_a_config_applied_live_changes_the_mix_orders_through_the_filters_hook()
                      mix=MixSettings(order=("phone", "osf"), ease_s=0.2), timeout_s=0.2)
     stage = MixStage(("phone", "osf"), {"osf": Scripted(second)}, cfg.mix, timeout_s=0.2)
     pipeline, logs = LivePipeline(cfg, log=lambda s: None), []
-    pipeline.on_config.append(follow_config(stage, ("phone", "osf"), logs.append))
+    pipeline.bus.on_config(follow_config(stage, ("phone", "osf"), logs.append))
     jaw = []
     for k in range(int(1.0 * FPS)):
         t = k / FPS

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.live.bus import SessionBus
 from facepuppet.runtime.live.config import ChannelSettings, FilterSettings, LiveConfig
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
 from facepuppet.runtime.live.pipeline import LivePipeline
@@ -42,7 +43,7 @@ def frames(t0, t1, jaw, blink=0.0, rotation=None, translation=None, rate=FPS):
 
 def run(pipeline, stream, duration):
     renderer, log = StubRenderer(), WeightLog()
-    loop = FrameLoop(RIG.shape_names, renderer, RecordedClock(), sinks=[log], fps=FPS, log=lambda s: None,
+    loop = FrameLoop(RIG.shape_names, renderer, RecordedClock(), observers=[log], fps=FPS, log=lambda s: None,
                      stages=[pipeline])
     result = loop.run(ReplaySource(stream), duration=duration)
     return log, renderer, result
@@ -139,7 +140,7 @@ def test_non_finite_frames_are_rejected_once_by_the_loop_before_any_stage():
             return original(frame, t)
 
     renderer, log = StubRenderer(), WeightLog()
-    result = FrameLoop(RIG.shape_names, renderer, RecordedClock(), sinks=[log], fps=FPS, log=lambda s: None,
+    result = FrameLoop(RIG.shape_names, renderer, RecordedClock(), observers=[log], fps=FPS, log=lambda s: None,
                        stages=[Spy()]).run(ReplaySource(good + [bad, bad_pose]), duration=0.3)
     np.testing.assert_allclose(log.array[:, 0], 0.4, atol=1e-6)
     assert result.counters["nonfinite_rejected"] == 2       # one counter, in the loop
@@ -149,8 +150,9 @@ def test_non_finite_frames_are_rejected_once_by_the_loop_before_any_stage():
 
 def test_a_growing_request_count_calibrates_and_nothing_calls_into_the_stage():
     count = {"n": 0}
-    pipeline = LivePipeline(passthrough_config(capture_s=0.1), log=lambda s: None,
-                            calibrate_requests=lambda: count["n"])
+    bus = SessionBus()
+    bus.count_requests(lambda: count["n"])
+    pipeline = LivePipeline(passthrough_config(capture_s=0.1), log=lambda s: None, bus=bus)
     one = lambda t: Frame(t=t, source="test", channels=CHANNELS, weights=[0.3, 0.0, math.nan])  # noqa: E731
     pipeline(one(0.0), 0.0)
     assert not pipeline.calibrating

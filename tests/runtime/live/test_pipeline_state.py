@@ -187,11 +187,11 @@ def test_a_snapshot_that_is_not_one_is_refused_naming_the_field_and_changes_noth
 
 @pytest.mark.parametrize("text", ["not json {", '{"version": 1, "channels": 3}', "[]"])
 def test_replay_says_a_state_record_it_cannot_use_and_starts_the_stage_afresh(text, tmp_path):
-    from facepuppet.runtime.commands.replay import _restore_state
+    from facepuppet.runtime.session.recording_feed import restore_state
 
     lines: list[str] = []
     p = LivePipeline(SMOOTH, log=lambda s: None)
-    _restore_state(p, (1.25, text), tmp_path / "take.fps", lines.append)
+    restore_state(p, (1.25, text), tmp_path / "take.fps", lines.append)
     assert len(lines) == 1 and "warning" in lines[0] and "take.fps" in lines[0] and "t = 1.250 s" in lines[0]
     assert p.state == "waiting"
 

@@ -135,7 +135,7 @@ def test_a_changed_filter_keeps_its_state_so_the_output_does_not_jump():
 def test_apply_config_from_another_thread_and_the_last_of_several_wins():
     p = LivePipeline(fast_config())
     heard = []
-    p.on_config.append(lambda t, c: heard.append((t, c.channel("jawOpen").gain)))
+    p.bus.on_config(lambda t, c: heard.append((t, c.channel("jawOpen").gain)))
     p(_frame(0.0, [0.3, 0.0, 0.0]), 0.0)
 
     def panel():
@@ -191,7 +191,8 @@ def test_a_captured_neutral_is_heard_as_a_change_and_its_schedule_replays_it_wit
     """Key C is not in a recording; the neutral it captured is (a CONFIG record): a replay that is not asked to
     calibrate draws the same values."""
     heard = []
-    live = LivePipeline(fast_config(capture_s=0.1), on_config=[lambda t, c: heard.append((t, c))])
+    live = LivePipeline(fast_config(capture_s=0.1))
+    live.bus.on_config(lambda t, c: heard.append((t, c)))
     ticks = [k / 60 for k in range(30)]
     stream = [_frame(t, [0.2 + 0.1 * (t > 0.3), 0.1, 0.0]) for t in ticks]
     out_live = []

@@ -54,7 +54,7 @@ def traced_after(fn) -> int:
 @pytest.mark.parametrize("varying", [False, True])
 def test_the_frame_loop_retains_nothing_per_tick(varying):
     loop = FrameLoop(SHAPES, NullRenderer(), RecordedClock(), fps=100.0, log=lambda s: None,
-                     on_tick=[LiveStats({}, interval_s=None, capacity=256).on_tick])
+                     observers=[LiveStats({}, interval_s=None, capacity=256).on_tick])
     source = EndlessSource(varying)
     loop.run(source, duration=10.0)  # warm-up: rings full, caches at their bound, the timer's rings full
     kept = {}

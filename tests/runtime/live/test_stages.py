@@ -25,6 +25,7 @@ from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.recording.session import read_session
 
 from helpers.elastic_models import random_model
+from helpers.logs import logged
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port
 
@@ -55,7 +56,8 @@ def live(argv, send, tmp_path, hooks=()):
 
     logs: list[str] = []
     try:
-        result = run.run_live(args, log=logs.append, on_ready=on_ready, hooks=hooks, keep_weights=True)
+        with logged(logs):
+            result = run.run_live(args, on_ready=on_ready, hooks=hooks, keep_weights=True)
     finally:
         stop.set()
         for t in threads:
@@ -233,7 +235,8 @@ def test_replay_of_a_marker_take_plays_it_through_the_solve(actor_files, tmp_pat
         args = parser().parse_args(["replay", str(take), "-c", str(paths["character"]), "--headless", "--size",
                                     "32x32", "--actor", str(paths["actor"]), "--pair", str(paths["pair"]),
                                     "--no-pipeline", "--dump-weights", str(out)])
-        assert replay.run_replay(args, log=logs.append) == 0
+        with logged(logs):
+            assert replay.run_replay(args) == 0
         assert "stages: replay(markers)→solve→map→draw" in logs
         assert any("marker take, 300 frames x 20 markers" in line for line in logs)
         got = np.load(out)
@@ -242,17 +245,19 @@ def test_replay_of_a_marker_take_plays_it_through_the_solve(actor_files, tmp_pat
     args = parser().parse_args(["replay", str(takes[0]), "-c", str(paths["character"]), "--headless", "--size",
                                 "32x32", "--actor", str(paths["actor"]), "--pair", str(paths["pair"])])
     logs = []
-    assert replay.run_replay(args, log=logs.append) == 0        # by default as the live markers input: filtered
+    with logged(logs):
+        assert replay.run_replay(args) == 0        # by default as the live markers input: filtered
     assert "stages: replay(markers)→solve→filter→map→draw" in logs
     args = parser().parse_args(["replay", str(takes[0]), "-c", str(paths["character"]), "--headless"])
     with pytest.raises(ValueError, match="--input markers: needs --actor ACTOR.npz and --pair PAIR.npz"):
-        replay.run_replay(args, log=lambda s: None)
+        replay.run_replay(args)
     renamed = write_trc(tmp_path / "renamed.trc", dc.replace(short, names=tuple(f"Sub1:{n}" for n in short.names)))
     args = parser().parse_args(["replay", str(renamed), "-c", str(paths["character"]), "--headless", "--size",
                                 "32x32", "--actor", str(paths["actor"]), "--pair", str(paths["pair"])])
     logs = []
     with pytest.raises(ValueError, match=r"renamed\.trc: the actor's markers are not in this take"):
-        replay.run_replay(args, log=logs.append)             # refused before drawing a neutral face to its end
+        with logged(logs):
+            replay.run_replay(args)             # refused before drawing a neutral face to its end
     assert any("layout of 20 markers refused" in line for line in logs)
 
 
@@ -261,15 +266,15 @@ def test_markers_need_an_actor_and_a_pair_that_fit(actor_files, tmp_path):
     safe = ["--headless", "--duration", "0.2", "--listen", f"127.0.0.1:{free_udp_port()}"]  # should one not raise
     base = ["run", "-c", str(paths["character"]), "--input", "markers", *safe]
     with pytest.raises(ValueError, match="--input markers: needs --actor ACTOR.npz and --pair PAIR.npz"):
-        run.run_live(parser().parse_args(base), log=lambda s: None)
+        run.run_live(parser().parse_args(base))
     with pytest.raises(ValueError, match="--actor and --pair go together"):
-        run.run_live(parser().parse_args(base + ["--actor", str(paths["actor"])]), log=lambda s: None)
+        run.run_live(parser().parse_args(base + ["--actor", str(paths["actor"])]))
     other = dataclasses.replace(sphere_character(), shape_names=("jawOpen", "smile"))
     sphere = other.save(tmp_path / "sphere.npz")
     args = parser().parse_args(["run", "-c", str(sphere), "--input", "markers", *safe,
                                 "--actor", str(paths["actor"]), "--pair", str(paths["pair"])])
     with pytest.raises(ValueError, match="--pair .*pair.npz: its shapes \\(2\\) are not the shapes of the character"):
-        run.run_live(args, log=lambda s: None)
+        run.run_live(args)
 
 
 # -- kernel PLS ----------------------------------------------------------------------------------------------------
@@ -352,7 +357,7 @@ def test_elastic_table_must_fit_the_character(tmp_path):
     args = parser().parse_args(["run", "-c", str(other), "--input", "vmc", "--headless", "--duration", "0.2",
                                 "--listen", f"127.0.0.1:{free_udp_port()}", "--elastic", str(tmp_path / "e.npz")])
     with pytest.raises(ValueError, match="--elastic .*e.npz: made for \\d+ vertices"):
-        run.run_live(args, log=lambda s: None)
+        run.run_live(args)
 
 
 # -- a live recording replayed tick for tick -----------------------------------------------------------------------
@@ -386,7 +391,8 @@ def test_replay_of_a_live_recording_draws_the_live_weights(tmp_path):
     logs: list[str] = []
     args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
                                 "--config", str(config), "--calibrate", "--dump-weights", str(replay_w)])
-    assert replay.run_replay(args, log=logs.append) == 0
+    with logged(logs):
+        assert replay.run_replay(args) == 0
     assert any("tick for tick" in line for line in logs)
     live_weights, replayed = np.load(live_w), np.load(replay_w)
     assert live_weights.shape == replayed.shape and np.abs(live_weights[:, 0]).max() > 0.1
@@ -394,11 +400,13 @@ def test_replay_of_a_live_recording_draws_the_live_weights(tmp_path):
 
     raw = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
                                "--no-pipeline", "--dump-weights", str(replay_w)])
-    assert replay.run_replay(raw, log=logs.append) == 0
+    with logged(logs):
+        assert replay.run_replay(raw) == 0
     assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # without the pipeline: the raw frames
     logs = []
     plain = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40"])
-    assert replay.run_replay(plain, log=logs.append) == 0         # the options the live run had are named
+    with logged(logs):
+        assert replay.run_replay(plain) == 0         # the options the live run had are named
     note = next(line for line in logs if "the filter stage runs as in the live run" in line)
     # the recording keeps the config itself (replay uses it), so only --calibrate is left to name
     assert "--calibrate" in note and "--config" not in note
@@ -424,13 +432,14 @@ def test_replay_of_a_live_recording_reproduces_it_by_default(tmp_path):
     args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
                                 "--dump-weights", str(replay_w)])
     logs: list[str] = []
-    assert replay.run_replay(args, log=logs.append) == 0
+    with logged(logs):
+        assert replay.run_replay(args) == 0
     assert any("stages: replay(vmc)→filter→map→draw" == line for line in logs)
     assert np.abs(live_weights).max() > 0.1
     np.testing.assert_array_equal(np.load(replay_w), live_weights)
     with pytest.raises(ValueError, match="--no-pipeline: --config and --calibrate configure the filter stage"):
         replay.run_replay(parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless",
-                                               "--no-pipeline", "--calibrate"]), log=lambda s: None)
+                                               "--no-pipeline", "--calibrate"]))
 
 
 def voice_wav(path, seconds: float = 2.5, rate: int = 16000):
@@ -475,7 +484,8 @@ def test_replay_of_a_live_gestures_run_draws_the_live_weights(tmp_path):
     logs = []
     args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
                                 "--pipeline", *options, "--dump-weights", str(replay_w)])
-    assert replay.run_replay(args, log=logs.append) == 0
+    with logged(logs):
+        assert replay.run_replay(args) == 0
     assert "stages: replay(vmc)→audio→filter→gestures→map→draw" in logs
     live_weights, replayed = np.load(live_w), np.load(replay_w)
     assert live_weights.shape == replayed.shape
@@ -485,7 +495,8 @@ def test_replay_of_a_live_gestures_run_draws_the_live_weights(tmp_path):
     other_seed = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
                                       "--pipeline", "--gestures", str(tmp_path / "gestures.npz"), "--gesture-seed",
                                       "4", "--dump-weights", str(replay_w)])
-    assert replay.run_replay(other_seed, log=logs.append) == 0
+    with logged(logs):
+        assert replay.run_replay(other_seed) == 0
     assert np.abs(np.load(replay_w) - live_weights).max() > 1e-3  # the gestures are in what was compared
 
 
@@ -506,6 +517,7 @@ def test_replay_of_a_voice_only_run_draws_the_live_weights(tmp_path):
     logs = []
     args = parser().parse_args(["replay", str(record), "-c", str(char_path), "--headless", "--size", "48x40",
                                 "--gestures", str(tmp_path / "gestures.npz"), "--dump-weights", str(replay_w)])
-    assert replay.run_replay(args, log=logs.append) == 0
+    with logged(logs):
+        assert replay.run_replay(args) == 0
     assert "stages: replay(audio)→audio→filter→gestures→map→draw" in logs   # the live chain, by default
     np.testing.assert_array_equal(np.load(replay_w), live_weights)

@@ -21,8 +21,9 @@ def test_periodic_lines_print_totals_and_the_last_second_labelled():
     assert "received=60 (+60)" in lines[0]
     assert "received=120 (+60)" in lines[1]
     assert "received=165 (+45)" in lines[2]           # the total and the last second, both there
-    stats.final()
-    assert "stats (whole run): counters total: udp: received=165" in lines[3]
+    final = stats.final()
+    assert "stats (whole run): counters total: udp: received=165" in final[0]
+    assert final[1].startswith("stats json: {")
 
 
 def test_a_gauge_is_shown_without_a_change():

@@ -55,8 +55,8 @@ def run(pipeline, stream, duration):
     def hook(info: TickInfo):
         states.append(pipeline.tracking_state)
 
-    loop = FrameLoop(RIG, renderer, RecordedClock(), sinks=[log], fps=FPS, log=lambda s: None,
-                     stages=[pipeline], on_tick=[hook])
+    loop = FrameLoop(RIG, renderer, RecordedClock(), observers=[log, hook], fps=FPS, log=lambda s: None,
+                     stages=[pipeline])
     loop.run(ReplaySource(stream), duration=duration)
     return log, renderer, states
 
@@ -154,7 +154,7 @@ def test_idle_motion_blink_shape_and_renewal():
 def test_events_are_counted_kept_and_handed_to_listeners():
     pipeline = LivePipeline(config(), log=lambda s: None)
     heard = []
-    pipeline.listeners.append(lambda t, found: heard.append((t, found)))
+    pipeline.bus.on_tracking(lambda t, found: heard.append((t, found)))
     stream = frames(0.0, 1.0, 0.8) + frames(2.0, 2.5, 0.3) + frames(3.5, 4.0, 0.3)
     run(pipeline, stream, 4.5)
     assert [f for _, f in heard] == [False, True, False, True, False]
@@ -195,9 +195,8 @@ def test_loss_settings_parse():
 def test_with_gestures_the_lost_mouth_takes_the_gesture_layers_lips(tmp_path):
     """build_chain with --gestures hands the filter the layer's voice face: while lost (mouth = "voice") the
     jaw is the layer's synthesised lips from the voice level, not the built-in level line."""
-    import argparse
-
     from facepuppet.runtime.live.stages import build_chain
+    from facepuppet.runtime.session.options import StageOptions
 
     from helpers.gesture_dbs import small_db
     from helpers.small_characters import sphere_character
@@ -211,8 +210,8 @@ def test_with_gestures_the_lost_mouth_takes_the_gesture_layers_lips(tmp_path):
     def level(t):
         return -60.0 if t < 1.2 else -30.0 + 20.0 * math.sin(3.0 * t)
 
-    args = argparse.Namespace(config=config, gestures=tmp_path / "gestures.npz", gesture_seed=1)
-    chain = build_chain(args, sphere_character(), "vmc", audio_level=level, log=lambda s: None)
+    options = StageOptions(config=config, gestures=tmp_path / "gestures.npz", gesture_seed=1)
+    chain = build_chain(options, sphere_character(), "vmc", audio_level=level, log=lambda s: None)
     assert chain.filter.generator is not None
     seen = {}
     generator = chain.filter.generator
@@ -224,7 +223,7 @@ def test_with_gestures_the_lost_mouth_takes_the_gesture_layers_lips(tmp_path):
 
     chain.filter.generator = spy
     renderer, log = StubRenderer(), WeightLog()
-    loop = FrameLoop(("jawOpen",), renderer, RecordedClock(), sinks=[log], fps=FPS, log=lambda s: None,
+    loop = FrameLoop(("jawOpen",), renderer, RecordedClock(), observers=[log], fps=FPS, log=lambda s: None,
                      stages=chain.stages)
     loop.run(ReplaySource(STREAM), duration=4.0)
     t, jaw = log.times, log.array[:, 0]
@@ -237,7 +236,7 @@ def test_with_gestures_the_lost_mouth_takes_the_gesture_layers_lips(tmp_path):
 
 
 def test_replay_reports_tracking_events_that_differ_from_the_recording():
-    from facepuppet.runtime.commands.replay import _compare_events
+    from facepuppet.runtime.session.recording_feed import compare_events as _compare_events
 
     same = _compare_events([(1.5, False), (3.0, True)], [(1.5, False), (3.0, True)])
     assert same == "replay: tracking events as recorded (2: lost at 1.500 s, found at 3.000 s)"

@@ -13,6 +13,7 @@ from facepuppet.runtime.cli import main
 from facepuppet.runtime.live.video_out import AUDIO_RATE, VideoError, VideoSink, plan_video
 from facepuppet.runtime.progress import Progress
 
+from helpers.logs import said
 from helpers.small_characters import sphere_character
 
 av = pytest.importorskip("av", reason="PyAV is not installed: pip install -e '.[video]' (make setup installs it)")
@@ -306,7 +307,7 @@ def test_replay_to_video_is_deterministic_one_frame_per_tick_with_sound(characte
         video, weights = tmp_path / f"{run}.mp4", tmp_path / f"{run}.npy"
         code = main(["replay", str(take), "-c", str(character), "--headless", "--size", "96x64", "--fps", "30",
                      "--video", str(video), "--audio-file", str(wav), "--dump-weights", str(weights)])
-        out = capsys.readouterr().out
+        out = said(capsys)
         assert code == 0, out
         assert "video: " in out and "libx264 yuv420p" in out and f"wrote {len(np.load(weights))} video frames" in out
         decoded.append((decode(video), len(np.load(weights))))

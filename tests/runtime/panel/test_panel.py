@@ -51,7 +51,7 @@ class _Run:
 
     def run(self, frames):
         loop = FrameLoop(self.character.shape_names, self.renderer, RecordedClock(), fps=FPS, log=lambda s: None,
-                         stages=[self.pipeline], on_tick=[self._hook],
+                         stages=[self.pipeline], observers=[self._hook],
                          overlays=() if self.panel is None else (self.panel.overlay,))
         loop.run(ReplaySource(frames), duration=(len(frames) - 1) / FPS)
         return self.renderer.read_pixels()

@@ -48,7 +48,7 @@ class _Run:
     def run(self, n, jaw=0.4, events=None):
         self.events = events or {}
         loop = FrameLoop(self.character.shape_names, self.renderer, RecordedClock(), fps=FPS, log=lambda s: None,
-                         stages=[self.pipeline], on_tick=[self._hook], overlays=(self.panel.overlay,))
+                         stages=[self.pipeline], observers=[self._hook], overlays=(self.panel.overlay,))
         loop.run(ReplaySource(_frames(jaw, n)), duration=(n - 1) / FPS)
         return self.renderer.read_pixels()
 

@@ -13,9 +13,10 @@ from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.config import load_live_config
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
+from facepuppet.runtime.live.mapper import Mapper, follow_mapping
 from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.live.profiles import Profile, config_to_toml, parse_config_text, read_made_for
-from facepuppet.runtime.live.stages import Chain, follow_mapping
+from facepuppet.runtime.live.stages import Chain
 from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.render.renderer import FaceRenderer
 
@@ -46,7 +47,10 @@ class _Run:
         self.renderer = FaceRenderer(ctx, self.character, W, H, path="gpu", log=lambda s: None)
         self.pipeline = LivePipeline(config, log=lambda s: None)
         self.chain = Chain(input="test", stages=(self.pipeline,), names=self.character.shape_names,
-                           filter=self.pipeline, config=config, profile=profile)
+                           filter=self.pipeline, config=config, profile=profile,
+                           mapper=Mapper(self.character.shape_names, log=lambda s: None))
+        # as the session wires it: a [mapping] applied live maps from then on
+        self.pipeline.bus.on_config(follow_mapping(self.chain.mapper, self.character.expressions, lambda s: None))
         self.now = 0.0
         self.panel = DeskPanel(ctx, self.renderer.fbo, W, H, pipeline=self.pipeline, chain=self.chain,
                                character=self.character, input_kind="test", address="127.0.0.1:1",
@@ -67,10 +71,8 @@ class _Run:
         self.events = events or {}
         self.ticks = []
         loop = FrameLoop(self.character.shape_names, self.renderer, RecordedClock(), fps=FPS, log=lambda s: None,
-                         stages=[self.pipeline], on_tick=[self._hook], overlays=(self.panel.overlay,),
-                         drive=self.chain.drive)
-        # as run and replay wire it: a [mapping] applied live maps from then on
-        self.pipeline.on_config[:] = [follow_mapping(self.chain, loop, self.character.expressions, lambda s: None)]
+                         stages=[self.pipeline], observers=[self._hook], overlays=(self.panel.overlay,),
+                         mapper=self.chain.mapper)
         loop.run(ReplaySource(_frames(n)), duration=(n - 1) / FPS)
 
     def rect(self, label):

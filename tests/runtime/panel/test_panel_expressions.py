@@ -13,6 +13,7 @@ import pytest
 from facepuppet.runtime.expressions import ExpressionMap, make_drive
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
+from facepuppet.runtime.live.mapper import Mapper
 from facepuppet.runtime.live.stages import Chain
 from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.render.renderer import FaceRenderer
@@ -31,13 +32,13 @@ def _drive(egl_ctx, c, channels, values, n):
     (panel, the last tick's info)."""
     drive = make_drive(c.shape_names, c.expressions)
     renderer = FaceRenderer(egl_ctx, c, 320, 240, path="gpu", log=lambda s: None)
-    chain = Chain(input="test", stages=(), names=c.shape_names, drive=drive)
+    chain = Chain(input="test", stages=(), names=c.shape_names, mapper=Mapper(c.shape_names, drive))
     seen = []
     panel = DeskPanel(egl_ctx, renderer.fbo, 320, 240, chain=chain, character=c, input_kind="test",
                       address="127.0.0.1:1", clock=lambda: len(seen) / 30)
     frames = [Frame(t=i / 30, source="test", channels=channels, weights=np.array(values)) for i in range(n)]
-    loop = FrameLoop(c.shape_names, renderer, RecordedClock(), fps=30.0, log=lambda s: None, drive=drive,
-                     on_tick=[lambda info: seen.append(info)], overlays=(panel.overlay,))
+    loop = FrameLoop(c.shape_names, renderer, RecordedClock(), fps=30.0, log=lambda s: None, mapper=chain.mapper,
+                     observers=[lambda info: seen.append(info)], overlays=(panel.overlay,))
     loop.run(ReplaySource(frames), duration=(n - 1) / 30)
     renderer.close()
     return panel, seen[-1]
@@ -87,7 +88,7 @@ def test_a_drop_counted_by_the_receiver_and_the_loop_is_shown_once(egl_ctx):
 def test_the_mapped_meter_of_a_blink_is_the_eyes_closing_on_godette(egl_ctx):
     """Godette has Blink, Blink_L and Blink_R (binary): what both eyes share goes to Blink, the rest to each
     eye's own; an eye's meter shows the sum, at most 1 (the right eye's own Blink_R alone would read 0 here)."""
-    from facepuppet.offline.io.gltf_read import read_gltf
+    from facepuppet.offline.io.gltf.read import read_gltf
     from tests.conftest import need_shared
 
     c = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))

@@ -14,7 +14,9 @@ from pythonosc.udp_client import SimpleUDPClient
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.commands import run
 from facepuppet.runtime.recording.session import read_session
+from facepuppet.runtime.session import recording_feed
 
+from helpers.logs import logged
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port
 from helpers.vmc_run import NO_SMOOTHING, send_vmc
@@ -125,7 +127,7 @@ def _run(tmp_path, extra=(), config_text=NO_SMOOTHING, plan=None):
         threading.Thread(target=send, daemon=True).start()
 
     try:
-        result = run.run_live(ns, log=lambda s: None, stop_event=stop, on_ready=on_ready, hooks=[op],
+        result = run.run_live(ns, stop_event=stop, on_ready=on_ready, hooks=[op],
                               on_panel=lambda p: setattr(op, "panel", p))
     finally:
         stop.set()
@@ -201,7 +203,8 @@ def test_a_recording_started_mid_run_replays_the_smoothed_run_exactly_from_its_f
     replay.register(ns.add_subparsers())
     args = ns.parse_args(["replay", str(op.files[0]), "-c", str(character), "--headless", "--size", "64x64",
                           "--dump-weights", str(dump)])
-    assert replay.run_replay(args, log=lines.append) == 0
+    with logged(lines):
+        assert replay.run_replay(args) == 0
     assert any("goes on from its state at the recording's start" in line for line in lines), lines
     replayed = np.load(dump)
     live = np.array([op.live[k] for k in ticks])
@@ -210,11 +213,11 @@ def test_a_recording_started_mid_run_replays_the_smoothed_run_exactly_from_its_f
     assert len(ticks) - first >= TICKS_RECORDED - 2
     np.testing.assert_allclose(replayed[first:], live[first:], atol=1e-6)
     # without it the replay starts the filters afresh: the first frame passes unsmoothed, far off the run
-    monkeypatch.setattr(replay, "_restore_state", lambda *a, **k: None)
+    monkeypatch.setattr(recording_feed, "restore_state", lambda *a, **k: None)
     fresh = tmp_path / "fresh.npy"
     args = ns.parse_args(["replay", str(op.files[0]), "-c", str(character), "--headless", "--size", "64x64",
                           "--dump-weights", str(fresh)])
-    assert replay.run_replay(args, log=lambda s: None) == 0
+    assert replay.run_replay(args) == 0
     assert np.abs(np.load(fresh)[first:] - live[first:]).max() > 0.02
 
 
@@ -248,7 +251,7 @@ def test_recordings_started_while_tracking_is_lost_replay_the_voice_and_the_ease
         dump = tmp_path / name
         args = ns.parse_args(["replay", str(path), "-c", str(character), "--headless", "--size", "64x64",
                               "--dump-weights", str(dump)])
-        assert replay.run_replay(args, log=lambda s: None) == 0
+        assert replay.run_replay(args) == 0
         return np.load(dump)
 
     for n, path in enumerate(op.files):
@@ -264,6 +267,6 @@ def test_recordings_started_while_tracking_is_lost_replay_the_voice_and_the_ease
         got = replayed(path, f"replay{n}.npy")
         assert got.shape == live.shape
         np.testing.assert_allclose(got, live, atol=1e-6)  # from the first tick: the voice, the ease out and in
-    monkeypatch.setattr(replay, "_restore_state", lambda *a, **k: None)
+    monkeypatch.setattr(recording_feed, "restore_state", lambda *a, **k: None)
     fresh = replayed(op.files[1], "fresh.npy")
     assert np.abs(fresh[:first_frame] - live[:first_frame]).max() > 0.01

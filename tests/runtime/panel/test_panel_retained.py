@@ -51,7 +51,7 @@ class _Run:
     def run(self, n, events=None, jaw=0.4):
         self.events = events or {}
         loop = FrameLoop(self.character.shape_names, self.renderer, RecordedClock(), fps=FPS, log=lambda s: None,
-                         stages=[self.pipeline], on_tick=[self._hook], overlays=(self.panel.overlay,))
+                         stages=[self.pipeline], observers=[self._hook], overlays=(self.panel.overlay,))
         loop.run(ReplaySource(_frames(n, jaw)), duration=(n - 1) / FPS)
         return self.renderer.read_pixels()
 

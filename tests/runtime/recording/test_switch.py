@@ -72,7 +72,7 @@ def test_a_run_with_several_inputs_refuses_a_start_once_it_ticks_with_the_reason
 
 
 def test_a_replay_in_real_time_of_a_recording_started_mid_run_starts_at_its_first_tick():
-    from facepuppet.runtime.commands.replay import replay_wall_clock
+    from facepuppet.runtime.session.recording_feed import replay_wall_clock
 
     now = [100.0]
     clock = replay_wall_clock([6000, 6001], 1000.0)  # the panel's recording began 6 s into the run

@@ -293,8 +293,7 @@ def test_each_material_draws_with_its_own_variant_in_one_frame(egl_ctx, path):
             material(base=(1, 0, 0, 0.5), alpha="BLEND"), material(base=(0.3, 0.3, 0.3, 1), shading="lit")]
     c = part_character(v, t, [0, 0, 1, 1, 2, 2, 3, 3], mats, uv=np.vstack([p[2] for p in pieces]))
     image, r = draw(egl_ctx, c, path=path, framing="body", size=(192, 64), background=(0.0, 0.0, 1.0))
-    state = r._gpu if path == "gpu" else r._cpu
-    assert len(state["programs"]) == 4  # four distinct (alpha, shading, textured, mirrored) variants
+    assert len(r._deformation.programs) == 4  # four distinct (alpha, shading, textured, mirrored) variants
     px = [tuple(int(c) for c in image[y, x]) for x, y in r.project([[x, 0, 0] for x in xs]).astype(int)]
     assert px[0] == (255, 0, 0)                      # OPAQUE: alpha ignored
     assert px[1] == (0, 0, 255)                      # MASK below the cutoff: the background shows

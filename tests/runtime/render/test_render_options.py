@@ -9,6 +9,7 @@ from PIL import Image
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.render.options import parse_background, render_options
 
+from helpers.logs import said
 from helpers.part_characters import figure
 from helpers.udp_helpers import free_udp_port
 
@@ -37,7 +38,7 @@ def run_figure(tmp_path, capsys, *extra):
     code = main(["run", "-c", str(char), "--input", "vmc", "--listen", f"127.0.0.1:{free_udp_port()}",
                  "--headless", "--duration", "0.2", "--size", "120x90", "--draw", "tick", "--fps", "20",
                  "--path", "cpu", "--out", str(out), *extra])
-    text = capsys.readouterr().out
+    text = said(capsys)
     assert code == 0, text
     frames = sorted(out.glob("frame_*.png"))
     assert frames

@@ -159,7 +159,8 @@ def test_window_without_display_raises_and_headless_works(monkeypatch):
 def gpu_deformed(ctx, character, weights):
     """Deformed positions and normals read back from face.glsl's vertex shader (transform feedback)."""
     from facepuppet.runtime.render.cpu_deform import CpuDeformer
-    from facepuppet.runtime.render.renderer import active_uniforms, delta_texture, gpu_defines
+    from facepuppet.runtime.render.paths.deltas import active_uniforms, delta_texture
+    from facepuppet.runtime.render.paths.gpu import gpu_defines
     from facepuppet.runtime.render.shader_loader import load_program
 
     prog = load_program(ctx, "face.glsl", gpu_defines(character), varyings=("v_world", "v_normal"))
@@ -269,7 +270,7 @@ def test_lash_cards_fade_from_the_lid_margin_instead_of_a_grey_band(egl_ctx):
     import dataclasses
 
     from facepuppet.runtime.character import MATERIAL_KINDS
-    from facepuppet.runtime.render.renderer import vertex_opacity
+    from facepuppet.runtime.render.layers import vertex_opacity
 
     c = lash_card_character()
     opacity = vertex_opacity(c)
@@ -291,7 +292,8 @@ def test_lash_cards_fade_from_the_lid_margin_instead_of_a_grey_band(egl_ctx):
 def test_ict_eye_layers_are_drawn_as_thin_blended_layers(egl_ctx, ict_character):
     """The re-imported ICT head: the eye occlusion and the films are drawn (not hidden) and see-through."""
     from facepuppet.runtime.character import MATERIAL_KINDS
-    from facepuppet.runtime.render.renderer import vertex_opacity, visible_triangles
+    from facepuppet.runtime.render.face_mesh import visible_triangles
+    from facepuppet.runtime.render.layers import vertex_opacity
 
     c = ict_character
     kinds = c.material_params[:, 2].round().astype(int)

@@ -1,15 +1,17 @@
-"""The renderer's ``elastic`` deformation path: control points spread by the compact basis on the GPU.
+"""The ``elastic`` deformation path: control points spread by the compact basis on the GPU.
 
 The compact basis (k control indices, weights and normal gradients per
 vertex) lives in two float textures made once; per frame only the control
 displacements, n_controls × 3 floats, are uploaded as a uniform array (and,
 for rigid parts such as the lower teeth, one 3 × 4 transform per part) and
 ``shaders/elastic.glsl`` does the rest (Yano & Harada eq. 5).
+
+:class:`ElasticDraw` is what the frame loop draws with on this path: it takes the elastic
+table's channel values (shapes, then muscles) instead of the character's weights.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import moderngl
@@ -17,12 +19,13 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
-from facepuppet.runtime.render.shader_loader import load_program
+from facepuppet.runtime.render.paths.base import DeformationPath, ProgramBuilder
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # for the annotation only: renderer.py imports this module
     from facepuppet.runtime.render.renderer import FaceRenderer
 
 ELASTIC_TEXTURE_WIDTH = 4096
+BASIS_UNIT, INDEX_UNIT, RIGID_LABEL_UNIT = 0, 1, 2
 
 
 def elastic_defines(model: ElasticModel) -> dict:
@@ -74,35 +77,50 @@ def check_model(character: Character, model: ElasticModel) -> ElasticModel:
     return model
 
 
-def setup_elastic(ctx: moderngl.Context, character: Character, model: ElasticModel,
-                  make_vao: Callable[[moderngl.Program, moderngl.Buffer], moderngl.VertexArray]) -> dict:
-    """GL objects of the elastic path: program, rest vertex buffer, VAO, basis textures.
+class ElasticPath(DeformationPath):
+    """The rest mesh in a vertex buffer, the basis in textures, the control displacements in uniforms.
 
-    ``make_vao(prog, vbo)`` is the renderer's VAO builder (same attribute layout as its other paths).
+    Parameters
+    ----------
+    ctx : moderngl.Context
+    character : Character, without parts (one ``face.glsl`` program)
+    model : ElasticModel, made for ``character`` (checked)
+    build : ProgramBuilder, the renderer's programs and vertex arrays
+
+    Attributes
+    ----------
+    model : ElasticModel
     """
-    prog = load_program(ctx, "face.glsl", elastic_defines(model))
-    rest = np.hstack([character.vertices, character.rest_normals()]).astype(np.float32)
-    vbo = ctx.buffer(rest.tobytes())
-    prog["u_basis"].value = 0
-    prog["u_basis_index"].value = 1
-    if model.n_rigid:
-        prog["u_rigid_label"].value = 2
-    vao = make_vao(prog, vbo)
-    # "programs" / "vaos" keyed as the renderer's other paths (one program here)
-    return {"prog": prog, "programs": {None: prog}, "vaos": {None: vao}, "vbo": vbo,
-            "textures": basis_textures(ctx, model), "model": model}
 
+    name = "elastic"
 
-def upload_controls(state: dict, controls: np.ndarray) -> None:
-    """Write the frame's control displacements, (n_controls, 3) float32, into the uniform array."""
-    model = state["model"]
-    u = np.ascontiguousarray(controls, dtype=np.float32)
-    if u.shape != (model.n_controls, 3):
-        raise ValueError(f"controls: expected shape ({model.n_controls}, 3), got {u.shape}")
-    if model.n_controls:
-        state["prog"]["u_controls"].write(u.tobytes())
-    if model.n_rigid:  # rows of [R | t] per rigid part, fitted to the anchors on the CPU
-        state["prog"]["u_rigid"].write(np.ascontiguousarray(model.rigid_transforms(u)).tobytes())
+    def __init__(self, ctx: moderngl.Context, character: Character, model: ElasticModel,
+                 build: ProgramBuilder) -> None:
+        self.model = check_model(character, model)
+        rest = np.hstack([character.vertices, character.rest_normals()]).astype(np.float32)
+        vbo = ctx.buffer(rest.tobytes())
+        programs, vaos = build(elastic_defines(model), vbo)
+        self._prog = programs[None]
+        self._prog["u_basis"].value = BASIS_UNIT
+        self._prog["u_basis_index"].value = INDEX_UNIT
+        if model.n_rigid:
+            self._prog["u_rigid_label"].value = RIGID_LABEL_UNIT
+        super().__init__(programs, vaos, vbo, basis_textures(ctx, model))
+
+    def prepare(self, weights: np.ndarray, joints: np.ndarray | None) -> None:
+        """Controls from the weights: U = Σ w P (Yano & Harada eq. 7)."""
+        self.prepare_controls(self.model.blend(weights))
+
+    def prepare_controls(self, controls: np.ndarray) -> None:
+        """Write the frame's control displacements, (n_controls, 3) float32, into the uniform array."""
+        model = self.model
+        u = np.ascontiguousarray(controls, dtype=np.float32)
+        if u.shape != (model.n_controls, 3):
+            raise ValueError(f"controls: expected shape ({model.n_controls}, 3), got {u.shape}")
+        if model.n_controls:
+            self._prog["u_controls"].write(u.tobytes())
+        if model.n_rigid:  # rows of [R | t] per rigid part, fitted to the anchors on the CPU
+            self._prog["u_rigid"].write(np.ascontiguousarray(model.rigid_transforms(u)).tobytes())
 
 
 class ElasticDraw:

@@ -1,0 +1,195 @@
+"""The materials of a glTF file: their names and kinds, the core look of each, the textures they use.
+
+A material is stored with [specular, shininess, kind, 0]: skin (the OBJ
+import's skin shine), unless ``extras.facepuppet`` (written by
+``export-character``) names another kind. Its look row holds what core glTF
+2.0 says: ``baseColorFactor``, ``emissiveFactor``, ``alphaMode`` /
+``alphaCutoff``, ``doubleSided`` and the base colour texture (TEXCOORD_0
+only). The extensions that change a row (unlit, emissive strength, texture
+transform, MToon) are read after this, each by its own reader. Textures are
+decoded with Pillow (PNG or JPEG, at most 8192×8192 texels) into RGBA as in
+the image (sRGB-encoded), with their samplers' codes.
+"""
+
+from __future__ import annotations
+
+import io
+import warnings as _warnings
+
+import numpy as np
+
+from facepuppet.runtime.character import MATERIAL_KINDS
+from facepuppet.runtime.character_parts import ALPHA_MODES, IDENTITY_UV_TRANSFORM
+
+from facepuppet.offline.io.gltf.read_state import LookRows, ReadState
+from facepuppet.offline.io.gltf_container import GltfError
+
+_SKIN_SHINE = (0.05, 18.0)  # rig_import.KIND_SHINE["skin"]
+_MAG = frozenset({9728, 9729})
+_MIN = frozenset({9728, 9729, 9984, 9985, 9986, 9987})
+_WRAP = frozenset({33071, 33648, 10497})
+
+
+def read_materials(state: ReadState) -> None:
+    """Fill the stored materials, their core look rows and the decoded textures (see the module doc)."""
+    default_material = _materials(state)
+    textures = _look_rows(state, default_material)
+    _textures(state, textures)
+
+
+def _materials(state: ReadState) -> int | None:
+    """Names (unique) and [specular, shininess, kind, 0] of the stored materials: the file's, then the spec's
+    default material when a primitive has none (or when the file has no material at all)."""
+    f = state.f
+    used = state.geo["material_used"]
+    mats = f.items("materials")
+    names, params = [], []
+    seen: set[str] = set()
+    for i, m in enumerate(mats):
+        f.obj("materials", i, f"materials[{i}]")
+        base = m.get("name") if isinstance(m.get("name"), str) and m["name"] else f"material{i}"
+        n, k = base, 1
+        while n in seen:
+            k += 1
+            n = f"{base}#{k}"
+        seen.add(n)
+        names.append(n)
+        params.append(_material_kind(state, m, i))
+    default_material = None
+    if -1 in used:  # primitives without a material: the spec's default material, appended
+        default_material = len(names)
+        n = "default"
+        while n in seen:
+            n += "_"
+        names.append(n)
+        params.append([_SKIN_SHINE[0], _SKIN_SHINE[1], MATERIAL_KINDS["skin"], 0.0])
+    if not names:
+        names, params = ["default"], [[_SKIN_SHINE[0], _SKIN_SHINE[1], MATERIAL_KINDS["skin"], 0.0]]
+    state.material_names = tuple(names)
+    state.material_params = np.asarray(params, dtype=np.float32)
+    return default_material
+
+
+def _material_kind(state: ReadState, m: dict, i: int) -> list[float]:
+    """[specular, shininess, kind, 0] of material ``i``: skin, unless ``extras.facepuppet`` (written by
+    ``export-character``) names another kind; a malformed entry is warned about and ignored."""
+    skin = [_SKIN_SHINE[0], _SKIN_SHINE[1], float(MATERIAL_KINDS["skin"]), 0.0]
+    extras = m.get("extras")
+    ours = extras.get("facepuppet") if isinstance(extras, dict) else None
+    if ours is None:
+        return skin
+    kind, spec, shine = (ours.get(k) if isinstance(ours, dict) else None for k in ("kind", "specular", "shininess"))
+    numbers = all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x >= 0
+                  for x in (spec, shine))
+    if kind not in MATERIAL_KINDS or not numbers:
+        state.warn(f"materials[{i}].extras.facepuppet: expected a kind of {sorted(MATERIAL_KINDS)} and "
+                   f"finite specular/shininess >= 0, got {ours!r}; read as skin")
+        return skin
+    return [float(spec), float(shine), float(MATERIAL_KINDS[kind]), 0.0]
+
+
+def _look_rows(state: ReadState, default_material: int | None) -> dict[int, int]:
+    """The core glTF look of each material (base colour, emissive, alpha mode, double-sided, base colour
+    texture) into ``state.look``; returns {glTF texture index: stored texture index} of the textures used."""
+    f, geo = state.f, state.geo
+    if default_material is not None:
+        geo["triangle_material"][geo["triangle_material"] == -1] = default_material
+        p = geo["primitives"]
+        p[p[:, 5] == -1, 5] = default_material
+    mats = f.items("materials")
+    n_m = len(state.material_names)
+    rows = LookRows(base=np.ones((n_m, 4)), emissive=np.zeros((n_m, 3)),
+                    alpha=np.tile([ALPHA_MODES["OPAQUE"], 0.5], (n_m, 1)), shading=np.zeros((n_m, 8)),
+                    texture=np.full(n_m, -1, dtype=np.int64), uv_transform=np.tile(IDENTITY_UV_TRANSFORM, (n_m, 1)))
+    textures: dict[int, int] = {}  # glTF texture index -> stored texture index
+    for i, m in enumerate(mats):
+        w = f"materials[{i}]"
+        pbr = f.get(m, "pbrMetallicRoughness", dict, w, {})
+        rows.base[i] = f.numbers(pbr, "baseColorFactor", 4, f"{w}.pbrMetallicRoughness", [1, 1, 1, 1])
+        rows.emissive[i] = f.numbers(m, "emissiveFactor", 3, w, [0, 0, 0])
+        mode = f.get(m, "alphaMode", str, w, "OPAQUE")
+        if mode not in ALPHA_MODES:
+            f.fail(f"{w}.alphaMode", f"{mode!r} is not OPAQUE, MASK or BLEND")
+        cutoff = f.get(m, "alphaCutoff", float, w, 0.5)
+        rows.alpha[i] = (ALPHA_MODES[mode], cutoff)
+        rows.shading[i, 1] = 1.0 if f.get(m, "doubleSided", bool, w, False) else 0.0
+        if "baseColorTexture" in pbr:
+            info = f.get(pbr, "baseColorTexture", dict, f"{w}.pbrMetallicRoughness")
+            tw = f"{w}.pbrMetallicRoughness.baseColorTexture"
+            t = f.get(info, "index", int, tw)
+            f.obj("textures", t, f"{tw}.index")
+            if f.get(info, "texCoord", int, tw, 0) != 0:
+                state.warn(f"{tw}.texCoord: TEXCOORD_{info['texCoord']} asked for; only TEXCOORD_0 is read")
+            if t not in textures:
+                textures[t] = len(textures)
+            rows.texture[i] = textures[t]
+    state.look = rows
+    return textures
+
+
+def _textures(state: ReadState, textures: dict[int, int]) -> None:
+    """Decode the used textures' images (PNG or JPEG, Pillow) and samplers into ``state.texture_*``."""
+    f = state.f
+    names, info, pixels = [], [], []
+    first = 0
+    used: set[str] = set()
+    for t, _stored in sorted(textures.items(), key=lambda kv: kv[1]):
+        tex = f.obj("textures", t, f"textures[{t}]")
+        w = f"textures[{t}]"
+        src = f.get(tex, "source", int, w, None)
+        if src is None:
+            f.fail(f"{w}.source", "missing: the texture has no PNG/JPEG image (KHR_texture_basisu and other "
+                                  "image extensions are not read)")
+        img = f.obj("images", src, f"{w}.source")
+        iw = f"images[{src}]"
+        rgba = _decode_image(state, img, iw)
+        sampler = [0, 0, 0, 0]
+        if "sampler" in tex:
+            s = f.obj("samplers", tex["sampler"], f"{w}.sampler")
+            sampler = []
+            for k, allowed in (("magFilter", _MAG), ("minFilter", _MIN), ("wrapS", _WRAP), ("wrapT", _WRAP)):
+                v = f.get(s, k, int, f"samplers[{tex['sampler']}]", 0)
+                if v and v not in allowed:
+                    f.fail(f"samplers[{tex['sampler']}].{k}", f"{v} is not one of {sorted(allowed)}")
+                sampler.append(v)
+        h, wd = rgba.shape[:2]
+        base = img.get("name") if isinstance(img.get("name"), str) and img["name"] else f"image{src}"
+        n, k = base, 1
+        while n in used:
+            k += 1
+            n = f"{base}#{k}"
+        used.add(n)
+        names.append(n)
+        info.append([first, wd, h, *sampler])
+        pixels.append(rgba.reshape(-1, 4))
+        first += wd * h
+    state.texture_names = tuple(names)
+    state.texture_info = np.asarray(info, dtype=np.int32).reshape(-1, 7)
+    state.texture_pixels = np.concatenate(pixels) if pixels else np.zeros((0, 4), np.uint8)
+
+
+def _decode_image(state: ReadState, img: dict, iw: str) -> np.ndarray:
+    from PIL import Image, UnidentifiedImageError
+
+    f = state.f
+    if "bufferView" in img:
+        data, start, length, _ = f.view_bytes(f.get(img, "bufferView", int, iw), f"{iw}.bufferView")
+        blob = data[start:start + length]
+    elif "uri" in img:
+        blob, _ = f.read_uri(f.get(img, "uri", str, iw), f"{iw}.uri")
+    else:
+        f.fail(iw, "missing: an image needs a uri or a bufferView")
+    if not (blob[:8] == b"\x89PNG\r\n\x1a\n" or blob[:3] == b"\xff\xd8\xff"):
+        f.fail(iw, f"not a PNG or JPEG image (mimeType {img.get('mimeType')!r}); only those are decoded")
+    try:
+        with _warnings.catch_warnings():
+            _warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(blob)) as im:
+                if im.width * im.height > 8192 * 8192:
+                    f.fail(iw, f"{im.width}x{im.height} is larger than 8192x8192 texels")
+                return np.asarray(im.convert("RGBA"), dtype=np.uint8).copy()
+    except GltfError:
+        raise
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombWarning,
+            Image.DecompressionBombError) as exc:
+        f.fail(iw, f"the image cannot be decoded ({str(exc)[:120]})")

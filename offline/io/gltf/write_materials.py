@@ -1,0 +1,96 @@
+"""The written materials and textures, as core glTF 2.0 says them.
+
+baseColorFactor/-Texture, emissive, alphaMode/alphaCutoff, doubleSided;
+metallicFactor 0 and a roughness from the stored shininess (Blinn-Phong n ->
+GGX: roughness = (2 / (n + 2))^(1/4)), since a character keeps no
+metal/roughness. An OBJ rig's ``hidden`` material is written BLEND with alpha
+0 (kept, not drawn); its thin layers (eye occlusion, films, lashes) BLEND and
+double-sided, with the fade the renderer gives them
+(``render.layers.vertex_opacity``) as COLOR_0 alpha (RGBA, :mod:`.write_meshes`),
+so any glTF viewer draws them see-through. A material kind other than skin
+(eye, teeth, lashes …) and its specular/shininess go in
+``material.extras.facepuppet`` for the importer. Textures: PNG, lossless,
+re-encoded from the stored texels; samplers from the stored codes. The
+extensions (unlit, texture transform, MToon) are written after, each by its
+own writer.
+"""
+
+from __future__ import annotations
+
+import io
+from typing import Any
+
+import numpy as np
+
+from facepuppet.runtime.character import MATERIAL_KINDS
+from facepuppet.runtime.character_parts import ALPHA_MODES
+from facepuppet.runtime.render.layers import LAYER_KINDS
+
+from facepuppet.offline.io.gltf.write_state import WriteState
+
+_ALPHA_NAME = {v: k for k, v in ALPHA_MODES.items()}
+_KIND_NAME = {v: k for k, v in MATERIAL_KINDS.items()}
+
+
+def write_materials(w: WriteState) -> tuple[list[dict], dict]:
+    """The core glTF materials (``w.materials``) and the images, textures and samplers they use (see the module
+    doc); the extension writers add to them after."""
+    c, lk = w.c, w.c.look
+    mats = []
+    for i, name in enumerate(c.material_names):
+        shine = float(c.material_params[i, 1])
+        rough = float(np.clip((2.0 / (max(shine, 0.0) + 2.0)) ** 0.25, 0.0, 1.0))
+        pbr: dict[str, Any] = {"metallicFactor": 0.0, "roughnessFactor": round(rough, 6)}
+        mat: dict[str, Any] = {"name": name, "pbrMetallicRoughness": pbr}
+        kind = int(round(float(c.material_params[i, 2])))
+        if kind != MATERIAL_KINDS["skin"]:  # read back by the importer; other readers ignore extras
+            mat["extras"] = {"facepuppet": {"kind": _KIND_NAME.get(kind, "skin"),
+                                            "specular": float(c.material_params[i, 0]),
+                                            "shininess": float(c.material_params[i, 1])}}
+        if lk is None:
+            if kind == MATERIAL_KINDS["hidden"]:
+                pbr["baseColorFactor"] = [1.0, 1.0, 1.0, 0.0]
+                mat["alphaMode"] = "BLEND"
+            elif kind in LAYER_KINDS:  # thin see-through layers: COLOR_0 alpha holds their fade
+                mat["alphaMode"] = "BLEND"
+                mat["doubleSided"] = True
+            mats.append(mat)
+            continue
+        base = [float(x) for x in lk.base_color[i]]
+        if base != [1.0, 1.0, 1.0, 1.0]:
+            pbr["baseColorFactor"] = base
+        if int(lk.texture[i]) >= 0:
+            pbr["baseColorTexture"] = {"index": int(lk.texture[i])}
+        if np.any(lk.emissive[i] != 0):
+            mat["emissiveFactor"] = [float(x) for x in lk.emissive[i]]
+        mode = _ALPHA_NAME[int(lk.alpha[i, 0])]
+        if mode != "OPAQUE":
+            mat["alphaMode"] = mode
+        if mode == "MASK":
+            mat["alphaCutoff"] = float(lk.alpha[i, 1])
+        if lk.shading[i, 1] > 0.5:
+            mat["doubleSided"] = True
+        mats.append(mat)
+    w.materials = mats
+    return mats, _textures(w)
+
+
+def _textures(w: WriteState) -> dict:
+    lk = w.c.look
+    if lk is None or not len(lk.texture_names):
+        return {}
+    from PIL import Image
+
+    images, textures, samplers = [], [], []
+    sampler_of: dict[tuple, int] = {}
+    for t, name in enumerate(lk.texture_names):
+        png = io.BytesIO()
+        Image.fromarray(np.ascontiguousarray(lk.image(t)), "RGBA").save(png, format="PNG", compress_level=4)
+        images.append({"name": name, "mimeType": "image/png", "bufferView": w.buf.view(png.getvalue())})
+        codes = tuple(int(x) for x in lk.texture_info[t, 3:7])
+        if codes not in sampler_of:
+            sampler_of[codes] = len(samplers)
+            samplers.append({k: v for k, v in zip(("magFilter", "minFilter", "wrapS", "wrapT"), codes) if v})
+        textures.append({"name": name, "source": t, "sampler": sampler_of[codes]})
+    w.summary.n_textures = len(textures)
+    return {"images": images, "textures": textures, "samplers": samplers}
