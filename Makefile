@@ -13,11 +13,12 @@ STAMP  := $(VENV)/.installed-stamp
 demo: $(STAMP)
 	$(VENV)/bin/facepuppet demo --out demo-out --force
 
+# One pytest worker process per core (pytest-xdist); each takes the next test as it finishes one.
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist worksteal
 
 test-quick: $(STAMP)
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -n auto --dist worksteal -m "not slow"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

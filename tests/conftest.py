@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import os
+import select
 import shutil
 import socket
 import subprocess
@@ -13,6 +14,13 @@ from pathlib import Path
 import pytest
 
 from helpers import running_test
+
+# One BLAS thread per test process, set before NumPy loads OpenBLAS (none of the imports above load it): the
+# suite runs in two worker processes (make test: pytest -n 2) on two cores, and OpenBLAS's own threads, which
+# spin while they wait, made a 20 s kernel-PLS fit take 250 s once the cores were busy (measured: 27 s with one
+# thread under the same load).
+for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
 
 # the module-scoped fixture ``db`` (a small synthetic gesture database) for the gesture tests
 pytest_plugins = ["helpers.gesture_dbs"]
@@ -66,24 +74,36 @@ def ict_character(ict_character_path):
 
 @pytest.fixture
 def x_display():
-    """A virtual X display (Xvfb) on a free number, stopped after the test."""
+    """A virtual X display (Xvfb), stopped after the test. Xvfb picks a free display number itself and writes
+    it to a pipe (``-displayfd``), so tests running in parallel never race for one."""
     xvfb = shutil.which("Xvfb")
     if xvfb is None:
         pytest.skip("Xvfb is not installed (make test installs it through .ci/system-deps); "
                     "the window path needs an X display")
-    for number in range(91, 120):
-        if not os.path.exists(f"/tmp/.X{number}-lock"):
-            break
-    proc = subprocess.Popen([xvfb, f":{number}", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 10
-    while not os.path.exists(f"/tmp/.X11-unix/X{number}") and time.monotonic() < deadline:
-        time.sleep(0.05)
+    read_fd, write_fd = os.pipe()
+    proc = subprocess.Popen([xvfb, "-displayfd", str(write_fd), "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, pass_fds=(write_fd,))
+    os.close(write_fd)
     try:
+        number = _read_display(read_fd, proc)
         yield f":{number}"
     finally:
+        os.close(read_fd)
         proc.terminate()
         proc.wait(timeout=10)
+
+
+def _read_display(fd: int, proc: subprocess.Popen, timeout_s: float = 20.0) -> str:
+    """The display number Xvfb writes to ``fd`` once it listens (a line of digits)."""
+    text = b""
+    deadline = time.monotonic() + timeout_s
+    while not text.endswith(b"\n"):
+        ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
+        chunk = os.read(fd, 64) if ready else b""
+        if not chunk:
+            raise RuntimeError(f"Xvfb did not start (exit code {proc.poll()}) within {timeout_s:g} s")
+        text += chunk
+    return text.decode().strip()
 
 
 @pytest.fixture
