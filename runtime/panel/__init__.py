@@ -1,7 +1,10 @@
 """The operator's panel of ``run``: a Dear ImGui window drawn over the frame through our own moderngl context.
 
 * :mod:`~facepuppet.runtime.panel.gl`: ImGui's draw data onto moderngl (``shaders/panel.glsl``).
-* :mod:`~facepuppet.runtime.panel.desk`: what the panel shows and edits (:class:`DeskPanel`).
+* :mod:`~facepuppet.runtime.panel.desk`: the panel of a run (:class:`DeskPanel`): its ImGui contexts, when each is
+  built (:mod:`~facepuppet.runtime.panel.retained`), its draw; what it shows and edits in
+  :mod:`~facepuppet.runtime.panel.status`, :mod:`~facepuppet.runtime.panel.channels` and
+  :mod:`~facepuppet.runtime.panel.sections`, drawn through :mod:`~facepuppet.runtime.panel.ui`.
 * :mod:`~facepuppet.runtime.panel.glfw_input`: a window's keyboard and mouse fed to ImGui; Tab toggles.
 
 The GUI library is the optional extra ``panel`` (``pip install 'facepuppet[panel]'``, imgui-bundle);

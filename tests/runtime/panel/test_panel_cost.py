@@ -17,7 +17,8 @@ from helpers.small_characters import sphere_character
 
 pytest.importorskip("imgui_bundle", reason="the panel's extra (imgui-bundle) is not installed")
 
-from facepuppet.runtime.panel.desk import METER_COLOURS, DeskPanel  # noqa: E402
+from facepuppet.runtime.panel.channels import METER_COLOURS  # noqa: E402
+from facepuppet.runtime.panel.desk import DeskPanel  # noqa: E402
 
 pytestmark = pytest.mark.gl
 W, H, FPS = 480, 640, 30.0  # one window (too narrow for two): the lower settings are below its bottom

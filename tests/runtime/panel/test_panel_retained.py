@@ -17,7 +17,8 @@ from helpers.small_characters import sphere_character
 
 pytest.importorskip("imgui_bundle", reason="the panel's extra (imgui-bundle) is not installed")
 
-from facepuppet.runtime.panel.desk import PANEL_WIDTH, SETTLE_FRAMES, DeskPanel  # noqa: E402
+from facepuppet.runtime.panel.desk import PANEL_WIDTH, DeskPanel  # noqa: E402
+from facepuppet.runtime.panel.retained import SETTLE_FRAMES  # noqa: E402
 
 pytestmark = pytest.mark.gl
 FPS = 30.0
@@ -135,7 +136,7 @@ def test_a_click_on_a_channel_row_selects_that_row(run):
 
 def _bar(image, rect):
     """Pixels of the raw meter's colour along the middle row of the meter ``rect``."""
-    from facepuppet.runtime.panel.desk import METER_COLOURS
+    from facepuppet.runtime.panel.channels import METER_COLOURS
 
     x0, y0, x1, y1 = (int(round(v)) for v in rect)
     row = image[(y0 + y1) // 2, x0:x1, :3].astype(int)

@@ -17,7 +17,7 @@ from helpers.udp_helpers import free_udp_port
 
 pytest.importorskip("imgui_bundle", reason="the panel's extra (imgui-bundle) is not installed")
 
-from facepuppet.runtime.panel.desk import METER_COLOURS  # noqa: E402
+from facepuppet.runtime.panel.channels import METER_COLOURS  # noqa: E402
 
 pytestmark = pytest.mark.gl
 
