@@ -11,6 +11,7 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.outputs import OutputSet
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.replay_source import open_recording
@@ -69,9 +70,9 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
 
 def _run(args: argparse.Namespace) -> int:
     if args.sheet and not args.pictures:
-        raise ValueError("--sheet: needs --pictures DIR (the folder the contact sheet goes to)")
+        raise UsageError("--sheet: needs --pictures DIR (the folder the contact sheet goes to)")
     if args.take is not None and not args.sheet:
-        raise ValueError("--take: needs --pictures DIR --sheet (the side-by-side picture is one of the sheets)")
+        raise UsageError("--take: needs --pictures DIR --sheet (the side-by-side picture is one of the sheets)")
     if args.take is not None:
         open_recording(args.take)  # a take that cannot be read is refused before the work, nothing written
     character = Character.load(args.character)

@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.live.config import (
     REGIONS,
     ChannelSettings,
@@ -62,7 +63,7 @@ def profile_path(spec: str | os.PathLike) -> Path:
     if "/" in text or os.sep in text or text.endswith(".toml"):
         return Path(text).expanduser()
     if not _NAME.fullmatch(text):
-        raise ValueError(f"--profile {text!r}: a profile name is letters, digits, '_', '-' and '.' (not first); "
+        raise UsageError(f"--profile {text!r}: a profile name is letters, digits, '_', '-' and '.' (not first); "
                          "or give a path to a .toml file")
     return profiles_dir() / f"{text}.toml"
 

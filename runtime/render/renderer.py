@@ -31,6 +31,7 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.render.camera import model_matrix
 from facepuppet.runtime.render.cpu_deform import check_weights
 from facepuppet.runtime.render.credits_label import CreditsLabel
@@ -138,7 +139,7 @@ class FaceRenderer:
         self.samples = min(int(msaa), int(ctx.max_samples)) if int(msaa) > 1 and target_fbo is None else 0
         self.parts = has_parts(character)
         if self.parts and path == "elastic":
-            raise ValueError("path: the elastic path draws characters without a skeleton or look only")
+            raise UsageError("path: the elastic path draws characters without a skeleton or look only")
         self._head_pose = HeadPose(character) if self.parts else None
         self.cull_back_faces = bool(cull_back_faces)
         self._framebuffers = Framebuffers(ctx, (self.width, self.height), self.samples, target_fbo)
