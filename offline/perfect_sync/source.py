@@ -14,6 +14,7 @@ checks like any elastic table; a cache that does not load is fitted again.
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -28,6 +29,8 @@ from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.elastic.params import fit_character
 from facepuppet.offline.io.rig_import import import_rig, read_ict_landmarks
+
+logger = logging.getLogger(__name__)
 
 KIT_FOLDER = "ict-facekit"
 NEUTRAL = "generic_neutral_mesh.obj"
@@ -73,7 +76,8 @@ def fit_kit_source(folder: Path) -> ElasticModel:
     return fit_character(ict, points, with_muscles=False)[0]
 
 
-def default_source(data: str | os.PathLike | None = None, log: Callable[[str], None] = print) -> ElasticModel:
+def default_source(data: str | os.PathLike | None = None,
+                   log: Callable[[str], None] = logger.info) -> ElasticModel:
     """The kit's ICT head as an elastic table: from the cache, else fitted and cached (see the module doc)."""
     folder = kit_folder(data)
     path = cache_dir() / f"ict_elastic_{_key(folder)}.npz"

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import logging
 import math
 import os
 import re
@@ -39,6 +40,8 @@ from facepuppet.runtime.live.config import (
     parse_live_config,
 )
 from facepuppet.runtime.live.mix import MixSettings
+
+logger = logging.getLogger(__name__)
 
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
@@ -207,7 +210,7 @@ class Profile:
     """
 
     def __init__(self, path: str | os.PathLike, character: str = "", input_kind: str = "",
-                 known_channels: Iterable[str] = (), log: Callable[[str], None] = print) -> None:
+                 known_channels: Iterable[str] = (), log: Callable[[str], None] = logger.info) -> None:
         self.path = Path(path)
         self.character = character
         self.input_kind = input_kind

@@ -23,6 +23,7 @@ and :meth:`FaceRenderer.read_pixels` (MSAA resolve, then read back).
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 
@@ -56,6 +57,8 @@ from facepuppet.runtime.render.paths.cpu import CpuPath
 from facepuppet.runtime.render.paths.elastic import ElasticPath
 from facepuppet.runtime.render.paths.gpu import GpuPath
 from facepuppet.runtime.render.shader_loader import load_program
+
+logger = logging.getLogger(__name__)
 
 PATHS = ("auto", "gpu", "cpu", "elastic")
 BASE_TEXTURE_UNIT = PATH_TEXTURE_UNITS  # a material's base colour texture, above the path's units
@@ -114,7 +117,7 @@ class FaceRenderer:
         path: str = "auto",
         target_fbo: moderngl.Framebuffer | None = None,
         background: tuple[float, float, float] = (0.16, 0.17, 0.19),
-        log: Callable[[str], None] = print,
+        log: Callable[[str], None] = logger.info,
         cull_back_faces: bool = True,
         framing: str = "head",
         elastic: ElasticModel | None = None,
