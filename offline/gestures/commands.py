@@ -226,7 +226,8 @@ def load_landmarks(path: str | os.PathLike) -> np.ndarray:
         raise InputFileError(f"{path}: expected a JSON file of 68 landmark vertex indices ({exc})") from None
     if isinstance(data, dict):
         data = data.get("idx_to_landmark_verts")
-    if not isinstance(data, list) or len(data) != 68 or not all(isinstance(v, int) for v in data):
+    if (not isinstance(data, list) or len(data) != 68 or not all(isinstance(v, int) for v in data)
+            or not all(-2 ** 63 <= v < 2 ** 63 for v in data)):
         raise InputFileError(f"{path}: expected 68 integer vertex indices (a list, or idx_to_landmark_verts), "
                              f"got {type(data).__name__}{'' if not isinstance(data, list) else f' of {len(data)}'}")
     return np.array(data, np.int64)
