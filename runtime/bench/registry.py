@@ -20,7 +20,7 @@ import platform
 import resource
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -44,7 +44,7 @@ _LOADED = False
 
 
 @contextlib.contextmanager
-def session_log(shown: bool):
+def session_log(shown: bool) -> Iterator[None]:
     """Within the block, the log of the session a benchmark runs (facepuppet's INFO lines: what it loaded,
     where it listens) is shown only when ``shown`` (``--verbose``); warnings always are."""
     ours = logging.getLogger("facepuppet.runtime")
@@ -66,7 +66,8 @@ def register_bench(name: str, func: Callable[[argparse.Namespace], dict], help: 
 
 
 def benches() -> dict[str, Bench]:
-    """Every registered benchmark, loading the known modules and entry points once."""
+    """Every registered benchmark by name (in name order, whichever module was imported first), loading the
+    known modules and entry points once."""
     global _LOADED
     if not _LOADED:
         _LOADED = True
@@ -74,7 +75,7 @@ def benches() -> dict[str, Bench]:
             importlib.import_module(module)
         for ep in entry_points(group="facepuppet.benches"):
             ep.load()(register_bench)
-    return dict(_REGISTRY)
+    return dict(sorted(_REGISTRY.items()))
 
 
 def machine_info() -> dict:

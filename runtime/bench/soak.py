@@ -111,7 +111,7 @@ def send(host: str, port: int, rate: float, seconds: float, cycle_s: float) -> d
 
 def rss_parts_mb() -> dict[str, float]:
     """RSS split as the kernel counts it (``/proc/self/status``): anonymous (heap, driver buffers), file-backed
-    (mapped libraries) and shared memory (the receiver's block), in MiB; empty where the file is absent."""
+    (mapped libraries) and shared memory, in MiB; empty where the file is absent."""
     parts = {}
     try:
         with open("/proc/self/status", encoding="ascii") as f:

@@ -8,15 +8,17 @@ was drawn up to a frame late. :class:`ArrivalWaiter` sleeps until any of them ha
 
 Receivers of one kind (``--receiver`` applies to every input): thread receivers
 (:class:`~facepuppet.runtime.inputs.udp.UdpSource`) set one shared event besides their own; process
-receivers (:class:`~facepuppet.runtime.inputs.udp_process.UdpProcessSource`) each write a byte per frame
-into a pipe, and the waiter selects on all the pipes.
+receivers (:class:`~facepuppet.runtime.inputs.udp_process.UdpProcessSource`) each have a channel from their
+child that becomes readable when the child sends something (a frame, counters, a datagram for the recorder):
+the waiter selects on all of them and asks the receivers (``pending()`` reads their channel) whether a
+frame came, never reading a channel itself.
 """
 
 from __future__ import annotations
 
-import os
 import select
 import threading
+import time
 from collections.abc import Sequence
 
 
@@ -30,13 +32,13 @@ class ArrivalWaiter:
         if not self.sources or not all(hasattr(s, "pending") for s in self.sources):
             raise ValueError("ArrivalWaiter: every source needs pending() (a UDP receiver)")
         self._event: threading.Event | None = None
-        self._fds: tuple[int, ...] = ()
+        self._fds: list[int] = []
         if all(hasattr(s, "notify") for s in self.sources):
             self._event = threading.Event()
             for s in self.sources:
                 s.notify(self._event)
         elif all(getattr(s, "wake_fd", None) is not None for s in self.sources):
-            self._fds = tuple(s.wake_fd for s in self.sources)
+            self._fds = [s.wake_fd for s in self.sources]
         else:
             raise ValueError("ArrivalWaiter: the sources are neither all thread receivers nor all started "
                              "process receivers")
@@ -50,13 +52,10 @@ class ArrivalWaiter:
             if self._any():  # arrived before the clear: no wait
                 return True
             return self._event.wait(timeout_s) if timeout_s > 0 else False
-        for fd in self._fds:  # bytes of frames already there (checked next)
-            try:
-                os.read(fd, 1 << 16)
-            except BlockingIOError:
-                pass
-        if self._any():
-            return True
-        if timeout_s <= 0:
-            return False
-        return bool(select.select(list(self._fds), [], [], timeout_s)[0])
+        deadline = time.monotonic() + timeout_s
+        while not self._any():  # a readable channel may carry no frame: ask again until the deadline
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            select.select(self._fds, [], [], left)
+        return True

@@ -7,8 +7,9 @@ Datagrams then wait in the kernel until the loop lets go (measured in a live
 run on 2 cores: p50 3 ms, p99 16 ms when the machine was quiet, hundreds of ms
 under load), and each hand-over of the GIL costs the loop a switch. Here a
 child process (its own interpreter, its own GIL) reads and decodes, and
-writes the newest frame into a shared-memory slot; the frame loop copies the
-slot once per tick and nothing else in its process competes for its GIL.
+sends each decoded frame through a socket pair; the frame loop reads what
+arrived once per tick, keeps the newest frame and nothing else in its
+process competes for its GIL.
 
 Same interface as :class:`UdpSource`: ``start()``/``stop()``, ``address``,
 ``latest(t) -> (frame or None, stale)``, ``frames_taken``, ``watched``, ``counters``,
@@ -16,84 +17,75 @@ Same interface as :class:`UdpSource`: ``start()``/``stop()``, ``address``,
 
 * the receive time is always the kernel's arrival stamp on the monotonic clock
   (``SO_TIMESTAMPNS``; the child's read time where there is none): no ``clock``;
-* ``on_packet`` (the recorder) runs in the *parent*: the child copies each
-  accepted datagram into a shared ring (4 MiB) and
-  :meth:`UdpProcessSource.deliver_packets` hands the ring's datagrams to
-  ``on_packet`` when the frame loop's recording hook calls it (once a tick),
-  :meth:`stop` the rest; a full ring drops and counts
-  (``packets_ring_dropped``), never blocks. :meth:`latest` is a snapshot only;
+* ``on_packet`` (the recorder) runs in the *parent*: the child sends each
+  accepted datagram through the channel, where it waits (up to ``ring_bytes``,
+  4 MiB, on each side) until
+  :meth:`UdpProcessSource.deliver_packets` hands it to ``on_packet`` when the
+  frame loop's recording hook calls it (once a tick), :meth:`stop` the rest;
+  beyond that it is dropped and counted (``packets_ring_dropped``), the child
+  never blocks. :meth:`latest` has no callbacks;
 * the adapter is copied into the child (pickled), so ``source.adapter.counters``
   stays at zero: read :attr:`counters`, which the child keeps current;
-* :meth:`UdpProcessSource.wait_for_frame` sleeps on a pipe the child writes a
-  byte to after each frame it publishes (the frame loop's draw on arrival);
+* :meth:`UdpProcessSource.wait_for_frame` sleeps on the channel, which becomes
+  readable when the child sends (the frame loop's draw on arrival);
 * frames with more than ``MAX_WEIGHTS`` weights or ``MAX_MARKERS`` markers are
   dropped and counted (``frame_too_large``).
 
-The slot is a seqlock: the child makes the sequence odd, writes, makes it even;
-the reader copies and retries when the sequence moved (at most ``READ_TRIES``
-times, then takes nothing this tick and counts ``snapshot_busy``). Names (channel
-tuples, marker names, sources) go through a ring in the same memory, written
-before the slot that uses them and named by their position in it, so old marker
-layouts are overwritten and new ones always get in; counter names and the last
-error go through a small append-only log.
-Ordering relies on stores becoming visible in program order (x86-64's model).
-The child's side is :mod:`~facepuppet.runtime.inputs.udp_child`.
+Why the frame is never torn, on any CPU: nothing is shared between the
+processes. Each frame, with the names it uses, crosses as one message of the
+channel (:mod:`~facepuppet.runtime.inputs.udp_channel`), a Unix stream socket:
+the kernel copies the bytes under the socket's lock and delivers them in the
+order they were sent, so the parent acts on a message only once it holds all of
+it, and on the names, counters and datagrams sent before it first. Frames the
+parent did not read in time are dropped when a newer one comes (in the child
+when the channel is full, here otherwise) and counted stale from the frame
+numbers the child gives them. The child's side is
+:mod:`~facepuppet.runtime.inputs.udp_child`.
 """
 
 from __future__ import annotations
 
-import json
+import collections
 import os
 import pickle
 import select
 import socket
+import struct
 import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
-from multiprocessing import shared_memory
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.udp import bind_udp, bound_address, normalise_allow
-from facepuppet.runtime.inputs.udp_shared import (
-    CHANNELS,
+from facepuppet.runtime.inputs.udp_channel import (
     COMPLETED,
-    FLAGS,
-    HAS_MARKERS,
-    HAS_ROTATION,
-    HAS_TRANSLATION,
-    HAS_WEIGHTS,
-    MARKER_NAMES,
-    META_END,
-    N_MARKERS,
-    N_WEIGHTS,
-    NAME,
-    NAMES_BYTES,
-    NAMES_END,
-    NUMBER,
+    COUNTER_NAME,
+    COUNTERS,
+    ERROR,
+    FRAME,
+    INDEX,
+    MAX_NAMES,
+    PACKET,
+    PACKET_HEAD,
     READY,
-    RECORD,
     RING_BYTES,
-    RING_R,
-    RING_W,
-    SEQ,
-    SOURCE,
-    STOP,
-    VALID_FOR,
     WATCHED,
-    WRAP,
-    SharedBlock,
-    padded,
+    ChannelError,
+    Inbox,
+    frame_from,
+    packet_cost,
+    read_frame,
 )
 
 if TYPE_CHECKING:
     from facepuppet.runtime.protocols import InputAdapter
 
-READ_TRIES = 64
-MAX_CACHED_NAMES = 256  # names (channel tuples, marker layouts, sources) kept here; the oldest goes first
 START_TIMEOUT_S = 30.0  # a spawned interpreter importing NumPy on a loaded 2-core machine
+STOP_TIMEOUT_S = 5.0  # the child flushes for at most 4 s (udp_child.STOP_FLUSH_S), then is killed
+
 
 class UdpProcessSource:
     """Frames from UDP datagrams decoded by ``adapter`` in a child process.
@@ -107,10 +99,15 @@ class UdpProcessSource:
     allow : set of str or None, sender IP addresses accepted (None: all)
     on_packet : callable(data bytes, t_receive float, sender (host, port)) or None, called
         on the thread that calls :meth:`deliver_packets` / :meth:`stop`
-    ring_bytes : int, size of the datagram ring for ``on_packet`` (a multiple of 16, >= 128 KiB)
+    ring_bytes : int, how many bytes of datagrams may wait for ``on_packet`` on each side of the channel
+        (a multiple of 16, >= 128 KiB; a datagram counts its size plus 16, rounded up to 16)
     watch : str or None, an OSC address: the child counts the decoded OSC messages with exactly this
         address (bundles included) in accepted datagrams in :attr:`watched`, without shipping every
         datagram to this process as ``on_packet`` does
+
+    :meth:`latest`, :meth:`pending`, :meth:`deliver_packets`, :attr:`counters` and :attr:`watched` may be
+    called from any thread (the panel reads counters while the loop takes frames): each reads the channel
+    under one lock.
     """
 
     def __init__(self, adapter: InputAdapter, host: str = "127.0.0.1", port: int | None = None,
@@ -128,20 +125,27 @@ class UdpProcessSource:
         self.on_packet = on_packet
         self.last_error: BaseException | None = None
         self.rcvbuf_bytes = 0
-        self._own = {"snapshot_busy": 0, "internal_error": 0}
+        self._lock = threading.RLock()
+        self._sock: socket.socket | None = None
+        self._process = None
+        self._chan: socket.socket | None = None        # this process's end of the channel
+        self._chan_child: socket.socket | None = None  # the child's end, held here too: never end of file here
+        self._inbox: Inbox | None = None
+        self._own = {"snapshot_busy": 0, "internal_error": 0, "packets_ring_dropped": 0}
+        self._reset()
+
+    def _reset(self) -> None:
+        """What a (re)start begins afresh: the new child's counters, names and frame numbers."""
         self._stale_dropped = 0
         self._taken = 0
-        self._sock: socket.socket | None = None
-        self._shm: shared_memory.SharedMemory | None = None
-        self._shared: SharedBlock | None = None
-        self._process = None
-        self._names: dict[tuple[str, int], object] = {}
+        self._ready = False
+        self._newest: tuple | None = None  # the newest frame received and not taken, not yet a Frame
+        self._names: list[object] = [None] * MAX_NAMES  # the child's name slots
         self._counter_names: dict[int, str] = {}
-        self._names_pos = 0
-        self._final: dict[str, int] | None = None
-        self._wake: tuple[int, int] | None = None   # pipe (read, write): a byte per published frame
-        self._alive: tuple[int, int] | None = None  # pipe (read: the child's, write: held here until stop)
-        self._watched_final = 0
+        self._counter_values: tuple[int, ...] = ()
+        self._watched = 0
+        self._packets: collections.deque[tuple[bytes, float, tuple, int]] = collections.deque()
+        self._packet_bytes = 0
 
     @property
     def address(self) -> tuple[str, int]:
@@ -165,75 +169,68 @@ class UdpProcessSource:
             raise RuntimeError("UdpProcessSource.start: already started")
         sock, self.rcvbuf_bytes = bind_udp(self.host, self.port, self.adapter.kind, stamps=True)
         self._sock = sock
-        self._shm = shared_memory.SharedMemory(create=True, size=SharedBlock.size(self.ring_bytes))
-        self._shared = SharedBlock(self._shm, self.ring_bytes)
-        self._names, self._counter_names, self._names_pos, self._final = {}, {}, 0, None
-        self._taken = self._stale_dropped = 0
-        self._wake = os.pipe()
-        for fd in self._wake:
-            os.set_blocking(fd, False)   # the child never waits on a full pipe; the parent drains
-        self._alive = os.pipe()   # only this process holds the write end: its death closes it (the child leaves)
+        self._chan, self._chan_child = socket.socketpair()
+        self._chan.setblocking(False)
+        self._inbox = Inbox(self._chan)
+        self._reset()
         # PR_SET_PDEATHSIG follows the starting *thread*: asked for only from the main thread
         deathsig = threading.current_thread() is threading.main_thread()
         # A fresh interpreter (not fork: this process may hold a GL context and threads; not
-        # multiprocessing's spawn: it re-imports the caller's __main__), given the socket by descriptor.
+        # multiprocessing's spawn: it re-imports the caller's __main__), given the sockets by descriptor.
         self._process = subprocess.Popen(
             [sys.executable, "-c", "from facepuppet.runtime.inputs.udp_child import child_main; child_main()"],
-            stdin=subprocess.PIPE, pass_fds=(sock.fileno(), self._wake[1], self._alive[0]))
-        os.close(self._alive[0])
+            stdin=subprocess.PIPE, pass_fds=(sock.fileno(), self._chan_child.fileno()))
         try:
-            self._process.stdin.write(pickle.dumps((self._shm.name, self.ring_bytes, sock.fileno(), sock.family,
+            self._process.stdin.write(pickle.dumps((sock.fileno(), sock.family, self._chan_child.fileno(),
                                                     self.adapter, self.allow, self.on_packet is not None,
-                                                    os.getpid(), self.watch,
-                                                    self._wake[1], self._alive[0], deathsig)))
+                                                    os.getpid(), self.watch, self.ring_bytes, deathsig)))
             self._process.stdin.close()
         except (OSError, pickle.PicklingError) as exc:
             self.stop()
             raise RuntimeError(f"UdpProcessSource: cannot hand the adapter to the receiving process: {exc}") from exc
         end = time.monotonic() + START_TIMEOUT_S
-        while not self._shared.ctl[READY]:
+        while True:
+            select.select([self._chan], [], [], 0.01)
+            with self._lock:
+                self._drain()
+            if self._ready:
+                return self
             if self._process.poll() is not None or time.monotonic() > end:
                 code = self._process.poll()
                 self.stop()
                 raise RuntimeError(f"UdpProcessSource: the receiving process did not start (exit code {code})")
-            time.sleep(0.005)
-        return self
 
     def stop(self) -> None:
-        """Stop the child (within about POLL_TIMEOUT_S), hand on the ring's last datagrams, free everything."""
-        shared = self._shared
-        if self._process is not None:
-            if shared is not None:
-                shared.ctl[STOP] = 1
-            if self._alive is not None:
-                os.close(self._alive[1])  # the child sees the pipe close at once
-                self._alive = None
+        """Stop the child (at once; it sends what it queued first), hand on the last datagrams, free everything.
+
+        The counters, ``watched`` and ``last_error`` keep their final values.
+        """
+        process = self._process
+        if process is not None:
             try:
-                self._process.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                self._process.kill()
-                self._process.wait(timeout=5.0)
+                self._chan.send(b"\0")  # the child's request to stop (its end of file would mean: parent gone)
+            except OSError:
+                pass
+            deadline = time.monotonic() + STOP_TIMEOUT_S
+            while process.poll() is None:  # read while it flushes: a full channel would keep it waiting
+                if time.monotonic() > deadline:
+                    process.kill()
+                    process.wait(timeout=5.0)
+                    break
+                select.select([self._chan], [], [], 0.02)
+                self._drain_and_deliver()
             self._process = None
-        if shared is not None:
-            self.deliver_packets()
-            self._watched_final = int(shared.ctl[WATCHED])
-            self._final = self._read_counters()
-            shared.release()
-            self._shared = None
-        if self._shm is not None:
-            self._shm.close()
-            self._shm.unlink()
-            self._shm = None
+        if self._inbox is not None:
+            self._drain_and_deliver()  # what the child sent before it left
+            with self._lock:
+                self._inbox = None
+                self._newest = None
+            for chan in (self._chan, self._chan_child):
+                chan.close()
+            self._chan = self._chan_child = None
         if self._sock is not None:
             self._sock.close()
             self._sock = None
-        if self._wake is not None:
-            for fd in self._wake:
-                os.close(fd)
-            self._wake = None
-        if self._alive is not None:
-            os.close(self._alive[1])
-            self._alive = None
 
     def __enter__(self) -> UdpProcessSource:
         return self.start()
@@ -241,11 +238,69 @@ class UdpProcessSource:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
+    def _drain_and_deliver(self) -> None:
+        with self._lock:
+            self._drain()
+        self.deliver_packets()
+
+    def _drain(self) -> None:
+        """Act on every whole message the channel holds (caller holds the lock); errors are counted."""
+        if self._inbox is None:
+            return
+        try:
+            messages = self._inbox.read()
+        except ChannelError as exc:
+            self._own["internal_error"] += 1
+            self.last_error = exc
+            return
+        for kind, body in messages:
+            try:
+                if kind == FRAME:
+                    self._on_frame(body)
+                elif kind == PACKET:
+                    self._on_packet(body)
+                elif kind == COUNTERS:
+                    values = struct.unpack_from(f"<{len(body) // 8}q", body)
+                    self._watched = max(self._watched, values[0])
+                    self._counter_values = values[1:]
+                elif kind == COUNTER_NAME:
+                    self._counter_names[INDEX.unpack_from(body)[0]] = body[INDEX.size:].decode("utf-8", "replace")
+                elif kind == ERROR:
+                    self.last_error = RuntimeError(body.decode("utf-8", "replace"))
+                elif kind == READY:
+                    self._ready = True
+                else:
+                    raise ChannelError(f"receiver channel: unknown message kind {kind}")
+            except Exception as exc:  # a message this side cannot read: count, never raise
+                self._own["internal_error"] += 1
+                self.last_error = exc
+
+    def _on_frame(self, body: bytes) -> None:
+        """Keep a frame as the newest (the one before, if not taken, is stale), its names looked up now: a
+        later frame may give their slots to other names."""
+        head, names, off = read_frame(body, self._names)
+        self._watched = max(self._watched, head[WATCHED])
+        self._newest = (head, names, body, off)
+
+    def _on_packet(self, body: bytes) -> None:
+        if self.on_packet is None:
+            return
+        t, port, host_len = PACKET_HEAD.unpack_from(body)
+        start = PACKET_HEAD.size
+        data = body[start + host_len:]
+        cost = packet_cost(host_len, len(data))
+        if self._packet_bytes + cost > self.ring_bytes:
+            self._own["packets_ring_dropped"] += 1
+            return
+        self._packets.append((data, t, (body[start:start + host_len].decode("ascii"), port), cost))
+        self._packet_bytes += cost
+
     @property
     def watched(self) -> int:
         """OSC messages to ``watch`` accepted so far (a count that only grows)."""
-        shared = self._shared
-        return int(shared.ctl[WATCHED]) if shared is not None else self._watched_final
+        with self._lock:
+            self._drain()
+            return self._watched
 
     @property
     def frames_taken(self) -> int:
@@ -254,173 +309,88 @@ class UdpProcessSource:
 
     def pending(self) -> bool:
         """A frame not yet taken is there (:meth:`latest` would hand it out)."""
-        shared = self._shared
-        return shared is not None and shared.ctl[COMPLETED] != self._taken
+        with self._lock:
+            self._drain()
+            return self._newest is not None
 
     @property
     def wake_fd(self) -> int | None:
-        """The read end of the pipe the child writes a byte to per published frame (None before start);
-        non-blocking: :class:`~facepuppet.runtime.inputs.arrival.ArrivalWaiter` drains it and selects on it."""
-        return None if self._wake is None else self._wake[0]
+        """This process's end of the channel (None before start): readable when the child has sent something.
+        Never read it directly (:meth:`pending` does): :class:`~facepuppet.runtime.inputs.arrival.ArrivalWaiter`
+        selects on it and asks :meth:`pending`."""
+        return None if self._chan is None else self._chan.fileno()
 
     def wait_for_frame(self, timeout_s: float) -> bool:
         """Sleep until a frame not yet taken is there (True) or ``timeout_s`` passes (False)."""
-        shared, wake = self._shared, self._wake
-        if shared is None or wake is None:
+        chan = self._chan
+        if chan is None:
             time.sleep(max(0.0, timeout_s))
             return False
-        try:                                  # bytes of frames already taken (or about to be: checked next)
-            os.read(wake[0], 1 << 16)
-        except BlockingIOError:
-            pass
-        if shared.ctl[COMPLETED] != self._taken:
-            return True
-        if timeout_s <= 0:
-            return False
-        return bool(select.select([wake[0]], [], [], timeout_s)[0])
+        deadline = time.monotonic() + timeout_s
+        while not self.pending():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            select.select([chan], [], [], left)
+        return True
 
     def latest(self, t: float | None = None) -> tuple[Frame | None, int]:
         """(newest frame not yet taken or None, frames overwritten unseen since the last call).
 
-        A snapshot: no callbacks (:meth:`deliver_packets` hands datagrams on). ``t`` is accepted for the
+        No callbacks (:meth:`deliver_packets` hands datagrams on). ``t`` is accepted for the
         source interface and ignored.
         """
-        shared = self._shared
-        if shared is None:
-            return None, 0
-        ctl = shared.ctl
-        copy = None
-        for _ in range(READ_TRIES):
-            seq = ctl[SEQ]
-            if seq & 1:
-                continue
-            completed = ctl[COMPLETED]
-            if completed == self._taken:
-                break
-            copy = self._copy_slot(shared)
-            if ctl[SEQ] == seq:
-                break
-            copy = None
-        else:
-            self._own["snapshot_busy"] += 1
-        if copy is None:
-            return None, 0
-        try:
-            frame = self._frame(copy)
-        except Exception as exc:  # a slot naming something the log does not hold: count, never raise
-            self._own["internal_error"] += 1
-            self.last_error = exc
-            return None, 0
-        stale = completed - self._taken - 1
-        self._taken = completed
-        self._stale_dropped += stale
-        return frame, stale
-
-    @staticmethod
-    def _copy_slot(shared: SharedBlock) -> tuple:
-        ctl = shared.ctl
-        flags, n_weights, n_markers = ctl[FLAGS], ctl[N_WEIGHTS], ctl[N_MARKERS]
-        weights = shared.weights[:n_weights].copy() if flags & HAS_WEIGHTS else None
-        markers = shared.markers[:3 * n_markers].reshape(n_markers, 3).copy() if flags & HAS_MARKERS else None
-        return (flags, ctl[CHANNELS], ctl[MARKER_NAMES], ctl[SOURCE], ctl[NUMBER], shared.times.copy(),
-                shared.pose.copy(), weights, markers)
-
-    def _frame(self, copy: tuple) -> Frame:
-        flags, channels, marker_names, source, number, times, pose, weights, markers = copy
-        name = self._name
-        return Frame(t=times[0], source=name("source", source), channels=name("channels", channels),
-                     weights=weights, head_rotation=pose[:4] if flags & HAS_ROTATION else None,
-                     head_translation=pose[4:7] if flags & HAS_TRANSLATION else None, audio_level=times[2],
-                     markers=markers, marker_names=name("markers", marker_names), t_sender=times[1],
-                     number=number)
-
-    def _name(self, kind: str, i: int):
-        """The name (channel tuple, marker names, source) the child wrote at ring position ``i``.
-
-        Positions are never reused, so what is cached stays right; a record the child may have
-        overwritten since (a flood of new layouts between the frame and this read) raises.
-        """
-        if i == -1:
-            return None
-        key = (kind, i)
-        value = self._names.get(key)
-        if value is not None:
-            return value
-        shared = self._shared
-        names, ctl = shared.names, shared.ctl
-        if i < 0 or i >= ctl[NAMES_END] or ctl[NAMES_END] - i > VALID_FOR:
-            raise RuntimeError(f"names ring: record {i} is gone (written up to {ctl[NAMES_END]})")
-        p = i % NAMES_BYTES
-        (n,) = NAME.unpack_from(names, p)
-        payload = bytes(names[p + NAME.size:p + NAME.size + n]) if p + NAME.size + n <= NAMES_BYTES else b""
-        if ctl[NAMES_END] - i > VALID_FOR:  # overwritten while we copied
-            raise RuntimeError(f"names ring: record {i} was overwritten while read")
-        found_kind, value = json.loads(payload)
-        if found_kind != kind:
-            raise RuntimeError(f"names ring: record {i} is {found_kind!r}, expected {kind!r}")
-        value = tuple(value) if isinstance(value, list) else value
-        if len(self._names) >= MAX_CACHED_NAMES:
-            del self._names[next(iter(self._names))]  # the oldest
-        self._names[key] = value
-        return value
-
-    def _read_names(self) -> None:
-        """Take the counter names and errors the child logged since the last read."""
-        shared = self._shared
-        end = shared.ctl[META_END]
-        while self._names_pos < end:
-            (n,) = NAME.unpack_from(shared.meta, self._names_pos)
-            kind, key, value = json.loads(bytes(shared.meta[self._names_pos + 4:self._names_pos + 4 + n]))
-            self._names_pos += 4 + n
-            if kind == "counter":
-                self._counter_names[key] = value
-            elif kind == "error":
-                self.last_error = RuntimeError(value)
-
-    def deliver_packets(self) -> None:
-        """Hand every datagram in the ring to ``on_packet`` (its errors are counted, never raised).
-
-        The child rings a datagram before it publishes its frame, so after :meth:`latest` every
-        datagram behind the frame taken is in the ring: called after the snapshot (the recording
-        hook does), they reach the recorder before that tick's TICK record.
-        """
-        shared, on_packet = self._shared, self.on_packet
-        if shared is None or on_packet is None:
-            return
-        ctl, ring, size = shared.ctl, shared.ring, shared.ring_bytes
-        r, w = ctl[RING_R], ctl[RING_W]
-        while r < w:
-            p = r % size
-            length, t, port, host_len = RECORD.unpack_from(ring, p)
-            if length == WRAP:
-                r += size - p
-                continue
-            start = p + RECORD.size
-            host = bytes(ring[start:start + host_len]).decode("ascii")
-            data = bytes(ring[start + host_len:start + host_len + length])
-            r += padded(RECORD.size + host_len + length)
+        with self._lock:
+            self._drain()
+            newest, self._newest = self._newest, None
+            if newest is None:
+                return None, 0
             try:
-                on_packet(data, t, (host, port))
-            except Exception as exc:
+                frame = frame_from(*newest)
+            except Exception as exc:  # a message this side cannot read: count, never raise
                 self._own["internal_error"] += 1
                 self.last_error = exc
-        ctl[RING_R] = r
+                return None, 0
+            completed = newest[0][COMPLETED]
+            stale = completed - self._taken - 1
+            self._taken = completed
+            self._stale_dropped += stale
+            return frame, stale
 
-    def _read_counters(self) -> dict[str, int]:
-        self._read_names()
-        values = self._shared.counters
-        return {name: values[i] for i, name in self._counter_names.items()}
+    def deliver_packets(self) -> None:
+        """Hand every datagram received to ``on_packet``, in order (its errors are counted, never raised).
+
+        The child sends a datagram before the frame decoded from it, so after :meth:`latest` every datagram
+        behind the frame taken is here: called after the snapshot (the recording hook does), they reach the
+        recorder before that tick's TICK record.
+        """
+        on_packet = self.on_packet
+        if on_packet is None:
+            return
+        with self._lock:
+            self._drain()
+            while self._packets:
+                data, t, sender, cost = self._packets.popleft()
+                self._packet_bytes -= cost
+                try:
+                    on_packet(data, t, sender)
+                except Exception as exc:
+                    self._own["internal_error"] += 1
+                    self.last_error = exc
 
     @property
     def counters(self) -> dict[str, int]:
         """The child's counters (adapter's merged with packets, filtered_sender, internal_error,
-        waited_over_1ms, frame_too_large, packets_ring_dropped, names_full (the counter-name and error log
-        is full), names_too_large (one name record over MAX_NAME_RECORD)) plus snapshot_busy,
-        stale_dropped and rcvbuf_bytes; ``internal_error`` adds both processes'."""
-        merged = dict(self._final) if self._shared is None and self._final is not None else (
-            self._read_counters() if self._shared is not None else {})
-        for name, value in self._own.items():
-            merged[name] = merged.get(name, 0) + value
+        waited_over_1ms, frame_too_large, packets_ring_dropped, names_full (the counter names and errors
+        passed META_BYTES), names_too_large (one name record over MAX_NAME_RECORD)) plus snapshot_busy (0: a
+        frame arrives whole, no read is retried), stale_dropped and rcvbuf_bytes; ``internal_error`` and
+        ``packets_ring_dropped`` add both processes'."""
+        with self._lock:
+            self._drain()
+            values = self._counter_values
+            merged = {name: values[i] if i < len(values) else 0 for i, name in self._counter_names.items()}
+            for name, value in self._own.items():
+                merged[name] = merged.get(name, 0) + value
         merged["stale_dropped"] = self._stale_dropped
         merged["rcvbuf_bytes"] = self.rcvbuf_bytes
         return merged

@@ -125,7 +125,7 @@ def _capture_of(doc) -> dict | None:
             **{key: _array(doc.get(key), m, f"capture.{key}") for key, m in (("w", k), ("wn", k), ("q", 4), ("tr", 3))}}
 
 
-def read_snapshot(doc) -> RawState:
+def read_snapshot(doc: object) -> RawState:
     """The state of a snapshot document (version 1 or 2), every field checked; ValueError naming the first
     field that is not what :func:`snapshot_doc` writes."""
     if not isinstance(doc, dict) or doc.get("version") not in (1, 2):

@@ -81,7 +81,7 @@ class RecordingHook:
     recorder : PacketRecorder, or a :class:`~facepuppet.runtime.recording.switch.SwitchableRecorder` (the
         run's: records only while a recording is in force, its TICK frame counts aligned for one started mid-run)
     source : the live source; its ``deliver_packets()`` (if any) hands the datagrams received since
-        the last tick to the recorder (the process receiver's ring), its ``frames_taken`` says which
+        the last tick to the recorder (those the process receiver holds for it), its ``frames_taken`` says which
         frame the tick drew (a faithful replay needs it)
     audio : AudioTap or None, the tick's audio level (recorded as the stages used it)
     mix_sources : sequence of the other tracker inputs of a run with several (the mix stage's sources, in the
@@ -103,7 +103,7 @@ class RecordingHook:
 
     def __call__(self, info: TickInfo) -> None:
         recorder = self.recorder
-        if self._deliver is not None:  # also while a switchable recorder records nothing: the ring stays drained
+        if self._deliver is not None:  # also while a switchable recorder records nothing: nothing piles up
             self._deliver()
         for deliver in self._mix_deliver:
             deliver()

@@ -43,6 +43,7 @@ from facepuppet.runtime.session.outputs import Outputs, open_outputs
 if TYPE_CHECKING:
     from facepuppet.runtime.character import Character
     from facepuppet.runtime.live.loop import LoopResult
+    from facepuppet.runtime.live.sinks import WeightLog
     from facepuppet.runtime.live.stages import Chain
     from facepuppet.runtime.progress import Progress
     from facepuppet.runtime.protocols import Renderer, TickObserver
@@ -82,7 +83,7 @@ class SessionResult:
     fps: float
 
     @property
-    def weights(self):
+    def weights(self) -> WeightLog | None:
         return self.outputs.weights
 
 

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from facepuppet.runtime.character import Character
     from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.live.bus import SessionBus
+    from facepuppet.runtime.live.loop import FrameLoop, LoopResult
     from facepuppet.runtime.live.stages import Chain
     from facepuppet.runtime.protocols import FrameSource, TickObserver
     from facepuppet.runtime.render.gl_context import GLTarget
@@ -111,7 +112,7 @@ class Feed(Protocol):
 
     def clock(self, parts: FeedParts, target: GLTarget, paced: bool) -> RecordedClock | WallClock: ...
 
-    def run(self, loop, parts: FeedParts) -> Any: ...
+    def run(self, loop: FrameLoop, parts: FeedParts) -> LoopResult: ...
 
 
 def recorded_or_wall(target: GLTarget, paced: bool) -> RecordedClock | WallClock:
@@ -152,5 +153,5 @@ class FramesFeed:
     def clock(self, parts: FeedParts, target: GLTarget, paced: bool) -> RecordedClock | WallClock:
         return recorded_or_wall(target, paced)
 
-    def run(self, loop, parts: FeedParts):
+    def run(self, loop: FrameLoop, parts: FeedParts) -> LoopResult:
         return loop.run(parts.source, duration=parts.duration, ticks=parts.ticks)

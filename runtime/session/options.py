@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from facepuppet.runtime.commands.options import parse_host_port, parse_size
 from facepuppet.runtime.errors import UsageError
@@ -41,7 +42,7 @@ from facepuppet.runtime.render.options import RenderOptions, add_render_argument
 PATHS = ("auto", "gpu", "cpu")
 
 
-def get(ns: argparse.Namespace, name: str, default=None):
+def get(ns: argparse.Namespace, name: str, default: object = None) -> Any:
     """An option of ``ns``, or ``default`` when the namespace lacks it (a benchmark's or a test's)."""
     return getattr(ns, name, default)
 

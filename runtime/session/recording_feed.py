@@ -85,7 +85,7 @@ def _recorded_face_id(info: dict) -> int | None:
         return None
 
 
-def marker_take(path: Path):
+def marker_take(path: Path) -> Any:
     """The recording a registered reader (a marker capture: TRC, C3D, CSV) makes of ``path``, or None."""
     try:
         with open(path, "rb") as f:
@@ -108,7 +108,8 @@ def compare_events(recorded: list, replayed: list) -> str:
             f"({text(recorded) or 'none'}), replayed {len(replayed)} ({text(replayed) or 'none'})")
 
 
-def restore_state(pipeline: LivePipeline, state: tuple[float, str], path, log: Callable[[str], None]) -> None:
+def restore_state(pipeline: LivePipeline, state: tuple[float, str], path: Path | str,
+                  log: Callable[[str], None]) -> None:
     """A recording started mid-run: the filter stage goes on from the state it had then (its STATE record).
     One that cannot be used is said and left: the replay then starts the stage afresh."""
     t, text = state

@@ -1,23 +1,26 @@
 """UdpProcessSource over real UDP on 127.0.0.1: a child process decodes, the newest frame comes through
-shared memory (seqlock), datagrams reach on_packet in the parent, counters are the child's."""
+a socket pair (whole, never mixed with another), datagrams reach on_packet in the parent, counters are the
+child's."""
 
 from __future__ import annotations
 
 import os
 import random
+import threading
 import time
 
 import numpy as np
 import pytest
 
 from facepuppet.runtime.channels import ARKIT_NAMES
+from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.kinds import make_adapter
 from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.markers import FRAME, LAYOUT
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
 
-from helpers.osc_helpers import osc, vmc_frame
+from helpers.osc_helpers import bundle, msg, osc, vmc_frame
 from helpers.udp_helpers import poll_frame, wait_for
 
 JAW = ARKIT_NAMES.index("jawOpen")
@@ -204,6 +207,26 @@ def test_the_child_leaves_when_the_parent_is_gone(tmp_path):
     wait_for(gone, "the orphaned child to exit")
 
 
+def test_kill_9_of_the_child_leaves_what_it_sent_and_the_source_answering(udp_sender):
+    """What the child sent before it died is still read; then nothing comes: a wait sleeps its timeout (no spin
+    on a dead channel) and stop() returns at once, handing on the datagrams received."""
+    seen = []
+    with UdpProcessSource(make_adapter("livelinkface"), port=0, on_packet=lambda *a: seen.append(a)) as source:
+        for i in range(10):
+            udp_sender.sendto(encode_llf_packet([0.5] * 52, number=i), source.address)
+        wait_for(lambda: source.counters["packets"] == 10, "10 datagrams")
+        source._process.kill()
+        source._process.wait()
+        udp_sender.sendto(encode_llf_packet([0.5] * 52, number=100), source.address)
+        assert source.latest()[0].number == 9
+        cpu = time.thread_time()
+        assert source.wait_for_frame(0.3) is False
+        assert time.thread_time() - cpu < 0.15
+        assert source.latest() == (None, 0) and source.counters["packets"] == 10
+        t_stop = time.monotonic()
+    assert time.monotonic() - t_stop < 2.0 and len(seen) == 10
+
+
 def test_watched_messages_are_counted_without_on_packet_and_without_callbacks(udp_sender):
     with UdpProcessSource(VmcAdapter(), port=0, watch="/facepuppet/calibrate") as source:
         udp_sender.sendto(vmc_frame(0.2), source.address)
@@ -215,3 +238,93 @@ def test_watched_messages_are_counted_without_on_packet_and_without_callbacks(ud
         wait_for(lambda: source.counters["packets"] == 3, "both calibrate messages")
         assert source.watched == 2  # a count the filter stage reads each tick; nothing is called
     assert source.watched == 2  # kept after stop
+
+
+def _flood(udp_sender, address, packets, pause_at):
+    """Send ``packets`` as fast as the socket takes them, pausing once (the receiver's channel fills)."""
+    def send():
+        for i, packet in enumerate(packets):
+            if i == pause_at:
+                time.sleep(0.3)
+            udp_sender.sendto(packet, address)
+    thread = threading.Thread(target=send)
+    thread.start()
+    return thread
+
+
+def _take_all(source, last_number, check):
+    """Take frames until the one numbered ``last_number``; ``check`` each; the numbers only grow, each frame
+    stands for as many completed frames as ``stale`` says. Sleeps a while once: frames pile up meanwhile."""
+    previous, taken_before, seen, slept = -1, source.frames_taken, 0, False
+    end = time.monotonic() + 30.0
+    while previous != last_number:
+        assert time.monotonic() < end, f"timed out at frame {previous} of {last_number}"
+        frame, stale = source.latest()
+        if frame is None:
+            source.wait_for_frame(0.05)
+            continue
+        check(frame)
+        assert frame.number > previous and frame.number - previous >= stale + 1
+        assert source.frames_taken == taken_before + stale + 1
+        previous, taken_before, seen = frame.number, source.frames_taken, seen + 1
+        if not slept and seen == 20:
+            time.sleep(0.3)
+            slept = True
+    return seen
+
+
+def test_a_fast_sender_never_shows_a_frame_mixed_from_two_datagrams(udp_sender):
+    """Each Live Link Face datagram gets weights, head, number and sender time of its own, all derived from the
+    number; each taken frame must agree with itself whatever the sender's pace, pauses of the reader included
+    (the channel fills, the child drops older frames)."""
+    n = 3000
+
+    def weights(number):
+        return (np.arange(52) * 31 + number) % 97 / 97.0
+
+    def yaw(number):
+        return (number % 101) / 101.0 - 0.5
+
+    packets = [encode_llf_packet(weights(i), head=(yaw(i), 0.1, -0.1), number=i) for i in range(n)]
+
+    def check(frame):
+        i = frame.number
+        np.testing.assert_allclose(frame.weights[:52], weights(i), atol=1e-6, err_msg=f"frame {i}")
+        np.testing.assert_allclose(frame.head_rotation, euler_to_quat(yaw(i), 0.1, -0.1), atol=1e-5)
+        assert frame.t_sender == pytest.approx(i / 60.0) and frame.source == "livelinkface"
+        assert frame.channels == ARKIT_NAMES
+
+    with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
+        sender = _flood(udp_sender, source.address, packets, pause_at=n // 2)
+        try:
+            _take_all(source, n - 1, check)
+        finally:
+            sender.join()
+        assert source.counters["internal_error"] == 0, source.last_error
+
+
+def test_a_fast_sender_of_new_marker_layouts_never_shows_names_of_another_frame(udp_sender):
+    """Each datagram declares a layout of its own (names carrying the frame number) and one frame in it, points
+    derived from the number: more layouts than the name slots both processes keep, so slots are reused while
+    frames are dropped and taken; a frame's names and points must come from the same datagram."""
+    n, n_markers = 1500, 8
+
+    def points(number):
+        return (np.arange(3 * n_markers, dtype="<f4").reshape(-1, 3) + number).astype("<f4")
+
+    packets = [bundle(msg(LAYOUT, i % 16, *[f"f{i}_m{k}" for k in range(n_markers)]),
+                      msg(FRAME, i % 16, i, (i * 0.5, "d"), (points(i).tobytes(), "b"))) for i in range(n)]
+
+    def check(frame):
+        i = frame.number
+        assert frame.marker_names == tuple(f"f{i}_m{k}" for k in range(n_markers)), i
+        np.testing.assert_array_equal(frame.markers, points(i))
+        assert frame.t_sender == i * 0.5 and frame.source == "markers"
+
+    with UdpProcessSource(make_adapter("markers"), port=0) as source:
+        sender = _flood(udp_sender, source.address, packets, pause_at=n // 2)
+        try:
+            _take_all(source, n - 1, check)
+        finally:
+            sender.join()
+        assert source.counters["internal_error"] == 0, source.last_error
