@@ -42,8 +42,8 @@ GLUnavailable           no OpenGL context (no display, no EGL)          render.g
 
 Each subclass is a ``ValueError`` (or a ``RuntimeError`` for a missing device or library) too, so code that caught
 those still does. ``tests/runtime/test_cli.py`` checks that every exception class of ``runtime`` and
-``offline`` is one of these, but for two private ones that never leave their module (``gltf_check._Stop``,
-``inputs.counted.Dropped``).
+``offline`` is one of these, but for three that never leave their module (``gltf_check._Stop``,
+``inputs.counted.Dropped``, ``inputs.udp_channel.ChannelError``).
 """
 
 from __future__ import annotations

@@ -18,6 +18,9 @@ from facepuppet.runtime.bench import registry as bench_registry
 from facepuppet.runtime.errors import FacepuppetError, InputFileError, UsageError
 from facepuppet.runtime.inputs.counted import Dropped, counted
 from facepuppet.runtime.inputs.ifacialmocap import IFacialMocapAdapter
+from facepuppet.runtime.inputs.udp_channel import ChannelError
+from facepuppet.runtime.inputs.udp_process import UdpProcessSource
+from facepuppet.runtime.inputs.vmc import VmcAdapter
 from facepuppet.runtime.inputs.vtubestudio import VTubeStudioAdapter
 from facepuppet.runtime.render.gl_context import GLUnavailable
 
@@ -172,8 +175,11 @@ def test_an_interrupt_exits_130(capsys, monkeypatch, tmp_path):
 
 # Exceptions used for control flow inside one module, never let out of it: gltf_check's _Stop ends the checker's
 # walk (check_gltf_bytes catches it); inputs.counted's Dropped names the counter of a dropped datagram (counted()
-# catches it, and only the adapters' private decoders, run inside counted(), raise it).
-CONTROL_FLOW = {("facepuppet.offline.io.gltf_check", "_Stop"), ("facepuppet.runtime.inputs.counted", "Dropped")}
+# catches it, and only the adapters' private decoders, run inside counted(), raise it); the process receiver's
+# ChannelError, a message on its own socket pair that it cannot read (UdpProcessSource counts it as an
+# internal_error and keeps it in last_error).
+CONTROL_FLOW = {("facepuppet.offline.io.gltf_check", "_Stop"), ("facepuppet.runtime.inputs.counted", "Dropped"),
+                ("facepuppet.runtime.inputs.udp_channel", "ChannelError")}
 
 
 def _exception_classes():
@@ -218,3 +224,12 @@ def test_the_control_flow_exceptions_do_not_escape():
         for data in (b"", b"\xff", b"{}", b'{"BlendShapes": [{"k": "jawOpen", "v": "x"}]}', b"jawOpen-x|",
                      b'{"Position": {"x": NaN}}', b"=head#a,b,c|"):
             assert adapter.handle(data, 0.0) is None
+
+    class Unreadable:   # the process receiver's channel, holding what its child never sends
+        def read(self):
+            raise ChannelError("receiver channel: a message of 9999999 bytes (kind 1), over 1048576")
+
+    source = UdpProcessSource(VmcAdapter(), port=0)
+    source._inbox = Unreadable()
+    source._drain()
+    assert source._own["internal_error"] == 1 and isinstance(source.last_error, ChannelError)
