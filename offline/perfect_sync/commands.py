@@ -15,6 +15,7 @@ from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.outputs import OutputSet
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.replay_source import open_recording
+from facepuppet.runtime.tables import TablesError
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import FaceError, find_face
@@ -35,8 +36,8 @@ def load_source(path: str | os.PathLike) -> ElasticModel:
     source = ElasticModel.load(path)
     for role in ("nose_tip", "forehead", "eye_inner_L", "eye_inner_R"):
         if role not in source.control_names:
-            raise ValueError(f"{path}: control_names: the source has no {role!r} point (the cloning's face frame "
-                             "needs it)")
+            raise TablesError(path, "control_names", f"the source has no {role!r} point (the cloning's face frame "
+                                                     "needs it)")
     return source
 
 
