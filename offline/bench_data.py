@@ -11,6 +11,8 @@ import argparse
 import os
 from pathlib import Path
 
+from facepuppet.runtime.errors import UsageError
+
 ENV = "FACEPUPPET_DATA"
 
 
@@ -24,8 +26,8 @@ def data_dir(value: str | os.PathLike | None) -> Path:
     """The data kit folder from ``--data`` or $FACEPUPPET_DATA; ValueError when neither names a folder."""
     chosen = value if value is not None else os.environ.get(ENV)
     if not chosen:
-        raise ValueError(f"this benchmark needs the data kit: pass --data DIR or set {ENV}")
+        raise UsageError(f"this benchmark needs the data kit: pass --data DIR or set {ENV}")
     path = Path(chosen)
     if not path.is_dir():
-        raise ValueError(f"data kit folder {path} does not exist (from {'--data' if value is not None else ENV})")
+        raise UsageError(f"data kit folder {path} does not exist (from {'--data' if value is not None else ENV})")
     return path

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.progress import Progress
 
 from facepuppet.offline.io import capture_replay
@@ -114,11 +115,11 @@ def _import_rig(args: argparse.Namespace) -> int:
 
 def _import_gltf(args: argparse.Namespace) -> int:
     if args.shapes_dir is not None:
-        raise ValueError(f"{args.shapes_dir}: a glTF/VRM file carries its own morph targets; give no shapes folder")
+        raise UsageError(f"{args.shapes_dir}: a glTF/VRM file carries its own morph targets; give no shapes folder")
     for flag, value, default in (("--units", args.units, "cm"), ("--landmarks", args.landmarks, None),
                                  ("--forward", args.forward, "+z")):
         if value != default:
-            raise ValueError(f"{flag}: not used for glTF/VRM (glTF is in metres and faces +Z, VRM 0.x is turned "
+            raise UsageError(f"{flag}: not used for glTF/VRM (glTF is in metres and faces +Z, VRM 0.x is turned "
                              "on import; landmarks are ICT's)")
     start = time.perf_counter()
     bar = Progress("import-rig", unit="meshes")

@@ -10,10 +10,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
+import traceback
 from importlib.metadata import entry_points
 
-from facepuppet.runtime.tables import TablesError
+from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.outputs import add_output_policy, check_outputs
+from facepuppet.runtime.render.blas_threads import BlasThreads
+from facepuppet.runtime.render.gl_context import GLUnavailable  # building the parser imports GL anyway
 
 # Runtime modules that add subcommands, in the order --help lists them. Each
 # must exist and import: a missing one is an error, never a silently dropped command.
@@ -40,8 +45,6 @@ def build_parser() -> argparse.ArgumentParser:
         importlib.import_module(name).register(sub)
     for ep in entry_points(group="facepuppet.commands"):
         ep.load()(sub)
-    from facepuppet.runtime.outputs import add_output_policy
-
     for command in sub.choices.values():   # one policy for every command's outputs (runtime/outputs.py)
         add_output_policy(command)
     return parser
@@ -55,31 +58,30 @@ _RENDERING_COMMANDS = frozenset({"run", "replay", "demo", "manipulate", "contact
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; every error a user can cause becomes a message and an exit code here, in one place.
+    """Run one command; every refusal a user can cause becomes one line and an exit code here, in one place.
 
-    Exit codes: 0 done; 2 bad input (an option, a file, a table; an address that cannot be bound);
-    3 no OpenGL context; 130 interrupted.
+    A refusal is a :class:`FacepuppetError` (a bad option, a file that cannot be used, a table that does not
+    fit, a missing device) or an ``OSError`` (a file missing or unreadable, an address that cannot be bound):
+    ``facepuppet COMMAND: error: MESSAGE`` on stderr, no traceback. argparse refuses its own usage errors
+    before this (exit 2). Anything else is a bug in facepuppet, not the user's fault: it is not caught, so
+    Python shows its traceback and exits 1. ``FACEPUPPET_DEBUG=1`` in the environment shows the traceback of
+    a refusal too, then its line, with the same exit code.
+
+    Exit codes: 0 done; 2 refused (an option, a file, a table, an output, an address); 3 no OpenGL context;
+    130 interrupted; 1 a bug (a traceback).
     """
-    from facepuppet.runtime.errors import FacepuppetError
-    from facepuppet.runtime.render.gl_context import GLUnavailable
-
     parser = build_parser()
     args = parser.parse_args(argv)
     _configure_logging()
     try:
-        from facepuppet.runtime.outputs import check_outputs
-
         check_outputs(args)   # an output that exists (without --force) is refused before any work
         if args.command in _RENDERING_COMMANDS:
-            from facepuppet.runtime.render.blas_threads import BlasThreads
-
             with BlasThreads(1):
                 return int(args.func(args) or 0)
         return int(args.func(args) or 0)
     except GLUnavailable as exc:
         return _error(args.command, exc, 3)
-    except (FacepuppetError, TablesError, ValueError, OSError) as exc:
-        # OSError: files that are missing or not readable, an address that cannot be bound
+    except (FacepuppetError, OSError) as exc:
         return _error(args.command, exc, 2)
     except KeyboardInterrupt:
         print(f"facepuppet {args.command}: interrupted", file=sys.stderr)
@@ -116,6 +118,9 @@ def _configure_logging() -> None:
 
 
 def _error(command: str, exc: BaseException, code: int) -> int:
+    """The one line of a refusal (after its traceback with ``FACEPUPPET_DEBUG=1``); ``code`` back."""
+    if os.environ.get("FACEPUPPET_DEBUG", "") not in ("", "0"):
+        traceback.print_exception(exc, file=sys.stderr)
     print(f"facepuppet {command}: error: {exc}", file=sys.stderr)
     return code
 

@@ -24,6 +24,8 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.signal import argrelmax
 
+from facepuppet.runtime.errors import UsageError
+
 # Why these defaults: a bandwidth of 0.5 on the unit sphere is ~29 degrees
 # between directions, so up/down or in/out of one marker become separate
 # classes while noise around one direction stays together.
@@ -187,13 +189,13 @@ class ActuationModel:
 
         k = self.n_components
         if not isinstance(k, (int, np.integer)) or k < 1:
-            raise ValueError(f"n_components (K): expected a positive integer, got {k!r}")
+            raise UsageError(f"n_components (K): expected a positive integer, got {k!r}")
         self.axes_, self.axis_marker_ = class_axes(disp, self.bandwidth)
         x = actuation_signals(disp, self.axes_, self.axis_marker_, self.handover_power)
         x = x[np.isfinite(x).all(axis=1)]
         n_classes = x.shape[1]
         if k > min(n_classes, len(x)):
-            raise ValueError(
+            raise UsageError(
                 f"K = {k} is larger than possible: the take yields {n_classes} actuation signals "
                 f"(marker classes) over {len(x)} complete frames; use K <= {min(n_classes, len(x))}")
         with warnings.catch_warnings():

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.progress import Progress
 
 from facepuppet.offline.actuation import transfer
@@ -130,7 +131,7 @@ def _retarget_actor(args: argparse.Namespace) -> int:
         capture = read_capture(args.evaluate)
         missing = [n for n in actor.names if n not in capture.names]
         if missing:
-            raise ValueError(f"{args.evaluate}: markers {missing[:5]} of the actor are not in this take")
+            raise InputFileError(f"{args.evaluate}: markers {missing[:5]} of the actor are not in this take")
         frames = capture.markers[:, [capture.names.index(n) for n in actor.names]]
         e = transfer_error(actor, pair, character, frames, m["fapu_actor"], m["fapu_character"])
         print(f"  {args.evaluate}: {e['frames']} frames, marker-space RMS transfer {e['transfer_rms']:.3f} {u} "

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.rigid import kabsch
 
 __all__ = ["HeadChoice", "Stabilised", "choose_head_markers", "find_head_markers", "kabsch", "stabilise"]
@@ -201,19 +202,19 @@ def stabilise(markers: np.ndarray, names: Sequence[str], head_markers: Sequence[
         for h in head_markers:
             if isinstance(h, str):
                 if h not in names:
-                    raise ValueError(f"head markers: no marker named {h!r}; known: {', '.join(names[:8])}...")
+                    raise UsageError(f"head markers: no marker named {h!r}; known: {', '.join(names[:8])}...")
                 idx.append(names.index(h))
             else:
                 idx.append(int(h))
         idx = tuple(sorted(set(idx)))
         if len(idx) < 3:
-            raise ValueError(f"head markers: need at least 3 distinct markers, got {len(idx)}")
+            raise UsageError(f"head markers: need at least 3 distinct markers, got {len(idx)}")
     if not 0 <= reference_frame < len(m):
         raise ValueError(f"reference_frame: expected 0..{len(m) - 1}, got {reference_frame}")
     head = m[:, idx]
     ref = head[reference_frame]
     if np.isnan(ref).any():
-        raise ValueError(f"reference_frame {reference_frame}: a head marker is occluded there; choose another frame")
+        raise UsageError(f"reference_frame {reference_frame}: a head marker is occluded there; choose another frame")
     visible = ~np.isnan(head).any(axis=2)
     n_frames = len(m)
     rot = np.tile(np.eye(3), (n_frames, 1, 1))

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.tables import hash_inputs
 
 from facepuppet.offline.actuation.basis import ActuationModel, k_report, neutral_frame
@@ -75,10 +76,10 @@ class ActorModel:
         if not isinstance(capture, Capture):
             raise TypeError(f"ActorModel.fit: expected a Capture, got {type(capture).__name__}")
         if capture.n_markers < 3:
-            raise ValueError(f"{capture.source or 'capture'}: need at least 3 markers, found {capture.n_markers}")
+            raise InputFileError(f"{capture.source or 'capture'}: need at least 3 markers, found {capture.n_markers}")
         n = capture.n_frames
         if self.neutral_frame is not None and not 0 <= self.neutral_frame < n:
-            raise ValueError(f"neutral_frame: expected 0..{n - 1}, got {self.neutral_frame}")
+            raise UsageError(f"neutral_frame: expected 0..{n - 1}, got {self.neutral_frame}")
         t0 = time.perf_counter()
         say("stabilise", 0.0, f"{n} frames x {capture.n_markers} markers")
         reference = self.neutral_frame if self.neutral_frame is not None else 0
@@ -90,7 +91,7 @@ class ActorModel:
         markers = stab.markers.astype(np.float64)
         neutral = self.neutral_frame if self.neutral_frame is not None else neutral_frame(markers)
         if np.isnan(markers[neutral]).any():
-            raise ValueError(f"neutral_frame {neutral}: some markers are occluded there; choose another frame")
+            raise UsageError(f"neutral_frame {neutral}: some markers are occluded there; choose another frame")
         disp = markers - markers[neutral]
         complete = np.isfinite(disp).all(axis=(1, 2))
         t1 = time.perf_counter()

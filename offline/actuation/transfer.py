@@ -50,6 +50,7 @@ from scipy.spatial import cKDTree
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.actuation.cubic_fit import fit_polynomial
@@ -95,17 +96,17 @@ def read_override(path: str | os.PathLike, marker_names: Sequence[str], n_vertic
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not a readable JSON object ({exc})") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputFileError(f"{path}: not a readable JSON object ({exc})") from None
     if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object {{marker name: vertex index}}")
+        raise InputFileError(f"{path}: expected a JSON object {{marker name: vertex index}}")
     names = list(marker_names)
     out = {}
     for name, vertex in data.items():
         if name not in names:
-            raise ValueError(f"{path}: field {name!r}: no such actor marker")
+            raise InputFileError(f"{path}: field {name!r}: no such actor marker")
         if not isinstance(vertex, int) or not 0 <= vertex < n_vertices:
-            raise ValueError(f"{path}: field {name!r}: expected a vertex index 0..{n_vertices - 1}, got {vertex!r}")
+            raise InputFileError(f"{path}: field {name!r}: expected a vertex index 0..{n_vertices - 1}, got {vertex!r}")
         out[names.index(name)] = vertex
     return out
 
@@ -118,13 +119,13 @@ def read_landmarks(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not a readable JSON file ({exc})") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputFileError(f"{path}: not a readable JSON file ({exc})") from None
     if isinstance(data, dict):
         data = data.get("idx_to_landmark_verts")
     if not (isinstance(data, list) and data and all(isinstance(v, int) and 0 <= v < n_vertices for v in data)):
-        raise ValueError(f"{path}: field idx_to_landmark_verts: expected a list of vertex indices "
-                         f"0..{n_vertices - 1}")
+        raise InputFileError(f"{path}: field idx_to_landmark_verts: expected a list of vertex indices "
+                             f"0..{n_vertices - 1}")
     return np.asarray(data, dtype=np.int64)
 
 
@@ -363,7 +364,7 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     left_out = observable_shapes(character, vertices, radius * fapu_char, exclude, include)
     used = np.array([j for j, n in enumerate(character.shape_names) if n not in left_out], dtype=np.int64)
     if len(used) == 0:
-        raise ValueError(f"retarget_actor: every shape of '{character.name}' was left out ({left_out})")
+        raise UsageError(f"retarget_actor: every shape of '{character.name}' was left out ({left_out})")
     dense = character.dense_deltas().astype(np.float64)           # (S, n_vertices, 3)
     basis = dense[used][:, vertices, :].reshape(len(used), -1).T  # B, (3 n_markers, n_used)
     pick = np.unique(np.linspace(0, len(s) - 1, min(max_frames, len(s))).astype(int))

@@ -30,6 +30,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from facepuppet.runtime.errors import InputFileError, UsageError
+
 from facepuppet.offline.elastic.laplacian import bilaplacian, check_mesh, components, vertex_gradients
 
 if TYPE_CHECKING:
@@ -54,12 +56,12 @@ def fixed_region(vertices: np.ndarray, nose_tip: ArrayLike, forehead: ArrayLike,
     ndarray of shape (n,), bool
     """
     if not ratio > 0:
-        raise ValueError(f"fixed_ratio: expected a positive number, got {ratio!r}")
+        raise UsageError(f"fixed_ratio: expected a positive number, got {ratio!r}")
     v = np.asarray(vertices, dtype=np.float64)
     nose = np.asarray(nose_tip, dtype=np.float64)
     scale = float(np.linalg.norm(np.asarray(forehead, dtype=np.float64) - nose))
     if scale <= 0:
-        raise ValueError("forehead: must differ from the nose tip to set the fixed-region scale")
+        raise InputFileError("forehead: must differ from the nose tip to set the fixed-region scale")
     return np.linalg.norm(v - nose, axis=1) > ratio * scale  # Yano & Harada §4 distance rule
 
 
@@ -68,7 +70,7 @@ def check_handles(handles: np.ndarray, n_vertices: int, fixed_mask: np.ndarray,
     """Handles as (n_c,) int64, or ValueError on duplicates, range or a handle in the fixed region."""
     h = np.asarray(handles)
     if h.ndim != 1 or len(h) == 0 or h.dtype.kind not in "iu":
-        raise ValueError(f"handles: expected a non-empty 1-D array of vertex indices, got {h.dtype} {h.shape}")
+        raise InputFileError(f"handles: expected a non-empty 1-D array of vertex indices, got {h.dtype} {h.shape}")
     h = h.astype(np.int64)
     label = (lambda i: f"{names[i]!r} (vertex {h[i]})") if names is not None else (lambda i: f"vertex {h[i]}")
     if h.min() < 0 or h.max() >= n_vertices:
@@ -77,10 +79,10 @@ def check_handles(handles: np.ndarray, n_vertices: int, fixed_mask: np.ndarray,
     if (counts > 1).any():
         dup = uniq[counts > 1][0]
         which = [label(i) for i in np.flatnonzero(h == dup)]
-        raise ValueError(f"handles: duplicate handles on one vertex: {', '.join(which)}")
+        raise InputFileError(f"handles: duplicate handles on one vertex: {', '.join(which)}")
     inside = np.flatnonzero(fixed_mask[h])
     if len(inside):
-        raise ValueError(
+        raise InputFileError(
             f"handles: control point {label(inside[0])} lies in the fixed region; "
             "raise the fixed-region ratio or move the control point"
         )
@@ -130,7 +132,7 @@ class ElasticBasis:
             raise ValueError(f"fixed_mask: expected shape ({n},), got {fixed.shape}")
         h = check_handles(handles, n, fixed, names)
         if not 1 <= self.k:
-            raise ValueError(f"k: expected a positive number of kept weights, got {self.k}")
+            raise UsageError(f"k: expected a positive number of kept weights, got {self.k}")
         count, labels = components(n, t)
         with_handle = np.zeros(count, bool)
         with_handle[labels[h]] = True

@@ -22,6 +22,7 @@ import numpy as np
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.elastic.control_points import ControlPoints
@@ -31,7 +32,7 @@ def fapu(positions: np.ndarray, points: ControlPoints) -> float:
     """Inner-eye-corner distance ES (units), the FAPU of §5."""
     es = float(np.linalg.norm(positions[points.index("eye_inner_L")] - positions[points.index("eye_inner_R")]))
     if es <= 0:
-        raise ValueError("control points: eye_inner_L and eye_inner_R coincide; FAPU would be zero")
+        raise InputFileError("control points: eye_inner_L and eye_inner_R coincide; FAPU would be zero")
     return es
 
 
@@ -46,7 +47,7 @@ def face_frame(positions: np.ndarray, points: ControlPoints) -> np.ndarray:
     y = positions[points.index("forehead")] - positions[points.index("nose_tip")]
     y = y - x * (x @ y)
     if np.linalg.norm(y) < 1e-9:
-        raise ValueError("control points: nose_tip → forehead is parallel to the eye line; no face frame")
+        raise InputFileError("control points: nose_tip → forehead is parallel to the eye line; no face frame")
     y = y / np.linalg.norm(y)
     return np.stack([x, y, np.cross(x, y)])
 
@@ -67,7 +68,7 @@ def clone_parameters(params: np.ndarray, source_positions: np.ndarray, source_po
     ndarray of the shape of ``params``, float32, target units
     """
     if tuple(source_points.names) != tuple(target_points.names):
-        raise ValueError("correspondences: target control points must carry the source's names in its order")
+        raise InputFileError("correspondences: target control points must carry the source's names in its order")
     src, tgt = np.asarray(source_positions, np.float64), np.asarray(target_positions, np.float64)
     r_s, r_t = face_frame(src, source_points), face_frame(tgt, target_points)
     scale = fapu(tgt, target_points) / fapu(src, source_points)

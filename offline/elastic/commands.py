@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,7 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.demo.head import build_demo_character
 from facepuppet.runtime.demo.head_parts import EYE_XY, MOUTH_HALF_WIDTH, MOUTH_Y
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.outputs import OutputSet
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
@@ -31,6 +31,7 @@ from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.lip_line import MEDIAPIPE_INNER_LIPS, cut_lip_line, fix_inner_lips
 from facepuppet.offline.elastic.params import build_model, fit_character
 from facepuppet.offline.io.obj import read_obj
+from facepuppet.offline.io.rig_import import read_ict_landmarks
 
 # Anchor groups (control_points.ANCHOR_NAMES) by control-point name.
 POINT_ANCHORS = {
@@ -82,9 +83,9 @@ def _fit(args: argparse.Namespace) -> int:
     else:
         landmarks = args.landmarks or character.metadata.get("settings", {}).get("landmarks")
         if not landmarks:
-            raise ValueError(f"fit-elastic: {args.character} has no landmarks: give --controls FILE or "
+            raise UsageError(f"fit-elastic: {args.character} has no landmarks: give --controls FILE or "
                              "--landmarks vertex_indices.json (the 68 landmarks of ICT-FaceKit)")
-        marks = json.loads(Path(landmarks).read_text(encoding="utf-8"))["idx_to_landmark_verts"]
+        marks = read_ict_landmarks(landmarks, character.n_vertices)
         points = ict_control_points(marks, character.vertices, character.triangles, main_front(character))
     model, basis, report = fit_character(character, points, k=args.k, fixed_ratio=args.fixed_ratio)
     with OutputSet() as outputs:        # both files, or neither
@@ -140,7 +141,7 @@ def _clone(args: argparse.Namespace) -> int:
         elif str(args.target) == "demo":
             anchors = demo_anchors(target)
         else:
-            raise ValueError(f"clone-elastic: {args.target} has {target.n_vertices} vertices, not the source's "
+            raise UsageError(f"clone-elastic: {args.target} has {target.n_vertices} vertices, not the source's "
                              f"{source.n_vertices}, and no proposal of correspondences for it is built in (the "
                              "MediaPipe face OBJ and 'demo' have one): give --correspondences FILE")
         src_pos = source.arrays["control_positions"].astype(np.float64)

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.geometry import vertex_normals
 
 if TYPE_CHECKING:
@@ -87,15 +88,15 @@ class ControlPoints:
         try:
             return self.names.index(name)
         except ValueError:
-            raise ValueError(f"control points: no point named {name!r} (the role needs it)") from None
+            raise InputFileError(f"control points: no point named {name!r} (the role needs it)") from None
 
     def vertex(self, name: str) -> int:
         return int(self.vertices[self.index(name)])
 
     def check(self, n_vertices: int, where: str = "control points") -> ControlPoints:
         if self.vertices.min() < 0 or self.vertices.max() >= n_vertices:
-            raise ValueError(f"{where}: vertex indices must lie in 0..{n_vertices - 1}, "
-                             f"got {self.vertices.min()}..{self.vertices.max()}")
+            raise InputFileError(f"{where}: vertex indices must lie in 0..{n_vertices - 1}, "
+                                 f"got {self.vertices.min()}..{self.vertices.max()}")
         return self
 
     def reorder(self, names: Sequence[str]) -> ControlPoints:
@@ -116,17 +117,17 @@ def read_control_points(path: str | os.PathLike, n_vertices: int | None = None) 
     path = Path(path)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not a readable JSON control-point file ({exc})") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputFileError(f"{path}: not a readable JSON control-point file ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         found = doc.get("format") if isinstance(doc, dict) else doc
-        raise ValueError(f"{path}: format: expected {FORMAT!r}, got {found!r}")
+        raise InputFileError(f"{path}: format: expected {FORMAT!r}, got {found!r}")
     try:
         names = tuple(str(p["name"]) for p in doc["points"])
         verts = np.array([int(p["vertex"]) for p in doc["points"]], np.int64)
         points = ControlPoints(names, verts)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: points: expected a list of {{name, vertex}} objects ({exc})") from None
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
+        raise InputFileError(f"{path}: points: expected a list of {{name, vertex}} objects ({exc})") from None
     return points.check(n_vertices, str(path)) if n_vertices is not None else points
 
 
@@ -166,7 +167,7 @@ def ict_control_points(landmarks: ArrayLike, vertices: np.ndarray, triangles: np
     """
     lm = np.asarray(landmarks, np.int64)
     if lm.shape != (68,):
-        raise ValueError(f"landmarks: expected 68 Multi-PIE vertex indices, got shape {lm.shape}")
+        raise InputFileError(f"landmarks: expected 68 Multi-PIE vertex indices, got shape {lm.shape}")
     v = np.asarray(vertices, np.float64)
     cand = front_vertices(v, triangles) if face_vertices is None else np.asarray(face_vertices, np.int64)
     names = list(_MULTIPIE.values())
@@ -229,7 +230,7 @@ def propose_control_points(
     moved = s * np.asarray(source_points, np.float64) @ r.T + t
     cand = np.asarray(candidates, np.int64)
     if len(cand) < len(moved):
-        raise ValueError(f"candidates: {len(cand)} target vertices cannot hold {len(moved)} control points")
+        raise InputFileError(f"candidates: {len(cand)} target vertices cannot hold {len(moved)} control points")
     tree = cKDTree(np.asarray(target_vertices, np.float64)[cand])
     taken: set = set()
     chosen = []

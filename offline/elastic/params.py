@@ -27,6 +27,7 @@ from scipy.linalg import qr, solve_triangular
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
+from facepuppet.runtime.errors import InputFileError
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
 from facepuppet.offline.elastic.control_points import ControlPoints
@@ -65,7 +66,7 @@ class ExpressionFit:
         q, r = qr(b, mode="economic")
         rank_floor = np.abs(np.diag(r)).max() * 1e-10
         if (np.abs(np.diag(r)) <= rank_floor).any():
-            raise ValueError("basis: rank deficient (two control points with identical basis functions?)")
+            raise InputFileError("basis: rank deficient (two control points with identical basis functions?)")
         s_count, n, _ = d.shape
         rhs = d.transpose(1, 0, 2).reshape(n, s_count * 3)
         u = solve_triangular(r, q.T @ rhs)  # Yano & Harada eq. 6: R U = Qᵀ D

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.gestures.layer import GestureLayer
 from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
@@ -108,7 +109,7 @@ def parse_style(text: str) -> dict[str, str]:
     for part in filter(None, (p.strip() for p in text.split(","))):
         group, sep, take = part.partition("=")
         if not sep or not group or not take:
-            raise ValueError(f"--style: expected GROUP=TAKE pairs separated by commas, got {part!r}")
+            raise UsageError(f"--style: expected GROUP=TAKE pairs separated by commas, got {part!r}")
         style[group.strip()] = take.strip()
     return style
 
@@ -222,12 +223,13 @@ def load_landmarks(path: str | os.PathLike) -> np.ndarray:
     try:
         data = json.loads(Path(path).read_text())
     except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: expected a JSON file of 68 landmark vertex indices ({exc})") from None
+        raise InputFileError(f"{path}: expected a JSON file of 68 landmark vertex indices ({exc})") from None
     if isinstance(data, dict):
         data = data.get("idx_to_landmark_verts")
-    if not isinstance(data, list) or len(data) != 68 or not all(isinstance(v, int) for v in data):
-        raise ValueError(f"{path}: expected 68 integer vertex indices (a list, or idx_to_landmark_verts), "
-                         f"got {type(data).__name__}{'' if not isinstance(data, list) else f' of {len(data)}'}")
+    if (not isinstance(data, list) or len(data) != 68 or not all(isinstance(v, int) for v in data)
+            or not all(-2 ** 63 <= v < 2 ** 63 for v in data)):
+        raise InputFileError(f"{path}: expected 68 integer vertex indices (a list, or idx_to_landmark_verts), "
+                             f"got {type(data).__name__}{'' if not isinstance(data, list) else f' of {len(data)}'}")
     return np.array(data, np.int64)
 
 
@@ -261,8 +263,8 @@ def transfer_detail(
     names = caps[0].names
     for c, p in zip(caps[1:], marker_paths[1:]):
         if c.names != names or abs(c.rate - caps[0].rate) > 1e-9:
-            raise ValueError(f"{p}: expected the markers and rate of {marker_paths[0]} ({len(names)} markers, "
-                             f"{caps[0].rate:g} Hz), got {len(c.names)} markers at {c.rate:g} Hz")
+            raise InputFileError(f"{p}: expected the markers and rate of {marker_paths[0]} ({len(names)} markers, "
+                                 f"{caps[0].rate:g} Hz), got {len(c.names)} markers at {c.rate:g} Hz")
     log(f"[1/4] read {len(caps)} take(s): {sum(len(c.markers) for c in caps)} frames x {len(names)} markers "
         f"at {caps[0].rate:g} Hz ({time.perf_counter() - start:.1f} s)")
     det = marker_detail([c.markers for c in caps], names, per_region=per_region, n_basis=n_basis, window=window,
@@ -330,16 +332,16 @@ def _transfer_detail(args: argparse.Namespace) -> int:
     from facepuppet.offline.gestures.detail_transfer import detail_table
 
     if (args.gestures is None) != (args.gestures_out is None):
-        raise ValueError("--gestures and --gestures-out go together (read one database, write its copy)")
+        raise UsageError("--gestures and --gestures-out go together (read one database, write its copy)")
     for flag, path in (("--output", args.output), ("--gestures-out", args.gestures_out)):
         if path is not None:       # (cli.main checked already; again for direct callers)
             check_path(flag, "file", Path(path), args.force)
     if args.per_region < 1 or args.step < 1:
-        raise ValueError(f"--per-region and --step: expected >= 1, got {args.per_region}, {args.step}")
+        raise UsageError(f"--per-region and --step: expected >= 1, got {args.per_region}, {args.step}")
     if not (args.picture_weight > 0):
-        raise ValueError(f"--picture-weight: expected a positive number, got {args.picture_weight}")
+        raise UsageError(f"--picture-weight: expected a positive number, got {args.picture_weight}")
     if args.radius is not None and not (args.radius > 0):
-        raise ValueError(f"--radius: expected a positive number, got {args.radius}")
+        raise UsageError(f"--radius: expected a positive number, got {args.radius}")
     # every input read and checked before the work, and every output written at the end, together
     character = Character.load(args.character)
     landmarks = load_landmarks(args.landmarks)

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.channels import canonical, gesture_group
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.gestures.tables import GROUPS, HEAD_FEATURES
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.tables import hash_inputs, save_tables
@@ -73,26 +74,39 @@ def quantile_map(x: np.ndarray, reference: np.ndarray) -> np.ndarray:
 def read_speech_take(wav: str | os.PathLike, curves_csv: str | os.PathLike, mapping_csv: str | os.PathLike,
                      fps: float = 30.0, frames: slice = slice(None)) -> Take:
     """FACEGOOD speech take: intensity from the WAV, lips P(t) mapped to ARKit (``valid`` rows only)."""
-    with open(curves_csv, newline="") as handle:
-        rows = list(csv.reader(handle))
-    header, data = rows[0], np.array(rows[1:], np.float64)
+    try:
+        with open(curves_csv, newline="") as handle:
+            rows = list(csv.reader(handle))
+        header, data = rows[0], np.array(rows[1:], np.float64)
+    except (UnicodeDecodeError, csv.Error, IndexError, ValueError) as exc:  # ValueError: a cell not a number
+        raise InputFileError(f"{curves_csv}: expected a header row, then rows of numbers ({exc})") from None
+    if data.ndim != 2 or not len(data):
+        raise InputFileError(f"{curves_csv}: expected a header row, then rows of numbers (found {len(rows) - 1} rows)")
     col = {n: i for i, n in enumerate(header)}
     lips: dict[str, np.ndarray] = {}
-    with open(mapping_csv, newline="") as handle:
-        for row in csv.DictReader(handle):
-            if row["status"] != "valid" or gesture_group(row["arkit"]) != "lips":
-                continue
-            srcs = [s for s in row["sources"].split(";") if s in col]
-            if not srcs:
-                continue
-            v = np.max(data[:, [col[s] for s in srcs]], axis=1)  # the sheet's "max" combination
-            if v.std() > 1e-6:  # keep the channels the take animates
-                lips[canonical(row["arkit"])] = v
+    try:
+        with open(mapping_csv, newline="") as handle:
+            mapping = list(csv.DictReader(handle))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise InputFileError(f"{mapping_csv}: not a readable CSV file ({exc})") from None
+    for row in mapping:
+        if row.get("status") != "valid":
+            continue
+        if not (isinstance(row.get("arkit"), str) and isinstance(row.get("sources"), str)):
+            raise InputFileError(f"{mapping_csv}: expected the columns arkit and sources in every valid row")
+        if gesture_group(row["arkit"]) != "lips":
+            continue
+        srcs = [s for s in row["sources"].split(";") if s in col]
+        if not srcs:
+            continue
+        v = np.max(data[:, [col[s] for s in srcs]], axis=1)  # the sheet's "max" combination
+        if v.std() > 1e-6:  # keep the channels the take animates
+            lips[canonical(row["arkit"])] = v
     if not lips:
-        raise ValueError(f"{curves_csv}: no animated lip channel maps to ARKit through {mapping_csv}")
+        raise InputFileError(f"{curves_csv}: no animated lip channel maps to ARKit through {mapping_csv}")
     n = len(data)
     if abs(fps - 30.0) > 1e-9:
-        raise ValueError(f"{curves_csv}: the curves are at 30 fps; build the database at fps=30, got {fps}")
+        raise UsageError(f"{curves_csv}: the curves are at 30 fps; build the database at fps=30, got {fps}")
     level, z, stats = speech_intensity(wav, fps=fps, n_frames=n)
     take = Take(Path(curves_csv).stem, z[frames], {k: v[frames] for k, v in lips.items()}, ("lips",),
                 source=f"{Path(wav).name} + {Path(curves_csv).name}")
@@ -104,12 +118,12 @@ def read_llf_take(path: str | os.PathLike, speech_z: np.ndarray, fps: float = 30
     """Live Link Face take: all weight channels at ``fps``; proxy intensity from its jawOpen."""
     frames = [f for f in read_llf_csv(path) if f.weights is not None]
     if len(frames) < 2:
-        raise ValueError(f"{path}: expected at least 2 frames with weights, found {len(frames)}")
+        raise InputFileError(f"{path}: expected at least 2 frames with weights, found {len(frames)}")
     names = [canonical(c) for c in frames[0].channels]
     _, w = _resample(np.array([f.t for f in frames]), np.stack([f.weights for f in frames]), fps)
     columns = {n: w[:, i] for i, n in enumerate(names)}
     if "jawOpen" not in columns:
-        raise ValueError(f"{path}: expected a JawOpen column for the proxy intensity")
+        raise InputFileError(f"{path}: expected a JawOpen column for the proxy intensity")
     z = quantile_map(columns["jawOpen"], speech_z)  # proxy s(t): see the module docstring
     return Take(Path(path).stem, z, columns, ("mood", "brows", "eyes", "rest"), source=Path(path).name)
 
@@ -120,15 +134,20 @@ def read_marker_take(path: str | os.PathLike, speech_z: np.ndarray, fps: float =
 
     import c3d
 
-    with open(path, "rb") as handle, warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # "No analog data found" is expected
-        reader = c3d.Reader(handle)
-        names = [s.strip() for s in reader.point_labels]
-        rate = float(reader.point_rate)
-        pts = np.stack([p[:, :3] for _, p, _ in reader.read_frames()]).astype(np.float64)
+    try:
+        with open(path, "rb") as handle, warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "No analog data found" is expected
+            reader = c3d.Reader(handle)
+            names = [s.strip() for s in reader.point_labels]
+            rate = float(reader.point_rate)
+            pts = np.stack([p[:, :3] for _, p, _ in reader.read_frames()]).astype(np.float64)
+    except OSError:
+        raise
+    except Exception as exc:  # the c3d package raises assorted errors on damaged files; np.stack on no frames
+        raise InputFileError(f"{path}: not a readable C3D file ({type(exc).__name__}: {exc})") from None
     for m in ("Chin", "NoseTop"):
         if m not in names:
-            raise ValueError(f"{path}: expected marker {m!r} for the proxy intensity")
+            raise InputFileError(f"{path}: expected marker {m!r} for the proxy intensity")
     track = head_track(pts, names)
     jaw = np.linalg.norm(pts[:, names.index("Chin")] - pts[:, names.index("NoseTop")], axis=1)
     _, res = _resample(np.arange(len(pts)) / rate, np.column_stack([track, jaw]), fps)

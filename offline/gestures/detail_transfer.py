@@ -48,6 +48,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.geometry import smoothstep, vertex_normals
 from facepuppet.runtime.tables import Tables
 
@@ -138,12 +139,12 @@ def place_markers(neutral: np.ndarray, names: Sequence[str], character: Characte
         raise ValueError(f"neutral: expected finite shape ({len(names)}, 3), got {neutral.shape}")
     landmarks = np.asarray(landmarks, np.int64)
     if landmarks.shape != (68,) or landmarks.min() < 0 or landmarks.max() >= character.n_vertices:
-        raise ValueError(f"landmarks: expected 68 vertex indices in 0..{character.n_vertices - 1}, "
-                         f"got shape {landmarks.shape}")
+        raise InputFileError(f"landmarks: expected 68 vertex indices in 0..{character.n_vertices - 1}, "
+                             f"got shape {landmarks.shape}")
     pairs = [(i, MARKER_LANDMARKS[n]) for i, n in enumerate(names) if n in MARKER_LANDMARKS]
     if len(pairs) < 3:
-        raise ValueError(f"names: expected at least 3 markers with a landmark ({sorted(MARKER_LANDMARKS)[:4]}...), "
-                         f"found {len(pairs)}")
+        raise InputFileError(f"names: expected at least 3 markers with a landmark ({sorted(MARKER_LANDMARKS)[:4]}...), "
+                             f"found {len(pairs)}")
     src = neutral[[i for i, _ in pairs]]
     dst = character.vertices[landmarks[[j for _, j in pairs]]].astype(np.float64)
     m = umeyama(src, dst)
@@ -313,7 +314,7 @@ def detail_character(character: Character, transfer: DetailTransfer, detail: Mar
     """
     clash = set(detail.feature_names) & set(character.shape_names)
     if clash:
-        raise ValueError(f"character shape_names: already has {sorted(clash)}")
+        raise InputFileError(f"character shape_names: already has {sorted(clash)}")
     fields = transfer.transfer(detail.directions)                    # (k, n_vertices, 3), character units
     verts = character.vertices.astype(np.float64)
     n0 = vertex_normals(verts, character.triangles)
@@ -360,7 +361,7 @@ def detail_table(db: Tables, detail: MarkerDetail, take_names: Sequence[str], ra
         raise ValueError(f"take_names: expected {len(detail.tracks)} names (one per track), got {len(take_names)}")
     for name, track in zip(take_names, detail.tracks):
         if name not in takes:
-            raise ValueError(f"take_names: {name!r} is not a take of the database ({takes})")
+            raise UsageError(f"take_names: {name!r} is not a take of the database ({takes})")
         rows = np.flatnonzero(frame_take == takes.index(name))
         t = np.arange(len(rows)) / fps
         src = np.arange(len(track)) / rate

@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from facepuppet.runtime.channels import gesture_group
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.gestures.layer import HEAD_FEATURES
 
 REGIONS = ("brows", "eyes", "lips", "rest")
@@ -51,11 +52,11 @@ def head_track(markers: np.ndarray, names: Sequence[str], stable: Sequence[str] 
         raise ValueError(f"markers: expected shape (n_frames, n_markers, 3), got {markers.shape}")
     missing = [m for m in stable if m not in list(names)]
     if missing:
-        raise ValueError(f"markers: expected stable markers {list(stable)}, missing {missing}")
+        raise InputFileError(f"markers: expected stable markers {list(stable)}, missing {missing}")
     idx = [list(names).index(m) for m in stable]
     pts = markers[:, idx]
     if not np.isfinite(pts).all():
-        raise ValueError("markers: the stable markers have NaN samples; fill or drop those frames first")
+        raise InputFileError("markers: the stable markers have NaN samples; fill or drop those frames first")
     ref = pts[0] - pts[0].mean(0)
     out = np.zeros((len(pts), 6))
     for t, p in enumerate(pts):

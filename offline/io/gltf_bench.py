@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.errors import UsageError
 
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf.write import export_character
@@ -33,7 +34,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_bench(args: argparse.Namespace) -> dict:
     if args.repeats < 1:
-        raise ValueError(f"--repeats {args.repeats}: must be at least 1")
+        raise UsageError(f"--repeats {args.repeats}: must be at least 1")
     character = Character.load(args.character)
     times: dict[str, list[float]] = {"export_s": [], "check_s": [], "import_s": []}
     size, problems = 0, []

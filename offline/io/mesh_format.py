@@ -11,6 +11,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from facepuppet.runtime.errors import InputFileError
+
 ACCEPTED = "Wavefront OBJ (text 'v'/'f' lines; a neutral .obj and a folder of shape .obj files, same vertex order)"
 
 
@@ -46,5 +48,5 @@ def refuse_non_obj(path: str | os.PathLike, role: str = "mesh") -> None:
     """Raise ValueError naming the format found when ``path`` is a known non-OBJ mesh format."""
     found = sniff_mesh_format(path)
     if found is not None:
-        raise ValueError(f"{Path(path)}: {role} is a {found} file, not an OBJ; import-rig reads {ACCEPTED}. "
-                         "Export the rig as OBJ (one file per shape)")
+        raise InputFileError(f"{Path(path)}: {role} is a {found} file, not an OBJ; import-rig reads {ACCEPTED}. "
+                             "Export the rig as OBJ (one file per shape)")

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.geometry import incidence_matrix
 from facepuppet.runtime.tables import hash_inputs, naming_file
 
@@ -137,7 +138,7 @@ def import_rig(
     if units not in UNITS_PER_CM:
         raise ValueError(f"units: expected one of {sorted(UNITS_PER_CM)}, got {units!r}")
     if not (tolerance >= 0 and np.isfinite(tolerance)):
-        raise ValueError(f"tolerance: expected a finite number >= 0, got {tolerance!r}")
+        raise UsageError(f"tolerance: expected a finite number >= 0, got {tolerance!r}")
     if forward not in FORWARD_TURNS:
         raise ValueError(f"forward: expected one of {', '.join(FORWARD_TURNS)}, got {forward!r}")
     if not neutral_path.is_file():
@@ -226,7 +227,7 @@ def _shape_paths(neutral: Path, folder: Path, shapes) -> list[Path]:
             key=lambda p: p.name,
         )
         if not paths:
-            raise ValueError(f"{folder}: no shape OBJ files (other than the neutral) in the folder")
+            raise InputFileError(f"{folder}: no shape OBJ files (other than the neutral) in the folder")
         return paths
     paths = []
     for s in shapes:
@@ -281,7 +282,7 @@ def _read_shape(path: Path, neutral_path: Path, n_vertices: int) -> np.ndarray:
     """(n_vertices, 3) float64 positions of a shape OBJ, or ValueError naming both files and counts."""
     shape = read_vertices_only(path)
     if len(shape) != n_vertices:
-        raise ValueError(
+        raise InputFileError(
             f"{path}: has {len(shape)} vertices but the neutral {neutral_path} has {n_vertices}; "
             "a shape must list the neutral's vertices in the same order"
         )
@@ -350,20 +351,23 @@ def _find_landmarks(
     path = Path(landmarks) if landmarks is not None else neutral_path.parent / "vertex_indices.json"
     if landmarks is not None and not path.is_file():
         raise FileNotFoundError(f"{path}: landmark file not found")
-    return path, _read_landmarks(path, n_vertices) if path.is_file() else None
+    return path, read_ict_landmarks(path, n_vertices) if path.is_file() else None
 
 
-def _read_landmarks(path: Path, n_vertices: int) -> np.ndarray:
-    """(68,) int64 vertex indices of the Multi-PIE landmarks from an ICT ``vertex_indices.json``."""
+def read_ict_landmarks(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
+    """(68,) int64 vertex indices of the Multi-PIE landmarks from an ICT ``vertex_indices.json``; an
+    InputFileError naming the file and field when it is not one for ``n_vertices`` vertices."""
+    path = Path(path)
     try:
         marks = json.loads(path.read_text(encoding="utf-8"))["idx_to_landmark_verts"]
         marks = np.asarray(marks, dtype=np.int64)
-    except (ValueError, KeyError, TypeError) as exc:
-        raise ValueError(f"{path}: idx_to_landmark_verts: expected a list of 68 vertex indices ({exc})") from None
+    except (ValueError, KeyError, TypeError, OverflowError) as exc:  # ValueError: JSON, UTF-8, not ints
+        raise InputFileError(f"{path}: idx_to_landmark_verts: expected a list of 68 vertex indices ({exc})") from None
     if marks.shape != (68,) or marks.min() < 0 or marks.max() >= n_vertices:
-        raise ValueError(
+        found = f"range {marks.min()}..{marks.max()}" if marks.size else "no index"
+        raise InputFileError(
             f"{path}: idx_to_landmark_verts: expected 68 indices in 0..{n_vertices - 1}, "
-            f"got shape {marks.shape}, range {marks.min()}..{marks.max()}"
+            f"got shape {marks.shape}, {found}"
         )
     return marks
 

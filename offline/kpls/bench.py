@@ -18,6 +18,7 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.demo.head import build_demo_character
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
@@ -121,7 +122,7 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     take = data / "tracker" / args.take
     for path in (ict_dir, take):
         if not path.exists():
-            raise ValueError(f"bench kpls: {path} not found; pass --data DIR holding ict-facekit/ and tracker/")
+            raise UsageError(f"bench kpls: {path} not found; pass --data DIR holding ict-facekit/ and tracker/")
     t0 = time.perf_counter()
     ict = import_rig(ict_dir / "generic_neutral_mesh.obj", ict_dir)
     demo = build_demo_character()

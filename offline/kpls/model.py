@@ -37,6 +37,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.linalg import solve_triangular
 
+from facepuppet.runtime.errors import UsageError
+
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
@@ -261,7 +263,7 @@ class KernelPLS:
             if not isinstance(nc, (int, np.integer)) or isinstance(nc, bool) or nc < 1:
                 raise ValueError(f"KernelPLS: n_components must be 'auto' or an int >= 1, got {nc!r}")
             if nc > n - 1:
-                raise ValueError(f"KernelPLS: too many components: n_components={nc} but {n} pairs allow "
+                raise UsageError(f"KernelPLS: too many components: n_components={nc} but {n} pairs allow "
                                  f"at most {n - 1} (centring removes one dimension)")
 
     def _gram(self, A, B):
@@ -318,7 +320,7 @@ class KernelPLS:
                 if best is None or errors[p] < best[0]:
                     best = (errors[p], kernel, self.gamma_, p, errors)
             if best is None:
-                raise ValueError(f"KernelPLS: no kernel of {AUTO_KERNELS} reaches {self.n_components} "
+                raise UsageError(f"KernelPLS: no kernel of {AUTO_KERNELS} reaches {self.n_components} "
                                  f"components on every cross-validation fold (use fewer components)")
             _, self.kernel_, self.gamma_, p, self.cv_errors_ = best
         else:
@@ -330,7 +332,7 @@ class KernelPLS:
         Yc = Y - self.y_mean_
         T, U = nipals(Kc, Yc, p, self.tol, self.max_iter, self.solver)
         if T.shape[1] < p:
-            raise ValueError(f"KernelPLS: too many components: the Gram matrix is exhausted after "
+            raise UsageError(f"KernelPLS: too many components: the Gram matrix is exhausted after "
                              f"{T.shape[1]} of the {p} components asked for (use fewer components)")
         self.x_scores_, self.y_scores_ = T, U
         self.dual_coef_ = dual_coefficients(Kc, Yc, self.x_scores_, self.y_scores_)
@@ -385,7 +387,7 @@ class KernelPLS:
             if progress is not None:
                 progress(f"{label} fold {number}/{len(folds)}")
         if reached == 0:
-            raise ValueError("KernelPLS: cross-validation found no component: a fold's training pairs do "
+            raise UsageError("KernelPLS: cross-validation found no component: a fold's training pairs do "
                              "not vary (give more, or more varied, pairs)")
         return {p: float(sse[p - 1] / Y.size) for p in range(1, reached + 1)}
 

@@ -50,6 +50,7 @@ import numpy as np
 
 from facepuppet.runtime.channels import ChannelMap, canonical
 from facepuppet.runtime.character import Character, moving_vertices
+from facepuppet.runtime.errors import InputFileError, UsageError
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -62,7 +63,7 @@ def moving_region(character: Character, fraction: float = 0.05) -> np.ndarray:
     """
     region = moving_vertices(character, fraction)
     if not len(region):
-        raise ValueError(f"character {character.name!r}: its shapes move no vertex; nothing to retarget")
+        raise InputFileError(f"character {character.name!r}: its shapes move no vertex; nothing to retarget")
     return region
 
 
@@ -70,7 +71,7 @@ def farthest_points(points: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
     """Indices (k,) int64 into ``points`` (n, 3) chosen by farthest-point sampling."""
     n = len(points)
     if not 1 <= k <= n:
-        raise ValueError(f"farthest_points: k must be in 1..{n} (the candidate count), got {k}")
+        raise UsageError(f"farthest_points: k must be in 1..{n} (the candidate count), got {k}")
     chosen = [int(np.random.default_rng(seed).integers(n))]
     dist = np.linalg.norm(points - points[chosen[0]], axis=1)
     for _ in range(k - 1):
@@ -167,17 +168,21 @@ def feature_matrix(character: Character, points: np.ndarray) -> np.ndarray:
 def read_pairing(path: str | os.PathLike) -> list[tuple[str, str]]:
     """``source,target`` name pairs from a text file (``#`` comments and blank lines skipped)."""
     path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputFileError(f"{path}: not a UTF-8 text file ({exc})") from None
     pairs = []
-    for number, line in enumerate(path.read_text().splitlines(), 1):
+    for number, line in enumerate(text.splitlines(), 1):
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
         parts = [p.strip() for p in line.split(",")]
         if len(parts) != 2 or not all(parts):
-            raise ValueError(f"{path}:{number}: expected 'source_name,target_name', found {line!r}")
+            raise InputFileError(f"{path}:{number}: expected 'source_name,target_name', found {line!r}")
         pairs.append((parts[0], parts[1]))
     if not pairs:
-        raise ValueError(f"{path}: no pairs in the pairing file")
+        raise InputFileError(f"{path}: no pairs in the pairing file")
     return pairs
 
 
@@ -196,9 +201,9 @@ def match_matrix(source_names: Sequence[str], target_names: Sequence[str],
     M = np.zeros((len(target_names), len(source_names)))
     for s, t in pairing:
         if canonical(s) not in s_index:
-            raise ValueError(f"pairing: source shape {s!r} is not among the source's {len(source_names)} shapes")
+            raise InputFileError(f"pairing: source shape {s!r} is not among the source's {len(source_names)} shapes")
         if canonical(t) not in t_index:
-            raise ValueError(f"pairing: target shape {t!r} is not among the target's {len(target_names)} shapes")
+            raise InputFileError(f"pairing: target shape {t!r} is not among the target's {len(target_names)} shapes")
         M[t_index[canonical(t)], s_index[canonical(s)]] = 1.0
     return M
 
@@ -268,7 +273,7 @@ def expression_pairs(source: Character, target: Character, source_points: ArrayL
     M = match_matrix(source.shape_names, target.shape_names, pairing)
     matched = np.flatnonzero(M.any(axis=0))
     if len(matched) < 2:
-        raise ValueError(f"expression_pairs: only {len(matched)} shapes of {source.name!r} match a shape of "
+        raise UsageError(f"expression_pairs: only {len(matched)} shapes of {source.name!r} match a shape of "
                          f"{target.name!r}; give a pairing file")
     W = pair_weights(source.n_shapes, matched, n_mixes, max_mix, seed)
     F = feature_matrix(source, sp)

@@ -11,9 +11,11 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.outputs import OutputSet
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.replay_source import open_recording
+from facepuppet.runtime.tables import TablesError
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import FaceError, find_face
@@ -34,8 +36,8 @@ def load_source(path: str | os.PathLike) -> ElasticModel:
     source = ElasticModel.load(path)
     for role in ("nose_tip", "forehead", "eye_inner_L", "eye_inner_R"):
         if role not in source.control_names:
-            raise ValueError(f"{path}: control_names: the source has no {role!r} point (the cloning's face frame "
-                             "needs it)")
+            raise TablesError(path, "control_names", f"the source has no {role!r} point (the cloning's face frame "
+                                                     "needs it)")
     return source
 
 
@@ -69,9 +71,9 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
 
 def _run(args: argparse.Namespace) -> int:
     if args.sheet and not args.pictures:
-        raise ValueError("--sheet: needs --pictures DIR (the folder the contact sheet goes to)")
+        raise UsageError("--sheet: needs --pictures DIR (the folder the contact sheet goes to)")
     if args.take is not None and not args.sheet:
-        raise ValueError("--take: needs --pictures DIR --sheet (the side-by-side picture is one of the sheets)")
+        raise UsageError("--take: needs --pictures DIR --sheet (the side-by-side picture is one of the sheets)")
     if args.take is not None:
         open_recording(args.take)  # a take that cannot be read is refused before the work, nothing written
     character = Character.load(args.character)

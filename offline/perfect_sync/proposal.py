@@ -41,6 +41,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 from scipy.spatial import cKDTree
 
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.elastic.control_points import ControlPoints, read_control_points
@@ -205,8 +206,8 @@ def propose(source_positions: np.ndarray, source_names: Sequence[str], vertices:
         _, order = tree.query(point, k=min(len(cand), len(names) + 1))
         pick = next((int(cand[i]) for i in np.atleast_1d(order) if int(cand[i]) not in taken), None)
         if pick is None:
-            raise ValueError(f"proposal: the skin's {len(cand)} forward-facing vertices cannot hold "
-                             f"{len(names)} control points")
+            raise InputFileError(f"proposal: the skin's {len(cand)} forward-facing vertices cannot hold "
+                                 f"{len(names)} control points")
         taken.add(pick)
         chosen.append(pick)
     chosen = _inner_lips(names, chosen, fitted, v, face)
@@ -359,7 +360,7 @@ def read_landmarks(path: str | os.PathLike, names: Sequence[str], n_vertices: in
             parts.append(f"unknown points {unknown}")
         if missing:
             parts.append(f"missing points {missing}")
-        raise ValueError(f"{path}: points: {'; '.join(parts)} (the source's control points are {list(names)})")
+        raise InputFileError(f"{path}: points: {'; '.join(parts)} (the source's control points are {list(names)})")
     return points.reorder(names)
 
 

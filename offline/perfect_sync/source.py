@@ -14,12 +14,13 @@ checks like any elastic table; a cache that does not load is fitted again.
 from __future__ import annotations
 
 import hashlib
-import json
+import logging
 import os
 from collections.abc import Callable
 from pathlib import Path
 
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.outputs import OutputSet
 from facepuppet.runtime.tables import TablesError
 
@@ -27,7 +28,9 @@ from facepuppet.offline.bench_data import ENV
 from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.elastic.params import fit_character
-from facepuppet.offline.io.rig_import import import_rig
+from facepuppet.offline.io.rig_import import import_rig, read_ict_landmarks
+
+logger = logging.getLogger(__name__)
 
 KIT_FOLDER = "ict-facekit"
 NEUTRAL = "generic_neutral_mesh.obj"
@@ -48,11 +51,11 @@ def kit_folder(data: str | os.PathLike | None) -> Path:
     hint = ("pass --source ELASTIC.npz (fit-elastic of a head with ARKit shapes), or the data kit with "
             f"--data DIR or ${ENV} (its {KIT_FOLDER}/ folder is fitted once and cached)")
     if not chosen:
-        raise ValueError(f"perfect-sync: no source: {hint}")
+        raise UsageError(f"perfect-sync: no source: {hint}")
     folder = Path(chosen) / KIT_FOLDER
     for need in (folder / NEUTRAL, folder / LANDMARKS):
         if not need.is_file():
-            raise ValueError(f"perfect-sync: no source: {need} does not exist; {hint}")
+            raise UsageError(f"perfect-sync: no source: {need} does not exist; {hint}")
     return folder
 
 
@@ -68,12 +71,13 @@ def _key(folder: Path) -> str:
 def fit_kit_source(folder: Path) -> ElasticModel:
     """fit-elastic of the ICT head in ``folder`` with the kit's control points (no muscles)."""
     ict = import_rig(folder / NEUTRAL, folder)
-    marks = json.loads((folder / LANDMARKS).read_text(encoding="utf-8"))
-    points = ict_control_points(marks["idx_to_landmark_verts"], ict.vertices, ict.triangles, main_front(ict))
+    marks = read_ict_landmarks(folder / LANDMARKS, ict.n_vertices)
+    points = ict_control_points(marks, ict.vertices, ict.triangles, main_front(ict))
     return fit_character(ict, points, with_muscles=False)[0]
 
 
-def default_source(data: str | os.PathLike | None = None, log: Callable[[str], None] = print) -> ElasticModel:
+def default_source(data: str | os.PathLike | None = None,
+                   log: Callable[[str], None] = logger.info) -> ElasticModel:
     """The kit's ICT head as an elastic table: from the cache, else fitted and cached (see the module doc)."""
     folder = kit_folder(data)
     path = cache_dir() / f"ict_elastic_{_key(folder)}.npz"

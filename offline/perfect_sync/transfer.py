@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index, canonical, split_side
 from facepuppet.runtime.character import Character, sparse_deltas
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.geometry import vertex_normals
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
@@ -215,7 +216,7 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
     sub_t = local[face.triangles]
     sub_points = ControlPoints(points.names, local[points.vertices])
     if (sub_points.vertices < 0).any():
-        raise ValueError("control points: every point must lie on the face mesh")
+        raise InputFileError("control points: every point must lie on the face mesh")
     folded = ElasticModel(arrays={**source.arrays, "params": params}, shape_names=names,
                           control_names=source.control_names, muscle_names=source.muscle_names,
                           units=source.units, metadata=dict(source.metadata))

@@ -28,6 +28,7 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.errors import InputFileError, UsageError
 
 PICK_RADIUS = 30.0   # pixels: a click farther than this from every marker picks nothing
 DRAG_STEPS = 8       # cursor events a scripted drag is cut into
@@ -92,13 +93,13 @@ class Manipulation:
     def __init__(self, actor: Actor, pair: ActorPair, character: Character, view: ScreenView | None = None,
                  iterations: int = 30, pick_radius: float = PICK_RADIUS, hold: float = 0.005) -> None:
         if tuple(pair.marker_names) != tuple(actor.names) or pair.cubic.shape[1] != actor.n_actuations:
-            raise ValueError(f"manipulate: the pair table was not made for this actor ({len(pair.marker_names)} "
+            raise UsageError(f"manipulate: the pair table was not made for this actor ({len(pair.marker_names)} "
                              f"markers, K={pair.cubic.shape[1]} vs {actor.n_markers}, K={actor.n_actuations})")
         if tuple(pair.shape_names) != tuple(character.shape_names):
-            raise ValueError(f"manipulate: the pair table drives {len(pair.shape_names)} shapes, the character "
+            raise UsageError(f"manipulate: the pair table drives {len(pair.shape_names)} shapes, the character "
                              f"has {character.n_shapes} (or other names); retarget the actor to this character")
         if pair.marker_vertices.max(initial=0) >= character.n_vertices:
-            raise ValueError("manipulate: pair marker_vertices index past the character's vertices")
+            raise UsageError("manipulate: pair marker_vertices index past the character's vertices")
         self.actor, self.pair, self.view = actor, pair, view
         self.solver = MarkerSolver(actor)
         self.iterations = iterations
@@ -226,26 +227,26 @@ def read_script(path: str | Path, names: Sequence[str]) -> list[dict]:
     path = Path(path)
     try:
         steps = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: not a readable JSON list of steps ({exc})") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputFileError(f"{path}: not a readable JSON list of steps ({exc})") from None
     if not isinstance(steps, list):
-        raise ValueError(f"{path}: expected a JSON list of steps, got {type(steps).__name__}")
+        raise InputFileError(f"{path}: expected a JSON list of steps, got {type(steps).__name__}")
     for n, step in enumerate(steps):
         where = f"{path}: step {n}"
         actions = [a for a in _ACTIONS if isinstance(step, dict) and a in step]
         if len(actions) != 1:
-            raise ValueError(f"{where}: expected an object with exactly one of {_ACTIONS}, got {step!r}")
+            raise InputFileError(f"{where}: expected an object with exactly one of {_ACTIONS}, got {step!r}")
         action = actions[0]
         if action != "reset" and step[action] not in names:
-            raise ValueError(f"{where}: field {action!r}: no marker named {step[action]!r}")
+            raise InputFileError(f"{where}: field {action!r}: no marker named {step[action]!r}")
         if action == "drag":
             moves = [m for m in ("to", "by", "pixels") if m in step]
             size = 2 if moves == ["pixels"] else 3
             if len(moves) != 1 or not _numbers(step[moves[0]], size):
-                raise ValueError(f"{where}: a drag needs one of 'to' / 'by' (3 numbers) or 'pixels' (2 numbers), "
-                                 f"got {step!r}")
+                raise InputFileError(f"{where}: a drag needs one of 'to' / 'by' (3 numbers) or 'pixels' (2 numbers), "
+                                     f"got {step!r}")
             if not (isinstance(step.get("steps", DRAG_STEPS), int) and step.get("steps", DRAG_STEPS) >= 1):
-                raise ValueError(f"{where}: field 'steps': expected an int >= 1, got {step['steps']!r}")
+                raise InputFileError(f"{where}: field 'steps': expected an int >= 1, got {step['steps']!r}")
     return steps
 
 
@@ -273,7 +274,7 @@ def run_step(m: Manipulation, step: dict, draw: Callable[[], None] = lambda: Non
         if "pixels" in step:
             start = m._need_view().project(m.marker_positions()[i])[0][0]
             if m.press(start) != i:
-                raise ValueError(f"script drag {step['drag']!r}: another marker is nearer its own pixel")
+                raise InputFileError(f"script drag {step['drag']!r}: another marker is nearer its own pixel")
             for t in range(1, n + 1):
                 m.move(start + np.asarray(step["pixels"], dtype=np.float64) * t / n)
         else:

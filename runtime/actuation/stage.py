@@ -30,6 +30,7 @@ import numpy as np
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.actuation.solver import MarkerSolver
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import matrix_to_quat
 from facepuppet.runtime.rigid import kabsch
@@ -66,7 +67,7 @@ class ActorRetarget:
     def __init__(self, actor: Actor, pair: ActorPair, solver: MarkerSolver | None = None,
                  log: Callable[[str], None] = logger.warning) -> None:
         if tuple(pair.marker_names) != tuple(actor.names) or pair.cubic.shape[1] != actor.n_actuations:
-            raise ValueError("ActorRetarget: the pair table was not made for this actor "
+            raise UsageError("ActorRetarget: the pair table was not made for this actor "
                              f"({len(pair.marker_names)} markers / K={pair.cubic.shape[1]} vs "
                              f"{actor.n_markers} / K={actor.n_actuations})")
         self.actor = actor

@@ -49,6 +49,7 @@ import numpy as np
 from facepuppet.runtime.bench.latency import rss_mb
 from facepuppet.runtime.bench.registry import load_average, register_bench, session_log
 from facepuppet.runtime.commands.run import plan_from_argv, run_live
+from facepuppet.runtime.errors import UsageError
 
 GOAL_MB_PER_HOUR = 1.0
 MOVE_END, IDLE_END, LOSS_END = 0.5, 2 / 3, 5 / 6  # phase boundaries, fractions of a cycle
@@ -141,10 +142,10 @@ def duration_s(args: argparse.Namespace) -> float:
     total = 0.0
     for value, unit in given:
         if not (math.isfinite(value) and value >= 0):
-            raise ValueError(f"bench soak: a length must be a finite number >= 0, got {value!r}")
+            raise UsageError(f"bench soak: a length must be a finite number >= 0, got {value!r}")
         total += value * unit
     if total <= 0:
-        raise ValueError("bench soak: the length (--hours + --minutes + --seconds) must be more than 0")
+        raise UsageError("bench soak: the length (--hours + --minutes + --seconds) must be more than 0")
     return total
 
 
@@ -152,7 +153,7 @@ def bench_soak(args: argparse.Namespace) -> dict:
     seconds = duration_s(args)
     cycle_s = float(args.cycle)
     if not (math.isfinite(cycle_s) and cycle_s > 0):
-        raise ValueError(f"bench soak --cycle: expected seconds > 0, got {args.cycle!r}")
+        raise UsageError(f"bench soak --cycle: expected seconds > 0, got {args.cycle!r}")
     sample_s = float(args.sample_s)
     warmup_s = min(float(args.warmup_s), seconds / 3)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:

@@ -24,6 +24,7 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.manipulation import Manipulation, ScreenView, read_script, run_step
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.character import Character
+from facepuppet.runtime.errors import UsageError
 
 if TYPE_CHECKING:
     import argparse
@@ -158,7 +159,7 @@ def _manipulate(args) -> int:
     actor, pair, character = Actor.load(args.actor), ActorPair.load(args.pair), Character.load(args.character)
     steps = read_script(args.script, actor.names) if args.script else None
     if args.headless and steps is None:
-        raise ValueError("--headless needs --script (there is no window to click in)")
+        raise UsageError("--headless needs --script (there is no window to click in)")
     out = (args.out or _default_out(args)) if steps is not None else None
     target = create_context(headless=True if args.headless else None, width=width, height=height,
                             title="facepuppet manipulate")

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import euler_to_quat
 
@@ -91,7 +92,7 @@ def demo_curves(duration: float = 12.0, rate: float = 60.0, seed: int = 0) -> De
     seed : int, seeds ``numpy.random.default_rng``; the only source of randomness
     """
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
-        raise ValueError(f"demo performance: duration must be a finite number of seconds > 0, got {duration!r}")
+        raise UsageError(f"demo performance: duration must be a finite number of seconds > 0, got {duration!r}")
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
         raise ValueError(f"demo performance: rate must be a finite number of frames per second > 0, got {rate!r}")
     rng = np.random.default_rng(seed)

@@ -84,6 +84,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.gestures.candidates import N_BINS, build_candidates
 from facepuppet.runtime.gestures.output import output_table
 from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
@@ -135,7 +136,7 @@ class GestureSynth:
                  whole: Sequence[str] = WHOLE_GROUPS) -> None:
         if (history < 1 or n_candidates < 1 or sigma < 0 or not 0 < variance <= 1 or beta < 0
                 or recent < 0):
-            raise ValueError(f"GestureSynth: expected history >= 1, n_candidates >= 1, sigma >= 0, beta >= 0, "
+            raise UsageError(f"GestureSynth: expected history >= 1, n_candidates >= 1, sigma >= 0, beta >= 0, "
                              f"0 < variance <= 1, recent >= 0; got {history}, {n_candidates}, {sigma}, {beta}, "
                              f"{variance}, {recent}")
         self.h, self.sigma, self.n_candidates, self.seed = history, float(sigma), n_candidates, seed
@@ -158,7 +159,7 @@ class GestureSynth:
         style = dict(style or {})
         for g, take_name in style.items():
             if g not in GROUPS or take_name not in self.takes:
-                raise ValueError(f"style: expected group in {GROUPS} and take in {self.takes}, got {g}={take_name}")
+                raise UsageError(f"style: expected group in {GROUPS} and take in {self.takes}, got {g}={take_name}")
         self.normaliser = normaliser or SpeakerNormaliser(
             settings.get("speaker_mean_db", -30.0), settings.get("speaker_std_db", 8.0),
             settings.get("speaker_gate_db", -60.0))
@@ -179,7 +180,7 @@ class GestureSynth:
             if g in style:
                 ok &= take == self.takes.index(style[g])
             if not ok.any():
-                raise ValueError(f"GestureSynth: group {g!r} has no reference frame with {h} frames of history"
+                raise UsageError(f"GestureSynth: group {g!r} has no reference frame with {h} frames of history"
                                  + (f" in take {style[g]!r}" if g in style else ""))
             self._valid[k] = ok
             descs.append(_principal_axes(feats[:, self._cols[k]] / scale[self._cols[k]], ok, variance, max_dims))

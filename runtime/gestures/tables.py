@@ -12,6 +12,7 @@ take of the frame and which groups that take provides.
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.tables import Section, TableSchema, TablesError, load_tables, register_schema
@@ -57,4 +58,7 @@ def load_gesture_db(path: str | os.PathLike) -> Tables:
     groups = db["feature_group"]
     if groups.size and (groups.min() < 0 or groups.max() >= len(GROUPS)):
         raise TablesError(path, "feature_group", f"expected group ids in [0, {len(GROUPS)})")
+    fps = db.settings.get("fps", 30.0)
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (math.isfinite(fps) and fps > 0):
+        raise TablesError(path, "settings.fps", f"expected a positive number of frames per second, found {fps!r}")
     return db

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.inputs.facecap import FaceCapAdapter
 from facepuppet.runtime.inputs.faceosc import FaceOscAdapter
 from facepuppet.runtime.inputs.ifacialmocap import IFacialMocapAdapter
@@ -52,13 +53,14 @@ def make_adapter(kind: str) -> InputAdapter:
 
     Raises
     ------
-    ValueError
-        when ``kind`` is not one of :data:`INPUT_KINDS`, listing them.
+    UsageError (a ValueError)
+        when ``kind`` is not one of :data:`INPUT_KINDS`, listing them (a kind named by an option or a
+        recording; the reader of a recording says which file).
     """
     try:
         cls = INPUT_KINDS[kind]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown input kind {kind!r}; expected one of: {', '.join(INPUT_KINDS)}") from None
+        raise UsageError(f"unknown input kind {kind!r}; expected one of: {', '.join(INPUT_KINDS)}") from None
     return cls()
 
 

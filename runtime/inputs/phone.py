@@ -28,6 +28,7 @@ from collections.abc import Callable
 import numpy as np
 
 from facepuppet.runtime.channels import ARKIT_NAMES
+from facepuppet.runtime.errors import UsageError
 
 #: gaze angle (degrees) that gives an eyeLook* weight of 1 (as for Face Cap's eye rotations)
 EYE_RANGE_DEG = 30.0
@@ -65,21 +66,21 @@ def parse_phone(text: str, default_port: int, option: str = "--phone") -> tuple[
     text = (text or "").strip()
     m = re.fullmatch(r"\[([^\]]+)\](?::(\d+))?|([^:\s]+)(?::(\d+))?|([0-9A-Fa-f:]+)", text)
     if m is None:
-        raise ValueError(f"{option}: expected the phone's IP address, optionally :PORT (e.g. 192.168.1.20), "
+        raise UsageError(f"{option}: expected the phone's IP address, optionally :PORT (e.g. 192.168.1.20), "
                          f"got {text!r}")
     host = m.group(1) or m.group(3) or m.group(5)
     port_text = m.group(2) or m.group(4)
     try:
         ip = ipaddress.ip_address(host)
     except ValueError:
-        raise ValueError(f"{option}: {host!r} is not an IP address; give the phone's address as the app shows it "
+        raise UsageError(f"{option}: {host!r} is not an IP address; give the phone's address as the app shows it "
                          "(names are not looked up)") from None
     if ip.is_multicast or ip.is_unspecified or (ip.version == 4 and ip == ipaddress.IPv4Address("255.255.255.255")):
-        raise ValueError(f"{option}: {host} is not one phone's address (broadcast, multicast or unspecified); "
+        raise UsageError(f"{option}: {host} is not one phone's address (broadcast, multicast or unspecified); "
                          "give the phone's own IP address")
     port = default_port if port_text is None else int(port_text)
     if not 0 < port < 65536:
-        raise ValueError(f"{option}: port {port} is out of range 1-65535")
+        raise UsageError(f"{option}: port {port} is out of range 1-65535")
     return str(ip), port
 
 

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from facepuppet.runtime.channels import canonical, filter_region
+from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.geometry import smoothstep
 from facepuppet.runtime.live.tracking_loss import LossSettings, voice_jaw
@@ -132,8 +133,8 @@ def check_mix_sources(settings: MixSettings, names: Sequence[str], where: str) -
     """ValueError naming the config when an order names a source the run does not have."""
     missing = sorted(settings.names() - set(names))
     if missing:
-        raise ValueError(f"--config {where}: [mix] names the source {missing[0]!r}, which this run does not have; "
-                         f"its sources are {', '.join(names)} (one per --input, a repeated kind as KIND#2)")
+        raise InputFileError(f"--config {where}: [mix] names the source {missing[0]!r}, which this run does not have; "
+                             f"its sources are {', '.join(names)} (one per --input, a repeated kind as KIND#2)")
 
 
 def follow_config(stage: MixStage, default_order: Sequence[str],

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import logging
 import math
 import os
 import re
@@ -29,6 +30,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.live.config import (
     REGIONS,
     ChannelSettings,
@@ -38,6 +40,8 @@ from facepuppet.runtime.live.config import (
     parse_live_config,
 )
 from facepuppet.runtime.live.mix import MixSettings
+
+logger = logging.getLogger(__name__)
 
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
@@ -62,7 +66,7 @@ def profile_path(spec: str | os.PathLike) -> Path:
     if "/" in text or os.sep in text or text.endswith(".toml"):
         return Path(text).expanduser()
     if not _NAME.fullmatch(text):
-        raise ValueError(f"--profile {text!r}: a profile name is letters, digits, '_', '-' and '.' (not first); "
+        raise UsageError(f"--profile {text!r}: a profile name is letters, digits, '_', '-' and '.' (not first); "
                          "or give a path to a .toml file")
     return profiles_dir() / f"{text}.toml"
 
@@ -206,7 +210,7 @@ class Profile:
     """
 
     def __init__(self, path: str | os.PathLike, character: str = "", input_kind: str = "",
-                 known_channels: Iterable[str] = (), log: Callable[[str], None] = print) -> None:
+                 known_channels: Iterable[str] = (), log: Callable[[str], None] = logger.info) -> None:
         self.path = Path(path)
         self.character = character
         self.input_kind = input_kind

@@ -45,6 +45,7 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.actuation.stage import ActorRetarget
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.expressions import ExpressionDrive, expression_spellings, make_drive
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.gestures.layer import gesture_layer
@@ -247,7 +248,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
     solve = _load_solve(options.actor, options.pair, options.retarget, shapes, input_kind, log)
     kpls = _load_kpls(options.retarget, shapes, log) if options.retarget is not None else None
     if voice_only and options.gestures is None:
-        raise ValueError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
+        raise UsageError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
     stages = []
     if audio_level is not None:
         chain.audio = AudioTap(audio_level)
@@ -260,7 +261,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
              *expression_spellings(character))
     chain.known_channels = known
     if options.config is not None and options.profile is not None:
-        raise ValueError("--config and --profile: choose one (a profile is a config file with its neutral; "
+        raise UsageError("--config and --profile: choose one (a profile is a config file with its neutral; "
                          "--profile PATH.toml reads any config file)")
     if options.profile is not None:
         chain.profile = Profile(profile_path(options.profile), character=Path(options.character).name if
@@ -281,7 +282,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
             # VMC names its channels: the avatar's expression names arrive as channels of their own
             chain.extra_names = tuple(dict.fromkeys((*chain.extra_names, *drive.receive_names())))
     elif not config.mapping.empty:
-        raise ValueError(f"--config {options.config}: [mapping] drives a character's shapes and expressions; "
+        raise UsageError(f"--config {options.config}: [mapping] drives a character's shapes and expressions; "
                          "it does not apply with --elastic")
     chain.mapper = Mapper(chain.names, drive, log=log)
     if filtered:
@@ -308,7 +309,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
 def _load_elastic(path, character, log):
     model = ElasticModel.load(path)
     if model.n_vertices != character.n_vertices or tuple(model.shape_names) != tuple(character.shape_names):
-        raise ValueError(f"--elastic {path}: made for {model.n_vertices} vertices and "
+        raise UsageError(f"--elastic {path}: made for {model.n_vertices} vertices and "
                          f"{len(model.shape_names)} shapes, not for the character's {character.n_vertices} "
                          f"vertices and {character.n_shapes} shapes in order")
     log(f"elastic: {path} ({model.n_controls} control points, k={model.k}, "
@@ -319,25 +320,25 @@ def _load_elastic(path, character, log):
 def _load_solve(actor_path, pair_path, retarget_path, shapes, input_kind, log):
     """The ``solve`` stage of ``--actor``/``--pair``, or None; checks they come together and fit."""
     if (actor_path is None) != (pair_path is None):
-        raise ValueError("--actor and --pair go together (the actor's solve, then its pair table for this character)")
+        raise UsageError("--actor and --pair go together (the actor's solve, then its pair table for this character)")
     if input_kind == "markers" and actor_path is None:
-        raise ValueError("--input markers: needs --actor ACTOR.npz and --pair PAIR.npz (train-actor, retarget-actor) "
+        raise UsageError("--input markers: needs --actor ACTOR.npz and --pair PAIR.npz (train-actor, retarget-actor) "
                          "to turn marker frames into the character's weights")
     if actor_path is None:
         return None
     if input_kind not in ("markers", None):
-        raise ValueError(f"--actor/--pair: only for --input markers, not {input_kind!r}")
+        raise UsageError(f"--actor/--pair: only for --input markers, not {input_kind!r}")
     if retarget_path is not None:
-        raise ValueError("--actor/--pair and --retarget: choose one parameter space")
+        raise UsageError("--actor/--pair and --retarget: choose one parameter space")
     pair = ActorPair.load(pair_path)
     if tuple(pair.shape_names) != shapes:
-        raise ValueError(f"--pair {pair_path}: its shapes ({len(pair.shape_names)}) are not the shapes of the "
+        raise UsageError(f"--pair {pair_path}: its shapes ({len(pair.shape_names)}) are not the shapes of the "
                          f"character ({len(shapes)}) in order; make it with retarget-actor for this character")
     actor = Actor.load(actor_path)
     try:
         stage = ActorRetarget(actor, pair, log=log)
     except ValueError as exc:
-        raise ValueError(f"--actor {actor_path} / --pair {pair_path}: {exc}") from None
+        raise UsageError(f"--actor {actor_path} / --pair {pair_path}: {exc}") from None
     log(f"actor: {actor_path} ({actor.n_markers} markers, K={actor.n_actuations}) -> pair {pair_path}")
     return stage
 
@@ -345,7 +346,7 @@ def _load_solve(actor_path, pair_path, retarget_path, shapes, input_kind, log):
 def _load_kpls(path, shapes, log) -> KplsStage:
     model = KplsRetarget.load(path)
     if tuple(model.target_names) != shapes:
-        raise ValueError(f"--retarget {path}: its target shapes ({len(model.target_names)}) "
+        raise UsageError(f"--retarget {path}: its target shapes ({len(model.target_names)}) "
                          f"are not the shapes of the character ({len(shapes)}) in order")
     log(f"retarget: {path} ({model.kernel} kernel, {len(model.source_names)} source "
         f"shapes -> {len(model.target_names)} character shapes)")

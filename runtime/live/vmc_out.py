@@ -75,6 +75,8 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from facepuppet.runtime.channels import pascal
+from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.outputs import OutputError
 from facepuppet.runtime.vrm_names import PERFECT_SYNC_NAMES, VRM0_PRESETS, fold_to_arkit, vrm0_from_arkit
 
 if TYPE_CHECKING:
@@ -150,7 +152,7 @@ class VmcSender:
         if names_mode not in VMC_NAMES:
             raise ValueError(f"--vmc-names: expected one of {', '.join(VMC_NAMES)}, got {names_mode!r}")
         if names_mode == "vrm" and not presets:
-            raise ValueError("--no-vmc-presets: leaves out every VRM name, and --vmc-names vrm sends only those")
+            raise UsageError("--no-vmc-presets: leaves out every VRM name, and --vmc-names vrm sends only those")
         self.address = (host, int(port))
         names = tuple(names)
         self.names_mode = names_mode
@@ -202,7 +204,7 @@ class VmcSender:
         groups = _split(vals + [_message("/VMC/Ext/Blend/Apply")], max_bundle)
         self.datagrams = [self._status] + [bytearray(_bundle(g)) for g in groups]
         if any(len(d) > max_bundle for d in self.datagrams):
-            raise ValueError(f"--vmc-out: a channel name is too long to fit a {max_bundle}-byte bundle")
+            raise OutputError(f"--vmc-out: a channel name is too long to fit a {max_bundle}-byte bundle")
         # (datagram index, byte offset of the value) of each Val, in order: the value is the message's last 4 bytes
         self._slots = [(gi, at + m.size - 4) for gi, g in enumerate(groups, start=1)
                        for at, m in zip(self._offsets(g), g) if m.address != "/VMC/Ext/Blend/Apply"]

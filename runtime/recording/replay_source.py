@@ -10,10 +10,10 @@ question from their own slots.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING
 
-from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.input_files import regular_file
 from facepuppet.runtime.recording.livelinkface_csv import looks_like_llf_csv, read_llf_csv
@@ -112,13 +112,15 @@ class ReplaySource:
         self._next = 0
 
 
-def decode_packets(packets: Iterable[Packet],
-                   make_adapter: Callable[[str], InputAdapter] | None = None) -> list[tuple[int, Frame]]:
+def decode_packets(packets: Iterable[Packet], make_adapter: Callable[[str], InputAdapter] | None = None,
+                   path: str | os.PathLike = "recording") -> list[tuple[int, Frame]]:
     """(packet index, frame) for each packet that completes a frame, decoded as the live run did.
 
     Each packet goes, in recorded order and with its recorded receive time,
     through a fresh adapter of its input kind (``make_adapter(kind)``, by
-    default :func:`~facepuppet.runtime.inputs.kinds.make_adapter`).
+    default :func:`~facepuppet.runtime.inputs.kinds.make_adapter`). A kind no
+    adapter decodes (``make_adapter`` refuses it with a UsageError) is refused
+    as an InputFileError naming ``path``, the recording.
     """
     if make_adapter is None:
         from facepuppet.runtime.inputs.kinds import make_adapter
@@ -127,14 +129,17 @@ def decode_packets(packets: Iterable[Packet],
     for i, packet in enumerate(packets):
         adapter = adapters.get(packet.kind)
         if adapter is None:
-            adapter = adapters[packet.kind] = make_adapter(packet.kind)
+            try:
+                adapter = adapters[packet.kind] = make_adapter(packet.kind)
+            except UsageError as exc:
+                raise InputFileError(f"{path}: packet {i}: {exc}") from None
         frame = adapter.handle(packet.data, packet.t)
         if frame is not None:
             decoded.append((i, frame))
     return decoded
 
 
-def frames_from_packets(packets: Iterable[Packet]) -> list[Frame]:
+def frames_from_packets(packets: Iterable[Packet], path: str | os.PathLike = "recording") -> list[Frame]:
     """The frames a live run decoded from its packets, decoded again.
 
     Each packet goes, in recorded order and with its recorded receive time,
@@ -143,8 +148,21 @@ def frames_from_packets(packets: Iterable[Packet]) -> list[Frame]:
     did live; adapters are deterministic, so the frames are the live ones.
 
     packets : sequence of :class:`~facepuppet.runtime.recording.records.Packet`
+    path : the recording, named when a packet's kind has no adapter
     """
-    return [frame for _, frame in decode_packets(packets)]
+    return [frame for _, frame in decode_packets(packets, path=path)]
+
+
+def check_time_order(path: str | os.PathLike, frames: Sequence[Frame]) -> list[Frame]:
+    """``frames`` as a list, when their times never go back; else an InputFileError naming ``path``, the
+    recording they were read from (a replay plays them in order; a live recording's are, a damaged one's
+    may not be)."""
+    frames = list(frames)
+    for i in range(1, len(frames)):
+        if frames[i].t < frames[i - 1].t:
+            raise InputFileError(f"{path}: frame {i} has t={frames[i].t} after t={frames[i - 1].t}; a "
+                                 "recording's frames must be in time order")
+    return frames
 
 
 def open_recording(path: str | os.PathLike) -> list[Frame]:
@@ -171,14 +189,14 @@ def open_recording(path: str | os.PathLike) -> list[Frame]:
             warnings.simplefilter("always")
             session = read_session(path)
         if not session.frames and session.packets:
-            frames = frames_from_packets(session.packets)
+            frames = frames_from_packets(session.packets, path)
             if frames:
-                return frames
+                return check_time_order(path, frames)
             raise InputFileError(f"{path}: the recorded packets decode to no frame")
         if not session.frames:
             raise InputFileError(f"{path}: session file holds no complete frame "
                                  f"({session.tail_error or 'none written'})")
-        return session.frames
+        return check_time_order(path, session.frames)
     first_line = head.split(b"\n", 1)[0].decode("utf-8", errors="replace")
     if looks_like_llf_csv(first_line):
         return read_llf_csv(path)

@@ -293,10 +293,22 @@ def _number_field(value: object) -> bool:
             and value > 0)
 
 
+def _names(value: object) -> bool:
+    return isinstance(value, list) and all(isinstance(v, str) for v in value)
+
+
+def _sources(value: object) -> bool:
+    return isinstance(value, list) and all(isinstance(v, dict) and isinstance(v.get("name"), str)
+                                           and isinstance(v.get("kind"), str) for v in value)
+
+
 _INFO_FIELDS = {  # the header's info fields a reader uses: (check, what it must be)
     "fps": (_number_field, "a positive number"),
     "idle_fps": (lambda v: v is None or _number_field(v), "a positive number or null"),
     "input": (lambda v: isinstance(v, str), "a string"),
+    "options": (lambda v: v is None or isinstance(v, dict), "a JSON object or null"),
+    "inputs": (lambda v: v is None or _names(v), "a list of source names or null"),
+    "mix_sources": (lambda v: v is None or _sources(v), "a list of {name, kind} objects or null"),
 }
 
 

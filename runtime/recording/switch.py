@@ -33,6 +33,8 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from facepuppet.runtime.errors import UsageError
+
 if TYPE_CHECKING:
     from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.protocols import InputAdapter
@@ -212,7 +214,7 @@ class SwitchableRecorder:
         if self.ticks_seen > 0 and self.refuse_midrun:
             self.failed += 1
             self.message = f"record: {self.refuse_midrun}"
-            raise ValueError(self.message)
+            raise UsageError(self.message)
         path = self.next_path(str(name)) if not isinstance(name, Path) else name
         if self._recorder is not None:
             self.stop()

@@ -93,25 +93,27 @@ def decode_live_recording(session: Session, make_adapter: Callable[[str], InputA
 
     Raises
     ------
-    ValueError
-        naming the file when its packets decode to no frame and it has no ticks.
+    InputFileError (a ValueError)
+        naming the file when its packets decode to no frame and it has no ticks, when a packet's input kind
+        has no adapter, or when its tick indices do not increase from 0 up.
     """
     info = session.header.get("info", {}) if isinstance(session.header, dict) else {}
     mix_sources = info.get("mix_sources") or []
     packets = session.packets
     mix = {}
+    _check_ticks(session)
     if mix_sources:  # a run with several inputs: the loop's own input, then each mix source's packets
         packets = [p for p in session.packets if p.kind == info.get("input")]
         for j, m in enumerate(mix_sources):
             name, kind = str(m["name"]), str(m["kind"])
             own = decode_packets([p for p in session.packets if p.kind == name],
-                                 lambda _, kind=kind: make_adapter(kind))
+                                 lambda _, kind=kind: make_adapter(kind), session.path)
             ticks = [Tick(t.k, t.t, counts[j] if j < len(counts) else 0, t.t_clock)
                      for t, (_, counts) in zip(session.ticks, session.sources)]
             mix[name] = LiveRecording([f for _, f in own], [i for i, _ in own], [], ticks, {})
     needle = watch_needle(CALIBRATE_ADDRESS)  # what the live receivers count: decoded messages, not the bytes
     calibrate = [i for i, packet in enumerate(packets) if count_messages(packet.data, CALIBRATE_ADDRESS, needle)]
-    decoded = decode_packets(packets, make_adapter)
+    decoded = decode_packets(packets, make_adapter, session.path)
     frames = [frame for _, frame in decoded]
     frame_packets = [i for i, _ in decoded]
     if not frames and not session.ticks:
@@ -119,6 +121,18 @@ def decode_live_recording(session: Session, make_adapter: Callable[[str], InputA
     return LiveRecording(frames, frame_packets, calibrate, list(session.ticks), dict(session.header),
                          list(session.audio_levels), list(session.configs), list(session.events), mix,
                          list(session.states))
+
+
+def _check_ticks(session: Session) -> None:
+    """The TICK records' indices are the ticks a replay draws, in order: non-negative and increasing (the
+    live loop's were; a damaged file's may not be)."""
+    previous = -1
+    for n, tick in enumerate(session.ticks):
+        if tick.k <= previous:
+            where = f"after {previous}" if n else "the first"
+            raise InputFileError(f"{session.path}: TICK record {n}: tick index {tick.k} ({where}); a live "
+                                 "recording's tick indices are non-negative and increase")
+        previous = tick.k
 
 
 def read_live_recording(path: str | os.PathLike,

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.outputs import atomic_path
 
 LABEL_HEIGHT = 18  # pixels under each cell for its label
@@ -53,7 +54,7 @@ def contact_sheet(images: list[tuple[str, np.ndarray]], columns: int) -> np.ndar
     if not images:
         raise ValueError("contact_sheet: expected at least one (label, image) pair, got none")
     if columns < 1:
-        raise ValueError(f"contact_sheet: columns must be >= 1, got {columns}")
+        raise UsageError(f"contact_sheet: columns must be >= 1, got {columns}")
     h, w, _ = check_rgb(images[0][1], images[0][0], alpha=True).shape
     rows = -(-len(images) // columns)
     cell_h = h + LABEL_HEIGHT

@@ -15,6 +15,8 @@ import argparse
 import re
 from dataclasses import dataclass
 
+from facepuppet.runtime.errors import UsageError
+
 # "body": the camera fits every drawn vertex; "head": the vertices that follow the humanoid head bone
 # (every drawn vertex for a character without one: a head rig); "face": what expressions move (contact sheets).
 # (Here, not in renderer.py, so that the command line is parsed without importing moderngl.)
@@ -59,7 +61,7 @@ def parse_background(text: str) -> tuple[tuple[float, float, float], bool]:
     except ValueError:
         rgb = []
     if len(rgb) != 3 or any(not (0 <= c <= 255) for c in rgb):
-        raise ValueError(f"--background: expected 'transparent' or R,G,B (0..1 or 0..255), got {text!r}")
+        raise UsageError(f"--background: expected 'transparent' or R,G,B (0..1 or 0..255), got {text!r}")
     scale = 255.0 if any(c > 1 for c in rgb) else 1.0
     return (rgb[0] / scale, rgb[1] / scale, rgb[2] / scale), False
 
@@ -89,6 +91,6 @@ def render_options(args: argparse.Namespace) -> RenderOptions:
         background, transparent = parse_background(text)
     msaa = int(getattr(args, "msaa", DEFAULT_MSAA))
     if msaa < 0:
-        raise ValueError(f"--msaa: expected 0 (off) or a number of samples, got {msaa}")
+        raise UsageError(f"--msaa: expected 0 (off) or a number of samples, got {msaa}")
     return RenderOptions(framing=getattr(args, "framing", "head"), background=background,
                          transparent=transparent, msaa=msaa, credits=bool(getattr(args, "credits", False)))

@@ -23,6 +23,7 @@ and :meth:`FaceRenderer.read_pixels` (MSAA resolve, then read back).
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 
@@ -31,6 +32,7 @@ import numpy as np
 
 from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.render.camera import model_matrix
 from facepuppet.runtime.render.cpu_deform import check_weights
 from facepuppet.runtime.render.credits_label import CreditsLabel
@@ -55,6 +57,8 @@ from facepuppet.runtime.render.paths.cpu import CpuPath
 from facepuppet.runtime.render.paths.elastic import ElasticPath
 from facepuppet.runtime.render.paths.gpu import GpuPath
 from facepuppet.runtime.render.shader_loader import load_program
+
+logger = logging.getLogger(__name__)
 
 PATHS = ("auto", "gpu", "cpu", "elastic")
 BASE_TEXTURE_UNIT = PATH_TEXTURE_UNITS  # a material's base colour texture, above the path's units
@@ -113,7 +117,7 @@ class FaceRenderer:
         path: str = "auto",
         target_fbo: moderngl.Framebuffer | None = None,
         background: tuple[float, float, float] = (0.16, 0.17, 0.19),
-        log: Callable[[str], None] = print,
+        log: Callable[[str], None] = logger.info,
         cull_back_faces: bool = True,
         framing: str = "head",
         elastic: ElasticModel | None = None,
@@ -138,7 +142,7 @@ class FaceRenderer:
         self.samples = min(int(msaa), int(ctx.max_samples)) if int(msaa) > 1 and target_fbo is None else 0
         self.parts = has_parts(character)
         if self.parts and path == "elastic":
-            raise ValueError("path: the elastic path draws characters without a skeleton or look only")
+            raise UsageError("path: the elastic path draws characters without a skeleton or look only")
         self._head_pose = HeadPose(character) if self.parts else None
         self.cull_back_faces = bool(cull_back_faces)
         self._framebuffers = Framebuffers(ctx, (self.width, self.height), self.samples, target_fbo)

@@ -31,6 +31,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.live.bus import SessionBus
 from facepuppet.runtime.live.loop import FrameLoop
 from facepuppet.runtime.live.stages import build_chain
@@ -222,7 +223,7 @@ def _open_panel(stack: contextlib.ExitStack, options: PanelOptions, picture: Pic
                           visible=not options.hidden)
     except PanelUnavailable as exc:
         if options.panel:
-            raise ValueError(f"--panel: {exc}") from None
+            raise UsageError(f"--panel: {exc}") from None
         log(f"run: no panel: {exc}; the run goes on without it")
         return None
     stack.callback(panel.close)

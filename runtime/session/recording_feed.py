@@ -34,7 +34,7 @@ from facepuppet.runtime.live.mix import MixStage, VoiceMixSource, check_mix_sour
 from facepuppet.runtime.live.stages import RecordedLevels, make_input_adapter
 from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.readers import find_reader
-from facepuppet.runtime.recording.replay_source import ReplaySource, open_recording
+from facepuppet.runtime.recording.replay_source import ReplaySource, check_time_order, open_recording
 from facepuppet.runtime.recording.ticked_source import TickedSource, decode_live_recording, read_live_session
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
 
@@ -242,7 +242,8 @@ class RecordingFeed:
                 return source, source.ticks, live_fps
         fps = 60.0 if fps is None else fps
         limit = self.replay.max_gap
-        source = ReplaySource(live.frames if live is not None else open_recording(self.path), max_gap=limit)
+        frames = check_time_order(self.path, live.frames) if live is not None else open_recording(self.path)
+        source = ReplaySource(frames, max_gap=limit)
         log(f"replay: {self.path} ({len(source.frames)} frames, {source.duration:.2f} s) on {self.character_path}")
         if source.gaps:
             log(f"replay: {source.describe_gaps()}; --max-gap SECONDS changes the limit ({limit:g} s), "

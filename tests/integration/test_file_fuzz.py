@@ -222,13 +222,31 @@ def gltf_json_bytes() -> bytes:
     return json.dumps(doc).encode()
 
 
+MARKERS = ("M0", "M1", "M2", "M3")
+
+
+def json_bytes(value) -> bytes:
+    return json.dumps(value, indent=1).encode()
+
+
+def landmarks_json() -> bytes:
+    return json_bytes({"idx_to_landmark_verts": [(7 * i) % 90 for i in range(68)]})
+
+
 def _readers(tmp: Path):
     """{name: (read, real bytes, suffix, extra cases)}, built lazily per test."""
     pytest.importorskip("c3d")
+    from facepuppet.runtime.actuation.manipulation import read_script
+
+    from facepuppet.offline.actuation.transfer import read_landmarks, read_override
+    from facepuppet.offline.elastic.control_points import read_control_points
+    from facepuppet.offline.gestures.commands import load_landmarks
     from facepuppet.offline.io.capture import read_c3d, read_csv, read_trc
     from facepuppet.offline.io.gltf.read import read_gltf
     from facepuppet.offline.io.mtl import read_mtl
     from facepuppet.offline.io.obj import read_obj
+    from facepuppet.offline.io.rig_import import read_ict_landmarks
+    from facepuppet.offline.kpls.pairs import read_pairing
 
     return {
         "tables(character)": (Character.load, (V1 / "character.npz").read_bytes(), ".npz",
@@ -247,11 +265,27 @@ def _readers(tmp: Path):
         "live link face csv": (read_llf_csv, llf_csv_bytes(), ".csv", tuple),
         "glb/vrm": (read_gltf, glb_bytes(tmp), ".vrm", lambda: glb_json_swaps(tmp)),
         "gltf json": (read_gltf, gltf_json_bytes(), ".gltf", tuple),
+        "control points json": (lambda p: read_control_points(p, 90), json_bytes(
+            {"format": "facepuppet-control-points", "version": 1,
+             "points": [{"name": n, "vertex": 3 + 5 * i} for i, n in enumerate(("nose_tip", "forehead", "chin"))]}),
+            ".json", tuple),
+        "markers-to-mesh json": (lambda p: read_override(p, MARKERS, 90), json_bytes({"M0": 3, "M2": 40}), ".json",
+                                 tuple),
+        "landmarks json": (lambda p: read_landmarks(p, 90), landmarks_json(), ".json", tuple),
+        "ict landmarks json": (lambda p: read_ict_landmarks(p, 90), landmarks_json(), ".json", tuple),
+        "detail landmarks json": (load_landmarks, landmarks_json(), ".json", tuple),
+        "pairing text": (read_pairing, b"# source,target\njawOpen,JawOpen\n\nmouthSmileLeft, Smile_L  # left\n", ".txt",
+                         tuple),
+        "manipulate script json": (lambda p: read_script(p, MARKERS), json_bytes(
+            [{"pin": "M0"}, {"drag": "M1", "to": [0.1, 2, -3], "steps": 4}, {"drag": "M2", "pixels": [5, -2]},
+             {"unpin": "M0"}, {"reset": True}]), ".json", tuple),
     }
 
 
 READERS = ["tables(character)", "tables(actor)", "session", "trc", "c3d", "csv markers", "obj", "mtl",
-           "wav int16", "wav float", "toml config", "live link face csv", "glb/vrm", "gltf json"]
+           "wav int16", "wav float", "toml config", "live link face csv", "glb/vrm", "gltf json",
+           "control points json", "markers-to-mesh json", "landmarks json", "ict landmarks json",
+           "detail landmarks json", "pairing text", "manipulate script json"]
 
 
 @pytest.mark.parametrize("name", READERS)

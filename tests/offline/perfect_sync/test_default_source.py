@@ -8,6 +8,7 @@ from facepuppet.runtime.character import Character
 from facepuppet.runtime.cli import main
 
 from facepuppet.offline.perfect_sync.source import cache_dir, default_source
+from helpers.logs import said
 from tests.conftest import need_shared
 
 
@@ -37,8 +38,7 @@ def test_default_source_is_fitted_once_cached_and_refitted_when_the_cache_is_bad
     assert main(["import-rig", str(need_shared("gltf", "Godette_vrm_v4.vrm")), "-o", str(godette)]) == 0
     out = tmp_path / "out.npz"
     assert main(["perfect-sync", str(godette), "-o", str(out), "--data", str(kit)]) == 0
-    printed = capsys.readouterr().out
-    assert "fitting the ICT head" in printed
+    assert "fitting the ICT head" in said(capsys)   # logged (stderr): not a result of the command
     cached = list(cache_dir().glob("ict_elastic_*.npz"))
     assert len(cached) == 1 and cached[0].parent == tmp_path / "cache" / "facepuppet"
     synced = Character.load(out)

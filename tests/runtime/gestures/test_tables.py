@@ -13,3 +13,11 @@ def test_loading_refuses_a_table_with_bad_take_indices(tmp_path, db):
     save_tables(tmp_path / "bad.npz", "gesture_db", arrays, channels=dict(db.channels))
     with pytest.raises(TablesError, match="frame_take"):
         load_gesture_db(tmp_path / "bad.npz")
+
+
+@pytest.mark.parametrize("fps", [-1.0, 0, "30", True, None, [30]])
+def test_loading_refuses_a_table_whose_frame_rate_is_not_a_positive_number(tmp_path, db, fps):
+    arrays = {k: np.array(v) for k, v in db.arrays.items()}
+    save_tables(tmp_path / "bad.npz", "gesture_db", arrays, channels=dict(db.channels), settings={"fps": fps})
+    with pytest.raises(TablesError, match=r"bad\.npz: settings\.fps: expected a positive number"):
+        load_gesture_db(tmp_path / "bad.npz")
