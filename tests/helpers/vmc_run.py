@@ -55,6 +55,7 @@ def drive(character, values: dict, tmp_path, extra: tuple = (), bones: dict | No
     parser = argparse.ArgumentParser()
     run.register(parser.add_subparsers())
     ns = parser.parse_args(["run", "-c", str(path), "--input", "vmc", "--listen", f"127.0.0.1:{port}", "--headless",
+                          "--receiver", "thread",  # the receiver itself is tested elsewhere (both kinds)
                           "--size", size, "--duration", "60", "--config", str(config), *extra])
     stop, drawn = threading.Event(), []
 
