@@ -24,7 +24,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 docs: $(STAMP)
-	$(PY) -m facepuppet.runtime.cli_reference docs/commands.md
+	$(PY) -m facepuppet.runtime.cli.reference docs/commands.md
 
 setup: $(STAMP)
 

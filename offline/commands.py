@@ -8,9 +8,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
 
 from facepuppet.offline.io import capture_replay
 from facepuppet.offline.io.gltf.read import read_gltf

@@ -1,6 +1,6 @@
 // Studio lighting for a face: key, fill and rim directional lights plus a
 // sky/ground ambient, with one branch per material kind (codes from
-// facepuppet.runtime.character.MATERIAL_KINDS). Colours are linear.
+// facepuppet.runtime.model.character.MATERIAL_KINDS). Colours are linear.
 
 const int KIND_SKIN = 0;
 const int KIND_EYE = 1;

@@ -67,7 +67,7 @@ def ict_character_path(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def ict_character(ict_character_path):
-    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.model.character import Character
 
     return Character.load(ict_character_path)
 

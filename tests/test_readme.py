@@ -18,8 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from facepuppet.runtime import cli, cli_reference
+from facepuppet.runtime import cli
 from facepuppet.runtime.bench.registry import bench_parser, benches
+from facepuppet.runtime.cli import reference as cli_reference
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -156,7 +157,7 @@ def test_docs_commands_md_is_what_the_parser_says_now():
     assert COMMANDS_MD.exists(), "docs/commands.md is missing: run `make docs`"
     assert _text(COMMANDS_MD) == cli_reference.reference(), (
         "docs/commands.md is not what the commands' argparse definitions give now: run `make docs` "
-        "(python -m facepuppet.runtime.cli_reference docs/commands.md) and commit it")
+        "(python -m facepuppet.runtime.cli.reference docs/commands.md) and commit it")
 
 
 def test_the_manipulate_script_format_is_documented():

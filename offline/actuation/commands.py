@@ -8,9 +8,9 @@ import time
 from pathlib import Path
 
 from facepuppet.runtime.actuation.actor import Actor
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.errors import InputFileError
-from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.actuation import transfer
 from facepuppet.offline.actuation.pictures import actuation_sheet, face_actuation_sheet, signal_plot

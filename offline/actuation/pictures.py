@@ -11,7 +11,7 @@ from PIL import Image, ImageDraw
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.images import contact_sheet, save_png
 
 if TYPE_CHECKING:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.rigid import kabsch
+from facepuppet.runtime.model.rigid import kabsch
 
 __all__ = ["HeadChoice", "Stabilised", "choose_head_markers", "find_head_markers", "kabsch", "stabilise"]
 

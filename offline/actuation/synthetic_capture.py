@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix
+from facepuppet.runtime.model.geometry import euler_to_quat, quat_to_matrix
 
 from facepuppet.offline.io.capture import Capture, fill_gaps
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.errors import InputFileError, UsageError
-from facepuppet.runtime.tables import hash_inputs
+from facepuppet.runtime.files.tables import hash_inputs
 
 from facepuppet.offline.actuation.basis import ActuationModel, k_report, neutral_frame
 from facepuppet.offline.actuation.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors

@@ -49,9 +49,9 @@ from scipy.spatial import cKDTree
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
-from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.errors import InputFileError, UsageError
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.actuation.cubic_fit import fit_polynomial
 

@@ -24,8 +24,8 @@ from scipy.optimize import lsq_linear
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.actuation.solver import MarkerSolver
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.rigid import kabsch
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.rigid import kabsch
 
 
 def head_coordinates(actor: Actor, markers: np.ndarray) -> np.ndarray:

@@ -20,10 +20,10 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import InputFileError
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.elastic.control_points import ControlPoints
 

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.demo.head import build_demo_character
 from facepuppet.runtime.demo.head_parts import EYE_XY, MOUTH_HALF_WIDTH, MOUTH_Y
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.outputs import OutputSet
+from facepuppet.runtime.files.outputs import OutputSet
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
 from facepuppet.offline.elastic.clone import character_with_shapes, clone_model, mesh_character

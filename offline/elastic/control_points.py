@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from facepuppet.runtime.errors import InputFileError
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.geometry import vertex_normals
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

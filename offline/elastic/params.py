@@ -25,9 +25,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import qr, solve_triangular
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel, no_muscles
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K, ElasticBasis, fixed_region
 from facepuppet.offline.elastic.control_points import ControlPoints

@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from PIL import Image, ImageDraw
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.images import contact_sheet, save_png
 from facepuppet.runtime.render.renderer import FaceRenderer
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.rigid import kabsch
+from facepuppet.runtime.model.rigid import kabsch
 
 from facepuppet.offline.elastic.control_points import ControlPoints
 

@@ -50,10 +50,10 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.bench.registry import load_average
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 from facepuppet.runtime.gestures.synth import GestureSynth
 from facepuppet.runtime.gestures.tables import load_gesture_db
-from facepuppet.runtime.progress import Progress
 
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 

@@ -22,17 +22,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.errors import InputFileError, UsageError
+from facepuppet.runtime.files.outputs import OutputSet, atomic_path, check_path
+from facepuppet.runtime.files.tables import save_tables
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.gestures.layer import GestureLayer
 from facepuppet.runtime.gestures.speaker_normaliser import SpeakerNormaliser
 from facepuppet.runtime.gestures.synth import GestureSynth
 from facepuppet.runtime.gestures.tables import load_gesture_db
-from facepuppet.runtime.outputs import OutputSet, atomic_path, check_path
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.recording.session import SessionWriter
 from facepuppet.runtime.render.images import contact_sheet, save_png
-from facepuppet.runtime.tables import save_tables
 
 from facepuppet.offline.io.capture import read_capture
 

@@ -32,11 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical, gesture_group
 from facepuppet.runtime.errors import InputFileError, UsageError
+from facepuppet.runtime.files.tables import hash_inputs, save_tables
 from facepuppet.runtime.gestures.tables import GROUPS, HEAD_FEATURES
+from facepuppet.runtime.mapping.channels import canonical, gesture_group
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
-from facepuppet.runtime.tables import hash_inputs, save_tables
 
 from facepuppet.offline.gestures.blend_weights import BlendWeights, choose_basis
 from facepuppet.offline.gestures.regional_features import head_track

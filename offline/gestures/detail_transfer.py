@@ -47,10 +47,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.errors import InputFileError, UsageError
-from facepuppet.runtime.geometry import smoothstep, vertex_normals
-from facepuppet.runtime.tables import Tables
+from facepuppet.runtime.files.tables import Tables
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.model.geometry import smoothstep, vertex_normals
 
 from facepuppet.offline.actuation.stabilise import stabilise
 from facepuppet.offline.actuation.transfer import umeyama

@@ -18,9 +18,9 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from facepuppet.runtime.channels import gesture_group
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.gestures.layer import HEAD_FEATURES
+from facepuppet.runtime.mapping.channels import gesture_group
 
 REGIONS = ("brows", "eyes", "lips", "rest")
 # markers that move rigidly with the skull in the AnimFace takes (data README: forehead + nose top)

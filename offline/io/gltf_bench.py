@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf.write import export_character

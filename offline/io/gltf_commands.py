@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.errors import FacepuppetError
-from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.io.gltf.write import describe, export_character
 from facepuppet.offline.io.gltf_check import check_gltf

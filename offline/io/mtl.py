@@ -6,7 +6,7 @@ import math
 import os
 from dataclasses import dataclass
 
-from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.files.input_files import regular_file
 
 from facepuppet.offline.io.obj import ObjError
 

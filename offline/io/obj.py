@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.errors import InputFileError
-from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.files.input_files import regular_file
 
 __all__ = ["ObjError", "ObjMesh", "read_obj", "read_vertices_only"]
 

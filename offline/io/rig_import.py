@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.errors import InputFileError, UsageError
-from facepuppet.runtime.geometry import incidence_matrix
-from facepuppet.runtime.tables import hash_inputs, naming_file
+from facepuppet.runtime.files.tables import hash_inputs, naming_file
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.model.geometry import incidence_matrix
 
 from facepuppet.offline.io.mesh_format import refuse_non_obj
 from facepuppet.offline.io.mtl import MtlMaterial, read_mtl
@@ -303,7 +303,7 @@ def _stored_vertices(delta: np.ndarray, d_normal: np.ndarray, tolerance: float) 
 class _NormalOperator:
     """Area-weighted unit vertex normals for a fixed topology (sparse sum of face normals).
 
-    Same result as :func:`facepuppet.runtime.geometry.vertex_normals`, in float64,
+    Same result as :func:`facepuppet.runtime.model.geometry.vertex_normals`, in float64,
     with the vertex-face incidence matrix built once for all shapes.
     """
 

@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.demo.head import build_demo_character
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.kpls.stage import KplsRetarget
-from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 
 from facepuppet.offline.bench_data import add_data_argument, data_dir

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.cli.progress import Progress
+from facepuppet.runtime.files.tables import hash_inputs
 from facepuppet.runtime.kpls.stage import KplsRetarget
-from facepuppet.runtime.progress import Progress
-from facepuppet.runtime.tables import hash_inputs
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.kpls.model import KernelPLS
 from facepuppet.offline.kpls.pairs import TrainingPairs, expression_pairs, match_matrix, pair_weights, read_pairing
@@ -61,7 +61,7 @@ def fit_kpls(source: Character, target: Character, kernel: str = "auto", compone
     """Training pairs and the cross-validated model of ``fit-retarget`` (its defaults are these).
 
     ``progress``: draw a progress line over the cross-validation folds (None: when stderr is a
-    terminal, see :class:`~facepuppet.runtime.progress.Progress`).
+    terminal, see :class:`~facepuppet.runtime.cli.progress.Progress`).
     """
     pairs = expression_pairs(source, target, pairing=pairing, n_mixes=n_mixes, seed=seed,
                              k_source=k_source, k_target=k_target)

@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.channels import ChannelMap
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.mapping.channels import ChannelMap
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.kpls.baselines import KernelRidgeRetarget, LinearPLS, LinearRetarget, PairRBF, PCARBFRetarget
 from facepuppet.offline.kpls.dutreve_rbf import DutreveRBF, corresponding_vertices

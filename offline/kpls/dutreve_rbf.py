@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.kpls.model import check_inputs
 from facepuppet.offline.kpls.pairs import moving_region

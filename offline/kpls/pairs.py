@@ -32,8 +32,8 @@ cross-validated kernel of ``fit-retarget`` is the linear one and the retarget
 reproduces the by-name mapping; a non-linear kernel pays off only for a
 non-linear correspondence (:mod:`facepuppet.offline.kpls.targets`).
 
-Shapes are matched by name through :func:`facepuppet.runtime.channels.canonical`
-(:class:`~facepuppet.runtime.channels.ChannelMap`: ``eyeBlink_L`` ↔
+Shapes are matched by name through :func:`facepuppet.runtime.mapping.channels.canonical`
+(:class:`~facepuppet.runtime.mapping.channels.ChannelMap`: ``eyeBlink_L`` ↔
 ``eyeBlinkLeft``; a sided shape onto an unsided one at half weight per side),
 or by a pairing file of ``source,target`` lines.
 """
@@ -48,16 +48,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.channels import ChannelMap, canonical
-from facepuppet.runtime.character import Character, moving_vertices
 from facepuppet.runtime.errors import InputFileError, UsageError
+from facepuppet.runtime.mapping.channels import ChannelMap, canonical
+from facepuppet.runtime.model.character import Character, moving_vertices
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 
 def moving_region(character: Character, fraction: float = 0.05) -> np.ndarray:
-    """The region retargeting works in: :func:`~facepuppet.runtime.character.moving_vertices`, (k,) int64.
+    """The region retargeting works in: :func:`~facepuppet.runtime.model.character.moving_vertices`, (k,) int64.
 
     Raises ValueError for a character whose shapes move nothing: it has no region to choose feature points in.
     """

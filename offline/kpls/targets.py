@@ -35,8 +35,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.kpls.pairs import feature_matrix, feature_points, match_matrix
 

@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.cli.progress import Progress
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.io.gltf.read import read_gltf

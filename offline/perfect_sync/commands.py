@@ -9,13 +9,13 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.outputs import OutputSet
-from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.files.outputs import OutputSet
+from facepuppet.runtime.files.tables import TablesError
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.recording.replay_source import open_recording
-from facepuppet.runtime.tables import TablesError
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import FaceError, find_face

@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.mapping.channels import canonical
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.perfect_sync.face import Face

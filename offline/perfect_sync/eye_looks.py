@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character_parts import Expressions
+from facepuppet.runtime.model.character_parts import Expressions
 
 from facepuppet.offline.perfect_sync.drawn_eyes import eye_inside
 from facepuppet.offline.perfect_sync.face import Face
@@ -24,7 +24,7 @@ LOOK_PRESETS = ("LookUp", "LookDown", "LookLeft", "LookRight")
 def look_expressions(expressions: Expressions | None, delta_offsets: np.ndarray, delta_indices: np.ndarray,
                      delta_positions: np.ndarray, n_vertices: int) -> dict:
     """{preset: dense displacements (n_vertices, 3) float64} of the character's own VRM look expressions
-    (``expressions``: its :class:`~facepuppet.runtime.character_parts.Expressions`, or None), each its binds'
+    (``expressions``: its :class:`~facepuppet.runtime.model.character_parts.Expressions`, or None), each its binds'
     weighted sum of the character's sparse shape deltas; an expression that binds no shape is left out."""
     out: dict = {}
     if expressions is None:

@@ -20,7 +20,7 @@ computed for a vertex is carried to its copies, which move identically. A
 character without a glTF layout (OBJ, which indexes positions once) is not
 welded: its coincident vertices are distinct pieces (ICT's tear film and eye
 occlusion meet its lids there). The frame: characters are stored +Y up, facing
-+Z (:mod:`facepuppet.runtime.character_parts`); the symmetry plane is fitted
++Z (:mod:`facepuppet.runtime.model.character_parts`); the symmetry plane is fitted
 to the skin by mirror ICP (reflect, match nearest points, refit the plane
 from the matched pairs), up comes from the humanoid neck → head bones when
 present, else +Y made orthogonal to the plane normal, and forward is their
@@ -40,9 +40,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from facepuppet.runtime.character import Character, moving_vertices
 from facepuppet.runtime.errors import FacepuppetError
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.character import Character, moving_vertices
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.io.rig_import import FORWARD_TURNS, turn_about_y

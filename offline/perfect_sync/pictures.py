@@ -10,10 +10,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from PIL import Image
 
-from facepuppet.runtime.channels import canonical
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
 from facepuppet.runtime.live.stages import build_chain
+from facepuppet.runtime.mapping.channels import canonical
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.recording.replay_source import DEFAULT_MAX_GAP_S, ReplaySource, open_recording
 from facepuppet.runtime.render.images import contact_sheet, save_png, with_footer
 from facepuppet.runtime.session.options import StageOptions

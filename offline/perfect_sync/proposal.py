@@ -42,7 +42,7 @@ from PIL import Image, ImageDraw
 from scipy.spatial import cKDTree
 
 from facepuppet.runtime.errors import InputFileError
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.elastic.control_points import ControlPoints, read_control_points
 from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, boundary_loops, fix_inner_lips, mouth_slit

@@ -21,8 +21,8 @@ from pathlib import Path
 
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.outputs import OutputSet
-from facepuppet.runtime.tables import TablesError
+from facepuppet.runtime.files.outputs import OutputSet
+from facepuppet.runtime.files.tables import TablesError
 
 from facepuppet.offline.bench_data import ENV
 from facepuppet.offline.elastic.commands import main_front

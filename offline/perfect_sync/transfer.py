@@ -29,11 +29,11 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index, canonical, split_side
-from facepuppet.runtime.character import Character, sparse_deltas
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import InputFileError
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, arkit_index, canonical, split_side
+from facepuppet.runtime.model.character import Character, sparse_deltas
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.elastic.basis import DEFAULT_FIXED_RATIO, DEFAULT_K
 from facepuppet.offline.elastic.clone import clone_model

@@ -27,8 +27,8 @@ import numpy as np
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.actuation.solver import MarkerSolver
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.errors import InputFileError, UsageError
+from facepuppet.runtime.model.character import Character
 
 PICK_RADIUS = 30.0   # pixels: a click farther than this from every marker picks nothing
 DRAG_STEPS = 8       # cursor events a scripted drag is cut into

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.tables import (
+from facepuppet.runtime.files.tables import (
     Section,
     TableSchema,
     coerce,

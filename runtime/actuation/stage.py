@@ -32,8 +32,8 @@ from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import matrix_to_quat
-from facepuppet.runtime.rigid import kabsch
+from facepuppet.runtime.model.geometry import matrix_to_quat
+from facepuppet.runtime.model.rigid import kabsch
 
 MAX_COORDINATE = 1e6  # capture units (mm: a kilometre): a marker beyond it is a damaged sample, not a face
 logger = logging.getLogger(__name__)

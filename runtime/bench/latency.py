@@ -10,7 +10,7 @@ rendering the character at ``--size``. Reported:
   and the per-stage split (:mod:`~facepuppet.runtime.live.stats`);
 * the CPU stages of the frame loop (snapshot, pipeline + map) p99;
 * the map step alone (``map_step``: channels onto the character's shapes, through its VRM expressions when it
-  has them; :mod:`~facepuppet.runtime.expressions`), timed apart over ``MAP_SAMPLES`` applications of
+  has them; :mod:`~facepuppet.runtime.mapping.expressions`), timed apart over ``MAP_SAMPLES`` applications of
   random values on the VMC input's channel layout: p50 / p99 / max in microseconds;
 * receive is the kernel's arrival stamp of the datagram (SO_TIMESTAMPNS), so
   time a datagram waits before the receiver reads it counts; ``--receiver``
@@ -55,6 +55,16 @@ import numpy as np
 
 from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench, session_log
 from facepuppet.runtime.commands.run import plan_from_argv, run_live
+from facepuppet.runtime.inputs.ifacialmocap import encode_ifm_frame
+from facepuppet.runtime.inputs.kinds import make_adapter
+from facepuppet.runtime.inputs.openseeface import FEATURES, encode_record
+from facepuppet.runtime.inputs.vmc import VmcAdapter
+from facepuppet.runtime.inputs.vtubestudio import encode_vts_frame
+from facepuppet.runtime.live.vmc_out import VmcSender
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, ChannelMap
+from facepuppet.runtime.mapping.expressions import make_drive
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.geometry import euler_to_quat
 from facepuppet.runtime.session.options import PanelOptions
 
 _PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2**20 if hasattr(os, "sysconf") else 4096 / 2**20
@@ -76,8 +86,6 @@ class _VmcFrames:
     """VMC frames as :class:`~facepuppet.runtime.live.vmc_out.VmcSender` sends them."""
 
     def __init__(self, host: str, port: int) -> None:
-        from facepuppet.runtime.channels import ARKIT_NAMES
-        from facepuppet.runtime.live.vmc_out import VmcSender
 
         self.sender = VmcSender(host, port, ARKIT_NAMES)
         self.phases = np.arange(len(ARKIT_NAMES)) * 0.37
@@ -89,7 +97,6 @@ class _VmcFrames:
         return [bytes(d) for d in self.sender.datagrams]
 
     def send(self, t: float) -> None:
-        from facepuppet.runtime.geometry import euler_to_quat
 
         weights = 0.5 + 0.5 * np.sin(2 * np.pi * 0.7 * t + self.phases)
         self.sender.send(weights, euler_to_quat(0.2 * math.sin(t), 0.1 * math.sin(1.3 * t), 0.0), (0.0, 0.0, 0.0))
@@ -109,7 +116,6 @@ class _OpenSeeFaceFrames:
 
     @staticmethod
     def datagrams(t: float) -> list[bytes]:
-        from facepuppet.runtime.inputs.openseeface import FEATURES, encode_record
 
         features = [0.8 * math.sin(2 * np.pi * 0.7 * t + 0.37 * i) for i in range(len(FEATURES))]
         half = 0.1 * math.sin(t)
@@ -178,7 +184,6 @@ class _IFacialMocapFrames(_PhoneFrames):
 
     @staticmethod
     def encode(t: float) -> bytes:
-        from facepuppet.runtime.inputs.ifacialmocap import encode_ifm_frame
 
         yaw, pitch = math.degrees(0.2 * math.sin(t)), math.degrees(0.1 * math.sin(1.3 * t))
         return encode_ifm_frame(_phone_weights(t), head=(pitch, yaw, 0.0, 0.0, 0.0, 0.0))
@@ -189,7 +194,6 @@ class _VTubeStudioFrames(_PhoneFrames):
 
     @staticmethod
     def encode(t: float) -> bytes:
-        from facepuppet.runtime.inputs.vtubestudio import encode_vts_frame
 
         yaw, pitch = math.degrees(0.2 * math.sin(t)), math.degrees(0.1 * math.sin(1.3 * t))
         return encode_vts_frame(_phone_weights(t), rotation=(pitch, yaw, 0.0), timestamp_ms=int(t * 1000))
@@ -207,7 +211,6 @@ SENDERS: dict[str, type] = {"vmc": _VmcFrames, "openseeface": _OpenSeeFaceFrames
 
 def decode_cost(kind: str, n: int = DECODE_PACKETS) -> dict:
     """Per-datagram cost of ``kind``'s adapter ``handle`` over ``n`` prepared datagrams: p50/p99/max µs."""
-    from facepuppet.runtime.inputs.kinds import make_adapter
 
     frames = SENDERS[kind]("127.0.0.1", 9)  # loopback's discard port: VMC's sender fills its bytes by sending
     try:
@@ -428,10 +431,6 @@ MAP_SAMPLES = 5000
 
 def map_step_cost(character_path: str | os.PathLike, n: int = MAP_SAMPLES, seed: int = 0) -> dict:
     """Cost of the frame loop's map step for this character and the VMC input's channels (µs per frame)."""
-    from facepuppet.runtime.channels import ChannelMap
-    from facepuppet.runtime.character import Character
-    from facepuppet.runtime.expressions import make_drive
-    from facepuppet.runtime.inputs.vmc import VmcAdapter
 
     character = Character.load(character_path)
     drive = make_drive(character.shape_names, character.expressions)

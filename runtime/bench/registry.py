@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 
+from facepuppet.runtime.files.outputs import check_path, write_atomic
+
 # Runtime modules that register benchmarks when imported; each must exist and import.
 _BENCH_MODULES = ("facepuppet.runtime.bench.render", "facepuppet.runtime.bench.latency",
                   "facepuppet.runtime.bench.soak", "facepuppet.runtime.bench.tables_bombs",
@@ -124,7 +126,6 @@ def run(args: argparse.Namespace) -> int:
     bench = registry[args.name]
     options = bench_parser(bench).parse_args(args.options)
     if options.json:
-        from facepuppet.runtime.outputs import check_path
 
         check_path("--json", "file", Path(options.json), options.force)   # before the benchmark runs
     started = time.time()
@@ -137,7 +138,6 @@ def run(args: argparse.Namespace) -> int:
         "results": results,
     }
     if options.json:
-        from facepuppet.runtime.outputs import write_atomic
 
         text = json.dumps(report, indent=2, sort_keys=True) + "\n"
         write_atomic(options.json, lambda temp: temp.write_text(text))

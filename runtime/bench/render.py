@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.bench.registry import peak_rss_mb, register_bench
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 if TYPE_CHECKING:
     from facepuppet.runtime.render.renderer import FaceRenderer
@@ -49,7 +51,6 @@ def _stats(ms: list[float]) -> dict:
 
 def head_poses(n_frames: int, fps: float = 60.0, degrees: float = 20.0) -> np.ndarray:
     """Quaternions (n_frames, 4) (x, y, z, w): a slow yaw (period 3 s) and pitch (period 4.1 s)."""
-    from facepuppet.runtime.geometry import euler_to_quat
 
     t = np.arange(n_frames) / fps
     yaw = np.radians(degrees) * np.sin(2 * np.pi * t / 3.0)
@@ -95,7 +96,6 @@ def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5,
 
 
 def bench_render(args: argparse.Namespace) -> dict:
-    from facepuppet.runtime.character import Character
     from facepuppet.runtime.render.gl_context import create_context
     from facepuppet.runtime.render.renderer import FaceRenderer
 

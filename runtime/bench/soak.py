@@ -50,6 +50,9 @@ from facepuppet.runtime.bench.latency import rss_mb
 from facepuppet.runtime.bench.registry import load_average, register_bench, session_log
 from facepuppet.runtime.commands.run import plan_from_argv, run_live
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.live.vmc_out import VmcSender
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 GOAL_MB_PER_HOUR = 1.0
 MOVE_END, IDLE_END, LOSS_END = 0.5, 2 / 3, 5 / 6  # phase boundaries, fractions of a cycle
@@ -66,9 +69,6 @@ def phase(t: float, cycle_s: float) -> str:
 
 def send(host: str, port: int, rate: float, seconds: float, cycle_s: float) -> dict:
     """Play the show cycle to ``host:port`` for ``seconds``; returns what was sent."""
-    from facepuppet.runtime.channels import ARKIT_NAMES
-    from facepuppet.runtime.geometry import euler_to_quat
-    from facepuppet.runtime.live.vmc_out import VmcSender
 
     sender = VmcSender(host, port, ARKIT_NAMES)
     calibrate = b"/facepuppet/calibrate\x00\x00\x00,\x00\x00\x00"  # OSC message, no arguments

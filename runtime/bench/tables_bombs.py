@@ -112,8 +112,8 @@ def with_manifest(src: Path, dst: Path, manifest_text: bytes) -> Path:
 
 _CHILD = """
 import resource, sys
-import facepuppet.runtime.character  # registers the kind
-from facepuppet.runtime.tables import load_tables
+import facepuppet.runtime.model.character  # registers the kind
+from facepuppet.runtime.files.tables import load_tables
 try:
     load_tables(sys.argv[1], "character")
     said = "loaded"

@@ -23,6 +23,13 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench
+from facepuppet.runtime.bench.render import synthetic_performance
+from facepuppet.runtime.cli import main
+from facepuppet.runtime.commands.options import parse_size
+from facepuppet.runtime.demo.head import build_demo_character
+from facepuppet.runtime.live.video_out import VideoSink, plan_video
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, pascal
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 
 def _stats(ms: list[float]) -> dict:
@@ -33,9 +40,6 @@ def _stats(ms: list[float]) -> dict:
 def _frames(width: int, height: int, n: int, info: dict) -> list[np.ndarray]:
     """``n`` frames of the demo head, rendered headless at ``width`` x ``height``, (h, w, 3) uint8; the GL
     renderer's name goes into ``info``."""
-    from facepuppet.runtime.bench.render import synthetic_performance
-    from facepuppet.runtime.demo.head import build_demo_character
-    from facepuppet.runtime.geometry import euler_to_quat
     from facepuppet.runtime.render.gl_context import create_context
     from facepuppet.runtime.render.renderer import FaceRenderer
 
@@ -59,7 +63,6 @@ def _frames(width: int, height: int, n: int, info: dict) -> list[np.ndarray]:
 
 
 def _encode(frames: list[np.ndarray], n: int, suffix: str, alpha: bool, folder: Path) -> dict:
-    from facepuppet.runtime.live.video_out import VideoSink, plan_video
 
     h, w = frames[0].shape[:2]
     if alpha:
@@ -85,7 +88,6 @@ def _encode(frames: list[np.ndarray], n: int, suffix: str, alpha: bool, folder: 
 
 
 def _take(path: Path, seconds: float) -> int:
-    from facepuppet.runtime.channels import ARKIT_NAMES, pascal
 
     idx = {n: i for i, n in enumerate(ARKIT_NAMES)}
     rows = ["Timecode,BlendShapeCount," + ",".join(pascal(n) for n in ARKIT_NAMES)]
@@ -103,8 +105,6 @@ def _take(path: Path, seconds: float) -> int:
 
 
 def _replay_fps(folder: Path, seconds: float, size: str, codec_suffix: str) -> dict:
-    from facepuppet.runtime.cli import main
-    from facepuppet.runtime.demo.head import build_demo_character
 
     character = folder / "demo_head.npz"
     build_demo_character().save(character)
@@ -128,7 +128,6 @@ def _replay_fps(folder: Path, seconds: float, size: str, codec_suffix: str) -> d
 
 
 def bench_video(args: argparse.Namespace) -> dict:
-    from facepuppet.runtime.commands.options import parse_size
     from facepuppet.runtime.render.blas_threads import BlasThreads
 
     width, height = parse_size(args.size)

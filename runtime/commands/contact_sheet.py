@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.images import contact_sheet, save_png, with_footer
 
 if TYPE_CHECKING:

@@ -18,12 +18,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from PIL import Image
 
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.demo.head import build_demo_character
 from facepuppet.runtime.demo.performance import demo_frames
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.files.outputs import check_path
 from facepuppet.runtime.live.video_out import add_video_arguments
-from facepuppet.runtime.outputs import check_path
-from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.render.gl_context import display_available
 from facepuppet.runtime.render.images import contact_sheet, save_png
 from facepuppet.runtime.session.assemble import open_session

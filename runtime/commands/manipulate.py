@@ -23,8 +23,10 @@ import numpy as np
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.manipulation import Manipulation, ScreenView, read_script, run_step
 from facepuppet.runtime.actuation.pair import ActorPair
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.files.outputs import check_path, write_atomic
+from facepuppet.runtime.model.character import Character
 
 if TYPE_CHECKING:
     import argparse
@@ -150,7 +152,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _manipulate(args) -> int:
-    from facepuppet.runtime.commands.options import parse_size
     from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
     from facepuppet.runtime.render.images import save_png
     from facepuppet.runtime.render.renderer import FaceRenderer
@@ -194,7 +195,6 @@ def _manipulate(args) -> int:
 
 def _default_out(args) -> Path:
     """``manipulate-out``, under the output policy (refused when not empty, unless --force)."""
-    from facepuppet.runtime.outputs import check_path
 
     out = Path("manipulate-out")
     check_path("--out (default)", "dir", out, bool(getattr(args, "force", False)))
@@ -211,7 +211,6 @@ def _run_script(m, steps, renderer, overlay, target, out: Path, save_png) -> Non
             save_png(out / f"step_{n:02d}.png", renderer.read_pixels())
             target.swap()
         records.append(run_step(m, step, draw))
-    from facepuppet.runtime.outputs import write_atomic
 
     text = json.dumps({"markers": list(m.actor.names), "shapes": list(m.pair.shape_names), "steps": records})
     write_atomic(out / "manipulate.json", lambda temp: temp.write_text(text))

@@ -15,9 +15,9 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.commands.run import report_outputs
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.session.assemble import SessionResult, open_session
 from facepuppet.runtime.session.input_options import ReplayInputOptions
 from facepuppet.runtime.session.options import OutputOptions, PacingOptions, PictureOptions, StageOptions

@@ -25,9 +25,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.outputs import write_atomic
+from facepuppet.runtime.files.outputs import write_atomic
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.session.assemble import SessionResult, open_session
 from facepuppet.runtime.session.input_options import LiveInputOptions, RecordOptions
 from facepuppet.runtime.session.live_feed import LiveFeed

@@ -14,10 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.demo import head_parts as parts
 from facepuppet.runtime.demo.head_parts import gauss
-from facepuppet.runtime.geometry import smoothstep, vertex_normals
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.model.geometry import smoothstep, vertex_normals
 
 MATERIALS = ("skin", "lips", "eye", "teeth", "mouth")
 # specular, shininess per material; the kind code comes from MATERIAL_KINDS
@@ -283,7 +284,7 @@ def build_demo_character() -> Character:
     Character
         units cm, y up, x the character's left, looking along +z; about 13k
         vertices; materials skin, lips, eye, teeth, mouth; shapes named as in
-        :data:`facepuppet.runtime.channels.ARKIT_NAMES`. Deterministic.
+        :data:`facepuppet.runtime.mapping.channels.ARKIT_NAMES`. Deterministic.
     """
     head = _assemble()
     pieces = head.pieces
@@ -318,6 +319,5 @@ def build_demo_character() -> Character:
 
 
 def _arkit_order(name: str) -> int:
-    from facepuppet.runtime.channels import ARKIT_NAMES
 
     return ARKIT_NAMES.index(name)

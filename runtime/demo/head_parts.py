@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from facepuppet.runtime.geometry import smoothstep
+from facepuppet.runtime.model.geometry import smoothstep
 
 ORIGIN = np.array([0.0, -1.5, -0.5])  # ray origin of the skin surface, cm
 MOUTH_Y = -6.4  # target height of the lip line, cm

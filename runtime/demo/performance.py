@@ -17,7 +17,7 @@ import numpy as np
 
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 DEMO_CHANNELS: tuple[str, ...] = (
     "jawOpen", "mouthFunnel", "mouthPucker", "mouthClose",

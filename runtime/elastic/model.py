@@ -30,8 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.rigid import kabsch
-from facepuppet.runtime.tables import (
+from facepuppet.runtime.files.tables import (
     Section,
     TableSchema,
     TablesError,
@@ -41,6 +40,7 @@ from facepuppet.runtime.tables import (
     save_tables,
     validate,
 )
+from facepuppet.runtime.model.rigid import kabsch
 
 MUSCLE_KINDS = {"linear": 0, "sphincter": 1}
 

@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import euler_to_quat, quat_mul
 from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNormaliser
 from facepuppet.runtime.gestures.synth import GestureSynth
 from facepuppet.runtime.gestures.tables import GESTURE_DB_SCHEMA, GROUPS, HEAD_FEATURES, LEVEL1, load_gesture_db
+from facepuppet.runtime.mapping.channels import canonical
+from facepuppet.runtime.model.geometry import euler_to_quat, quat_mul
 
 if TYPE_CHECKING:
     import os

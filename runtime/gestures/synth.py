@@ -91,7 +91,7 @@ from facepuppet.runtime.gestures.speaker_normaliser import SILENCE_Z, SpeakerNor
 from facepuppet.runtime.gestures.tables import GROUPS, LEVEL1
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.tables import Tables
+    from facepuppet.runtime.files.tables import Tables
 
 RECENT_PENALTY = 1e4  # added to a recently shown candidate's distance (distances are O(1); sentinels ~1e6)
 WHOLE_GROUPS = ("eyes",)  # groups whose channels show one reference frame whole (own residual + own c·B)

@@ -15,12 +15,12 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from facepuppet.runtime.tables import Section, TableSchema, TablesError, load_tables, register_schema
+from facepuppet.runtime.files.tables import Section, TableSchema, TablesError, load_tables, register_schema
 
 if TYPE_CHECKING:
     import os
 
-    from facepuppet.runtime.tables import Tables
+    from facepuppet.runtime.files.tables import Tables
 
 GROUPS = ("lips", "mood", "brows", "eyes", "rest", "head")
 LEVEL1 = ("lips", "mood")

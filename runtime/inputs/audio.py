@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.errors import FacepuppetError, InputFileError
-from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.files.input_files import regular_file
 
 if TYPE_CHECKING:
     import os

@@ -53,10 +53,10 @@ import math
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import quat_mul
 from facepuppet.runtime.inputs.osc import OscAdapter, all_finite, as_float, finite32, floats
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import quat_mul
 
 #: Face Cap's blendshape index order (PROTOCOLS.md §3).
 FACECAP_ORDER: tuple[str, ...] = (

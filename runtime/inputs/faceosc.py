@@ -47,10 +47,10 @@ import math
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.osc import OscAdapter, all_finite, floats
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 TAU_REST = 0.5
 TAU_ACTIVE = 20.0

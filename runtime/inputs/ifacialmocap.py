@@ -41,12 +41,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES, arkit_index
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.counted import Dropped, counted
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES, FLOAT32_MAX
 from facepuppet.runtime.inputs.phone import eyes_into
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, arkit_index
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 #: the start payload (iFacialMocap's developer page); ``|sendDataVersion=v2`` asks for the v2 frames
 START = "iFacialMocap_sahuasouryya9218sauhuiayeta91555dy3719"

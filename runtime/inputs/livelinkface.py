@@ -17,9 +17,9 @@ offset     field                       encoding
 =========  ==========================  =========================================
 
 The 61 values are the 52 ARKit weights in Apple's order
-(:data:`~facepuppet.runtime.channels.ARKIT_NAMES`), then head yaw, pitch, roll
+(:data:`~facepuppet.runtime.mapping.channels.ARKIT_NAMES`), then head yaw, pitch, roll
 (radians, to ``head_rotation`` via
-:func:`~facepuppet.runtime.geometry.euler_to_quat`, as for the CSV in
+:func:`~facepuppet.runtime.model.geometry.euler_to_quat`, as for the CSV in
 :mod:`facepuppet.runtime.recording.livelinkface_csv`), then left- and right-eye yaw, pitch, roll (not
 used: the eyeLook* weights carry gaze).
 
@@ -42,11 +42,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.counted import counted
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 VERSION = 6
 N_VALUES = 61

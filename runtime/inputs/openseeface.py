@@ -87,11 +87,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import quat_mul
 from facepuppet.runtime.inputs.counted import counted
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import quat_mul
 
 N_POINTS = 68
 N_POINTS_3D = 70

@@ -27,8 +27,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 #: gaze angle (degrees) that gives an eyeLook* weight of 1 (as for Face Cap's eye rotations)
 EYE_RANGE_DEG = 30.0

@@ -29,11 +29,11 @@ message is dropped and counted as ``malformed``.
 **Names.** Blend names are case-sensitive (``Joy`` is a VRM0 preset, ``joy``
 is nothing). A name is looked up first among the VRM0 and VRM1 presets
 (:data:`PRESETS`, a fixed approximation in ARKit channels), then as a perfect
-sync name: any spelling that :func:`~facepuppet.runtime.channels.canonical`
+sync name: any spelling that :func:`~facepuppet.runtime.mapping.channels.canonical`
 brings to one of the 52 ARKit names (``JawOpen`` -> ``jawOpen``). Names that
 match neither (``Neutral``, custom clips) are counted as ``unmapped_name``.
 An avatar's own expressions (a character with VRM expressions, see
-:mod:`facepuppet.runtime.expressions`) come as ``extra_names``: a name among
+:mod:`facepuppet.runtime.mapping.expressions`) come as ``extra_names``: a name among
 them is that channel, and a VRM preset name in its other VRM spelling (``happy``
 for ``Joy``, ``blinkLeft`` for ``Blink_L``; any case) reaches the same channel;
 the map then drives the expression itself instead of the ARKit approximation.
@@ -68,10 +68,10 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES, canonical
-from facepuppet.runtime.expressions import preset_of
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.osc import OscAdapter, all_finite, as_float, finite32, floats
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, canonical
+from facepuppet.runtime.mapping.expressions import preset_of
 
 _INDEX = {name: i for i, name in enumerate(ARKIT_NAMES)}
 

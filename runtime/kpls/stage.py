@@ -30,9 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from facepuppet.runtime.channels import ChannelMap
-from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.tables import (
+from facepuppet.runtime.files.tables import (
     Section,
     TableSchema,
     TablesError,
@@ -43,6 +41,8 @@ from facepuppet.runtime.tables import (
     save_tables,
     validate,
 )
+from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.mapping.channels import ChannelMap
 
 if TYPE_CHECKING:
     from pathlib import Path

@@ -71,12 +71,12 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-from facepuppet.runtime.channels import ARKIT_NAMES, canonical, split_side
 from facepuppet.runtime.errors import InputFileError
-from facepuppet.runtime.expressions import MappingSettings, MappingTarget
-from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.files.input_files import regular_file
 from facepuppet.runtime.live.mix import MixSettings, parse_mix
 from facepuppet.runtime.live.tracking_loss import LOSS_KEYS, LossSettings, parse_loss
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, canonical, split_side
+from facepuppet.runtime.mapping.expressions import MappingSettings, MappingTarget
 
 if TYPE_CHECKING:
     import os

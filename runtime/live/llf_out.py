@@ -9,12 +9,12 @@ float32, int32, int32), the count 61 (uint8), and 61 big-endian float32:
 
 * the 52 ARKit weights in Apple's order (the UDP order; the CSV order differs),
   the rig's channels folded into them by
-  :func:`facepuppet.runtime.vrm_names.fold_to_arkit` (the same fold as
+  :func:`facepuppet.runtime.mapping.vrm_names.fold_to_arkit` (the same fold as
   ``--vmc-out``: split ``browInnerUp_L/_R`` by their max; a shape the rig lacks
   is 0), clipped to [0, 1], NaN sent as 0;
 * head yaw, pitch, roll in radians, the inverse of the decoder's
-  :func:`~facepuppet.runtime.geometry.euler_to_quat` (R = Ry(yaw) Rx(pitch) Rz(roll),
-  :func:`~facepuppet.runtime.geometry.quat_to_euler`), so what we send decodes
+  :func:`~facepuppet.runtime.model.geometry.euler_to_quat` (R = Ry(yaw) Rx(pitch) Rz(roll),
+  :func:`~facepuppet.runtime.model.geometry.quat_to_euler`), so what we send decodes
   to the rotation we drew;
 * left-eye then right-eye yaw, pitch, roll in radians. A frame carries no eye
   rotation, so they are made from the eyeLook weights the packet carries
@@ -46,10 +46,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.geometry import quat_to_euler
 from facepuppet.runtime.inputs.livelinkface import N_VALUES, encode_llf_packet
-from facepuppet.runtime.vrm_names import fold_to_arkit
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.mapping.vrm_names import fold_to_arkit
+from facepuppet.runtime.model.geometry import quat_to_euler
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo

@@ -5,8 +5,8 @@ frame). Each tick takes the newest frame the source has by ``t_k`` (older ones
 are dropped and counted, never queued), rejects it if it is not finite, runs
 the stages (:func:`~facepuppet.runtime.live.stages.build_chain`), maps the last
 stage's channels onto the renderer's by name with a
-:class:`~facepuppet.runtime.channels.ChannelMap` cached per channel tuple (an
-:class:`~facepuppet.runtime.expressions.ExpressionMap` for a character with VRM
+:class:`~facepuppet.runtime.mapping.channels.ChannelMap` cached per channel tuple (an
+:class:`~facepuppet.runtime.mapping.expressions.ExpressionMap` for a character with VRM
 expressions: channels onto morphs and expressions),
 draws, waits for the GPU, and hands the tick to its observers (one interface,
 :class:`~facepuppet.runtime.protocols.TickObserver`: PNG frames, the weight log, video, OSC
@@ -42,8 +42,8 @@ from facepuppet.runtime.live.mapper import Mapper
 from facepuppet.runtime.live.timing import StageTimer
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.channels import ChannelMap
-    from facepuppet.runtime.expressions import ExpressionDrive, ExpressionMap
+    from facepuppet.runtime.mapping.channels import ChannelMap
+    from facepuppet.runtime.mapping.expressions import ExpressionDrive, ExpressionMap
     from facepuppet.runtime.protocols import FrameSource, Renderer, Stage, TickObserver
     from facepuppet.runtime.render.gl_context import GLTarget
 
@@ -180,7 +180,7 @@ class FrameLoop:
     idle_fps : float or None; draw on arrival (see the module docstring) when the
         source has ``wait_for_frame(timeout_s) -> bool``, redrawing at least this
         often without new frames; ``fps`` is then the grid of the tick labels
-    drive : ExpressionDrive or None (:func:`~facepuppet.runtime.expressions.make_drive`): maps each channel
+    drive : ExpressionDrive or None (:func:`~facepuppet.runtime.mapping.expressions.make_drive`): maps each channel
         tuple onto the character's morphs and VRM expressions; None: a plain ChannelMap by name, as for an OBJ rig
     mapper : Mapper or None, the map step to use (a session's, shared with its panel); None: one of its own
         from ``names`` and ``drive``

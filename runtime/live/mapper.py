@@ -4,8 +4,8 @@ A frame names its channels; the renderer draws a fixed list (the character's sha
 channels). The map between them depends only on the channel tuple, so it is built once per layout and kept
 (at most :data:`MAX_CHANNEL_MAPS`; a sender whose layout keeps changing evicts the oldest). A character with
 VRM expressions, or a ``[mapping]`` in the config, maps through an
-:class:`~facepuppet.runtime.expressions.ExpressionDrive` (channels onto morphs and expressions); otherwise a
-:class:`~facepuppet.runtime.channels.ChannelMap` by name.
+:class:`~facepuppet.runtime.mapping.expressions.ExpressionDrive` (channels onto morphs and expressions); otherwise a
+:class:`~facepuppet.runtime.mapping.channels.ChannelMap` by name.
 
 One :class:`Mapper` per session: the frame loop maps with it every tick, the operator's panel reads from the
 same cache what each input channel drives (its meters), and a ``[mapping]`` applied live
@@ -20,12 +20,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.channels import ChannelMap
-from facepuppet.runtime.expressions import MappingError, MappingSettings, make_drive
+from facepuppet.runtime.mapping.channels import ChannelMap
+from facepuppet.runtime.mapping.expressions import MappingError, MappingSettings, make_drive
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.character_parts import Expressions
-    from facepuppet.runtime.expressions import ExpressionDrive, ExpressionMap
+    from facepuppet.runtime.mapping.expressions import ExpressionDrive, ExpressionMap
+    from facepuppet.runtime.model.character_parts import Expressions
 
 logger = logging.getLogger(__name__)
 
@@ -38,7 +38,7 @@ class Mapper:
     Parameters
     ----------
     names : sequence of str, the channels the renderer draws, in order (the maps' targets)
-    drive : ExpressionDrive or None (:func:`~facepuppet.runtime.expressions.make_drive`); None: a plain
+    drive : ExpressionDrive or None (:func:`~facepuppet.runtime.mapping.expressions.make_drive`); None: a plain
         ChannelMap by name, as for an OBJ rig
     log : callable taking one str; each layout's report goes here the first time the loop maps it
 
@@ -109,7 +109,7 @@ def follow_mapping(mapper: Mapper, expressions: Expressions | None,
                    log: Callable[[str], None] = logger.info) -> Callable[[float, object], None]:
     """A config listener (:meth:`~facepuppet.runtime.live.bus.SessionBus.on_config`): a config taking effect
     whose ``[mapping]`` differs from the one in force builds the drive again
-    (:func:`~facepuppet.runtime.expressions.make_drive`) for the loop and the panel, from this tick's map on.
+    (:func:`~facepuppet.runtime.mapping.expressions.make_drive`) for the loop and the panel, from this tick's map on.
     A mapping naming what the character lacks is refused with a warning (the mapping in force stays)."""
     def hook(t: float, config) -> None:
         current = mapper.drive.mapping if mapper.drive is not None else MappingSettings()

@@ -38,11 +38,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical, filter_region
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import smoothstep
 from facepuppet.runtime.live.tracking_loss import LossSettings, voice_jaw
+from facepuppet.runtime.mapping.channels import canonical, filter_region
+from facepuppet.runtime.model.geometry import nlerp, smoothstep
 
 MIX_KEYS = ("order", "ease_s", "regions", "channels")
 MIX_REGIONS = ("eyes", "brows", "mouth", "other", "head")
@@ -364,8 +364,6 @@ class MixStage:
         return choice, values
 
     def _mix_head(self, t: float) -> tuple:
-        from facepuppet.runtime.live.pipeline import nlerp
-
         pick, rot, trans = -1, _IDENTITY, None
         for i in self._head_order:
             s = self._sources[i]

@@ -44,29 +44,21 @@ from dataclasses import replace
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical, filter_region
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import quat_mul, smoothstep
 from facepuppet.runtime.live.bus import SessionBus
 from facepuppet.runtime.live.config import LiveConfig, Neutral
 from facepuppet.runtime.live.one_euro import OneEuroFilter
 from facepuppet.runtime.live.pipeline_state import RawState, read_snapshot, snapshot_doc
 from facepuppet.runtime.live.response import Response
 from facepuppet.runtime.live.tracking_loss import IdleMotion, LossTargets, voice_jaw
+from facepuppet.runtime.mapping.channels import canonical, filter_region
+from facepuppet.runtime.model.geometry import nlerp, quat_mul, smoothstep
 
 logger = logging.getLogger(__name__)
 
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 EVENTS_KEPT = 64  # the last tracking events kept for the panel (a ring: a show runs for hours)
 TRACKING_STATES = ("waiting", "live", "lost", "easing")
-
-
-def nlerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
-    """Normalised linear interpolation of quaternions (x, y, z, w), shortest way round."""
-    if float(np.dot(a, b)) < 0:
-        b = -b
-    q = (1.0 - s) * a + s * b
-    return q / max(float(np.linalg.norm(q)), 1e-12)
 
 
 def _conj(q: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ XDG_CONFIG_HOME); anything with a ``/`` or ending in ``.toml`` is a path. A prof
 starts from the defaults and is created by its first :meth:`Profile.save`. Loading one made for another
 character or input logs a warning (the settings still apply: names are matched by spelling).
 
-Files are written atomically (:func:`facepuppet.runtime.outputs.atomic_path`): a crash mid-save leaves the old
+Files are written atomically (:func:`facepuppet.runtime.files.outputs.atomic_path`): a crash mid-save leaves the old
 profile. :func:`config_to_toml` is also what a recording keeps of the config in force.
 """
 
@@ -31,6 +31,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.files.outputs import atomic_path
 from facepuppet.runtime.live.config import (
     REGIONS,
     ChannelSettings,
@@ -242,7 +243,6 @@ class Profile:
 
     def save(self, config: LiveConfig) -> Path:
         """Write ``config`` (neutral included) to :attr:`path`, atomically; returns the path."""
-        from facepuppet.runtime.outputs import atomic_path
 
         made = {"character": self.character, "input": self.input_kind,
                 "saved": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}

@@ -26,8 +26,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical, split_side
 from facepuppet.runtime.live.config import LiveConfig
+from facepuppet.runtime.mapping.channels import canonical, split_side
 
 _MIRROR_ROT = np.array([1.0, -1.0, -1.0, 1.0])
 _MIRROR_TRANS = np.array([-1.0, 1.0, 1.0])

@@ -46,7 +46,6 @@ from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.actuation.stage import ActorRetarget
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.expressions import ExpressionDrive, expression_spellings, make_drive
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.gestures.layer import gesture_layer
 from facepuppet.runtime.inputs.kinds import make_adapter
@@ -59,11 +58,12 @@ from facepuppet.runtime.live.config import LiveConfig, load_live_config
 from facepuppet.runtime.live.mapper import Mapper, follow_mapping
 from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.live.profiles import Profile, parse_config_text, profile_path
+from facepuppet.runtime.mapping.expressions import ExpressionDrive, expression_spellings, make_drive
 
 if TYPE_CHECKING:
     import moderngl
 
-    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.model.character import Character
     from facepuppet.runtime.protocols import InputAdapter, Renderer, Stage
     from facepuppet.runtime.session.options import StageOptions
 

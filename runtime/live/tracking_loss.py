@@ -45,8 +45,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from facepuppet.runtime.channels import canonical
-from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.mapping.channels import canonical
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 LOSS_MODES = ("hold", "neutral", "voice", "idle")
 LOSS_ALIASES = {"ease": "neutral"}

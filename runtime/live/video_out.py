@@ -44,7 +44,7 @@ unknown encoder or one that is not a video encoder, a codec the container or
 the frames cannot take, an odd size for a 4:2:0 format, and an unreadable WAV
 are refused with a message naming the option; the output file itself goes
 through the common policy (exists without ``--force``, missing folder:
-:mod:`facepuppet.runtime.outputs`). The file is written beside its final path
+:mod:`facepuppet.runtime.files.outputs`). The file is written beside its final path
 and renamed into place when the run ends well; a failed run leaves none.
 
 **Alpha.** The sink takes frames of (h, w, 3) or (h, w, 4) uint8 and picks the
@@ -65,10 +65,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.files.outputs import OutputSet
+from facepuppet.runtime.inputs.audio import read_wav
 
 if TYPE_CHECKING:
+    from facepuppet.runtime.cli.progress import Progress
     from facepuppet.runtime.live.loop import TickInfo
-    from facepuppet.runtime.progress import Progress
 
 AUDIO_RATE = 48000
 H264_OPTIONS = {"crf": "18", "preset": "veryfast", "x264-params": "mbtree=0"}  # mbtree: see the module doc
@@ -226,7 +228,6 @@ def _read_track(path: Path) -> np.ndarray:
     """The WAV's samples mixed to mono, at ``AUDIO_RATE``, float32 (InputFileError naming the file)."""
     from scipy.signal import resample_poly
 
-    from facepuppet.runtime.inputs.audio import read_wav
 
     samples, rate = read_wav(path)
     if rate != AUDIO_RATE:
@@ -262,7 +263,6 @@ class VideoSink:
     """
 
     def __init__(self, plan: VideoPlan, fps: float, progress: Progress | None = None) -> None:
-        from facepuppet.runtime.outputs import OutputSet
 
         self.av = _av()
         self.plan = plan

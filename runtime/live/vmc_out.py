@@ -19,11 +19,11 @@ Every tick sends, over one UDP socket, bundles of at most ``max_bundle`` bytes
 
    * the 52 ARKit shapes, every tick, in the PascalCase of perfect sync
      (``EyeBlinkLeft`` … ``TongueOut``), the rig's channels folded into them as
-     :func:`facepuppet.runtime.vrm_names.fold_to_arkit` says (split
+     :func:`facepuppet.runtime.mapping.vrm_names.fold_to_arkit` says (split
      ``browInnerUp_L/_R`` by their max; a shape the rig lacks is 0);
    * the 17 VRM 0.x presets (``Blink``, ``Blink_L``, ``Blink_R``, ``A`` …
      ``O``, ``Joy``, ``LookUp`` …, ``Neutral``) derived from those 52 by
-     :func:`facepuppet.runtime.vrm_names.vrm0_from_arkit`;
+     :func:`facepuppet.runtime.mapping.vrm_names.vrm0_from_arkit`;
    * with ``extra=True`` (``--vmc-extra``), the rig's channels outside ARKit
      (``CheekRaiserLeft``, ``PupilDilateRight``) under their PascalCase names;
 
@@ -74,10 +74,10 @@ import numpy as np
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 
-from facepuppet.runtime.channels import pascal
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.outputs import OutputError
-from facepuppet.runtime.vrm_names import PERFECT_SYNC_NAMES, VRM0_PRESETS, fold_to_arkit, vrm0_from_arkit
+from facepuppet.runtime.files.outputs import OutputError
+from facepuppet.runtime.mapping.channels import pascal
+from facepuppet.runtime.mapping.vrm_names import PERFECT_SYNC_NAMES, VRM0_PRESETS, fold_to_arkit, vrm0_from_arkit
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo

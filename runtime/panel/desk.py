@@ -49,12 +49,12 @@ from facepuppet.runtime.panel.ui import Ui
 if TYPE_CHECKING:
     import moderngl
 
-    from facepuppet.runtime.character import Character
     from facepuppet.runtime.live.config import LiveConfig
     from facepuppet.runtime.live.loop import TickInfo
     from facepuppet.runtime.live.pipeline import LivePipeline
     from facepuppet.runtime.live.stages import Chain
     from facepuppet.runtime.live.stats import LiveStats
+    from facepuppet.runtime.model.character import Character
     from facepuppet.runtime.recording.recorder import PacketRecorder
     from facepuppet.runtime.recording.switch import SwitchableRecorder
 

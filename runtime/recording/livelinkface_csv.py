@@ -12,11 +12,11 @@ column                      becomes
                             (timecode frame count at 60 fps)
 ``BlendShapeCount``         ignored
 ``HeadYaw/Pitch/Roll``      ``head_rotation`` (radians, via
-                            :func:`~facepuppet.runtime.geometry.euler_to_quat`)
+                            :func:`~facepuppet.runtime.model.geometry.euler_to_quat`)
 ``Left/RightEyeYaw...``     ignored: eye rotations are not channels (the rig's
                             eyeLook* shapes carry gaze)
 every other column          a weight channel, named as in the header
-                            (``JawOpen``); :mod:`facepuppet.runtime.channels` maps spellings
+                            (``JawOpen``); :mod:`facepuppet.runtime.mapping.channels` maps spellings
 ==========================  =================================================
 
 Timecode ``HH:MM:SS:FF.fff`` counts 60 frames per second, ``.fff`` being the
@@ -41,9 +41,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.files.input_files import regular_file
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.geometry import euler_to_quat
-from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 if TYPE_CHECKING:
     import os

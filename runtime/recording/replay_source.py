@@ -14,8 +14,9 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.errors import InputFileError, UsageError
+from facepuppet.runtime.files.input_files import regular_file
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.input_files import regular_file
+from facepuppet.runtime.inputs import kinds
 from facepuppet.runtime.recording.livelinkface_csv import looks_like_llf_csv, read_llf_csv
 from facepuppet.runtime.recording.session import MAGIC, read_session
 
@@ -123,7 +124,7 @@ def decode_packets(packets: Iterable[Packet], make_adapter: Callable[[str], Inpu
     as an InputFileError naming ``path``, the recording.
     """
     if make_adapter is None:
-        from facepuppet.runtime.inputs.kinds import make_adapter
+        make_adapter = kinds.make_adapter
     adapters: dict = {}
     decoded = []
     for i, packet in enumerate(packets):

@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.files.input_files import regular_file
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.input_files import regular_file
 from facepuppet.runtime.recording.records import (
     RESERVED_KINDS,
     Layout,
@@ -56,6 +56,8 @@ from facepuppet.runtime.recording.records import (
     encode_frame,
     layout_of,
 )
+
+from facepuppet import __version__
 
 MAGIC = b"FPSESS\x00\x01"
 
@@ -80,8 +82,6 @@ class SessionWriter:
 
     def __init__(self, path: str | os.PathLike, info: dict | None = None, fsync_every_s: float | None = 1.0,
                  overwrite: bool = False) -> None:
-        from facepuppet import __version__
-
         self.path = Path(path)
         self.fsync_every_s = fsync_every_s
         self.n_records = 0

@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.files.input_files import regular_file
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.input_files import regular_file
 from facepuppet.runtime.inputs.osc import CALIBRATE_ADDRESS
 from facepuppet.runtime.inputs.udp import count_messages, watch_needle
 from facepuppet.runtime.recording.records import Tick

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facepuppet.runtime.geometry import quat_to_matrix
+from facepuppet.runtime.model.geometry import quat_to_matrix
 
 
 def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:

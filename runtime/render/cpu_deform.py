@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.blas import saxpy
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 
 
 def check_weights(weights: np.ndarray, n_shapes: int) -> np.ndarray:

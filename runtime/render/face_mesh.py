@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.render.layers import LAYER_KINDS
 from facepuppet.runtime.render.triangle_order import cache_order
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, moving_vertices
-from facepuppet.runtime.geometry import bounds
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, moving_vertices
+from facepuppet.runtime.model.geometry import bounds
 from facepuppet.runtime.render.camera import Camera, frame_bounds
 from facepuppet.runtime.render.parts_path import head_vertices
 

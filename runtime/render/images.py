@@ -9,7 +9,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.outputs import atomic_path
+from facepuppet.runtime.files.outputs import atomic_path
 
 LABEL_HEIGHT = 18  # pixels under each cell for its label
 _SHEET_BACKGROUND = (24, 25, 28)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
 
 #: The layer kinds, in drawing order (each blended over the ones before)
 LAYER_KINDS = (MATERIAL_KINDS["occlusion"], MATERIAL_KINDS["film"], MATERIAL_KINDS["lashes"])

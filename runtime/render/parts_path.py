@@ -1,8 +1,8 @@
 """Drawing a character that carries glTF / VRM parts (skeleton, look): the renderer's pieces for it.
 
 :class:`~facepuppet.runtime.render.renderer.FaceRenderer` draws a character
-with a :class:`~facepuppet.runtime.character_parts.Look` or a
-:class:`~facepuppet.runtime.character_parts.Skeleton` through ``character.glsl``
+with a :class:`~facepuppet.runtime.model.character_parts.Look` or a
+:class:`~facepuppet.runtime.model.character_parts.Skeleton` through ``character.glsl``
 with what this module prepares; a character without parts is drawn through
 ``face.glsl`` exactly as before.
 
@@ -32,8 +32,8 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character
-from facepuppet.runtime.character_parts import (
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.model.character_parts import (
     ALPHA_MODES,
     CLAMP_TO_EDGE,
     MIRRORED_REPEAT,
@@ -41,7 +41,7 @@ from facepuppet.runtime.character_parts import (
     Look,
     identity_look,
 )
-from facepuppet.runtime.geometry import quat_to_matrix
+from facepuppet.runtime.model.geometry import quat_to_matrix
 from facepuppet.runtime.render.triangle_order import cache_order
 
 #: Share of a head turn given to the neck bone (the head bone takes the rest); 0.3, as avatar apps do.
@@ -122,7 +122,7 @@ _LIT = 0
 
 def material_variant(character: Character, m: int) -> tuple[int, int, int, int, int]:
     """The fragment variant of material ``m``: (alpha mode, shading code, textured, mirrored wrap, lighting
-    kind), each an int; the kind (:data:`~facepuppet.runtime.character.MATERIAL_KINDS`) only for lit
+    kind), each an int; the kind (:data:`~facepuppet.runtime.model.character.MATERIAL_KINDS`) only for lit
     materials (the studio lighting of eyes, teeth, lashes ... as ``face.glsl`` draws them), else 0.
 
     ``character.glsl`` is compiled once per distinct variant with these as #defines

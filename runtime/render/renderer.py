@@ -30,9 +30,9 @@ from collections.abc import Callable
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.camera import model_matrix
 from facepuppet.runtime.render.cpu_deform import check_weights
 from facepuppet.runtime.render.credits_label import CreditsLabel

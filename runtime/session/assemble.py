@@ -41,11 +41,11 @@ from facepuppet.runtime.session.options import OutputOptions, PanelOptions, Pict
 from facepuppet.runtime.session.outputs import Outputs, open_outputs
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.cli.progress import Progress
     from facepuppet.runtime.live.loop import LoopResult
     from facepuppet.runtime.live.sinks import WeightLog
     from facepuppet.runtime.live.stages import Chain
-    from facepuppet.runtime.progress import Progress
+    from facepuppet.runtime.model.character import Character
     from facepuppet.runtime.protocols import Renderer, TickObserver
     from facepuppet.runtime.render.gl_context import GLTarget
     from facepuppet.runtime.session.feeds import Feed, FeedParts

@@ -25,11 +25,11 @@ from facepuppet.runtime.live.loop import RecordedClock, WallClock
 from facepuppet.runtime.recording.replay_source import ReplaySource
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
     from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.live.bus import SessionBus
     from facepuppet.runtime.live.loop import FrameLoop, LoopResult
     from facepuppet.runtime.live.stages import Chain
+    from facepuppet.runtime.model.character import Character
     from facepuppet.runtime.protocols import FrameSource, TickObserver
     from facepuppet.runtime.render.gl_context import GLTarget
     from facepuppet.runtime.session.options import PacingOptions

@@ -43,10 +43,10 @@ from facepuppet.runtime.recording.switch import SwitchableRecorder
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
     from facepuppet.runtime.live.bus import SessionBus
     from facepuppet.runtime.live.loop import FrameLoop, LoopResult
     from facepuppet.runtime.live.stages import Chain
+    from facepuppet.runtime.model.character import Character
     from facepuppet.runtime.render.gl_context import GLTarget
     from facepuppet.runtime.session.input_options import LiveInputOptions, RecordOptions
     from facepuppet.runtime.session.options import PacingOptions, PanelOptions, PictureOptions, StageOptions

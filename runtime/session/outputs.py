@@ -25,9 +25,9 @@ from facepuppet.runtime.live.video_out import VideoSink
 from facepuppet.runtime.live.vmc_out import VmcSender, pipeline_status
 
 if TYPE_CHECKING:
+    from facepuppet.runtime.cli.progress import Progress
     from facepuppet.runtime.live.bus import SessionBus
     from facepuppet.runtime.live.stages import Chain
-    from facepuppet.runtime.progress import Progress
     from facepuppet.runtime.protocols import TickObserver
     from facepuppet.runtime.session.options import OutputOptions
 

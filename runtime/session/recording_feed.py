@@ -26,24 +26,24 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.markers import UNIT_METRES
 from facepuppet.runtime.live.loop import RecordedClock, WallClock
 from facepuppet.runtime.live.mix import MixStage, VoiceMixSource, check_mix_sources, follow_config
 from facepuppet.runtime.live.stages import RecordedLevels, make_input_adapter
-from facepuppet.runtime.progress import Progress
 from facepuppet.runtime.recording.readers import find_reader
 from facepuppet.runtime.recording.replay_source import ReplaySource, check_time_order, open_recording
 from facepuppet.runtime.recording.ticked_source import TickedSource, decode_live_recording, read_live_session
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
     from facepuppet.runtime.live.bus import SessionBus
     from facepuppet.runtime.live.loop import FrameLoop, LoopResult
     from facepuppet.runtime.live.pipeline import LivePipeline
     from facepuppet.runtime.live.stages import Chain
+    from facepuppet.runtime.model.character import Character
     from facepuppet.runtime.recording.session import Session
     from facepuppet.runtime.recording.ticked_source import LiveRecording
     from facepuppet.runtime.render.gl_context import GLTarget

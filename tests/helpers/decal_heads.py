@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.character_parts import Layout
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.character_parts import Layout
 
 from facepuppet.offline.elastic.clone import mesh_character
 

@@ -4,8 +4,8 @@ gesture table tests; a test file uses the fixture by importing it."""
 import numpy as np
 import pytest
 
+from facepuppet.runtime.files.tables import save_tables
 from facepuppet.runtime.gestures.tables import GROUPS, load_gesture_db
-from facepuppet.runtime.tables import save_tables
 
 
 def small_db(path, n_takes=2, n=300, seed=0):

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.character_parts import ALPHA_MODES, SHADING, Expressions, Layout, Look, Skeleton
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.character_parts import ALPHA_MODES, SHADING, Expressions, Layout, Look, Skeleton
 
 #: Humanoid chain: (name, parent name, local translation). Node 0 is the root.
 BONES = (

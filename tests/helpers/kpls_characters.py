@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, sparse_deltas
 
 SHAPES = ("jawOpen", "mouthSmileLeft", "mouthSmileRight", "eyeBlinkLeft", "eyeBlinkRight",
           "browInnerUp", "mouthPucker", "cheekPuff")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.character_parts import (
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.character_parts import (
     ALPHA_MODES,
     IDENTITY_UV_TRANSFORM,
     SHADING,

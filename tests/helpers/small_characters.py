@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
-from facepuppet.runtime.character_parts import Expressions, Layout, Look, Skeleton, identity_look
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.model.character_parts import Expressions, Layout, Look, Skeleton, identity_look
+from facepuppet.runtime.model.geometry import vertex_normals
 
 
 def uv_sphere(n_lat: int = 24, n_lon: int = 32) -> tuple[np.ndarray, np.ndarray]:

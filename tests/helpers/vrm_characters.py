@@ -11,8 +11,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.character_parts import OVERRIDES, Expressions
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.character_parts import OVERRIDES, Expressions
 
 from helpers.small_characters import sphere_character
 

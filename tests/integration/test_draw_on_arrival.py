@@ -9,12 +9,12 @@ import time
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.udp import UdpSource
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
 from facepuppet.runtime.live.loop import FrameLoop, WallClock
 from facepuppet.runtime.live.sinks import WeightLog
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 from helpers.osc_helpers import vmc_frame
 

@@ -20,17 +20,17 @@ import pytest
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.bench.tables_bombs import read_manifest, with_manifest
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.audio import read_wav
 from facepuppet.runtime.live.config import load_live_config
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.recording.session import SessionWriter
 
 from helpers.file_fuzz import check_reader, repacked_json_swaps, swap_session_header
 
-V1 = Path(__file__).resolve().parents[1] / "runtime" / "data" / "tables_v1"
+V1 = Path(__file__).resolve().parents[1] / "runtime" / "files" / "data" / "tables_v1"
 SEED = 17
 
 

@@ -185,7 +185,7 @@ def test_godette_exported_as_vrm_reads_back_the_same_and_faces_minus_z_in_the_fi
 
 
 def test_godettes_own_normals_are_kept_drawn_and_exported(egl_ctx, godette, tmp_path):
-    from facepuppet.runtime.geometry import vertex_normals
+    from facepuppet.runtime.model.geometry import vertex_normals
 
     # the file's normals (hard edges of a low-poly avatar), not area-weighted ones from the triangles
     assert godette.normals is not None

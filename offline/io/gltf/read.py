@@ -1,7 +1,7 @@
-"""glTF 2.0 / GLB / VRM 0.x / VRM 1.0 -> :class:`~facepuppet.runtime.character.Character` with its parts.
+"""glTF 2.0 / GLB / VRM 0.x / VRM 1.0 -> :class:`~facepuppet.runtime.model.character.Character` with its parts.
 
 ``read_gltf(path)`` reads the default scene and stores, as
-:mod:`facepuppet.runtime.character_parts` asks: vertices, normals and morph
+:mod:`facepuppet.runtime.model.character_parts` asks: vertices, normals and morph
 deltas in the rest pose in world space, metres, +Y up, facing +Z (a VRM 0.x
 avatar faces −Z and is turned 180° about +Y); the node hierarchy renumbered
 parents first; per vertex four (node, weight) pairs (a mesh without a skin
@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.character_parts import Layout, Look, Skeleton
-from facepuppet.runtime.tables import TablesError, hash_inputs, naming_file
+from facepuppet.runtime.files.tables import TablesError, hash_inputs, naming_file
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.character_parts import Layout, Look, Skeleton
 
 from facepuppet.offline.io.gltf import khr_materials, vrm_expressions, vrm_humanoid, vrm_materials, vrm_meta
 from facepuppet.offline.io.gltf.credits import credit_line, text

@@ -18,8 +18,8 @@ import warnings as _warnings
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS
-from facepuppet.runtime.character_parts import ALPHA_MODES, IDENTITY_UV_TRANSFORM
+from facepuppet.runtime.model.character import MATERIAL_KINDS
+from facepuppet.runtime.model.character_parts import ALPHA_MODES, IDENTITY_UV_TRANSFORM
 
 from facepuppet.offline.io.gltf.read_state import LookRows, ReadState
 from facepuppet.offline.io.gltf_container import GltfError

@@ -2,7 +2,7 @@
 
 The default scene is ``scene``, else scene 0, else every root node. Nodes are
 stored depth first from the roots, so a parent always comes before its
-children (what :class:`~facepuppet.runtime.character_parts.Skeleton` asks); a
+children (what :class:`~facepuppet.runtime.model.character_parts.Skeleton` asks); a
 node outside the default scene is not stored. Names are made unique with
 ``#2``, ``#3`` … A VRM 0.x avatar faces −Z: its roots are turned 180° about
 +Y, so every world transform becomes ``T·G``.
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.geometry import quat_to_matrix
+from facepuppet.runtime.model.geometry import quat_to_matrix
 
 from facepuppet.offline.io.gltf.read_state import ReadState
 

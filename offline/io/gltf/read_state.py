@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.character_parts import Expressions
+from facepuppet.runtime.model.character_parts import Expressions
 
 from facepuppet.offline.io.gltf_container import GltfFile
 
@@ -29,7 +29,7 @@ class LookRows:
     base : ndarray (n_materials, 4), linear RGBA base colour factor
     emissive : ndarray (n_materials, 3)
     alpha : ndarray (n_materials, 2), (ALPHA_MODES code, cutoff)
-    shading : ndarray (n_materials, 8), the ``SHADING_COLUMNS`` of :mod:`facepuppet.runtime.character_parts`
+    shading : ndarray (n_materials, 8), the ``SHADING_COLUMNS`` of :mod:`facepuppet.runtime.model.character_parts`
     texture : ndarray (n_materials,), int64, stored texture index or -1
     uv_transform : ndarray (n_materials, 5), KHR_texture_transform offset u, v, rotation, scale u, v
     """

@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES, canonical, pascal
-from facepuppet.runtime.character_parts import OVERRIDES, Expressions
-from facepuppet.runtime.vrm_names import VRM0_PRESETS, VRM1_FROM_VRM0
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, canonical, pascal
+from facepuppet.runtime.mapping.vrm_names import VRM0_PRESETS, VRM1_FROM_VRM0
+from facepuppet.runtime.model.character_parts import OVERRIDES, Expressions
 
 from facepuppet.offline.io.gltf.read_state import ReadState, target_names
 from facepuppet.offline.io.gltf.write_state import WriteState

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.io.gltf.read_state import ReadState
 from facepuppet.offline.io.gltf.write_state import ExportError, WriteState

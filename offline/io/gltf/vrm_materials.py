@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.character_parts import SHADING
+from facepuppet.runtime.model.character_parts import SHADING
 
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.write_state import WriteState

@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.geometry import vertex_normals
-from facepuppet.runtime.outputs import atomic_path
+from facepuppet.runtime.files.outputs import atomic_path
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.geometry import vertex_normals
 from facepuppet.runtime.render.layers import has_layers, vertex_opacity
 
 from facepuppet.offline.io.gltf import (

@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.character import MATERIAL_KINDS
-from facepuppet.runtime.character_parts import ALPHA_MODES
+from facepuppet.runtime.model.character import MATERIAL_KINDS
+from facepuppet.runtime.model.character_parts import ALPHA_MODES
 from facepuppet.runtime.render.layers import LAYER_KINDS
 
 from facepuppet.offline.io.gltf.write_state import WriteState

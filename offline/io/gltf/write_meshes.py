@@ -1,6 +1,6 @@
 """The written meshes: primitives, vertex attributes and morph targets, in the file's frame and units.
 
-One glTF mesh per :class:`~facepuppet.runtime.character_parts.Layout` mesh,
+One glTF mesh per :class:`~facepuppet.runtime.model.character_parts.Layout` mesh,
 one primitive per Layout primitive; primitives of a mesh that share a vertex
 range share their vertex accessors. A character without a Layout (an OBJ rig)
 is one mesh with one primitive per material. Attributes: POSITION (with

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.geometry import matrix_to_quat
+from facepuppet.runtime.model.geometry import matrix_to_quat
 
 from facepuppet.offline.io.gltf.write_state import WriteState
 

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.io.gltf.write_buffer import Buffer
 

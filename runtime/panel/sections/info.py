@@ -6,8 +6,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
     from facepuppet.runtime.live.stages import Chain
+    from facepuppet.runtime.model.character import Character
     from facepuppet.runtime.panel.ui import Ui
 
 #: characters the panel's font (ImGui's built-in, ASCII) lacks, written as ASCII

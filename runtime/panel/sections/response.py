@@ -10,13 +10,13 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from facepuppet.runtime.channels import canonical
-from facepuppet.runtime.expressions import MappingTarget
 from facepuppet.runtime.live.config import CURVES
+from facepuppet.runtime.mapping.channels import canonical
+from facepuppet.runtime.mapping.expressions import MappingTarget
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.expressions import MappingSettings
     from facepuppet.runtime.live.config import LiveConfig
+    from facepuppet.runtime.mapping.expressions import MappingSettings
     from facepuppet.runtime.panel.channels import ChannelList
     from facepuppet.runtime.panel.ui import Ui
 

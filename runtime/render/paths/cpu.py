@@ -11,7 +11,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.cpu_deform import CpuDeformer
 from facepuppet.runtime.render.parts_path import CpuSkinner, HeadPose
 from facepuppet.runtime.render.paths.base import DeformationPath, ProgramBuilder

@@ -12,7 +12,7 @@ import dataclasses
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 
 DELTA_TEXTURE_WIDTH = 4096
 #: Steps of a delta component either side of zero (16-bit offsets; blendshapes.glsl)

@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.paths.base import DeformationPath, ProgramBuilder
 
 if TYPE_CHECKING:  # for the annotation only: renderer.py imports this module

@@ -15,7 +15,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.parts_path import joint_texels
 from facepuppet.runtime.render.paths.base import DeformationPath, ProgramBuilder
 from facepuppet.runtime.render.paths.deltas import DELTA_TEXTURE_WIDTH, active_uniforms, delta_texture

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix
+from facepuppet.runtime.model.geometry import euler_to_quat, quat_to_matrix
 
 from conftest import need_shared
 from facepuppet.offline.actuation.stabilise import find_head_markers, kabsch, stabilise

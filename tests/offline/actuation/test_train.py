@@ -11,7 +11,7 @@ from scipy.optimize import linear_sum_assignment
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.solver import MarkerSolver
-from facepuppet.runtime.rigid import kabsch
+from facepuppet.runtime.model.rigid import kabsch
 
 from facepuppet.offline.actuation import commands as actor_commands
 from facepuppet.offline.actuation.basis import ActuationModel, class_axes, mean_shift

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.actuation.actor import Actor
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.geometry import euler_to_quat, quat_to_matrix
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.geometry import euler_to_quat, quat_to_matrix
 
 from facepuppet.offline.actuation.transfer import (
     align_markers,

@@ -5,9 +5,9 @@ import argparse
 import numpy as np
 import pytest
 
+from facepuppet.runtime.files.tables import TablesError
 from facepuppet.runtime.gestures.tables import GROUPS, load_gesture_db
 from facepuppet.runtime.recording.replay_source import open_recording
-from facepuppet.runtime.tables import TablesError
 
 from facepuppet.offline.gestures import commands as gesture_commands
 from facepuppet.offline.gestures.database import build_gesture_db, quantile_map
@@ -93,8 +93,8 @@ def test_run_input_audio_needs_gestures_and_audio():
 @pytest.mark.data
 def test_transfer_detail_writes_a_character_with_local_detail_shapes_and_gesture_tables(db_path, ict_character_path,
                                                                                        tmp_path, capsys):
-    from facepuppet.runtime.character import Character
     from facepuppet.runtime.gestures.layer import gesture_layer
+    from facepuppet.runtime.model.character import Character
 
     ict = need_shared("ict-facekit")
     parser = argparse.ArgumentParser()
@@ -137,7 +137,7 @@ def test_transfer_detail_writes_a_character_with_local_detail_shapes_and_gesture
 
 @pytest.mark.gl
 def test_detail_contact_sheet_tints_where_each_shape_acts(ict_character_path):
-    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.model.character import Character
 
     char = Character.load(ict_character_path)
     rows = {}

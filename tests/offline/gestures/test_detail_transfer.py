@@ -89,8 +89,8 @@ def test_bad_inputs_are_refused(placed, ict_character):
 
 
 def test_detail_table_aligns_marker_tracks_with_the_database_frames(tmp_path):
+    from facepuppet.runtime.files.tables import save_tables
     from facepuppet.runtime.gestures.layer import GROUPS, load_gesture_db
-    from facepuppet.runtime.tables import save_tables
 
     from facepuppet.offline.gestures.detail_transfer import MarkerDetail, detail_table
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from facepuppet.runtime.cli import main
 
-TABLES_V1 = Path(__file__).resolve().parents[2] / "runtime" / "data" / "tables_v1" / "character.npz"
+TABLES_V1 = Path(__file__).resolve().parents[2] / "runtime" / "files" / "data" / "tables_v1" / "character.npz"
 
 
 def test_bench_gltf_writes_its_json(tmp_path, capsys):

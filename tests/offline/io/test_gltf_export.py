@@ -18,8 +18,8 @@ import pytest
 import trimesh
 from PIL import Image
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.cli import main
+from facepuppet.runtime.model.character import Character
 
 from conftest import need_shared
 from facepuppet.offline.io.gltf import read as gltf_read
@@ -27,7 +27,7 @@ from facepuppet.offline.io.gltf.write import ExportError, export_character
 from facepuppet.offline.io.gltf_check import check_gltf
 from helpers.gltf_characters import BONES, decode, node_worlds, parts_character, view_bytes
 
-TABLES_V1 = Path(__file__).resolve().parents[2] / "runtime" / "data" / "tables_v1" / "character.npz"
+TABLES_V1 = Path(__file__).resolve().parents[2] / "runtime" / "files" / "data" / "tables_v1" / "character.npz"
 TURN = np.array([-1.0, 1.0, -1.0])
 SUFFIX = {"glb": ".glb", "gltf": ".gltf", "vrm0": ".vrm", "vrm1": ".vrm"}
 

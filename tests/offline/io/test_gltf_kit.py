@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.vrm_names import VRM0_PRESETS, VRM1_FROM_VRM0
+from facepuppet.runtime.mapping.vrm_names import VRM0_PRESETS, VRM1_FROM_VRM0
 
 from facepuppet.offline.io.gltf.read import read_gltf
 from helpers.gltf_writer import raw_accessor, read_doc

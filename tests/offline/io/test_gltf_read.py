@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.character_parts import ALPHA_MODES, LINEAR, NEAREST, REPEAT, SHADING
 from facepuppet.runtime.cli import main
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.character_parts import ALPHA_MODES, LINEAR, NEAREST, REPEAT, SHADING
 
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf_container import GltfError

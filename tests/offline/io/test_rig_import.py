@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.cli import main
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from conftest import need_shared
 from facepuppet.offline.io.obj import ObjError

@@ -8,9 +8,9 @@ import argparse
 import numpy as np
 import pytest
 
+from facepuppet.runtime.files.tables import load_tables
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls.stage import KplsRetarget
-from facepuppet.runtime.tables import load_tables
 
 from conftest import need_shared
 from facepuppet.offline.kpls.commands import fit_kpls, register, to_runtime

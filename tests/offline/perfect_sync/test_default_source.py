@@ -4,8 +4,8 @@ a refusal saying what to pass, before any work and writing nothing."""
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.cli import main
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.perfect_sync.source import cache_dir, default_source
 from helpers.logs import said

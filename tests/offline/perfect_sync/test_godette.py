@@ -3,7 +3,7 @@ perfect-sync expressions and read back."""
 
 import pytest
 
-from facepuppet.runtime.channels import pascal
+from facepuppet.runtime.mapping.channels import pascal
 
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf.write import export_character

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import canonical
-from facepuppet.runtime.tables import TablesError
+from facepuppet.runtime.files.tables import TablesError
+from facepuppet.runtime.mapping.channels import canonical
 
 from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ict_control_points, write_control_points
@@ -159,8 +159,8 @@ def test_a_static_head_without_shapes_gets_all_51(ict_character, source, tmp_pat
 
 def test_command_writes_the_character_and_refuses_bad_landmarks_writing_nothing(ict_character_path, source,
                                                                                   tmp_path, capsys):
-    from facepuppet.runtime.character import Character
     from facepuppet.runtime.cli import main
+    from facepuppet.runtime.model.character import Character
 
     out, pics = tmp_path / "ps.npz", tmp_path / "pics"
     assert main(["perfect-sync", str(ict_character_path), "-o", str(out), "--source", str(source[1]),
@@ -327,7 +327,7 @@ def test_the_gums_stay_behind_the_cheeks(identical, ict_character):
     dense = out.dense_deltas()
     names = [canonical(n) for n in out.shape_names]
     skin = find_face(out).skin
-    from facepuppet.runtime.geometry import vertex_normals
+    from facepuppet.runtime.model.geometry import vertex_normals
 
     gum_t = c.triangles[c.triangle_material == c.material_names.index("M_GumsTongue")].astype(np.int64)
     gv = c.vertices.astype(np.float64)

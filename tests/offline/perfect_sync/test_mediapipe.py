@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.mapping.channels import canonical
 
 from facepuppet.offline.io.rig_import import import_rig
 from facepuppet.offline.perfect_sync import evaluate

@@ -179,7 +179,7 @@ def test_godette_cloned_jaw_open_parts_her_decal_lips(godette):
 def test_ict_lashes_follow_the_closing_lids(ict_character, source):
     """ICT's lashes (and tear film) are pieces of their own lying on the lids: they now move with the skin under
     them (on main they stayed, and the closing lid passed through the upper lashes)."""
-    from facepuppet.runtime.channels import canonical
+    from facepuppet.runtime.mapping.channels import canonical
 
     from facepuppet.offline.kpls.targets import stylise
     from facepuppet.offline.perfect_sync.commands import perfect_sync
@@ -506,7 +506,7 @@ def test_a_decal_eye_without_look_expressions_slides_its_iris_inside_the_outline
 
 def _take_weights(t: float) -> dict:
     """The kit's Live Link Face take's ARKit weights at its frame nearest ``t`` seconds (canonical keys)."""
-    from facepuppet.runtime.channels import canonical
+    from facepuppet.runtime.mapping.channels import canonical
     from facepuppet.runtime.recording.replay_source import open_recording
 
     frames = open_recording(need_shared("tracker", "livelinkface_myslate_3.csv"))

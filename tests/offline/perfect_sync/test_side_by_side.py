@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from facepuppet.runtime.channels import canonical
+from facepuppet.runtime.mapping.channels import canonical
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.render.images import LABEL_HEIGHT
 

@@ -4,8 +4,8 @@ cloned on the welded surface, and a seam's copies move as one vertex."""
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character_parts import Layout
 from facepuppet.runtime.demo.head import build_demo_character
+from facepuppet.runtime.model.character_parts import Layout
 
 from facepuppet.offline.elastic.clone import mesh_character
 from facepuppet.offline.elastic.laplacian import components

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.actuation.actor import Actor
-from facepuppet.runtime.tables import TablesError
+from facepuppet.runtime.files.tables import TablesError
 
 from helpers.small_actors import K, make_actor
 

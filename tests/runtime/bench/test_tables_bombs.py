@@ -7,7 +7,7 @@ from pathlib import Path
 
 from facepuppet.runtime.cli import main
 
-CHARACTER = Path(__file__).resolve().parents[1] / "data" / "tables_v1" / "character.npz"
+CHARACTER = Path(__file__).resolve().parents[1] / "files" / "data" / "tables_v1" / "character.npz"
 
 
 def test_bench_tables_refuses_each_forgery_and_writes_json(tmp_path, capsys):

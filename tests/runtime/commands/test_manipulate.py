@@ -15,9 +15,9 @@ from PIL import Image
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.manipulation import Manipulation, ScreenView, read_script
 from facepuppet.runtime.actuation.pair import ActorPair
-from facepuppet.runtime.character import MATERIAL_KINDS, Character, sparse_deltas
 from facepuppet.runtime.commands import manipulate
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, sparse_deltas
+from facepuppet.runtime.model.geometry import vertex_normals
 
 GRID = 21
 CENTRES = [(-3.0, -4.0), (3.0, -4.0), (0.0, 3.0), (-3.5, 4.5)]      # one local actuation around each

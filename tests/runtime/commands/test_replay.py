@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from facepuppet.runtime.character import Character, sparse_deltas
 from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.commands.replay import register
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
 from facepuppet.runtime.live.sinks import PngSink, WeightLog
+from facepuppet.runtime.model.character import Character, sparse_deltas
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.recording.session import SessionWriter

@@ -20,7 +20,7 @@ from facepuppet.runtime.recording.session import SessionWriter
 
 from helpers.file_fuzz import swap_session_header
 
-CHARACTER = Path(__file__).resolve().parents[1] / "data" / "tables_v1" / "character.npz"
+CHARACTER = Path(__file__).resolve().parents[1] / "files" / "data" / "tables_v1" / "character.npz"
 
 
 def take(path: Path) -> Path:

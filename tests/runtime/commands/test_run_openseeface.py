@@ -97,8 +97,8 @@ def test_face_id_is_only_for_openseeface(character, capsys):
 def test_the_committed_sample_decodes_to_what_its_sender_sent():
     """The sample (made by make_openseeface_sample.py with the test sender) read back through the recording
     reader and a face-7 adapter: every packet a frame, jawOpen and the left blink as the truth file says."""
-    from facepuppet.runtime.channels import ARKIT_NAMES
     from facepuppet.runtime.inputs.openseeface import OpenSeeFaceAdapter
+    from facepuppet.runtime.mapping.channels import ARKIT_NAMES
     from facepuppet.runtime.recording.ticked_source import read_live_recording
 
     truth = json.loads(TRUTH.read_text())

@@ -125,7 +125,7 @@ def test_a_recording_made_with_a_profile_and_a_live_change_replays_to_the_same_w
 def test_a_mapping_changed_mid_run_maps_from_then_on_and_replays_to_the_same_weights(tmp_path):
     """The panel's "drives" list hands over a [mapping] (jawOpen onto the sphere's puff): the run maps with it
     from the next tick, the recording keeps the change, and its replay draws the same weights."""
-    from facepuppet.runtime.expressions import MappingTarget
+    from facepuppet.runtime.mapping.expressions import MappingTarget
 
     char = sphere_character().save(tmp_path / "sphere.npz")
     config = tmp_path / "plain.toml"

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.demo import head_parts as parts
 from facepuppet.runtime.demo.head import build_demo_character
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.geometry import vertex_normals
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.demo.performance import DEMO_CHANNELS, demo_curves, demo_frames
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 
 @pytest.fixture(scope="module")

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.elastic.model import ElasticModel
-from facepuppet.runtime.geometry import vertex_normals
-from facepuppet.runtime.tables import TablesError
+from facepuppet.runtime.files.tables import TablesError
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from helpers.elastic_models import random_model
 from helpers.small_characters import sphere_character

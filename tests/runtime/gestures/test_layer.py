@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
+from facepuppet.runtime.files.tables import save_tables
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.gestures.candidates import intensity_bin
 from facepuppet.runtime.gestures.layer import GestureLayer
 from facepuppet.runtime.gestures.synth import RECENT_PENALTY, GestureSynth
 from facepuppet.runtime.gestures.tables import load_gesture_db
-from facepuppet.runtime.tables import save_tables
 
 from helpers.gesture_dbs import small_db
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from facepuppet.runtime.files.tables import TablesError, save_tables
 from facepuppet.runtime.gestures.tables import load_gesture_db
-from facepuppet.runtime.tables import TablesError, save_tables
 
 
 def test_loading_refuses_a_table_with_bad_take_indices(tmp_path, db):

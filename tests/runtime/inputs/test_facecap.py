@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.facecap import FACECAP_ORDER, FaceCapAdapter
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 from helpers.osc_helpers import bundle, counts, msg
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 
-from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.faceosc import RESET_SPANS, SPANS, TAU_ACTIVE, FaceOscAdapter
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 from helpers.osc_helpers import counts, msg
 

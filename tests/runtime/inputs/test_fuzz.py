@@ -21,11 +21,11 @@ import numpy as np
 import pytest
 from pythonosc.osc_packet import OscPacket
 
-from facepuppet.runtime.channels import ARKIT_NAMES, pascal
 from facepuppet.runtime.inputs.kinds import INPUT_KINDS, make_adapter
 from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.osc import UNSUPPORTED, decode
 from facepuppet.runtime.inputs.udp import UdpSource
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, pascal
 
 from helpers.openseeface_sender import osf_record
 from helpers.osc_helpers import bundle, msg

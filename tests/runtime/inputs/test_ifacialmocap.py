@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.ifacialmocap import MAX_PACKET, IFacialMocapAdapter
 from facepuppet.runtime.inputs.kinds import INPUT_KINDS, default_port
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 from helpers.phone_senders import ARKIT_52, IFM_START, ifm_frame, ifm_name
 

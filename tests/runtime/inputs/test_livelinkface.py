@@ -8,9 +8,9 @@ import struct
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.livelinkface import MAX_PACKET, LiveLinkFaceAdapter, encode_llf_packet
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 from helpers.osc_helpers import counts
 

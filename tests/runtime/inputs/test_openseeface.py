@@ -12,9 +12,9 @@ import struct
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.kinds import default_port, make_adapter
 from facepuppet.runtime.inputs.openseeface import MAX_FACES, RECORD_SIZE, OpenSeeFaceAdapter, encode_record
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 from helpers.openseeface_sender import FEATURE_ORDER, REST_QUATERNION, SIZE, float_offsets, osf_record
 from helpers.osc_helpers import counts

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.kinds import make_adapter
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.recording.session import read_session
 

@@ -10,11 +10,11 @@ import time
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.kinds import INPUT_KINDS, make_adapter
 from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.udp import UdpSource, bind_udp, enable_kernel_stamps, receive
 from facepuppet.runtime.inputs.vmc import VmcAdapter
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 from helpers.osc_helpers import vmc_frame
 from helpers.udp_helpers import poll_frame, wait_for

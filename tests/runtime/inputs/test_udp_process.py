@@ -12,13 +12,13 @@ import time
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.kinds import make_adapter
 from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
 from facepuppet.runtime.inputs.markers import FRAME, LAYOUT
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 from helpers.osc_helpers import bundle, msg, osc, vmc_frame
 from helpers.udp_helpers import poll_frame, wait_for

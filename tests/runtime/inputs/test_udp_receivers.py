@@ -8,12 +8,12 @@ import socket
 
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter, encode_llf_packet
 from facepuppet.runtime.inputs.osc import CALIBRATE_ADDRESS
 from facepuppet.runtime.inputs.udp import UdpSource, normalise_host
 from facepuppet.runtime.inputs.udp_process import UdpProcessSource
 from facepuppet.runtime.inputs.vmc import VmcAdapter
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 from helpers.osc_helpers import bundle, msg, osc, vmc_frame
 from helpers.udp_helpers import poll_frame, wait_for

@@ -8,8 +8,8 @@ import struct
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.vmc import PRESETS, VmcAdapter
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 from helpers.osc_helpers import bundle, counts, msg
 

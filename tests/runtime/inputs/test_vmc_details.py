@@ -14,8 +14,8 @@ import struct
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.inputs.vmc import MAX_TRACKERS, VmcAdapter
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 
 from helpers.osc_helpers import counts
 

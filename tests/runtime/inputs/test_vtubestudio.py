@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.geometry import euler_to_quat
 from facepuppet.runtime.inputs.kinds import INPUT_KINDS, default_port
 from facepuppet.runtime.inputs.vtubestudio import MAX_MESSAGE, VTubeStudioAdapter, vts_request
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.geometry import euler_to_quat
 
 from helpers.phone_senders import ARKIT_52, vts_frame
 

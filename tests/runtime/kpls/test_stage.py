@@ -7,9 +7,9 @@ import argparse
 import numpy as np
 import pytest
 
+from facepuppet.runtime.files.tables import TablesError, load_tables, save_tables
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.kpls.stage import KplsRetarget
-from facepuppet.runtime.tables import TablesError, load_tables, save_tables
 
 from helpers.kpls_stages import random_stage
 from helpers.logs import logged

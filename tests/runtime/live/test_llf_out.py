@@ -13,11 +13,11 @@ import threading
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES, pascal
 from facepuppet.runtime.cli import main
-from facepuppet.runtime.geometry import euler_to_quat, quat_to_euler, quat_to_matrix
 from facepuppet.runtime.inputs.livelinkface import LiveLinkFaceAdapter
 from facepuppet.runtime.live.llf_out import EYE_PITCH_MAX, EYE_YAW_MAX, LlfSender, device_id
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, pascal
+from facepuppet.runtime.model.geometry import euler_to_quat, quat_to_euler, quat_to_matrix
 
 from helpers.logs import said
 from helpers.small_characters import sphere_character

@@ -85,7 +85,7 @@ def test_channels_mapped_by_name_and_report_logged_once_per_channel_tuple():
 
 
 def test_a_character_with_expressions_is_mapped_through_them_and_the_report_names_the_routes():
-    from facepuppet.runtime.expressions import make_drive
+    from facepuppet.runtime.mapping.expressions import make_drive
 
     from helpers.vrm_characters import preset_character
 

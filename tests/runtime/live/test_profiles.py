@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from facepuppet.runtime.expressions import MappingSettings, MappingTarget
 from facepuppet.runtime.live.config import ChannelSettings, FilterSettings, LiveConfig, LiveConfigError, Neutral
 from facepuppet.runtime.live.profiles import Profile, config_to_toml, parse_config_text, profile_path, profiles_dir
+from facepuppet.runtime.mapping.expressions import MappingSettings, MappingTarget
 
 
 def tuned() -> LiveConfig:

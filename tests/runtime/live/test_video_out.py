@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.cli import main
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.live.video_out import AUDIO_RATE, VideoError, VideoSink, plan_video
-from facepuppet.runtime.progress import Progress
 
 from helpers.logs import said
 from helpers.small_characters import sphere_character
@@ -286,7 +286,7 @@ def test_audio_file_without_video_is_refused_in_replay_and_demo(character, tmp_p
 
 def llf_take(path, seconds: float = 1.0) -> None:
     """A Live Link Face CSV take: the jaw opens and closes over ``seconds`` (60 rows a second)."""
-    from facepuppet.runtime.channels import ARKIT_NAMES, pascal
+    from facepuppet.runtime.mapping.channels import ARKIT_NAMES, pascal
 
     rows = ["Timecode,BlendShapeCount," + ",".join(pascal(n) for n in ARKIT_NAMES)]
     for i in range(int(seconds * 60)):

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from pythonosc.osc_bundle import OscBundle
 
-from facepuppet.runtime.channels import ARKIT_NAMES
 from facepuppet.runtime.commands.options import parse_host_port
 from facepuppet.runtime.live.vmc_out import MAX_BUNDLE, VmcSender
-from facepuppet.runtime.vrm_names import VRM0_PRESETS
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.mapping.vrm_names import VRM0_PRESETS
 
 from helpers.udp_helpers import free_udp_port
 

@@ -9,7 +9,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import canonical
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.config import load_live_config
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
@@ -17,6 +16,7 @@ from facepuppet.runtime.live.mapper import Mapper, follow_mapping
 from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.live.profiles import Profile, config_to_toml, parse_config_text, read_made_for
 from facepuppet.runtime.live.stages import Chain
+from facepuppet.runtime.mapping.channels import canonical
 from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.render.renderer import FaceRenderer
 

@@ -10,11 +10,11 @@ import math
 import numpy as np
 import pytest
 
-from facepuppet.runtime.expressions import ExpressionMap, make_drive
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
 from facepuppet.runtime.live.mapper import Mapper
 from facepuppet.runtime.live.stages import Chain
+from facepuppet.runtime.mapping.expressions import ExpressionMap, make_drive
 from facepuppet.runtime.recording.replay_source import ReplaySource
 from facepuppet.runtime.render.renderer import FaceRenderer
 

@@ -7,7 +7,7 @@ import csv
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ChannelMap
+from facepuppet.runtime.mapping.channels import ChannelMap
 from facepuppet.runtime.recording.livelinkface_csv import parse_timecode, read_llf_csv
 from facepuppet.runtime.recording.replay_source import open_recording
 

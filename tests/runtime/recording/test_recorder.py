@@ -201,8 +201,8 @@ def test_a_replay_finds_the_calibrate_requests_the_live_receivers_counted_not_th
     """The recording's calibrate requests are the decoded OSC messages to the address, as the receivers count
     them: a Live Link Face device whose name carries the address's bytes is a frame, not a request (a byte
     search took it for one, so a replay calibrated where the run did not)."""
-    from facepuppet.runtime.channels import ARKIT_NAMES
     from facepuppet.runtime.inputs.livelinkface import encode_llf_packet
+    from facepuppet.runtime.mapping.channels import ARKIT_NAMES
     from facepuppet.runtime.recording.ticked_source import read_live_recording
 
     path = tmp_path / "take.fps"

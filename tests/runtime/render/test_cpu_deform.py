@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.geometry import vertex_normals
+from facepuppet.runtime.model.geometry import vertex_normals
 from facepuppet.runtime.render.cpu_deform import CpuDeformer
 
 from helpers.small_characters import sphere_character

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character import Character
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.renderer import FaceRenderer
 
 pytestmark = pytest.mark.gl

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character_parts import CLAMP_TO_EDGE, MIRRORED_REPEAT, NEAREST, REPEAT
+from facepuppet.runtime.model.character_parts import CLAMP_TO_EDGE, MIRRORED_REPEAT, NEAREST, REPEAT
 from facepuppet.runtime.render.parts_path import HeadPose, draw_groups, uv_matrix
 from facepuppet.runtime.render.renderer import FaceRenderer
 
@@ -201,7 +201,7 @@ def test_head_pose_matches_the_skeletons_pose_matrices_and_splits_into_neck_and_
     d = hp.matrices(q)
     np.testing.assert_allclose(d[:2], np.tile(np.eye(4), (2, 1, 1)), atol=1e-6)   # hips, spine stay
     # the head ends turned by the whole rotation, the neck by 30 % of it
-    from facepuppet.runtime.geometry import quat_to_matrix
+    from facepuppet.runtime.model.geometry import quat_to_matrix
 
     np.testing.assert_allclose(d[3, :3, :3], quat_to_matrix(q), atol=1e-5)
     angle = lambda m: np.degrees(np.arccos((np.trace(m[:3, :3]) - 1) / 2))  # noqa: E731
@@ -231,7 +231,7 @@ def edge_values(image):
 
 def test_msaa_gives_intermediate_values_along_an_edge_that_no_msaa_does_not(egl_ctx):
     # a white unlit quad turned 20 degrees in the image plane: slanted edges over a black background
-    from facepuppet.runtime.geometry import quat_to_matrix
+    from facepuppet.runtime.model.geometry import quat_to_matrix
 
     v, t, uv = quad()
     turn = quat_to_matrix([0, 0, np.sin(np.radians(10)), np.cos(np.radians(10))])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.geometry import euler_to_quat
+from facepuppet.runtime.model.geometry import euler_to_quat
 from facepuppet.runtime.render.gl_context import GLUnavailable, create_context
 from facepuppet.runtime.render.renderer import FaceRenderer, realistic_weights
 
@@ -241,7 +241,7 @@ def test_face_framing_of_a_character_nothing_moves_frames_it_whole(egl_ctx, sphe
 def lash_card_character():
     """A skin quad, an eye quad in front of its middle, and a lash card from the eye's lower edge down over
     the skin (the ICT lower-lash layout): vertex rows at 0, 0.1, ..., 0.4 below the eye edge."""
-    from facepuppet.runtime.character import MATERIAL_KINDS, Character
+    from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
 
     skin = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]
     eye = [[-0.4, 0.0, 0.02], [0.4, 0.0, 0.02], [0.4, 0.3, 0.02], [-0.4, 0.3, 0.02]]
@@ -269,7 +269,7 @@ def test_lash_cards_fade_from_the_lid_margin_instead_of_a_grey_band(egl_ctx):
     every eye. Its opacity now falls from the eye's edge to the tips (renderer.vertex_opacity)."""
     import dataclasses
 
-    from facepuppet.runtime.character import MATERIAL_KINDS
+    from facepuppet.runtime.model.character import MATERIAL_KINDS
     from facepuppet.runtime.render.layers import vertex_opacity
 
     c = lash_card_character()
@@ -291,7 +291,7 @@ def test_lash_cards_fade_from_the_lid_margin_instead_of_a_grey_band(egl_ctx):
 @pytest.mark.data
 def test_ict_eye_layers_are_drawn_as_thin_blended_layers(egl_ctx, ict_character):
     """The re-imported ICT head: the eye occlusion and the films are drawn (not hidden) and see-through."""
-    from facepuppet.runtime.character import MATERIAL_KINDS
+    from facepuppet.runtime.model.character import MATERIAL_KINDS
     from facepuppet.runtime.render.face_mesh import visible_triangles
     from facepuppet.runtime.render.layers import vertex_opacity
 

@@ -11,9 +11,9 @@ import pytest
 from pythonosc.osc_bundle import OscBundle
 from pythonosc.osc_message import OscMessage
 
-from facepuppet.runtime.channels import ARKIT_NAMES, pascal
 from facepuppet.runtime.cli import build_parser, main
 from facepuppet.runtime.commands import replay, run
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, pascal
 
 from helpers.small_characters import sphere_character
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from facepuppet.runtime.geometry import smoothstep
+from facepuppet.runtime.model.geometry import smoothstep
 
 
 def smoothstep_by_cases(e0: float, e1: float, x: float) -> float:

@@ -57,7 +57,9 @@ from typing import Any
 import numpy as np
 
 from facepuppet.runtime.errors import FacepuppetError
-from facepuppet.runtime.outputs import atomic_path
+from facepuppet.runtime.files.outputs import atomic_path
+
+from facepuppet import __version__
 
 FORMAT_NAME = "facepuppet-tables"
 SCHEMA_VERSION = 1  # the schema version of a kind that declares none
@@ -384,7 +386,6 @@ def save_tables(
     temporary file beside it, then renamed), so a crash never leaves half a
     tables file behind.
     """
-    from facepuppet import __version__
 
     path = Path(path)
     schema = schema_of(kind, path)

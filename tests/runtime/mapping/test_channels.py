@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import (
+from facepuppet.runtime.mapping.channels import (
     ARKIT_NAMES,
     CHANNEL_REGIONS,
     ChannelMap,

@@ -1,7 +1,7 @@
 """The optional parts of a character that a glTF / VRM avatar brings: skeleton, look, expressions, layout.
 
 A character imported from OBJ has none of them (every field ``None`` on
-:class:`~facepuppet.runtime.character.Character`) and is drawn as before. A
+:class:`~facepuppet.runtime.model.character.Character`) and is drawn as before. A
 character imported from glTF 2.0 / GLB / VRM has some or all:
 
 * :class:`Skeleton`: the node hierarchy in its rest pose and, per vertex, up
@@ -41,8 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facepuppet.runtime.geometry import quat_to_matrix
-from facepuppet.runtime.tables import Section, TablesError
+from facepuppet.runtime.files.tables import Section, TablesError
+from facepuppet.runtime.model.geometry import quat_to_matrix
 
 # -- codes ----------------------------------------------------------------
 ALPHA_MODES = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
@@ -274,7 +274,7 @@ class Expressions:
     Attributes
     ----------
     names : tuple of n_expressions str, the channel names (a preset's VRM 0.x spelling from
-        :data:`~facepuppet.runtime.vrm_names.VRM0_PRESETS`, e.g. ``Blink_L``; a custom one's own name)
+        :data:`~facepuppet.runtime.mapping.vrm_names.VRM0_PRESETS`, e.g. ``Blink_L``; a custom one's own name)
     presets : tuple of n_expressions str, the VRM 0.x preset spelling, "" for a custom expression
     offsets : ndarray (n_expressions + 1,) int64
     bind_shape : ndarray (n_binds,) uint32, character shape index

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character import Character, moving_vertices, sparse_deltas
+from facepuppet.runtime.model.character import Character, moving_vertices, sparse_deltas
 
 from helpers.kpls_characters import bump_character
 

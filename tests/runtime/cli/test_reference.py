@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from facepuppet.runtime import cli, cli_reference
+from facepuppet.runtime import cli
 from facepuppet.runtime.bench.registry import bench_parser, benches
+from facepuppet.runtime.cli import reference as cli_reference
 
 
 def _every_parser() -> list[argparse.ArgumentParser]:

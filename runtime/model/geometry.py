@@ -131,6 +131,14 @@ def smoothstep(e0: float, e1: float, x: float | np.ndarray) -> float | np.ndarra
     return t * t * (3.0 - 2.0 * t)
 
 
+def nlerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+    """Normalised linear interpolation of quaternions (x, y, z, w), shortest way round."""
+    if float(np.dot(a, b)) < 0:
+        b = -b
+    q = (1.0 - s) * a + s * b
+    return q / max(float(np.linalg.norm(q)), 1e-12)
+
+
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a·b of quaternions (x, y, z, w)."""
     ax, ay, az, aw = a

@@ -21,17 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.character_parts import (
-    PART_CHANNELS,
-    PART_SECTIONS,
-    Expressions,
-    Layout,
-    Look,
-    Skeleton,
-    check_normals,
-)
-from facepuppet.runtime.geometry import vertex_normals
-from facepuppet.runtime.tables import (
+from facepuppet.runtime.files.tables import (
     Section,
     TableSchema,
     TablesError,
@@ -41,6 +31,16 @@ from facepuppet.runtime.tables import (
     save_tables,
     validate,
 )
+from facepuppet.runtime.model.character_parts import (
+    PART_CHANNELS,
+    PART_SECTIONS,
+    Expressions,
+    Layout,
+    Look,
+    Skeleton,
+    check_normals,
+)
+from facepuppet.runtime.model.geometry import vertex_normals
 
 # Material kinds the shader knows (column 2 of ``material_params``). "occlusion" (a dark soft shadow over
 # the eye, fading from the lids) and "film" (a thin wet see-through layer: lacrimal fluid, eye blend) are
@@ -102,7 +102,7 @@ class Character:
     metadata : dict, settings/metrics/input hash carried into the manifest; ``settings["source"]``
         says where a glTF/VRM character came from (format, VRM meta, the extension JSON kept for export)
     skeleton, look, expressions, layout : the optional parts a glTF / VRM avatar brings
-        (:mod:`facepuppet.runtime.character_parts`); None for an OBJ rig
+        (:mod:`facepuppet.runtime.model.character_parts`); None for an OBJ rig
     normals : ndarray of shape (n_vertices, 3), float32, unit, the file's rest normals, or None (computed
         from the triangles, :meth:`rest_normals`)
     """

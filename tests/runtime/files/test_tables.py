@@ -10,8 +10,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character import CHARACTER_SCHEMA, Character, sparse_deltas
-from facepuppet.runtime.tables import (
+from facepuppet.runtime.files.tables import (
     Section,
     TableSchema,
     TablesError,
@@ -23,6 +22,7 @@ from facepuppet.runtime.tables import (
     save_tables,
     validate,
 )
+from facepuppet.runtime.model.character import CHARACTER_SCHEMA, Character, sparse_deltas
 
 
 def tiny_character() -> Character:

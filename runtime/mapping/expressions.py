@@ -2,10 +2,10 @@
 
 A character's drivable channels are its shapes (morph targets) and, when it
 came from a VRM avatar, its expressions
-(:class:`~facepuppet.runtime.character_parts.Expressions`: each binds several
+(:class:`~facepuppet.runtime.model.character_parts.Expressions`: each binds several
 shapes at bind weights 0..1). A character without expressions, and without a
 ``[mapping]`` in ``--config``, is driven as before by a plain
-:class:`~facepuppet.runtime.channels.ChannelMap`. Otherwise
+:class:`~facepuppet.runtime.mapping.channels.ChannelMap`. Otherwise
 :class:`ExpressionDrive` builds, once per channel layout, an
 :class:`ExpressionMap` that routes each input channel by the first rule that
 applies:
@@ -18,27 +18,27 @@ applies:
 2. **expression**: a channel naming one of the avatar's expressions drives
    that expression. A preset is named in any VRM spelling, any case: VRM 0.x
    (``A``, ``a``, ``Blink_L``, ``blink_l``, ``Joy``) or VRM 1.0 (``aa``,
-   ``blinkLeft``, ``happy``; :data:`~facepuppet.runtime.vrm_names.VRM1_FROM_VRM0`);
+   ``blinkLeft``, ``happy``; :data:`~facepuppet.runtime.mapping.vrm_names.VRM1_FROM_VRM0`);
    a custom expression by its own name, any case. This comes before the
    morphs on purpose: a VRM preset name means the expression (VSeeFace applies
-   the clip), and :func:`~facepuppet.runtime.channels.canonical` would
+   the clip), and :func:`~facepuppet.runtime.mapping.channels.canonical` would
    otherwise fold ``Blink_L`` and ``blinkLeft`` onto a morph named
    ``blink_left``, skipping the expression's other binds. Several channels
    naming one expression (``Joy`` and ``happy`` from a VRM 1.0 sender) combine
    by their maximum.
 3. **morph**: a channel matched onto shapes by the existing explicit mapping
-   (:class:`~facepuppet.runtime.channels.ChannelMap`: ARKit names straight onto
+   (:class:`~facepuppet.runtime.mapping.channels.ChannelMap`: ARKit names straight onto
    ARKit-named morphs in any case and ``Left``/``_L`` style — perfect sync —
    splitting and averaging sides as there).
 4. **default preset mapping**: an ARKit channel left over (the avatar has no
    ARKit-named morph for it) feeds the VRM 0.x presets the avatar has by the
-   documented default of :mod:`facepuppet.runtime.vrm_names`
-   (:data:`~facepuppet.runtime.vrm_names.VRM0_FROM_ARKIT`: blinks from
+   documented default of :mod:`facepuppet.runtime.mapping.vrm_names`
+   (:data:`~facepuppet.runtime.mapping.vrm_names.VRM0_FROM_ARKIT`: blinks from
    eyeBlink*, A/I/U/E/O from the jaw and mouth shapes, Look* from eyeLook*),
    each preset's sum clipped to [0, 1]. The emotion presets (Joy, Angry,
    Sorrow, Fun) are left out unless ``[mapping] emotions = true``. The blinks:
    an avatar with ``Blink`` and ``Blink_L``/``Blink_R`` gets the split of
-   :func:`~facepuppet.runtime.vrm_names.vrm0_from_arkit` (``Blink = min(L, R)``,
+   :func:`~facepuppet.runtime.mapping.vrm_names.vrm0_from_arkit` (``Blink = min(L, R)``,
    ``Blink_L = L - Blink``, ``Blink_R = R - Blink``, so each eye closes as
    much as ARKit says); one with only ``Blink`` gets the mean of both eyes; one
    with only the sides gets each eye on its side. When an expression is both
@@ -95,13 +95,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES, ChannelMap, canonical
-from facepuppet.runtime.character_parts import OVERRIDES, Expressions
 from facepuppet.runtime.errors import FacepuppetError
-from facepuppet.runtime.vrm_names import PRESET_MATRIX, VRM0_PRESETS, VRM1_FROM_VRM0
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, ChannelMap, canonical
+from facepuppet.runtime.mapping.vrm_names import PRESET_MATRIX, VRM0_PRESETS, VRM1_FROM_VRM0
+from facepuppet.runtime.model.character_parts import OVERRIDES, Expressions
 
 if TYPE_CHECKING:
-    from facepuppet.runtime.character import Character
+    from facepuppet.runtime.model.character import Character
 
 #: The emotion presets the default mapping leaves out unless ``[mapping] emotions = true``.
 EMOTIONS: tuple[str, ...] = ("Joy", "Angry", "Sorrow", "Fun")
@@ -266,7 +266,7 @@ class ExpressionDrive:
 class ExpressionMap:
     """Source channel values -> the character's shape weights, through expressions (one channel layout).
 
-    Same use as :class:`~facepuppet.runtime.channels.ChannelMap`: :meth:`apply`, :meth:`report`,
+    Same use as :class:`~facepuppet.runtime.mapping.channels.ChannelMap`: :meth:`apply`, :meth:`report`,
     ``source_names``, ``target_names``, ``undriven_target``, ``unmatched_source``.
 
     Attributes

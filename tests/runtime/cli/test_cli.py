@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 import facepuppet.runtime
-from facepuppet.runtime import cli
 from facepuppet.runtime.bench import registry as bench_registry
+from facepuppet.runtime.cli import command as cli
 from facepuppet.runtime.errors import FacepuppetError, InputFileError, UsageError
 from facepuppet.runtime.inputs.counted import Dropped, counted
 from facepuppet.runtime.inputs.ifacialmocap import IFacialMocapAdapter
@@ -61,7 +61,7 @@ def test_rendering_commands_without_egl_exit_3_with_one_line(tmp_path, command):
     import sys
     from pathlib import Path
 
-    character = Path(__file__).parent / "data" / "tables_v1" / "character.npz"
+    character = Path(__file__).resolve().parents[1] / "files" / "data" / "tables_v1" / "character.npz"
     argv = [a.format(c=character, tmp=tmp_path) for a in command]
     env = dict(os.environ, __EGL_VENDOR_LIBRARY_FILENAMES=str(tmp_path / "none.json"), DISPLAY="")
     done = subprocess.run([sys.executable, "-m", "facepuppet", *argv], capture_output=True, text=True, env=env,
@@ -72,7 +72,7 @@ def test_rendering_commands_without_egl_exit_3_with_one_line(tmp_path, command):
 
 # -- refusals and bugs --------------------------------------------------------------------------------------
 
-CHARACTER = Path(__file__).parent / "data" / "tables_v1" / "character.npz"
+CHARACTER = Path(__file__).resolve().parents[1] / "files" / "data" / "tables_v1" / "character.npz"
 
 
 def _with_func(monkeypatch, command: str, func) -> None:
@@ -122,7 +122,7 @@ def test_a_bug_is_not_a_refusal_its_traceback_shows(capsys, monkeypatch, tmp_pat
 def test_a_bug_in_the_command_line_shows_a_traceback_and_exits_1(tmp_path):
     """The whole path, as a user meets it: ``python -m facepuppet`` on a bug prints the traceback."""
     script = ("import sys\n"
-              "from facepuppet.runtime import cli\n"
+              "from facepuppet.runtime.cli import command as cli\n"
               "parser = cli.build_parser()\n"
               "def broken(args):\n"
               "    return 1 / 0\n"
@@ -196,7 +196,7 @@ def _exception_classes():
 
 def test_every_exception_class_of_the_project_is_a_facepuppet_error():
     found = _exception_classes()
-    assert ("facepuppet.runtime.tables", "TablesError") in found and len(found) > 15
+    assert ("facepuppet.runtime.files.tables", "TablesError") in found and len(found) > 15
     assert CONTROL_FLOW <= set(found)
     outside = [f"{module}.{name}" for module, name in found if (module, name) not in CONTROL_FLOW
                and not issubclass(getattr(importlib.import_module(module), name), FacepuppetError)]

@@ -1,6 +1,6 @@
 """Bounded work before refusal: forged tables files that inflate, pad or nest are refused early.
 
-Built from the small real files in ``tests/runtime/data/tables_v1`` (written by
+Built from the small real files in ``tests/runtime/files/data/tables_v1`` (written by
 the format's own first code). The bombs check that refusal comes before the
 decompression, by tracemalloc's peak (every NumPy array and ``bytes`` object
 the loader makes is traced), not by wall-clock time.
@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from facepuppet.runtime import tables as tables_mod
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.bench.tables_bombs import inflating_section, padded_manifest, read_manifest, with_manifest
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.tables import TablesError, load_tables
+from facepuppet.runtime.files import tables as tables_mod
+from facepuppet.runtime.files.tables import TablesError, load_tables
+from facepuppet.runtime.model.character import Character
 
 V1 = Path(__file__).parent / "data" / "tables_v1"
 BOMB_BYTES = 96 << 20  # the tests' bomb: ~100 kB on disk, 96 MiB inflated

@@ -2,7 +2,7 @@
 
 They were written once, before tables.py had its public schema API, and are kept as they came out:
 tests/runtime/test_tables_compat.py loads them with today's code. Run from the repository root
-(``python tests/runtime/data/tables_v1/make.py``) only to make a new folder for a new schema version.
+(``python tests/runtime/files/data/tables_v1/make.py``) only to make a new folder for a new schema version.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parents[2]))  # tests/, for the helpers
+sys.path.insert(0, str(HERE.parents[3]))  # tests/, for the helpers
 
 from runtime.test_tables import tiny_character  # noqa: E402
 

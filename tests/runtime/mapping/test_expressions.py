@@ -1,6 +1,6 @@
 """Channels onto a VRM-like character: morphs, expressions by name, the default ARKit -> VRM preset mapping.
 
-Expected weights are worked out by hand in each test from the VRM0_FROM_ARKIT table (runtime/vrm_names.py
+Expected weights are worked out by hand in each test from the VRM0_FROM_ARKIT table (runtime/mapping/vrm_names.py
 module doc), the bind weights of tests/helpers/vrm_characters.py and the VRM 1.0 expression rules.
 """
 
@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES, ChannelMap
-from facepuppet.runtime.expressions import ExpressionDrive, MappingError, make_drive, preset_of
 from facepuppet.runtime.live.config import LiveConfigError, load_live_config, parse_live_config
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, ChannelMap
+from facepuppet.runtime.mapping.expressions import ExpressionDrive, MappingError, make_drive, preset_of
 
 from helpers.small_characters import sphere_character
 from helpers.vrm_characters import PRESET_EXPRESSIONS, preset_character, sync_character

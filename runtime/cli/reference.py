@@ -2,7 +2,7 @@
 
 The hand-written docs show what a user does; this page lists every command, sub-benchmark and option
 with its help, so that no option is documented twice and none is missing. ``make docs`` regenerates it
-(``python -m facepuppet.runtime.cli_reference docs/commands.md``) and ``tests/test_readme.py`` fails
+(``python -m facepuppet.runtime.cli.reference docs/commands.md``) and ``tests/test_readme.py`` fails
 when the committed page is not what this module writes now.
 
 The text is built here rather than by argparse's ``HelpFormatter``, whose layout depends on the
@@ -18,12 +18,12 @@ from pathlib import Path
 
 from facepuppet.runtime.bench.registry import bench_parser, benches
 from facepuppet.runtime.cli import build_parser
-from facepuppet.runtime.outputs import write_atomic
+from facepuppet.runtime.files.outputs import write_atomic
 
 HEADER = """\
 # Commands reference
 
-<!-- Written by `make docs` from the argparse definitions (runtime/cli_reference.py): do not edit. -->
+<!-- Written by `make docs` from the argparse definitions (runtime/cli/reference.py): do not edit. -->
 
 Every command of `facepuppet`, in the order `facepuppet --help` lists them, with each option's help.
 `python -m facepuppet` is the same command. What the commands are for, with examples, is in the other
@@ -188,8 +188,8 @@ def anchor(heading: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m facepuppet.runtime.cli_reference [PATH]``: write the page to PATH, or to stdout."""
-    cli = argparse.ArgumentParser(prog="python -m facepuppet.runtime.cli_reference",
+    """``python -m facepuppet.runtime.cli.reference [PATH]``: write the page to PATH, or to stdout."""
+    cli = argparse.ArgumentParser(prog="python -m facepuppet.runtime.cli.reference",
                                   description="Write the commands reference (Markdown) from the argparse definitions.")
     cli.add_argument("path", nargs="?", type=Path, help="file to write (default: stdout)")
     args = cli.parse_args(argv)

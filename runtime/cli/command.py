@@ -16,9 +16,11 @@ import traceback
 from importlib.metadata import entry_points
 
 from facepuppet.runtime.errors import FacepuppetError
-from facepuppet.runtime.outputs import add_output_policy, check_outputs
+from facepuppet.runtime.files.outputs import add_output_policy, check_outputs
 from facepuppet.runtime.render.blas_threads import BlasThreads
 from facepuppet.runtime.render.gl_context import GLUnavailable  # building the parser imports GL anyway
+
+from facepuppet import __version__
 
 # Runtime modules that add subcommands, in the order --help lists them. Each
 # must exist and import: a missing one is an error, never a silently dropped command.
@@ -33,7 +35,6 @@ _COMMAND_MODULES = (
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from facepuppet import __version__
 
     parser = argparse.ArgumentParser(
         prog="facepuppet",
@@ -45,7 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
         importlib.import_module(name).register(sub)
     for ep in entry_points(group="facepuppet.commands"):
         ep.load()(sub)
-    for command in sub.choices.values():   # one policy for every command's outputs (runtime/outputs.py)
+    for command in sub.choices.values():   # one policy for every command's outputs (runtime/files/outputs.py)
         add_output_policy(command)
     return parser
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facepuppet.runtime.channels import ARKIT_NAMES
-from facepuppet.runtime.vrm_names import (
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.mapping.vrm_names import (
     PERFECT_SYNC_NAMES,
     VRM0_PRESETS,
     VRM1_FROM_VRM0,

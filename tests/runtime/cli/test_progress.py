@@ -2,7 +2,7 @@
 
 import io
 
-from facepuppet.runtime.progress import Progress
+from facepuppet.runtime.cli.progress import Progress
 
 
 class Clock:

@@ -7,9 +7,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from facepuppet.runtime.character import Character
-from facepuppet.runtime.character_parts import Skeleton
-from facepuppet.runtime.tables import TablesError
+from facepuppet.runtime.files.tables import TablesError
+from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.character_parts import Skeleton
 
 from helpers.small_characters import parts_character
 

@@ -14,11 +14,11 @@ import pytest
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
-from facepuppet.runtime.character import Character
 from facepuppet.runtime.elastic.model import ElasticModel
+from facepuppet.runtime.files.tables import load_tables, save_tables, schema_of
 from facepuppet.runtime.gestures.tables import load_gesture_db
 from facepuppet.runtime.kpls.stage import KplsRetarget
-from facepuppet.runtime.tables import load_tables, save_tables, schema_of
+from facepuppet.runtime.model.character import Character
 
 V1 = Path(__file__).parent / "data" / "tables_v1"
 CLASSES = {"character": Character, "actor": Actor, "actor_pair": ActorPair, "elastic": ElasticModel,

@@ -4,7 +4,7 @@ One table for everything that speaks to or reads a VRM avatar: ``--vmc-out``
 (:mod:`facepuppet.runtime.live.vmc_out`) and the glTF/VRM import (issue 13).
 
 **Perfect sync** (PROTOCOLS.md §1): the 52 ARKit shapes of
-:data:`~facepuppet.runtime.channels.ARKIT_NAMES` spelled in PascalCase
+:data:`~facepuppet.runtime.mapping.channels.ARKIT_NAMES` spelled in PascalCase
 (``EyeBlinkLeft`` … ``TongueOut``), case-sensitive: :data:`PERFECT_SYNC_NAMES`.
 
 **Folding a rig's channels back into ARKit's 52** (:func:`fold_to_arkit`):
@@ -64,7 +64,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from facepuppet.runtime.channels import ARKIT_NAMES, canonical, pascal, split_side
+from facepuppet.runtime.mapping.channels import ARKIT_NAMES, canonical, pascal, split_side
 
 #: ARKit's 52 shapes in Apple's order, in the PascalCase of VMC perfect sync.
 PERFECT_SYNC_NAMES: tuple[str, ...] = tuple(pascal(n) for n in ARKIT_NAMES)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime import cli
-from facepuppet.runtime.outputs import OUTPUT_OPTIONS, OutputSet, atomic_path, output_actions
+from facepuppet.runtime.files.outputs import OUTPUT_OPTIONS, OutputSet, atomic_path, output_actions
 
 
 def _commands():
