@@ -22,8 +22,9 @@ from helpers import running_test
 for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
-# the module-scoped fixture ``db`` (a small synthetic gesture database) for the gesture tests
-pytest_plugins = ["helpers.gesture_dbs"]
+# the module-scoped fixture ``db`` (a small synthetic gesture database) for the gesture tests; ``udp_receiver``
+# (a loopback socket for what a run or a replay sends)
+pytest_plugins = ["helpers.gesture_dbs", "helpers.udp_helpers"]
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"

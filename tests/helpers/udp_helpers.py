@@ -1,5 +1,5 @@
-"""Shared pieces of the UDP tests: a free loopback port, a bounded wait (the ``udp_sender``
-fixture is in tests/conftest.py)."""
+"""Shared pieces of the UDP tests: a free loopback port, a bounded wait, a loopback receiver for what a run
+sends and its drain (the ``udp_sender`` fixture is in tests/conftest.py)."""
 
 from __future__ import annotations
 
@@ -33,3 +33,24 @@ def wait_for(predicate, what: str):
 def poll_frame(source):
     """The next frame ``source.latest()`` hands out."""
     return wait_for(lambda: source.latest()[0], "a frame")
+
+
+@pytest.fixture
+def udp_receiver():
+    """A UDP socket bound on 127.0.0.1 (a free port) for what a test makes facepuppet send (a fixture of
+    every test: tests/conftest.py loads this module as a plugin)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        s.settimeout(5.0)
+        yield s
+
+
+def drain(sock: socket.socket) -> list[bytes]:
+    """Every datagram waiting on ``sock`` now, in arrival order (without waiting for more)."""
+    sock.settimeout(0.0)
+    out = []
+    while True:
+        try:
+            out.append(sock.recv(65536))
+        except BlockingIOError:
+            return out

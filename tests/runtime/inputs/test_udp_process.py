@@ -273,6 +273,18 @@ def _take_all(source, last_number, check):
     return seen
 
 
+def _flood_and_check(udp_sender, kind: str, packets: list, check) -> None:
+    """Flood a process receiver of ``kind`` with ``packets`` (pausing the reader halfway, which fills the
+    channel) and ``check`` every frame taken; the child counted no internal error."""
+    with UdpProcessSource(make_adapter(kind), port=0) as source:
+        sender = _flood(udp_sender, source.address, packets, pause_at=len(packets) // 2)
+        try:
+            _take_all(source, len(packets) - 1, check)
+        finally:
+            sender.join()
+        assert source.counters["internal_error"] == 0, source.last_error
+
+
 def test_a_fast_sender_never_shows_a_frame_mixed_from_two_datagrams(udp_sender):
     """Each Live Link Face datagram gets weights, head, number and sender time of its own, all derived from the
     number; each taken frame must agree with itself whatever the sender's pace, pauses of the reader included
@@ -294,13 +306,7 @@ def test_a_fast_sender_never_shows_a_frame_mixed_from_two_datagrams(udp_sender):
         assert frame.t_sender == pytest.approx(i / 60.0) and frame.source == "livelinkface"
         assert frame.channels == ARKIT_NAMES
 
-    with UdpProcessSource(make_adapter("livelinkface"), port=0) as source:
-        sender = _flood(udp_sender, source.address, packets, pause_at=n // 2)
-        try:
-            _take_all(source, n - 1, check)
-        finally:
-            sender.join()
-        assert source.counters["internal_error"] == 0, source.last_error
+    _flood_and_check(udp_sender, "livelinkface", packets, check)
 
 
 def test_a_fast_sender_of_new_marker_layouts_never_shows_names_of_another_frame(udp_sender):
@@ -321,10 +327,4 @@ def test_a_fast_sender_of_new_marker_layouts_never_shows_names_of_another_frame(
         np.testing.assert_array_equal(frame.markers, points(i))
         assert frame.t_sender == i * 0.5 and frame.source == "markers"
 
-    with UdpProcessSource(make_adapter("markers"), port=0) as source:
-        sender = _flood(udp_sender, source.address, packets, pause_at=n // 2)
-        try:
-            _take_all(source, n - 1, check)
-        finally:
-            sender.join()
-        assert source.counters["internal_error"] == 0, source.last_error
+    _flood_and_check(udp_sender, "markers", packets, check)

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 import re
-import socket
 import struct
 import threading
 
@@ -21,7 +20,7 @@ from facepuppet.runtime.model.geometry import euler_to_quat, quat_to_euler, quat
 
 from helpers.logs import said
 from helpers.small_characters import sphere_character
-from helpers.udp_helpers import free_udp_port, wait_for
+from helpers.udp_helpers import drain, free_udp_port, wait_for
 
 
 def published_packet(values61, name: bytes, uuid: bytes, number: int, sub: float, fps: int, den: int) -> bytes:
@@ -38,24 +37,6 @@ def published_packet(values61, name: bytes, uuid: bytes, number: int, sub: float
     for v in values61:
         out += struct.pack(">f", v)
     return bytes(out)
-
-
-@pytest.fixture
-def receiver():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        s.settimeout(5.0)
-        yield s
-
-
-def drain(sock: socket.socket) -> list[bytes]:
-    sock.settimeout(0.0)
-    out = []
-    while True:
-        try:
-            out.append(sock.recv(65536))
-        except BlockingIOError:
-            return out
 
 
 def r_yxz(yaw, pitch, roll):
@@ -78,13 +59,13 @@ def test_quat_to_euler_inverts_euler_to_quat_and_reads_the_matrix_order():
     assert quat_to_euler((0.0, 0.0, 0.0, 1.0)) == (0.0, 0.0, 0.0)
 
 
-def test_packet_is_the_published_layout_byte_for_byte(receiver):
+def test_packet_is_the_published_layout_byte_for_byte(udp_receiver):
     """Rig channels named as ARKit (any spelling) go out unchanged: the packet equals one built from §5."""
     rng = np.random.default_rng(0)
     names = [pascal(n) for n in ARKIT_NAMES]  # the PascalCase of Live Link Face itself
     weights = rng.uniform(0, 1, 52).astype(np.float32)
     yaw, pitch, roll = 0.3, -0.2, 0.1
-    sender = LlfSender("127.0.0.1", receiver.getsockname()[1], names, subject="Stage Left")
+    sender = LlfSender("127.0.0.1", udp_receiver.getsockname()[1], names, subject="Stage Left")
     try:
         t = 12.3456
         sent = bytes(sender.encode(weights, euler_to_quat(yaw, pitch, roll), t))
@@ -144,13 +125,13 @@ def test_eye_angles_follow_the_gaze_weights():
                                rtol=1e-6)
 
 
-def test_sends_over_udp_on_loopback_and_counts(receiver):
-    port = receiver.getsockname()[1]
+def test_sends_over_udp_on_loopback_and_counts(udp_receiver):
+    port = udp_receiver.getsockname()[1]
     sender = LlfSender("127.0.0.1", port, ("jawOpen",))
     try:
         for i in range(5):
             sender.send(np.array([i / 10], np.float32), None, t=i / 60)
-        got = [receiver.recv(65536) for _ in range(5)]
+        got = [udp_receiver.recv(65536) for _ in range(5)]
     finally:
         sender.close()
     assert sender.counters == {"packets_sent": 5, "send_errors": 0}
@@ -231,7 +212,7 @@ def test_round_trip_into_run_input_livelinkface(tmp_path):
         character=character, input="livelinkface", listen=f"127.0.0.1:{free_udp_port()}", allow=None,
         config=config, calibrate=False, audio=None, audio_file=None, record=None, vmc_out=None, stats=False,
         headless=True, out=None, dump_weights=None, size="48x40", fps=60.0, duration=30.0, path="auto",
-        receiver="thread")
+        udp_receiver="thread")
     result = run_live(args, stop_event=stop, on_ready=on_ready, keep_weights=True,
                       hooks=[watch])
     assert stop.is_set() and len(sent) == 40
@@ -244,18 +225,18 @@ def test_round_trip_into_run_input_livelinkface(tmp_path):
 
 
 @pytest.mark.gl
-def test_run_llf_out_sends_one_packet_a_tick_and_says_so(tmp_path, receiver, capsys):
+def test_run_llf_out_sends_one_packet_a_tick_and_says_so(tmp_path, udp_receiver, capsys):
     character = tmp_path / "sphere.npz"
     sphere_character().save(character)
     code = main(["run", "-c", str(character), "--input", "vmc", "--listen", f"127.0.0.1:{free_udp_port()}",
                  "--headless", "--duration", "0.5", "--size", "48x40", "--draw", "tick", "--fps", "20", "--stats",
-                 "--llf-out", f"127.0.0.1:{receiver.getsockname()[1]}"])
+                 "--llf-out", f"127.0.0.1:{udp_receiver.getsockname()[1]}"])
     out = said(capsys)
     assert code == 0, out
     assert "llf-out: 127.0.0.1:" in out and "subject 'facepuppet'" in out
     assert "51 ARKit shapes the character lacks sent as 0" in out  # the sphere: jawOpen and its own "puff"
     n_ticks = int(re.search(r"run: (\d+) ticks", out).group(1))
-    datagrams = drain(receiver)
+    datagrams = drain(udp_receiver)
     # one packet per drawn tick; a live run skips a tick it is late for (a loaded machine), so the count is
     # what the run reports, at most the 11 ticks of 0.5 s at 20 fps, and each packet's frame number is its
     # tick's time on the 60 fps timecode (3 per tick at 20 fps)
@@ -269,7 +250,7 @@ def test_run_llf_out_sends_one_packet_a_tick_and_says_so(tmp_path, receiver, cap
 
 
 @pytest.mark.gl
-def test_replay_llf_out_sends_the_takes_values(tmp_path, receiver, capsys):
+def test_replay_llf_out_sends_the_takes_values(tmp_path, udp_receiver, capsys):
     """A Live Link Face CSV take replayed out as packets: the same values come back through our decoder."""
     character = tmp_path / "sphere.npz"
     sphere_character().save(character)
@@ -284,12 +265,12 @@ def test_replay_llf_out_sends_the_takes_values(tmp_path, receiver, capsys):
     take.write_text("\n".join(rows) + "\n")
     dumped = tmp_path / "w.npy"
     code = main(["replay", str(take), "-c", str(character), "--headless", "--size", "48x40", "--fps", "10",
-                 "--llf-out", f"127.0.0.1:{receiver.getsockname()[1]}", "--dump-weights", str(dumped)])
+                 "--llf-out", f"127.0.0.1:{udp_receiver.getsockname()[1]}", "--dump-weights", str(dumped)])
     out = said(capsys)
     assert code == 0, out
     assert "(paced to real time)" in out
     adapter = LiveLinkFaceAdapter()
-    got = [float(adapter.handle(d, 0.0).weights[17]) for d in drain(receiver)]
+    got = [float(adapter.handle(d, 0.0).weights[17]) for d in drain(udp_receiver)]
     drawn = np.load(dumped)[:, 0]
     assert len(got) == len(drawn) == 6  # one packet a tick, each with the tick's drawn jawOpen
     np.testing.assert_array_equal(np.float32(got), drawn)

@@ -4,7 +4,6 @@ replay drives VMC receivers and sends tracking events as a live run does (over r
 from __future__ import annotations
 
 import argparse
-import socket
 
 import numpy as np
 import pytest
@@ -16,6 +15,7 @@ from facepuppet.runtime.commands import replay, run
 from facepuppet.runtime.mapping.channels import ARKIT_NAMES, pascal
 
 from helpers.small_characters import sphere_character
+from helpers.udp_helpers import drain
 
 OUTPUT_OPTIONS = ("--vmc-out", "--vmc-extra", "--vmc-presets", "--vmc-names", "--llf-out", "--events-out", "--video",
                   "--video-codec", "--out", "--dump-weights", "--stats")
@@ -40,23 +40,6 @@ def test_replay_help_lists_every_output():
         assert option in text, option
 
 
-@pytest.fixture
-def receiver():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        yield s
-
-
-def _drain(sock: socket.socket) -> list[bytes]:
-    sock.settimeout(0.0)
-    out = []
-    while True:
-        try:
-            out.append(sock.recv(65536))
-        except BlockingIOError:
-            return out
-
-
 def _take(path, rows: list[tuple[float, float]]) -> None:
     """A Live Link Face CSV take: (time s, jawOpen) rows at 60 frames per second timecodes."""
     lines = ["Timecode,BlendShapeCount," + ",".join(pascal(n) for n in ARKIT_NAMES)]
@@ -69,7 +52,7 @@ def _take(path, rows: list[tuple[float, float]]) -> None:
 
 
 @pytest.mark.gl
-def test_replay_vmc_out_sends_the_drawn_weights_paced_to_real_time(tmp_path, receiver, capsys):
+def test_replay_vmc_out_sends_the_drawn_weights_paced_to_real_time(tmp_path, udp_receiver, capsys):
     character = tmp_path / "sphere.npz"
     sphere_character().save(character)
     take = tmp_path / "take.csv"
@@ -77,13 +60,13 @@ def test_replay_vmc_out_sends_the_drawn_weights_paced_to_real_time(tmp_path, rec
     _take(take, [(i / 10, jaw) for i, jaw in enumerate(jaws)])
     dumped = tmp_path / "w.npy"
     code = main(["replay", str(take), "-c", str(character), "--headless", "--size", "48x40", "--fps", "10",
-                 "--vmc-out", f"127.0.0.1:{receiver.getsockname()[1]}", "--dump-weights", str(dumped)])
+                 "--vmc-out", f"127.0.0.1:{udp_receiver.getsockname()[1]}", "--dump-weights", str(dumped)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert "vmc-out" in captured.err and "(paced to real time)" in captured.err
-    assert f"replay: sent 6 ticks as VMC to 127.0.0.1:{receiver.getsockname()[1]}" in captured.out
+    assert f"replay: sent 6 ticks as VMC to 127.0.0.1:{udp_receiver.getsockname()[1]}" in captured.out
     ticks, jaw = [], []
-    for datagram in _drain(receiver):
+    for datagram in drain(udp_receiver):
         for m in OscBundle(datagram):
             if m.address == "/VMC/Ext/Blend/Val" and m.params[0] == "JawOpen":
                 jaw.append(m.params[1])
@@ -97,7 +80,7 @@ def test_replay_vmc_out_sends_the_drawn_weights_paced_to_real_time(tmp_path, rec
 
 
 @pytest.mark.gl
-def test_replay_events_out_sends_the_tracking_events_of_the_filter_stage(tmp_path, receiver, capsys):
+def test_replay_events_out_sends_the_tracking_events_of_the_filter_stage(tmp_path, udp_receiver, capsys):
     """A take with a pause longer than the config's timeout: the replay's filter stage loses tracking and finds
     it again, and says so over OSC as a live run does."""
     character = tmp_path / "sphere.npz"
@@ -108,24 +91,24 @@ def test_replay_events_out_sends_the_tracking_events_of_the_filter_stage(tmp_pat
     config.write_text("[tracking_loss]\ntimeout_s = 0.2\nease_out_s = 0.1\nease_in_s = 0.1\n")
     code = main(["replay", str(take), "-c", str(character), "--headless", "--size", "48x40", "--fps", "20",
                  "--config", str(config), "--max-gap", "inf",
-                 "--events-out", f"127.0.0.1:{receiver.getsockname()[1]}"])
+                 "--events-out", f"127.0.0.1:{udp_receiver.getsockname()[1]}"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert "events: tracking lost/found as OSC /facepuppet/tracking" in captured.err
-    messages = [OscMessage(d) for d in _drain(receiver)]
+    messages = [OscMessage(d) for d in drain(udp_receiver)]
     assert [(m.address, m.params) for m in messages] == [("/facepuppet/tracking", [0]),
                                                          ("/facepuppet/tracking", [1])]
 
 
 @pytest.mark.gl
-def test_replay_without_the_filter_stage_says_it_has_no_events_to_send(tmp_path, receiver, capsys):
+def test_replay_without_the_filter_stage_says_it_has_no_events_to_send(tmp_path, udp_receiver, capsys):
     character = tmp_path / "sphere.npz"
     sphere_character().save(character)
     take = tmp_path / "take.csv"
     _take(take, [(i / 20, 0.3) for i in range(4)])
     code = main(["replay", str(take), "-c", str(character), "--headless", "--size", "48x40",
-                 "--events-out", f"127.0.0.1:{receiver.getsockname()[1]}"])
+                 "--events-out", f"127.0.0.1:{udp_receiver.getsockname()[1]}"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert "no filter stage" in captured.err
-    assert _drain(receiver) == []
+    assert drain(udp_receiver) == []
