@@ -44,8 +44,7 @@ def need_shared(*parts: str) -> Path:
 
 
 @pytest.fixture(scope="session")
-def egl_ctx():
-    """A real headless OpenGL context (EGL, Mesa llvmpipe here); skips only if EGL is truly missing."""
+def _egl_session_ctx():
     moderngl = pytest.importorskip("moderngl")
     try:
         ctx = moderngl.create_standalone_context(backend="egl", require=330)
@@ -53,6 +52,20 @@ def egl_ctx():
         pytest.skip(f"no EGL OpenGL context on this machine: {exc}")
     yield ctx
     ctx.release()
+
+
+@pytest.fixture
+def egl_ctx(_egl_session_ctx):
+    """A real headless OpenGL context (EGL, Mesa llvmpipe here), one per test process; skips only if EGL is
+    truly missing. Each test starts with no GL error pending, and one that leaves an error behind fails,
+    naming it (the error is sticky: whichever test read ``ctx.error`` next would fail instead, and which one
+    that is depends on the order the workers ran the tests in)."""
+    ctx = _egl_session_ctx
+    before = ctx.error
+    assert before == "GL_NO_ERROR", f"a GL error was pending before this test: {before}"
+    yield ctx
+    left = ctx.error
+    assert left == "GL_NO_ERROR", f"this test left a GL error on the shared context: {left}"
 
 
 @pytest.fixture(scope="session")
