@@ -21,7 +21,7 @@ import numpy as np
 from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import ALPHA_MODES, IDENTITY_UV_TRANSFORM
 
-from facepuppet.offline.io.gltf.read_state import LookRows, ReadState
+from facepuppet.offline.io.gltf.read_state import LookRows, ReadState, UniqueNames
 from facepuppet.offline.io.gltf_container import GltfError
 
 _SKIN_SHINE = (0.05, 18.0)  # rig_import.KIND_SHINE["skin"]
@@ -44,22 +44,16 @@ def _materials(state: ReadState) -> int | None:
     used = state.geo["material_used"]
     mats = f.items("materials")
     names, params = [], []
-    seen: set[str] = set()
+    unique = UniqueNames()
     for i, m in enumerate(mats):
         f.obj("materials", i, f"materials[{i}]")
-        base = m.get("name") if isinstance(m.get("name"), str) and m["name"] else f"material{i}"
-        n, k = base, 1
-        while n in seen:
-            k += 1
-            n = f"{base}#{k}"
-        seen.add(n)
-        names.append(n)
+        names.append(unique.take(m.get("name") if isinstance(m.get("name"), str) and m["name"] else f"material{i}"))
         params.append(_material_kind(state, m, i))
     default_material = None
     if -1 in used:  # primitives without a material: the spec's default material, appended
         default_material = len(names)
         n = "default"
-        while n in seen:
+        while n in unique.used:
             n += "_"
         names.append(n)
         params.append([_SKIN_SHINE[0], _SKIN_SHINE[1], MATERIAL_KINDS["skin"], 0.0])
@@ -132,7 +126,7 @@ def _textures(state: ReadState, textures: dict[int, int]) -> None:
     f = state.f
     names, info, pixels = [], [], []
     first = 0
-    used: set[str] = set()
+    unique = UniqueNames()
     for t, _stored in sorted(textures.items(), key=lambda kv: kv[1]):
         tex = f.obj("textures", t, f"textures[{t}]")
         w = f"textures[{t}]"
@@ -153,13 +147,8 @@ def _textures(state: ReadState, textures: dict[int, int]) -> None:
                     f.fail(f"samplers[{tex['sampler']}].{k}", f"{v} is not one of {sorted(allowed)}")
                 sampler.append(v)
         h, wd = rgba.shape[:2]
-        base = img.get("name") if isinstance(img.get("name"), str) and img["name"] else f"image{src}"
-        n, k = base, 1
-        while n in used:
-            k += 1
-            n = f"{base}#{k}"
-        used.add(n)
-        names.append(n)
+        names.append(unique.take(img.get("name") if isinstance(img.get("name"), str) and img["name"]
+                                 else f"image{src}"))
         info.append([first, wd, h, *sampler])
         pixels.append(rgba.reshape(-1, 4))
         first += wd * h

@@ -14,7 +14,7 @@ import numpy as np
 
 from facepuppet.runtime.model.geometry import quat_to_matrix
 
-from facepuppet.offline.io.gltf.read_state import ReadState
+from facepuppet.offline.io.gltf.read_state import ReadState, UniqueNames
 
 TURN_Y180 = np.diag([-1.0, 1.0, -1.0, 1.0])
 
@@ -60,16 +60,9 @@ def read_nodes(state: ReadState) -> None:
     if not np.isfinite(world).all():
         f.fail("nodes", "the node transforms overflow (non-finite world matrices)")
     state.world = world  # stored frame (turned for VRM 0.x)
-    names, used = [], set()
-    for i in order:
-        base = nodes[i].get("name") if isinstance(nodes[i].get("name"), str) and nodes[i]["name"] else f"node{i}"
-        n, k = base, 1
-        while n in used:
-            k += 1
-            n = f"{base}#{k}"
-        used.add(n)
-        names.append(n)
-    state.node_names = names
+    unique = UniqueNames()
+    state.node_names = [unique.take(nodes[i].get("name") if isinstance(nodes[i].get("name"), str) and nodes[i]["name"]
+                                    else f"node{i}") for i in order]
 
 
 def _scene_roots(state: ReadState, parent_of: np.ndarray) -> list[int]:
