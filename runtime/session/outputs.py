@@ -117,7 +117,8 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
         outputs.counters["llf_out"] = llf.counters
     if options.vmc_out is not None or options.events_out is not None:
         if chain.filter is None:
-            log("events: no filter stage (--pipeline), so no tracking lost/found events to send")
+            if options.events_out is not None:  # (--vmc-out alone: its tracking flag, nothing to say)
+                log("events: no filter stage (--pipeline), so no tracking lost/found events to send")
         else:
             events = stack.enter_context(contextlib.closing(TrackingEventSender(
                 [options.events_out] if options.events_out else [], [options.vmc_out] if options.vmc_out else [])))
