@@ -53,8 +53,8 @@ class Mapper:
         self.names = tuple(names)
         self.log = log
         self.drive: ExpressionDrive | None = None
-        self._maps: dict[tuple[str, ...], ChannelMap | ExpressionMap] = {}
-        self._reported: set[tuple[str, ...]] = set()
+        self._maps: dict[tuple[str, ...], ChannelMap | ExpressionMap] = {}  # the loop's, reported
+        self._quiet: dict[tuple[str, ...], ChannelMap | ExpressionMap] = {}  # asked for by the panel first
         self._first: dict[tuple[str, ...], tuple[np.ndarray, list[int]]] = {}
         self.set_drive(drive)
 
@@ -64,29 +64,30 @@ class Mapper:
             raise ValueError("Mapper drive: its shapes are not the renderer's channels")
         self.drive = drive
         self._maps.clear()
-        self._reported.clear()
+        self._quiet.clear()
         self._first.clear()
 
     def map_for(self, channels: tuple[str, ...], source: str = "",
                 report: bool = True) -> ChannelMap | ExpressionMap:
         """The cached map of a channel tuple, built on first sight; with ``report`` (the loop's own use) its
-        report is logged the first time."""
+        report is logged the first time. The loop's maps are one dictionary lookup per tick; a map the panel
+        asked for first waits, unreported, until the loop maps that layout."""
         cmap = self._maps.get(channels)
+        if cmap is not None:
+            return cmap
+        cmap = self._quiet.get(channels)
         if cmap is None:
-            if len(self._maps) >= MAX_CHANNEL_MAPS:  # a sender whose channel set keeps changing: bounded
-                oldest = next(iter(self._maps))
-                del self._maps[oldest]
-                self._reported.discard(oldest)
-                self._first.pop(oldest, None)
-            cmap = self._maps[channels] = (ChannelMap.build(channels, self.names) if self.drive is None
-                                           else self.drive.build(channels))
-        if report and channels not in self._reported:
-            self._reported.add(channels)
-            n_driven = len(self.names) - len(cmap.undriven_target)
-            head = (f"channel map ({source or 'source'}): {len(channels)} source channels -> "
-                    f"{n_driven} of {len(self.names)} rig shapes driven")
-            text = cmap.report()
-            self.log(head + ("\n" + text if text else "; every channel matched"))
+            cmap = ChannelMap.build(channels, self.names) if self.drive is None else self.drive.build(channels)
+        if not report:
+            _bounded_put(self._quiet, channels, cmap)
+            return cmap
+        self._quiet.pop(channels, None)
+        _bounded_put(self._maps, channels, cmap)
+        n_driven = len(self.names) - len(cmap.undriven_target)
+        head = (f"channel map ({source or 'source'}): {len(channels)} source channels -> "
+                f"{n_driven} of {len(self.names)} rig shapes driven")
+        text = cmap.report()
+        self.log(head + ("\n" + text if text else "; every channel matched"))
         return cmap
 
     def first_targets(self, channels: tuple[str, ...]) -> tuple[np.ndarray, list[int]]:
@@ -96,8 +97,17 @@ class Mapper:
         first = self._first.get(channels)
         if first is None:
             idx = self.map_for(channels, report=False).first_targets()
-            first = self._first[channels] = (idx, idx.tolist())
+            first = (idx, idx.tolist())
+            _bounded_put(self._first, channels, first)
         return first
+
+
+def _bounded_put(cache: dict, key: tuple, value: object) -> None:
+    """``cache[key] = value``, the oldest entry dropped past MAX_CHANNEL_MAPS (a sender whose channel set keeps
+    changing)."""
+    if len(cache) >= MAX_CHANNEL_MAPS:
+        del cache[next(iter(cache))]
+    cache[key] = value
 
 
 def same_mapping(a: MappingSettings, b: MappingSettings) -> bool:
