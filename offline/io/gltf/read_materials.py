@@ -21,7 +21,8 @@ import numpy as np
 from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import ALPHA_MODES, IDENTITY_UV_TRANSFORM
 
-from facepuppet.offline.io.gltf.read_state import LookRows, ReadState, UniqueNames
+from facepuppet.offline.io.gltf.names import UniqueNames
+from facepuppet.offline.io.gltf.read_state import LookRows, ReadState
 from facepuppet.offline.io.gltf_container import GltfError
 
 _SKIN_SHINE = (0.05, 18.0)  # rig_import.KIND_SHINE["skin"]

@@ -14,7 +14,8 @@ import numpy as np
 
 from facepuppet.runtime.model.geometry import quat_to_matrix
 
-from facepuppet.offline.io.gltf.read_state import ReadState, UniqueNames
+from facepuppet.offline.io.gltf.names import UniqueNames
+from facepuppet.offline.io.gltf.read_state import ReadState
 
 TURN_Y180 = np.diag([-1.0, 1.0, -1.0, 1.0])
 

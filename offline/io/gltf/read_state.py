@@ -20,26 +20,6 @@ from facepuppet.runtime.model.character_parts import Expressions
 from facepuppet.offline.io.gltf_container import GltfFile
 
 
-class UniqueNames:
-    """Names made unique in the order they are taken: a name taken already gets ``#2``, ``#3``, ... (the first
-    free), as the glTF spec leaves names free to repeat and a character's names are keys. Each base name
-    remembers where its count reached, so a file repeating one name many times costs linear time, not
-    quadratic."""
-
-    def __init__(self) -> None:
-        self.used: set[str] = set()
-        self._next: dict[str, int] = {}
-
-    def take(self, base: str) -> str:
-        name, k = base, self._next.get(base, 1)
-        while name in self.used:
-            k += 1
-            name = f"{base}#{k}"
-        self._next[base] = k
-        self.used.add(name)
-        return name
-
-
 @dataclass(eq=False)
 class LookRows:
     """The per-material look being read, float64 until the character is built (one row per stored material).

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from facepuppet.offline.io.gltf.names import UniqueNames
 from facepuppet.offline.io.gltf.write_buffer import ELEMENT_ARRAY_BUFFER
 from facepuppet.offline.io.gltf.write_state import ExportError, WriteState
 
@@ -51,15 +52,8 @@ def plan_meshes(w: WriteState) -> None:
             out.append((0, c.n_vertices, c.triangles[:0], 0, 0))
         mesh_names = [c.name or "mesh"]
     w.mesh_names = mesh_names
-    taken = set(c.skeleton.names) if c.skeleton is not None else set()
-    w.host_names = []
-    for name in mesh_names:
-        unique, k = name, 1
-        while unique in taken:
-            k += 1
-            unique = f"{name}#{k}"
-        taken.add(unique)
-        w.host_names.append(unique)
+    unique = UniqueNames(c.skeleton.names if c.skeleton is not None else ())  # a host node is not named as a joint
+    w.host_names = [unique.take(name) for name in mesh_names]
     w.primitives = out
 
 

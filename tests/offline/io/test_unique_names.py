@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import random
 
-from facepuppet.offline.io.gltf.read_state import UniqueNames
+from facepuppet.offline.io.gltf.names import UniqueNames
 
 
 def _reference(bases: list[str]) -> list[str]:
@@ -34,3 +34,8 @@ def test_a_name_repeated_thirty_thousand_times_counts_on_from_where_it_was():
     names = [unique.take("Bone") for _ in range(30001)]
     assert names[0] == "Bone" and names[1] == "Bone#2" and names[-1] == "Bone#30001"
     assert unique._next["Bone"] == 30001  # one step per take: the loop of the reference would take 30,000 steps
+
+
+def test_names_taken_beforehand_are_avoided_as_the_plain_loop_avoids_them():
+    unique = UniqueNames(["Head", "Body#2"])  # the export's joint names: a mesh host may not take them
+    assert [unique.take(n) for n in ("Head", "Body", "Body", "Face")] == ["Head#2", "Body", "Body#3", "Face"]
