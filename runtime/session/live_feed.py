@@ -83,6 +83,7 @@ class LiveFeed:
         self.midrun = wants_panel(picture, panel)  # only the panel starts a recording once the run ticks
         self.title = f"facepuppet run ({inputs.input})"
         self.audio = None
+        self.adapter = None  # the loop's input adapter, once open (None for the voice alone)
         self.fps = float(pacing.fps)
         # draw on arrival: tick labels on a 1 kHz grid (so a replay can follow them), redraws at --fps when idle
         self.arrival = pacing.draw == "arrival" and not inputs.voice_only
@@ -137,7 +138,6 @@ class LiveFeed:
             counters["record"] = recorder.counters
             observers.append(RecordingHook(recorder, source, chain.audio, mix_sources=[
                 s for _, s in chain.mix.tracker_sources()] if chain.mix else ()))
-        self.source = source
         return FeedParts(source, self.loop_fps, duration=self.pacing.duration, idle_fps=self.idle_fps,
                          catch_up=True, wake=self._arrival_wake(source, chain), address=source.address,
                          counters=counters, recorder=recorder, observers=observers, live=True,
@@ -231,7 +231,7 @@ class LiveFeed:
 
     def _start_phone(self, source, log) -> PhoneRequester | None:
         """The running requester of ``--phone`` (None without it; a note when the kind needs one)."""
-        adapter = getattr(self, "adapter", None)
+        adapter = self.adapter
         if not hasattr(adapter, "phone_request"):
             return None
         phone, listen_port = self.inputs.phone, source.address[1]
