@@ -74,7 +74,7 @@ def _register_import_rig(subparsers) -> None:
 
 
 def _import_rig(args: argparse.Namespace) -> int:
-    if args.neutral.is_file() and is_gltf_file(args.neutral):
+    if is_gltf_file(args.neutral):   # by its name, or the bytes of a regular file
         return _import_gltf(args)
     start = time.perf_counter()
     bar = Progress("import-rig", unit="shapes")

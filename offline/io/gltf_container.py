@@ -9,17 +9,17 @@ specification (§5.1 accessors, §3.6.2 sparse accessors, §5.11 buffer views,
   JSON chunk, then optionally a BIN chunk; a ``.vrm`` is a GLB; anything else
   is read as a JSON ``.gltf``;
 * buffers are the GLB's BIN chunk (buffer 0 without ``uri``), a ``data:`` URI
-  (base64) or a file beside the ``.gltf``. A buffer or image URI must be a
-  relative path that stays inside the file's folder: an absolute path, a
-  ``..`` that climbs out of it, or a URL with a scheme (``http:``) is refused,
-  because a downloaded avatar must not make the importer read other files on
-  the machine or reach the network;
+  (base64) or a file beside the ``.gltf``; the file itself and every URI are
+  read by :mod:`.gltf_files` (regular files inside the glTF's folder only,
+  sizes checked before reading);
 * accessors of every component type, normalized or not (KHR_mesh_quantization
   is plain accessor decoding), with byte strides and sparse substitution, with
   or without a base buffer view.
 
 Every size is checked against the declared byte lengths before anything is
-allocated, so a count that would need gigabytes is refused, not attempted.
+allocated, so a count that would need gigabytes is refused, not attempted; an
+accessor without a buffer view (zeros, perhaps with sparse substitutions) has
+no bytes to be checked against, so it is held to :data:`MAX_UNBACKED_VALUES`.
 Refusals are :class:`GltfError`: the file, the JSON field path and the
 problem (``avatar.glb: accessors[3].count: …``).
 
@@ -31,20 +31,16 @@ chunks without naming what is wrong and fills defaults silently).
 
 from __future__ import annotations
 
-import base64
-import binascii
 import json
 import os
 import struct
-import urllib.parse
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 
-from facepuppet.runtime.errors import InputFileError
-
+from facepuppet.offline.io.gltf_files import GltfError, Opened, open_image_uri, read_buffer_uri, read_gltf_bytes
 from facepuppet.offline.io.mesh_format import sniff_mesh_format
 
 GLB_MAGIC = b"glTF"
@@ -54,23 +50,22 @@ COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 512
 N_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 #: The largest accessor the reader decodes (elements); far beyond any avatar, far below an allocation bomb.
 MAX_ELEMENTS = 50_000_000
-#: The largest external image file read (bytes).
-MAX_IMAGE_BYTES = 256 * 1024 * 1024
+#: The most values (count x components) of an accessor without a buffer view, whose zeros no byte of the file
+#: backs: 4 Mi values are 1.4 million VEC3 vertices in one morph target (a VRoid avatar's largest mesh has
+#: ~30,000), and 32 MiB once decoded as float64.
+MAX_UNBACKED_VALUES = 1 << 22
 
-
-class GltfError(InputFileError):
-    """A glTF / GLB / VRM file cannot be read: the message names the file, the JSON field path and the problem."""
-
-    def __init__(self, path: str | os.PathLike, where: str, problem: str) -> None:
-        self.path, self.where, self.problem = str(path), where, problem
-        super().__init__(f"{path}: {where}: {problem}" if where else f"{path}: {problem}")
+__all__ = ["GltfError", "GltfFile", "read_gltf_file", "is_gltf_file", "MAX_UNBACKED_VALUES"]
 
 
 def is_gltf_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is glTF: a ``.gltf``/``.glb``/``.vrm`` name, GLB magic, or glTF JSON text."""
+    """Whether ``path`` is glTF: a ``.gltf``/``.glb``/``.vrm`` name, or a regular file with GLB magic or glTF JSON
+    text (nothing else is opened: a FIFO would block the sniff)."""
     path = Path(path)
     if path.suffix.lower() in (".gltf", ".glb", ".vrm"):
         return True
+    if not path.is_file():
+        return False
     try:
         found = sniff_mesh_format(path)
     except OSError:
@@ -155,46 +150,23 @@ class GltfFile:
             if not self.is_glb or i != 0 or self.bin_chunk is None:
                 self.fail(f"{where}.uri", "missing: only buffer 0 of a GLB with a BIN chunk may omit it")
             data = self.bin_chunk
-            source = "the GLB BIN chunk"
+            if len(data) < length:
+                self.fail(f"{where}.byteLength", f"{length} bytes declared but the GLB BIN chunk has only "
+                                                 f"{len(data)}")
+            data = data[:length]
         else:
-            data, source = self.read_uri(uri, f"{where}.uri", limit=length)
-        if len(data) < length:
-            self.fail(f"{where}.byteLength", f"{length} bytes declared but {source} has only {len(data)}")
-        self._buffers[i] = data[:length]
-        return self._buffers[i]
+            data, file = read_buffer_uri(self.path, uri, where, length)
+            if file is not None:
+                self.external.append(file)
+        self._buffers[i] = data
+        return data
 
-    def read_uri(self, uri: str, where: str, limit: int = MAX_IMAGE_BYTES) -> tuple[bytes, str]:
-        """The bytes of a ``data:`` URI or of a relative file beside the glTF (see the module doc).
-
-        An external file is read only up to ``limit`` bytes (a buffer's declared byteLength), so a
-        .gltf naming a huge file beside it costs no more than it declares.
-        """
-        if uri.startswith("data:"):
-            head, sep, payload = uri.partition(",")
-            if not sep or not head.endswith(";base64"):
-                self.fail(where, "a data URI must be base64 (data:<type>;base64,<data>)")
-            try:
-                return base64.b64decode(payload, validate=True), "the data URI"
-            except (binascii.Error, ValueError) as exc:
-                self.fail(where, f"not valid base64 ({exc})")
-        parsed = urllib.parse.urlsplit(uri)
-        if parsed.scheme or parsed.netloc:
-            self.fail(where, f"{uri[:80]!r}: only relative file names and data: URIs are read, not URLs")
-        rel = urllib.parse.unquote(parsed.path)
-        folder = self.path.resolve().parent
-        target = (folder / rel).resolve()
-        if Path(rel).is_absolute() or not target.is_relative_to(folder):
-            self.fail(where, f"{uri[:80]!r}: the file must be inside the folder of the glTF ({folder})")
-        try:
-            with open(target, "rb") as handle:
-                data = handle.read(limit + 1)
-            if len(data) > limit and limit == MAX_IMAGE_BYTES:
-                self.fail(where, f"{uri[:80]!r}: larger than {MAX_IMAGE_BYTES} bytes")
-            data = data[:limit]
-        except OSError as exc:
-            self.fail(where, f"{uri[:80]!r}: cannot read {target}: {exc.strerror or exc}")
-        self.external.append(target)
-        return data, f"file {rel!r}"
+    def open_image(self, uri: str, where: str) -> Opened:
+        """The image file or ``data:`` URI ``uri`` opened (see :mod:`.gltf_files`), for a ``with``."""
+        opened = open_image_uri(self.path, uri, where)
+        if opened.path is not None and opened.path not in self.external:
+            self.external.append(opened.path)
+        return opened
 
     def view_bytes(self, v: int, where: str) -> tuple[bytes, int, int, int | None]:
         """(buffer bytes, start, length, byteStride or None) of buffer view ``v``, bounds checked."""
@@ -234,6 +206,9 @@ class GltfFile:
         count = self.count(acc, "count", w, minimum=1)
         if count > MAX_ELEMENTS:
             self.fail(f"{w}.count", f"{count} elements is more than this reader decodes ({MAX_ELEMENTS})")
+        if "bufferView" not in acc and count * n > MAX_UNBACKED_VALUES:
+            self.fail(f"{w}.count", f"{count} {kind} elements without a bufferView: more than the "
+                                    f"{MAX_UNBACKED_VALUES} values an accessor of zeros may have here")
         normalized = self.get(acc, "normalized", bool, w, False)
         if normalized and ctype in (5125, 5126):
             self.fail(f"{w}.normalized", "only 8- and 16-bit integer accessors may be normalized")
@@ -306,10 +281,7 @@ class GltfFile:
 def read_gltf_file(path: str | os.PathLike) -> GltfFile:
     """Parse the container of a ``.glb`` / ``.vrm`` / ``.gltf`` (no accessor is decoded yet)."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: glTF file not found") from None
+    data = read_gltf_bytes(path)
     if data[:4] == GLB_MAGIC:
         json_bytes, bin_chunk = _glb_chunks(path, data)
         is_glb = True

@@ -7,28 +7,41 @@ import's skin shine), unless ``extras.facepuppet`` (written by
 ``alphaCutoff``, ``doubleSided`` and the base colour texture (TEXCOORD_0
 only). The extensions that change a row (unlit, emissive strength, texture
 transform, MToon) are read after this, each by its own reader. Textures are
-decoded with Pillow (PNG or JPEG, at most 8192×8192 texels) into RGBA as in
-the image (sRGB-encoded), with their samplers' codes.
+decoded with Pillow (PNG or JPEG) into RGBA as in the image (sRGB-encoded),
+with their samplers' codes. A file can declare a texture far larger than its
+bytes (a blank 8000×8000 PNG is 100 KB), so all used images' sizes are read
+from their headers and held to :data:`MAX_TEXTURE_SIDE` and
+:data:`MAX_TEXTURE_TEXELS` before any is decoded.
 """
 
 from __future__ import annotations
 
 import io
 import warnings as _warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numpy as np
+from PIL import Image, UnidentifiedImageError
 
 from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import ALPHA_MODES, IDENTITY_UV_TRANSFORM
 
 from facepuppet.offline.io.gltf.names import UniqueNames
 from facepuppet.offline.io.gltf.read_state import LookRows, ReadState
-from facepuppet.offline.io.gltf_container import GltfError
+from facepuppet.offline.io.gltf_files import Opened
 
 _SKIN_SHINE = (0.05, 18.0)  # rig_import.KIND_SHINE["skin"]
 _MAG = frozenset({9728, 9729})
 _MIN = frozenset({9728, 9729, 9984, 9985, 9986, 9987})
 _WRAP = frozenset({33071, 33648, 10497})
+#: The widest and tallest texture decoded: avatars ship 1024-4096 texel textures; one 8192x8192 is 256 MiB of RGBA.
+MAX_TEXTURE_SIDE = 8192
+#: The most texels of all used textures together, checked from the images' headers before any is decoded: 128 Mi
+#: texels (512 MiB of RGBA) hold 32 textures of 2048x2048, 8 of 4096x4096 or 2 of 8192x8192 (the data kit's
+#: largest avatar uses 2.5 Mi), and stay half of the character table's 1 GiB cap on its one texel section.
+MAX_TEXTURE_TEXELS = 128 << 20
 
 
 def read_materials(state: ReadState) -> None:
@@ -123,63 +136,119 @@ def _look_rows(state: ReadState, default_material: int | None) -> dict[int, int]
 
 
 def _textures(state: ReadState, textures: dict[int, int]) -> None:
-    """Decode the used textures' images (PNG or JPEG, Pillow) and samplers into ``state.texture_*``."""
+    """Decode the used textures' images (PNG or JPEG, Pillow) and samplers into ``state.texture_*``.
+
+    Every used image's size is read from its header first, and the sizes checked against
+    :data:`MAX_TEXTURE_SIDE` and :data:`MAX_TEXTURE_TEXELS`, before any image is decoded; then each is
+    decoded straight into its rows of the one texel array."""
     f = state.f
-    names, info, pixels = [], [], []
+    used = [_texture(state, t) for t, _stored in sorted(textures.items(), key=lambda kv: kv[1])]
+    total = 0
+    for u in used:
+        if u.width > MAX_TEXTURE_SIDE or u.height > MAX_TEXTURE_SIDE:
+            f.fail(u.where, f"{u.width}x{u.height} texels: larger than {MAX_TEXTURE_SIDE}x{MAX_TEXTURE_SIDE}")
+        total += u.width * u.height
+        if total > MAX_TEXTURE_TEXELS:
+            f.fail(u.where, f"{u.width}x{u.height} texels bring the used textures to {total} texels, more than "
+                            f"the {MAX_TEXTURE_TEXELS} read ({MAX_TEXTURE_TEXELS * 4 >> 20} MiB of RGBA)")
+    pixels = np.empty((total, 4), np.uint8)
+    names, info = [], []
     first = 0
     unique = UniqueNames()
-    for t, _stored in sorted(textures.items(), key=lambda kv: kv[1]):
-        tex = f.obj("textures", t, f"textures[{t}]")
-        w = f"textures[{t}]"
-        src = f.get(tex, "source", int, w, None)
-        if src is None:
-            f.fail(f"{w}.source", "missing: the texture has no PNG/JPEG image (KHR_texture_basisu and other "
-                                  "image extensions are not read)")
-        img = f.obj("images", src, f"{w}.source")
-        iw = f"images[{src}]"
-        rgba = _decode_image(state, img, iw)
-        sampler = [0, 0, 0, 0]
-        if "sampler" in tex:
-            s = f.obj("samplers", tex["sampler"], f"{w}.sampler")
-            sampler = []
-            for k, allowed in (("magFilter", _MAG), ("minFilter", _MIN), ("wrapS", _WRAP), ("wrapT", _WRAP)):
-                v = f.get(s, k, int, f"samplers[{tex['sampler']}]", 0)
-                if v and v not in allowed:
-                    f.fail(f"samplers[{tex['sampler']}].{k}", f"{v} is not one of {sorted(allowed)}")
-                sampler.append(v)
-        h, wd = rgba.shape[:2]
-        names.append(unique.take(img.get("name") if isinstance(img.get("name"), str) and img["name"]
-                                 else f"image{src}"))
-        info.append([first, wd, h, *sampler])
-        pixels.append(rgba.reshape(-1, 4))
-        first += wd * h
+    for u in used:
+        n = u.width * u.height
+        _decode_into(state, u, pixels[first:first + n])
+        names.append(unique.take(u.image.get("name") if isinstance(u.image.get("name"), str) and u.image["name"]
+                                 else f"image{u.source}"))
+        info.append([first, u.width, u.height, *u.sampler])
+        first += n
     state.texture_names = tuple(names)
     state.texture_info = np.asarray(info, dtype=np.int32).reshape(-1, 7)
-    state.texture_pixels = np.concatenate(pixels) if pixels else np.zeros((0, 4), np.uint8)
+    state.texture_pixels = pixels
 
 
-def _decode_image(state: ReadState, img: dict, iw: str) -> np.ndarray:
-    from PIL import Image, UnidentifiedImageError
+@dataclass(frozen=True)
+class _UsedTexture:
+    """A used texture: its image (index, JSON, path) with the size its header gives, and its sampler codes."""
 
+    source: int
+    image: dict
+    where: str
+    width: int
+    height: int
+    sampler: tuple[int, int, int, int]
+
+
+def _texture(state: ReadState, t: int) -> _UsedTexture:
+    """Texture ``t``: its image's size from the image's header (nothing decoded) and its sampler."""
+    f = state.f
+    tex = f.obj("textures", t, f"textures[{t}]")
+    w = f"textures[{t}]"
+    src = f.get(tex, "source", int, w, None)
+    if src is None:
+        f.fail(f"{w}.source", "missing: the texture has no PNG/JPEG image (KHR_texture_basisu and other "
+                              "image extensions are not read)")
+    img = f.obj("images", src, f"{w}.source")
+    iw = f"images[{src}]"
+    sampler = (0, 0, 0, 0)
+    if "sampler" in tex:
+        s_i = f.get(tex, "sampler", int, w)
+        s = f.obj("samplers", s_i, f"{w}.sampler")
+        codes = []
+        for k, allowed in (("magFilter", _MAG), ("minFilter", _MIN), ("wrapS", _WRAP), ("wrapT", _WRAP)):
+            v = f.get(s, k, int, f"samplers[{s_i}]", 0)
+            if v and v not in allowed:
+                f.fail(f"samplers[{s_i}].{k}", f"{v} is not one of {sorted(allowed)}")
+            codes.append(v)
+        sampler = tuple(codes)
+    with _open_image(state, img, iw) as opened, _image(state, opened, img, iw) as im:
+        width, height = im.size
+    return _UsedTexture(src, img, iw, width, height, sampler)
+
+
+def _decode_into(state: ReadState, u: _UsedTexture, out: np.ndarray) -> None:
+    """Decode ``u``'s image as RGBA into ``out`` : ndarray (width * height, 4) uint8."""
+    with _open_image(state, u.image, u.where) as opened, _image(state, opened, u.image, u.where) as im:
+        if im.size != (u.width, u.height):  # the file changed between the two reads
+            state.f.fail(u.where, f"{im.size[0]}x{im.size[1]} now, {u.width}x{u.height} when first read")
+        try:
+            with _warnings.catch_warnings():
+                _warnings.simplefilter("error", Image.DecompressionBombWarning)
+                rgba = im.convert("RGBA")
+        except _DECODE_ERRORS as exc:
+            state.f.fail(u.where, f"the image cannot be decoded ({str(exc)[:120]})")
+        out[:] = np.asarray(rgba, dtype=np.uint8).reshape(-1, 4)
+        rgba.close()
+
+
+def _open_image(state: ReadState, img: dict, iw: str) -> Opened:
+    """The bytes of image ``iw``: its buffer view, or its URI through :mod:`..gltf_files`."""
     f = state.f
     if "bufferView" in img:
         data, start, length, _ = f.view_bytes(f.get(img, "bufferView", int, iw), f"{iw}.bufferView")
-        blob = data[start:start + length]
-    elif "uri" in img:
-        blob, _ = f.read_uri(f.get(img, "uri", str, iw), f"{iw}.uri")
-    else:
-        f.fail(iw, "missing: an image needs a uri or a bufferView")
-    if not (blob[:8] == b"\x89PNG\r\n\x1a\n" or blob[:3] == b"\xff\xd8\xff"):
+        return Opened(io.BytesIO(data[start:start + length]), length, None, f"{iw}.bufferView")
+    if "uri" in img:
+        return f.open_image(f.get(img, "uri", str, iw), f"{iw}.uri")
+    f.fail(iw, "missing: an image needs a uri or a bufferView")
+
+
+@contextmanager
+def _image(state: ReadState, opened: Opened, img: dict, iw: str) -> Iterator[Image.Image]:
+    """The PNG or JPEG image of ``opened``, opened lazily by Pillow: only its header is read."""
+    f = state.f
+    head = opened.handle.read(8)
+    opened.handle.seek(0)
+    if not (head == b"\x89PNG\r\n\x1a\n" or head[:3] == b"\xff\xd8\xff"):
         f.fail(iw, f"not a PNG or JPEG image (mimeType {img.get('mimeType')!r}); only those are decoded")
     try:
         with _warnings.catch_warnings():
             _warnings.simplefilter("error", Image.DecompressionBombWarning)
-            with Image.open(io.BytesIO(blob)) as im:
-                if im.width * im.height > 8192 * 8192:
-                    f.fail(iw, f"{im.width}x{im.height} is larger than 8192x8192 texels")
-                return np.asarray(im.convert("RGBA"), dtype=np.uint8).copy()
-    except GltfError:
-        raise
-    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombWarning,
-            Image.DecompressionBombError) as exc:
+            im = Image.open(opened.handle, formats=("PNG", "JPEG"))
+    except _DECODE_ERRORS as exc:
         f.fail(iw, f"the image cannot be decoded ({str(exc)[:120]})")
+    with im:
+        yield im
+
+
+_DECODE_ERRORS = (UnidentifiedImageError, OSError, ValueError, SyntaxError, EOFError, Image.DecompressionBombWarning,
+                  Image.DecompressionBombError)

@@ -131,7 +131,7 @@ def test_texture_image_and_sampler_references_are_checked(vrm0):
     assert "textures[0].source: 7 is not an index into images (2 entries)" in found
     assert any(p.startswith("textures[0].sampler") for p in found)
     found = changed(vrm0, lambda d, b: d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"].update(index=5))
-    assert any(p.startswith("materials[0].baseColorTexture.index") for p in found)
+    assert any(p.startswith("materials[0].pbrMetallicRoughness.baseColorTexture.index") for p in found)
 
 
 def test_vrm_references_are_checked(vrm0):
