@@ -59,13 +59,18 @@ def _material_properties(state: ReadState, mats: list) -> dict:
     props = state.vrm0.get("materialProperties", [])
     if not isinstance(props, list):
         f.fail("extensions.VRM.materialProperties", "expected an array")
-    by_name = {m.get("name"): i for i, m in enumerate(mats) if isinstance(m, dict)}
+    # matched by name; a name that is an array or an object (not a JSON key of any use) matches nothing
+    by_name = {m.get("name"): i for i, m in enumerate(mats) if isinstance(m, dict)
+               and not isinstance(m.get("name"), (list, dict))}
     out: dict[int, np.ndarray | None] = {}
     for k, prop in enumerate(props):
         w = f"extensions.VRM.materialProperties[{k}]"
         if not isinstance(prop, dict):
             f.fail(w, "expected an object")
-        i = by_name.get(prop.get("name"), k if k < len(mats) else None)
+        name = prop.get("name")
+        i = k if k < len(mats) else None
+        if not isinstance(name, (list, dict)):
+            i = by_name.get(name, i)
         if i is None:
             continue
         shader = prop.get("shader", "")
