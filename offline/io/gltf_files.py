@@ -167,7 +167,7 @@ def _open_data_uri(uri: str, limit: int, refuse) -> Opened:
     if not sep or not head.endswith(";base64"):
         raise refuse("a data URI must be base64 (data:<type>;base64,<data>)")
     # base64 with validate=True has no whitespace: 4 characters per 3 bytes, less the '=' padding
-    size = len(payload) // 4 * 3 - (len(payload) - len(payload.rstrip("=")))
+    size = len(payload) // 4 * 3 - (2 if payload.endswith("==") else 1 if payload.endswith("=") else 0)
     if size > limit:
         raise refuse(f"a data URI of {size} bytes, more than the {limit} it may hold here")
     try:
