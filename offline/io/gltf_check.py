@@ -19,9 +19,9 @@ it reports is one of the file, not of a reader. What it checks:
   accessors: valid componentType and type, byteOffset a multiple of the
   component size, the last element (with byteStride) inside the buffer view,
   sparse indices and values inside their views, sparse indices strictly
-  increasing and below count.
-* POSITION accessors (attributes and morph targets) have min and max, and any
-  min/max given equal the data (float32).
+  increasing and below count; POSITION accessors (attributes and morph
+  targets) have min and max, and any min/max given equal the data (float32)
+  (:mod:`.gltf_check_accessors`).
 * primitives: attribute counts equal, index values below the vertex count,
   indices a SCALAR of unsigned type; the same number of morph targets in every
   primitive of a mesh (and ``weights`` of that length).
@@ -34,11 +34,9 @@ it reports is one of the file, not of a reader. What it checks:
 
 The check never raises on what a file holds: a value of the wrong JSON type is
 a problem naming its path (:mod:`.gltf_check_walk`). Its cost is bounded by the
-file: the node walk is iterative and linear, an accessor without a buffer view
-is held to the importer's :data:`~.gltf_container.MAX_UNBACKED_VALUES`, the
-accessors decode at most :data:`DECODE_BUDGET_FACTOR` times the buffers' bytes
-(accessors overlapping each other many times over are a bomb, not a model), one
-accessor is held in memory at a time, and at most :data:`MAX_PROBLEMS` are listed.
+file: the node walk is iterative and linear, the accessors' decoding has its
+budgets (:mod:`.gltf_check_accessors`), and at most :data:`MAX_PROBLEMS` are
+listed.
 """
 
 from __future__ import annotations
@@ -47,27 +45,18 @@ import json
 import os
 import struct
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
-import numpy as np
-
+from facepuppet.offline.io.gltf_check_accessors import AccessorCheck
 from facepuppet.offline.io.gltf_check_vrm import check_vrm0, check_vrm1
 from facepuppet.offline.io.gltf_check_walk import JsonWalk, is_int, is_number, show
-from facepuppet.offline.io.gltf_container import MAX_UNBACKED_VALUES
 from facepuppet.offline.io.gltf_files import GltfError, open_image_uri, read_buffer_uri, read_gltf_bytes
 
 __all__ = ["check_gltf", "check_gltf_bytes", "MAX_PROBLEMS"]
 
-_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-_COLUMNS = {"MAT2": (2, 2), "MAT3": (3, 3), "MAT4": (4, 4)}
 GLB_MAGIC, GLB_JSON, GLB_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
 #: The most problems listed: a file with more is broken through and through, and listing a million lines helps no one.
 MAX_PROBLEMS = 1000
-#: The accessors together decode at most this many times the buffers' bytes (plus :data:`DECODE_BUDGET_FLOOR`):
-#: accessors side by side, or interleaved in one view, decode each byte once.
-DECODE_BUDGET_FACTOR = 4
-DECODE_BUDGET_FLOOR = 64 << 20
 
 
 def check_gltf(path: str | os.PathLike) -> list[str]:
@@ -101,25 +90,14 @@ class _Stop(Exception):
     pass
 
 
-class _View(NamedTuple):
-    buffer: int
-    offset: int
-    length: int
-    stride: int | None
-    target: bool
-
-
 class _Checker(JsonWalk):
     def __init__(self, path: Path | None) -> None:
         super().__init__()
         self.path = path
         self.buffers: dict[int, bytes] = {}
-        self.view_ok: dict[int, _View] = {}
-        self.acc_ok: dict[int, dict] = {}
-        self.acc_max: dict[int, float] = {}   # the largest value of each decoded accessor (indices, joints)
+        self.acc = AccessorCheck(self, self.buffers)
         self.n_targets: dict[int, int] = {}
         self.parent: list[int] = []
-        self.decode_left = DECODE_BUDGET_FLOOR
 
     def bad(self, where: str, what: str) -> None:
         super().bad(where, what)
@@ -149,8 +127,8 @@ class _Checker(JsonWalk):
         self.doc = doc
         self._asset()
         self._buffers(bin_chunk, glb=data[:4] == b"glTF")
-        self._views()
-        self._accessors()
+        self.acc.check_views()
+        self.acc.check_accessors()
         self._meshes()
         self._nodes()
         self._skins()
@@ -230,199 +208,6 @@ class _Checker(JsonWalk):
             except GltfError as exc:
                 self.bad(exc.where, exc.problem)
 
-    def _views(self) -> None:
-        buffers = self.items("buffers")
-        for i, v, w in self.objects("bufferViews"):
-            b = self.index(v, "buffer", "buffers", w, required=True)
-            n = self.req(v, "byteLength", w, int)
-            off = v.get("byteOffset", 0)
-            if not is_int(off) or off < 0:
-                self.bad(f"{w}.byteOffset", f"{show(off)}; must be an integer >= 0")
-                continue
-            stride = v.get("byteStride")
-            if stride is not None and (not is_int(stride) or not 4 <= stride <= 252 or stride % 4):
-                self.bad(f"{w}.byteStride", f"{show(stride)}; must be 4..252 and a multiple of 4")
-                continue
-            if b is None or n is None:
-                continue
-            if n < 1:
-                self.bad(f"{w}.byteLength", f"{n}; must be >= 1")
-                continue
-            size = buffers[b].get("byteLength") if isinstance(buffers[b], dict) else None
-            if is_int(size) and off + n > size:
-                self.bad(w, f"bytes {off}..{off + n} run past buffer {b}'s byteLength {size}")
-                continue
-            self.view_ok[i] = _View(b, off, n, stride, "target" in v)
-
-    def _view_bytes(self, vi: int) -> memoryview | None:
-        """The bytes of buffer view ``vi`` (no copy); None when its buffer could not be read in full."""
-        v = self.view_ok[vi]
-        data = self.buffers.get(v.buffer)
-        if data is None or v.offset + v.length > len(data):
-            return None
-        return memoryview(data)[v.offset:v.offset + v.length]
-
-    def _accessors(self) -> None:
-        self.decode_left += DECODE_BUDGET_FACTOR * sum(len(b) for b in self.buffers.values())
-        for i, a, w in self.objects("accessors"):
-            ct = self.req(a, "componentType", w, int)
-            n = self.req(a, "count", w, int)
-            t = self.req(a, "type", w, str)
-            normalized = self.value(a, "normalized", bool, w, False)
-            ok = True
-            if ct is not None and ct not in _COMPONENTS:
-                self.bad(f"{w}.componentType", f"{ct} is not a glTF component type")
-                ok = False
-            if t is not None and t not in _WIDTH:
-                self.bad(f"{w}.type", f"{show(t)} is not SCALAR, VEC2..4 or MAT2..4")
-                ok = False
-            if n is not None and n < 1:
-                self.bad(f"{w}.count", f"{n}; must be >= 1")
-                ok = False
-            if not ok or None in (ct, n, t):
-                continue
-            arr = self._read(a, w, ct, n, t)
-            self.acc_ok[i] = a
-            if arr is not None:
-                top = arr.max()
-                if np.isfinite(top):
-                    self.acc_max[i] = float(top)
-            for key in ("min", "max"):
-                if key not in a:
-                    continue
-                vals = a[key]
-                if not (isinstance(vals, list) and len(vals) == _WIDTH[t] and all(map(is_number, vals))):
-                    self.bad(f"{w}.{key}", f"must be {_WIDTH[t]} numbers")
-                    continue
-                if arr is not None:
-                    self._min_max(arr, key, vals, w, ct, normalized)
-
-    def _min_max(self, arr: np.ndarray, key: str, vals: list, w: str, ct: int, normalized: bool) -> None:
-        """A problem when the accessor's ``min`` / ``max`` (``key``) is not its data's."""
-        got = (arr.min(axis=0) if key == "min" else arr.max(axis=0)).astype(np.float64)
-        if normalized and ct != 5126:
-            got = _normalize(got, ct)   # monotonic, so the min of the normalized values is the normalized min
-        want = np.asarray(vals, dtype=np.float64)
-        with np.errstate(all="ignore"):
-            if ct == 5126:
-                want, got = want.astype(np.float32), got.astype(np.float32)
-            same = np.allclose(got, want, rtol=1e-6, atol=1e-7)
-        if not same:
-            self.bad(f"{w}.{key}", f"{show(vals)} but the data's {key} is {show([float(x) for x in got])}")
-
-    def _read(self, a: dict, w: str, ct: int, n: int, t: str) -> np.ndarray | None:
-        """Accessor ``a``'s values (n, width), of its own component type; None when they cannot be read."""
-        dtype = np.dtype(_COMPONENTS[ct]).newbyteorder("<")
-        size = dtype.itemsize
-        width = _WIDTH[t]
-        cols = _COLUMNS.get(t)
-        # matrix columns start on 4-byte boundaries (spec 3.6.2.4: MAT2/MAT3 of 1- and 2-byte components)
-        col_bytes = cols[0] * size if cols else width * size
-        col_stride = (col_bytes + 3) // 4 * 4 if cols else col_bytes
-        elem = col_stride * (cols[1] if cols else 1)
-        off = a.get("byteOffset", 0)
-        if not is_int(off) or off < 0:
-            self.bad(f"{w}.byteOffset", f"{show(off)}; must be an integer >= 0")
-            return None
-        if off % size:
-            self.bad(f"{w}.byteOffset", f"{off} is not a multiple of the component size {size}")
-        if "bufferView" not in a:
-            if n * width > MAX_UNBACKED_VALUES:
-                self.bad(f"{w}.count", f"{n} {t} elements without a bufferView: more than the {MAX_UNBACKED_VALUES} "
-                                       "values an accessor of zeros may have here")
-                return None
-            if not self._spend(n * width * size):
-                return None
-            arr = np.zeros((n, width), dtype=dtype)
-        else:
-            vi = self.index(a, "bufferView", "bufferViews", w)
-            if vi is None or vi not in self.view_ok:
-                return None
-            v = self.view_ok[vi]
-            stride = v.stride or elem
-            if stride < elem:
-                self.bad(f"bufferViews[{vi}].byteStride", f"{stride} is less than {w}'s element size {elem}")
-                return None
-            if (v.offset + off) % size:
-                self.bad(w, f"starts at buffer byte {v.offset + off}, not a multiple of its component size {size}")
-            need = off + stride * (n - 1) + elem
-            if need > v.length:
-                self.bad(w, f"{n} elements of {elem} bytes (stride {stride}) from byte {off} need {need} bytes; "
-                            f"bufferView {vi} has {v.length}")
-                return None
-            raw = self._view_bytes(vi)
-            if raw is None or not self._spend(n * elem):
-                return None
-            buf = np.frombuffer(raw, dtype=np.uint8)
-            rows = np.lib.stride_tricks.as_strided(buf[off:], shape=(n, elem), strides=(stride, 1), writeable=False)
-            if cols:
-                parts = [rows[:, c * col_stride:c * col_stride + col_bytes] for c in range(cols[1])]
-                rows = np.concatenate(parts, axis=1)
-            arr = np.array(rows, copy=True, order="C").view(dtype).reshape(n, width)
-        sparse = a.get("sparse")
-        if sparse is not None:
-            arr = self._sparse(sparse, f"{w}.sparse", n, dtype, width, arr)
-        return arr
-
-    def _spend(self, n_bytes: int) -> bool:
-        """Take ``n_bytes`` from the decoding budget; False (once a problem) when it is spent."""
-        self.decode_left -= n_bytes
-        if self.decode_left >= 0:
-            return True
-        self.bad("accessors", f"decode more than {DECODE_BUDGET_FACTOR} times the buffers' bytes (they overlap "
-                              "over and over); the data of the rest is not checked")
-        return False
-
-    def _sparse(self, s: Any, w: str, n: int, dtype: np.dtype, width: int, arr: np.ndarray) -> np.ndarray | None:
-        if not isinstance(s, dict):
-            self.bad(w, f"{show(s)}: must be an object")
-            return None
-        k = self.req(s, "count", w, int)
-        ind, val = s.get("indices"), s.get("values")
-        if not isinstance(ind, dict) or not isinstance(val, dict):
-            self.bad(w, "needs indices and values objects")
-            return None
-        if k is None:
-            return None
-        if not 1 <= k <= n:
-            self.bad(f"{w}.count", f"{k}; must be 1..{n} (the accessor's count)")
-            return None
-        ict = self.req(ind, "componentType", f"{w}.indices", int)
-        if ict not in (5121, 5123, 5125):
-            self.bad(f"{w}.indices.componentType", f"{show(ict)}; must be an unsigned byte, short or int")
-            return None
-        got = []
-        for part, dt, wid in ((ind, np.dtype(_COMPONENTS[ict]), 1), (val, dtype, width)):
-            pw = f"{w}.{'indices' if part is ind else 'values'}"
-            vi = self.index(part, "bufferView", "bufferViews", pw, required=True)
-            if vi is None or vi not in self.view_ok:
-                return None
-            view = self.view_ok[vi]
-            if view.stride is not None or view.target:
-                self.bad(f"bufferViews[{vi}]", f"used by {pw}: must have no byteStride or target")
-            off = part.get("byteOffset", 0)
-            if not is_int(off) or off < 0:
-                self.bad(f"{pw}.byteOffset", f"{show(off)}; must be an integer >= 0")
-                return None
-            need = off + k * wid * dt.itemsize
-            if need > view.length:
-                self.bad(pw, f"{k} x {wid * dt.itemsize} bytes from byte {off} run past bufferView {vi} "
-                             f"({view.length} bytes)")
-                return None
-            raw = self._view_bytes(vi)
-            if raw is None:
-                return None
-            got.append(np.frombuffer(raw, dtype=dt.newbyteorder("<"), count=k * wid, offset=off).reshape(k, wid))
-        idx = got[0][:, 0].astype(np.int64)
-        if np.any(np.diff(idx) <= 0):
-            self.bad(f"{w}.indices", "must be strictly increasing")
-        if idx.max() >= n:
-            self.bad(f"{w}.indices", f"index {int(idx.max())} is past the accessor's count {n}")
-            return None
-        arr = arr.copy()
-        arr[idx] = got[1]
-        return arr
-
     def _meshes(self) -> None:
         for m, mesh, w in self.objects("meshes"):
             prims = self.req(mesh, "primitives", w, list)
@@ -464,12 +249,12 @@ class _Checker(JsonWalk):
 
     def _indices(self, ia: int, pw: str, mode: Any, n_vertex: int | None) -> None:
         """Primitive ``pw``'s index accessor ``ia``: an unsigned SCALAR, values below ``n_vertex``, whole triangles."""
-        a = self.acc_ok.get(ia)
+        a = self.acc.ok.get(ia)
         if a is None:
             return
         if a.get("type") != "SCALAR" or a.get("componentType") not in (5121, 5123, 5125):
             self.bad(f"{pw}.indices", f"accessor {ia} must be a SCALAR of unsigned byte, short or int")
-        top = self.acc_max.get(ia)
+        top = self.acc.top.get(ia)
         if top is not None and n_vertex is not None and top >= n_vertex:
             self.bad(f"{pw}.indices", f"accessor {ia} has index {int(top)}, past the vertex count {n_vertex}")
         if mode == 4 and a["count"] % 3:
@@ -481,7 +266,7 @@ class _Checker(JsonWalk):
             if not is_int(ai) or not 0 <= ai < len(self.items("accessors")):
                 self.bad(f"{w}.{key}", f"{show(ai)} is not an accessor index")
                 continue
-            a = self.acc_ok.get(ai)
+            a = self.acc.ok.get(ai)
             if a is None:
                 continue
             counts[key] = a["count"]
@@ -541,7 +326,7 @@ class _Checker(JsonWalk):
             if "skeleton" in skin:
                 self.index(skin, "skeleton", "nodes", w)
             if "inverseBindMatrices" in skin and (ai := self.index(skin, "inverseBindMatrices", "accessors", w)) \
-                    is not None and (a := self.acc_ok.get(ai)) is not None:
+                    is not None and (a := self.acc.ok.get(ai)) is not None:
                 if a.get("type") != "MAT4" or a.get("componentType") != 5126:
                     self.bad(f"{w}.inverseBindMatrices", f"accessor {ai} must be MAT4 float")
                 if a["count"] < len(joints):
@@ -562,7 +347,7 @@ class _Checker(JsonWalk):
                     if "skin" not in node:
                         self.bad(w, f"mesh {m} primitive {p} has JOINTS_0 but the node has no skin")
                     continue
-                top = self.acc_max.get(ai) if is_int(ai) else None
+                top = self.acc.top.get(ai) if is_int(ai) else None
                 if top is not None and top >= joints_of[s]:
                     self.bad(f"meshes[{m}].primitives[{p}].attributes.JOINTS_0",
                              f"joint {int(top)} but skin {s} has {joints_of[s]} joints")
@@ -630,11 +415,3 @@ def _in_cycles(parent: list[int]) -> list[int]:
         for k in chain:
             state[k], cyclic[k] = 2, hit
     return [i for i in range(len(parent)) if cyclic[i]]
-
-
-def _normalize(values: np.ndarray, ct: int) -> np.ndarray:
-    """Normalized integer components as floats (spec 3.11: max(c / (2^(b-1) - 1), -1) for signed)."""
-    info = np.iinfo(_COMPONENTS[ct])
-    if info.min < 0:
-        return np.maximum(values / info.max, -1.0)
-    return values / info.max
