@@ -25,7 +25,9 @@ from facepuppet.runtime.cli import main
 from conftest import need_shared
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf.read_materials import MAX_TEXTURE_SIDE, MAX_TEXTURE_TEXELS
+from facepuppet.offline.io.gltf.write import encode_glb
 from facepuppet.offline.io.gltf_check import check_gltf
+from facepuppet.offline.io.gltf_check_accessors import DECODE_BUDGET_FACTOR
 from facepuppet.offline.io.gltf_container import MAX_UNBACKED_VALUES, GltfError
 from facepuppet.offline.io.gltf_files import MAX_FILE_BYTES
 from helpers.gltf_writer import GltfBuilder, read_doc
@@ -295,3 +297,25 @@ def test_the_error_type_is_the_containers(tmp_path):
     path = with_buffer_uri(tmp_path, "../x.bin")
     with pytest.raises(GltfError, match=r"m\.gltf: buffers\[0\]\.uri: '\.\./x\.bin': the file must be inside"):
         read_gltf(path)
+
+
+def test_accessors_laid_over_the_same_bytes_thousands_of_times_stop_at_the_decode_budget(tmp_path):
+    b = GltfBuilder()
+    view = b.view(np.zeros(16 << 10, np.float32).tobytes())   # 64 KiB
+    for _ in range(4000):   # 250 MiB of decoding asked from a 64 KiB buffer
+        b.accessor(None, kind="SCALAR", dtype="float32", view=view, count=16 << 10)
+    path = b.write_glb(tmp_path / "overlaid.glb")
+    found = check_gltf(path)
+    assert found == [f"accessors: decode more than {DECODE_BUDGET_FACTOR} times the buffers' bytes (they overlap "
+                     "over and over); the data of the rest is not checked"]
+
+
+def test_a_buffer_shorter_than_declared_is_not_read_past_its_end(tmp_path):
+    b = GltfBuilder()
+    b.accessor(np.arange(3000, dtype=np.float32))
+    doc = dict(b.doc, buffers=[{"byteLength": 12000}])
+    path = tmp_path / "short.glb"
+    path.write_bytes(encode_glb(doc, bytes(b.blob[:400])))   # the BIN chunk holds 400 of the 12,000 bytes
+    found = check_gltf(path)
+    assert found == ["buffers[0].byteLength: 12000 but the BIN chunk holds 400 bytes (it may be at most 3 bytes of "
+                     "padding longer)"]
