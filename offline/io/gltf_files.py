@@ -50,7 +50,7 @@ MAX_FILE_BYTES = 1 << 30
 #: The largest image file or ``data:`` image read (compressed bytes): an 8192x8192 RGBA PNG of noise, the
 #: worst a texture of the largest accepted size compresses to, is 268 MB.
 MAX_IMAGE_BYTES = 272 << 20
-_OPEN_FLAGS = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+_OPEN_FLAGS = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)  # not on Windows
 
 
 class GltfError(InputFileError):

@@ -63,8 +63,9 @@ def check(path: Path, capsys) -> tuple[int, str]:
     return code, capsys.readouterr().out
 
 
-def both_refuse(path: Path, tmp_path: Path, capsys, where: str, why: str) -> None:
-    """import-rig: exit 2, one line naming the file, ``where`` and ``why``; check-gltf: exit 2 with that problem."""
+def both_refuse(path: Path, tmp_path: Path, capsys, where: str, why: str) -> str:
+    """import-rig: exit 2, one line naming the file, ``where`` and ``why``; check-gltf: exit 2 with that problem
+    (its output returned)."""
     code, err = import_rig(path, tmp_path, capsys)
     assert code == 2, err
     assert "Traceback" not in err
@@ -72,6 +73,7 @@ def both_refuse(path: Path, tmp_path: Path, capsys, where: str, why: str) -> Non
     code, out = check(path, capsys)
     assert code == 2
     assert any(line.startswith(f"{path}: {where}: ") and why in line for line in out.splitlines()), out
+    return out
 
 
 def run_command(*argv: str) -> subprocess.CompletedProcess:
@@ -89,13 +91,13 @@ def test_a_buffer_beside_the_file_is_read_by_both(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("uri", ["../SECRET.bin", "sub/../../SECRET.bin", "%2E%2E/SECRET.bin", "/etc/passwd",
-                                 str(Path("/etc/passwd"))])
+                                 "../../../../../../../../etc/passwd"])
 def test_a_uri_climbing_out_of_the_folder_or_absolute_is_refused_by_both(tmp_path, capsys, uri):
     (tmp_path / "SECRET.bin").write_bytes(TRI.tobytes())
     (tmp_path / "model" / "sub").mkdir(parents=True)
     path = with_buffer_uri(tmp_path, uri)
-    both_refuse(path, tmp_path, capsys, "buffers[0].uri", "inside the folder of the glTF")
-    assert "0.0" not in capsys.readouterr().out   # nothing of the secret's bytes is printed
+    out = both_refuse(path, tmp_path, capsys, "buffers[0].uri", "inside the folder of the glTF")
+    assert "the data's" not in out   # nothing read from the secret comes out as accessor min/max
 
 
 def test_a_symlink_inside_the_folder_pointing_out_of_it_is_refused_by_both(tmp_path, capsys):
