@@ -83,6 +83,7 @@ def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5,
         readback.append((t3 - t2) * 1e3)
     total = time.perf_counter() - start
     render_s = (sum(prepare) + sum(draw)) / 1e3
+    passes = time_passes(renderer, weights[:max(len(weights) // 2, 1)], poses)
     return {
         "frames": len(weights),
         "frames_per_s": len(weights) / render_s,
@@ -91,8 +92,28 @@ def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5,
         "cpu_submit_ms": _stats(submit),
         "draw_finish_ms": _stats(draw),
         "readback_ms": _stats(readback),
+        "passes_ms": passes,
         "peak_rss_mb": peak_rss_mb(),
     }
+
+
+def time_passes(renderer: FaceRenderer, weights: np.ndarray, poses: np.ndarray | None = None,
+                mode: str = "finish") -> dict:
+    """Median and p99 ms of each draw pass over the frames (a :class:`PassClock`; "finish" mode stalls
+    after every pass, so these frames are timed apart from the unprofiled ones)."""
+    from facepuppet.runtime.render.pass_clock import PassClock
+
+    clock = PassClock(renderer.ctx, mode)
+    for i, w in enumerate(weights):
+        renderer.prepare(w, head_rotation=None if poses is None else poses[i % len(poses)])
+        clock.start()
+        renderer.submit(clock)
+        renderer.resolve(clock)
+        clock.stop()
+    names = list(dict.fromkeys(n for frame in clock.frames for n in frame))
+    out = {name: _stats([frame.get(name, 0.0) for frame in clock.frames]) for name in names}
+    out["total"] = _stats([sum(frame.values()) for frame in clock.frames])
+    return out
 
 
 def bench_render(args: argparse.Namespace) -> dict:

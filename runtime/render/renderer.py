@@ -52,6 +52,7 @@ from facepuppet.runtime.render.parts_path import (
     variant_defines,
     vertex_attributes,
 )
+from facepuppet.runtime.render.pass_clock import NO_CLOCK, PassClock, NoClock
 from facepuppet.runtime.render.paths.base import PATH_TEXTURE_UNITS, DeformationPath
 from facepuppet.runtime.render.paths.cpu import CpuPath
 from facepuppet.runtime.render.paths.elastic import ElasticPath
@@ -286,19 +287,33 @@ class FaceRenderer:
         self._deformation.prepare_controls(controls)
 
     # -- per frame: the draw passes ----------------------------------------
-    def submit(self) -> None:
-        """Issue the draw calls for the prepared frame, pass by pass (never waits for the GPU)."""
+    def submit(self, clock: PassClock | NoClock = NO_CLOCK) -> None:
+        """Issue the draw calls for the prepared frame, pass by pass (never waits for the GPU, unless a
+        :class:`~facepuppet.runtime.render.pass_clock.PassClock` in "finish" mode times the passes)."""
         self._set_frame_uniforms()
         self._deformation.bind()
+        clock.mark("setup")
         self._clear()
+        clock.mark("clear")
         if self.parts:
             self._draw_opaque_groups()
+            clock.mark("opaque")
             self._draw_blended_groups()
+            clock.mark("blended")
         else:
             self._draw_surfaces()
+            clock.mark("opaque")
             self._draw_layers()
+            clock.mark("blended")
         if self._label is not None:
             self._label.draw()
+            clock.mark("label")
+
+    def resolve(self, clock: PassClock | NoClock = NO_CLOCK) -> None:
+        """The MSAA resolve of the frame (what reading it back starts with); nothing when not multisampled."""
+        if self.samples:
+            self._framebuffers.resolved()
+            clock.mark("resolve")
 
     def _set_frame_uniforms(self) -> None:
         """The pose and the camera, in every program of the path."""
