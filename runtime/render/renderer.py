@@ -52,7 +52,7 @@ from facepuppet.runtime.render.parts_path import (
     variant_defines,
     vertex_attributes,
 )
-from facepuppet.runtime.render.pass_clock import NO_CLOCK, PassClock, NoClock
+from facepuppet.runtime.render.pass_clock import NO_CLOCK, NoClock, PassClock
 from facepuppet.runtime.render.paths.base import PATH_TEXTURE_UNITS, DeformationPath
 from facepuppet.runtime.render.paths.cpu import CpuPath
 from facepuppet.runtime.render.paths.elastic import ElasticPath
