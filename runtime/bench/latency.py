@@ -65,6 +65,7 @@ from facepuppet.runtime.mapping.channels import ARKIT_NAMES, ChannelMap
 from facepuppet.runtime.mapping.expressions import make_drive
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.geometry import euler_to_quat
+from facepuppet.runtime.render.quality import QUALITIES
 from facepuppet.runtime.session.options import PanelOptions
 
 _PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2**20 if hasattr(os, "sysconf") else 4096 / 2**20
@@ -301,7 +302,8 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
             "--size", args.size, "--fps", repr(float(args.fps)), "--duration", repr(3 * seconds + 60),
             "--path", args.path, "--receiver", getattr(args, "receiver", "process"),
             "--draw", getattr(args, "draw", "arrival"), *(["--phone", phone] if phone else []),
-            *(["--panel"] if panel is not None else [])]
+            *(["--panel"] if panel is not None else []), "--quality", getattr(args, "quality", "auto"),
+            *(["--msaa", str(args.msaa)] if getattr(args, "msaa", None) is not None else [])]
     plan = replace(plan_from_argv(argv), panel=PanelOptions(panel is not None, hidden=panel == "hidden"))
     stop = threading.Event()
     sender_out: list[str] = []
@@ -334,7 +336,11 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
     calls_ms: list[float] = []  # per tick: the panel's draw calls (llvmpipe's vertex work for the panel)
     shown_ticks: list[bool] = []  # per tick with panel="alternate": whether the panel was shown in it
 
+    drawn_with: dict = {}
+
     def sample(info):
+        if not drawn_with:  # the picture the run chose (the path and the samples its quality left)
+            drawn_with.update(msaa=int(getattr(info.renderer, "samples", 0)), path=info.renderer.path)
         if shown_panel:
             calls_ms.append(shown_panel[0].draw_calls_s * 1e3)
             if panel == "alternate":  # this tick's mode, then the other one for the next tick
@@ -422,8 +428,32 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
         "newest_frame_max_ms_per_second": [per_second[k] for k in sorted(per_second)],
         "rss_mb_per_second": [round(m, 1) for _, m in rss],
         "render_path": result.path,
+        "msaa": drawn_with.get("msaa"),
         "loadavg": load_average(),
     }
+
+
+def pass_costs(args: argparse.Namespace, path: str, msaa: int, frames: int = 60) -> dict:
+    """ms per draw pass (:mod:`~facepuppet.runtime.render.pass_clock`, "finish" mode) of the character at the
+    run's size, path and samples, timed apart from the live run (waiting after each pass would change it)."""
+    from facepuppet.runtime.bench.render import head_poses, synthetic_performance, time_passes
+    from facepuppet.runtime.commands.options import parse_size
+    from facepuppet.runtime.render.gl_context import create_context
+    from facepuppet.runtime.render.renderer import FaceRenderer
+
+    character = Character.load(args.character)
+    width, height = parse_size(args.size)
+    target = create_context(headless=True)
+    try:
+        renderer = FaceRenderer(target.ctx, character, width, height, path=path, msaa=msaa, log=lambda _: None)
+        try:
+            weights = synthetic_performance(frames, character.n_shapes, n_active=character.n_shapes)
+            return {"path": path, "msaa": renderer.samples,
+                    **time_passes(renderer, weights, head_poses(frames))}
+        finally:
+            renderer.close()
+    finally:
+        target.close()
 
 
 MAP_SAMPLES = 5000
@@ -471,6 +501,11 @@ def bench_latency(args: argparse.Namespace) -> dict:
     with session_log(args.verbose):
         results["nominal"] = _phase(args, args.rate, args.seconds)
     _print("nominal", results["nominal"])
+    nominal = results["nominal"]
+    if nominal.get("msaa") is not None:
+        passes = results["passes_ms"] = pass_costs(args, nominal["render_path"], nominal["msaa"])
+        print(f"  draw passes ({passes['path']} path, MSAA {passes['msaa']}x) median ms: " + ", ".join(
+            f"{name} {v['median']:.2f}" for name, v in passes.items() if isinstance(v, dict)))
     m = results["map_step"] = map_step_cost(args.character)
     print(f"  map step alone ({m['map']}, {m['channels']} channels -> {m['shapes']} shapes, "
           f"{m['expressions']} expressions): p50 {m['p50_us']:.1f} µs, p99 {m['p99_us']:.1f} µs over {m['n']}")
@@ -562,6 +597,9 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--draw", choices=("arrival", "tick"), default="arrival",
                         help="the run's drawing: on arrival of each frame (default) or on the --fps grid")
     parser.add_argument("--path", choices=("auto", "gpu", "cpu"), default="auto", help="deformation path")
+    parser.add_argument("--quality", choices=QUALITIES, default="auto",
+                        help="the run's --quality (auto, as run's default)")
+    parser.add_argument("--msaa", type=int, default=None, help="the run's --msaa (default: as --quality decides)")
     parser.add_argument("--receiver", choices=("process", "thread"), default="process",
                         help="the run's receiver: a child process (default) or a thread")
     parser.add_argument("--panel", action="store_true",

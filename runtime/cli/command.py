@@ -114,8 +114,9 @@ def _configure_logging() -> None:
         handler = _Stderr()
         handler.setFormatter(logging.Formatter("%(message)s"))
         ours.addHandler(handler)
-        ours.setLevel(logging.INFO)
         ours.propagate = False
+    if ours.level in (logging.NOTSET,) or ours.level > logging.INFO:  # put back, whoever changed it since
+        ours.setLevel(logging.INFO)
 
 
 def _error(command: str, exc: BaseException, code: int) -> int:

@@ -6,7 +6,8 @@ MSAA and the credits corner.
 window asks the platform for a transparent framebuffer (glfw
 ``TRANSPARENT_FRAMEBUFFER``; the run says when it is not granted).
 ``--background R,G,B`` is a colour, 0..1 or 0..255 per channel.
-``--msaa N`` multisamples (default 4, capped at what the context allows; 0 = off).
+``--msaa N`` multisamples (capped at what the context allows; 0 = off); without it, ``--quality``
+decides (:mod:`~facepuppet.runtime.render.quality`: 4 for pictures kept, fitted to the frame budget live).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import re
 from dataclasses import dataclass
 
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.render.quality import DEFAULT_MSAA, DEFAULT_QUALITY, QUALITIES, choose_msaa
 
 # "body": the camera fits every drawn vertex; "head": the vertices that follow the humanoid head bone
 # (every drawn vertex for a character without one: a head rig); "face": what expressions move (contact sheets).
@@ -23,7 +25,6 @@ from facepuppet.runtime.errors import UsageError
 FRAMINGS = ("body", "head", "face")
 
 DEFAULT_BACKGROUND = (0.16, 0.17, 0.19)
-DEFAULT_MSAA = 4
 
 
 @dataclass(frozen=True)
@@ -35,20 +36,26 @@ class RenderOptions:
     framing : str, one of FRAMINGS
     background : tuple of 3 float, display RGB 0..1 (unused when transparent)
     transparent : bool
-    msaa : int, samples (0 = off)
+    msaa : int or None, samples asked for (0 = off; None: as ``quality`` decides)
+    quality : str, one of QUALITIES
     credits : bool, draw the character's attribution in a corner
     """
 
     framing: str = "head"
     background: tuple[float, float, float] = DEFAULT_BACKGROUND
     transparent: bool = False
-    msaa: int = DEFAULT_MSAA
+    msaa: int | None = None
+    quality: str = DEFAULT_QUALITY
     credits: bool = False
 
-    def renderer_kwargs(self) -> dict:
-        """Keyword arguments of FaceRenderer for these options (the credits text is the caller's)."""
+    def renderer_kwargs(self, msaa: int | None = None) -> dict:
+        """Keyword arguments of FaceRenderer for these options (the credits text is the caller's); ``msaa``:
+        the samples chosen (:func:`~facepuppet.runtime.render.quality.choose_msaa`), default the full
+        quality's (a picture that is kept)."""
+        if msaa is None:
+            msaa = choose_msaa(self.msaa, self.quality, None, live=False).msaa
         return {"framing": self.framing, "background": self.background, "transparent": self.transparent,
-                "msaa": self.msaa}
+                "msaa": msaa}
 
 
 def parse_background(text: str) -> tuple[tuple[float, float, float], bool]:
@@ -75,9 +82,13 @@ def add_render_arguments(parser: argparse.ArgumentParser, framing: str = "head",
     group.add_argument("--background", default=None, metavar="transparent|R,G,B",
                        help="'transparent' (RGBA PNG frames with alpha 0 where nothing is drawn; a transparent "
                             "window where the platform allows) or a colour R,G,B (0..1 or 0..255)")
-    group.add_argument("--msaa", type=int, default=DEFAULT_MSAA, metavar="N",
-                       help=f"multisample anti-aliasing samples (default {DEFAULT_MSAA}, 0 = off; capped at "
-                            "what the OpenGL context allows)")
+    group.add_argument("--msaa", type=int, default=None, metavar="N",
+                       help=f"multisample anti-aliasing samples (0 = off; capped at what the OpenGL context "
+                            f"allows; default: as --quality decides, {DEFAULT_MSAA} at full quality)")
+    group.add_argument("--quality", choices=QUALITIES, default=DEFAULT_QUALITY,
+                       help="picture quality: 'full' (MSAA, whatever it costs), 'fast' (no MSAA) or 'auto' "
+                            "(the default: full for pictures kept as files; live, MSAA off on a software "
+                            "rasteriser or when the draw takes more than half the frame budget, said once)")
     if credits:
         group.add_argument("--credits", action="store_true",
                            help="draw the character's attribution (VRM meta / licence) in a corner")
@@ -89,8 +100,12 @@ def render_options(args: argparse.Namespace) -> RenderOptions:
     text = getattr(args, "background", None)
     if text is not None:
         background, transparent = parse_background(text)
-    msaa = int(getattr(args, "msaa", DEFAULT_MSAA))
-    if msaa < 0:
+    msaa = getattr(args, "msaa", None)
+    if msaa is not None and int(msaa) < 0:
         raise UsageError(f"--msaa: expected 0 (off) or a number of samples, got {msaa}")
+    quality = getattr(args, "quality", DEFAULT_QUALITY) or DEFAULT_QUALITY
+    if quality not in QUALITIES:
+        raise UsageError(f"--quality: expected one of {', '.join(QUALITIES)}, got {quality!r}")
     return RenderOptions(framing=getattr(args, "framing", "head"), background=background,
-                         transparent=transparent, msaa=msaa, credits=bool(getattr(args, "credits", False)))
+                         transparent=transparent, msaa=None if msaa is None else int(msaa), quality=quality,
+                         credits=bool(getattr(args, "credits", False)))

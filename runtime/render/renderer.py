@@ -264,6 +264,18 @@ class FaceRenderer:
         )
         return next(p for p in candidates if p.name == best), report
 
+    def median_draw_ms(self, frames: int = 8, warmup: int = 2) -> float:
+        """Median ms of drawing a frame with every shape active and waiting for it (the live budget check)."""
+        weights = realistic_weights(self.character.n_shapes, n_active=self.character.n_shapes)
+        times = []
+        for i in range(warmup + frames):
+            t0 = time.perf_counter()
+            self.draw(weights)
+            self.finish()
+            if i >= warmup:
+                times.append(time.perf_counter() - t0)
+        return float(np.median(times)) * 1e3
+
     # -- per frame: the CPU side -------------------------------------------
     def prepare(self, weights: np.ndarray, head_rotation: np.ndarray | None = None,
                 head_translation: np.ndarray | None = None) -> None:

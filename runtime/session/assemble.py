@@ -37,6 +37,7 @@ from facepuppet.runtime.live.loop import FrameLoop
 from facepuppet.runtime.live.stages import build_chain
 from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.render.gl_context import create_context
+from facepuppet.runtime.render.quality import budget_note, choose_msaa
 from facepuppet.runtime.session.options import OutputOptions, PanelOptions, PictureOptions, StageOptions
 from facepuppet.runtime.session.outputs import Outputs, open_outputs
 
@@ -162,15 +163,8 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
         log(chain.describe())
         if on_chain is not None:
             on_chain(chain)
-        target = create_context(headless=True if picture.headless else None, width=picture.width,
-                                height=picture.height, title=feed.title, log=log, samples=picture.render.msaa,
-                                transparent=picture.render.transparent)
-        stack.callback(target.close)
-        screen = None if target.headless else target.ctx.screen
-        renderer = chain.renderer(target.ctx, character, picture.width, picture.height, picture.path, screen, log,
-                                  **picture.render.renderer_kwargs(),
-                                  credits=character.credits if picture.render.credits else None)
-        stack.callback(renderer.close)
+        live = outputs.out is None and outputs.video is None  # pictures kept as files are drawn at full quality
+        target, renderer = _open_picture(stack, picture, feed.title, chain, character, live, parts.fps, log)
         counters = dict(parts.counters)
         stats = None
         if parts.live:
@@ -196,6 +190,48 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
             stats.counters = feed.counters_view(parts, counters, chain)
         yield Session(character, feed, bus, chain, parts, target, renderer, opened, stats, shown, loop, counters,
                       on_ready)
+
+
+def _open_picture(stack: contextlib.ExitStack, picture: PictureOptions, title: str, chain: Chain,
+                  character: Character, live: bool, fps: float, log: Callable[[str], None]
+                  ) -> tuple[GLTarget, Renderer]:
+    """The GL context (a window, or headless) and the renderer, at the picture quality of
+    :mod:`~facepuppet.runtime.render.quality`: a window is opened again without multisampling when its
+    renderer turns out to be a software rasteriser; an offscreen picture is drawn without MSAA when a few
+    timed frames take more than the live share of the frame budget."""
+    render = picture.render
+    asked = choose_msaa(render.msaa, render.quality, None, live=False).msaa  # before the renderer is known
+
+    def context(samples: int) -> GLTarget:
+        return create_context(headless=True if picture.headless else None, width=picture.width,
+                              height=picture.height, title=title, log=log, samples=samples,
+                              transparent=render.transparent)
+
+    target = context(asked)
+    quality = choose_msaa(render.msaa, render.quality, target.ctx.info.get("GL_RENDERER"), live)
+    if quality.note:
+        log(quality.note)
+        if not target.headless and target.samples:
+            target.close()
+            target = context(quality.msaa)
+    stack.callback(target.close)
+    screen = None if target.headless else target.ctx.screen
+
+    def renderer_at(samples: int) -> Renderer:
+        return chain.renderer(target.ctx, character, picture.width, picture.height, picture.path, screen, log,
+                              **render.renderer_kwargs(samples),
+                              credits=character.credits if render.credits else None)
+
+    renderer = renderer_at(quality.msaa)
+    budgeted = live and render.msaa is None and render.quality == "auto"
+    if budgeted and getattr(renderer, "samples", 0):
+        note = budget_note(renderer.median_draw_ms(), 1e3 / fps, renderer.samples)
+        if note:
+            log(note)
+            renderer.close()
+            renderer = renderer_at(0)
+    stack.callback(renderer.close)
+    return target, renderer
 
 
 def _open_panel(stack: contextlib.ExitStack, options: PanelOptions, picture: PictureOptions, target: GLTarget,

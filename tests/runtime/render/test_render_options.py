@@ -27,9 +27,15 @@ def test_render_options_defaults_and_msaa_check():
     import argparse
 
     opts = render_options(argparse.Namespace())
-    assert (opts.framing, opts.transparent, opts.msaa, opts.credits) == ("head", False, 4, False)
+    assert (opts.framing, opts.transparent, opts.msaa, opts.quality, opts.credits) == \
+        ("head", False, None, "auto", False)
+    assert opts.renderer_kwargs()["msaa"] == 4  # a picture that is kept: full quality
+    assert render_options(argparse.Namespace(quality="fast")).renderer_kwargs()["msaa"] == 0
+    assert render_options(argparse.Namespace(quality="fast", msaa=2)).renderer_kwargs()["msaa"] == 2
     with pytest.raises(ValueError, match="--msaa"):
         render_options(argparse.Namespace(msaa=-2))
+    with pytest.raises(ValueError, match="--quality"):
+        render_options(argparse.Namespace(quality="best"))
 
 
 def run_figure(tmp_path, capsys, *extra):
