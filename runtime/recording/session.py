@@ -19,8 +19,9 @@ on an unbuffered descriptor opened with ``O_APPEND``, so a ``kill -9`` can at
 worst lose or tear the last record; :func:`read_session` keeps every complete
 record before a torn tail and says where it stopped. A damaged record in the
 middle (a flipped bit) is skipped: reading resumes at the next offset where a
-whole record verifies (known kind, length within the file, CRC), and the
-bytes skipped are counted.
+whole record verifies (known kind, length within the file, CRC; found in
+time linear in the file's size, :mod:`~facepuppet.runtime.recording.resync`),
+and the bytes skipped are counted.
 """
 
 from __future__ import annotations
@@ -56,13 +57,13 @@ from facepuppet.runtime.recording.records import (
     encode_frame,
     layout_of,
 )
+from facepuppet.runtime.recording.resync import MAX_PAYLOAD, Prefixes, next_record
 
 from facepuppet import __version__
 
 MAGIC = b"FPSESS\x00\x01"
 
 _RECORD_HEAD = struct.Struct("<IIB")  # payload length, crc32 of payload, kind
-_MAX_PAYLOAD = 1 << 30  # a length above this is corruption, not data
 
 
 class SessionWriter:
@@ -139,8 +140,8 @@ class SessionWriter:
 
 
 def _record(kind: RecordKind, payload: bytes) -> bytes:
-    if len(payload) > _MAX_PAYLOAD:
-        raise ValueError(f"session record payload: expected at most {_MAX_PAYLOAD} bytes, got {len(payload)}")
+    if len(payload) > MAX_PAYLOAD:  # what a reader resynchronising after damage looks for
+        raise ValueError(f"session record payload: expected at most {MAX_PAYLOAD} bytes, got {len(payload)}")
     return _RECORD_HEAD.pack(len(payload), zlib.crc32(payload), int(kind)) + payload
 
 
@@ -213,6 +214,7 @@ def read_session(path: str | os.PathLike) -> Session:
         )
     session = Session(path=path, header={}, frames=[], complete=True, n_records=0)
     layouts: dict[int, Layout] = {}
+    prefixes = Prefixes(data)
     offset = len(MAGIC)
     end = len(data)
     while offset < end:
@@ -222,7 +224,7 @@ def read_session(path: str | os.PathLike) -> Session:
             offset = next_offset
             continue
         session.complete = False
-        found = _resync(data, offset + 1)
+        found = next_record(data, offset + 1, _RESYNC_KINDS, prefixes)
         if found is None:  # nothing valid after it: a torn or corrupt tail (as after a crash)
             session.tail_error = (f"{path}: {problem} at byte offset {offset}; "
                                   f"kept the {session.n_records} records before it")
@@ -263,29 +265,7 @@ def _next_record(session: Session, layouts: dict[int, Layout], data: bytes, offs
     return None, start + length
 
 
-_KINDS = frozenset(int(k) for k in RecordKind)
-
-
-def _resync(data: bytes, offset: int) -> int | None:
-    """Offset of the first record at or after ``offset`` whose kind is known and whose length and CRC check.
-
-    The format is length-prefixed and CRC'd, so a damaged record is skipped by
-    scanning for the next place where a whole record verifies (a random match
-    needs a known kind byte, a length within the file and a 32-bit CRC).
-    """
-    end = len(data)
-    head = _RECORD_HEAD.size
-    for at in range(offset, end - head + 1):
-        if data[at + 8] not in _KINDS or data[at + 8] == RecordKind.HEADER:
-            continue
-        length, crc, _ = _RECORD_HEAD.unpack_from(data, at)
-        # no record is empty (each payload starts with its tag or JSON), and eight zero bytes and a kind
-        # byte, common in OSC's zero padding, would otherwise verify as an empty record (crc32(b"") == 0)
-        if length == 0 or length > end - at - head:
-            continue
-        if zlib.crc32(data[at + head:at + head + length]) == crc:
-            return at
-    return None
+_RESYNC_KINDS = frozenset(int(k) for k in RecordKind if k != RecordKind.HEADER)  # the header is only first
 
 
 def _number_field(value: object) -> bool:

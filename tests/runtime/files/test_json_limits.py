@@ -53,7 +53,8 @@ def test_the_depth_scan_agrees_with_a_plain_loop_across_chunk_boundaries(monkeyp
         depth, clean = plain_depth(text)
         found = nesting_depth(text)
         assert found == depth if clean else found >= depth, text
-    for _ in range(300 if chunk > 40 else 30):  # real JSON: escaped quotes and backslashes inside strings, brackets in strings
+    # real JSON: escaped quotes and backslashes inside strings, brackets in strings
+    for _ in range(300 if chunk > 40 else 30):
         value = rng.choice([[], {}, 'a\\"[', {"k\\\\": [["]\\\"{"]]}])
         for _ in range(rng.randint(0, 6)):
             value = [value, {'x"[': value}]
