@@ -14,6 +14,11 @@ A reader skips PACKET/AUDIO/TICK records it cannot decode (older readers skip th
 all; their length is in the record header) and counts them in
 ``Session.skipped``; any other unknown code is corruption.
 
+JSON in a record (the header, LAYOUT) is read within the limits of
+:mod:`~facepuppet.runtime.files.json_limits`; a whole record over them is
+refused (InputFileError naming the file, the kind and the offset), not taken
+for damage.
+
 Crash safety: :class:`SessionWriter` writes each record with one ``os.write``
 on an unbuffered descriptor opened with ``O_APPEND``, so a ``kill -9`` can at
 worst lose or tear the last record; :func:`read_session` keeps every complete
@@ -38,6 +43,7 @@ from pathlib import Path
 
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.files.input_files import regular_file
+from facepuppet.runtime.files.json_limits import JsonLimitError, JsonTextError, loads_limited
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.recording.records import (
     RESERVED_KINDS,
@@ -260,6 +266,9 @@ def _next_record(session: Session, layouts: dict[int, Layout], data: bytes, offs
         return f"CRC mismatch in the {where}", offset
     try:
         _apply_record(session, layouts, kind, payload, first=offset == len(MAGIC))
+    except JsonLimitError as exc:  # whole and CRC'd, so not damage: made to be refused
+        raise InputFileError(f"{session.path}: {RecordKind(kind).name} record at byte offset {offset}: "
+                             f"{exc.problem}") from None
     except ValueError as exc:
         return f"corrupt record of kind {kind}: {exc}", offset
     return None, start + length
@@ -313,9 +322,11 @@ def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, paylo
         raise ValueError("the header must be the first record, and only the first")
     if kind == RecordKind.HEADER:
         try:
-            session.header = json.loads(payload.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"header is not JSON: {exc}") from None
+            session.header = loads_limited(payload, "header")
+        except JsonLimitError:
+            raise
+        except JsonTextError as exc:
+            raise ValueError(f"header {exc.problem}") from None
     elif kind == RecordKind.LAYOUT:
         layout_id, layout = decode_layout(payload)
         layouts[layout_id] = layout
