@@ -31,9 +31,11 @@ and the bytes skipped are counted.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import stat
 import struct
 import time
 import warnings
@@ -85,6 +87,15 @@ class SessionWriter:
 
     Use as a context manager; :meth:`close` fsyncs and closes the descriptor.
     Not thread-safe: one thread writes.
+
+    A write that fails (disk full, the file-size limit) raises its OSError once the file is cut back to the
+    end of the last whole record (``size``), so what was written reads without a torn tail; a header that
+    cannot be written leaves no file behind (where the writer created it).
+
+    Attributes
+    ----------
+    n_records : int, whole records written (the header included)
+    size : int, bytes of whole records in the file (the magic included)
     """
 
     def __init__(self, path: str | os.PathLike, info: dict | None = None, fsync_every_s: float | None = 1.0,
@@ -92,6 +103,7 @@ class SessionWriter:
         self.path = Path(path)
         self.fsync_every_s = fsync_every_s
         self.n_records = 0
+        self.size = 0
         self._layouts: dict[Layout, int] = {}
         flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | getattr(os, "O_BINARY", 0)
         flags |= os.O_TRUNC if overwrite else os.O_EXCL
@@ -105,7 +117,16 @@ class SessionWriter:
         }
         payload = json.dumps(header, sort_keys=True).encode("utf-8")
         # Magic and header go out in one write: a file is either empty or has both.
-        self._write(MAGIC + _record(RecordKind.HEADER, payload))
+        try:
+            self._write(MAGIC + _record(RecordKind.HEADER, payload))
+        except OSError as exc:
+            created = not overwrite and stat.S_ISREG(os.fstat(self._fd).st_mode)
+            self._close_quietly()
+            if created:  # the empty file this writer made, never a file it was given (nor a device)
+                with contextlib.suppress(OSError):
+                    self.path.unlink()
+            raise OSError(exc.errno, f"{self.path}: cannot write a recording's header: "
+                                     f"{exc.strerror or exc}") from exc
 
     def __enter__(self) -> SessionWriter:
         return self
@@ -131,18 +152,32 @@ class SessionWriter:
         if self._fd is None:
             raise ValueError(f"{self.path}: session writer is closed")
         view = memoryview(data)
-        while view:  # a regular file takes it all at once; loop only for safety
-            view = view[os.write(self._fd, view):]
+        try:
+            while view:  # a regular file takes it all at once, or part of it when the disk or the limit is reached
+                view = view[os.write(self._fd, view):]
+        except OSError:
+            with contextlib.suppress(OSError):  # shrinking needs no space and is within any size limit
+                os.ftruncate(self._fd, self.size)
+            raise
         self.n_records += 1
+        self.size += len(data)
         if self.fsync_every_s is not None and time.monotonic() - self._last_sync >= self.fsync_every_s:
             os.fsync(self._fd)
             self._last_sync = time.monotonic()
 
     def close(self) -> None:
+        """fsync and close; raises the OSError of a failed fsync (the descriptor closed all the same)."""
         if self._fd is not None:
-            os.fsync(self._fd)
-            os.close(self._fd)
-            self._fd = None
+            try:
+                os.fsync(self._fd)
+            finally:
+                self._close_quietly()
+
+    def _close_quietly(self) -> None:
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(fd)
 
 
 def _record(kind: RecordKind, payload: bytes) -> bytes:
