@@ -2,7 +2,8 @@
 
 A refusal (a bad option, a file that cannot be used, a missing device) is a :class:`FacepuppetError` whose
 message names the option or file and what was wrong; ``cli.main`` prints it in one line,
-``facepuppet COMMAND: error: MESSAGE``, and exits 2 (3 for no OpenGL), as it does for an ``OSError`` (a file
+``facepuppet COMMAND: error: MESSAGE``, and exits 2 (3 for no OpenGL, 1 for a run whose recording failed), as it
+does for an ``OSError`` (a file
 missing or unreadable, an address that cannot be bound). Any other exception, a plain ``ValueError`` from NumPy
 included, is a bug in facepuppet: ``cli.main`` lets it through, Python prints its traceback and exits 1.
 ``FACEPUPPET_DEBUG=1`` in the environment shows the traceback of a refusal too.
@@ -37,6 +38,9 @@ AudioUnavailable        no audio device or library                      inputs.a
 PanelUnavailable        the panel's extra (imgui-bundle) is missing     panel                                2
 ShaderError             a shader does not compile or link here          render.shader_loader                 2
 GLUnavailable           no OpenGL context (no display, no EGL)          render.gl_context                    3
+RecordingFailed         a run's recording could not be written to its   errors                               1
+                        end (disk full, the file-size limit); the run
+                        stopped, the file keeps what was written
 (any other exception)   a bug in facepuppet: its traceback shows        (Python)                             1
 ======================  ==============================================  ===================================  ====
 
@@ -68,3 +72,9 @@ class InputFileError(FacepuppetError, ValueError):
 
     A ValueError too, so callers that caught the readers' ValueErrors still do.
     """
+
+
+class RecordingFailed(FacepuppetError, RuntimeError):
+    """A run's recording could not be written to its end (disk full, the file-size limit): the run stopped
+    there; the message names the file and what it keeps. Exit 1: the run did not do what was asked, though
+    nothing the user gave was wrong."""

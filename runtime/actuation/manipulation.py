@@ -18,7 +18,6 @@ same calls; the window and the command are :mod:`~facepuppet.runtime.commands.ma
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -28,6 +27,8 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.errors import InputFileError, UsageError
+from facepuppet.runtime.files.input_files import regular_file
+from facepuppet.runtime.files.json_limits import JsonTextError, loads_limited
 from facepuppet.runtime.model.character import Character
 
 PICK_RADIUS = 30.0   # pixels: a click farther than this from every marker picks nothing
@@ -215,6 +216,7 @@ class Manipulation:
 
 # -- scripts ----------------------------------------------------------------
 _ACTIONS = ("pin", "unpin", "drag", "reset")
+MAX_SCRIPT_BYTES = 4 << 20  # a script of a few thousand steps is a few hundred kB
 
 
 def read_script(path: str | Path, names: Sequence[str]) -> list[dict]:
@@ -224,11 +226,14 @@ def read_script(path: str | Path, names: Sequence[str]) -> list[dict]:
     (character units), ``{"drag": NAME, "by": [dx, dy, dz]}`` (character units) or
     ``{"drag": NAME, "pixels": [dx, dy]}`` (through the cursor path); a drag may give ``"steps": n``.
     """
-    path = Path(path)
+    path = regular_file(path, "manipulation script")
+    size = path.stat().st_size
+    if size > MAX_SCRIPT_BYTES:
+        raise InputFileError(f"{path}: {size} bytes; a manipulation script is at most {MAX_SCRIPT_BYTES}")
     try:
-        steps = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputFileError(f"{path}: not a readable JSON list of steps ({exc})") from None
+        steps = loads_limited(path.read_bytes(), str(path), max_bytes=MAX_SCRIPT_BYTES)
+    except JsonTextError as exc:
+        raise InputFileError(f"{path}: not a readable JSON list of steps ({exc.problem})") from None
     if not isinstance(steps, list):
         raise InputFileError(f"{path}: expected a JSON list of steps, got {type(steps).__name__}")
     for n, step in enumerate(steps):

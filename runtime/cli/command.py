@@ -15,7 +15,7 @@ import sys
 import traceback
 from importlib.metadata import entry_points
 
-from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.errors import FacepuppetError, RecordingFailed
 from facepuppet.runtime.files.outputs import add_output_policy, check_outputs
 from facepuppet.runtime.render.blas_threads import BlasThreads
 from facepuppet.runtime.render.gl_context import GLUnavailable  # building the parser imports GL anyway
@@ -69,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     a refusal too, then its line, with the same exit code.
 
     Exit codes: 0 done; 2 refused (an option, a file, a table, an output, an address); 3 no OpenGL context;
-    130 interrupted; 1 a bug (a traceback).
+    130 interrupted; 1 a run whose recording could not be written to its end (:class:`RecordingFailed`, one
+    line), or a bug (a traceback).
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -82,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except GLUnavailable as exc:
         return _error(args.command, exc, 3)
+    except RecordingFailed as exc:
+        return _error(args.command, exc, 1)
     except (FacepuppetError, OSError) as exc:
         return _error(args.command, exc, 2)
     except KeyboardInterrupt:

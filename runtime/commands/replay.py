@@ -11,12 +11,12 @@ here too; a replay that sends anything is paced to real time, as a receiver expe
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 from facepuppet.runtime.commands.run import report_outputs
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.files.json_limits import dumps_strict
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.session.assemble import SessionResult, open_session
 from facepuppet.runtime.session.input_options import ReplayInputOptions
@@ -92,8 +92,8 @@ def run_replay(args: argparse.Namespace) -> int:
         print(feed.missing_line())
     print(loop.timer.table())
     if plan.outputs.stats:
-        print(json.dumps({"n_ticks": loop.n_ticks, "path": result.path, "counters": c,
-                          "timings_ms": loop.timings}, sort_keys=True))
+        print(dumps_strict({"n_ticks": loop.n_ticks, "path": result.path, "counters": c,
+                            "timings_ms": loop.timings}, sort_keys=True))
     report_outputs("replay", plan.outputs, result)
     if feed.events_line():
         print(feed.events_line())

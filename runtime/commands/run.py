@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.errors import RecordingFailed, UsageError
 from facepuppet.runtime.files.outputs import write_atomic
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.session.assemble import SessionResult, open_session
@@ -122,7 +122,8 @@ def run_live(args: argparse.Namespace | RunPlan, stop_event: threading.Event | N
 
 
 def run_command(args: argparse.Namespace) -> int:
-    """The ``run`` command: returns the exit code (errors are mapped to exit codes in ``cli.main``)."""
+    """The ``run`` command: returns the exit code (errors are mapped to exit codes in ``cli.main``; a recording
+    that could not be written to its end stopped the run and raises RecordingFailed, exit 1)."""
     plan = RunPlan.from_args(args)
     result = run_live(plan)
     loop, c = result.loop, result.loop.counters
@@ -136,6 +137,9 @@ def run_command(args: argparse.Namespace) -> int:
     if plan.outputs.stats:
         print("\n".join(result.stats.final()))
     report_outputs("run", plan.outputs, result)
+    failure = result.recorder.failure if result.recorder is not None else None
+    if failure is not None:  # the run stopped there; nothing may read as recorded
+        raise RecordingFailed(failure)
     if plan.record.record is not None:
         print(f"run: recorded to {plan.record.record}")
     return 0

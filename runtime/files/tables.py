@@ -46,7 +46,6 @@ import hashlib
 import json
 import math
 import os
-import re
 import zipfile
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -57,6 +56,7 @@ from typing import Any
 import numpy as np
 
 from facepuppet.runtime.errors import FacepuppetError
+from facepuppet.runtime.files.json_limits import JsonTextError, loads_limited
 from facepuppet.runtime.files.outputs import atomic_path
 
 from facepuppet import __version__
@@ -526,28 +526,16 @@ def _read_member(archive: zipfile.ZipFile, member: str, path, field_name: str, *
     return arr.reshape(shape)
 
 
-def _json_depth(raw: bytes) -> int:
-    """How deeply objects and lists nest in JSON text (strings left out), without parsing it."""
-    bare = re.sub(rb'"(?:[^"\\]|\\.)*"', b"", raw)
-    opens = np.frombuffer(bare, dtype=np.uint8)
-    step = np.isin(opens, np.frombuffer(b"[{", np.uint8)).astype(np.int64)
-    step -= np.isin(opens, np.frombuffer(b"]}", np.uint8))
-    return int(np.cumsum(step).max(initial=0))
-
-
 def _parse_manifest(archive: zipfile.ZipFile, member: str, path) -> dict:
     """The manifest member, size- and depth-checked before it is parsed."""
     raw = _read_member(archive, member, path, "manifest", limit=MAX_MANIFEST_BYTES)
     if raw.dtype != np.uint8 or raw.ndim != 1:
         raise TablesError(path, "manifest", f"must be a uint8 byte string, found {raw.dtype} {raw.shape}")
-    blob = raw.tobytes()
-    depth = _json_depth(blob)
-    if depth > MAX_MANIFEST_DEPTH:
-        raise TablesError(path, "manifest", f"nests {depth} levels deep; at most {MAX_MANIFEST_DEPTH} allowed")
     try:
-        manifest = json.loads(blob.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError) as exc:  # ValueError: JSON, and over-long ints
-        raise TablesError(path, "manifest", f"is not valid UTF-8 JSON ({exc})") from None
+        manifest = loads_limited(raw.tobytes(), "manifest", max_bytes=MAX_MANIFEST_BYTES,
+                                 max_depth=MAX_MANIFEST_DEPTH)
+    except JsonTextError as exc:
+        raise TablesError(path, "manifest", exc.problem) from None
     if not isinstance(manifest, dict):
         raise TablesError(path, "manifest", "must be a JSON object")
     return manifest

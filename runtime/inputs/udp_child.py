@@ -87,7 +87,8 @@ class _Publisher:
         self.meta_bytes = 0
         self.errors_logged = 0
         self.own = {"packets": 0, "filtered_sender": 0, "internal_error": 0, "waited_over_1ms": 0,
-                    "frame_too_large": 0, "packets_ring_dropped": 0, "names_full": 0, "names_too_large": 0}
+                    "kernel_dropped": 0, "frame_too_large": 0, "packets_ring_dropped": 0, "names_full": 0,
+                    "names_too_large": 0}
 
     def ready(self) -> None:
         self.outbox.put(message(READY))

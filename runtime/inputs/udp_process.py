@@ -59,7 +59,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.frames import Frame
-from facepuppet.runtime.inputs.udp import bind_udp, bound_address, normalise_allow
+from facepuppet.runtime.inputs.udp import bind_udp, bound_address, enable_drop_count, normalise_allow
 from facepuppet.runtime.inputs.udp_channel import (
     COMPLETED,
     COUNTER_NAME,
@@ -125,6 +125,7 @@ class UdpProcessSource:
         self.on_packet = on_packet
         self.last_error: BaseException | None = None
         self.rcvbuf_bytes = 0
+        self.drops_reported = False  # whether the kernel hands the child its drop count (set at start)
         self._lock = threading.RLock()
         self._sock: socket.socket | None = None
         self._process = None
@@ -168,6 +169,7 @@ class UdpProcessSource:
         if self._process is not None:
             raise RuntimeError("UdpProcessSource.start: already started")
         sock, self.rcvbuf_bytes = bind_udp(self.host, self.port, self.adapter.kind, stamps=True)
+        self.drops_reported = enable_drop_count(sock)  # a flag of the socket, which the child reads
         self._sock = sock
         self._chan, self._chan_child = socket.socketpair()
         self._chan.setblocking(False)
@@ -381,7 +383,8 @@ class UdpProcessSource:
     @property
     def counters(self) -> dict[str, int]:
         """The child's counters (adapter's merged with packets, filtered_sender, internal_error,
-        waited_over_1ms, frame_too_large, packets_ring_dropped, names_full (the counter names and errors
+        waited_over_1ms, kernel_dropped (None: the kernel does not say), frame_too_large, packets_ring_dropped,
+        names_full (the counter names and errors
         passed META_BYTES), names_too_large (one name record over MAX_NAME_RECORD)) plus snapshot_busy (0: a
         frame arrives whole, no read is retried), stale_dropped and rcvbuf_bytes; ``internal_error`` and
         ``packets_ring_dropped`` add both processes'."""
@@ -391,6 +394,7 @@ class UdpProcessSource:
             merged = {name: values[i] if i < len(values) else 0 for i, name in self._counter_names.items()}
             for name, value in self._own.items():
                 merged[name] = merged.get(name, 0) + value
+        merged["kernel_dropped"] = merged.get("kernel_dropped", 0) if self.drops_reported else None
         merged["stale_dropped"] = self._stale_dropped
         merged["rcvbuf_bytes"] = self.rcvbuf_bytes
         return merged

@@ -69,6 +69,7 @@ import math
 import tomllib
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.errors import InputFileError
@@ -384,6 +385,42 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
     )
 
 
+MAX_CONFIG_BYTES = 4 << 20  # a config with a large [mapping] is tens of kB
+
+
+def read_toml(source: bytes | str, where: str) -> dict:
+    """The table of TOML ``source``: bytes as read from a file, or text (a recording's config), checked the
+    same way wherever it comes from.
+
+    Raises
+    ------
+    LiveConfigError
+        naming ``where``: over MAX_CONFIG_BYTES, not UTF-8, not TOML, or nested deeper than the parser's
+        recursion goes (tomllib recurses once per nested array or inline table).
+    """
+    if len(source) > MAX_CONFIG_BYTES:
+        raise LiveConfigError(f"{where}: {len(source)} bytes; a config is at most {MAX_CONFIG_BYTES}")
+    try:
+        return tomllib.loads(source.decode("utf-8") if isinstance(source, bytes) else source)
+    except tomllib.TOMLDecodeError as exc:
+        raise LiveConfigError(f"{where}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise LiveConfigError(f"{where}: not UTF-8 text (byte {exc.start}: {exc.reason}); TOML is UTF-8") from None
+    except RecursionError:
+        raise LiveConfigError(f"{where}: not a config facepuppet can read: arrays or tables nest too deep") from None
+
+
+def read_toml_file(path: str | os.PathLike, what: str = "TOML config file") -> tuple[Path, dict]:
+    """(path, its TOML table): a regular file of at most MAX_CONFIG_BYTES, read by :func:`read_toml`.
+
+    Raises LiveConfigError naming the file (FileNotFoundError when there is none)."""
+    path = regular_file(path, what)
+    size = path.stat().st_size
+    if size > MAX_CONFIG_BYTES:
+        raise LiveConfigError(f"{path}: {size} bytes; a config is at most {MAX_CONFIG_BYTES}")
+    return path, read_toml(path.read_bytes(), str(path))
+
+
 def load_live_config(path: str | os.PathLike, known_channels: Iterable[str] | None = None) -> LiveConfig:
     """Read and check a TOML config file (``known_channels`` as :func:`parse_live_config`).
 
@@ -394,14 +431,5 @@ def load_live_config(path: str | os.PathLike, known_channels: Iterable[str] | No
     FileNotFoundError
         when the file does not exist.
     """
-    path = regular_file(path, "TOML config file")
-    try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
-        raise LiveConfigError(f"{path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise LiveConfigError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason}); TOML is UTF-8") from None
-    except RecursionError:
-        raise LiveConfigError(f"{path}: not a config facepuppet can read: arrays or tables nest too deep") from None
+    path, data = read_toml_file(path)
     return parse_live_config(data, str(path), known_channels)

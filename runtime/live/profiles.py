@@ -25,7 +25,6 @@ import logging
 import math
 import os
 import re
-import tomllib
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
@@ -36,9 +35,10 @@ from facepuppet.runtime.live.config import (
     REGIONS,
     ChannelSettings,
     LiveConfig,
-    LiveConfigError,
     load_live_config,
     parse_live_config,
+    read_toml,
+    read_toml_file,
 )
 from facepuppet.runtime.live.mix import MixSettings
 
@@ -173,21 +173,18 @@ def config_to_toml(config: LiveConfig, made_for: dict | None = None) -> str:
 
 
 def parse_config_text(text: str, where: str, known_channels: Iterable[str] | None = None) -> LiveConfig:
-    """LiveConfig from TOML text (a recording's config, say); LiveConfigError naming ``where``."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise LiveConfigError(f"{where}: not valid TOML: {exc}") from None
-    return parse_live_config(data, where, known_channels)
+    """LiveConfig from TOML text (a recording's config, say), checked as a ``--config`` file is
+    (:func:`~facepuppet.runtime.live.config.read_toml`); LiveConfigError naming ``where``."""
+    return parse_live_config(read_toml(text, where), where, known_channels)
 
 
 # -- profiles -----------------------------------------------------------------------------------------
 
 
 def read_made_for(path: str | os.PathLike) -> dict:
-    """The ``[profile]`` table of a profile file ({} when it has none)."""
-    with open(path, "rb") as f:
-        data = tomllib.load(f)
+    """The ``[profile]`` table of a profile file ({} when it has none); LiveConfigError naming the file when
+    it cannot be read as a config."""
+    _, data = read_toml_file(path, "profile file")
     made = data.get("profile", {})
     return dict(made) if isinstance(made, dict) else {}
 

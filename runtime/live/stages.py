@@ -211,7 +211,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
                 bus: SessionBus | None = None, filtered: bool = True,
                 audio_level: Callable[[float], float] | None = None, voice_only: bool = False,
                 label: str | None = None, log: Callable[[str], None] = logger.info,
-                config_text: tuple[str, str] | None = None, schedule: Sequence[tuple[float, str]] = (),
+                config_text: tuple[str, str] | None = None, schedule: Sequence[tuple[float, str, str]] = (),
                 keep_snapshots: bool = False) -> Chain:
     """The stage chain for the stage options, checked against the character; logs what it loaded.
 
@@ -229,7 +229,8 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
     label : str or None, what :meth:`Chain.describe` names as the input (default ``input_kind``)
     config_text : (where, TOML text) or None, the config to start from when neither ``--config`` nor
         ``--profile`` is given (a recording's config in force)
-    schedule : (tick time, TOML text) pairs, config changes the filter applies at those ticks (a recording's)
+    schedule : (tick time, TOML text, where) triples, config changes the filter applies at those ticks (a
+        recording's; ``where`` names the record in messages)
     keep_snapshots : bool, the filter keeps its state before each tick (a recording may start mid-run)
 
     Raises
@@ -286,7 +287,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
                          "it does not apply with --elastic")
     chain.mapper = Mapper(chain.names, drive, log=log)
     if filtered:
-        changes = [(float(t), parse_config_text(text, f"config change at t={t:.3f} s", known)) for t, text in schedule]
+        changes = [(float(t), parse_config_text(text, where, known)) for t, text, where in schedule]
         chain.filter = LivePipeline(config, audio_level=level, log=log, bus=bus, schedule=changes,
                                     keep_snapshots=keep_snapshots)
         if options.calibrate:

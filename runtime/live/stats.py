@@ -21,12 +21,13 @@ nothing grows in a long run. The per-second line covers the last second; the
 final report covers the whole run (exact while the ring holds every sample, from
 the histograms, within 1 %, once it has wrapped).
 Counters are shown as totals since the start, and on the per-second line also
-with their change over the last second: ``received=1234 (+60/1 s)``.
+with their change over the last second: ``received=1234 (+60/1 s)``. A count
+the system does not report (``kernel_dropped`` where the kernel gives none) is
+None, shown ``unknown`` and written ``null``, never 0.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from collections.abc import Callable, Sequence
@@ -34,6 +35,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from facepuppet.runtime.files.json_limits import dumps_strict
 from facepuppet.runtime.live.timing import DurationSketch
 
 if TYPE_CHECKING:
@@ -143,6 +145,9 @@ class LiveStats:
             before = None if previous is None else previous.get(group, {})
             shown = []
             for k, v in values.items():
+                if v is None:  # a count nobody reports here (kernel_dropped off Linux): not a 0
+                    shown.append(f"{k}=unknown")
+                    continue
                 if not (v or k in ("received", "frames_received")):
                     continue
                 item = f"{k}={v}"
@@ -164,9 +169,12 @@ class LiveStats:
                 + (f" || {lat_label} (n={latency['end_to_end']['n']}): {lat}" if lat else ""))
 
     def summary(self) -> dict:
-        """Counters and latency over the whole run (JSON-serialisable)."""
+        """Counters and latency over the whole run (JSON-serialisable; NaN where nothing was measured, None
+        where a count is unknown)."""
         return {"ticks": self.ticks, "counters": self.counter_snapshot(), "latency_ms": self.whole_run()}
 
     def final(self) -> list[str]:
-        """The whole-run line and the JSON summary (``--stats`` at exit: the command prints them)."""
-        return [self.line(self.whole_run(), "whole run"), "stats json: " + json.dumps(self.summary(), sort_keys=True)]
+        """The whole-run line and the JSON summary (``--stats`` at exit: the command prints them), strict JSON:
+        ``null`` where nothing was measured (a latency without frames), so any JSON parser reads it."""
+        return [self.line(self.whole_run(), "whole run"),
+                "stats json: " + dumps_strict(self.summary(), sort_keys=True)]

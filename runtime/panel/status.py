@@ -1,7 +1,8 @@
 """The panel's Input section: what the run listens to and how the input is doing.
 
 Kind, listening address and the frames' source, packets/s and frames drawn/s (over the last half second), drops
-by reason (every non-zero drop counter of the receiver and the loop), age of the last new frame, tracking state
+by reason (every non-zero drop counter of the receiver and the loop, the kernel's ``kernel_dropped`` among them,
+said unknown where the system does not report it), age of the last new frame, tracking state
 (waiting / live / lost / easing back), receive→draw latency p50/p99 (``end_to_end`` of the live stats over the
 last half second).
 
@@ -47,6 +48,7 @@ class InputStatus:
     Attributes
     ----------
     numbers : dict of the last refresh's numbers: ``packets_s``, ``drawn_s``, ``drops`` (name -> count),
+        ``kernel_unknown`` (the receiver's kernel drop count is not reported here),
         ``latency`` ((p50 ms, p99 ms, frames) or None), ``record`` ((path, size in bytes or None), only while
         there is a recording), ``stats_n``
     ticks : int, the panel's ticks so far (counted by the panel, shown or not: the frames drawn/s)
@@ -88,6 +90,7 @@ class InputStatus:
                 if any(w in name for w in DROP_WORDS) and isinstance(value, (int, np.integer)) and value:
                     drops[f"{name}" if group == "udp" else f"{group}.{name}"] = int(value)
         s["drops"] = drops
+        s["kernel_unknown"] = "kernel_dropped" in udp and udp["kernel_dropped"] is None  # the OS does not say
         s["latency"] = None
         if self.stats is not None:
             since = s.get("stats_n", 0)
@@ -121,7 +124,8 @@ class InputStatus:
                       else "packets/s and frames drawn/s: measuring"),
             "latency": ("receive->draw: no frames in the last 0.5 s" if lat is None
                         else f"receive->draw p50 {lat[0]:.2f} ms, p99 {lat[1]:.2f} ms ({lat[2]} frames)"),
-            "drops": "drops: " + (", ".join(f"{k} {v}" for k, v in sorted(drops.items())) or "none")}
+            "drops": "drops: " + (", ".join(f"{k} {v}" for k, v in sorted(drops.items())) or "none")
+                     + ("; kernel_dropped unknown (this system does not report it)" if s.get("kernel_unknown") else "")}
 
     def room(self, imgui: Any, live_at: dict[str, tuple]) -> None:
         """In the desk's window: the Input header and room for the status lines, where the live layer writes

@@ -9,11 +9,17 @@ record each to a :class:`~facepuppet.runtime.recording.session.SessionWriter` (o
 written). Replaying the file re-decodes the packets with a fresh adapter of the
 recorded input kind (:func:`~facepuppet.runtime.recording.replay_source.open_recording`),
 which gives back the frame stream the live run saw.
+
+A write that fails (disk full, the file-size limit) ends the writer thread without a traceback: the file
+is cut back to its last whole record, :attr:`PacketRecorder.failure` says what it keeps, and
+``on_failure`` is told (``run`` then stops: a recording that cannot be written must not be taken for one
+that was). What is queued after that is dropped.
 """
 
 from __future__ import annotations
 
 import collections
+import logging
 import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING
@@ -33,6 +39,8 @@ from facepuppet.runtime.recording.session import SessionWriter
 if TYPE_CHECKING:
     import os
 
+logger = logging.getLogger(__name__)
+
 
 class PacketRecorder:
     """Record datagrams and audio levels without blocking their producers.
@@ -49,6 +57,9 @@ class PacketRecorder:
     ----------
     counters : dict: ``packets_recorded``, ``audio_recorded``, ``ticks_recorded``, ``configs_recorded``,
         ``events_recorded``, ``record_dropped`` (queue full)
+    failure : str or None, why the file stopped growing and what it keeps (None while every write succeeded)
+    on_failure : callable(PacketRecorder) or None, called once (on the writer thread, or in :meth:`close`)
+        when a write fails
     """
 
     def __init__(self, path: str | os.PathLike, kind: str, info: dict | None = None, capacity: int = 8192,
@@ -60,6 +71,9 @@ class PacketRecorder:
         self.path = self.writer.path
         self.counters = {"packets_recorded": 0, "audio_recorded": 0, "ticks_recorded": 0, "configs_recorded": 0,
                          "events_recorded": 0, "record_dropped": 0}
+        self.failure: str | None = None
+        self.on_failure: Callable[[PacketRecorder], None] | None = None
+        self._ticks_written: tuple[float, float] | None = None  # the first and the newest TICK time written
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
         self._stopping = False
@@ -131,42 +145,71 @@ class PacketRecorder:
         self._wake.set()
 
     def _drain(self) -> None:
-        q, write = self._queue, self.writer.write_record
+        q = self._queue
         while True:
             self._wake.wait(0.05)
             self._wake.clear()
-            while q:
-                kind, t, value = q.popleft()
-                if kind == RecordKind.PACKET:
-                    label, data = value if isinstance(value, tuple) else (self.kind, value)
-                    write(kind, encode_packet_record(t, label, data))
-                    self.counters["packets_recorded"] += 1
-                elif kind == RecordKind.CONFIG:
-                    write(kind, encode_config(t, value))
-                    self.counters["configs_recorded"] += 1
-                elif kind == RecordKind.STATE:
-                    write(kind, encode_state(t, value))
-                elif kind == RecordKind.TICK:
-                    write(kind, encode_tick(value[0], t, value[1], value[2]))
-                    self.counters["ticks_recorded"] += 1
-                elif kind == RecordKind.SOURCES:
-                    write(kind, encode_sources(t, value))
-                elif kind == RecordKind.EVENT:
-                    write(kind, encode_event(t, value))
-                    self.counters["events_recorded"] += 1
-                else:
-                    write(kind, encode_audio(t, value))
-                    self.counters["audio_recorded"] += 1
+            try:
+                while q:
+                    self._write(*q.popleft())
+            except (OSError, ValueError) as exc:  # disk full, file-size limit, a record over the format's size
+                q.clear()
+                self._fail(exc)
+                return
             if self._stopping and not q:
                 return
 
+    def _write(self, kind: RecordKind, t: float, value) -> None:
+        write = self.writer.write_record
+        if kind == RecordKind.PACKET:
+            label, data = value if isinstance(value, tuple) else (self.kind, value)
+            write(kind, encode_packet_record(t, label, data))
+            self.counters["packets_recorded"] += 1
+        elif kind == RecordKind.CONFIG:
+            write(kind, encode_config(t, value))
+            self.counters["configs_recorded"] += 1
+        elif kind == RecordKind.STATE:
+            write(kind, encode_state(t, value))
+        elif kind == RecordKind.TICK:
+            write(kind, encode_tick(value[0], t, value[1], value[2]))
+            self.counters["ticks_recorded"] += 1
+            self._ticks_written = (t if self._ticks_written is None else self._ticks_written[0], t)
+        elif kind == RecordKind.SOURCES:
+            write(kind, encode_sources(t, value))
+        elif kind == RecordKind.EVENT:
+            write(kind, encode_event(t, value))
+            self.counters["events_recorded"] += 1
+        else:
+            write(kind, encode_audio(t, value))
+            self.counters["audio_recorded"] += 1
+
+    def _fail(self, exc: BaseException) -> None:
+        """Say why the file stopped growing and what it keeps; tell ``on_failure`` (once)."""
+        if self.failure is not None:
+            return
+        c, ticks = self.counters, self._ticks_written
+        kept = (f"{c['ticks_recorded']} ticks ({ticks[1] - ticks[0]:.2f} s of the run), " if ticks else "") + \
+            f"{c['packets_recorded']} packets"
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        self.failure = (f"{self.path}: the recording stopped: a write failed ({reason}); the file keeps its first "
+                        f"{self.writer.n_records} records ({self.writer.size} bytes: {kept}) and reads and "
+                        "replays up to there")
+        if self.on_failure is not None:
+            try:
+                self.on_failure(self)
+            except Exception:  # the writer thread never raises
+                logger.exception("recorder: on_failure")
+
     def close(self) -> None:
-        """Write what is queued, fsync and close the file."""
+        """Write what is queued, fsync and close the file (a failure to is kept in :attr:`failure`)."""
         if self._thread.is_alive():
             self._stopping = True
             self._wake.set()
             self._thread.join()
-        self.writer.close()
+        try:
+            self.writer.close()
+        except OSError as exc:
+            self._fail(exc)
 
     def __enter__(self) -> PacketRecorder:
         return self

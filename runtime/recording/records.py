@@ -46,13 +46,13 @@ ValueError (the reader treats that as corruption).
 from __future__ import annotations
 
 import enum
-import json
 import math
 import struct
 from dataclasses import dataclass
 
 import numpy as np
 
+from facepuppet.runtime.files.json_limits import JsonLimitError, loads_limited
 from facepuppet.runtime.frames import Frame
 
 _FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
@@ -332,9 +332,10 @@ def decode_frame(payload: bytes, layouts: dict[int, Layout]) -> Frame:
 
 
 def decode_layout(payload: bytes) -> tuple[int, Layout]:
-    """(layout id, Layout) from a LAYOUT payload; ValueError when it is not the expected JSON."""
+    """(layout id, Layout) from a LAYOUT payload; ValueError when it is not the expected JSON, JsonLimitError
+    (a ValueError too) when it is over the JSON limits."""
     try:
-        obj = json.loads(payload.decode("utf-8"))
+        obj = loads_limited(payload, "LAYOUT record")
         channels = obj["channels"]
         marker_names = obj["marker_names"]
         layout = Layout(
@@ -344,5 +345,7 @@ def decode_layout(payload: bytes) -> tuple[int, Layout]:
             int(obj["n_markers"]),
         )
         return int(obj["id"]), layout
-    except (UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+    except JsonLimitError:
+        raise
+    except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"layout record is not the expected JSON object: {exc}") from None

@@ -14,20 +14,28 @@ A reader skips PACKET/AUDIO/TICK records it cannot decode (older readers skip th
 all; their length is in the record header) and counts them in
 ``Session.skipped``; any other unknown code is corruption.
 
+JSON in a record (the header, LAYOUT) is read within the limits of
+:mod:`~facepuppet.runtime.files.json_limits`; a whole record over them is
+refused (InputFileError naming the file, the kind and the offset), not taken
+for damage.
+
 Crash safety: :class:`SessionWriter` writes each record with one ``os.write``
 on an unbuffered descriptor opened with ``O_APPEND``, so a ``kill -9`` can at
 worst lose or tear the last record; :func:`read_session` keeps every complete
 record before a torn tail and says where it stopped. A damaged record in the
 middle (a flipped bit) is skipped: reading resumes at the next offset where a
-whole record verifies (known kind, length within the file, CRC), and the
-bytes skipped are counted.
+whole record verifies (known kind, length within the file, CRC; found in
+time linear in the file's size, :mod:`~facepuppet.runtime.recording.resync`),
+and the bytes skipped are counted.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import stat
 import struct
 import time
 import warnings
@@ -37,6 +45,7 @@ from pathlib import Path
 
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.files.input_files import regular_file
+from facepuppet.runtime.files.json_limits import JsonLimitError, JsonTextError, loads_limited
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.recording.records import (
     RESERVED_KINDS,
@@ -56,13 +65,13 @@ from facepuppet.runtime.recording.records import (
     encode_frame,
     layout_of,
 )
+from facepuppet.runtime.recording.resync import MAX_PAYLOAD, Prefixes, next_record
 
 from facepuppet import __version__
 
 MAGIC = b"FPSESS\x00\x01"
 
 _RECORD_HEAD = struct.Struct("<IIB")  # payload length, crc32 of payload, kind
-_MAX_PAYLOAD = 1 << 30  # a length above this is corruption, not data
 
 
 class SessionWriter:
@@ -78,6 +87,15 @@ class SessionWriter:
 
     Use as a context manager; :meth:`close` fsyncs and closes the descriptor.
     Not thread-safe: one thread writes.
+
+    A write that fails (disk full, the file-size limit) raises its OSError once the file is cut back to the
+    end of the last whole record (``size``), so what was written reads without a torn tail; a header that
+    cannot be written leaves no file behind (where the writer created it).
+
+    Attributes
+    ----------
+    n_records : int, whole records written (the header included)
+    size : int, bytes of whole records in the file (the magic included)
     """
 
     def __init__(self, path: str | os.PathLike, info: dict | None = None, fsync_every_s: float | None = 1.0,
@@ -85,6 +103,7 @@ class SessionWriter:
         self.path = Path(path)
         self.fsync_every_s = fsync_every_s
         self.n_records = 0
+        self.size = 0
         self._layouts: dict[Layout, int] = {}
         flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | getattr(os, "O_BINARY", 0)
         flags |= os.O_TRUNC if overwrite else os.O_EXCL
@@ -98,7 +117,16 @@ class SessionWriter:
         }
         payload = json.dumps(header, sort_keys=True).encode("utf-8")
         # Magic and header go out in one write: a file is either empty or has both.
-        self._write(MAGIC + _record(RecordKind.HEADER, payload))
+        try:
+            self._write(MAGIC + _record(RecordKind.HEADER, payload))
+        except OSError as exc:
+            created = not overwrite and stat.S_ISREG(os.fstat(self._fd).st_mode)
+            self._close_quietly()
+            if created:  # the empty file this writer made, never a file it was given (nor a device)
+                with contextlib.suppress(OSError):
+                    self.path.unlink()
+            raise OSError(exc.errno, f"{self.path}: cannot write a recording's header: "
+                                     f"{exc.strerror or exc}") from exc
 
     def __enter__(self) -> SessionWriter:
         return self
@@ -124,23 +152,37 @@ class SessionWriter:
         if self._fd is None:
             raise ValueError(f"{self.path}: session writer is closed")
         view = memoryview(data)
-        while view:  # a regular file takes it all at once; loop only for safety
-            view = view[os.write(self._fd, view):]
+        try:
+            while view:  # a regular file takes it all at once, or part of it when the disk or the limit is reached
+                view = view[os.write(self._fd, view):]
+        except OSError:
+            with contextlib.suppress(OSError):  # shrinking needs no space and is within any size limit
+                os.ftruncate(self._fd, self.size)
+            raise
         self.n_records += 1
+        self.size += len(data)
         if self.fsync_every_s is not None and time.monotonic() - self._last_sync >= self.fsync_every_s:
             os.fsync(self._fd)
             self._last_sync = time.monotonic()
 
     def close(self) -> None:
+        """fsync and close; raises the OSError of a failed fsync (the descriptor closed all the same)."""
         if self._fd is not None:
-            os.fsync(self._fd)
-            os.close(self._fd)
-            self._fd = None
+            try:
+                os.fsync(self._fd)
+            finally:
+                self._close_quietly()
+
+    def _close_quietly(self) -> None:
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(fd)
 
 
 def _record(kind: RecordKind, payload: bytes) -> bytes:
-    if len(payload) > _MAX_PAYLOAD:
-        raise ValueError(f"session record payload: expected at most {_MAX_PAYLOAD} bytes, got {len(payload)}")
+    if len(payload) > MAX_PAYLOAD:  # what a reader resynchronising after damage looks for
+        raise ValueError(f"session record payload: expected at most {MAX_PAYLOAD} bytes, got {len(payload)}")
     return _RECORD_HEAD.pack(len(payload), zlib.crc32(payload), int(kind)) + payload
 
 
@@ -213,6 +255,7 @@ def read_session(path: str | os.PathLike) -> Session:
         )
     session = Session(path=path, header={}, frames=[], complete=True, n_records=0)
     layouts: dict[int, Layout] = {}
+    prefixes = Prefixes(data)
     offset = len(MAGIC)
     end = len(data)
     while offset < end:
@@ -222,7 +265,7 @@ def read_session(path: str | os.PathLike) -> Session:
             offset = next_offset
             continue
         session.complete = False
-        found = _resync(data, offset + 1)
+        found = next_record(data, offset + 1, _RESYNC_KINDS, prefixes)
         if found is None:  # nothing valid after it: a torn or corrupt tail (as after a crash)
             session.tail_error = (f"{path}: {problem} at byte offset {offset}; "
                                   f"kept the {session.n_records} records before it")
@@ -258,34 +301,15 @@ def _next_record(session: Session, layouts: dict[int, Layout], data: bytes, offs
         return f"CRC mismatch in the {where}", offset
     try:
         _apply_record(session, layouts, kind, payload, first=offset == len(MAGIC))
+    except JsonLimitError as exc:  # whole and CRC'd, so not damage: made to be refused
+        raise InputFileError(f"{session.path}: {RecordKind(kind).name} record at byte offset {offset}: "
+                             f"{exc.problem}") from None
     except ValueError as exc:
         return f"corrupt record of kind {kind}: {exc}", offset
     return None, start + length
 
 
-_KINDS = frozenset(int(k) for k in RecordKind)
-
-
-def _resync(data: bytes, offset: int) -> int | None:
-    """Offset of the first record at or after ``offset`` whose kind is known and whose length and CRC check.
-
-    The format is length-prefixed and CRC'd, so a damaged record is skipped by
-    scanning for the next place where a whole record verifies (a random match
-    needs a known kind byte, a length within the file and a 32-bit CRC).
-    """
-    end = len(data)
-    head = _RECORD_HEAD.size
-    for at in range(offset, end - head + 1):
-        if data[at + 8] not in _KINDS or data[at + 8] == RecordKind.HEADER:
-            continue
-        length, crc, _ = _RECORD_HEAD.unpack_from(data, at)
-        # no record is empty (each payload starts with its tag or JSON), and eight zero bytes and a kind
-        # byte, common in OSC's zero padding, would otherwise verify as an empty record (crc32(b"") == 0)
-        if length == 0 or length > end - at - head:
-            continue
-        if zlib.crc32(data[at + head:at + head + length]) == crc:
-            return at
-    return None
+_RESYNC_KINDS = frozenset(int(k) for k in RecordKind if k != RecordKind.HEADER)  # the header is only first
 
 
 def _number_field(value: object) -> bool:
@@ -333,9 +357,11 @@ def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, paylo
         raise ValueError("the header must be the first record, and only the first")
     if kind == RecordKind.HEADER:
         try:
-            session.header = json.loads(payload.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"header is not JSON: {exc}") from None
+            session.header = loads_limited(payload, "header")
+        except JsonLimitError:
+            raise
+        except JsonTextError as exc:
+            raise ValueError(f"header {exc.problem}") from None
     elif kind == RecordKind.LAYOUT:
         layout_id, layout = decode_layout(payload)
         layouts[layout_id] = layout

@@ -136,7 +136,9 @@ class SwitchableRecorder:
     refuse_midrun : str, why a recording cannot start once the run ticks ("" when it can: a run with several
         inputs says so, their frame counts are not aligned)
     clock : callable() -> seconds since the epoch, for default names (injectable for tests)
-    log : callable(str) or None, told each start and stop
+    log : callable(str) or None, told each start and stop, and a failed write
+    on_failure : callable() or None, called (on the recorder's writer thread) when a recording's write fails:
+        ``run`` stops then, so that a run never goes on as if it were recorded
 
     Attributes
     ----------
@@ -144,13 +146,16 @@ class SwitchableRecorder:
     recording : bool
     counters : the ``record`` counter group (all recordings of the run, ``recordings``, ``record_failed``)
     message : str, what the last start / stop did or why it failed (the panel shows it)
+    failure : str or None, the first recording whose writes failed: what its file keeps
+        (:attr:`PacketRecorder.failure`); None while every write succeeded
     """
 
     def __init__(self, open_recorder: Callable[[Path], PacketRecorder], directory: Path | None = None, *,
                  make_adapter: Callable[[], InputAdapter] | None = None,
                  frames_taken: Callable[[], int] | None = None, refuse_midrun: str = "",
                  pipeline: Any = None,
-                 clock: Callable[[], float] = time.time, log: Callable[[str], None] | None = None) -> None:
+                 clock: Callable[[], float] = time.time, log: Callable[[str], None] | None = None,
+                 on_failure: Callable[[], None] | None = None) -> None:
         self.open_recorder = open_recorder
         self.directory = Path(directory) if directory is not None else Path(".")
         self.make_adapter = make_adapter
@@ -163,6 +168,8 @@ class SwitchableRecorder:
         self._state_due = False
         self.clock = clock
         self.log = log
+        self.on_failure = on_failure
+        self.failure: str | None = None
         self.path: Path | None = None
         self.recordings = 0
         self.failed = 0
@@ -226,6 +233,7 @@ class SwitchableRecorder:
             if self.log is not None:
                 self.log(f"run: {self.message}")
             raise
+        recorder.on_failure = self._failed
         midrun = self.ticks_seen > 0
         if not midrun:
             align = _Aligner(None, base=0)
@@ -265,8 +273,22 @@ class SwitchableRecorder:
             self.log(f"run: recording {self.message}")
         return Path(recorder.path)
 
+    def _failed(self, recorder: PacketRecorder) -> None:
+        """A write of ``recorder`` failed (its writer thread, or its close): say what the file keeps, stop the
+        run."""
+        with self._lock:
+            first = self.failure is None
+            if first:
+                self.failure = recorder.failure
+            self.failed += 1
+        self.message = f"record: {recorder.failure}"
+        if self.log is not None:
+            self.log(f"run: {self.message}" + ("; the run stops" if self.on_failure is not None else ""))
+        if first and self.on_failure is not None:
+            self.on_failure()
+
     def _finish(self, recorder: PacketRecorder) -> None:
-        recorder.close()
+        recorder.close()  # a failure on close is told to _failed too
         with self._lock:
             for k, v in recorder.counters.items():
                 self._done[k] = self._done.get(k, 0) + v

@@ -71,6 +71,8 @@ class SessionResult:
     address : (host, port) or None, where a live feed listened
     panel : DeskPanel or None (closed)
     fps : float, ticks per second of the tick grid
+    recorder : the feed's SwitchableRecorder or None (closed once the session's block ends; its ``failure``
+        says when a recording could not be written to its end, which stopped the run)
     """
 
     loop: LoopResult
@@ -82,6 +84,7 @@ class SessionResult:
     address: tuple | None
     panel: Any
     fps: float
+    recorder: Any = None
 
     @property
     def weights(self) -> WeightLog | None:
@@ -115,7 +118,7 @@ class Session:
         counters = (self.stats.counter_snapshot() if self.stats is not None
                     else {group: dict(values) for group, values in self.counters.items()})
         return SessionResult(result, self.renderer.path, self.chain.describe(), self.outputs, counters, self.stats,
-                             self.parts.address, self.panel, self.parts.fps)
+                             self.parts.address, self.panel, self.parts.fps, self.parts.recorder)
 
 
 @contextlib.contextmanager

@@ -47,7 +47,8 @@ class ChainInputs:
     voice_only : bool, no tracker: the face from the voice
     audio_level : callable t -> dBFS, or None (no ``audio`` stage)
     config_text : (where, TOML) or None, the config to start from (a recording's)
-    schedule : list of (tick time, TOML), config changes to apply at those ticks (a recording's)
+    schedule : list of (tick time, TOML, where), config changes to apply at those ticks (a recording's; ``where``
+        names the record for messages)
     keep_snapshots : bool, the filter keeps its state before each tick (a recording may start mid-run)
     packets : bool, the receivers hand every datagram to the bus (a recording is possible)
     """

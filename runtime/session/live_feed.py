@@ -182,6 +182,7 @@ class LiveFeed:
         holder = SwitchableRecorder(
             open_recorder, record.parent if record is not None else Path.cwd(), make_adapter=make_adapter,
             frames_taken=lambda: source.frames_taken, log=log,
+            on_failure=self.stop_event.set,  # a recording that cannot be written stops the run (run says so)
             pipeline=chain.filter if self.midrun else None,  # only the panel starts one mid-run
             refuse_midrun="not with several inputs (their frame counts cannot be aligned mid-run); use --record FILE"
             if inputs.mix else "")

@@ -18,7 +18,6 @@ starting state, so the same options give the live run's weights.
 from __future__ import annotations
 
 import contextlib
-import json
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -28,6 +27,7 @@ import numpy as np
 
 from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.files.json_limits import JsonLimitError, loads_limited
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.markers import UNIT_METRES
 from facepuppet.runtime.live.loop import RecordedClock, WallClock
@@ -111,11 +111,14 @@ def compare_events(recorded: list, replayed: list) -> str:
 def restore_state(pipeline: LivePipeline, state: tuple[float, str], path: Path | str,
                   log: Callable[[str], None]) -> None:
     """A recording started mid-run: the filter stage goes on from the state it had then (its STATE record).
-    One that cannot be used is said and left: the replay then starts the stage afresh."""
+    One over the JSON limits is refused (JsonLimitError naming the file and the record); one that cannot be
+    used otherwise is said and left: the replay then starts the stage afresh."""
     t, text = state
     try:
-        pipeline.restore_state(json.loads(text))
-    except (ValueError, json.JSONDecodeError) as exc:
+        pipeline.restore_state(loads_limited(text, f"{path}: STATE record (the filter stage's state at t = {t:.3f} s)"))
+    except JsonLimitError:
+        raise
+    except ValueError as exc:
         log(f"replay: warning: {path}: the filter stage's state at the recording's start (t = {t:.3f} s) is not "
             f"usable ({exc}); its first ticks may differ from the run")
         return
@@ -185,18 +188,20 @@ class RecordingFeed:
         return live_ticks or self.take is not None
 
     def _recorded_config(self, info: dict, filtered: bool, log) -> tuple[tuple[str, str] | None, list]:
-        """(where, TOML) of the config a live run started with, and its changes, for a replay without --config or
-        --profile (they win, and the live run's changes are not applied over them)."""
+        """(where, TOML) of the config a live run started with, and its changes as (tick time, TOML, where), for
+        a replay without --config or --profile (they win, and the live run's changes are not applied over
+        them)."""
         text = info.get("config") if self.session is not None else None
         if not filtered or not isinstance(text, str):
             return None, []
         if self.stages.config is not None or self.stages.profile is not None:
             log("replay: the live run's recorded config (and its changes) is not used: --config/--profile given")
             return None, []
-        changes = list(self.session.configs)
+        changes = [(t, text, f"{self.path}: CONFIG record {i} (the config change at t={t:.3f} s)")
+                   for i, (t, text) in enumerate(self.session.configs)]
         log("replay: the live run's config in force (recorded)"
             + (f" and its {len(changes)} change{'s' if len(changes) != 1 else ''} during the run" if changes else ""))
-        return (f"{self.path} (its recorded config)", text), changes
+        return (f"{self.path}: session header field 'info.config' (the live run's config)", text), changes
 
     # -- once the chain exists ---------------------------------------------------------------------
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from PIL import Image
 
 from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.commands.replay import register
+from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.loop import FrameLoop, RecordedClock
 from facepuppet.runtime.live.sinks import PngSink, WeightLog
 from facepuppet.runtime.model.character import Character, sparse_deltas
@@ -128,3 +130,23 @@ def test_replay_command_rejects_what_it_cannot_play(tmp_path):
     with pytest.raises(ValueError, match="--size: expected WIDTHxHEIGHT"):
         parse_size("1280by720")
     assert parse_size("320x240") == (320, 240)
+
+
+@pytest.mark.gl
+def test_replay_stats_json_is_strict_json(egl_ctx, tmp_path, capsys):
+    """``replay --stats`` prints its counters and timings as JSON that a strict parser reads (no NaN)."""
+    char_path = _tiny_character().save(tmp_path / "tiny.npz")
+    session_path = tmp_path / "take.fps"
+    with SessionWriter(session_path) as w:
+        for k in range(5):
+            w.write_frame(Frame(t=k / 60, source="test", channels=("jawOpen",),
+                                weights=np.array([0.1 * k], np.float32)))
+    assert _command(["replay", str(session_path), "-c", str(char_path), "--headless", "--size", "32x24",
+                     "--stats"]) == 0
+
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+
+    line = next(s for s in capsys.readouterr().out.splitlines() if s.startswith("{"))
+    stats = json.loads(line, parse_constant=refuse)
+    assert stats["n_ticks"] > 0 and "timings_ms" in stats

@@ -7,6 +7,7 @@ import math
 import shutil
 import socket
 import subprocess
+import sys
 import threading
 import time
 import wave
@@ -248,3 +249,25 @@ def test_unknown_receiver_is_refused(character):
 
     with pytest.raises(ValueError, match="--receiver: expected one of"):
         run_live(SimpleNamespace(receiver="fiber"))
+
+
+def _strict_json(text: str):
+    """JSON as strict parsers read it: NaN and Infinity are not JSON."""
+    def refuse(constant):
+        raise ValueError(f"not JSON: {constant}")
+    return json.loads(text, parse_constant=refuse)
+
+
+@pytest.mark.gl
+def test_stats_json_is_strict_and_counts_kernel_drops_per_source(character, capsys):
+    """No sender: nothing was measured, written null (it was NaN, which strict parsers refuse); each input's
+    receiver has its kernel drop count (0 here on Linux: the kernel reports it; null where it does not)."""
+    ports = free_udp_port(), free_udp_port()
+    code = main(["run", "-c", str(character), "--input", "vmc", "--input", "vmc", "--listen", f"127.0.0.1:{ports[0]}",
+                 "--listen", f"127.0.0.1:{ports[1]}", "--headless", "--duration", "0.3", "--size", "32x24", "--stats"])
+    out = said(capsys)
+    assert code == 0, out
+    stats = _strict_json(next(line for line in out.splitlines() if line.startswith("stats json: "))[12:])
+    assert stats["latency_ms"]["end_to_end"] == {"n": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
+    expected = 0 if sys.platform.startswith("linux") else None
+    assert stats["counters"]["udp"]["kernel_dropped"] == stats["counters"]["udp:vmc#2"]["kernel_dropped"] == expected
