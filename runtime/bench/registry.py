@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
-import json
 import logging
 import os
 import platform
@@ -25,6 +24,7 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 
+from facepuppet.runtime.files.json_limits import dumps_strict
 from facepuppet.runtime.files.outputs import check_path, write_atomic
 
 # Runtime modules that register benchmarks when imported; each must exist and import.
@@ -137,9 +137,8 @@ def run(args: argparse.Namespace) -> int:
         "machine": machine_info(),
         "results": results,
     }
-    if options.json:
-
-        text = json.dumps(report, indent=2, sort_keys=True) + "\n"
+    if options.json:  # strict JSON: a figure that could not be measured (NaN) is written null
+        text = dumps_strict(report, indent=2, sort_keys=True) + "\n"
         write_atomic(options.json, lambda temp: temp.write_text(text))
         print(f"wrote {options.json}")
     return 0
