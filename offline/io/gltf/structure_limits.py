@@ -1,0 +1,149 @@
+"""How big a glTF's structure may be: counts and depths checked from its JSON before anything is decoded.
+
+A stranger's avatar is read by loops over its nodes, meshes and primitives,
+and every mesh instance of the scene is stored as its own copy. A file of a
+few hundred kilobytes can declare a structure whose reading would take hours
+or gigabytes: 30,001 nodes, 3,000 instances of one mesh, 4,000 primitives, a
+60,000-deep chain, a small mesh instanced into millions of stored vertices.
+Each limit below is stated once, far above any real avatar (VRoid Studio's
+have a few hundred nodes about 12 deep, under 10 meshes, under 100 primitives
+and under 100k vertices; the heaviest game avatars some thousands of nodes and
+a million vertices) and far below what would hurt; the reader's loops are
+linear, so a file within them reads in time proportional to what it declares.
+
+The counts of the file (nodes, meshes, primitives) are checked first; the
+depth while the hierarchy is walked; what the default scene stores (mesh
+instances, their primitives, vertices, triangles and morph values, from the
+accessors' declared counts, each instance counted) before the first accessor
+is decoded. The JSON a character keeps as it came (the VRM extension, the
+asset's meta) must nest no deeper than :data:`MAX_KEPT_JSON_DEPTH` and hold
+finite numbers, so that its character table can be written and read back.
+Each refusal names the file and the JSON path where the limit was crossed.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from facepuppet.offline.io.gltf_container import GltfFile
+
+#: Nodes in the file (a character holds at most 65,535).
+MAX_NODES = 20_000
+#: Levels of the node hierarchy (a root is level 1); real skeletons with long hair chains are under 100 deep.
+MAX_DEPTH = 512
+#: Meshes in the file, and mesh instances (nodes with a mesh) in the default scene.
+MAX_MESHES = 2_000
+#: Primitives in the file, and primitives stored for the default scene (each instance of a mesh counts).
+MAX_PRIMITIVES = 2_000
+#: Vertices stored for the default scene (each instance counts), by the POSITION accessors' declared counts.
+MAX_VERTICES = 4_000_000
+#: Triangles stored for the default scene (each instance counts), by the index accessors' declared counts.
+MAX_TRIANGLES = 8_000_000
+#: Morph values read for the default scene: vertices × morph targets, summed over what is stored.
+MAX_MORPH_VALUES = 50_000_000
+#: Nesting of the JSON a character keeps as it came (the table's manifest nests it 3 deep and allows 32).
+MAX_KEPT_JSON_DEPTH = 24
+
+
+def check_counts(f: GltfFile) -> None:
+    """The file's nodes, meshes and primitives against their limits, before anything is read."""
+    nodes = f.items("nodes")
+    if len(nodes) > MAX_NODES:
+        f.fail("nodes", f"{len(nodes)} nodes; a file may have at most {MAX_NODES}")
+    meshes = f.items("meshes")
+    if len(meshes) > MAX_MESHES:
+        f.fail("meshes", f"{len(meshes)} meshes; a file may have at most {MAX_MESHES}")
+    total = 0
+    for m, mesh in enumerate(meshes):
+        prims = mesh.get("primitives") if isinstance(mesh, dict) else None
+        if isinstance(prims, list):
+            total += len(prims)
+            if total > MAX_PRIMITIVES:
+                f.fail(f"meshes[{m}].primitives", f"{len(prims)} primitives bring the file's to {total}; a file "
+                                                  f"may have at most {MAX_PRIMITIVES}")
+
+
+def check_depth(f: GltfFile, node: int, depth: int) -> None:
+    """Node ``node`` at level ``depth`` of the hierarchy (a root is level 1) against :data:`MAX_DEPTH`."""
+    if depth > MAX_DEPTH:
+        f.fail(f"nodes[{node}]", f"is {depth} levels deep in the node hierarchy; at most {MAX_DEPTH} are read")
+
+
+def declared_count(f: GltfFile, accessor: Any) -> int:
+    """The ``count`` accessor ``accessor`` declares (0 when it is malformed: the reader refuses it by name when it
+    decodes it)."""
+    accessors = f.doc.get("accessors")
+    if not (isinstance(accessor, int) and isinstance(accessors, list) and 0 <= accessor < len(accessors)):
+        return 0
+    a = accessors[accessor]
+    count = a.get("count") if isinstance(a, dict) else None
+    return count if isinstance(count, int) and not isinstance(count, bool) and count > 0 else 0
+
+
+class SceneSize:
+    """What the default scene stores, summed as the reader plans it and checked against the limits as it grows.
+
+    The reader adds each mesh instance, each group of primitives sharing their vertices (stored once per
+    instance) and each primitive's triangles before it decodes any accessor.
+    """
+
+    def __init__(self, f: GltfFile) -> None:
+        self.f = f
+        self.instances = self.primitives = self.vertices = self.triangles = self.morph_values = 0
+
+    def add_instance(self, node: int, mesh: int, n_primitives: int) -> None:
+        self.instances += 1
+        self.primitives += n_primitives
+        if self.instances > MAX_MESHES:
+            self.f.fail(f"nodes[{node}].mesh", f"mesh instance {self.instances} of the scene; a character holds at "
+                                               f"most {MAX_MESHES} meshes (each instance counts)")
+        if self.primitives > MAX_PRIMITIVES:
+            self.f.fail(f"nodes[{node}].mesh", f"mesh {mesh}'s {n_primitives} primitives bring the scene's to "
+                                               f"{self.primitives}; at most {MAX_PRIMITIVES} are stored (each "
+                                               "instance counts)")
+
+    def add_vertices(self, where: str, attributes: dict, n_targets: int) -> int:
+        """A group of primitives sharing ``attributes`` (``where``: the first of them) stored once more; its
+        declared vertex count. The scene's vertices are refused past the limit when more than this group
+        makes them: a group alone is bounded by its POSITION accessor's own checks against its buffer view
+        (a declared count the file cannot back is refused there, by the accessor's path). Its morph values
+        (vertices × targets) are bounded in every case, since a target accessor without a buffer view costs
+        the file nothing."""
+        n = declared_count(self.f, attributes.get("POSITION"))
+        self.vertices += n
+        self.morph_values += n * n_targets
+        if self.vertices > MAX_VERTICES and self.vertices > n:  # one group alone: its accessor's bounds judge it
+            self.f.fail(f"{where}.attributes.POSITION", f"{n} vertices bring the scene's stored vertices to "
+                                                        f"{self.vertices}; at most {MAX_VERTICES} (each instance "
+                                                        "counts)")
+        if self.morph_values > MAX_MORPH_VALUES:
+            self.f.fail(f"{where}.targets", f"{n_targets} morph targets of {n} vertices bring the scene's morph "
+                                            f"values to {self.morph_values}; at most {MAX_MORPH_VALUES} (each "
+                                            "instance counts)")
+        return n
+
+    def add_triangles(self, where: str, primitive: dict, n_vertices: int) -> None:
+        """Primitive ``primitive`` (at ``where``) over a group of ``n_vertices`` stored once more."""
+        n = declared_count(self.f, primitive.get("indices")) if "indices" in primitive else n_vertices
+        self.triangles += n // 3
+        if self.triangles > MAX_TRIANGLES and self.triangles > n // 3:  # one primitive alone: as the vertices
+            self.f.fail(where, f"{n // 3} triangles bring the scene's stored triangles to {self.triangles}; at "
+                               f"most {MAX_TRIANGLES} (each instance counts)")
+
+
+def check_kept_json(f: GltfFile, value: Any, where: str, depth: int = 1) -> None:
+    """JSON the character keeps as it came (``value``, found at ``where`` at nesting level ``depth``): no deeper
+    than :data:`MAX_KEPT_JSON_DEPTH`, every number finite. Walked without recursion."""
+    stack = [(value, where, depth)]
+    while stack:
+        v, w, d = stack.pop()
+        if isinstance(v, float) and not math.isfinite(v):
+            f.fail(w, f"{v!r}: a number the character keeps must be finite")
+        if isinstance(v, (dict, list)):
+            if d > MAX_KEPT_JSON_DEPTH:
+                f.fail(w, f"nests {d} levels deep; the character keeps JSON at most {MAX_KEPT_JSON_DEPTH} levels "
+                          "deep")
+            items = v.items() if isinstance(v, dict) else enumerate(v)
+            stack.extend((x, f"{w}.{k}" if isinstance(v, dict) else f"{w}[{k}]", d + 1)
+                         for k, x in reversed(list(items)))
