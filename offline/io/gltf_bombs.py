@@ -73,6 +73,11 @@ def _model(folder: Path) -> Path:
     return model
 
 
+def sound_triangle(folder: Path) -> Path:
+    """The sound file every forgery is measured against: one triangle, its buffer a data URI."""
+    return _write_json(_model(folder) / "triangle.gltf", _triangle_doc(_data_uri(TRIANGLE.tobytes())))
+
+
 # -- reading outside the folder ------------------------------------------------------------------------------
 def parent_passwd(folder: Path) -> Path:
     """A buffer uri climbing to ``/etc/passwd``."""
@@ -81,8 +86,9 @@ def parent_passwd(folder: Path) -> Path:
 
 def parent_secret(folder: Path) -> Path:
     """A buffer uri ``../SECRET.bin``: the file beside the model's folder."""
+    model = _model(folder)
     (folder / "SECRET.bin").write_bytes(SECRET)
-    return _write_json(_model(folder) / "secret.gltf", _triangle_doc("../SECRET.bin"))
+    return _write_json(model / "secret.gltf", _triangle_doc("../SECRET.bin"))
 
 
 def symlink_outside(folder: Path) -> Path:
@@ -257,4 +263,15 @@ FORGERIES: dict[str, Callable[[Path], Path]] = {
     "nul_uri": nul_uri,
     "nan_weights": nan_weights,
     "deep_json": deep_json,
+}
+
+_URI = r"buffers\[0\]"
+#: The JSON path (a regular expression) each case's refusal names, in the message or in check-gltf's list.
+REFUSAL_NAMES: dict[str, str] = {
+    "parent_passwd": _URI, "parent_secret": _URI, "symlink_outside": _URI, "dev_zero": _URI,
+    "symlink_dev_zero": _URI, "fifo": _URI, "nul_uri": _URI,
+    "huge_accessor": r"accessors\[0\]",
+    "four_textures": r"images|textures", "sixteen_textures": r"images|textures",
+    "same_name_nodes": r"nodes", "mesh_instances": r"nodes|mesh", "own_attribute_primitives": r"primitives",
+    "deep_chain": r"nodes", "nan_weights": r"meshes\[0\]\.weights", "deep_json": r"JSON",
 }
