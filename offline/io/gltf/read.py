@@ -37,7 +37,7 @@ from facepuppet.offline.io.gltf.read_materials import read_materials
 from facepuppet.offline.io.gltf.read_meshes import Progress, read_geometry, read_shapes
 from facepuppet.offline.io.gltf.read_nodes import read_nodes
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
-from facepuppet.offline.io.gltf.structure_limits import check_counts, check_kept_json
+from facepuppet.offline.io.gltf.structure_limits import check_kept_json, check_structure
 from facepuppet.offline.io.gltf_container import GltfError, GltfFile, read_gltf_file
 
 __all__ = ["read_gltf", "EXTENSION_READERS", "SUPPORTED_EXTENSIONS", "GltfError"]
@@ -100,7 +100,7 @@ def read_gltf(path: str | os.PathLike, *, name: str | None = None, progress: Pro
     """
     f = read_gltf_file(Path(path))
     with np.errstate(all="ignore"):  # overflow shows as non-finite values, refused by name below
-        check_counts(f)
+        check_structure(f)
         state = _new_state(f)
         _check_kept(state)
         _check_extensions(state)

@@ -4,8 +4,8 @@ The default scene is ``scene``, else scene 0, else every root node. Nodes are
 stored depth first from the roots, so a parent always comes before its
 children (what :class:`~facepuppet.runtime.model.character_parts.Skeleton` asks); a
 node outside the default scene is not stored. The walk is a loop over an
-explicit stack, so a deep hierarchy costs no recursion, and each node's level
-is checked against :data:`~.structure_limits.MAX_DEPTH` as it is reached. Names are made unique with
+explicit stack, so a deep hierarchy costs no recursion (its depth was bounded
+before, by :mod:`.structure_limits`). Names are made unique with
 ``#2``, ``#3`` … A VRM 0.x avatar faces −Z: its roots are turned 180° about
 +Y, so every world transform becomes ``T·G``.
 """
@@ -18,7 +18,6 @@ from facepuppet.runtime.model.geometry import quat_to_matrix
 
 from facepuppet.offline.io.gltf.names import UniqueNames
 from facepuppet.offline.io.gltf.read_state import ReadState
-from facepuppet.offline.io.gltf.structure_limits import check_depth
 
 TURN_Y180 = np.diag([-1.0, 1.0, -1.0, 1.0])
 
@@ -40,15 +39,14 @@ def read_nodes(state: ReadState) -> None:
     roots = _scene_roots(state, parent_of)
     order: list[int] = []
     seen = np.zeros(len(nodes), dtype=bool)
-    stack = [(r, 1) for r in reversed(roots)]  # (node, its level: a root is 1)
+    stack = list(reversed(roots))
     while stack:  # depth first, parents before children; a cycle shows as a revisit
-        i, level = stack.pop()
+        i = stack.pop()
         if seen[i]:
             f.fail(f"nodes[{i}]", "the node hierarchy has a cycle")
-        check_depth(f, i, level)
         seen[i] = True
         order.append(i)
-        stack.extend((c, level + 1) for c in reversed(nodes[i].get("children", [])))
+        stack.extend(reversed(nodes[i].get("children", [])))
     if len(order) > 65535:
         f.fail("nodes", f"{len(order)} nodes in the scene; a character holds at most 65535")
     state.node_from_file = np.array(order, dtype=np.int64)

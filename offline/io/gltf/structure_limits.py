@@ -11,8 +11,10 @@ and under 100k vertices; the heaviest game avatars some thousands of nodes and
 a million vertices) and far below what would hurt; the reader's loops are
 linear, so a file within them reads in time proportional to what it declares.
 
-The counts of the file (nodes, meshes, primitives) are checked first; the
-depth while the hierarchy is walked; what the default scene stores (mesh
+The counts of the file (nodes, meshes, primitives) and the depth of its node
+hierarchy are checked first (:func:`structure_problems`, which ``check-gltf``
+can list as well: it only reads the JSON, whatever types it holds); what the
+default scene stores (mesh
 instances, their primitives, vertices, triangles and morph values, from the
 accessors' declared counts, each instance counted) before the first accessor
 is decoded. The JSON a character keeps as it came (the VRM extension, the
@@ -24,6 +26,7 @@ Each refusal names the file and the JSON path where the limit was crossed.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
 from facepuppet.offline.io.gltf_container import GltfFile
@@ -46,28 +49,62 @@ MAX_MORPH_VALUES = 50_000_000
 MAX_KEPT_JSON_DEPTH = 24
 
 
-def check_counts(f: GltfFile) -> None:
-    """The file's nodes, meshes and primitives against their limits, before anything is read."""
-    nodes = f.items("nodes")
+def structure_problems(doc: Any) -> Iterator[tuple[str, str]]:
+    """(JSON path, problem) of each file-level limit a glTF document ``doc`` crosses: its nodes, meshes and
+    primitives counted, its node hierarchy's depth walked (iteratively, each node once, from the nodes no node
+    lists as a child). Whatever JSON it holds, this only reads: a malformed part is skipped, for the reader's
+    own checks to refuse by name. The first limit crossed ends the walk (its cost stays linear in the file)."""
+    nodes = doc.get("nodes") if isinstance(doc, dict) else None
+    nodes = nodes if isinstance(nodes, list) else []
     if len(nodes) > MAX_NODES:
-        f.fail("nodes", f"{len(nodes)} nodes; a file may have at most {MAX_NODES}")
-    meshes = f.items("meshes")
+        yield "nodes", f"{len(nodes)} nodes; a file may have at most {MAX_NODES}"
+        return
+    meshes = doc.get("meshes") if isinstance(doc, dict) else None
+    meshes = meshes if isinstance(meshes, list) else []
     if len(meshes) > MAX_MESHES:
-        f.fail("meshes", f"{len(meshes)} meshes; a file may have at most {MAX_MESHES}")
+        yield "meshes", f"{len(meshes)} meshes; a file may have at most {MAX_MESHES}"
+        return
     total = 0
     for m, mesh in enumerate(meshes):
         prims = mesh.get("primitives") if isinstance(mesh, dict) else None
         if isinstance(prims, list):
             total += len(prims)
             if total > MAX_PRIMITIVES:
-                f.fail(f"meshes[{m}].primitives", f"{len(prims)} primitives bring the file's to {total}; a file "
-                                                  f"may have at most {MAX_PRIMITIVES}")
+                yield (f"meshes[{m}].primitives", f"{len(prims)} primitives bring the file's to {total}; a file may "
+                                                  f"have at most {MAX_PRIMITIVES}")
+                return
+    problem = _too_deep(nodes)
+    if problem is not None:
+        yield problem
 
 
-def check_depth(f: GltfFile, node: int, depth: int) -> None:
-    """Node ``node`` at level ``depth`` of the hierarchy (a root is level 1) against :data:`MAX_DEPTH`."""
-    if depth > MAX_DEPTH:
-        f.fail(f"nodes[{node}]", f"is {depth} levels deep in the node hierarchy; at most {MAX_DEPTH} are read")
+def _too_deep(nodes: list) -> tuple[str, str] | None:
+    """The first node (depth first from the roots) past :data:`MAX_DEPTH`, as (path, problem), or None."""
+    n = len(nodes)
+    children = [[c for c in node["children"] if isinstance(c, int) and not isinstance(c, bool) and 0 <= c < n]
+                if isinstance(node, dict) and isinstance(node.get("children"), list) else [] for node in nodes]
+    has_parent = [False] * n
+    for listed in children:
+        for c in listed:
+            has_parent[c] = True
+    level = [0] * n  # 0: not reached yet
+    stack = [(r, 1) for r in reversed(range(n)) if not has_parent[r]]
+    while stack:
+        i, depth = stack.pop()
+        if level[i]:
+            continue  # listed by two parents: walked once
+        level[i] = depth
+        if depth > MAX_DEPTH:
+            return f"nodes[{i}]", f"is {depth} levels deep in the node hierarchy; at most {MAX_DEPTH} are read"
+        stack.extend((c, depth + 1) for c in reversed(children[i]) if not level[c])
+    return None
+
+
+def check_structure(f: GltfFile) -> None:
+    """The file-level limits of :func:`structure_problems`, the first one crossed refused, before anything is
+    read."""
+    for where, problem in structure_problems(f.doc):
+        f.fail(where, problem)
 
 
 def declared_count(f: GltfFile, accessor: Any) -> int:

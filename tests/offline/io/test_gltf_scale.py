@@ -229,3 +229,37 @@ def test_a_kept_vrm_extension_with_nan_or_nested_too_deep_is_refused_naming_its_
     ok = _vrm_with(tmp_path, {"meta": {"title": "t"}, "extras": nested})
     assert main(["import-rig", str(ok), "-o", str(tmp_path / "c.npz")]) == 0
     assert Character.load(tmp_path / "c.npz").source["vrm_extension"]["extras"] == nested
+
+
+# -- the file-level limits as a list (what check-gltf can list too) ------------------------------------------------
+@pytest.mark.parametrize("case, where", [("same_name_nodes", "nodes"), ("own_attribute_primitives",
+                                                                           "meshes[0].primitives"),
+                                         ("deep_chain", "nodes")])
+def test_structure_problems_lists_the_forged_structures_from_their_json_alone(tmp_path, case, where):
+    doc = json.loads(gltf_bombs.FORGERIES[case](tmp_path).read_text())
+    assert [w for w, _ in limits.structure_problems(doc)] == [where]
+
+
+def test_structure_problems_walks_a_chain_at_the_depth_limit_and_names_the_first_node_past_it():
+    chain = [{"children": [i + 1]} for i in range(limits.MAX_DEPTH - 1)] + [{}]
+    assert list(limits.structure_problems({"nodes": chain})) == []
+    chain[-1]["children"] = [len(chain)]
+    found = list(limits.structure_problems({"nodes": [*chain, {}]}))
+    assert found == [(f"nodes[{limits.MAX_DEPTH}]", f"is {limits.MAX_DEPTH + 1} levels deep in the node hierarchy; "
+                                                    f"at most {limits.MAX_DEPTH} are read")]
+
+
+@pytest.mark.parametrize("doc", [None, [], "x", {"nodes": {}}, {"nodes": [1, None, "a", {"children": "x"}]},
+                                 {"nodes": [{"children": [0]}, {"children": [5, -1, True, 1.5, None, [0]]}]},
+                                 {"meshes": [1, {"primitives": {}}, {"primitives": [None]}]},
+                                 {"nodes": [{"children": [1]}, {"children": [0]}]}])  # a cycle without a root
+def test_structure_problems_reads_any_json_without_raising(doc):
+    assert list(limits.structure_problems(doc)) == []
+
+
+def test_a_node_listed_by_many_parents_is_walked_once():
+    """Every node lists all the later ones as children: the walk visits each node once, not once per parent
+    (which would be exponential), and the levels are those of the first parent reached."""
+    n = 300
+    nodes = [{"children": list(range(i + 1, n))} for i in range(n)]
+    assert list(limits.structure_problems({"nodes": nodes})) == []
