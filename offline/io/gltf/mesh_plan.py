@@ -60,16 +60,21 @@ def plan_meshes(state: ReadState, instances: list[tuple[int, int]]) -> list[Mesh
     for _, i in instances:
         m = f.get(state.doc["nodes"][i], "mesh", int, f"nodes[{i}]")
         mesh = f.obj("meshes", m, f"nodes[{i}].mesh")
-        if m not in plans:
+        repeat = m in plans
+        if not repeat:
             plans[m] = _plan(f, m, mesh)
         plan = plans[m]
         size.add_instance(i, m, len(plan.primitives))
+        stored = 0
         for members in plan.members.values():
             first = plan.primitives[members[0]]
             n = size.add_vertices(f"meshes[{m}].primitives[{members[0]}]", first["attributes"],
                                   len(first.get("targets", [])))
+            stored += n
             for p in members:
                 size.add_triangles(f"meshes[{m}].primitives[{p}]", plan.primitives[p], n)
+        if repeat:
+            size.add_repeat(i, m, stored)
         out.append(plan)
     return out
 

@@ -14,12 +14,13 @@ linear, so a file within them reads in time proportional to what it declares.
 The counts of the file (nodes, meshes, primitives) and the depth of its node
 hierarchy are checked first (:func:`structure_problems`, which ``check-gltf``
 can list as well: it only reads the JSON, whatever types it holds); what the
-default scene stores (mesh
-instances, their primitives, vertices, triangles and morph values, from the
-accessors' declared counts, each instance counted) before the first accessor
-is decoded. The JSON a character keeps as it came (the VRM extension, the
-asset's meta) must nest no deeper than :data:`MAX_KEPT_JSON_DEPTH` and hold
-finite numbers, so that its character table can be written and read back.
+default scene stores (mesh instances, their primitives, vertices, triangles
+and morph values, from the accessors' declared counts, each instance counted,
+and apart the vertices a mesh instanced again stores again) before the first
+accessor is decoded. The JSON a character keeps as it came (the VRM
+extension, the asset's meta) must nest no deeper than
+:data:`MAX_KEPT_JSON_DEPTH` and hold finite numbers, so that its character
+table can be written and read back.
 Each refusal names the file and the JSON path where the limit was crossed.
 """
 
@@ -41,6 +42,10 @@ MAX_MESHES = 2_000
 MAX_PRIMITIVES = 2_000
 #: Vertices stored for the default scene (each instance counts), by the POSITION accessors' declared counts.
 MAX_VERTICES = 4_000_000
+#: Of those, the vertices stored by instances of a mesh already stored: copies of what the file holds once, so a
+#: small file instancing a mesh many times costs what a file holding them all would (a few hundred copies of a
+#: button are 100k).
+MAX_REPEATED_VERTICES = 500_000
 #: Triangles stored for the default scene (each instance counts), by the index accessors' declared counts.
 MAX_TRIANGLES = 8_000_000
 #: Morph values read for the default scene: vertices × morph targets, summed over what is stored.
@@ -127,7 +132,7 @@ class SceneSize:
 
     def __init__(self, f: GltfFile) -> None:
         self.f = f
-        self.instances = self.primitives = self.vertices = self.triangles = self.morph_values = 0
+        self.instances = self.primitives = self.vertices = self.repeated = self.triangles = self.morph_values = 0
 
     def add_instance(self, node: int, mesh: int, n_primitives: int) -> None:
         self.instances += 1
@@ -139,6 +144,14 @@ class SceneSize:
             self.f.fail(f"nodes[{node}].mesh", f"mesh {mesh}'s {n_primitives} primitives bring the scene's to "
                                                f"{self.primitives}; at most {MAX_PRIMITIVES} are stored (each "
                                                "instance counts)")
+
+    def add_repeat(self, node: int, mesh: int, n_vertices: int) -> None:
+        """Mesh ``mesh``, already stored, instanced again at node ``node``: its ``n_vertices`` stored again."""
+        self.repeated += n_vertices
+        if self.repeated > MAX_REPEATED_VERTICES:
+            self.f.fail(f"nodes[{node}].mesh", f"another instance of mesh {mesh} ({n_vertices} vertices) brings the "
+                                               f"vertices stored again for repeated instances to {self.repeated}; at "
+                                               f"most {MAX_REPEATED_VERTICES}")
 
     def add_vertices(self, where: str, attributes: dict, n_targets: int) -> int:
         """A group of primitives sharing ``attributes`` (``where``: the first of them) stored once more; its

@@ -175,6 +175,11 @@ def test_primitive_limits_declared_and_stored_over_instances(tmp_path, monkeypat
     _past(monkeypatch, "MAX_PRIMITIVES", 9, b.write_glb(tmp_path / "i.glb"), r"nodes\[2\]\.mesh: ")
 
 
+def test_vertices_stored_again_by_repeated_instances_are_bounded_apart(tmp_path, monkeypatch):
+    """Three instances of one triangle store its 3 vertices twice more than the file holds them."""
+    _past(monkeypatch, "MAX_REPEATED_VERTICES", 6, gltf_bombs.mesh_instances(tmp_path, 3), r"nodes\[2\]\.mesh: ")
+
+
 def test_vertex_triangle_and_morph_value_limits_count_every_instance(tmp_path, monkeypatch):
     b = GltfBuilder()
     pos = b.accessor(gltf_bombs.TRIANGLE, minmax=True)
