@@ -14,8 +14,8 @@ linear, so a file within them reads in time proportional to what it declares.
 The counts of the file (nodes, meshes, primitives) and the depth of its node
 hierarchy are checked first (:func:`structure_problems`, which ``check-gltf``
 can list as well: it only reads the JSON, whatever types it holds); what the
-default scene stores (mesh instances, their primitives, vertices, triangles
-and morph values, from the accessors' declared counts, each instance counted,
+default scene stores (the primitives of its mesh instances, their vertices,
+triangles and morph values, from the accessors' declared counts, each instance counted,
 and apart the vertices a mesh instanced again stores again) before the first
 accessor is decoded. The JSON a character keeps as it came (the VRM
 extension, the asset's meta) must nest no deeper than
@@ -36,7 +36,7 @@ from facepuppet.offline.io.gltf_container import GltfFile
 MAX_NODES = 20_000
 #: Levels of the node hierarchy (a root is level 1); real skeletons with long hair chains are under 100 deep.
 MAX_DEPTH = 512
-#: Meshes in the file, and mesh instances (nodes with a mesh) in the default scene.
+#: Meshes in the file, and mesh instances (nodes with a mesh) in the file.
 MAX_MESHES = 2_000
 #: Primitives in the file, and primitives stored for the default scene (each instance of a mesh counts).
 MAX_PRIMITIVES = 2_000
@@ -55,10 +55,11 @@ MAX_KEPT_JSON_DEPTH = 24
 
 
 def structure_problems(doc: Any) -> Iterator[tuple[str, str]]:
-    """(JSON path, problem) of each file-level limit a glTF document ``doc`` crosses: its nodes, meshes and
-    primitives counted, its node hierarchy's depth walked (iteratively, each node once, from the nodes no node
-    lists as a child). Whatever JSON it holds, this only reads: a malformed part is skipped, for the reader's
-    own checks to refuse by name. The first limit crossed ends the walk (its cost stays linear in the file)."""
+    """(JSON path, problem) of each file-level limit a glTF document ``doc`` crosses: its nodes, meshes, mesh
+    instances and primitives counted, its node hierarchy's depth walked (iteratively, each node once, from the
+    nodes no node lists as a child). Whatever JSON it holds, this only reads: a malformed part is skipped, for
+    the reader's own checks to refuse by name. The first limit crossed ends the walk (its cost stays linear in
+    the file)."""
     nodes = doc.get("nodes") if isinstance(doc, dict) else None
     nodes = nodes if isinstance(nodes, list) else []
     if len(nodes) > MAX_NODES:
@@ -69,6 +70,14 @@ def structure_problems(doc: Any) -> Iterator[tuple[str, str]]:
     if len(meshes) > MAX_MESHES:
         yield "meshes", f"{len(meshes)} meshes; a file may have at most {MAX_MESHES}"
         return
+    instances = 0
+    for i, node in enumerate(nodes):
+        if isinstance(node, dict) and "mesh" in node:
+            instances += 1
+            if instances > MAX_MESHES:
+                yield (f"nodes[{i}].mesh", f"mesh instance {instances} (a node with a mesh); a file may have at most "
+                                           f"{MAX_MESHES}, as a character holds at most {MAX_MESHES} meshes")
+                return
     total = 0
     for m, mesh in enumerate(meshes):
         prims = mesh.get("primitives") if isinstance(mesh, dict) else None
@@ -132,14 +141,12 @@ class SceneSize:
 
     def __init__(self, f: GltfFile) -> None:
         self.f = f
-        self.instances = self.primitives = self.vertices = self.repeated = self.triangles = self.morph_values = 0
+        self.primitives = self.vertices = self.repeated = self.triangles = self.morph_values = 0
 
     def add_instance(self, node: int, mesh: int, n_primitives: int) -> None:
-        self.instances += 1
+        """Mesh ``mesh`` instanced at node ``node`` (the instances themselves were counted with the file's
+        nodes, :func:`structure_problems`): its primitives stored once more."""
         self.primitives += n_primitives
-        if self.instances > MAX_MESHES:
-            self.f.fail(f"nodes[{node}].mesh", f"mesh instance {self.instances} of the scene; a character holds at "
-                                               f"most {MAX_MESHES} meshes (each instance counts)")
         if self.primitives > MAX_PRIMITIVES:
             self.f.fail(f"nodes[{node}].mesh", f"mesh {mesh}'s {n_primitives} primitives bring the scene's to "
                                                f"{self.primitives}; at most {MAX_PRIMITIVES} are stored (each "

@@ -237,8 +237,8 @@ def test_a_kept_vrm_extension_with_nan_or_nested_too_deep_is_refused_naming_its_
 
 
 # -- the file-level limits as a list (what check-gltf can list too) ------------------------------------------------
-@pytest.mark.parametrize("case, where", [("same_name_nodes", "nodes"), ("own_attribute_primitives",
-                                                                           "meshes[0].primitives"),
+@pytest.mark.parametrize("case, where", [("same_name_nodes", "nodes"), ("mesh_instances", "nodes[2000].mesh"),
+                                         ("own_attribute_primitives", "meshes[0].primitives"),
                                          ("deep_chain", "nodes")])
 def test_structure_problems_lists_the_forged_structures_from_their_json_alone(tmp_path, case, where):
     doc = json.loads(gltf_bombs.FORGERIES[case](tmp_path).read_text())
