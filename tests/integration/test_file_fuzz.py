@@ -7,6 +7,13 @@ finding. Cases are seeded (the same on every run) and few: the whole module
 takes a few seconds. The small files are made by the project's own writers
 where it has one (tables, sessions, TRC, C3D, CSV markers), by hand in the
 format otherwise; the data kit's files follow in the ``data`` tests.
+
+The glTF path has its own tests below: the files ``export-character`` writes
+and the kit's VRMs, mutated, each checked by ``check_gltf`` (which must list,
+never raise) and read or refused by the importer; and every hostile file of
+:mod:`facepuppet.offline.io.gltf_bombs`, which the importer must refuse naming
+it, run in a child process bounded in memory and time
+(:mod:`helpers.gltf_fuzz`).
 """
 
 from __future__ import annotations
@@ -28,7 +35,10 @@ from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 from facepuppet.runtime.recording.replay_source import open_recording
 from facepuppet.runtime.recording.session import SessionWriter
 
+from facepuppet.offline.io import gltf_bombs
 from helpers.file_fuzz import check_reader, repacked_json_swaps, swap_session_header
+from helpers.gltf_fuzz import forged_findings, read_and_check
+from helpers.gltf_writer import glb_chunks
 
 V1 = Path(__file__).resolve().parents[1] / "runtime" / "files" / "data" / "tables_v1"
 SEED = 17
@@ -326,3 +336,56 @@ def test_every_mutant_of_a_data_kit_file_is_read_or_refused_naming_the_file(tmp_
     read, _, suffix, _ = _readers(tmp_path)[reader]
     findings = check_reader(read, real, tmp_path, suffix, SEED, n=5)
     assert not findings, f"{len(findings)} findings for {name}:\n" + "\n".join(findings[:15])
+
+
+# -- the glTF path: check_gltf and the importer ---------------------------------------------------------------
+WRITTEN = ("vrm0", "vrm1", "glb", "gltf")
+
+
+def exported(tmp: Path, fmt: str) -> Path:
+    """The tests' small character with all four parts as ``export-character`` writes it in ``fmt``."""
+    from facepuppet.offline.io.gltf.write import export_character
+    from helpers.gltf_characters import parts_character
+
+    path = tmp / ("exported" + {"vrm0": ".vrm", "vrm1": ".vrm", "glb": ".glb", "gltf": ".gltf"}[fmt])
+    character = parts_character(source_format="vrm1" if fmt == "vrm1" else "vrm0")
+    export_character(character, path, vrm=int(fmt[3]) if fmt.startswith("vrm") else None)
+    return path
+
+
+def glb_swaps(data: bytes, seed: int, n: int):
+    """Type swaps of a GLB's JSON chunk, repacked around its BIN chunk."""
+    doc, blob = glb_chunks(data)
+    return repacked_json_swaps(json.dumps(doc).encode(), lambda text: _glb_with_json(text, blob or b""), seed, n=n)
+
+
+@pytest.mark.parametrize("fmt", WRITTEN)
+def test_every_mutant_of_a_gltf_the_project_writes_is_checked_and_read_or_refused_naming_the_file(tmp_path, fmt):
+    path = exported(tmp_path, fmt)
+    real = path.read_bytes()
+    seed = SEED + 100 + WRITTEN.index(fmt)
+    extra = glb_swaps(real, seed, 20) if real[:4] == b"glTF" else ()
+    findings = check_reader(read_and_check, real, tmp_path, path.suffix, seed, n=10, extra=extra)
+    assert not findings, f"{len(findings)} findings for {fmt}:\n" + "\n".join(findings[:15])
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("name", ["Godette_vrm_v4.vrm", "VRMC_vrm_expressions_isBinary_Overrides.vrm"])
+def test_every_mutant_of_a_data_kit_vrm_is_checked_and_read_or_refused_naming_the_file(tmp_path, name):
+    from conftest import need_shared
+
+    real = need_shared("gltf", name).read_bytes()
+    findings = check_reader(read_and_check, real, tmp_path, ".vrm", SEED, n=4, extra=glb_swaps(real, SEED, 12))
+    assert not findings, f"{len(findings)} findings for {name}:\n" + "\n".join(findings[:15])
+
+
+@pytest.fixture(scope="module")
+def forged(tmp_path_factory) -> dict[str, list[str]]:
+    """{case: findings} of every forged hostile glTF, run once per test process."""
+    return forged_findings(list(gltf_bombs.FORGERIES), tmp_path_factory.mktemp("forged"))
+
+
+@pytest.mark.parametrize("case", list(gltf_bombs.FORGERIES))
+def test_every_forged_hostile_gltf_is_refused_by_the_importer_naming_the_file_and_checked_without_raising(
+        forged, case):
+    assert forged[case] == [], f"{case}: " + "; ".join(forged[case])

@@ -37,6 +37,7 @@ from facepuppet.offline.io.gltf.read_materials import read_materials
 from facepuppet.offline.io.gltf.read_meshes import Progress, read_geometry, read_shapes
 from facepuppet.offline.io.gltf.read_nodes import read_nodes
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
+from facepuppet.offline.io.gltf.structure_limits import check_kept_json, check_structure
 from facepuppet.offline.io.gltf_container import GltfError, GltfFile, read_gltf_file
 
 __all__ = ["read_gltf", "EXTENSION_READERS", "SUPPORTED_EXTENSIONS", "GltfError"]
@@ -69,6 +70,9 @@ SUPPORTED_EXTENSIONS = frozenset({"KHR_mesh_quantization"}).union(*(r.extensions
 #: Used-only extensions that carry nothing the character needs (no warning): VRM's physics and constraints
 #: are kept in the raw VRM JSON for export.
 QUIET_EXTENSIONS = frozenset({"VRMC_springBone", "VRMC_node_constraint", "VRMC_vrm_animation"})
+#: The fields of ``asset`` and of ``asset.extras`` a plain glTF's character keeps as its meta.
+_ASSET_META = ("copyright", "generator", "version")
+_EXTRAS_META = ("title", "author", "license", "source")
 
 
 def read_gltf(path: str | os.PathLike, *, name: str | None = None, progress: Progress | None = None) -> Character:
@@ -89,13 +93,16 @@ def read_gltf(path: str | os.PathLike, *, name: str | None = None, progress: Pro
     ------
     GltfError
         (an InputFileError) naming the file and the JSON field path: bad container, bad or
-        out-of-range data, unsupported required extension, primitive mode other than triangles.
+        out-of-range data, unsupported required extension, primitive mode other than triangles, a
+        structure past the limits of :mod:`.structure_limits` (refused before any accessor is decoded).
     FileNotFoundError
         the file is missing.
     """
     f = read_gltf_file(Path(path))
     with np.errstate(all="ignore"):  # overflow shows as non-finite values, refused by name below
+        check_structure(f)
         state = _new_state(f)
+        _check_kept(state)
         _check_extensions(state)
         read_nodes(state)
         read_geometry(state, progress)
@@ -125,6 +132,24 @@ def _new_state(f: GltfFile) -> ReadState:
     return ReadState(f=f, format=fmt, vrm0=vrm0, vrm1=vrm1, turn=fmt == "vrm0")
 
 
+def _check_kept(state: ReadState) -> None:
+    """What the character keeps of the file's JSON as it came (the VRM extension, the asset's meta fields) within
+    :data:`~.structure_limits.MAX_KEPT_JSON_DEPTH` and finite, refused here by its path in the file."""
+    f = state.f
+    if state.vrm1 is not None:
+        check_kept_json(f, state.vrm1, "extensions.VRMC_vrm")
+    elif state.vrm0 is not None:
+        check_kept_json(f, state.vrm0, "extensions.VRM")
+    asset = state.doc.get("asset", {})
+    extras = asset.get("extras")
+    for key in _ASSET_META:
+        if key in asset:
+            check_kept_json(f, asset[key], f"asset.{key}", 2)
+    for key in _EXTRAS_META:
+        if isinstance(extras, dict) and key in extras:
+            check_kept_json(f, extras[key], f"asset.extras.{key}", 2)
+
+
 def _check_extensions(state: ReadState) -> None:
     f = state.f
     used = state.doc.get("extensionsUsed", [])
@@ -145,10 +170,10 @@ def _asset_meta(state: ReadState) -> None:
     """The meta and credits of a plain glTF: the asset's copyright, generator and version, and the title,
     author, licence and source of its ``extras`` (a VRM's meta reader replaces them)."""
     asset = state.doc.get("asset", {})
-    meta = {k: v for k, v in asset.items() if k in ("copyright", "generator", "version")}
+    meta = {k: v for k, v in asset.items() if k in _ASSET_META}
     extras = asset.get("extras")
     if isinstance(extras, dict):
-        meta.update({k: v for k, v in extras.items() if k in ("title", "author", "license", "source")})
+        meta.update({k: v for k, v in extras.items() if k in _EXTRAS_META})
     state.meta = meta
     state.credits = credit_line(text(meta, "title"), text(meta, "author"), text(meta, "license"),
                                 text(meta, "copyright"))

@@ -1,9 +1,12 @@
 """The meshes of the default scene: vertices, skins, triangles, morph targets, in the stored frame.
 
-Per mesh instance (a node with a mesh), per group of primitives sharing the
-same vertex attributes (Godette's body has three materials over one vertex
-list; they are stored once and the Layout ranges of those primitives
-coincide):
+Each mesh is planned first (:mod:`.mesh_plan`: its primitives checked and
+grouped, every instance counted against the limits of
+:mod:`.structure_limits`), so a refusal of the structure comes before any
+accessor is decoded. Then, per mesh instance (a node with a mesh), per group
+of primitives sharing the same vertex attributes (Godette's body has three
+materials over one vertex list; they are stored once and the Layout ranges of
+those primitives coincide):
 
 * skinned (node has ``skin`` and the primitive JOINTS_0/WEIGHTS_0): each
   vertex is moved by ``Σ w_i G(joint_i) IBM_i`` (the spec's skinning at the
@@ -21,71 +24,56 @@ joint.
 Shapes: one per distinct morph-target name (``extras.targetNames`` of the
 primitive, else of the mesh, else ``<mesh name>.<index>``); the same name on
 two meshes is one shape. Only vertices a target moves (or whose unit normal
-it turns by more than the OBJ import's ``NORMAL_TOLERANCE``) are stored.
-The mesh's default ``weights`` are not baked into the neutral; they are kept
-in ``source["default_weights"]``.
+it turns by more than the OBJ import's ``NORMAL_TOLERANCE``) are stored,
+kept sparse as each target is read (one target of a group is dense at a time).
+The mesh's default ``weights`` (finite numbers) are not baked into the
+neutral; they are kept in ``source["default_weights"]``.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from facepuppet.offline.io.gltf.mesh_plan import plan_meshes
+from facepuppet.offline.io.gltf.names import UniqueNames
 from facepuppet.offline.io.gltf.read_state import ReadState, target_names
 from facepuppet.offline.io.rig_import import NORMAL_TOLERANCE
 
 Progress = Callable[[int, int, str], None]
-_MODES = {0: "points", 1: "lines", 2: "line loop", 3: "line strip", 4: "triangles", 5: "triangle strip",
-          6: "triangle fan"}
 
 
 def read_geometry(state: ReadState, progress: Progress | None) -> None:
     """Fill ``state.geo``: every mesh instance of the default scene in the stored frame (see the module doc)."""
     f = state.f
     instances = [(s, i) for s, i in enumerate(state.node_from_file) if "mesh" in state.doc["nodes"][i]]
+    plans = plan_meshes(state, instances)  # checked and counted against the limits before any decoding
     out: dict[str, Any] = {"vertices": [], "normals": [], "uv": [], "colors": [], "nodes": [], "weights": [],
                            "triangles": [], "triangle_material": [], "primitives": [], "mesh_names": [],
                            "targets": [], "default_weights": {}, "material_used": set(),
                            "instance_of_mesh": {}, "n_joints": 0, "file_normals": True}
     n_v = n_t = 0
     joints_used: set[int] = set()
-    for k, (s, i) in enumerate(instances, start=1):
+    mesh_names = UniqueNames()
+    skins: dict[int, dict] = {}
+    for k, ((s, i), plan) in enumerate(zip(instances, plans), start=1):
         node = state.doc["nodes"][i]
-        m = f.get(node, "mesh", int, f"nodes[{i}]")
-        mesh = f.obj("meshes", m, f"nodes[{i}].mesh")
-        mw = f"meshes[{m}]"
-        mesh_name = mesh.get("name") if isinstance(mesh.get("name"), str) and mesh["name"] else f"mesh{m}"
-        unique, copy = mesh_name, 1
-        while unique in out["mesh_names"]:
-            copy += 1
-            unique = f"{mesh_name}#{copy}"
+        m, mw, prims = plan.index, f"meshes[{plan.index}]", plan.primitives
+        unique = mesh_names.take(plan.name)
         mesh_index = len(out["mesh_names"])
         out["mesh_names"].append(unique)
         out["instance_of_mesh"].setdefault(m, []).append((mesh_index, s))
-        skin = _skin(state, node, i)
-        prims = f.get(mesh, "primitives", list, mw)
-        if not prims:
-            f.fail(f"{mw}.primitives", "a mesh needs at least one primitive")
-        mesh_names_t = target_names(mesh.get("extras"))
-        groups: dict[str, tuple[int, int]] = {}  # attribute key -> (first vertex, n vertices)
+        skin = _skin(state, node, i, skins)
+        mesh_names_t = target_names(plan.mesh.get("extras"))
+        groups: dict[tuple, tuple[int, int]] = {}  # plan key -> (first vertex, n vertices)
         for p, prim in enumerate(prims):
             pw = f"{mw}.primitives[{p}]"
-            if not isinstance(prim, dict):
-                f.fail(pw, "expected an object")
-            mode = f.get(prim, "mode", int, pw, 4)
-            if mode != 4:
-                f.fail(f"{pw}.mode", f"{mode} ({_MODES.get(mode, 'unknown')}): only triangle lists (4) are read")
-            attrs = f.get(prim, "attributes", dict, pw)
-            targets = f.get(prim, "targets", list, pw, [])
-            key = json.dumps([attrs, targets], sort_keys=True)
+            key = plan.keys[p]
             if key not in groups:
-                siblings = [(f"{mw}.primitives[{q}]", pr) for q, pr in enumerate(prims)
-                            if isinstance(pr, dict) and pr.get("mode", 4) == 4
-                            and json.dumps([pr.get("attributes"), pr.get("targets", [])], sort_keys=True) == key]
-                g = _vertices(state, attrs, targets, pw, skin, s, siblings)
+                siblings = [(f"{mw}.primitives[{q}]", prims[q]) for q in plan.members[key]]
+                g = _vertices(state, prim["attributes"], prim.get("targets", []), pw, skin, s, siblings)
                 groups[key] = (n_v, len(g["positions"]))
                 out["vertices"].append(g["positions"])
                 out["normals"].append(g["normals"])
@@ -96,10 +84,10 @@ def read_geometry(state: ReadState, progress: Progress | None) -> None:
                 out["weights"].append(g["weights"])
                 joints_used.update(np.unique(g["nodes"][g["weights"] > 0]).tolist() if skin is not None else [])
                 names = target_names(prim.get("extras")) or mesh_names_t
-                for t, (dp, dn) in enumerate(g["targets"]):
+                for t, (keep, dp, dn) in enumerate(g["targets"]):
                     tname = names[t] if t < len(names) and isinstance(names[t], str) and names[t] \
-                        else f"{mesh_name}.{t}"
-                    out["targets"].append((tname, n_v, dp, dn))
+                        else f"{plan.name}.{t}"
+                    out["targets"].append((tname, keep + n_v, dp, dn))
                 n_v += len(g["positions"])
             first, count = groups[key]
             tri = _indices(state, prim, pw, count) + first
@@ -111,14 +99,7 @@ def read_geometry(state: ReadState, progress: Progress | None) -> None:
             out["triangle_material"].append(np.full(len(tri), material, dtype=np.int64))
             out["primitives"].append([first, count, n_t, len(tri), mesh_index, material])
             n_t += len(tri)
-        weights = mesh.get("weights")
-        if isinstance(weights, list) and weights:
-            names = mesh_names_t or target_names(prims[0].get("extras"))
-            for t, wt in enumerate(weights):
-                if isinstance(wt, (int, float)) and not isinstance(wt, bool) and wt:
-                    tname = names[t] if t < len(names) and isinstance(names[t], str) and names[t] \
-                        else f"{mesh_name}.{t}"
-                    out["default_weights"][tname] = float(wt)
+        out["default_weights"].update(plan.default_weights)
         if progress is not None:
             progress(k, len(instances), unique)
     if n_v == 0:
@@ -136,13 +117,16 @@ def read_geometry(state: ReadState, progress: Progress | None) -> None:
     state.geo = out
 
 
-def _skin(state: ReadState, node: dict, i: int) -> dict | None:
-    """Per skin: joint stored indices and the joint matrices G(joint) IBM (stored frame)."""
+def _skin(state: ReadState, node: dict, i: int, done: dict[int, dict]) -> dict | None:
+    """Per skin: joint stored indices and the joint matrices G(joint) IBM (stored frame); each skin is read
+    once into ``done``, however many nodes it skins."""
     if "skin" not in node:
         return None
     f = state.f
     s = f.get(node, "skin", int, f"nodes[{i}]")
     skin = f.obj("skins", s, f"nodes[{i}].skin")
+    if s in done:
+        return done[s]
     w = f"skins[{s}]"
     joints = f.get(skin, "joints", list, w)
     if not joints:
@@ -162,7 +146,8 @@ def _skin(state: ReadState, node: dict, i: int) -> dict | None:
             f.fail(f"{w}.inverseBindMatrices", "contains NaN or infinite values")
     else:
         ibm = np.tile(np.eye(4), (len(joints), 1, 1))
-    return {"joints": stored, "matrices": state.world[stored] @ ibm, "where": w}
+    done[s] = {"joints": stored, "matrices": state.world[stored] @ ibm, "where": w}
+    return done[s]
 
 
 def _vertices(state: ReadState, attrs: dict, targets: list, pw: str, skin: dict | None, node: int,
@@ -242,7 +227,8 @@ def _vertices(state: ReadState, attrs: dict, targets: list, pw: str, skin: dict 
         else:
             dnw = np.zeros((n, 3))
         dnw[np.linalg.norm(dnw, axis=1) <= NORMAL_TOLERANCE] = 0.0  # as the OBJ import: not stored
-        out_targets.append((dpw, dnw))
+        keep = np.flatnonzero(np.any(dpw != 0, axis=1) | np.any(dnw != 0, axis=1))
+        out_targets.append((keep, dpw[keep], dnw[keep]))  # sparse at once: one target is dense at a time
     from_file = normals is not None and bool(np.all(np.abs(np.linalg.norm(nrm, axis=1) - 1.0) < 1e-3))
     if normals is not None and not from_file:
         state.warn(f"{aw}.NORMAL: zero or non-finite normals; the character's normals are computed instead")
@@ -283,12 +269,11 @@ def read_shapes(state: ReadState) -> None:
     geo = state.geo
     order: list[str] = []
     per: dict[str, list] = {}
-    for tname, first, dp, dn in geo["targets"]:
+    for tname, idx, dp, dn in geo["targets"]:
         if tname not in per:
             order.append(tname)
             per[tname] = []
-        keep = np.flatnonzero(np.any(dp != 0, axis=1) | np.any(dn != 0, axis=1))
-        per[tname].append((keep + first, dp[keep], dn[keep]))
+        per[tname].append((idx, dp, dn))
     offsets, idx, pos, nrm = [0], [], [], []
     for tname in order:
         i = np.concatenate([k for k, _, _ in per[tname]])

@@ -3,7 +3,9 @@
 The default scene is ``scene``, else scene 0, else every root node. Nodes are
 stored depth first from the roots, so a parent always comes before its
 children (what :class:`~facepuppet.runtime.model.character_parts.Skeleton` asks); a
-node outside the default scene is not stored. Names are made unique with
+node outside the default scene is not stored. The walk is a loop over an
+explicit stack, so a deep hierarchy costs no recursion (its depth was bounded
+before, by :mod:`.structure_limits`). Names are made unique with
 ``#2``, ``#3`` … A VRM 0.x avatar faces −Z: its roots are turned 180° about
 +Y, so every world transform becomes ``T·G``.
 """

@@ -40,16 +40,18 @@ def read_expressions(state: ReadState) -> None:
     shape_names = state.shape_names
     shape_index = {n: i for i, n in enumerate(shape_names)}
     if state.vrm1 is not None:
-        rows = _vrm1_expressions(state, shape_index)
+        rows = _vrm1_expressions(state, shape_index, _TargetNames(state))
     elif state.vrm0 is not None:
-        rows = _vrm0_expressions(state, shape_index)
+        rows = _vrm0_expressions(state, shape_index, _TargetNames(state))
     else:
         return
     names, presets, offsets, bs, bw, flags = [], [], [0], [], [], []
+    seen: set[str] = set()
     for name, preset, shapes, weights, flag in rows:
-        if name in names:
+        if name in seen:
             state.warn(f"expression {name!r} appears twice; the first is kept")
             continue
+        seen.add(name)
         # One shape spans every mesh whose targets share its name, and VRM binds it once per mesh:
         # the binds of one shape are one bind (the largest, with a warning when the meshes differ).
         merged: dict[int, float] = {}
@@ -69,25 +71,35 @@ def read_expressions(state: ReadState) -> None:
                                     np.asarray(flags, dtype=np.int32).reshape(-1, 4))
 
 
-def _target_name_of(state: ReadState, mesh: int, index: int) -> str | None:
-    meshes = state.doc.get("meshes", [])
-    if not (isinstance(mesh, int) and 0 <= mesh < len(meshes)) or not isinstance(index, int):
-        return None
-    m = meshes[mesh]
-    names = target_names(m.get("extras"))
-    prims = m.get("primitives") or [{}]
-    if not names and isinstance(prims[0], dict):
-        names = target_names(prims[0].get("extras"))
-    n_targets = max((len(p.get("targets", [])) for p in prims if isinstance(p, dict)), default=0)
-    if not 0 <= index < n_targets:
-        return None
-    if index < len(names) and isinstance(names[index], str) and names[index]:
-        return names[index]
-    base = m.get("name") if isinstance(m.get("name"), str) and m["name"] else f"mesh{mesh}"
-    return f"{base}.{index}"
+class _TargetNames:
+    """The morph target name of (mesh, target index) as the mesh reader names its shapes; each mesh's names and
+    target count are worked out once (a VRM binds the same mesh many times)."""
+
+    def __init__(self, state: ReadState) -> None:
+        self.meshes = state.doc.get("meshes", [])
+        self.of_mesh: dict[int, tuple[list, int, str]] = {}
+
+    def __call__(self, mesh: int, index: int) -> str | None:
+        if not (isinstance(mesh, int) and 0 <= mesh < len(self.meshes)) or not isinstance(index, int):
+            return None
+        if mesh not in self.of_mesh:
+            m = self.meshes[mesh]
+            names = target_names(m.get("extras"))
+            prims = m.get("primitives") or [{}]
+            if not names and isinstance(prims[0], dict):
+                names = target_names(prims[0].get("extras"))
+            n_targets = max((len(p.get("targets", [])) for p in prims if isinstance(p, dict)), default=0)
+            base = m.get("name") if isinstance(m.get("name"), str) and m["name"] else f"mesh{mesh}"
+            self.of_mesh[mesh] = (names, n_targets, base)
+        names, n_targets, base = self.of_mesh[mesh]
+        if not 0 <= index < n_targets:
+            return None
+        if index < len(names) and isinstance(names[index], str) and names[index]:
+            return names[index]
+        return f"{base}.{index}"
 
 
-def _vrm0_expressions(state: ReadState, shape_index: dict) -> list:
+def _vrm0_expressions(state: ReadState, shape_index: dict, target_name: _TargetNames) -> list:
     f = state.f
     bsm = state.vrm0.get("blendShapeMaster", {})
     w = "extensions.VRM.blendShapeMaster.blendShapeGroups"
@@ -108,14 +120,14 @@ def _vrm0_expressions(state: ReadState, shape_index: dict) -> list:
         preset = _VRM0_BY_LOWER.get(preset_name, "")
         name = preset or f.get(group, "name", str, gw, "") or f"expression{g}"
         shapes, weights = _binds(state, f.get(group, "binds", list, gw, []), f"{gw}.binds", mesh_of, 100.0,
-                                 shape_index)
+                                 shape_index, target_name)
         binary = 1 if f.get(group, "isBinary", bool, gw, False) else 0
         rows.append((name, preset, shapes, weights, [binary, 0, 0, 0]))
     return rows
 
 
 def _binds(state: ReadState, binds: list, where: str, mesh_of: Callable[[dict, str], tuple[int | None, str]],
-           full: float, shape_index: dict) -> tuple[list, list]:
+           full: float, shape_index: dict, target_name: _TargetNames) -> tuple[list, list]:
     """(shapes, weights in 0..1) of a VRM expression's morph-target binds (``full``: the weight of 100 %);
     a bind naming no morph target of the scene is dropped with a warning."""
     f = state.f
@@ -127,7 +139,7 @@ def _binds(state: ReadState, binds: list, where: str, mesh_of: Callable[[dict, s
         mesh, label = mesh_of(bind, bw)
         index = f.get(bind, "index", int, bw)
         weight = f.get(bind, "weight", float, bw, full)
-        tname = _target_name_of(state, mesh, index)
+        tname = target_name(mesh, index)
         if tname is None or tname not in shape_index:
             state.warn(f"{bw}: {label} target {index} is not a morph target in the scene (dropped)")
             continue
@@ -136,7 +148,7 @@ def _binds(state: ReadState, binds: list, where: str, mesh_of: Callable[[dict, s
     return shapes, weights
 
 
-def _vrm1_expressions(state: ReadState, shape_index: dict) -> list:
+def _vrm1_expressions(state: ReadState, shape_index: dict, target_name: _TargetNames) -> list:
     f = state.f
 
     def node_mesh(bind: dict, bw: str) -> tuple[int | None, str]:
@@ -159,7 +171,7 @@ def _vrm1_expressions(state: ReadState, shape_index: dict) -> list:
             preset = _VRM0_FROM_VRM1.get(key, "") if group == "preset" else ""
             name = preset or key
             shapes, weights = _binds(state, f.get(e, "morphTargetBinds", list, ew, []), f"{ew}.morphTargetBinds",
-                                     node_mesh, 1.0, shape_index)
+                                     node_mesh, 1.0, shape_index, target_name)
             flag = [1 if f.get(e, "isBinary", bool, ew, False) else 0]
             for k in ("overrideBlink", "overrideLookAt", "overrideMouth"):
                 v = f.get(e, k, str, ew, "none")
