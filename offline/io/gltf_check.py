@@ -41,12 +41,19 @@ listed.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import struct
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
+from PIL import Image, UnidentifiedImageError
+
+from facepuppet.offline.io.gltf.read_materials import MAX_TEXTURE_SIDE, MAX_TEXTURE_TEXELS
+from facepuppet.offline.io.gltf.structure_limits import structure_problems
 from facepuppet.offline.io.gltf_check_accessors import AccessorCheck
 from facepuppet.offline.io.gltf_check_vrm import check_vrm0, check_vrm1
 from facepuppet.offline.io.gltf_check_walk import JsonWalk, is_int, is_number, show
@@ -117,14 +124,24 @@ class _Checker(JsonWalk):
         else:
             js = data
         try:
-            doc = json.loads(js.decode("utf-8"))
+            doc = json.loads(js.decode("utf-8"), parse_constant=_NotJson)
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             self.stop("JSON", f"not UTF-8 JSON ({str(exc)[:100]})")
         except RecursionError:
             self.stop("JSON", "nested too deeply to be read")
         if not isinstance(doc, dict):
             self.stop("JSON", "the top level is not an object")
+        not_json = list(_not_json_values(doc))
+        for where, name in not_json:
+            self.bad(where, f"{name} is not a JSON number (RFC 8259 has no NaN or Infinity)")
+        if not_json:
+            raise _Stop
         self.doc = doc
+        beyond = list(structure_problems(doc))  # the importer's limits: checked first, so that the walk stays short
+        for where, what in beyond:
+            self.bad(where, f"{what} (beyond what facepuppet imports)")
+        if beyond:
+            raise _Stop
         self._asset()
         self._buffers(bin_chunk, glb=data[:4] == b"glTF")
         self.acc.check_views()
@@ -363,7 +380,25 @@ class _Checker(JsonWalk):
         if "scene" in self.doc:
             self.index(self.doc, "scene", "scenes", "(top)")
 
+    def _texture_budget(self, sizes: list[tuple[str, tuple[int, int] | None]]) -> None:
+        """Each image's size (from its header; nothing is decoded) within the importer's texture limits."""
+        total = 0
+        for w, size in sizes:
+            if size is None:
+                self.bad(w, "not a PNG or JPEG image whose size its header gives")
+                continue
+            width, height = size
+            if max(width, height) > MAX_TEXTURE_SIDE:
+                self.bad(w, f"{width}x{height} texels: larger than {MAX_TEXTURE_SIDE}x{MAX_TEXTURE_SIDE} "
+                            "(beyond what facepuppet imports)")
+            total += width * height
+            if total > MAX_TEXTURE_TEXELS:
+                self.bad(w, f"{width}x{height} texels bring the images to {total} texels, more than "
+                            f"{MAX_TEXTURE_TEXELS} (beyond what facepuppet imports)")
+                return
+
     def _textures(self) -> None:
+        sizes: list[tuple[str, tuple[int, int] | None]] = []
         for _, t, w in self.objects("textures"):
             self.index(t, "source", "images", w)
             self.index(t, "sampler", "samplers", w)
@@ -378,9 +413,15 @@ class _Checker(JsonWalk):
             uri = self.value(img, "uri", str, w)
             if uri is not None and (uri.startswith("data:") or self.path is not None):
                 try:
-                    open_image_uri(self.path or Path("file"), uri, f"{w}.uri").handle.close()
+                    with open_image_uri(self.path or Path("file"), uri, f"{w}.uri").handle as handle:
+                        sizes.append((w, image_size(handle)))
                 except GltfError as exc:
                     self.bad(exc.where, exc.problem)
+            elif "bufferView" in img and is_int(img["bufferView"]) and img["bufferView"] in self.acc.views:
+                data = self.acc.view_bytes(img["bufferView"])
+                if data is not None:
+                    sizes.append((w, image_size(io.BytesIO(data))))
+        self._texture_budget(sizes)
         for _, mat, w in self.objects("materials"):
             pbr = self.dict_at(mat, "pbrMetallicRoughness", w)
             refs = [(pbr, "baseColorTexture", f"{w}.pbrMetallicRoughness"),
@@ -393,6 +434,39 @@ class _Checker(JsonWalk):
             mode = mat.get("alphaMode", "OPAQUE")
             if mode not in ("OPAQUE", "MASK", "BLEND"):
                 self.bad(f"{w}.alphaMode", f"{show(mode)}; must be OPAQUE, MASK or BLEND")
+
+
+class _NotJson(str):
+    """A ``NaN``, ``Infinity`` or ``-Infinity`` that Python's JSON parser accepts and JSON does not have."""
+
+
+def _not_json_values(doc: Any) -> Iterator[tuple[str, str]]:
+    """(JSON path, the word) of each :class:`_NotJson` in ``doc``, walked without recursion."""
+    stack = [("", doc)]
+    while stack:
+        where, value = stack.pop()
+        if isinstance(value, _NotJson):
+            yield where or "JSON", str(value)
+        elif isinstance(value, dict):
+            stack.extend((f"{where}.{k}" if where else str(k), v) for k, v in reversed(value.items()))
+        elif isinstance(value, list):
+            stack.extend((f"{where}[{i}]", v) for i, v in reversed(list(enumerate(value))))
+
+
+def image_size(handle: BinaryIO) -> tuple[int, int] | None:
+    """(width, height) of a PNG or JPEG from its header (Pillow opens lazily: nothing is decoded); None when it
+    is neither or its header is broken."""
+    head = handle.read(8)
+    handle.seek(0)
+    if not (head == b"\x89PNG\r\n\x1a\n" or head[:3] == b"\xff\xd8\xff"):
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a decompression-bomb warning: the size is what is checked here
+            with Image.open(handle, formats=("PNG", "JPEG")) as im:
+                return im.size
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, EOFError, Image.DecompressionBombError):
+        return None
 
 
 def _numbers(v: Any, n: int) -> bool:

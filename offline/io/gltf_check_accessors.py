@@ -82,7 +82,7 @@ class AccessorCheck:
                 continue
             self.views[i] = _View(b, off, n, stride, "target" in v)
 
-    def _view_bytes(self, vi: int) -> memoryview | None:
+    def view_bytes(self, vi: int) -> memoryview | None:
         """The bytes of buffer view ``vi`` (no copy); None when its buffer could not be read in full."""
         v = self.views[vi]
         data = self.buffers.get(v.buffer)
@@ -128,11 +128,11 @@ class AccessorCheck:
 
     def _min_max(self, arr: np.ndarray, key: str, vals: list, w: str, ct: int, normalized: bool) -> None:
         """A problem when the accessor's ``min`` / ``max`` (``key``) is not its data's."""
-        got = (arr.min(axis=0) if key == "min" else arr.max(axis=0)).astype(np.float64)
-        if normalized and ct != 5126:
-            got = _normalize(got, ct)   # monotonic, so the min of the normalized values is the normalized min
-        want = np.asarray(vals, dtype=np.float64)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"):  # data or bounds beyond float32 (or NaN) compare unequal, no warning
+            got = (arr.min(axis=0) if key == "min" else arr.max(axis=0)).astype(np.float64)
+            if normalized and ct != 5126:
+                got = _normalize(got, ct)   # monotonic, so the min of the normalized values is the normalized min
+            want = np.asarray(vals, dtype=np.float64)
             if ct == 5126:
                 want, got = want.astype(np.float32), got.astype(np.float32)
             same = np.allclose(got, want, rtol=1e-6, atol=1e-7)
@@ -179,7 +179,7 @@ class AccessorCheck:
                 self.walk.bad(w, f"{n} elements of {elem} bytes (stride {stride}) from byte {off} need {need} bytes; "
                                  f"bufferView {vi} has {v.length}")
                 return None
-            raw = self._view_bytes(vi)
+            raw = self.view_bytes(vi)
             if raw is None or not self._spend(n * elem):
                 return None
             buf = np.frombuffer(raw, dtype=np.uint8)
@@ -238,7 +238,7 @@ class AccessorCheck:
                 self.walk.bad(pw, f"{k} x {wid * dt.itemsize} bytes from byte {off} run past bufferView {vi} "
                                   f"({view.length} bytes)")
                 return None
-            raw = self._view_bytes(vi)
+            raw = self.view_bytes(vi)
             if raw is None:
                 return None
             got.append(np.frombuffer(raw, dtype=dt.newbyteorder("<"), count=k * wid, offset=off).reshape(k, wid))

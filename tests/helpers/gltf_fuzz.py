@@ -7,7 +7,7 @@ run in a child process that a hang or a memory bomb cannot take the test run wit
 it. ``forged_findings(cases, folder)`` forges each case of
 :mod:`facepuppet.offline.io.gltf_bombs` and runs it in a child process where
 the importer must *refuse* it (a FacepuppetError naming the file) and
-``check_gltf`` must return, and neither may open a file outside the model's
+``check_gltf`` must return at least one problem, and neither may open a file outside the model's
 folder (an audit hook sees every file the child opens); the child's address space is capped and each case
 has a deadline, so a case that still allocates gigabytes is reported as a
 MemoryError and one that hangs as a hang (the child is then killed and a new
@@ -68,8 +68,8 @@ def outside(path: Path) -> set[str]:
 
 def refused_and_checked(path: Path, opened: list[str] | None = None) -> list[str]:
     """What is wrong with the two readers on a forged hostile file: the importer must refuse it with the
-    project's error naming it; ``check_gltf`` must return; no RuntimeWarning may leak; neither may open a file
-    outside the model's folder (``opened``: the real paths of the files opened, filled by an audit hook)."""
+    project's error naming it; ``check_gltf`` must list the problems (one at least); no RuntimeWarning may
+    leak; neither may open a file outside the model's folder (``opened``: the real paths of the files opened, filled by an audit hook)."""
     findings = []
     forbidden = outside(path)
 
@@ -81,7 +81,8 @@ def refused_and_checked(path: Path, opened: list[str] | None = None) -> list[str
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            checked(path)
+            if not checked(path):
+                findings.append("check_gltf found no problem: it must say why the importer refuses the file")
         except CheckGltfRaised as exc:
             findings.append(str(exc))
         opened_outside("check_gltf")

@@ -185,3 +185,22 @@ def test_required_fields_are_named():
     assert check_gltf_bytes(b"\xff\xfe not json") == [
         "JSON: not UTF-8 JSON ('utf-8' codec can't decode byte 0xff in position 0: invalid start byte)"]
     assert np.all([isinstance(p, str) for p in found])
+
+
+def test_nan_in_the_json_is_not_json(tmp_path):
+    path = tmp_path / "nan.gltf"
+    path.write_text('{"asset": {"version": "2.0"}, "meshes": [{"primitives": [], "weights": [0.5, NaN, -Infinity]}]}')
+    problems = check_gltf(path)
+    assert problems == ["meshes[0].weights[1]: NaN is not a JSON number (RFC 8259 has no NaN or Infinity)",
+                        "meshes[0].weights[2]: -Infinity is not a JSON number (RFC 8259 has no NaN or Infinity)"]
+
+
+def test_the_importers_structure_limits_are_listed_by_check_gltf(tmp_path):
+    from facepuppet.offline.io.gltf.structure_limits import MAX_NODES
+
+    path = tmp_path / "many.gltf"
+    nodes = [{"name": "n"} for _ in range(MAX_NODES + 1)]
+    path.write_text(json.dumps({"asset": {"version": "2.0"}, "nodes": nodes}))
+    problems = check_gltf(path)
+    assert problems == [f"nodes: {MAX_NODES + 1} nodes; a file may have at most {MAX_NODES} (beyond what "
+                        "facepuppet imports)"]

@@ -19,6 +19,7 @@ import pytest
 
 from facepuppet.runtime.errors import FacepuppetError
 
+from facepuppet.offline.io.gltf import structure_limits
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf.write import build_gltf, encode_glb
 from facepuppet.offline.io.gltf_check import MAX_PROBLEMS, check_gltf
@@ -100,12 +101,17 @@ def test_wrong_types_of_a_uri_or_a_byte_length_in_a_gltf_are_problems_or_refusal
             assert str(exc).startswith(f"{file}: {key.split('.')[0]}"), exc
 
 
-def test_a_60000_deep_node_chain_is_checked_without_recursion(tmp_path):
+def test_a_60000_deep_node_chain_is_checked_without_recursion(tmp_path, monkeypatch):
     n = 60_000
     doc = {"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "scene": 0,
            "nodes": [{"children": [i + 1]} for i in range(n - 1)] + [{}]}
     path = tmp_path / "deep.gltf"
     path.write_text(json.dumps(doc))
+    assert check_gltf(path) == [f"nodes: {n} nodes; a file may have at most {structure_limits.MAX_NODES} (beyond "
+                                "what facepuppet imports)"]
+    # past the importer's limits, check-gltf's own walk of the hierarchy: linear, no recursion
+    monkeypatch.setattr(structure_limits, "MAX_NODES", 10 * n)
+    monkeypatch.setattr(structure_limits, "MAX_DEPTH", 10 * n)
     assert check_gltf(path) == []
     doc["nodes"][-1] = {"children": [n // 2]}   # now the lower half is a cycle with two parents at its top
     path.write_text(json.dumps(doc))
@@ -124,7 +130,8 @@ def test_json_nested_past_the_parser_is_a_problem(tmp_path):
     assert check_gltf(path) == ["JSON: nested too deeply to be read"]
 
 
-def test_problems_are_listed_at_most_max_problems_times(tmp_path):
+def test_problems_are_listed_at_most_max_problems_times(tmp_path, monkeypatch):
+    monkeypatch.setattr(structure_limits, "MAX_MESHES", 10 * MAX_PROBLEMS)  # within the importer's limits
     doc = {"asset": {"version": "2.0"}, "nodes": [{"mesh": 5} for _ in range(3 * MAX_PROBLEMS)]}
     path = tmp_path / "many.gltf"
     path.write_text(json.dumps(doc))
