@@ -69,7 +69,8 @@ def outside(path: Path) -> set[str]:
 def refused_and_checked(path: Path, opened: list[str] | None = None) -> list[str]:
     """What is wrong with the two readers on a forged hostile file: the importer must refuse it with the
     project's error naming it; ``check_gltf`` must list the problems (one at least); no RuntimeWarning may
-    leak; neither may open a file outside the model's folder (``opened``: the real paths of the files opened, filled by an audit hook)."""
+    leak; neither may open a file outside the model's folder (``opened``: the real paths of the files
+    opened, filled by an audit hook)."""
     findings = []
     forbidden = outside(path)
 
