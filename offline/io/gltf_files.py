@@ -74,7 +74,7 @@ class Opened:
     def __enter__(self) -> Opened:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.handle.close()
 
 
