@@ -54,6 +54,8 @@ from dataclasses import replace
 import numpy as np
 
 from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench, session_log
+from facepuppet.runtime.bench.render import head_poses, synthetic_performance, time_passes
+from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.commands.run import plan_from_argv, run_live
 from facepuppet.runtime.inputs.ifacialmocap import encode_ifm_frame
 from facepuppet.runtime.inputs.kinds import make_adapter
@@ -436,8 +438,6 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
 def pass_costs(args: argparse.Namespace, path: str, msaa: int, frames: int = 60) -> dict:
     """ms per draw pass (:mod:`~facepuppet.runtime.render.pass_clock`, "finish" mode) of the character at the
     run's size, path and samples, timed apart from the live run (waiting after each pass would change it)."""
-    from facepuppet.runtime.bench.render import head_poses, synthetic_performance, time_passes
-    from facepuppet.runtime.commands.options import parse_size
     from facepuppet.runtime.render.gl_context import create_context
     from facepuppet.runtime.render.renderer import FaceRenderer
 
