@@ -25,7 +25,8 @@ _COMMAND_MODULES = ("facepuppet.offline.actuation.commands", "facepuppet.offline
 # Offline modules with ``register_benches(register_bench)``, same rule.
 _BENCH_MODULES = ("facepuppet.offline.actuation.bench", "facepuppet.offline.elastic.bench",
                   "facepuppet.offline.gestures.bench", "facepuppet.offline.kpls.bench",
-                  "facepuppet.offline.io.gltf_bench", "facepuppet.offline.perfect_sync.bench")
+                  "facepuppet.offline.io.gltf_bench", "facepuppet.offline.perfect_sync.bench",
+                  "facepuppet.offline.gpu_bench")
 
 
 def _modules(names):
