@@ -32,6 +32,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -44,6 +45,11 @@ from facepuppet.runtime.render.quality import is_software
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.rig_import import import_rig
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
 logger = logging.getLogger(__name__)
 
@@ -95,7 +101,7 @@ def _stats(ms: list[float]) -> dict:
             "min": float(a.min())}
 
 
-def measure_case(renderer, weights: np.ndarray, poses: np.ndarray, warmup: int) -> dict:
+def measure_case(renderer: FaceRenderer, weights: np.ndarray, poses: np.ndarray, warmup: int) -> dict:
     """GPU time per frame and per pass (timer queries), the wall draw + finish (no queries), the CPU prepare,
     and whether the timed picture is the untimed one, of ``renderer`` over ``weights`` and ``poses``."""
     from facepuppet.runtime.render.pass_clock import PassClock
@@ -149,7 +155,7 @@ def measure_case(renderer, weights: np.ndarray, poses: np.ndarray, warmup: int) 
     }
 
 
-def open_context(device: str):
+def open_context(device: str) -> tuple[moderngl.Context, int]:
     """An EGL context: on ``device`` (an index), or with ``"auto"`` on the first EGL device that is not a
     software rasteriser (the first device when all are). Returns (context, device index)."""
     import moderngl
