@@ -50,7 +50,7 @@ bench: $(STAMP)
 # The working tree against BASE (default the previous commit) in one sitting, A/B by turns: bench render
 # (--frames 60 at 1280x720) and bench latency (--seconds 5; 640x480, VMC at 120 Hz), ROUNDS runs of each on
 # each side, the medians compared (ratio per figure, > 20 % worse flagged). Each side imports the ICT head with
-# its own code. About 4 minutes on 2 cores; its files in .bench/ (ignored by git). docs/benchmarks.md.
+# its own code. About 3 minutes on 2 cores; its files in .bench/ (ignored by git). docs/benchmarks.md.
 BASE ?= HEAD~1
 ROUNDS ?= 3
 bench-check: $(STAMP)

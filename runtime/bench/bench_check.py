@@ -46,7 +46,10 @@ ICT_OBJ = ("ict-facekit", "generic_neutral_mesh.obj")
 
 def bench_options(args: argparse.Namespace) -> dict[str, list[str]]:
     """The options of each benchmark in a round (options every version of the benchmarks takes)."""
-    width, height = parse_size(args.render_size)
+    try:
+        width, height = parse_size(args.render_size)
+    except UsageError:
+        raise UsageError(f"--render-size: expected WIDTHxHEIGHT such as 1280x720, got {args.render_size!r}") from None
     return {"render": ["--frames", str(args.render_frames), "--width", str(width), "--height", str(height)],
             "latency": ["--seconds", repr(float(args.latency_seconds))]}
 
@@ -103,6 +106,7 @@ def run_sitting(args: argparse.Namespace, run: Callable[[Path, list[str]], None]
     def say(text: str) -> None:
         log(f"[{time.monotonic() - start:5.0f} s] {text}")
 
+    options = bench_options(args)  # a bad --render-size is refused before anything is checked out
     repo = Path(revision.git(args.repo, "rev-parse", "--show-toplevel"))
     out = Path(args.out) if Path(args.out).is_absolute() else repo / args.out
     data = data_folder(args.data, repo)
@@ -124,7 +128,6 @@ def run_sitting(args: argparse.Namespace, run: Callable[[Path, list[str]], None]
             say(f"{side}: importing the ICT head with its own import-rig")
             run(shims[side], ["import-rig", str(data.joinpath(*ICT_OBJ)), str(data / ICT_OBJ[0]), "-o",
                               str(characters[side]), "--force"])
-        options = bench_options(args)
         runs = out / "runs"
         runs.mkdir(parents=True, exist_ok=True)
         files: dict[tuple[str, str], list[Path]] = {}

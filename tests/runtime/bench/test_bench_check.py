@@ -104,3 +104,6 @@ def test_a_sitting_that_cannot_run_exits_2_saying_why(clone, data_kit, tmp_path,
     assert "ict-facekit/generic_neutral_mesh.obj not found" in capsys.readouterr().err
     assert bench_check.main([*common, "--data", str(data_kit), "--rounds", "1"]) == 2
     assert "--rounds" in capsys.readouterr().err
+    assert bench_check.main([*common, "--data", str(data_kit), "--render-size", "big"]) == 2
+    assert "--render-size: expected WIDTHxHEIGHT" in capsys.readouterr().err
+    assert not (tmp_path / "out" / "base").exists()  # refused before anything was checked out
