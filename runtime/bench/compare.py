@@ -44,6 +44,7 @@ _STATISTICS = frozenset({"median", "mean", "min", "p50", "p90", "p95", "p99"})
 _NOT_FIGURES = re.compile(r"^(n|max|budget)(_ms|_us)?$")
 _STATISTIC_OF_TIMES = re.compile(r"(^|_)(p\d+|median|mean)_(ms|us)$")
 _RATE = re.compile(r"_per_s(_|$)")
+_NAMES_SHOWN = 6  # figures named in the printed list of those only one run has
 
 #: keys whose values say what was measured (where they differ, the runs are not alike)
 CONFIGURATION = frozenset({
@@ -181,7 +182,10 @@ class Comparison:
         for name, base, this in self.differs:
             out.append(f"  NOT ALIKE: {name} is {this!r} here, {base!r} in the baseline")
         width = max([len("figure")] + [len(f.name) for f in self.figures])
-        out.append(f"  {'figure':<{width}} {'baseline':>10} {'this run':>10} {'ratio':>7}  change")
+        if self.figures:
+            out.append(f"  {'figure':<{width}} {'baseline':>10} {'this run':>10} {'ratio':>7}  change")
+        else:
+            out.append("  no figure in common with the baseline (another size, path or character?)")
         for f in self.figures:
             ratio, worse = f.ratio, f.worse_by
             change = "n/a" if worse is None else "same" if abs(worse) < 0.0005 else \
@@ -191,7 +195,10 @@ class Comparison:
                        f"{'n/a' if ratio is None else f'{ratio:.3f}':>7}  {change}{mark}")
         for label, names in (("only in the baseline", self.only_baseline), ("only in this run", self.only_this_run)):
             if names:
-                out.append(f"  {label} (not compared): {', '.join(names)}")
+                more = len(names) - _NAMES_SHOWN
+                shown = ", ".join(names[:_NAMES_SHOWN]) + (f" and {more} more (the JSON lists them)" if more > 0
+                                                           else "")
+                out.append(f"  {label}, not compared: {len(names)} figures: {shown}")
         flagged = self.flagged
         limit = f"{self.threshold * 100:g} %"
         if flagged:
