@@ -8,7 +8,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test test-quick lint docs setup system-deps bench clean
+.PHONY: demo test test-quick lint docs setup system-deps bench bench-check clean
 
 demo: $(STAMP)
 	$(VENV)/bin/facepuppet demo --out demo-out --force
@@ -47,5 +47,15 @@ bench: $(STAMP)
 	test -f bench-out/ict.npz || $(VENV)/bin/facepuppet import-rig $(ICT)/generic_neutral_mesh.obj $(ICT) -o bench-out/ict.npz
 	$(VENV)/bin/facepuppet bench render -c bench-out/ict.npz --json bench-out/render.json
 
+# The working tree against BASE (default the previous commit) in one sitting, A/B by turns: bench render
+# (--frames 60 at 1280x720) and bench latency (--seconds 5; 640x480, VMC at 120 Hz), ROUNDS runs of each on
+# each side, the medians compared (ratio per figure, > 20 % worse flagged). Each side imports the ICT head with
+# its own code. About 3 minutes on 2 cores; its files in .bench/ (ignored by git). docs/benchmarks.md.
+BASE ?= HEAD~1
+ROUNDS ?= 3
+bench-check: $(STAMP)
+	$(PY) -m facepuppet.runtime.bench.bench_check --base $(BASE) --rounds $(ROUNDS) --render-frames 60 \
+		--render-size 1280x720 --latency-seconds 5 --out .bench
+
 clean:
-	rm -rf $(VENV) build dist *.egg-info demo-out bench-out
+	rm -rf $(VENV) build dist *.egg-info demo-out bench-out .bench

@@ -342,7 +342,8 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
 
     def sample(info):
         if not drawn_with:  # the picture the run chose (the path and the samples its quality left)
-            drawn_with.update(msaa=int(getattr(info.renderer, "samples", 0)), path=info.renderer.path)
+            drawn_with.update(msaa=int(getattr(info.renderer, "samples", 0)), path=info.renderer.path,
+                              gl_renderer=getattr(getattr(info.renderer, "ctx", None), "info", {}).get("GL_RENDERER"))
         if shown_panel:
             calls_ms.append(shown_panel[0].draw_calls_s * 1e3)
             if panel == "alternate":  # this tick's mode, then the other one for the next tick
@@ -431,6 +432,7 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
         "rss_mb_per_second": [round(m, 1) for _, m in rss],
         "render_path": result.path,
         "msaa": drawn_with.get("msaa"),
+        "gl_renderer": drawn_with.get("gl_renderer"),
         "loadavg": load_average(),
     }
 
@@ -618,6 +620,7 @@ register_bench(
     "receive -> frame-finished latency of a headless live run fed by a sender process (VMC, OpenSeeFace, "
     "iFacialMocap or VTube Studio; optional flood), and the decode cost per datagram",
     _add_arguments,
+    comparable=True,
 )
 
 

@@ -5,7 +5,10 @@ registered with :func:`register_bench`, optionally with ``add_arguments(parser)`
 for its own options. Runtime benchmarks live in the modules listed in
 ``_BENCH_MODULES``; other packages register through the ``facepuppet.benches``
 entry-point group (each entry point is called with :func:`register_bench`).
-Benchmarks are code, not timed tests: they print medians and write JSON.
+Benchmarks are code, not timed tests: they print medians and write JSON. A benchmark registered
+``comparable`` (its figures are times and rates, :mod:`~facepuppet.runtime.bench.compare`) takes
+``--against BASELINE.json`` too: this run's figures against an earlier run's, in the table printed and in the
+JSON (``against``).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 
+from facepuppet.runtime.bench import compare
 from facepuppet.runtime.files.json_limits import dumps_strict
 from facepuppet.runtime.files.outputs import check_path, write_atomic
 
@@ -39,6 +43,7 @@ class Bench:
     func: Callable[[argparse.Namespace], dict]
     help: str
     add_arguments: Callable[[argparse.ArgumentParser], None] | None = None
+    comparable: bool = False
 
 
 _REGISTRY: dict[str, Bench] = {}
@@ -60,11 +65,13 @@ def session_log(shown: bool) -> Iterator[None]:
 
 
 def register_bench(name: str, func: Callable[[argparse.Namespace], dict], help: str,
-                   add_arguments: Callable[[argparse.ArgumentParser], None] | None = None) -> None:
-    """Add a benchmark; ``func(args)`` returns a dict written as JSON."""
+                   add_arguments: Callable[[argparse.ArgumentParser], None] | None = None,
+                   comparable: bool = False) -> None:
+    """Add a benchmark; ``func(args)`` returns a dict written as JSON. ``comparable``: its results are times and
+    rates named as :mod:`~facepuppet.runtime.bench.compare` reads them, so it takes ``--against``."""
     if name in _REGISTRY and _REGISTRY[name].func is not func:
         raise ValueError(f"benchmark {name!r} is registered twice")
-    _REGISTRY[name] = Bench(name, func, help, add_arguments)
+    _REGISTRY[name] = Bench(name, func, help, add_arguments, comparable)
 
 
 def benches() -> dict[str, Bench]:
@@ -110,10 +117,14 @@ def bench_parser(bench: Bench) -> argparse.ArgumentParser:
     parser.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     if bench.add_arguments:
         bench.add_arguments(parser)
+    if bench.comparable:
+        compare.add_arguments(parser)
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the named benchmark (or list them). Exit code 0, also when ``--against`` flags figures; 1 only with
+    ``--fail-worse`` and a flagged figure; a baseline that cannot be read is refused (exit 2) before the run."""
     registry = benches()
     if not args.name or args.name not in registry:
         lines = [f"  {b.name:<12} {b.help}" for b in registry.values()]
@@ -128,6 +139,8 @@ def run(args: argparse.Namespace) -> int:
     if options.json:
 
         check_path("--json", "file", Path(options.json), options.force)   # before the benchmark runs
+    against = getattr(options, "against", None)
+    baseline = compare.load_baseline(against, bench.name) if against else None  # before the benchmark runs
     started = time.time()
     results = bench.func(options)
     report = {
@@ -137,10 +150,17 @@ def run(args: argparse.Namespace) -> int:
         "machine": machine_info(),
         "results": results,
     }
+    comparison = None
+    if baseline is not None:
+        comparison = compare.compare(baseline, report, options.threshold, baseline_path=str(against))
+        report["against"] = comparison.to_json()
+        print("\n".join(comparison.lines()))
     if options.json:  # strict JSON: a figure that could not be measured (NaN) is written null
         text = dumps_strict(report, indent=2, sort_keys=True) + "\n"
         write_atomic(options.json, lambda temp: temp.write_text(text))
         print(f"wrote {options.json}")
+    if comparison is not None and options.fail_worse and comparison.flagged:
+        return 1
     return 0
 
 

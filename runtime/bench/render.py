@@ -195,4 +195,5 @@ register_bench(
     bench_render,
     "frames/s and CPU ms per frame of the gpu and cpu deformation paths (headless)",
     _add_arguments,
+    comparable=True,
 )
