@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from facepuppet.runtime.errors import InputFileError, UsageError
+from facepuppet.runtime.files.input_files import regular_file
 from facepuppet.runtime.files.tables import hash_inputs, naming_file
 from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.model.geometry import incidence_matrix
@@ -141,8 +142,7 @@ def import_rig(
         raise UsageError(f"tolerance: expected a finite number >= 0, got {tolerance!r}")
     if forward not in FORWARD_TURNS:
         raise ValueError(f"forward: expected one of {', '.join(FORWARD_TURNS)}, got {forward!r}")
-    if not neutral_path.is_file():
-        raise FileNotFoundError(f"{neutral_path}: neutral OBJ not found")
+    regular_file(neutral_path, "neutral OBJ")  # missing: not found; a FIFO or device: refused, never opened
     refuse_non_obj(neutral_path, "the neutral")
     if shapes_dir is None and shapes:
         raise ValueError("shapes: an explicit list of shapes needs a shapes folder")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -283,3 +284,11 @@ def test_an_unknown_forward_is_refused(rig):
     root, _ = rig
     with pytest.raises(ValueError, match="forward: expected one of"):
         import_rig(root / "neutral.obj", None, forward="up")
+
+
+def test_a_fifo_as_the_neutral_is_refused_without_being_opened(tmp_path, capsys):
+    fifo = tmp_path / "neutral.obj"
+    os.mkfifo(fifo)  # opening it would block until a writer came: it must never be opened
+    code = main(["import-rig", str(fifo), "-o", str(tmp_path / "c.npz")])
+    assert code == 2 and f"{fifo}: expected a neutral OBJ, found a FIFO (named pipe)" in capsys.readouterr().err
+    assert not (tmp_path / "c.npz").exists()
