@@ -10,6 +10,8 @@ getters, so a wrong type is a problem naming its JSON path, never an exception.
 
 from __future__ import annotations
 
+from typing import Any
+
 from facepuppet.offline.io.gltf_check_walk import JsonWalk, is_int, is_number, join, show
 
 __all__ = ["check_vrm0", "check_vrm1"]
@@ -40,11 +42,9 @@ def check_vrm0(c: JsonWalk, n_targets: dict[int, int]) -> None:
             m, i = bind.get("mesh"), bind.get("index")
             if not is_int(m) or not 0 <= m < n_meshes:
                 c.bad(f"{bw}.mesh", f"{show(m)} is not a mesh index")
-            elif not is_int(i) or not 0 <= i < n_targets.get(m, 0):
-                c.bad(f"{bw}.index", f"{show(i)}: mesh {m} has {n_targets.get(m, 0)} morph targets")
-            wt = bind.get("weight", 100)
-            if not is_number(wt) or not 0 <= wt <= 100:
-                c.bad(f"{bw}.weight", f"{show(wt)}; VRM 0.x bind weights are 0..100")
+            else:
+                _bind_target(c, bw, m, i, n_targets)
+            _bind_weight(c, bw, bind.get("weight", 100), 100, "0.x")
     _spring_bones(c, c.dict_at(ext, "secondaryAnimation", w), f"{w}.secondaryAnimation")
     n_tex = len(c.items("textures"))
     for _, prop, pw in c.entries(c.list_at(ext, "materialProperties", w), f"{w}.materialProperties"):
@@ -104,8 +104,18 @@ def check_vrm1(c: JsonWalk, n_targets: dict[int, int]) -> None:
                 m = nodes[node].get("mesh") if isinstance(nodes[node], dict) else None
                 if not is_int(m):
                     c.bad(f"{bw}.node", f"node {node} has no mesh")
-                elif not is_int(i) or not 0 <= i < n_targets.get(m, 0):
-                    c.bad(f"{bw}.index", f"{show(i)}: mesh {m} has {n_targets.get(m, 0)} morph targets")
-                wt = bind.get("weight", 1.0)
-                if not is_number(wt) or not 0 <= wt <= 1:
-                    c.bad(f"{bw}.weight", f"{show(wt)}; VRM 1.0 bind weights are 0..1")
+                else:
+                    _bind_target(c, bw, m, i, n_targets)
+                _bind_weight(c, bw, bind.get("weight", 1.0), 1, "1.0")
+
+
+def _bind_target(c: JsonWalk, bw: str, m: int, i: Any, n_targets: dict[int, int]) -> None:
+    """An expression bind's morph target index ``i`` of mesh ``m``, within the mesh's targets."""
+    if not is_int(i) or not 0 <= i < n_targets.get(m, 0):
+        c.bad(f"{bw}.index", f"{show(i)}: mesh {m} has {n_targets.get(m, 0)} morph targets")
+
+
+def _bind_weight(c: JsonWalk, bw: str, weight: Any, full: float, version: str) -> None:
+    """An expression bind's weight, a number in 0..``full`` (100 in VRM 0.x, 1 in 1.0)."""
+    if not is_number(weight) or not 0 <= weight <= full:
+        c.bad(f"{bw}.weight", f"{show(weight)}; VRM {version} bind weights are 0..{full:g}")
