@@ -14,7 +14,8 @@ The weights are a deterministic synthetic performance: sinusoids of
 different periods on ~10 channels, the rest at zero; the head turns
 (a slow sinusoidal yaw and pitch), so a character with a skeleton is skinned
 every frame (``--no-pose`` keeps it still). MSAA as the commands draw
-(``--msaa``, default 4).
+as a live ``run`` draws by default (``--quality auto``: no MSAA on a software rasteriser, 4x on a GPU;
+:mod:`~facepuppet.runtime.render.quality`); ``--quality full`` or ``--msaa N`` for another picture.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import numpy as np
 from facepuppet.runtime.bench.registry import peak_rss_mb, register_bench
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.geometry import euler_to_quat
+from facepuppet.runtime.render.quality import QUALITIES, choose_msaa
 
 if TYPE_CHECKING:
     from facepuppet.runtime.render.renderer import FaceRenderer
@@ -123,10 +125,14 @@ def bench_render(args: argparse.Namespace) -> dict:
     character = Character.load(args.character)
     weights = synthetic_performance(args.frames, character.n_shapes, n_active=args.active)
     poses = None if getattr(args, "no_pose", False) else head_poses(args.frames)
-    msaa = int(getattr(args, "msaa", 4))
+    asked = getattr(args, "msaa", None)
     target = create_context(headless=True)
     ctx = target.ctx
+    quality = choose_msaa(asked, getattr(args, "quality", "auto"), ctx.info.get("GL_RENDERER"), live=True)
+    msaa = quality.msaa
     results = {
+        "quality": getattr(args, "quality", "auto"),
+        "quality_note": quality.note,
         "character": str(args.character),
         "n_vertices": character.n_vertices,
         "n_triangles": int(len(character.triangles)),
@@ -185,7 +191,10 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--height", type=int, default=720)
     parser.add_argument("--active", type=int, default=10,
                         help="shapes animated at once (10; a live ARKit tracker drives nearly all of them)")
-    parser.add_argument("--msaa", type=int, default=4, help="multisamples (4, as the commands draw; 0 = off)")
+    parser.add_argument("--quality", choices=QUALITIES, default="auto",
+                        help="picture quality as run's --quality (auto: what a live run draws on this machine)")
+    parser.add_argument("--msaa", type=int, default=None,
+                        help="multisamples (default: as --quality decides; 0 = off)")
     parser.add_argument("--no-pose", action="store_true",
                         help="keep the head still (default: it turns, so a skeleton is skinned every frame)")
 
