@@ -126,16 +126,17 @@ def run_sitting(args: argparse.Namespace, run: Callable[[Path, list[str]], None]
             characters[side] = (out / "characters" / side / "ict.npz").resolve()  # one file name: alike
             characters[side].parent.mkdir(parents=True, exist_ok=True)
             say(f"{side}: importing the ICT head with its own import-rig")
+            characters[side].unlink(missing_ok=True)  # no --force: older versions do not take it
             run(shims[side], ["import-rig", str(data.joinpath(*ICT_OBJ)), str(data / ICT_OBJ[0]), "-o",
-                              str(characters[side]), "--force"])
+                              str(characters[side])])
         runs = out / "runs"
         runs.mkdir(parents=True, exist_ok=True)
         files: dict[tuple[str, str], list[Path]] = {}
         for r, bench, side in schedule(args.rounds, tuple(options)):
             path = (runs / f"{side}-{bench}-{r}.json").resolve()
             say(f"round {r}/{args.rounds}: bench {bench} {' '.join(options[bench])} on {side}")
-            run(shims[side], ["bench", bench, "-c", str(characters[side]), *options[bench], "--json", str(path),
-                              "--force"])
+            path.unlink(missing_ok=True)
+            run(shims[side], ["bench", bench, "-c", str(characters[side]), *options[bench], "--json", str(path)])
             files.setdefault((bench, side), []).append(path)
     finally:
         if not args.keep:

@@ -10,6 +10,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from helpers.small_characters import sphere_character
+from helpers.udp_helpers import free_udp_port
+
 
 @pytest.mark.slow
 def test_demo_opens_a_window_when_a_display_exists(x_display, tmp_path):
@@ -45,3 +48,28 @@ def test_a_transparent_window_background_is_asked_for_and_its_refusal_reported(x
     assert result.returncode == 0, result.stderr
     assert "demo: window" in result.stdout
     assert "no transparent window framebuffer" in result.stdout + result.stderr
+
+
+@pytest.mark.slow
+def test_a_live_window_on_a_software_rasteriser_is_opened_again_without_msaa_and_says_so_once(x_display, tmp_path):
+    """--quality auto: the first window is asked for with 4x samples; its renderer turns out to be llvmpipe, so
+    the window is opened again without them and the run goes on (said once; --quality full keeps them)."""
+    env = {**os.environ, "DISPLAY": x_display}
+    env.pop("WAYLAND_DISPLAY", None)
+    char = sphere_character().save(tmp_path / "sphere.npz")
+
+    def run(*extra):
+        return subprocess.run(
+            [sys.executable, "-m", "facepuppet", "run", "-c", str(char), "--input", "vmc", "--listen",
+             f"127.0.0.1:{free_udp_port()}", "--duration", "0.3", "--size", "160x120", *extra],
+            env=env, capture_output=True, text=True, timeout=300)
+
+    auto = run()
+    assert auto.returncode == 0, auto.stderr
+    if "llvmpipe" not in auto.stderr and "software rasteriser" not in auto.stderr:
+        pytest.skip("this display's OpenGL is not a software rasteriser")
+    assert auto.stderr.count("picture quality auto:") == 1 and "MSAA off" in auto.stderr
+    assert "ticks" in auto.stdout
+    full = run("--quality", "full")
+    assert full.returncode == 0, full.stderr
+    assert "picture quality" not in full.stderr
