@@ -41,6 +41,11 @@ class Framebuffers:
         else:
             self.fbo = target_fbo
 
+    @property
+    def owned(self) -> bool:
+        """Whether the framebuffers are this object's own (offscreen), not a target's."""
+        return self._own
+
     def resolved(self) -> moderngl.Framebuffer:
         """The framebuffer to read: the multisampled one resolved into its plain twin, or the one drawn into."""
         if self._resolve is None:

@@ -10,9 +10,10 @@ millisecond. The blended layers and the label cost little beside it. So:
   are kept (``--out``, ``--video``, contact sheets) are drawn so.
 * ``fast``: MSAA off.
 * ``auto`` (the default): full when the pictures are kept; live, MSAA off on
-  a software rasteriser, and off on a GPU whose measured draw at
-  construction takes more than half the frame budget. The command says
-  once what it lowered and how to keep it.
+  a software rasteriser, and off on a GPU whose measured draw takes more
+  than half the frame budget, at construction or later in the run
+  (:mod:`~facepuppet.runtime.live.draw_budget`). The command says once what
+  it lowered and how to keep it.
 
 An explicit ``--msaa N`` always wins.
 """
@@ -65,11 +66,11 @@ def choose_msaa(msaa: int | None, quality: str, gl_renderer: str | None, live: b
     return Quality(DEFAULT_MSAA)
 
 
-def budget_note(draw_ms: float, budget_ms: float, samples: int) -> str:
-    """The line saying MSAA is turned off, when a draw of ``draw_ms`` (median of a few frames at ``samples``)
+def budget_note(draw_ms: float, budget_ms: float, samples: int, when: str = "the first frames") -> str:
+    """The line saying MSAA is turned off, when a draw of ``draw_ms`` (the median of ``when``, at ``samples``)
     takes more than the live share of a frame of ``budget_ms``; "" when it fits."""
     if samples <= 0 or draw_ms <= BUDGET_SHARE * budget_ms:
         return ""
-    return (f"picture quality auto: a {samples}x MSAA frame took {draw_ms:.1f} ms to draw, more than "
+    return (f"picture quality auto: {samples}x MSAA frames took {draw_ms:.1f} ms to draw ({when}), more than "
             f"{BUDGET_SHARE:.0%} of the {budget_ms:.1f} ms frame budget: MSAA off (--quality full or "
             f"--msaa {samples} keeps it)")

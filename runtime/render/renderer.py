@@ -264,6 +264,19 @@ class FaceRenderer:
         )
         return next(p for p in candidates if p.name == best), report
 
+    def set_msaa(self, msaa: int) -> bool:
+        """Draw from now on with ``msaa`` samples (0: none) into new offscreen framebuffers; False (nothing
+        changed) when drawing into a target framebuffer (a window's samples are the window's). Whoever holds
+        :attr:`fbo` (an overlay drawing into it) must take the new one."""
+        if not self._framebuffers.owned:
+            return False
+        samples = min(int(msaa), int(self.ctx.max_samples)) if int(msaa) > 1 else 0
+        if samples != self.samples:
+            self._framebuffers.release()
+            self._framebuffers = Framebuffers(self.ctx, (self.width, self.height), samples, None)
+            self.fbo, self.samples = self._framebuffers.fbo, samples
+        return True
+
     def median_draw_ms(self, frames: int = 8, warmup: int = 2) -> float:
         """Median ms of drawing a frame with every shape active and waiting for it (the live budget check)."""
         weights = realistic_weights(self.character.n_shapes, n_active=self.character.n_shapes)

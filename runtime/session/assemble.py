@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.live.bus import SessionBus
+from facepuppet.runtime.live.draw_budget import DrawBudgetWatch
 from facepuppet.runtime.live.loop import FrameLoop
 from facepuppet.runtime.live.stages import build_chain
 from facepuppet.runtime.live.stats import LiveStats
@@ -168,6 +169,10 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
             on_chain(chain)
         live = outputs.out is None and outputs.video is None  # pictures kept as files are drawn at full quality
         target, renderer = _open_picture(stack, picture, feed.title, chain, character, live, parts.fps, log)
+        watch = None
+        if live and picture.render.msaa is None and picture.render.quality == "auto" \
+                and getattr(renderer, "samples", 0):
+            watch = DrawBudgetWatch(renderer, 1e3 / parts.fps, log)
         counters = dict(parts.counters)
         stats = None
         if parts.live:
@@ -181,10 +186,13 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
             if parts.live else None
         if shown is not None and on_panel is not None:
             on_panel(shown)
+        if shown is not None and watch is not None:
+            watch.retarget.append(shown.draw_into)
         if shown is None and not target.headless and chain.filter is not None:
             _bind_calibrate_key(target, chain.filter)
         loop = FrameLoop(chain.names, renderer, feed.clock(parts, target, paced),
-                         observers=[*opened.observers, *parts.observers], fps=parts.fps, log=log, target=target,
+                         observers=[*opened.observers, *parts.observers, *([watch] if watch else [])],
+                         fps=parts.fps, log=log, target=target,
                          stages=chain.stages, stop=getattr(feed, "stop", None), catch_up=parts.catch_up,
                          idle_fps=parts.idle_fps, overlays=() if shown is None else (shown.overlay,),
                          wake=parts.wake, mapper=chain.mapper)
