@@ -11,10 +11,15 @@ turns MSAA off, once, says so, and hands the new framebuffer to whoever draws in
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.render.quality import budget_note
+
+if TYPE_CHECKING:  # the renderer and the loop's tick: for the signatures only (moderngl is not imported here)
+    from facepuppet.runtime.live.loop import TickInfo
+    from facepuppet.runtime.render.renderer import FaceRenderer
 
 #: Ticks whose draw times are weighed (the last ones; about 2 s at 60 fps).
 WINDOW = 120
@@ -32,7 +37,7 @@ class DrawBudgetWatch:
     window : int, ticks weighed
     """
 
-    def __init__(self, renderer, budget_ms: float, log: Callable[[str], None],
+    def __init__(self, renderer: FaceRenderer, budget_ms: float, log: Callable[[str], None],
                  retarget: list[Callable] | None = None, window: int = WINDOW) -> None:
         self.renderer, self.budget_ms, self.log = renderer, float(budget_ms), log
         self.retarget = retarget if retarget is not None else []
@@ -40,7 +45,7 @@ class DrawBudgetWatch:
         self._n = 0
         self.lowered = False
 
-    def __call__(self, info) -> None:
+    def __call__(self, info: TickInfo) -> None:
         if self.lowered:
             return
         self._ms[self._n % len(self._ms)] = (info.stamps[4] - info.stamps[2]) * 1e3

@@ -441,7 +441,7 @@ class DeskPanel:
         first CONFIG) or ``stop`` it; a failure is in the recorder's message and loses nothing."""
         self._record.action(action, self.recorder, self.pipeline)
 
-    def draw_into(self, fbo) -> None:
+    def draw_into(self, fbo: moderngl.Framebuffer) -> None:
         """Draw into ``fbo`` from the next frame on (the renderer's new framebuffer, when it changed samples)."""
         self.fbo = fbo
 
