@@ -47,6 +47,7 @@ from __future__ import annotations
 import errno
 import functools
 import ipaddress
+import math
 import socket
 import struct
 import sys
@@ -95,8 +96,31 @@ def enable_drop_count(sock: socket.socket) -> bool:
     return True
 
 
-def receive(sock: socket.socket, stamped: bool, clock: Callable[[], float], own: dict) -> tuple[bytes, tuple, float]:
-    """One datagram: (data, sender, receive time in seconds).
+class ArrivalOrder:
+    """Receive times that never go back, one socket's datagrams after another.
+
+    The kernel stamps a datagram on arrival only once timestamping is switched on system-wide, and Linux
+    switches it on a moment after a socket asks (a deferred static-key change); a datagram that arrived
+    in that moment is stamped when it is read instead, later than the ones that arrived after it and carry
+    their true stamp. A socket hands datagrams in arrival order, so each arrived no earlier than the one
+    before: a time before the previous one is raised to it (a recording's frames must be in time order).
+    """
+
+    __slots__ = ("last",)
+
+    def __init__(self) -> None:
+        self.last = -math.inf
+
+    def __call__(self, t: float) -> float:
+        if t < self.last:
+            return self.last
+        self.last = t
+        return t
+
+
+def receive(sock: socket.socket, stamped: bool, clock: Callable[[], float], own: dict,
+            order: ArrivalOrder | None = None) -> tuple[bytes, tuple, float]:
+    """One datagram: (data, sender, receive time in seconds); ``order`` keeps the times from going back.
 
     With ``stamped`` the time is the kernel's arrival stamp on the monotonic clock (the read time where the
     kernel gave none) and a read later than LATE_READ_S after arrival counts in ``own["waited_over_1ms"]``;
@@ -121,7 +145,7 @@ def receive(sock: socket.socket, stamped: bool, clock: Callable[[], float], own:
             own["kernel_dropped"] = total + ((_DROPS.unpack_from(payload)[0] - total) & 0xFFFFFFFF)
     if stamped and t_read - t > LATE_READ_S:
         own["waited_over_1ms"] += 1
-    return data, sender, t
+    return data, sender, t if order is None else order(t)
 
 
 def watch_needle(address: str | None) -> bytes | None:
@@ -314,9 +338,10 @@ class UdpSource:
             self.watch
         needle = watch_needle(watch)
         stamped = clock is time.monotonic and enable_kernel_stamps(sock)
+        order = ArrivalOrder()
         while not stop.is_set():
             try:
-                data, sender, t = receive(sock, stamped, clock, own)
+                data, sender, t = receive(sock, stamped, clock, own, order)
             except (TimeoutError, BlockingIOError, InterruptedError):
                 continue
             except OSError as exc:  # socket closed under us or a transient error (e.g. ICMP)

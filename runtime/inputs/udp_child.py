@@ -27,6 +27,7 @@ import numpy as np
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.udp import (
     POLL_TIMEOUT_S,
+    ArrivalOrder,
     control_only,
     count_messages,
     enable_kernel_stamps,
@@ -86,6 +87,7 @@ class _Publisher:
         self.counter_index: dict[str, int] = {}
         self.meta_bytes = 0
         self.errors_logged = 0
+        self.order = ArrivalOrder()  # receive times that never go back (see ArrivalOrder)
         self.own = {"packets": 0, "filtered_sender": 0, "internal_error": 0, "waited_over_1ms": 0,
                     "kernel_dropped": 0, "frame_too_large": 0, "packets_ring_dropped": 0, "names_full": 0,
                     "names_too_large": 0}
@@ -325,7 +327,7 @@ def _take_one(sock: socket.socket, stamped: bool, publisher: _Publisher, allow, 
     """Read, filter, count, queue and decode one datagram; never raises."""
     own = publisher.own
     try:
-        data, sender, t = receive(sock, stamped, time.monotonic, own)
+        data, sender, t = receive(sock, stamped, time.monotonic, own, publisher.order)
     except (TimeoutError, BlockingIOError, InterruptedError):
         return
     except OSError as exc:
