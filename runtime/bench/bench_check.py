@@ -7,7 +7,7 @@ builds measured in the same minutes, taking turns, meet the same load. So the si
 1. checks the base (``--base``, default ``HEAD~1``) out into ``OUT/base`` and makes an import shim for each side
    (:mod:`~facepuppet.runtime.bench.revision`): both run with this environment's Python, each importing its own
    tree's code (checked, and the paths printed);
-2. imports the ICT head from the data kit (``--data``, ``$FACEPUPPET_DATA`` or ``../shared/data``) with each
+2. imports the ICT head from the data kit (``--data`` or ``$FACEPUPPET_DATA``, which ``make`` sets) with each
    side's own importer;
 3. runs ``bench render`` and ``bench latency`` on each side by turns, working tree then base, ``--rounds`` times
    (:func:`schedule`), each run a separate ``facepuppet`` process writing its ``--json``;
@@ -77,9 +77,13 @@ def median_report(reports: list[dict]) -> dict:
     return merge(reports)
 
 
-def data_folder(option: str | None, repo: Path) -> Path:
-    """The data kit: ``--data``, else ``$FACEPUPPET_DATA``, else ``../shared/data`` beside the repository."""
-    chosen = Path(option or os.environ.get("FACEPUPPET_DATA") or repo.parent / "shared" / "data")
+def data_folder(option: str | None) -> Path:
+    """The data kit: ``--data``, else ``$FACEPUPPET_DATA`` (``make bench-check`` sets it)."""
+    named = option or os.environ.get("FACEPUPPET_DATA")
+    if not named:
+        raise UsageError("--data: the data kit folder is needed (the ICT head both sides import); pass --data DIR "
+                         "or set FACEPUPPET_DATA")
+    chosen = Path(named)
     obj = chosen.joinpath(*ICT_OBJ)
     if not obj.is_file():
         raise UsageError(f"--data {chosen}: {'/'.join(ICT_OBJ)} not found (the ICT head both sides import); "
@@ -109,7 +113,7 @@ def run_sitting(args: argparse.Namespace, run: Callable[[Path, list[str]], None]
     options = bench_options(args)  # a bad --render-size is refused before anything is checked out
     repo = Path(revision.git(args.repo, "rev-parse", "--show-toplevel"))
     out = Path(args.out) if Path(args.out).is_absolute() else repo / args.out
-    data = data_folder(args.data, repo)
+    data = data_folder(args.data)
     base_sha = revision.resolve(repo, args.base)
     dirty = bool(revision.git(repo, "status", "--porcelain", "--untracked-files=no"))
     trees = {"head": repo, "base": revision.add_worktree(repo, base_sha, out / "base")}
@@ -169,7 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--rounds", type=int, default=3, help="runs of each benchmark on each side (3; at least 2)")
     parser.add_argument("--out", default=".bench", help="folder for the base's worktree, the shims and the JSON "
                                                         "(.bench in the repository, ignored by git)")
-    parser.add_argument("--data", default=None, help="the data kit (default: $FACEPUPPET_DATA, else ../shared/data)")
+    parser.add_argument("--data", default=None, help="the data kit (default: $FACEPUPPET_DATA)")
     parser.add_argument("--render-frames", type=int, default=60, help="bench render --frames (60)")
     parser.add_argument("--render-size", default="1280x720", help="bench render --width x --height (1280x720)")
     parser.add_argument("--latency-seconds", type=float, default=5.0, help="bench latency --seconds (5)")
