@@ -21,6 +21,7 @@ as a live ``run`` draws by default (``--quality auto``: no MSAA on a software ra
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from typing import TYPE_CHECKING
 
@@ -116,6 +117,28 @@ def time_passes(renderer: FaceRenderer, weights: np.ndarray, poses: np.ndarray |
     out = {name: _stats([frame.get(name, 0.0) for frame in clock.frames]) for name in names}
     out["total"] = _stats([sum(frame.values()) for frame in clock.frames])
     return out
+
+
+def pass_costs(character_path: str | os.PathLike, width: int, height: int, path: str, msaa: int,
+               frames: int = 60) -> dict:
+    """ms per draw pass (:func:`time_passes`) of a character at a size, deformation path and samples, every
+    shape moving and the head turning: what a live run's picture costs pass by pass, timed apart from the
+    run (waiting after each pass would change the run)."""
+    from facepuppet.runtime.render.gl_context import create_context
+    from facepuppet.runtime.render.renderer import FaceRenderer
+
+    character = Character.load(character_path)
+    target = create_context(headless=True)
+    try:
+        renderer = FaceRenderer(target.ctx, character, width, height, path=path, msaa=msaa, log=lambda _: None)
+        try:
+            weights = synthetic_performance(frames, character.n_shapes, n_active=character.n_shapes)
+            return {"path": path, "msaa": renderer.samples,
+                    **time_passes(renderer, weights, head_poses(frames))}
+        finally:
+            renderer.close()
+    finally:
+        target.close()
 
 
 def bench_render(args: argparse.Namespace) -> dict:

@@ -7,7 +7,8 @@ import argparse
 
 import pytest
 
-from facepuppet.runtime.bench.latency import SENDERS, _add_arguments, decode_cost
+from facepuppet.runtime.bench.latency import _add_arguments
+from facepuppet.runtime.bench.senders import SENDERS, decode_cost
 from facepuppet.runtime.inputs.kinds import make_adapter
 
 
