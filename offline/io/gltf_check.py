@@ -45,14 +45,11 @@ import io
 import json
 import os
 import struct
-import warnings
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
-from PIL import Image, UnidentifiedImageError
-
-from facepuppet.offline.io.gltf.read_materials import MAX_TEXTURE_SIDE, MAX_TEXTURE_TEXELS
+from facepuppet.offline.io.gltf.read_materials import MAX_TEXTURE_SIDE, MAX_TEXTURE_TEXELS, image_size
 from facepuppet.offline.io.gltf.structure_limits import structure_problems
 from facepuppet.offline.io.gltf_check_accessors import AccessorCheck
 from facepuppet.offline.io.gltf_check_vrm import check_vrm0, check_vrm1
@@ -451,22 +448,6 @@ def _not_json_values(doc: Any) -> Iterator[tuple[str, str]]:
             stack.extend((f"{where}.{k}" if where else str(k), v) for k, v in reversed(value.items()))
         elif isinstance(value, list):
             stack.extend((f"{where}[{i}]", v) for i, v in reversed(list(enumerate(value))))
-
-
-def image_size(handle: BinaryIO) -> tuple[int, int] | None:
-    """(width, height) of a PNG or JPEG from its header (Pillow opens lazily: nothing is decoded); None when it
-    is neither or its header is broken."""
-    head = handle.read(8)
-    handle.seek(0)
-    if not (head == b"\x89PNG\r\n\x1a\n" or head[:3] == b"\xff\xd8\xff"):
-        return None
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # a decompression-bomb warning: the size is what is checked here
-            with Image.open(handle, formats=("PNG", "JPEG")) as im:
-                return im.size
-    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, EOFError, Image.DecompressionBombError):
-        return None
 
 
 def _numbers(v: Any, n: int) -> bool:

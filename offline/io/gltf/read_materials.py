@@ -21,6 +21,7 @@ import warnings as _warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import BinaryIO
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
@@ -236,9 +237,7 @@ def _open_image(state: ReadState, img: dict, iw: str) -> Opened:
 def _image(state: ReadState, opened: Opened, img: dict, iw: str) -> Iterator[Image.Image]:
     """The PNG or JPEG image of ``opened``, opened lazily by Pillow: only its header is read."""
     f = state.f
-    head = opened.handle.read(8)
-    opened.handle.seek(0)
-    if not (head == b"\x89PNG\r\n\x1a\n" or head[:3] == b"\xff\xd8\xff"):
+    if not _png_or_jpeg(opened.handle):
         f.fail(iw, f"not a PNG or JPEG image (mimeType {img.get('mimeType')!r}); only those are decoded")
     try:
         with _warnings.catch_warnings():
@@ -252,3 +251,24 @@ def _image(state: ReadState, opened: Opened, img: dict, iw: str) -> Iterator[Ima
 
 _DECODE_ERRORS = (UnidentifiedImageError, OSError, ValueError, SyntaxError, EOFError, Image.DecompressionBombWarning,
                   Image.DecompressionBombError)
+
+
+def image_size(handle: BinaryIO) -> tuple[int, int] | None:
+    """(width, height) of a PNG or JPEG from its header (Pillow opens lazily: nothing is decoded); None when it
+    is neither or its header is broken."""
+    if not _png_or_jpeg(handle):
+        return None
+    try:
+        with _warnings.catch_warnings():
+            _warnings.simplefilter("ignore")  # a decompression-bomb warning: the size is what is checked here
+            with Image.open(handle, formats=("PNG", "JPEG")) as im:
+                return im.size
+    except _DECODE_ERRORS:
+        return None
+
+
+def _png_or_jpeg(handle: BinaryIO) -> bool:
+    """Whether ``handle`` starts with the PNG or JPEG signature (read, then rewound)."""
+    head = handle.read(8)
+    handle.seek(0)
+    return head == b"\x89PNG\r\n\x1a\n" or head[:3] == b"\xff\xd8\xff"
