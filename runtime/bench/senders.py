@@ -21,6 +21,7 @@ import math
 import socket
 import sys
 import time
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -210,19 +211,25 @@ def send(host: str, port: int, rate: float, seconds: float, kind: str = "vmc") -
         sys.stdin.readline()
         frames.answer(request, requester)
         frames.sock.setblocking(False)
-    start = time.monotonic()
     k = 0
-    while True:
-        t = k / rate
-        if t >= seconds:
-            break
-        ahead = start + t - time.monotonic()
-        if ahead > 0:
-            time.sleep(ahead)
+    for t in paced(rate, seconds):
         frames.send(t)
         k += 1
     frames.close()
     return k
+
+
+def paced(rate: float, seconds: float) -> Iterator[float]:
+    """The times 0, 1/rate, 2/rate, ... below ``seconds``, each yielded when the wall clock (monotonic) reaches it
+    from the first; a late one is yielded at once (the schedule is kept, not shifted)."""
+    start = time.monotonic()
+    k = 0
+    while (t := k / rate) < seconds:
+        ahead = start + t - time.monotonic()
+        if ahead > 0:
+            time.sleep(ahead)
+        yield t
+        k += 1
 
 
 if __name__ == "__main__":

@@ -48,6 +48,7 @@ import numpy as np
 
 from facepuppet.runtime.bench.latency import rss_mb
 from facepuppet.runtime.bench.registry import load_average, register_bench, session_log
+from facepuppet.runtime.bench.senders import paced
 from facepuppet.runtime.commands.run import plan_from_argv, run_live
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.live.vmc_out import VmcSender
@@ -78,17 +79,8 @@ def send(host: str, port: int, rate: float, seconds: float, cycle_s: float) -> d
     held = 0.5 + 0.5 * np.sin(phases)
     sent = {"frames": 0, "calibrations": 0, "datagrams": 0}
     next_calibration = 0
-    start = time.monotonic()
-    k = 0
     try:
-        while True:
-            t = k / rate
-            if t >= seconds:
-                break
-            ahead = start + t - time.monotonic()
-            if ahead > 0:
-                time.sleep(ahead)
-            k += 1
+        for t in paced(rate, seconds):
             cycle, f = divmod(t / cycle_s, 1.0)
             due = int(cycle) * len(CALIBRATE_AT) + sum(f >= c for c in CALIBRATE_AT)
             if due > next_calibration:
