@@ -134,6 +134,7 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
     def sample(info):
         if not drawn_with:  # the picture the run chose (the path and the samples its quality left)
             drawn_with.update(msaa=int(getattr(info.renderer, "samples", 0)), path=info.renderer.path,
+                              subtle_layers=bool(getattr(info.renderer, "subtle_layers", True)),
                               gl_renderer=getattr(getattr(info.renderer, "ctx", None), "info", {}).get("GL_RENDERER"))
         if shown_panel:
             calls_ms.append(shown_panel[0].draw_calls_s * 1e3)
@@ -223,6 +224,7 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
         "rss_mb_per_second": [round(m, 1) for _, m in rss],
         "render_path": result.path,
         "msaa": drawn_with.get("msaa"),
+        "subtle_layers": drawn_with.get("subtle_layers"),
         "gl_renderer": drawn_with.get("gl_renderer"),
         "loadavg": load_average(),
     }
@@ -277,8 +279,9 @@ def bench_latency(args: argparse.Namespace) -> dict:
     if nominal.get("msaa") is not None:
         width, height = parse_size(args.size)
         passes = results["passes_ms"] = pass_costs(args.character, width, height, nominal["render_path"],
-                                                   nominal["msaa"])
-        print(f"  draw passes ({passes['path']} path, MSAA {passes['msaa']}x) median ms: " + ", ".join(
+                                                   nominal["msaa"], subtle_layers=nominal["subtle_layers"])
+        print(f"  draw passes ({passes['path']} path, MSAA {passes['msaa']}x, subtle eye layers "
+              f"{'on' if passes['subtle_layers'] else 'off'}) median ms: " + ", ".join(
             f"{name} {v['median']:.2f}" for name, v in passes.items() if isinstance(v, dict)))
     m = results["map_step"] = map_step_cost(args.character)
     print(f"  map step alone ({m['map']}, {m['channels']} channels -> {m['shapes']} shapes, "

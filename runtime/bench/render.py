@@ -30,7 +30,7 @@ import numpy as np
 from facepuppet.runtime.bench.registry import peak_rss_mb, register_bench
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.geometry import euler_to_quat
-from facepuppet.runtime.render.quality import QUALITIES, choose_msaa
+from facepuppet.runtime.render.quality import QUALITIES, choose_quality
 
 if TYPE_CHECKING:
     from facepuppet.runtime.render.renderer import FaceRenderer
@@ -120,7 +120,7 @@ def time_passes(renderer: FaceRenderer, weights: np.ndarray, poses: np.ndarray |
 
 
 def pass_costs(character_path: str | os.PathLike, width: int, height: int, path: str, msaa: int,
-               frames: int = 60) -> dict:
+               frames: int = 60, subtle_layers: bool = True) -> dict:
     """ms per draw pass (:func:`time_passes`) of a character at a size, deformation path and samples, every
     shape moving and the head turning: what a live run's picture costs pass by pass, timed apart from the
     run (waiting after each pass would change the run)."""
@@ -130,10 +130,11 @@ def pass_costs(character_path: str | os.PathLike, width: int, height: int, path:
     character = Character.load(character_path)
     target = create_context(headless=True)
     try:
-        renderer = FaceRenderer(target.ctx, character, width, height, path=path, msaa=msaa, log=lambda _: None)
+        renderer = FaceRenderer(target.ctx, character, width, height, path=path, msaa=msaa, log=lambda _: None,
+                                subtle_layers=subtle_layers)
         try:
             weights = synthetic_performance(frames, character.n_shapes, n_active=character.n_shapes)
-            return {"path": path, "msaa": renderer.samples,
+            return {"path": path, "msaa": renderer.samples, "subtle_layers": renderer.subtle_layers,
                     **time_passes(renderer, weights, head_poses(frames))}
         finally:
             renderer.close()
@@ -151,11 +152,12 @@ def bench_render(args: argparse.Namespace) -> dict:
     asked = getattr(args, "msaa", None)
     target = create_context(headless=True)
     ctx = target.ctx
-    quality = choose_msaa(asked, getattr(args, "quality", "auto"), ctx.info.get("GL_RENDERER"), live=True)
-    msaa = quality.msaa
+    quality = choose_quality(asked, getattr(args, "quality", "auto"), ctx.info.get("GL_RENDERER"), live=True)
+    msaa, layers = quality.msaa, quality.subtle_layers
     results = {
         "quality": getattr(args, "quality", "auto"),
         "quality_note": quality.note,
+        "subtle_layers": layers,
         "character": str(args.character),
         "n_vertices": character.n_vertices,
         "n_triangles": int(len(character.triangles)),
@@ -172,12 +174,14 @@ def bench_render(args: argparse.Namespace) -> dict:
     }
     try:
         for path in ("gpu", "cpu"):
-            renderer = FaceRenderer(ctx, character, args.width, args.height, path=path, msaa=msaa)
+            renderer = FaceRenderer(ctx, character, args.width, args.height, path=path, msaa=msaa,
+                                    subtle_layers=layers)
             results["msaa"] = renderer.samples
             results["paths"][path] = measure_path(renderer, weights, poses=poses)
             renderer.close()
         reports = []
-        renderer = FaceRenderer(ctx, character, args.width, args.height, path="auto", log=reports.append, msaa=msaa)
+        renderer = FaceRenderer(ctx, character, args.width, args.height, path="auto", log=reports.append, msaa=msaa,
+                                subtle_layers=layers)
         results["auto_choice"] = renderer.path
         results["auto_report"] = renderer.path_report
         renderer.close()

@@ -13,6 +13,9 @@ from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
 
 #: The layer kinds, in drawing order (each blended over the ones before)
 LAYER_KINDS = (MATERIAL_KINDS["occlusion"], MATERIAL_KINDS["film"], MATERIAL_KINDS["lashes"])
+#: The layers a frame budget may leave out (the lid shadow and wet films: a few pixels of shading in the eyes);
+#: first in LAYER_KINDS, so the rest are one run after them. The lashes draw the eye line and always stay.
+SUBTLE_LAYER_KINDS = LAYER_KINDS[:2]
 #: Opacity of the thin layers: lashes at the root, the eye occlusion at the lids, films
 LASH_ROOT_OPACITY, OCCLUSION_OPACITY, FILM_OPACITY = 0.9, 0.6, 0.22
 

@@ -17,7 +17,7 @@ import re
 from dataclasses import dataclass
 
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.render.quality import DEFAULT_MSAA, DEFAULT_QUALITY, QUALITIES, choose_msaa
+from facepuppet.runtime.render.quality import DEFAULT_MSAA, DEFAULT_QUALITY, QUALITIES, Quality, choose_quality
 
 # "body": the camera fits every drawn vertex; "head": the vertices that follow the humanoid head bone
 # (every drawn vertex for a character without one: a head rig); "face": what expressions move (contact sheets).
@@ -48,14 +48,14 @@ class RenderOptions:
     quality: str = DEFAULT_QUALITY
     credits: bool = False
 
-    def renderer_kwargs(self, msaa: int | None = None) -> dict:
-        """Keyword arguments of FaceRenderer for these options (the credits text is the caller's); ``msaa``:
-        the samples chosen (:func:`~facepuppet.runtime.render.quality.choose_msaa`), default the full
-        quality's (a picture that is kept)."""
-        if msaa is None:
-            msaa = choose_msaa(self.msaa, self.quality, None, live=False).msaa
+    def renderer_kwargs(self, quality: Quality | None = None) -> dict:
+        """Keyword arguments of FaceRenderer for these options (the credits text is the caller's); ``quality``:
+        the picture chosen (:func:`~facepuppet.runtime.render.quality.choose_quality`), default the one of
+        a picture that is kept."""
+        if quality is None:
+            quality = choose_quality(self.msaa, self.quality, None, live=False)
         return {"framing": self.framing, "background": self.background, "transparent": self.transparent,
-                "msaa": msaa}
+                "msaa": quality.msaa, "subtle_layers": quality.subtle_layers}
 
 
 def parse_background(text: str) -> tuple[tuple[float, float, float], bool]:
@@ -86,9 +86,10 @@ def add_render_arguments(parser: argparse.ArgumentParser, framing: str = "head",
                        help=f"multisample anti-aliasing samples (0 = off; capped at what the OpenGL context "
                             f"allows; default: as --quality decides, {DEFAULT_MSAA} at full quality)")
     group.add_argument("--quality", choices=QUALITIES, default=DEFAULT_QUALITY,
-                       help="picture quality: 'full' (MSAA, whatever it costs), 'fast' (no MSAA) or 'auto' "
-                            "(the default: full for pictures kept as files; live, MSAA off on a software "
-                            "rasteriser or when the draw takes more than half the frame budget, said once)")
+                       help="picture quality: 'full' (MSAA and every layer, whatever it costs), 'fast' (no "
+                            "MSAA, no subtle eye layers) or 'auto' (the default: full for pictures kept as "
+                            "files; live, fast on a software rasteriser, and MSAA off when the draw takes more "
+                            "than half the frame budget; said once)")
     if credits:
         group.add_argument("--credits", action="store_true",
                            help="draw the character's attribution (VRM meta / licence) in a corner")

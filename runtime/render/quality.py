@@ -4,18 +4,24 @@ What a frame costs is mostly its fragments, and multisampling multiplies
 them: on Mesa's software rasteriser (llvmpipe), 4x MSAA takes the ICT head's
 draw at 640x480 from 7.7 to 19 ms (``bench render``, passes_ms), more than a
 60 Hz frame by itself, while on a real GPU it costs a fraction of a
-millisecond. The blended layers and the label cost little beside it. So:
+millisecond. Next come the subtle see-through eye layers of an OBJ rig
+(:data:`~facepuppet.runtime.render.layers.SUBTLE_LAYER_KINDS`: the lids'
+shadow on the eye, the wet films): drawn two-sided and blended, their
+triangles cost about twice an opaque one's on a software rasteriser
+(``bench render`` passes_ms, ``blended``), for a few pixels of shading in
+the eyes. The lashes, which draw the eye line, are never dropped. So:
 
-* ``full``: MSAA at ``--msaa`` (default 4), whatever it costs. Pictures that
-  are kept (``--out``, ``--video``, contact sheets) are drawn so.
-* ``fast``: MSAA off.
-* ``auto`` (the default): full when the pictures are kept; live, MSAA off on
-  a software rasteriser, and off on a GPU whose measured draw takes more
-  than half the frame budget, at construction or later in the run
-  (:mod:`~facepuppet.runtime.live.draw_budget`). The command says once what
-  it lowered and how to keep it.
+* ``full``: MSAA at ``--msaa`` (default 4) and every layer, whatever it
+  costs. Pictures that are kept (``--out``, ``--video``, contact sheets) are
+  drawn so.
+* ``fast``: MSAA off, the subtle eye layers off.
+* ``auto`` (the default): full when the pictures are kept; live, on a
+  software rasteriser, MSAA and the subtle eye layers off; on a GPU, MSAA
+  off when the measured draw takes more than half the frame budget, at
+  construction or later in the run (:mod:`~facepuppet.runtime.live.draw_budget`).
+  The command says once what it lowered and how to keep it.
 
-An explicit ``--msaa N`` always wins.
+An explicit ``--msaa N`` always wins for the samples.
 """
 
 from __future__ import annotations
@@ -42,28 +48,31 @@ def is_software(gl_renderer: str | None) -> bool:
 
 @dataclass(frozen=True)
 class Quality:
-    """The samples to draw with and, when lowered from what was asked, the line that says why."""
+    """The samples to draw with, whether the subtle eye layers are drawn and, when something was lowered
+    from full quality, the line that says why."""
 
     msaa: int
+    subtle_layers: bool = True
     note: str = ""
 
 
-def choose_msaa(msaa: int | None, quality: str, gl_renderer: str | None, live: bool) -> Quality:
-    """The MSAA samples for ``--msaa`` (None: not given), ``--quality``, the context's renderer and whether the
+def choose_quality(msaa: int | None, quality: str, gl_renderer: str | None, live: bool) -> Quality:
+    """The picture for ``--msaa`` (None: not given), ``--quality``, the context's renderer and whether the
     frames are live (shown or sent as they happen, not kept as files)."""
     if quality not in QUALITIES:
         raise ValueError(f"quality: expected one of {QUALITIES}, got {quality!r}")
-    if msaa is not None:
-        return Quality(int(msaa))
     if quality == "fast":
-        return Quality(0)
-    if quality == "full" or not live:
-        return Quality(DEFAULT_MSAA)
-    if is_software(gl_renderer):
-        return Quality(0, f"picture quality auto: {gl_renderer} is a software rasteriser, where {DEFAULT_MSAA}x "
-                          f"MSAA costs more than the rest of the draw: MSAA off to keep the frame budget "
-                          f"(--quality full or --msaa {DEFAULT_MSAA} keeps it)")
-    return Quality(DEFAULT_MSAA)
+        return Quality(0 if msaa is None else int(msaa), subtle_layers=False)
+    if quality == "full" or not live or not is_software(gl_renderer):
+        return Quality(DEFAULT_MSAA if msaa is None else int(msaa))
+    if msaa is not None:  # the samples asked for; the layers still fitted to the software rasteriser
+        return Quality(int(msaa), False, f"picture quality auto: {gl_renderer} is a software rasteriser: the "
+                                         f"subtle eye layers (lid shadow, wet film) left out to keep the frame "
+                                         f"budget (--quality full keeps them)")
+    return Quality(0, False, f"picture quality auto: {gl_renderer} is a software rasteriser, where {DEFAULT_MSAA}x "
+                             f"MSAA costs more than the rest of the draw: MSAA off, and the subtle eye layers "
+                             f"(lid shadow, wet film) left out, to keep the frame budget (--quality full keeps "
+                             f"both, --msaa {DEFAULT_MSAA} the MSAA)")
 
 
 def budget_note(draw_ms: float, budget_ms: float, samples: int, when: str = "the first frames") -> str:

@@ -39,7 +39,7 @@ from facepuppet.runtime.render.credits_label import CreditsLabel
 from facepuppet.runtime.render.face_mesh import vertex_materials, visible_triangles
 from facepuppet.runtime.render.framebuffers import Framebuffers
 from facepuppet.runtime.render.framing import frame_character
-from facepuppet.runtime.render.layers import has_layers, vertex_opacity
+from facepuppet.runtime.render.layers import SUBTLE_LAYER_KINDS, has_layers, vertex_opacity
 from facepuppet.runtime.render.options import FRAMINGS
 from facepuppet.runtime.render.parts_path import (
     HeadPose,
@@ -91,6 +91,9 @@ class FaceRenderer:
     msaa : int, samples of the offscreen framebuffer (0 or 1: none; capped at the context's maximum);
         a window's samples are the window's (``create_context(samples=...)``)
     log : callable(str), receives the one-line path report
+    subtle_layers : bool, draw the subtle see-through eye layers (lid shadow, wet films:
+        :data:`~facepuppet.runtime.render.layers.SUBTLE_LAYER_KINDS`); False leaves them out where a frame
+        budget asks (:mod:`~facepuppet.runtime.render.quality`); the lashes are always drawn
     cull_back_faces : bool
         Cull back faces of closed, consistently wound surfaces (about half the
         triangles of a head; a large saving on a software rasteriser). Thin
@@ -125,6 +128,7 @@ class FaceRenderer:
         transparent: bool = False,
         msaa: int = 0,
         credits: str | None = None,
+        subtle_layers: bool = True,
     ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
@@ -146,6 +150,7 @@ class FaceRenderer:
             raise UsageError("path: the elastic path draws characters without a skeleton or look only")
         self._head_pose = HeadPose(character) if self.parts else None
         self.cull_back_faces = bool(cull_back_faces)
+        self.subtle_layers = bool(subtle_layers)
         self._framebuffers = Framebuffers(ctx, (self.width, self.height), self.samples, target_fbo)
         self.fbo = self._framebuffers.fbo
         self.camera = frame_character(character, framing, self.width / self.height)
@@ -183,6 +188,9 @@ class FaceRenderer:
             self._attr_vbo = ctx.buffer(vertex_attributes(c, vertex_opacity(c) if has_layers(c) else None).tobytes())
             view_dir = self.camera.view[2, :3] * -1.0  # the camera looks along -z of its frame
             tris, self._groups = draw_groups(c, view_dir, self.cull_back_faces)
+            if not self.subtle_layers:
+                subtle = np.isin(c.material_params[:, 2].round().astype(int), SUBTLE_LAYER_KINDS)
+                self._groups = [g for g in self._groups if not subtle[g.material]]
             self._variant_of = [material_variant(c, m) for m in range(len(c.material_names))]
             self._ibo = ctx.buffer(tris.tobytes() if len(tris) else b"\0" * 12)
             self.n_indices = len(tris) * 3
@@ -194,6 +202,13 @@ class FaceRenderer:
         self._ibo = ctx.buffer(tris.tobytes())
         self.n_indices = len(tris) * 3
         self.n_one_sided_indices = n_one_sided * 3 if self.cull_back_faces else 0
+        self._n_surface_indices = n_one_sided * 3
+        # the layers follow the surfaces in LAYER_KINDS order, the subtle ones first: leaving them out is
+        # starting the layers' draw after them
+        self._first_layer_index = self._n_surface_indices
+        if not self.subtle_layers:
+            kinds = c.material_params[:, 2].round().astype(int)[c.triangle_material]
+            self._first_layer_index += 3 * int(np.isin(kinds, SUBTLE_LAYER_KINDS).sum())
 
     def _make_path(self, name: str, elastic: ElasticModel | None) -> DeformationPath:
         if name == "gpu":
@@ -360,22 +375,24 @@ class FaceRenderer:
                                moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
 
     def _draw_surfaces(self) -> None:
-        """A character without parts, its one-sided kinds: back faces culled."""
-        culled = self.n_one_sided_indices
-        if culled:
+        """A character without parts, its one-sided kinds: back faces culled (unless ``cull_back_faces`` is
+        off)."""
+        n = self._n_surface_indices
+        if n:
             self.ctx.front_face = "ccw"
-            self.ctx.enable(moderngl.CULL_FACE)
-            self._deformation.vaos[None].render(moderngl.TRIANGLES, vertices=culled)
+            if self.cull_back_faces:
+                self.ctx.enable(moderngl.CULL_FACE)
+            self._deformation.vaos[None].render(moderngl.TRIANGLES, vertices=n)
         self.ctx.disable(moderngl.CULL_FACE)
 
     def _draw_layers(self) -> None:
         """A character without parts, its thin two-sided layers (eye occlusion, films, lashes): blended over the
         finished surfaces, without writing depth so that each shows through the ones drawn after it."""
-        culled = self.n_one_sided_indices
-        if self.n_indices > culled:
+        first = self._first_layer_index
+        if self.n_indices > first:
             self.ctx.enable(moderngl.BLEND)
             self.fbo.depth_mask = False
-            self._deformation.vaos[None].render(moderngl.TRIANGLES, vertices=self.n_indices - culled, first=culled)
+            self._deformation.vaos[None].render(moderngl.TRIANGLES, vertices=self.n_indices - first, first=first)
             self.fbo.depth_mask = True
             self.ctx.disable(moderngl.BLEND)
 

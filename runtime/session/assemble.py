@@ -26,6 +26,7 @@ and reports after it, once every file is complete::
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -38,7 +39,7 @@ from facepuppet.runtime.live.loop import FrameLoop
 from facepuppet.runtime.live.stages import build_chain
 from facepuppet.runtime.live.stats import LiveStats
 from facepuppet.runtime.render.gl_context import create_context
-from facepuppet.runtime.render.quality import budget_note, choose_msaa
+from facepuppet.runtime.render.quality import budget_note, choose_quality
 from facepuppet.runtime.session.options import OutputOptions, PanelOptions, PictureOptions, StageOptions
 from facepuppet.runtime.session.outputs import Outputs, open_outputs
 
@@ -211,7 +212,7 @@ def _open_picture(stack: contextlib.ExitStack, picture: PictureOptions, title: s
     renderer turns out to be a software rasteriser; an offscreen picture is drawn without MSAA when a few
     timed frames take more than the live share of the frame budget."""
     render = picture.render
-    asked = choose_msaa(render.msaa, render.quality, None, live=False).msaa  # before the renderer is known
+    asked = choose_quality(render.msaa, render.quality, None, live=False).msaa  # before the renderer is known
 
     def context(samples: int) -> GLTarget:
         return create_context(headless=True if picture.headless else None, width=picture.width,
@@ -219,10 +220,10 @@ def _open_picture(stack: contextlib.ExitStack, picture: PictureOptions, title: s
                               transparent=render.transparent)
 
     target = context(asked)
-    quality = choose_msaa(render.msaa, render.quality, target.ctx.info.get("GL_RENDERER"), live)
+    quality = choose_quality(render.msaa, render.quality, target.ctx.info.get("GL_RENDERER"), live)
     if quality.note:
         log(quality.note)
-        if not target.headless and target.samples:
+        if not target.headless and target.samples and target.samples != quality.msaa:
             target.close()
             target = context(quality.msaa)
     stack.callback(target.close)
@@ -230,7 +231,7 @@ def _open_picture(stack: contextlib.ExitStack, picture: PictureOptions, title: s
 
     def renderer_at(samples: int) -> Renderer:
         return chain.renderer(target.ctx, character, picture.width, picture.height, picture.path, screen, log,
-                              **render.renderer_kwargs(samples),
+                              **render.renderer_kwargs(dataclasses.replace(quality, msaa=samples)),
                               credits=character.credits if render.credits else None)
 
     renderer = renderer_at(quality.msaa)

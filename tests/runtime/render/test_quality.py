@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.cli import main
-from facepuppet.runtime.render.quality import BUDGET_SHARE, budget_note, choose_msaa, is_software
+from facepuppet.runtime.render.quality import BUDGET_SHARE, budget_note, choose_quality, is_software
 
 from helpers.logs import session_log
 from helpers.small_characters import sphere_character
@@ -23,22 +23,24 @@ def test_software_rasterisers_are_told_from_gpus():
         assert not is_software(name), name
 
 
-@pytest.mark.parametrize("msaa, quality, renderer, live, expected", [
-    (None, "auto", LLVMPIPE, True, 0),   # live on a software rasteriser: off, said once
-    (None, "auto", GPU, True, 4),        # live on a GPU: full (the draw is timed against the budget after)
-    (None, "auto", LLVMPIPE, False, 4),  # pictures kept as files: full quality
-    (None, "full", LLVMPIPE, True, 4),
-    (None, "fast", GPU, False, 0),
-    (2, "auto", LLVMPIPE, True, 2),      # an explicit --msaa wins over everything
-    (0, "full", GPU, False, 0),
+@pytest.mark.parametrize("msaa, quality, renderer, live, expected, layers", [
+    (None, "auto", LLVMPIPE, True, 0, False),   # live on a software rasteriser: both off, said once
+    (None, "auto", GPU, True, 4, True),         # live on a GPU: full (the draw is timed against the budget after)
+    (None, "auto", LLVMPIPE, False, 4, True),   # pictures kept as files: full quality
+    (None, "full", LLVMPIPE, True, 4, True),
+    (None, "fast", GPU, False, 0, False),
+    (2, "auto", LLVMPIPE, True, 2, False),      # an explicit --msaa wins for the samples
+    (2, "fast", GPU, True, 2, False),
+    (0, "full", GPU, False, 0, True),
 ])
-def test_choose_msaa(msaa, quality, renderer, live, expected):
-    chosen = choose_msaa(msaa, quality, renderer, live)
-    assert chosen.msaa == expected
-    lowered = msaa is None and quality == "auto" and live and expected == 0
+def test_choose_quality(msaa, quality, renderer, live, expected, layers):
+    chosen = choose_quality(msaa, quality, renderer, live)
+    assert (chosen.msaa, chosen.subtle_layers) == (expected, layers)
+    lowered = quality == "auto" and live and not layers  # what auto lowered is said; what was asked is not
     assert bool(chosen.note) == lowered
     if lowered:
-        assert "--quality full" in chosen.note and "llvmpipe" in chosen.note
+        assert "--quality full" in chosen.note and "llvmpipe" in chosen.note and "eye layers" in chosen.note
+        assert ("MSAA" in chosen.note) == (msaa is None)
 
 
 def test_budget_note_only_when_the_draw_takes_more_than_its_share():
@@ -77,7 +79,8 @@ def test_a_live_run_on_llvmpipe_draws_without_msaa_and_says_so_once(egl_ctx, tmp
     text = run(tmp_path)
     assert text.count("picture quality auto") == 1 and "MSAA off" in text
     assert "picture quality" not in run(tmp_path, "--quality", "full")
-    assert "picture quality" not in run(tmp_path, "--msaa", "4")
+    text = run(tmp_path, "--msaa", "4")
+    assert "MSAA off" not in text and text.count("eye layers") == 1
 
 
 def test_pictures_kept_as_files_are_drawn_with_msaa_and_fast_without(egl_ctx, tmp_path):

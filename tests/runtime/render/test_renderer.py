@@ -305,3 +305,38 @@ def test_ict_eye_layers_are_drawn_as_thin_blended_layers(egl_ctx, ict_character)
         assert len(m)
         v = np.unique(c.triangles[np.isin(c.triangle_material, m)])
         assert set(v.tolist()) <= drawn and opacity[v].max() < 0.7 and opacity[v].max() > 0.1
+
+
+@pytest.mark.data
+def test_ict_without_the_subtle_eye_layers_changes_only_the_eyes_and_keeps_the_lashes(egl_ctx, ict_character):
+    """``subtle_layers=False`` (fast quality) leaves out the lid shadow and the films: the picture changes,
+    only where those layers lie on screen, and the lashes are still drawn."""
+    import dataclasses
+
+    from facepuppet.runtime.model.character import MATERIAL_KINDS
+    from facepuppet.runtime.render.layers import SUBTLE_LAYER_KINDS
+
+    c = ict_character
+    kinds = c.material_params[:, 2].round().astype(int)
+
+    def picture(character, **kw):
+        r = FaceRenderer(egl_ctx, character, 320, 240, path="cpu", framing="face", log=lambda _: None, **kw)
+        r.draw(np.zeros(character.n_shapes, np.float32))
+        image, n, screen = r.read_pixels().astype(int), r.n_indices, r.project(character.vertices)
+        r.close()
+        return image, n, screen
+
+    full, _, screen = picture(c)
+    fast, _, _ = picture(c, subtle_layers=False)
+    changed = np.abs(full - fast).max(axis=2) > 2
+    assert changed.sum() > 20  # the layers were drawn at full quality and left out at fast
+    layer_tris = np.isin(kinds[c.triangle_material], SUBTLE_LAYER_KINDS)
+    xy = screen[np.unique(c.triangles[layer_tris])]
+    ys, xs = np.nonzero(changed)
+    assert xs.min() >= xy[:, 0].min() - 2 and xs.max() <= xy[:, 0].max() + 2
+    assert ys.min() >= xy[:, 1].min() - 2 and ys.max() <= xy[:, 1].max() + 2
+    # the lashes stay: hiding them too changes the fast picture
+    params = c.material_params.copy()
+    params[kinds == MATERIAL_KINDS["lashes"], 2] = MATERIAL_KINDS["hidden"]
+    no_lashes, _, _ = picture(dataclasses.replace(c, material_params=params), subtle_layers=False)
+    assert (np.abs(no_lashes - fast).max(axis=2) > 2).sum() > 20
