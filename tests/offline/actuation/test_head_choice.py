@@ -1,0 +1,77 @@
+"""The automatic head-marker choice on takes where a region holds still and the head turns by a known motion.
+
+A still brow or a still jaw is as rigid as the skull; the choice must recover the head motion that was added
+(within 0.5 deg over the take) or say that it cannot tell, naming the rival sets, which the test checks are
+really rigid and really move differently. Built from both kit takes, with the kit's names and with the names
+taken away (then nothing but the motion can tell the skull).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.model.rigid import kabsch
+
+from conftest import need_shared
+from facepuppet.offline.actuation.stabilise import RIGID_WARN_MM, rigidity_mm, stabilise
+from facepuppet.offline.io.capture import read_capture
+from helpers.still_region_takes import BROWS, JAW, rotation_error_deg, still_region_take
+
+TOLERANCE_DEG = 0.5
+SCENES = {"brows still": (BROWS, 0.0), "jaw still": (JAW, 0.0), "jaw still on its hinge": (JAW, 1.5)}
+
+
+def _frame(markers: np.ndarray, head: tuple[int, ...]) -> np.ndarray:
+    h = markers[:, list(head)]
+    return kabsch(np.broadcast_to(h[0], h.shape), h)[0]
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("named", [True, False], ids=["kit names", "no names"])
+@pytest.mark.parametrize("scene", list(SCENES))
+@pytest.mark.parametrize("take", ["jaw", "cheeks"])
+def test_the_found_head_recovers_the_added_rotation_or_names_the_rivals(take, scene, named):
+    capture = read_capture(need_shared("markers", f"animface_{take}.trc"))
+    still, hinge = SCENES[scene]
+    markers, truth = still_region_take(capture, still, turn_deg=4.0, hinge_deg=hinge)
+    names = list(capture.names) if named else [f"M{i:02d}" for i in range(capture.n_markers)]
+    try:
+        out = stabilise(markers, names, mm_per_unit=10.0)
+    except UsageError as refusal:
+        text = str(refusal)
+        assert "ambiguous" in text and "--head-markers" in text, text
+        rivals = refusal.candidates
+        assert len(rivals) >= 2
+        for head in rivals:
+            assert ", ".join(names[i] for i in head) in text
+            assert rigidity_mm(markers, head, 10.0) <= RIGID_WARN_MM
+        # the claim: they move differently, by more than the tolerance
+        apart = rotation_error_deg(_frame(markers, rivals[0]), _frame(markers, rivals[1])).max()
+        assert apart > TOLERANCE_DEG, apart
+        assert not named, f"the kit's names are evidence enough, yet: {text}"
+        return
+    error = rotation_error_deg(out.rotation, truth).max()
+    assert error <= TOLERANCE_DEG, (f"removed a head rotation up to {error:.2f} deg off the added one, with "
+                                    f"{[names[i] for i in out.head_markers]}")
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("take", ["cheeks", "jaw"])
+def test_given_head_markers_get_their_rigidity_and_the_warning_above_1_mm_from_train_actor(take, tmp_path):
+    import subprocess
+    import sys
+
+    path = need_shared("markers", f"animface_{take}.trc")
+    skull = ["ForeHead_M", "ForeHead_L", "ForeHead_R", "NoseTop"]
+    capture = read_capture(path)
+    expected = rigidity_mm(capture.markers, [capture.names.index(n) for n in skull], 10.0)
+    done = subprocess.run([sys.executable, "-m", "facepuppet", "train-actor", str(path), "-o", str(tmp_path / "a.npz"),
+                           "--k", "4", "--head-markers", *skull], capture_output=True, text=True, timeout=600)
+    text = done.stdout + done.stderr
+    assert done.returncode == 0, text
+    assert f"head markers (given): {', '.join(skull)}; rigidity: distance SD up to {expected:.2f} mm" in text, text
+    # the cheeks take's nose bridge slides with the cheeks (1.6 mm); the jaw take's set holds (0.35 mm)
+    assert ("warning: not rigid" in text) == (expected > RIGID_WARN_MM), text
+    assert (take == "cheeks") == (expected > RIGID_WARN_MM), expected
