@@ -75,3 +75,51 @@ def test_given_head_markers_get_their_rigidity_and_the_warning_above_1_mm_from_t
     # the cheeks take's nose bridge slides with the cheeks (1.6 mm); the jaw take's set holds (0.35 mm)
     assert ("warning: not rigid" in text) == (expected > RIGID_WARN_MM), text
     assert (take == "cheeks") == (expected > RIGID_WARN_MM), expected
+
+
+@pytest.mark.data
+def test_train_actor_refuses_an_ambiguous_take_with_exit_2_and_takes_the_named_skull(tmp_path):
+    """A jaw held still on its hinge, markers without telling names: the command names both rigid sets and asks
+    for --head-markers; given the skull, it trains."""
+    import dataclasses
+    import subprocess
+    import sys
+
+    from facepuppet.offline.io.capture import write_trc
+
+    capture = read_capture(need_shared("markers", "animface_jaw.trc"))
+    markers, _ = still_region_take(capture, JAW, hinge_deg=1.5)
+    anonymous = tuple(f"M{i:02d}" for i in range(capture.n_markers))
+    take = write_trc(tmp_path / "held_jaw.trc", dataclasses.replace(
+        capture, markers=markers.astype(np.float32), names=anonymous, source=""))
+    command = [sys.executable, "-m", "facepuppet", "train-actor", str(take), "-o", str(tmp_path / "a.npz"), "--k", "3"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "error: head markers: ambiguous: " in done.stderr and "--head-markers" in done.stderr
+    assert "Traceback" not in done.stderr and not (tmp_path / "a.npz").exists()
+    skull = [anonymous[capture.names.index(n)] for n in ("ForeHead_M", "ForeHead_L", "ForeHead_R", "NoseTop")]
+    done = subprocess.run(command + ["--head-markers", *skull], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert f"head markers (given): {', '.join(skull)}" in done.stderr
+
+
+def test_names_that_say_skull_and_names_that_only_contain_head():
+    from facepuppet.offline.actuation.head_choice import skull_named
+
+    names = ["ForeHead_M", "NoseTop", "NoseHead", "NoseHead_L", "Head_L", "RFHD", "LBHD", "L_Temple", "Chin",
+             "Leyebrow_M", "HeadTop", "Nose_Bridge", "Forehead2", "Mouth_Lend", "EyebrowHead"]
+    assert [names[i] for i in skull_named(names)] == ["ForeHead_M", "NoseTop", "Head_L", "RFHD", "LBHD", "L_Temple",
+                                                      "HeadTop", "Nose_Bridge", "Forehead2"]
+
+
+@pytest.mark.data
+def test_a_brow_cluster_given_as_the_head_is_reported_as_too_narrow():
+    from facepuppet.offline.actuation.head_choice import SPAN_FRACTION, describe_given
+
+    capture = read_capture(need_shared("markers", "animface_jaw.trc"))
+    brow = [capture.names.index(n) for n in ("Leyebrow_M", "Leyebrow_Inside", "Leyebrow_Outside", "Eyebrow_Center")]
+    skull = [capture.names.index(n) for n in ("ForeHead_M", "ForeHead_L", "ForeHead_R", "NoseTop")]
+    narrow, wide = describe_given(capture.markers, brow, 10.0), describe_given(capture.markers, skull, 10.0)
+    assert narrow.span < SPAN_FRACTION <= wide.span
+    assert "poorly determined" in narrow.describe(capture.names)
+    assert "poorly determined" not in wide.describe(capture.names)
