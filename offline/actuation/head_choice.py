@@ -61,8 +61,9 @@ class HeadChoice:
     span : float, the set's span as a fraction of the layout's (see the module docstring)
     rigid : bool, ``rigidity_mm`` <= :data:`RIGID_WARN_MM`
     how : str, "found" (rigid and spanning, no rival), "named" (found by the markers' names) or "given"
-    rivals : tuple of (markers, degrees): rigid spanning sets disjoint from this one whose head frames turn
-        apart from its by more than :data:`AGREE_DEG` (the names decided between them)
+    rivals : tuple of (markers, degrees): for a set found by name, the rigid spanning set, more rigid than it
+        and sharing fewer than :data:`MIN_SHARED` markers with it, that turns furthest apart from it (by more
+        than :data:`AGREE_DEG`); the names decided between them
     """
 
     markers: tuple[int, ...]
@@ -267,7 +268,8 @@ def choose_head_markers(markers: np.ndarray, n: int = 4, mm_per_unit: float = 1.
         frame = _frames(m, pick)
         rivals = []
         for c in rigid:
-            if len(set(c) & set(pick)) < MIN_SHARED and rigidity(c) <= RIVAL_RATIO * rigidity(pick):
+            # only a set more rigid than the named one is worth a note: names outweigh a less rigid set
+            if len(set(c) & set(pick)) < MIN_SHARED and rigidity(c) <= rigidity(pick):
                 apart = _apart_deg(frame, _frames(m, c))
                 if apart > AGREE_DEG:
                     rivals.append((c, apart))

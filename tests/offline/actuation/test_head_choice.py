@@ -52,6 +52,12 @@ def test_the_found_head_recovers_the_added_rotation_or_names_the_rivals(take, sc
         assert apart > TOLERANCE_DEG, apart
         assert not named, f"the kit's names are evidence enough, yet: {text}"
         return
+    # a note on a more rigid set that turns apart is a claim too
+    for other, apart in out.choice.rivals:
+        assert ", ".join(names[i] for i in other) in out.choice.describe(names)
+        assert rigidity_mm(markers, other, 10.0) <= out.choice.rigidity_mm
+        assert rotation_error_deg(_frame(markers, other), _frame(markers, out.head_markers)).max() == pytest.approx(
+            apart, abs=1e-6) and apart > TOLERANCE_DEG
     error = rotation_error_deg(out.rotation, truth).max()
     assert error <= TOLERANCE_DEG, (f"removed a head rotation up to {error:.2f} deg off the added one, with "
                                     f"{[names[i] for i in out.head_markers]}")
