@@ -4,8 +4,8 @@ Rigidity alone cannot tell the skull: a region that holds still in a take (brows
 closed) is as rigid as bone, and a few markers can keep their mutual distances by chance while they move.
 So a head set must also span the face (forehead to nose bridge: a brow cluster a few centimetres wide
 turns with any noise on it), names that say skull (forehead, temple, nose bridge, head band) are taken as
-evidence, and where two disjoint sets are both rigid and spanning but turn differently, nothing in one take
-says which one is the skull: the choice refuses, names both, and asks for ``--head-markers``.
+evidence, and where two sets that share no frame are both rigid and spanning but turn differently, nothing
+in one take says which one is the skull: the choice refuses, names both, and asks for ``--head-markers``.
 
 Symbols: distance SD matrix ``spread`` (n_markers, n_markers), mm; a set's *span* is the RMS distance of its
 markers from the axis about which it turns least determinably (the square root of the smallest principal
@@ -232,9 +232,10 @@ def choose_head_markers(markers: np.ndarray, n: int = 4, mm_per_unit: float = 1.
        rigid; the whole set, with the rigidity warning, if no subset is).
     2. Otherwise candidates are grown from each marker (:func:`_grown_sets`, ``n`` markers); those spanning
        :data:`SPAN_FRACTION` of the face and rigid to :data:`RIGID_WARN_MM` compete, and the most rigid wins
-       unless a disjoint one turns more than :data:`AGREE_DEG` apart from it over the take: then the choice
-       is ambiguous (:class:`AmbiguousHead`). With no rigid spanning candidate the most rigid spanning one (or
-       the most rigid of all) is returned, and its report warns.
+       unless another spanning one, at most :data:`RIVAL_RATIO` times less rigid and sharing fewer than
+       :data:`MIN_SHARED` markers with it, turns more than :data:`AGREE_DEG` apart from it over the take:
+       then the choice is ambiguous (:class:`AmbiguousHead`). With no rigid spanning candidate the most
+       rigid spanning one (or the most rigid of all) is returned, and its report warns.
 
     Parameters
     ----------
@@ -282,7 +283,7 @@ def choose_head_markers(markers: np.ndarray, n: int = 4, mm_per_unit: float = 1.
         return HeadChoice(pick, rigidity(pick), span[pick], rigidity(pick) <= RIGID_WARN_MM, "found")
     pick = rigid[0]
     frame = _frames(m, pick)
-    rivals = [(c, _apart_deg(frame, _frames(m, c))) for c in rigid[1:]
+    rivals = [(c, _apart_deg(frame, _frames(m, c))) for c in spanning if c != pick
               if len(set(c) & set(pick)) < MIN_SHARED and rigidity(c) <= RIVAL_RATIO * rigidity(pick)]
     rivals = sorted((r for r in rivals if r[1] > AGREE_DEG), key=lambda r: -r[1])
     if rivals:
@@ -290,7 +291,7 @@ def choose_head_markers(markers: np.ndarray, n: int = 4, mm_per_unit: float = 1.
         label = (lambda c: _names(c, names)) if names is not None else (lambda c: ", ".join(map(str, c)))
         raise AmbiguousHead(
             f"head markers: ambiguous: {label(pick)} (distance SD up to {rigidity(pick):.2f} mm) and "
-            f"{label(other)} ({rigidity(other):.2f} mm) are both rigid and span the face, but turn up to "
+            f"{label(other)} ({rigidity(other):.2f} mm) both span the face and hold their shape, but turn up to "
             f"{apart:.2f} deg apart over the take: a region that holds still is as rigid as the skull, and this "
             "take cannot tell which one is; name the skull's markers (forehead, nose bridge, head band) with "
             "--head-markers", (pick, other))

@@ -2,7 +2,7 @@
 
 A still brow or a still jaw is as rigid as the skull; the choice must recover the head motion that was added
 (within 0.5 deg over the take) or say that it cannot tell, naming the rival sets, which the test checks are
-really rigid and really move differently. Built from both kit takes, with the kit's names and with the names
+really rigid, span the face and move differently. Built from both kit takes, with the kit's names and with the names
 taken away (then nothing but the motion can tell the skull).
 """
 
@@ -15,6 +15,7 @@ from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.model.rigid import kabsch
 
 from conftest import need_shared
+from facepuppet.offline.actuation.head_choice import RIVAL_RATIO, SPAN_FRACTION, span_fraction
 from facepuppet.offline.actuation.stabilise import RIGID_WARN_MM, rigidity_mm, stabilise
 from facepuppet.offline.io.capture import read_capture
 from helpers.still_region_takes import BROWS, JAW, rotation_error_deg, still_region_take
@@ -44,9 +45,12 @@ def test_the_found_head_recovers_the_added_rotation_or_names_the_rivals(take, sc
         assert "ambiguous" in text and "--head-markers" in text, text
         rivals = refusal.candidates
         assert len(rivals) >= 2
+        first = rigidity_mm(markers, rivals[0], 10.0)
+        assert first <= RIGID_WARN_MM
         for head in rivals:
             assert ", ".join(names[i] for i in head) in text
-            assert rigidity_mm(markers, head, 10.0) <= RIGID_WARN_MM
+            assert rigidity_mm(markers, head, 10.0) <= RIVAL_RATIO * first
+            assert span_fraction(markers, head) >= SPAN_FRACTION
         # the claim: they move differently, by more than the tolerance
         apart = rotation_error_deg(_frame(markers, rivals[0]), _frame(markers, rivals[1])).max()
         assert apart > TOLERANCE_DEG, apart
