@@ -27,7 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("capture", type=Path, help="marker capture: .trc, .c3d or .csv")
     p.add_argument("-o", "--output", type=Path, required=True, help="actor table to write (.npz)")
     p.add_argument("--k", type=int, default=13, help="number of actuations K (default 13)")
-    p.add_argument("--head-markers", nargs="+", metavar="NAME", help="rigid head markers (default: found)")
+    p.add_argument("--head-markers", nargs="+", metavar="NAME",
+                   help="rigid markers on the skull, e.g. forehead and nose bridge (default: found by name and "
+                        "motion; when the take cannot tell, train-actor stops and names the rival sets)")
     p.add_argument("--neutral-frame", type=int, help="neutral frame, 0-based (default: closest to the median)")
     p.add_argument("--max-gap", type=int, default=10, help="fill occlusion gaps up to this many frames")
     p.add_argument("--pictures", type=Path, metavar="DIR",

@@ -1,7 +1,8 @@
 """Head stabilisation: remove the rigid head motion from a marker take.
 
-Rigid head markers are given by name or found as the set whose mutual
-distances change least over the take. Each frame is aligned to the reference
+Rigid head markers are given by name or found (``head_choice``: rigid, spanning
+the face, named for the skull; refused as ambiguous when the take cannot tell).
+Each frame is aligned to the reference
 frame by Kabsch (least-squares rotation + translation of the head markers),
 giving the markers in head coordinates and a head pose track. A take whose
 head markers already stand still is reported as head-fixed and left as is.
@@ -20,7 +21,17 @@ import numpy as np
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.model.rigid import kabsch
 
-__all__ = ["HeadChoice", "Stabilised", "choose_head_markers", "find_head_markers", "kabsch", "stabilise"]
+from facepuppet.offline.actuation.head_choice import (
+    RIGID_WARN_MM,
+    AmbiguousHead,
+    HeadChoice,
+    choose_head_markers,
+    describe_given,
+    rigidity_mm,
+)
+
+__all__ = ["RIGID_WARN_MM", "AmbiguousHead", "HeadChoice", "Stabilised", "choose_head_markers", "find_head_markers",
+           "kabsch", "rigidity_mm", "stabilise"]
 
 DEFAULT_N_HEAD = 4
 #: millimetres per capture unit
@@ -44,7 +55,8 @@ class Stabilised:
     rms_residual : float, RMS distance of the head markers to the reference after alignment, units
     max_angle_deg : float, largest head rotation relative to the reference frame, degrees
     bad_frames : tuple of int, frames with fewer than 3 visible head markers (pose copied from a neighbour)
-    choice : HeadChoice or None, how the head markers were found (None when they were given)
+    choice : HeadChoice or None, how the head markers were chosen (found, found by name, given) and their
+        rigidity; None only for a :class:`Stabilised` built by hand
     mm_per_unit : float, millimetres per capture unit (the summary reports the residual in mm)
     """
 
@@ -67,111 +79,6 @@ class Stabilised:
                                                     if self.bad_frames else ""))
 
 
-@dataclass(frozen=True)
-class HeadChoice:
-    """The automatic choice of head markers.
-
-    Attributes
-    ----------
-    markers : tuple of int, the chosen marker indices, sorted
-    rigidity_mm : float, the largest SD over the take of a distance between two chosen markers, mm
-    stillness_mm : float, median over the other markers of their RMS motion in the head frame the set gives, mm
-    rigid : bool, ``rigidity_mm`` <= :data:`RIGID_WARN_MM`
-    """
-
-    markers: tuple[int, ...]
-    rigidity_mm: float
-    stillness_mm: float
-    rigid: bool
-
-    def describe(self, names: Sequence[str]) -> str:
-        text = (f"head markers (found): {', '.join(names[i] for i in self.markers)}; rigidity: distance SD "
-                f"up to {self.rigidity_mm:.2f} mm over the take")
-        if not self.rigid:
-            text += (f"; warning: not rigid (over {RIGID_WARN_MM:g} mm): head motion and expression mix; "
-                     "name rigid markers with --head-markers")
-        return text
-
-
-#: a head-marker set whose mutual distances vary more than this (SD, mm) is not rigid enough: warn
-RIGID_WARN_MM = 1.0
-#: stillness of a head frame: this quantile over the other markers of their RMS motion in it (the still ones)
-STILL_QUANTILE = 0.25
-#: head frames this much less still than the stillest still compete on rigidity
-STILL_RATIO = 1.5
-
-
-def choose_head_markers(markers: np.ndarray, n: int = DEFAULT_N_HEAD, mm_per_unit: float = 1.0) -> HeadChoice:
-    """The rigid set of ``n`` head markers: mutual distances that vary least over the take.
-
-    Candidates: from each marker, grow a set greedily by the marker whose
-    distances to the set vary least (its largest SD to a member); a set's
-    rigidity is the largest SD of a distance within it. A cluster that moves
-    as one (a brow lifting) is rigid too, but in its frame every other marker
-    carries its motion; so among the candidates rigid enough
-    (:data:`RIGID_WARN_MM`; or the most rigid when none is), those whose head
-    frame leaves the still part of the face stillest (the
-    :data:`STILL_QUANTILE` quantile of the other markers' RMS motion, within
-    :data:`STILL_RATIO` of the best) remain, and the most rigid of them is the head.
-
-    Parameters
-    ----------
-    markers : ndarray of shape (n_frames, n_markers, 3), float, capture units, NaN = occluded
-    n : int, the set's size (at least 3)
-    mm_per_unit : float, millimetres per capture unit (for the report and the warning)
-    """
-    m = np.asarray(markers, dtype=np.float64)
-    n_markers = m.shape[1]
-    if n_markers < 3 or n < 3:
-        raise ValueError(f"head markers: need at least 3 markers and n >= 3, got {n_markers} markers, n={n}")
-    n = min(n, n_markers)
-    dist = np.linalg.norm(m[:, :, None, :] - m[:, None, :, :], axis=-1)
-    spread = np.nanstd(dist, axis=0) * mm_per_unit
-    spread[np.isnan(spread)] = np.inf
-    np.fill_diagonal(spread, 0.0)
-    candidates = set()
-    for seed in range(n_markers):
-        chosen = [seed]
-        while len(chosen) < n:
-            score = spread[:, chosen].max(axis=1)
-            score[chosen] = np.inf
-            chosen.append(int(np.argmin(score)))
-        candidates.add(tuple(sorted(chosen)))
-    rigidity = {c: float(spread[np.ix_(c, c)].max()) for c in candidates}
-    best = min(rigidity.values())
-    close = sorted(c for c in candidates if rigidity[c] <= max(RIGID_WARN_MM, best))
-    still = {c: _stillness(m, c) * mm_per_unit for c in close}
-    stillest = min(still.values())
-    pick = min((c for c in close if still[c] <= STILL_RATIO * stillest), key=lambda c: (rigidity[c], still[c]))
-    return HeadChoice(pick, rigidity[pick], still[pick], rigidity[pick] <= RIGID_WARN_MM)
-
-
-def _stillness(m: np.ndarray, head: tuple[int, ...]) -> float:
-    """Median over the markers outside ``head`` of their RMS motion in the head frame ``head`` gives, units."""
-    h = m[:, list(head)]
-    full = ~np.isnan(h).any(axis=(1, 2))
-    if full.sum() < 2:
-        return np.inf
-    frames, hf = m[full], h[full]
-    ref = hf[0]
-    rot, trans = kabsch(np.broadcast_to(ref, hf.shape), hf)
-    aligned = frames @ np.swapaxes(rot, 1, 2) + trans[:, None, :]
-    others = np.setdiff1d(np.arange(m.shape[1]), head)
-    if not len(others):
-        return 0.0
-    a = aligned[:, others]
-    motion = np.sqrt(np.nanmean(np.sum((a - np.nanmean(a, axis=0)) ** 2, axis=2), axis=0))
-    return float(np.nanquantile(motion, STILL_QUANTILE))
-
-
-def rigidity_mm(markers: np.ndarray, head: Sequence[int], mm_per_unit: float = 1.0) -> float:
-    """The largest SD over the take of a distance between two of the ``head`` markers, mm (0 for one marker)."""
-    h = np.asarray(markers, dtype=np.float64)[:, list(head)]
-    dist = np.linalg.norm(h[:, :, None, :] - h[:, None, :, :], axis=-1)
-    sd = np.nanstd(dist, axis=0)
-    return float(np.nanmax(sd) * mm_per_unit) if np.isfinite(sd).any() else float("nan")
-
-
 def find_head_markers(markers: np.ndarray, n: int = DEFAULT_N_HEAD) -> tuple[int, ...]:
     """The ``n`` markers of :func:`choose_head_markers` (indices, sorted)."""
     return choose_head_markers(markers, n).markers
@@ -186,16 +93,17 @@ def stabilise(markers: np.ndarray, names: Sequence[str], head_markers: Sequence[
     ----------
     markers : ndarray of shape (n_frames, n_markers, 3), float, capture units, NaN = occluded
     names : sequence of n_markers str
-    head_markers : sequence of str (names) or int (indices), or None to find them
+    head_markers : sequence of str (names) or int (indices), or None to find them (by the names and the
+        motion: :func:`~facepuppet.offline.actuation.head_choice.choose_head_markers`, which refuses with
+        :class:`~facepuppet.offline.actuation.head_choice.AmbiguousHead` when the take cannot tell)
     reference_frame : int, the frame whose head pose defines head coordinates
     n_head : int, how many head markers to find when none are given
-    mm_per_unit : float, millimetres per capture unit (the found set's rigidity is reported in mm)
+    mm_per_unit : float, millimetres per capture unit (the set's rigidity is reported in mm)
     """
     m = np.asarray(markers, dtype=np.float64)
     names = list(names)
-    choice = None
     if head_markers is None:
-        choice = choose_head_markers(m, n_head, mm_per_unit)
+        choice = choose_head_markers(m, n_head, mm_per_unit, names)
         idx = choice.markers
     else:
         idx = []
@@ -209,6 +117,7 @@ def stabilise(markers: np.ndarray, names: Sequence[str], head_markers: Sequence[
         idx = tuple(sorted(set(idx)))
         if len(idx) < 3:
             raise UsageError(f"head markers: need at least 3 distinct markers, got {len(idx)}")
+        choice = describe_given(m, idx, mm_per_unit)
     if not 0 <= reference_frame < len(m):
         raise ValueError(f"reference_frame: expected 0..{len(m) - 1}, got {reference_frame}")
     head = m[:, idx]

@@ -20,7 +20,7 @@ from facepuppet.runtime.files.tables import hash_inputs
 
 from facepuppet.offline.actuation.basis import ActuationModel, k_report, neutral_frame
 from facepuppet.offline.actuation.cubic_fit import choose_ridge_ab, fit_polynomial, holdout_errors
-from facepuppet.offline.actuation.stabilise import MM_PER_UNIT, rigidity_mm, stabilise
+from facepuppet.offline.actuation.stabilise import MM_PER_UNIT, RIGID_WARN_MM, stabilise
 from facepuppet.offline.io.capture import Capture
 
 Progress = Callable[[str, float, str], None]
@@ -85,8 +85,7 @@ class ActorModel:
         reference = self.neutral_frame if self.neutral_frame is not None else 0
         stab = stabilise(capture.markers, capture.names, self.head_markers, reference_frame=reference,
                          mm_per_unit=MM_PER_UNIT[capture.units])
-        if stab.choice is not None:
-            say("stabilise", 0.5, stab.choice.describe(capture.names))
+        say("stabilise", 0.5, stab.choice.describe(capture.names))
         say("stabilise", 1.0, stab.summary())
         markers = stab.markers.astype(np.float64)
         neutral = self.neutral_frame if self.neutral_frame is not None else neutral_frame(markers)
@@ -125,7 +124,7 @@ class ActorModel:
                     "random_state": self.random_state, "neutral_frame": int(neutral), "ridge_ab": ridge_ab,
                     "head_markers": [capture.names[i] for i in stab.head_markers],
                     "head_fixed": bool(stab.head_fixed), "source": capture.source, "rate": capture.rate,
-                    "head_markers_found": stab.choice is not None}
+                    "head_markers_found": stab.choice.how != "given", "head_markers_how": stab.choice.how}
         train_rms = float(np.sqrt(np.mean(np.sum(
             ((np.concatenate([s ** 3, s ** 2, s], 1) @ cubic.reshape(-1, y.shape[1])) - y).reshape(
                 len(y), -1, 3) ** 2, axis=2))))
@@ -135,8 +134,7 @@ class ActorModel:
             "preprocess_s": t1 - t0, "ica_s": t2 - t1, "fit_s": t3 - t2, "train_s": t3 - t0,
             "train_rms": train_rms, "holdout": errors, "k_report": k_rows, "ridge_ab_table": ridge_table,
             "head_rms_residual": stab.rms_residual, "head_max_angle_deg": stab.max_angle_deg,
-            "head_rigidity_mm": (stab.choice.rigidity_mm if stab.choice is not None
-                                 else rigidity_mm(capture.markers, stab.head_markers, MM_PER_UNIT[capture.units])),
+            "head_rigidity_mm": stab.choice.rigidity_mm, "head_span": stab.choice.span,
             "gaps_left": len(capture.gaps), "samples_filled": int(capture.filled),
             # the actuations' real range, for transfer training pairs (offline/actuation/transfer.py)
             "s_quantiles": {"levels": list(S_QUANTILE_LEVELS),
@@ -169,7 +167,8 @@ class ActorModel:
             f"  frames: {m['n_training_frames']} of {m['n_frames']} used (complete); neutral frame "
             f"{a.metadata['settings']['neutral_frame']}; "
             f"head markers {', '.join(a.metadata['settings']['head_markers'])} "
-            f"(rigidity: distance SD up to {m['head_rigidity_mm']:.2f} mm)",
+            f"(rigidity: distance SD up to {m['head_rigidity_mm']:.2f} mm"
+            + (f", over {RIGID_WARN_MM:g} mm: not rigid" if m["head_rigidity_mm"] > RIGID_WARN_MM else "") + ")",
             f"  head: {self.stabilised_.summary()}",
             f"  time: preprocess {m['preprocess_s']:.2f} s, ICA {m['ica_s']:.2f} s, cubic fit {m['fit_s']:.2f} s",
             f"  held-out RMS marker error: linear {h['linear_rms']:.4f}, cubic {h['cubic_rms']:.4f}, cubic with "
