@@ -12,7 +12,7 @@ from PIL import Image, ImageDraw
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.model.character import Character
-from facepuppet.runtime.render.images import contact_sheet, save_png
+from facepuppet.runtime.render.images import contact_sheet, point_box, save_png
 
 LABEL_WEIGHT = 0.1  # a weight from this up is listed on its cell of the face actuation sheet
 
@@ -108,7 +108,7 @@ def face_actuation_images(pair: ActorPair, character: Character, ctx: moderngl.C
     zoom = 2                                      # render larger, then crop to the marked region of the face
     renderer = FaceRenderer(ctx, character, size[0] * zoom, size[1] * zoom, path=path, framing="face",
                             log=lambda line: None)
-    box = _marker_box(renderer.project(character.vertices[pair.marker_vertices]), renderer.width,
+    box = point_box(renderer.project(character.vertices[pair.marker_vertices]), renderer.width,
                       renderer.height, size[0] / size[1])
     try:
         out = []
@@ -139,16 +139,6 @@ def _list_weights(cell: Image.Image, weights: list[tuple[str, float]], line: int
         left, top, right, bottom = draw.textbbox((3, 2 + n * line), text)
         draw.rectangle((left - 2, top - 1, right + 2, bottom + 1), fill=(20, 20, 24))
         draw.text((3, 2 + n * line), text, fill=(235, 235, 235))
-
-
-def _marker_box(pixels: np.ndarray, width: int, height: int, aspect: float, margin: float = 0.25):
-    """(left, top, right, bottom) pixels: the markers' bounding box grown by ``margin``, of the given aspect."""
-    lo, hi = pixels.min(axis=0), pixels.max(axis=0)
-    centre, half = (lo + hi) / 2, (hi - lo) / 2 * (1 + margin)
-    half = np.maximum(half, [half[1] * aspect, half[0] / aspect])
-    half = np.minimum(half, [width / 2, height / 2])
-    centre = np.clip(centre, half, [width - half[0], height - half[1]])
-    return tuple(int(round(v)) for v in (*(centre - half), *(centre + half)))
 
 
 def face_actuation_sheet(pair: ActorPair, character: Character, path: str | os.PathLike, columns: int = 5,
