@@ -12,7 +12,9 @@ from PIL import Image, ImageDraw
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.model.character import Character
-from facepuppet.runtime.render.images import contact_sheet, save_png
+from facepuppet.runtime.render.images import contact_sheet, point_box, save_png
+
+LABEL_WEIGHT = 0.1  # a weight from this up is listed on its cell of the face actuation sheet
 
 if TYPE_CHECKING:
     import moderngl
@@ -96,7 +98,9 @@ def face_actuation_images(pair: ActorPair, character: Character, ctx: moderngl.C
     size : (width, height), pixels of each cell
 
     Returns [(label, ndarray of shape (height, width, 3), uint8)], the neutral first; each label names
-    the actuation and its two largest weights.
+    the actuation and how many weights reach ``LABEL_WEIGHT``, and the cell lists them all, largest first,
+    with their values (as many as fit, then how many more and the largest of those left out): what a
+    cell shows is the sum of them all, so naming two would call an open mouth "mouthFrown".
     """
     from facepuppet.runtime.render.renderer import FaceRenderer  # GL: the renderer imports moderngl
 
@@ -104,7 +108,7 @@ def face_actuation_images(pair: ActorPair, character: Character, ctx: moderngl.C
     zoom = 2                                      # render larger, then crop to the marked region of the face
     renderer = FaceRenderer(ctx, character, size[0] * zoom, size[1] * zoom, path=path, framing="face",
                             log=lambda line: None)
-    box = _marker_box(renderer.project(character.vertices[pair.marker_vertices]), renderer.width,
+    box = point_box(renderer.project(character.vertices[pair.marker_vertices]), renderer.width,
                       renderer.height, size[0] / size[1])
     try:
         out = []
@@ -113,23 +117,28 @@ def face_actuation_images(pair: ActorPair, character: Character, ctx: moderngl.C
             w = pair.weights(s)
             renderer.draw(w)
             renderer.finish()
-            top = [i for i in np.argsort(-w)[:2] if w[i] > 0.05]
-            names = ", ".join(f"{character.shape_names[i]} {w[i]:.2f}" for i in top) or "no weight > 0.05"
+            shown = [i for i in np.argsort(-w, kind="stable") if w[i] >= LABEL_WEIGHT]
             cell = Image.fromarray(renderer.read_pixels()).crop(box).resize(size, Image.LANCZOS)
-            out.append(("neutral" if j < 0 else f"s{j + 1:02d}={strength:g}: {names}", np.asarray(cell)))
+            _list_weights(cell, [(character.shape_names[i], float(w[i])) for i in shown])
+            count = f"{len(shown)} weight{'s' if len(shown) != 1 else ''} >= {LABEL_WEIGHT:g}"
+            out.append((f"neutral: {count}" if j < 0 else f"s{j + 1:02d}={strength:g}: {count}", np.asarray(cell)))
     finally:
         renderer.close()
     return out
 
 
-def _marker_box(pixels: np.ndarray, width: int, height: int, aspect: float, margin: float = 0.25):
-    """(left, top, right, bottom) pixels: the markers' bounding box grown by ``margin``, of the given aspect."""
-    lo, hi = pixels.min(axis=0), pixels.max(axis=0)
-    centre, half = (lo + hi) / 2, (hi - lo) / 2 * (1 + margin)
-    half = np.maximum(half, [half[1] * aspect, half[0] / aspect])
-    half = np.minimum(half, [width / 2, height / 2])
-    centre = np.clip(centre, half, [width - half[0], height - half[1]])
-    return tuple(int(round(v)) for v in (*(centre - half), *(centre + half)))
+def _list_weights(cell: Image.Image, weights: list[tuple[str, float]], line: int = 11) -> None:
+    """Write ``(name, weight)`` lines in the cell's top-left corner on a dark band, as many as fit."""
+    draw = ImageDraw.Draw(cell)
+    room = max(1, (cell.height - 4) // line)
+    lines = [f"{name} {value:.2f}" for name, value in weights]
+    if len(lines) > room:
+        rest = weights[room - 1:]
+        lines = lines[:room - 1] + [f"+{len(rest)} more, each <= {rest[0][1]:.2f}"]
+    for n, text in enumerate(lines):
+        left, top, right, bottom = draw.textbbox((3, 2 + n * line), text)
+        draw.rectangle((left - 2, top - 1, right + 2, bottom + 1), fill=(20, 20, 24))
+        draw.text((3, 2 + n * line), text, fill=(235, 235, 235))
 
 
 def face_actuation_sheet(pair: ActorPair, character: Character, path: str | os.PathLike, columns: int = 5,

@@ -26,6 +26,7 @@ from facepuppet.offline.io.capture import Capture
 Progress = Callable[[str, float, str], None]
 BOUND_MARGIN = 0.25  # solver bounds: the training range widened by this fraction of it
 S_QUANTILE_LEVELS = (0.0, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.99, 1.0)  # stored per actuation
+S_SAMPLES = 400  # training frames whose s the actor table keeps (evenly spaced) for the transfer's pairs
 
 
 class ActorModel:
@@ -146,6 +147,7 @@ class ActorModel:
             linear=linear.reshape(self.k, capture.n_markers, 3),
             unmixing=act.unmixing_, class_axes=act.axes_, class_marker=act.axis_marker_,
             head_markers=np.asarray(stab.head_markers),
+            s_samples=s[np.unique(np.linspace(0, len(s) - 1, min(S_SAMPLES, len(s))).astype(int))],
             s_lower=np.minimum(lo - margin, 0.0), s_upper=np.maximum(hi + margin, 0.0),
             metadata={"settings": settings, "metrics": self.metrics_,
                       "input_hash": hash_inputs(capture.markers)},

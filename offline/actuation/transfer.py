@@ -22,10 +22,18 @@ Steps:
    pupil shapes by name (:data:`UNOBSERVABLE`) and shapes whose moving skin
    region (|delta| >= half its largest) has no marker vertex within
    ``radius`` (a fraction of the character's FAPU). ``include`` brings any back.
-3. Training pairs over the actuations' real range: s drawn from each
-   actuation's quantiles over the capture (``metrics["s_quantiles"]`` of the
-   actor table, negative values included) -- each actuation alone across its
-   range, sparse mixes, and dense mixes -- markers by eq 2.
+3. Training pairs where the solve lands: the actuations of frames of the
+   training take (the actor's ``s_samples``) and the rest pose s = 0, markers
+   by eq 2. The take's frames matter because an actor's actuations can be
+   nearly collinear (two jaw actuations at cosine 0.96 on the AnimFace jaw
+   take) and then cancel each other near rest; weights are >= 0 and cannot
+   cancel, so pairs of each actuation alone teach the additive cubic a large
+   face for a near-rest frame (the jaw take's first frame: 2.65 cm of mouth
+   opening on ICT where the actor's lips moved 0.68 cm, closing). An actor
+   table without samples gets synthetic pairs: s drawn from each actuation's
+   quantiles over the capture (``metrics["s_quantiles"]``, negative values
+   included) -- each actuation alone across its range, sparse mixes, and
+   dense mixes.
 4. Each pair's displacements in FAPU (inner-eye-corner distance on each face:
    markers ``Leye_Inside``/``Reye_Inside``, landmarks 39/42; else the marker
    cloud's RMS radius on both), rotated into the character's axes, expressed
@@ -295,9 +303,26 @@ def s_distribution(actor: Actor) -> tuple[np.ndarray, np.ndarray, str]:
     return np.array([0.0, 1.0]), np.vstack([lo, hi]), "bounds (table has no s_quantiles)"
 
 
+def take_pairs(actor: Actor) -> tuple[np.ndarray, np.ndarray] | None:
+    """Parameter-shape pairs at the actor's own take: s = 0 and the table's ``s_samples``; None without them.
+
+    Returns s (n, K) float64 and disp (n, n_markers, 3) float64, x(s) - neutral by eq 2.
+    """
+    if actor.s_samples is None or len(actor.s_samples) == 0:
+        return None
+    s = np.vstack([np.zeros(actor.n_actuations), actor.s_samples.astype(np.float64)])
+    return s, _displacements(actor, s)
+
+
+def _displacements(actor: Actor, s: np.ndarray) -> np.ndarray:
+    k = actor.n_actuations
+    coef = actor.cubic.astype(np.float64).reshape(3 * k, -1)
+    return (np.concatenate([s ** 3, s ** 2, s], 1) @ coef).reshape(len(s), actor.n_markers, 3)  # eq. 2
+
+
 def parameter_shape_pairs(actor: Actor, n_sparse: int = 400, n_dense: int = 200, levels: int = 12,
                           seed: int = 0, low: float = 0.01, high: float = 0.99) -> tuple[np.ndarray, np.ndarray]:
-    """Parameter-shape pairs from the actor's own model over the actuations' real range.
+    """Synthetic parameter-shape pairs from the actor's own model over the actuations' real range.
 
     Each actuation alone at ``levels`` values from its ``low`` to its ``high`` quantile (negative
     side included when the capture had one), ``n_sparse`` sparse mixes (each actuation active with
@@ -323,9 +348,7 @@ def parameter_shape_pairs(actor: Actor, n_sparse: int = 400, n_dense: int = 200,
     sparse = draw(rng.uniform(size=(n_sparse, k))) * (rng.uniform(size=(n_sparse, k)) < 3.0 / k)
     dense = draw(rng.uniform(size=(n_dense, k)))
     s = np.vstack([np.zeros(k), np.asarray(alone), sparse, dense])
-    coef = actor.cubic.astype(np.float64).reshape(3 * k, -1)
-    disp = (np.concatenate([s ** 3, s ** 2, s], 1) @ coef).reshape(len(s), actor.n_markers, 3)  # eq. 2
-    return s, disp
+    return s, _displacements(actor, s)
 
 
 def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = None, disp: np.ndarray | None = None,
@@ -339,7 +362,8 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     ----------
     actor : Actor
     character : Character
-    s : ndarray of shape (n_frames, K), float, training actuations; None: :func:`parameter_shape_pairs`
+    s : ndarray of shape (n_frames, K), float, training actuations; None: :func:`take_pairs`, else (an actor
+        table without ``s_samples``) :func:`parameter_shape_pairs`
     disp : ndarray of shape (n_frames, n_markers, 3), float, actor units, head-coordinate displacements
     override : {marker index: vertex index}
     landmarks : ndarray of shape (68,), int, the character's Multi-PIE landmark vertices, or None
@@ -354,8 +378,12 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     """
     source = "given"
     if s is None or disp is None:
-        s, disp = parameter_shape_pairs(actor)
-        source = s_distribution(actor)[2]
+        pairs = take_pairs(actor)
+        if pairs is not None:
+            (s, disp), source = pairs, "the take's frames"
+        else:
+            s, disp = parameter_shape_pairs(actor)
+            source = s_distribution(actor)[2]
     s, disp = np.asarray(s, np.float64), np.asarray(disp, np.float64)
     align = align_markers(actor, character, override, landmarks, snap_landmarks=snap_landmarks)
     sim, vertices = align.similarity, align.vertices

@@ -47,6 +47,7 @@ ACTOR_SCHEMA = register_schema(TableSchema(
         "head_markers": Section("int32", ("n_head",), "rigid head marker indices"),
         "s_lower": Section("float32", ("n_actuations",), "solver lower bounds"),
         "s_upper": Section("float32", ("n_actuations",), "solver upper bounds"),
+        "s_samples": Section("float32", ("n_samples", "n_actuations"), "s of frames of the training take", True),
     },
     channels=("markers", "actuations"),
     channel_dims={"markers": "n_markers", "actuations": "n_actuations"},
@@ -69,6 +70,9 @@ class Actor:
     head_markers : ndarray of shape (n_head,), int32
     s_lower, s_upper : ndarray of shape (K,), float32
     linear : ndarray of shape (K, n_markers, 3), float32, or None
+    s_samples : ndarray of shape (n_samples, K), float32, or None: the actuations of frames of the training
+        take, evenly spaced. They are the poses the solve really lands in, nearly collinear actuations
+        cancelling each other near rest included, so the transfer fits the pair table on them
     metadata : dict with "settings", "metrics", "input_hash"
     """
 
@@ -83,6 +87,7 @@ class Actor:
     s_lower: np.ndarray
     s_upper: np.ndarray
     linear: np.ndarray | None = None
+    s_samples: np.ndarray | None = None
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -139,6 +139,11 @@ class MarkerSolver:
         return _Point(phi=phi, s3=phi[:k], s2=phi[k:2 * k], s=phi[2 * k:], s21=phi[k:].reshape(2, k),
                       gphi=np.empty(3 * k))
 
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper), each (K,) float64: the bounds s is projected onto."""
+        return self._lo.copy(), self._hi.copy()
+
     def reset(self) -> None:
         """Forget the warm start (s = neutral)."""
         self.s = np.zeros(self.actor.n_actuations)

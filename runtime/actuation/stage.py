@@ -29,6 +29,7 @@ import numpy as np
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
+from facepuppet.runtime.actuation.saturation import SaturationCount
 from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.frames import Frame
@@ -60,6 +61,7 @@ class ActorRetarget:
     counters : dict, ``frames``, ``no_markers``, ``no_head_pose``, ``layout_refused``; ``out_of_range``: frames
         with a marker coordinate beyond ``MAX_COORDINATE`` or infinite (those markers are treated as occluded);
         ``no_solution``: frames whose head fit or solve came out non-finite (skipped, previous weights kept)
+    saturation : SaturationCount, the solved frames whose weights sit at 1.0 or whose s sits at a bound, per name
     """
 
     name = "solve"
@@ -91,6 +93,9 @@ class ActorRetarget:
         linear = np.asarray(pair.similarity, np.float64)[:3, :3]
         scale = abs(np.linalg.det(linear)) ** (1.0 / 3.0)
         self._axes = linear / scale if scale > 0 else np.eye(3)
+        lower, upper = self.solver.bounds          # and the pair's fitted range, to which weights() clamps s
+        self.saturation = SaturationCount(self.target_names, actor.n_actuations, np.maximum(lower, pair.s_lower),
+                                          np.minimum(upper, pair.s_upper))
 
     def needs(self) -> tuple[int, int]:
         """(head markers, other markers) a layout must share with the actor for the solve."""
@@ -225,6 +230,7 @@ class ActorRetarget:
             self.counters["no_solution"] += 1
             return None
         self.s = s
+        self.saturation.add(s, weights)
         return weights
 
 

@@ -25,7 +25,7 @@ from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.files.outputs import check_path
 from facepuppet.runtime.live.video_out import add_video_arguments
 from facepuppet.runtime.render.gl_context import display_available
-from facepuppet.runtime.render.images import contact_sheet, save_png
+from facepuppet.runtime.render.images import contact_sheet, point_box, save_png
 from facepuppet.runtime.session.assemble import open_session
 from facepuppet.runtime.session.feeds import FramesFeed
 from facepuppet.runtime.session.options import OutputOptions, PacingOptions, PictureOptions
@@ -34,19 +34,30 @@ if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
 
 SHEET_CELLS = 12
+SHEET_ASPECT = 0.6  # width / height of a contact-sheet cell: a head with its neck is taller than wide
 DEMO_OUT = Path("demo-out")
 
 
 class SheetSink:
-    """Keep ``n`` evenly spaced frames of a run of ``n_ticks`` for a contact sheet (a tick observer)."""
+    """Keep ``n`` evenly spaced frames of a run of ``n_ticks`` for a contact sheet (a tick observer), each
+    cropped to the head: the frame is wide and the head tall, so a whole frame as a cell shows the head in
+    a quarter of it. The crop is the head's box in the first kept frame (grown by ``margin`` for the head's
+    turns and the jaw), the same for every cell so that they compare."""
 
-    def __init__(self, n_ticks: int, n: int = SHEET_CELLS) -> None:
+    def __init__(self, n_ticks: int, n: int = SHEET_CELLS, aspect: float = SHEET_ASPECT,
+                 margin: float = 0.1) -> None:
         self.picks = set(np.linspace(0, max(n_ticks - 1, 0), n).round().astype(int).tolist())
         self.cells: list[tuple[str, np.ndarray]] = []
+        self.aspect, self.margin = aspect, margin
+        self.box: tuple[int, int, int, int] | None = None
 
     def __call__(self, info: TickInfo) -> None:
         if info.k in self.picks:
-            self.cells.append((f"t = {info.t:5.2f} s", info.renderer.read_pixels().copy()))
+            r = info.renderer
+            if self.box is None:
+                self.box = point_box(r.project(r.character.vertices), r.width, r.height, self.aspect, self.margin)
+            left, top, right, bottom = self.box
+            self.cells.append((f"t = {info.t:5.2f} s", r.read_pixels()[top:bottom, left:right].copy()))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -102,7 +113,7 @@ def run_demo(args: argparse.Namespace) -> int:
     if out is not None and sheet.cells:
         out.mkdir(parents=True, exist_ok=True)
         cell_w = 320
-        cells = [(label, _shrink(rgb, cell_w)) for label, rgb in sheet.cells]
+        cells = [(label, _to_width(rgb, cell_w)) for label, rgb in sheet.cells]
         path = save_png(out / "contact_sheet.png", contact_sheet(cells, columns=4))
         print(f"demo: contact sheet of {len(cells)} moments: {path}")
     loop, c = result.loop, result.loop.counters
@@ -118,10 +129,11 @@ def run_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _shrink(rgb: np.ndarray, width: int) -> np.ndarray:
-    """Downscale an (h, w, 3) or RGBA (h, w, 4) uint8 image to ``width`` pixels wide (Pillow, high quality)."""
+def _to_width(rgb: np.ndarray, width: int) -> np.ndarray:
+    """An (h, w, 3) or RGBA (h, w, 4) uint8 image scaled to ``width`` pixels wide (Pillow, high quality): every
+    cell of the sheet as wide, whatever the window's size and the head's crop."""
     h, w = rgb.shape[:2]
-    if w <= width:
+    if w == width:
         return rgb
-    img = Image.fromarray(rgb).resize((width, round(h * width / w)), Image.LANCZOS)
+    img = Image.fromarray(rgb).resize((width, max(1, round(h * width / w))), Image.LANCZOS)
     return np.asarray(img)

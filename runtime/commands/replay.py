@@ -23,6 +23,8 @@ from facepuppet.runtime.session.input_options import ReplayInputOptions
 from facepuppet.runtime.session.options import OutputOptions, PacingOptions, PictureOptions, StageOptions
 from facepuppet.runtime.session.recording_feed import RecordingFeed
 
+SATURATION_WARN = 0.1  # a channel at 1.0 in this fraction of the solved frames is warned about without --stats
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -91,9 +93,15 @@ def run_replay(args: argparse.Namespace) -> int:
     if feed.missing_line():
         print(feed.missing_line())
     print(loop.timer.table())
+    saturation = None if feed.solve is None else feed.solve.saturation
+    if saturation is not None and (plan.outputs.stats or saturation.fractions(SATURATION_WARN)["channels_at_1"]):
+        # always said when a channel sits at 1.0 for a tenth of the take: it looks like expression otherwise
+        print(("replay: " if plan.outputs.stats else "replay: warning: ") + saturation.line())
     if plan.outputs.stats:
-        print(dumps_strict({"n_ticks": loop.n_ticks, "path": result.path, "counters": c,
-                            "timings_ms": loop.timings}, sort_keys=True))
+        summary = {"n_ticks": loop.n_ticks, "path": result.path, "counters": c, "timings_ms": loop.timings}
+        if saturation is not None:
+            summary["saturation"] = saturation.fractions()
+        print(dumps_strict(summary, sort_keys=True))
     report_outputs("replay", plan.outputs, result)
     if feed.events_line():
         print(feed.events_line())

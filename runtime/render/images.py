@@ -27,6 +27,23 @@ def check_rgb(image: np.ndarray, name: str = "image", alpha: bool = False) -> np
     return a
 
 
+def point_box(pixels: np.ndarray, width: int, height: int, aspect: float,
+              margin: float = 0.25) -> tuple[int, int, int, int]:
+    """(left, top, right, bottom) pixels: the points' bounding box grown by ``margin`` and widened (or made
+    taller) to ``aspect`` (width / height), kept inside the ``width`` x ``height`` image.
+
+    A contact sheet's cells cropped to it show the part of the picture that matters (a face, its markers)
+    at the cell's size instead of a small head in a wide frame.
+    """
+    pixels = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    lo, hi = pixels.min(axis=0), pixels.max(axis=0)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2 * (1 + margin)
+    half = np.maximum(half, [half[1] * aspect, half[0] / aspect])
+    half = np.minimum(half, [width / 2, height / 2])
+    centre = np.clip(centre, half, [width - half[0], height - half[1]])
+    return tuple(int(round(v)) for v in (*(centre - half), *(centre + half)))
+
+
 def save_png(path: str | os.PathLike, rgb: np.ndarray) -> Path:
     """Write ``rgb`` (ndarray of shape (h, w, 3) RGB or (h, w, 4) RGBA, uint8, top row first) as a PNG;
     returns the path."""

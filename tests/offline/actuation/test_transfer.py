@@ -219,3 +219,16 @@ def test_trained_actor_stores_its_actuation_quantiles():
     np.testing.assert_allclose(values, np.quantile(model.s_, levels, axis=0), atol=1e-5)
     s, _ = parameter_shape_pairs(model.actor_, n_sparse=20, n_dense=20)
     assert s.min() >= values[0].min() - 1e-9 and s.max() <= values[-1].max() + 1e-9
+
+
+def test_face_actuation_cells_count_every_weight_they_show(egl_ctx):
+    from facepuppet.offline.actuation.pictures import LABEL_WEIGHT, face_actuation_images
+
+    character = grid_face()
+    actor, _ = actor_on(character)
+    pair = retarget_actor(actor, character)
+    images = face_actuation_images(pair, character, egl_ctx, size=(160, 120))
+    assert images[0][0] == "neutral: 0 weights >= 0.1"
+    for k, (label, _) in enumerate(images[1:]):
+        n = int(np.sum(pair.weights(np.eye(pair.cubic.shape[1])[k]) >= LABEL_WEIGHT))
+        assert label.endswith(f": {n} weight{'s' if n != 1 else ''} >= {LABEL_WEIGHT:g}")
