@@ -36,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     PictureOptions.add_arguments(p, headless_help="render offscreen through EGL, as fast as possible")
     PacingOptions.add_arguments(
         p, fps=None, fps_help="ticks per second of recorded time (default: the live run's for a live recording, "
-                              "else 60)",
+                              "else the take's own frame rate, read from its times, so each frame is drawn once; "
+                              "60 when its times have no steady rate)",
         duration=None, duration_help="seconds to play (default: the whole recording)")
     OutputOptions.add_arguments(p, stats_help="also print the counters and timings as one JSON line",
                                 sound_help="with --video, the sound track (a recording keeps audio levels, not "

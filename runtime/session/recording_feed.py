@@ -3,7 +3,9 @@
 Headless, a replay ticks as fast as the machine draws (:class:`~facepuppet.runtime.live.loop.RecordedClock`);
 in a window, or when something is sent (VMC, Live Link Face, tracking events: a receiver expects real time),
 it is paced to the wall clock. Either way tick ``k`` shows the recording at ``k / fps`` seconds, so two
-replays give the same weights and the same images.
+replays give the same weights and the same images. Without ``--fps`` a take ticks at its own frame rate
+(:mod:`~facepuppet.runtime.recording.take_rate`), window or not, so each frame is drawn once and the same
+command gives the same pictures on a screen and headless.
 
 A live recording (``run --record``) with TICK records replays tick for tick
 (:class:`~facepuppet.runtime.recording.ticked_source.TickedSource`): the frames each live tick took, at its
@@ -35,6 +37,7 @@ from facepuppet.runtime.live.mix import MixStage, VoiceMixSource, check_mix_sour
 from facepuppet.runtime.live.stages import RecordedLevels, make_input_adapter
 from facepuppet.runtime.recording.readers import find_reader
 from facepuppet.runtime.recording.replay_source import ReplaySource, check_time_order, open_recording
+from facepuppet.runtime.recording.take_rate import take_rate
 from facepuppet.runtime.recording.ticked_source import TickedSource, decode_live_recording, read_live_session
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
 
@@ -49,6 +52,9 @@ if TYPE_CHECKING:
     from facepuppet.runtime.render.gl_context import GLTarget
     from facepuppet.runtime.session.input_options import ReplayInputOptions
     from facepuppet.runtime.session.options import PacingOptions, StageOptions
+
+
+FALLBACK_FPS = 60.0  # ticks per second of a replay whose take has no steady rate and no --fps
 
 
 class WallClockFrom(WallClock):
@@ -245,15 +251,29 @@ class RecordingFeed:
                 log(f"replay: {self.path} tick for tick ({len(source.ticks)} live ticks {pace}, "
                     f"{len(live.frames)} frames) on {self.character_path}")
                 return source, source.ticks, live_fps
-        fps = 60.0 if fps is None else fps
         limit = self.replay.max_gap
         frames = check_time_order(self.path, live.frames) if live is not None else open_recording(self.path)
-        source = ReplaySource(frames, max_gap=limit)
+        fps, grid = self._rate(frames, fps, log)
+        source = ReplaySource(frames, max_gap=limit, grid_fps=grid)
         log(f"replay: {self.path} ({len(source.frames)} frames, {source.duration:.2f} s) on {self.character_path}")
         if source.gaps:
             log(f"replay: {source.describe_gaps()}; --max-gap SECONDS changes the limit ({limit:g} s), "
                 f"--max-gap inf keeps them")
         return source, None, fps
+
+    def _rate(self, frames: list[Frame], fps: float | None, log) -> tuple[float, float | None]:
+        """(ticks per second, the grid the frames are delivered on or None): ``--fps`` when given; else the
+        take's own rate (:mod:`~facepuppet.runtime.recording.take_rate`), each frame drawn once, on its nearest
+        tick; else (no steady rate in the times) the fallback, said."""
+        if fps is not None:
+            return fps, None
+        rate = take_rate([f.t for f in frames])
+        if rate is None:
+            log(f"replay: no steady frame rate in {self.path.name}'s times; drawing at {FALLBACK_FPS:g} fps "
+                "(--fps to choose)")
+            return FALLBACK_FPS, None
+        log(f"replay: at the take's own rate, {rate:g} fps: each frame drawn once (--fps to choose another)")
+        return rate, rate
 
     def _expected_ticks(self, source, ticks, fps: float) -> int | None:
         """How many ticks the replay will draw, for the progress line (None when unknown)."""
@@ -317,8 +337,8 @@ class RecordingFeed:
             frames = [Frame(t=f.t, source=f.source, markers=f.markers * factor, marker_names=f.marker_names,
                             t_sender=f.t_sender, number=f.number) for f in frames]
             note = f", converted {units} -> {to_units}"
-        source = ReplaySource(frames)
-        fps = 60.0 if self.pacing.fps is None else self.pacing.fps
+        fps, grid = self._rate(frames, self.pacing.fps, log)
+        source = ReplaySource(frames, grid_fps=grid)
         log(f"replay: {self.path} ({take.description}{note}; {source.duration:.2f} s) on {self.character_path}, "
             "through the solve as --input markers")
         return source, None, fps
