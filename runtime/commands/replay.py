@@ -6,11 +6,16 @@ marker take, on recorded time) with :func:`~facepuppet.runtime.session.assemble.
 report. The stage chain is ``run``'s, built by the same function from the same options, and every output of
 ``run`` (``--vmc-out``, ``--llf-out``, ``--events-out``, ``--video``, ``--out``, ``--dump-weights``) works
 here too; a replay that sends anything is paced to real time, as a receiver expects.
+
+Ctrl-C or SIGTERM stops a replay at its next tick: the outputs are completed (a video with its end, every PNG
+whole), the summary is printed as at the end of the take, with the signal that stopped it, and the exit code
+is the shell's ``128 + signal`` (130, 143), so a script does not take a cut replay for a whole one.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -98,4 +103,10 @@ def run_replay(args: argparse.Namespace) -> int:
     report_outputs("replay", plan.outputs, result)
     if feed.events_line():
         print(feed.events_line())
-    return 0
+    stopped = feed.stopped_by
+    if stopped is None:
+        return 0
+    total = feed.progress.total if feed.progress is not None else None
+    print(f"replay: stopped by {stopped} after {loop.n_ticks}" + (f" of {total:g}" if total else "")
+          + " ticks; what was written above is complete")
+    return 128 + int(getattr(signal, stopped))

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from PIL import Image
 
+from facepuppet.runtime.files.outputs import atomic_path
+
 if TYPE_CHECKING:
     import os
     from collections.abc import Sequence
@@ -26,22 +28,40 @@ if TYPE_CHECKING:
 
 
 class PngSink:
-    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``info.renderer.read_pixels()``.
+    """Write each drawn tick's image as ``out_dir/frame_00000.png``, numbered 0, 1, 2, ... in drawing order.
 
-    Keeps no list of what it wrote (a long run writes many): ``written`` counts, ``last_path`` is the newest.
+    Consecutive numbers are what an image-sequence reader expects (``ffmpeg -i frame_%05d.png``, which stops
+    at the first missing number); a tick index would leave gaps (a run drawing on arrival labels its ticks on
+    a 1 kHz grid). What each image shows is kept beside them in ``out_dir/frames.csv``: ``frame,tick,t``
+    (image number, tick index, tick time in seconds), one line per image, written once the image is in place.
+
+    Each image is written to a temporary file and renamed onto its name, so a process stopped at any moment
+    leaves only whole images. Keeps no list of what it wrote (a long run writes many): ``written`` counts,
+    ``last_path`` is the newest. :meth:`close` closes ``frames.csv``.
     """
+
+    INDEX = "frames.csv"
 
     def __init__(self, out_dir: str | os.PathLike) -> None:
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.written = 0
         self.last_path: Path | None = None
+        self._index = open(self.out_dir / self.INDEX, "w", encoding="ascii", newline="")
+        self._index.write("frame,tick,t\n")
 
     def __call__(self, info: TickInfo) -> None:
-        path = self.out_dir / f"frame_{info.k:05d}.png"
-        Image.fromarray(np.ascontiguousarray(info.renderer.read_pixels())).save(path)
+        path = self.out_dir / f"frame_{self.written:05d}.png"
+        pixels = np.ascontiguousarray(info.renderer.read_pixels())
+        with atomic_path(path) as temp:
+            Image.fromarray(pixels).save(temp, format="PNG")
+        self._index.write(f"{self.written},{info.k},{info.t!r}\n")
+        self._index.flush()
         self.written += 1
         self.last_path = path
+
+    def close(self) -> None:
+        self._index.close()
 
 
 class WeightLog:

@@ -16,14 +16,13 @@ source (its frame counts) and hears the chain's config through the bus.
 from __future__ import annotations
 
 import contextlib
-import signal
 import sys
 import threading
 from collections.abc import Callable
 from dataclasses import replace
 from importlib.util import find_spec
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.gestures.layer import VoiceOnlySource
@@ -41,6 +40,7 @@ from facepuppet.runtime.live.stages import make_input_adapter
 from facepuppet.runtime.recording.recorder import PacketRecorder
 from facepuppet.runtime.recording.switch import SwitchableRecorder
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
+from facepuppet.runtime.session.stop_signals import StopOnSignals
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.bus import SessionBus
@@ -94,7 +94,7 @@ class LiveFeed:
     def prepare(self, character: Character, stack: contextlib.ExitStack,
                 log: Callable[[str], None]) -> ChainInputs:
         # from here on a SIGTERM or Ctrl-C ends the run cleanly (the loop stops at its next tick)
-        stack.enter_context(_sigint_sets(self.stop_event))
+        stack.enter_context(StopOnSignals(self.stop_event))
         inputs = self.inputs
         if inputs.audio is not None or inputs.audio_file is not None:
             self.audio = open_audio(device=inputs.audio, wav=inputs.audio_file, log=log)
@@ -296,25 +296,3 @@ class _LiveCounters(dict):
         for name, other in self._others.items():
             self[f"udp:{name}"] = other.counters
         return super().items()
-
-
-class _sigint_sets:
-    """Within the block (main thread only), Ctrl-C (SIGINT) and SIGTERM set ``event`` instead of ending the
-    process: the loop stops at its next tick and the run closes its recording and prints its final stats."""
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __init__(self, event: threading.Event):
-        self.event = event
-        self.previous: dict[int, Any] = {}
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for signum in self.SIGNALS:
-                self.previous[signum] = signal.signal(signum, lambda *_: self.event.set())
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for signum, previous in self.previous.items():
-            signal.signal(signum, previous)
-        self.previous = {}

@@ -89,6 +89,7 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
         outputs.observers.append(outputs.weights)
     if options.out is not None:
         outputs.pngs = PngSink(options.out)
+        stack.callback(outputs.pngs.close)
         outputs.observers.append(outputs.pngs)
     if options.video is not None:
         video = VideoSink(options.video, fps, progress=progress)

@@ -20,6 +20,7 @@ starting state, so the same options give the live run's weights.
 from __future__ import annotations
 
 import contextlib
+import threading
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -40,6 +41,7 @@ from facepuppet.runtime.recording.replay_source import ReplaySource, check_time_
 from facepuppet.runtime.recording.take_rate import take_rate
 from facepuppet.runtime.recording.ticked_source import TickedSource, decode_live_recording, read_live_session
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
+from facepuppet.runtime.session.stop_signals import StopOnSignals
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.bus import SessionBus
@@ -55,6 +57,7 @@ if TYPE_CHECKING:
 
 
 FALLBACK_FPS = 60.0  # ticks per second of a replay whose take has no steady rate and no --fps
+PIPED_EVERY_S = 30.0  # off a terminal, a progress line in the log this often
 
 
 class WallClockFrom(WallClock):
@@ -152,11 +155,16 @@ class RecordingFeed:
         self.live: LiveRecording | None = None
         self.take: Any = None
         self.events: list = []  # the replay's tracking events, compared with the recording's at the end
+        self.stop_event = threading.Event()
+        self.signals: StopOnSignals | None = None
+        self.progress: Progress | None = None
 
     # -- before the chain --------------------------------------------------------------------------
 
     def prepare(self, character: Character, stack: contextlib.ExitStack,
                 log: Callable[[str], None]) -> ChainInputs:
+        # from here on Ctrl-C or SIGTERM stops the replay at its next tick; what was written is completed
+        self.signals = stack.enter_context(StopOnSignals(self.stop_event))
         self.session = session = read_live_session(self.path)
         info = _info(session)
         kind = info.get("input") if session is not None else None
@@ -234,7 +242,7 @@ class RecordingFeed:
             bus.on_tracking(lambda t, found: self.events.append((t, found)))
         self.source = source
         total = self._expected_ticks(source, ticks, fps)
-        self.progress = Progress(self.progress_label, total=total, unit="ticks")
+        self.progress = Progress(self.progress_label, total=total, unit="ticks", piped_every_s=PIPED_EVERY_S)
         done = lambda info: self.progress.update(info.k + 1 if ticks is None else self.progress.done + 1)  # noqa: E731
         return FeedParts(source, fps, ticks=ticks, duration=self.pacing.duration, observers=[done])
 
@@ -348,8 +356,20 @@ class RecordingFeed:
     def clock(self, parts: FeedParts, target: GLTarget, paced: bool) -> RecordedClock | WallClock:
         return RecordedClock() if target.headless and not paced else replay_wall_clock(parts.ticks, parts.fps)
 
+    def stop(self) -> bool:
+        """Whether Ctrl-C or SIGTERM asked the replay to stop (the loop checks before each tick)."""
+        return self.stop_event.is_set()
+
+    @property
+    def stopped_by(self) -> str | None:
+        """The name of the signal that stopped the replay (``SIGINT``, ``SIGTERM``), None when it ran to its
+        end."""
+        received = self.signals.received if self.signals is not None else None
+        return None if received is None else received.name
+
     def run(self, loop: FrameLoop, parts: FeedParts) -> LoopResult:
-        with self.progress:  # on a terminal: ticks done, rate, time left (quiet when piped)
+        # on a terminal: ticks done, rate, time left, redrawn in place; in a log: the same as a line now and then
+        with self.progress:
             return loop.run(parts.source, duration=parts.duration, ticks=parts.ticks)
 
     def missing_line(self) -> str | None:
