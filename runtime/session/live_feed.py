@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from importlib.util import find_spec
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.gestures.layer import VoiceOnlySource
@@ -59,6 +59,16 @@ def wants_panel(picture: PictureOptions, panel: PanelOptions) -> bool:
     if picture.headless and not panel.panel:
         return False
     return find_spec("imgui_bundle") is not None
+
+
+def voice_line(audio: Any) -> str:
+    """What a run with the voice as its only input plays: a WAV file (read on the run's clock, to its end) or
+    a microphone (listened to); it has no network address to name."""
+    path = getattr(audio, "path", None)
+    if path is not None:
+        return (f"run: playing the voice from {path} ({audio.duration:.2f} s, {audio.sample_rate:g} Hz) on the "
+                "run's clock")
+    return f"run: listening to the voice on {getattr(audio, 'device_name', 'the default input device')}"
 
 
 class LiveFeed:
@@ -121,8 +131,11 @@ class LiveFeed:
             source.duration = getattr(self.audio, "duration", None)
         source.start()
         stack.callback(source.stop)
-        log(f"run: listening for {inputs.input} on {source.address[0]}:{source.address[1]}"
-            + (f" (only from {', '.join(sorted(inputs.allow))})" if inputs.allow else ""))
+        if inputs.voice_only:
+            log(voice_line(self.audio))
+        else:
+            log(f"run: listening for {inputs.input} on {source.address[0]}:{source.address[1]}"
+                + (f" (only from {', '.join(sorted(inputs.allow))})" if inputs.allow else ""))
         if inputs.mix:
             self._open_mix(stack, chain, bus, log)
         requester = self._start_phone(source, log)
