@@ -26,7 +26,8 @@ _COMMAND_MODULES = ("facepuppet.offline.actuation.commands", "facepuppet.offline
 _BENCH_MODULES = ("facepuppet.offline.actuation.bench", "facepuppet.offline.elastic.bench",
                   "facepuppet.offline.gestures.bench", "facepuppet.offline.kpls.bench",
                   "facepuppet.offline.io.gltf_bench", "facepuppet.offline.io.gltf_bombs_bench",
-                  "facepuppet.offline.perfect_sync.bench", "facepuppet.offline.gpu_bench")
+                  "facepuppet.offline.perfect_sync.bench", "facepuppet.offline.gpu_bench",
+                  "facepuppet.offline.replay_bench")
 
 
 def _modules(names):

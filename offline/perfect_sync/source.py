@@ -16,9 +16,11 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import time
 from collections.abc import Callable
 from pathlib import Path
 
+from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.files.outputs import OutputSet
@@ -68,12 +70,30 @@ def _key(folder: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def fit_kit_source(folder: Path) -> ElasticModel:
-    """fit-elastic of the ICT head in ``folder`` with the kit's control points (no muscles)."""
-    ict = import_rig(folder / NEUTRAL, folder)
+def fit_kit_source(folder: Path, log: Callable[[str], None] = logger.info) -> ElasticModel:
+    """fit-elastic of the ICT head in ``folder`` with the kit's control points (no muscles).
+
+    It takes tens of seconds on a slow machine, once: the shapes read are shown as a progress line (count,
+    rate, time left; on a terminal) and each step is said in ``log`` as it starts and ends, so neither a
+    terminal nor a log sits on one line with no sign of life.
+    """
+    start = time.perf_counter()
+    bar = Progress("perfect-sync: source: reading the ICT shapes", unit="shapes")
+
+    def read(i: int, n: int, name: str) -> None:
+        bar.total = n
+        bar.update(i, note=name)
+
+    with bar:
+        ict = import_rig(folder / NEUTRAL, folder, progress=read)
+    read_s = time.perf_counter() - start
     marks = read_ict_landmarks(folder / LANDMARKS, ict.n_vertices)
     points = ict_control_points(marks, ict.vertices, ict.triangles, main_front(ict))
-    return fit_character(ict, points, with_muscles=False)[0]
+    log(f"perfect-sync: source: {ict.n_shapes} shapes read in {read_s:.1f} s; fitting the elastic basis "
+        f"({ict.n_vertices} vertices, {len(points.vertices)} control points)")
+    model = fit_character(ict, points, with_muscles=False)[0]
+    log(f"perfect-sync: source: fitted in {time.perf_counter() - start:.1f} s")
+    return model
 
 
 def default_source(data: str | os.PathLike | None = None,
@@ -89,7 +109,7 @@ def default_source(data: str | os.PathLike | None = None,
         except (TablesError, OSError, ValueError) as exc:
             log(f"perfect-sync: the cached source {path} does not load ({exc}); fitting it again")
     log(f"perfect-sync: source: fitting the ICT head of {folder} (once; kept in {path.parent})")
-    model = fit_kit_source(folder)
+    model = fit_kit_source(folder, log)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with OutputSet() as outputs:

@@ -69,8 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     a refusal too, then its line, with the same exit code.
 
     Exit codes: 0 done; 2 refused (an option, a file, a table, an output, an address); 3 no OpenGL context;
-    130 interrupted; 1 a run whose recording could not be written to its end (:class:`RecordingFailed`, one
-    line), or a bug (a traceback).
+    130 interrupted (also a replay stopped by Ctrl-C, after its summary; 143 one stopped by SIGTERM); 1 a run
+    whose recording could not be written to its end (:class:`RecordingFailed`, one line), or a bug (a
+    traceback).
     """
     parser = build_parser()
     args = parser.parse_args(argv)

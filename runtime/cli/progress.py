@@ -7,7 +7,11 @@ longer benchmarks) reports through :class:`Progress`, so they all read alike::
 
 The line is drawn only on a terminal and at most every ``interval_s``; piped
 or redirected output stays clean (the command's own summary lines are what
-land in a log). The clock is injectable so the arithmetic is testable.
+land in a log). Work long enough that a log would otherwise sit silent for
+minutes (a replay of a long take) asks for ``piped_every_s``: off a terminal it
+then writes the same text as a whole line every that many seconds, never a
+carriage return, so a log shows it is alive and how far it got without
+filling with redraws. The clock is injectable so the arithmetic is testable.
 """
 
 from __future__ import annotations
@@ -31,7 +35,9 @@ class Progress:
 
     ``enabled`` defaults to whether ``stream`` (stderr) is a terminal. ``total``
     may be None (unknown length): the line then shows the count and rate only.
-    Use as a context manager or call :meth:`close`; closing ends the line.
+    ``piped_every_s``: when not enabled (not a terminal), write the line as a plain line of its own every
+    this many seconds (None: nothing, the default). Use as a context manager or call :meth:`close`; closing
+    ends the line.
     """
 
     def __init__(
@@ -44,6 +50,7 @@ class Progress:
         enabled: bool | None = None,
         interval_s: float = 0.25,
         clock: Callable[[], float] = time.monotonic,
+        piped_every_s: float | None = None,
     ) -> None:
         self.label = label
         self.total = total
@@ -54,6 +61,7 @@ class Progress:
             enabled = bool(isatty and isatty())
         self.enabled = enabled
         self.interval_s = interval_s
+        self.piped_every_s = piped_every_s
         self.clock = clock
         self.done: float = 0
         self._start = clock()
@@ -81,7 +89,11 @@ class Progress:
     def update(self, done: float, note: str = "") -> None:
         """Set the count done; redraws when enabled and ``interval_s`` has passed."""
         self.done = done
-        if not self.enabled or self._closed:
+        if self._closed:
+            return
+        if not self.enabled:
+            if self.piped_every_s is not None:
+                self._log_line(note)
             return
         now = self.clock()
         if self._drawn_at is not None and now - self._drawn_at < self.interval_s:
@@ -111,6 +123,17 @@ class Progress:
         self._closed = True
         if self.enabled and (self._drawn_at is not None or note):
             self._draw(note, end="\n")
+
+    def _log_line(self, note: str) -> None:
+        """Off a terminal: the line as a plain line of its own, once ``piped_every_s`` has passed since the
+        start or the last one."""
+        now = self.clock()
+        since = self._start if self._drawn_at is None else self._drawn_at
+        if now - since < self.piped_every_s:
+            return
+        self._drawn_at = now
+        self.stream.write(self.line(note) + "\n")
+        self.stream.flush()
 
     def _draw(self, note: str, end: str) -> None:
         text = self.line(note)

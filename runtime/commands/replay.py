@@ -6,11 +6,16 @@ marker take, on recorded time) with :func:`~facepuppet.runtime.session.assemble.
 report. The stage chain is ``run``'s, built by the same function from the same options, and every output of
 ``run`` (``--vmc-out``, ``--llf-out``, ``--events-out``, ``--video``, ``--out``, ``--dump-weights``) works
 here too; a replay that sends anything is paced to real time, as a receiver expects.
+
+Ctrl-C or SIGTERM stops a replay at its next tick: the outputs are completed (a video with its end, every PNG
+whole), the summary is printed as at the end of the take, with the signal that stopped it, and the exit code
+is the shell's ``128 + signal`` (130, 143), so a script does not take a cut replay for a whole one.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,7 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     PictureOptions.add_arguments(p, headless_help="render offscreen through EGL, as fast as possible")
     PacingOptions.add_arguments(
         p, fps=None, fps_help="ticks per second of recorded time (default: the live run's for a live recording, "
-                              "else 60)",
+                              "else the take's own frame rate, read from its times, so each frame is drawn once; "
+                              "60 when its times have no steady rate)",
         duration=None, duration_help="seconds to play (default: the whole recording)")
     OutputOptions.add_arguments(p, stats_help="also print the counters and timings as one JSON line",
                                 sound_help="with --video, the sound track (a recording keeps audio levels, not "
@@ -105,4 +111,10 @@ def run_replay(args: argparse.Namespace) -> int:
     report_outputs("replay", plan.outputs, result)
     if feed.events_line():
         print(feed.events_line())
-    return 0
+    stopped = feed.stopped_by
+    if stopped is None:
+        return 0
+    total = feed.progress.total if feed.progress is not None else None
+    print(f"replay: stopped by {stopped} after {loop.n_ticks}" + (f" of {total:g}" if total else "")
+          + " ticks; what was written above is complete")
+    return 128 + int(getattr(signal, stopped))

@@ -152,7 +152,10 @@ def report_outputs(command: str, outputs: OutputOptions, result: SessionResult) 
         write_atomic(outputs.dump_weights, lambda temp: np.save(temp, result.weights.array))
         print(f"{command}: wrote the weights of {n} ticks to {outputs.dump_weights}")
     if outputs.out is not None:
-        print(f"{command}: wrote {n} PNGs to {outputs.out}")
+        pngs = result.outputs.pngs
+        print(f"{command}: wrote {pngs.written if pngs is not None else n} PNGs to {outputs.out}"
+              + (f" (frame_00000.png to {pngs.last_path.name}; their ticks and times in {pngs.INDEX})"
+                 if pngs is not None and pngs.last_path is not None else ""))
     if outputs.video is not None:
         print(f"{command}: wrote {n} video frames to {outputs.video.path}")
     if outputs.llf_out is not None:

@@ -11,7 +11,10 @@ float32, int32, int32), the count 61 (uint8), and 61 big-endian float32:
   the rig's channels folded into them by
   :func:`facepuppet.runtime.mapping.vrm_names.fold_to_arkit` (the same fold as
   ``--vmc-out``: split ``browInnerUp_L/_R`` by their max; a shape the rig lacks
-  is 0), clipped to [0, 1], NaN sent as 0;
+  is 0), clipped to [0, 1], NaN sent as 0. A shape the rig lacks is sent as the tick's input frame (after
+  the stages) gives it, folded the same way, when the frame has it: a character that cannot answer for a
+  channel (a VRM avatar without ARKit morphs lacks them all) passes the face it was given on, rather than
+  a still face; only a channel neither has is 0;
 * head yaw, pitch, roll in radians, the inverse of the decoder's
   :func:`~facepuppet.runtime.model.geometry.euler_to_quat` (R = Ry(yaw) Rx(pitch) Rz(roll),
   :func:`~facepuppet.runtime.model.geometry.quat_to_euler`), so what we send decodes
@@ -52,9 +55,11 @@ from facepuppet.runtime.mapping.vrm_names import fold_to_arkit
 from facepuppet.runtime.model.geometry import quat_to_euler
 
 if TYPE_CHECKING:
+    from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.live.loop import TickInfo
 
 TIMECODE_FPS = 60
+MAX_INPUT_FOLDS = 8  # input channel layouts whose fold is kept (a run's inputs have one or two)
 EYE_YAW_MAX = math.radians(30.0)    # eyeLookOut/In = 1 sent as a 30° eye turn (facepuppet's choice)
 EYE_PITCH_MAX = math.radians(25.0)  # eyeLookUp/Down = 1 sent as a 25° eye turn
 SUBJECT = "facepuppet"
@@ -95,7 +100,7 @@ class LlfSender:
     ----------
     packet : bytearray, the datagram of the last tick
     counters : dict: ``packets_sent``, ``send_errors``
-    missing : tuple of str, the ARKit names the rig has no channel for (sent as 0)
+    missing : tuple of str, the ARKit names the rig has no channel for (sent from the input frame, else 0)
     """
 
     def __init__(self, host: str, port: int, names: Sequence[str], subject: str = SUBJECT) -> None:
@@ -108,7 +113,9 @@ class LlfSender:
         self._n = len(names)
         self._first, self._second, _extras = fold_to_arkit(names)
         self.missing = tuple(name for name, i in zip(_ARKIT, self._first) if i == self._n)
+        self._lacking = np.flatnonzero(self._first == self._n)
         self._padded = np.zeros(self._n + 1)
+        self._input_folds: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
         self.packet = bytearray(encode_llf_packet([0.0] * 52, name=subject, device_id=device_id(subject),
                                                   fps=TIMECODE_FPS))
         self._timing_at = 45 + len(raw)
@@ -129,10 +136,32 @@ class LlfSender:
         np.clip(padded, 0.0, 1.0, out=padded)
         return np.maximum(padded[self._first], padded[self._second])
 
-    def encode(self, weights: np.ndarray, rotation: np.ndarray | None = None, t: float = 0.0) -> bytearray:
+    def from_input(self, arkit: np.ndarray, frame: Frame | None) -> None:
+        """Fill the ARKit channels the rig lacks in ``arkit`` (52,) from ``frame``'s weights where it has them
+        (folded as the rig's are, clipped to [0, 1]; NaN, "not sent", stays 0)."""
+        if not self._lacking.size or frame is None or frame.weights is None:
+            return
+        folds = self._input_folds.get(frame.channels)
+        if folds is None:
+            if len(self._input_folds) >= MAX_INPUT_FOLDS:
+                self._input_folds.clear()
+            first, second, _ = fold_to_arkit(frame.channels)
+            folds = self._input_folds[frame.channels] = (first, second)
+        first, second = folds
+        values = np.zeros(len(frame.weights) + 1)
+        values[:-1] = frame.weights
+        np.nan_to_num(values, copy=False, nan=0.0)
+        np.clip(values, 0.0, 1.0, out=values)
+        lacking = self._lacking
+        arkit[lacking] = np.maximum(values[first[lacking]], values[second[lacking]])
+
+    def encode(self, weights: np.ndarray, rotation: np.ndarray | None = None, t: float = 0.0,
+               frame: Frame | None = None) -> bytearray:
         """The packet of one tick: rig ``weights`` (n,), head ``rotation`` (x, y, z, w) or None (identity),
-        tick time ``t`` seconds (>= 0). Returns :attr:`packet`, patched in place."""
+        tick time ``t`` seconds (>= 0), the tick's input ``frame`` (after the stages; it answers for the
+        shapes the rig lacks) or None. Returns :attr:`packet`, patched in place."""
         arkit = self.arkit(weights)
+        self.from_input(arkit, frame)
         head = (0.0, 0.0, 0.0) if rotation is None else quat_to_euler(rotation)
         frames = max(t, 0.0) * TIMECODE_FPS
         number = int(frames)
@@ -140,9 +169,10 @@ class LlfSender:
         _VALUES.pack_into(self.packet, self._values_at, *arkit.tolist(), *head, *eye_angles(arkit))
         return self.packet
 
-    def send(self, weights: np.ndarray, rotation: np.ndarray | None = None, t: float = 0.0) -> None:
+    def send(self, weights: np.ndarray, rotation: np.ndarray | None = None, t: float = 0.0,
+             frame: Frame | None = None) -> None:
         """Send one tick (see :meth:`encode`); a send error is counted, never raised."""
-        packet = self.encode(weights, rotation, t)
+        packet = self.encode(weights, rotation, t, frame)
         try:
             self._sock.send(packet)
             self.counters["packets_sent"] += 1
@@ -151,7 +181,7 @@ class LlfSender:
 
     def on_tick(self, info: TickInfo) -> None:
         """FrameLoop ``on_tick`` hook: send what this tick drew."""
-        self.send(info.weights, info.rotation, info.t)
+        self.send(info.weights, info.rotation, info.t, info.frame)
 
     def describe(self) -> str:
         """One line for the start of a run: where, what, what the rig cannot drive."""
@@ -160,7 +190,8 @@ class LlfSender:
         if self.missing:
             shown = ", ".join(self.missing[:6]) + (" …" if len(self.missing) > 6 else "")
             n = len(self.missing)
-            line += f"; {n} ARKit shape{'s' if n > 1 else ''} the character lacks sent as 0: {shown}"
+            line += (f"; {n} ARKit shape{'s' if n > 1 else ''} the character lacks sent as the input gives them "
+                     f"(0 where it lacks them too): {shown}")
         return line
 
     def close(self) -> None:

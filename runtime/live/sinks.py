@@ -9,14 +9,18 @@ live stats (:mod:`facepuppet.runtime.live.stats`).
 
 from __future__ import annotations
 
+import os
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from PIL import Image
 
+from facepuppet.runtime.files.outputs import atomic_path
+
 if TYPE_CHECKING:
-    import os
     from collections.abc import Sequence
 
     from facepuppet.runtime.live.loop import TickInfo
@@ -25,23 +29,90 @@ if TYPE_CHECKING:
     from facepuppet.runtime.recording.recorder import PacketRecorder
 
 
-class PngSink:
-    """Write each tick's image as ``out_dir/frame_00000.png`` (tick index), via ``info.renderer.read_pixels()``.
+def png_workers() -> int:
+    """Threads encoding PNGs beside the frame loop: one core is the loop's (and the driver's), up to four of
+    the others encode (zlib gives up the GIL while it compresses, so they run in parallel)."""
+    return max(1, min(MAX_PNG_WORKERS, (os.cpu_count() or 2) - 1))
 
-    Keeps no list of what it wrote (a long run writes many): ``written`` counts, ``last_path`` is the newest.
+
+MAX_PNG_WORKERS = 4
+
+
+class PngSink:
+    """Write each drawn tick's image as ``out_dir/frame_00000.png``, numbered 0, 1, 2, ... in drawing order.
+
+    Consecutive numbers are what an image-sequence reader expects (``ffmpeg -i frame_%05d.png``, which stops
+    at the first missing number); a tick index would leave gaps (a run drawing on arrival labels its ticks on
+    a 1 kHz grid). What each image shows is kept beside them in ``out_dir/frames.csv``: ``frame,tick,t``
+    (image number, tick index, tick time in seconds), one line per image, written in order once the image
+    is in place.
+
+    Encoding a PNG costs about as much as drawing the frame on a CPU rasteriser and far more than on a GPU,
+    so the loop only reads the pixels (which needs its GL context) and ``workers`` threads encode and write
+    (0, the default: in the loop's thread, each image in place when the call returns; a session's outputs
+    use :func:`png_workers`); at most ``workers + 1`` images wait, so memory stays bounded however slow the
+    disk. Each image is written to a temporary file and renamed onto its name, so a process stopped at any
+    moment leaves only whole images. :meth:`close` waits for every image and closes ``frames.csv``; an
+    image that could not be written raises there or at a later tick.
+
+    Keeps no list of what it wrote (a long run writes many): ``written`` counts the images in place,
+    ``last_path`` is the newest.
     """
 
-    def __init__(self, out_dir: str | os.PathLike) -> None:
+    INDEX = "frames.csv"
+
+    def __init__(self, out_dir: str | os.PathLike, workers: int = 0) -> None:
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.written = 0
         self.last_path: Path | None = None
+        self.workers = int(workers)
+        self._pool = ThreadPoolExecutor(self.workers, thread_name_prefix="png") if self.workers > 0 else None
+        self._pending: deque[tuple[Future | None, Path, str]] = deque()
+        self._queued = 0
+        self._index = open(self.out_dir / self.INDEX, "w", encoding="ascii", newline="")
+        self._index.write("frame,tick,t\n")
 
     def __call__(self, info: TickInfo) -> None:
-        path = self.out_dir / f"frame_{info.k:05d}.png"
-        Image.fromarray(np.ascontiguousarray(info.renderer.read_pixels())).save(path)
-        self.written += 1
-        self.last_path = path
+        n = self._queued
+        path = self.out_dir / f"frame_{n:05d}.png"
+        pixels = np.ascontiguousarray(info.renderer.read_pixels())
+        line = f"{n},{info.k},{info.t!r}\n"
+        self._queued += 1
+        if self._pool is None:
+            _write_png(path, pixels)
+            self._pending.append((None, path, line))
+        else:
+            self._pending.append((self._pool.submit(_write_png, path, pixels), path, line))
+        self._settle(keep=self.workers)
+
+    def _settle(self, keep: int) -> None:
+        """Index the images done, in order; wait for the oldest while more than ``keep`` are waiting."""
+        pending = self._pending
+        while pending and (len(pending) > keep or pending[0][0] is None or pending[0][0].done()):
+            future, path, line = pending.popleft()
+            if future is not None:
+                future.result()  # an image that could not be written raises here
+            self._index.write(line)
+            self._index.flush()
+            self.written += 1
+            self.last_path = path
+
+    def close(self) -> None:
+        """Wait for every image, index them and close ``frames.csv`` (once)."""
+        if self._index.closed:
+            return
+        try:
+            self._settle(keep=0)
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True, cancel_futures=True)
+            self._index.close()
+
+
+def _write_png(path: Path, pixels: np.ndarray) -> None:
+    with atomic_path(path) as temp:
+        Image.fromarray(pixels).save(temp, format="PNG")
 
 
 class WeightLog:

@@ -9,6 +9,7 @@ question from their own slots.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING
@@ -39,6 +40,11 @@ class ReplaySource:
     max_gap : float, seconds; a pause between two frames longer than this is cut to
         this length (a frame at t = 1e300, a timecode jumping by hours), counted in
         ``gaps`` and ``cut_s``. ``math.inf`` keeps every pause.
+    grid_fps : float or None; a replay ticking at the take's own rate: each frame is delivered at the tick of
+        that rate nearest its time, so a clock jittering by less than half a period (a timecode's sub-frame,
+        a network's arrival) neither leaves a tick without a new frame nor makes the next one skip a frame.
+        Times stay in order; two frames nearest the same tick make the newer one win there (the older is
+        counted stale), as the take's own clock says.
 
     Times passed to :meth:`latest` and :meth:`done` are seconds since the first
     frame (``frames[0].t`` is time 0), so a session recorded on a monotonic
@@ -51,7 +57,8 @@ class ReplaySource:
     cut_s : float, seconds cut in all
     """
 
-    def __init__(self, frames: Iterable[Frame], max_gap: float = DEFAULT_MAX_GAP_S) -> None:
+    def __init__(self, frames: Iterable[Frame], max_gap: float = DEFAULT_MAX_GAP_S,
+                 grid_fps: float | None = None) -> None:
         self.frames = list(frames)
         if not self.frames:
             raise ValueError("ReplaySource: expected at least one frame, got none")
@@ -74,6 +81,11 @@ class ReplaySource:
                 self.cut_s += step - max_gap
                 step = max_gap
             self._times.append(self._times[-1] + step)
+        if grid_fps is not None:
+            if not (math.isfinite(grid_fps) and grid_fps > 0):
+                raise ValueError(f"ReplaySource grid_fps: expected a positive rate, got {grid_fps!r}")
+            # k / grid_fps is the loop's own expression for tick k's time, so the frame is due exactly then
+            self._times = [round(x * grid_fps) / grid_fps for x in self._times]
         self._next = 0
 
     def describe_gaps(self) -> str:

@@ -16,7 +16,6 @@ source (its frame counts) and hears the chain's config through the bus.
 from __future__ import annotations
 
 import contextlib
-import signal
 import sys
 import threading
 from collections.abc import Callable
@@ -41,6 +40,7 @@ from facepuppet.runtime.live.stages import make_input_adapter
 from facepuppet.runtime.recording.recorder import PacketRecorder
 from facepuppet.runtime.recording.switch import SwitchableRecorder
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
+from facepuppet.runtime.session.stop_signals import StopOnSignals
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.bus import SessionBus
@@ -59,6 +59,16 @@ def wants_panel(picture: PictureOptions, panel: PanelOptions) -> bool:
     if picture.headless and not panel.panel:
         return False
     return find_spec("imgui_bundle") is not None
+
+
+def voice_line(audio: Any) -> str:
+    """What a run with the voice as its only input plays: a WAV file (read on the run's clock, to its end) or
+    a microphone (listened to); it has no network address to name."""
+    path = getattr(audio, "path", None)
+    if path is not None:
+        return (f"run: playing the voice from {path} ({audio.duration:.2f} s, {audio.sample_rate:g} Hz) on the "
+                "run's clock")
+    return f"run: listening to the voice on {getattr(audio, 'device_name', 'the default input device')}"
 
 
 class LiveFeed:
@@ -94,7 +104,7 @@ class LiveFeed:
     def prepare(self, character: Character, stack: contextlib.ExitStack,
                 log: Callable[[str], None]) -> ChainInputs:
         # from here on a SIGTERM or Ctrl-C ends the run cleanly (the loop stops at its next tick)
-        stack.enter_context(_sigint_sets(self.stop_event))
+        stack.enter_context(StopOnSignals(self.stop_event))
         inputs = self.inputs
         if inputs.audio is not None or inputs.audio_file is not None:
             self.audio = open_audio(device=inputs.audio, wav=inputs.audio_file, log=log)
@@ -121,8 +131,11 @@ class LiveFeed:
             source.duration = getattr(self.audio, "duration", None)
         source.start()
         stack.callback(source.stop)
-        log(f"run: listening for {inputs.input} on {source.address[0]}:{source.address[1]}"
-            + (f" (only from {', '.join(sorted(inputs.allow))})" if inputs.allow else ""))
+        if inputs.voice_only:
+            log(voice_line(self.audio))
+        else:
+            log(f"run: listening for {inputs.input} on {source.address[0]}:{source.address[1]}"
+                + (f" (only from {', '.join(sorted(inputs.allow))})" if inputs.allow else ""))
         if inputs.mix:
             self._open_mix(stack, chain, bus, log)
         requester = self._start_phone(source, log)
@@ -296,25 +309,3 @@ class _LiveCounters(dict):
         for name, other in self._others.items():
             self[f"udp:{name}"] = other.counters
         return super().items()
-
-
-class _sigint_sets:
-    """Within the block (main thread only), Ctrl-C (SIGINT) and SIGTERM set ``event`` instead of ending the
-    process: the loop stops at its next tick and the run closes its recording and prints its final stats."""
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __init__(self, event: threading.Event):
-        self.event = event
-        self.previous: dict[int, Any] = {}
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for signum in self.SIGNALS:
-                self.previous[signum] = signal.signal(signum, lambda *_: self.event.set())
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for signum, previous in self.previous.items():
-            signal.signal(signum, previous)
-        self.previous = {}

@@ -250,7 +250,8 @@ class OutputOptions:
         video's sound (``run`` defines ``--audio-file`` as an input, which is the video's sound too)."""
         group = parser.add_argument_group("outputs", "what the session writes and sends, besides what is drawn")
         group.add_argument("--out", type=Path, default=None, metavar="DIR",
-                           help="write each tick as DIR/frame_00000.png")
+                           help="write each drawn tick as DIR/frame_00000.png, numbered 0, 1, 2, ... (what "
+                                "ffmpeg -i DIR/frame_%%05d.png reads); DIR/frames.csv says each one's tick and time")
         group.add_argument("--dump-weights", type=Path, default=None, metavar="FILE.npy",
                            help="save the rig weights of every tick, (n_ticks, n_shapes) float32, at exit")
         group.add_argument("--video", type=Path, default=None, metavar="FILE",

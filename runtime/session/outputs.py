@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 from facepuppet.runtime.live.events_out import TrackingEventSender
 from facepuppet.runtime.live.llf_out import LlfSender
-from facepuppet.runtime.live.sinks import PngSink, WeightLog
+from facepuppet.runtime.live.sinks import PngSink, WeightLog, png_workers
 from facepuppet.runtime.live.video_out import VideoSink
 from facepuppet.runtime.live.vmc_out import VmcSender, pipeline_status
 
@@ -88,7 +88,8 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
         outputs.weights = WeightLog()
         outputs.observers.append(outputs.weights)
     if options.out is not None:
-        outputs.pngs = PngSink(options.out)
+        outputs.pngs = PngSink(options.out, workers=png_workers())
+        stack.callback(outputs.pngs.close)
         outputs.observers.append(outputs.pngs)
     if options.video is not None:
         video = VideoSink(options.video, fps, progress=progress)

@@ -3,7 +3,9 @@
 Headless, a replay ticks as fast as the machine draws (:class:`~facepuppet.runtime.live.loop.RecordedClock`);
 in a window, or when something is sent (VMC, Live Link Face, tracking events: a receiver expects real time),
 it is paced to the wall clock. Either way tick ``k`` shows the recording at ``k / fps`` seconds, so two
-replays give the same weights and the same images.
+replays give the same weights and the same images. Without ``--fps`` a take ticks at its own frame rate
+(:mod:`~facepuppet.runtime.recording.take_rate`), window or not, so each frame is drawn once and the same
+command gives the same pictures on a screen and headless.
 
 A live recording (``run --record``) with TICK records replays tick for tick
 (:class:`~facepuppet.runtime.recording.ticked_source.TickedSource`): the frames each live tick took, at its
@@ -18,6 +20,7 @@ starting state, so the same options give the live run's weights.
 from __future__ import annotations
 
 import contextlib
+import threading
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -35,8 +38,10 @@ from facepuppet.runtime.live.mix import MixStage, VoiceMixSource, check_mix_sour
 from facepuppet.runtime.live.stages import RecordedLevels, make_input_adapter
 from facepuppet.runtime.recording.readers import find_reader
 from facepuppet.runtime.recording.replay_source import ReplaySource, check_time_order, open_recording
+from facepuppet.runtime.recording.take_rate import take_rate
 from facepuppet.runtime.recording.ticked_source import TickedSource, decode_live_recording, read_live_session
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
+from facepuppet.runtime.session.stop_signals import StopOnSignals
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.bus import SessionBus
@@ -49,6 +54,10 @@ if TYPE_CHECKING:
     from facepuppet.runtime.render.gl_context import GLTarget
     from facepuppet.runtime.session.input_options import ReplayInputOptions
     from facepuppet.runtime.session.options import PacingOptions, StageOptions
+
+
+FALLBACK_FPS = 60.0  # ticks per second of a replay whose take has no steady rate and no --fps
+PIPED_EVERY_S = 30.0  # off a terminal, a progress line in the log this often
 
 
 class WallClockFrom(WallClock):
@@ -147,11 +156,16 @@ class RecordingFeed:
         self.take: Any = None
         self.events: list = []  # the replay's tracking events, compared with the recording's at the end
         self.solve: Any = None  # the chain's marker solve stage (its saturation count is reported), or None
+        self.stop_event = threading.Event()
+        self.signals: StopOnSignals | None = None
+        self.progress: Progress | None = None
 
     # -- before the chain --------------------------------------------------------------------------
 
     def prepare(self, character: Character, stack: contextlib.ExitStack,
                 log: Callable[[str], None]) -> ChainInputs:
+        # from here on Ctrl-C or SIGTERM stops the replay at its next tick; what was written is completed
+        self.signals = stack.enter_context(StopOnSignals(self.stop_event))
         self.session = session = read_live_session(self.path)
         info = _info(session)
         kind = info.get("input") if session is not None else None
@@ -230,7 +244,7 @@ class RecordingFeed:
             bus.on_tracking(lambda t, found: self.events.append((t, found)))
         self.source = source
         total = self._expected_ticks(source, ticks, fps)
-        self.progress = Progress(self.progress_label, total=total, unit="ticks")
+        self.progress = Progress(self.progress_label, total=total, unit="ticks", piped_every_s=PIPED_EVERY_S)
         done = lambda info: self.progress.update(info.k + 1 if ticks is None else self.progress.done + 1)  # noqa: E731
         return FeedParts(source, fps, ticks=ticks, duration=self.pacing.duration, observers=[done])
 
@@ -247,15 +261,29 @@ class RecordingFeed:
                 log(f"replay: {self.path} tick for tick ({len(source.ticks)} live ticks {pace}, "
                     f"{len(live.frames)} frames) on {self.character_path}")
                 return source, source.ticks, live_fps
-        fps = 60.0 if fps is None else fps
         limit = self.replay.max_gap
         frames = check_time_order(self.path, live.frames) if live is not None else open_recording(self.path)
-        source = ReplaySource(frames, max_gap=limit)
+        fps, grid = self._rate(frames, fps, log)
+        source = ReplaySource(frames, max_gap=limit, grid_fps=grid)
         log(f"replay: {self.path} ({len(source.frames)} frames, {source.duration:.2f} s) on {self.character_path}")
         if source.gaps:
             log(f"replay: {source.describe_gaps()}; --max-gap SECONDS changes the limit ({limit:g} s), "
                 f"--max-gap inf keeps them")
         return source, None, fps
+
+    def _rate(self, frames: list[Frame], fps: float | None, log) -> tuple[float, float | None]:
+        """(ticks per second, the grid the frames are delivered on or None): ``--fps`` when given; else the
+        take's own rate (:mod:`~facepuppet.runtime.recording.take_rate`), each frame drawn once, on its nearest
+        tick; else (no steady rate in the times) the fallback, said."""
+        if fps is not None:
+            return fps, None
+        rate = take_rate([f.t for f in frames])
+        if rate is None:
+            log(f"replay: no steady frame rate in {self.path.name}'s times; drawing at {FALLBACK_FPS:g} fps "
+                "(--fps to choose)")
+            return FALLBACK_FPS, None
+        log(f"replay: at the take's own rate, {rate:g} fps: each frame drawn once (--fps to choose another)")
+        return rate, rate
 
     def _expected_ticks(self, source, ticks, fps: float) -> int | None:
         """How many ticks the replay will draw, for the progress line (None when unknown)."""
@@ -319,8 +347,8 @@ class RecordingFeed:
             frames = [Frame(t=f.t, source=f.source, markers=f.markers * factor, marker_names=f.marker_names,
                             t_sender=f.t_sender, number=f.number) for f in frames]
             note = f", converted {units} -> {to_units}"
-        source = ReplaySource(frames)
-        fps = 60.0 if self.pacing.fps is None else self.pacing.fps
+        fps, grid = self._rate(frames, self.pacing.fps, log)
+        source = ReplaySource(frames, grid_fps=grid)
         log(f"replay: {self.path} ({take.description}{note}; {source.duration:.2f} s) on {self.character_path}, "
             "through the solve as --input markers")
         return source, None, fps
@@ -330,8 +358,20 @@ class RecordingFeed:
     def clock(self, parts: FeedParts, target: GLTarget, paced: bool) -> RecordedClock | WallClock:
         return RecordedClock() if target.headless and not paced else replay_wall_clock(parts.ticks, parts.fps)
 
+    def stop(self) -> bool:
+        """Whether Ctrl-C or SIGTERM asked the replay to stop (the loop checks before each tick)."""
+        return self.stop_event.is_set()
+
+    @property
+    def stopped_by(self) -> str | None:
+        """The name of the signal that stopped the replay (``SIGINT``, ``SIGTERM``), None when it ran to its
+        end."""
+        received = self.signals.received if self.signals is not None else None
+        return None if received is None else received.name
+
     def run(self, loop: FrameLoop, parts: FeedParts) -> LoopResult:
-        with self.progress:  # on a terminal: ticks done, rate, time left (quiet when piped)
+        # on a terminal: ticks done, rate, time left, redrawn in place; in a log: the same as a line now and then
+        with self.progress:
             return loop.run(parts.source, duration=parts.duration, ticks=parts.ticks)
 
     def missing_line(self) -> str | None:

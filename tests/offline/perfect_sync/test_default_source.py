@@ -1,6 +1,8 @@
 """``perfect-sync`` without ``--source``: the data kit's ICT head, fitted once and cached; without a kit,
 a refusal saying what to pass, before any work and writing nothing."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -55,5 +57,9 @@ def test_default_source_is_fitted_once_cached_and_refitted_when_the_cache_is_bad
     logged.clear()
     refit = default_source(kit, log=logged.append)
     assert "does not load" in logged[0] and "fitting the ICT head" in logged[1]
+    # the fit's steps are said as they come (a first run waits tens of seconds on it)
+    assert re.fullmatch(r"perfect-sync: source: 5\d shapes read in [\d.]+ s; fitting the elastic basis \(\d+ "
+                        r"vertices, \d+ control points\)", logged[2]), logged
+    assert re.fullmatch(r"perfect-sync: source: fitted in [\d.]+ s", logged[3]), logged
     assert np.allclose(refit.arrays["params"], first.arrays["params"])
     assert default_source(kit, log=logged.append) is not None and "fitted before" in logged[-1]

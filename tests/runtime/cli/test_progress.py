@@ -79,3 +79,30 @@ def test_write_prints_a_line_above_the_progress_line_terminal_or_not():
     lines = shown.getvalue().split("\n")
     assert lines[0].endswith("a result") and lines[0].startswith("\rjob: 1/4")   # cleared, then the text
     assert lines[1].startswith("\rjob: 1/4")                                    # the progress line again
+
+
+def test_piped_lines_are_plain_and_spaced_by_piped_every_s():
+    """Asked for (``piped_every_s``), a log gets a whole line now and then: no carriage return, no redraws."""
+    clock, out = Clock(), io.StringIO()
+    p = Progress("replay", 100, unit="ticks", stream=out, clock=clock, piped_every_s=30)
+    for _ in range(100):
+        clock.t += 1
+        p.advance()
+    p.close()
+    lines = out.getvalue().splitlines()
+    assert "\r" not in out.getvalue()
+    assert lines == ["replay: 30/100 ticks (30%), 1/s, ~1 min 10 s left",
+                     "replay: 60/100 ticks (60%), 1/s, ~40 s left",
+                     "replay: 90/100 ticks (90%), 1/s, ~10 s left"]
+
+
+def test_piped_lines_are_off_unless_asked_and_never_on_a_terminal():
+    clock = Clock()
+    quiet, tty = io.StringIO(), Tty()
+    for stream, every in ((quiet, None), (tty, 1.0)):
+        p = Progress("x", 10, stream=stream, clock=clock, interval_s=1000, piped_every_s=every)
+        for _ in range(10):
+            clock.t += 5
+            p.advance()
+    assert quiet.getvalue() == ""
+    assert "\n" not in tty.getvalue()  # the terminal's line is redrawn in place, not logged

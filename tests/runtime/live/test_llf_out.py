@@ -234,7 +234,7 @@ def test_run_llf_out_sends_one_packet_a_tick_and_says_so(tmp_path, udp_receiver,
     out = said(capsys)
     assert code == 0, out
     assert "llf-out: 127.0.0.1:" in out and "subject 'facepuppet'" in out
-    assert "51 ARKit shapes the character lacks sent as 0" in out  # the sphere: jawOpen and its own "puff"
+    assert "51 ARKit shapes the character lacks sent as the input gives them" in out  # the sphere: jawOpen, "puff"
     n_ticks = int(re.search(r"run: (\d+) ticks", out).group(1))
     datagrams = drain(udp_receiver)
     # one packet per drawn tick; a live run skips a tick it is late for (a loaded machine), so the count is
@@ -275,3 +275,53 @@ def test_replay_llf_out_sends_the_takes_values(tmp_path, udp_receiver, capsys):
     assert len(got) == len(drawn) == 6  # one packet a tick, each with the tick's drawn jawOpen
     np.testing.assert_array_equal(np.float32(got), drawn)
     assert set(np.round(got, 5)) <= set(jaws) and len(set(np.round(got, 5))) >= 4
+
+
+def _take_csv(path, n=6):
+    """A Live Link Face CSV whose every channel moves (channel k at row i: (k + i) / 60)."""
+    rows = ["Timecode,BlendShapeCount," + ",".join(pascal(n) for n in ARKIT_NAMES)]
+    for i in range(n):
+        rows.append(f"00:00:01:{i * 6:02d}.000,52," + ",".join(f"{(k + i) / 60:.6f}" for k in range(52)))
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.gl
+def test_replay_llf_out_sends_the_input_where_the_character_has_no_arkit_shape(tmp_path, udp_receiver, capsys):
+    """A character without ARKit shapes (a plain VRM avatar) cannot answer for the face: what goes out is the
+    input's face, not 52 zeros; where it has a shape (jawOpen here) it is what was drawn."""
+    import dataclasses
+
+    character = tmp_path / "blob.npz"
+    dataclasses.replace(sphere_character(), shape_names=("jawOpen", "blobWiden")).save(character)
+    take = _take_csv(tmp_path / "take.csv")
+    code = main(["replay", str(take), "-c", str(character), "--headless", "--size", "48x40",
+                 "--llf-out", f"127.0.0.1:{udp_receiver.getsockname()[1]}"])
+    out = said(capsys)
+    assert code == 0, out
+    assert "51 ARKit shapes the character lacks sent as the input gives them (0 where it lacks them too): " \
+           "eyeBlinkLeft" in out
+    adapter = LiveLinkFaceAdapter()
+    got = np.array([adapter.handle(d, 0.0).weights for d in drain(udp_receiver)])
+    assert got.shape == (6, 52)
+    expected = (np.arange(52)[None, :] + np.arange(6)[:, None]) / 60
+    np.testing.assert_allclose(got, expected, atol=1e-6)
+
+
+def test_the_input_fills_only_what_the_rig_lacks_and_nan_or_absent_input_is_0():
+    from facepuppet.runtime.frames import Frame
+
+    sender = LlfSender("127.0.0.1", free_udp_port(), ["jawOpen"])
+    try:
+        frame = Frame(t=0.0, source="t", channels=("JawOpen", "eyeBlink_L", "mouthSmile_R", "cheekPuff"),
+                      weights=np.array([0.9, 0.25, 0.5, np.nan], np.float32))
+        adapter = LiveLinkFaceAdapter()
+        got = adapter.handle(bytes(sender.encode(np.array([0.3], np.float32), frame=frame)), 0.0).weights
+        index = {name: i for i, name in enumerate(ARKIT_NAMES)}
+        assert got[index["jawOpen"]] == np.float32(0.3)        # the rig's own: what was drawn
+        assert got[index["eyeBlinkLeft"]] == 0.25 and got[index["mouthSmileRight"]] == 0.5
+        assert got[index["cheekPuff"]] == 0.0 and got[index["browDownLeft"]] == 0.0
+        plain = adapter.handle(bytes(sender.encode(np.array([0.3], np.float32))), 0.0).weights
+        assert plain[index["eyeBlinkLeft"]] == 0.0
+    finally:
+        sender.close()

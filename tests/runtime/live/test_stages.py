@@ -501,6 +501,19 @@ def test_replay_of_a_live_gestures_run_draws_the_live_weights(tmp_path):
 
 
 @pytest.mark.gl
+def test_a_voice_only_run_says_it_plays_its_wav_and_listens_on_no_port(tmp_path):
+    from helpers.gesture_dbs import small_db
+
+    small_db(tmp_path / "gestures.npz")
+    char_path = sphere_character().save(tmp_path / "sphere.npz")
+    wav = voice_wav(tmp_path / "voice.wav", seconds=0.5)
+    _, logs = live(["-c", str(char_path), "--input", "audio", "--gestures", str(tmp_path / "gestures.npz"),
+                    "--audio-file", str(wav)], lambda client, stop: None, tmp_path)
+    assert f"run: playing the voice from {wav} (0.50 s, 16000 Hz) on the run's clock" in logs
+    assert not [line for line in logs if "listening" in line], logs
+
+
+@pytest.mark.gl
 def test_replay_of_a_voice_only_run_draws_the_live_weights(tmp_path):
     """``run --input audio --gestures`` records ticks and no packets; its replay is the live run, tick for tick."""
     from helpers.gesture_dbs import small_db
