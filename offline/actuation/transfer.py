@@ -34,9 +34,14 @@ Steps:
    quantiles over the capture (``metrics["s_quantiles"]``, negative values
    included) -- each actuation alone across its range, sparse mixes, and
    dense mixes.
-4. Each pair's displacements in FAPU (inner-eye-corner distance on each face:
-   markers ``Leye_Inside``/``Reye_Inside``, landmarks 39/42; else the marker
-   cloud's RMS radius on both), rotated into the character's axes, expressed
+4. Each pair's displacements carried to the character's size, rotated into
+   its axes: multiplied by the face-size ratio, the median of the ratios of
+   the distances between landmark markers on both faces (:mod:`face_scale`;
+   one pair of markers, the inner eye corners, set it before, and one marker
+   off its landmark scaled the whole face); without three landmark markers
+   the FAPU ratio (inner-eye-corner distance on each face: markers
+   ``Leye_Inside``/``Reye_Inside``, landmarks 39/42; else the marker cloud's
+   RMS radius on both); or the ratio the user gives. Then expressed
    in the character's weights by bounded least squares
    (``scipy.optimize.lsq_linear``, 0 <= w <= 1, small ridge); then cubic
    tables s -> w fitted over that range (eqs 2-4).
@@ -62,6 +67,7 @@ from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
 from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.actuation.cubic_fit import fit_polynomial
+from facepuppet.offline.actuation.face_scale import FaceScale, face_scale
 
 # AnimFace marker -> 0-based Multi-PIE 68 landmark (L/R = the subject's own side; 36-41 is the right eye).
 # Only markers that sit on the landmark: AnimFace's ``*eye_Outside`` markers sit on the temples
@@ -256,6 +262,16 @@ def face_units(actor: Actor, character: Character, vertices: np.ndarray,
     return radius(src), radius(mapped), "marker cloud RMS radius"
 
 
+def landmark_scale(actor: Actor, character: Character, landmarks: np.ndarray | None,
+                   pairs: dict[int, int]) -> FaceScale | None:
+    """The face-size ratio from the landmark markers (``pairs``: marker index -> landmark), or None."""
+    if landmarks is None or len(pairs) < 3:
+        return None
+    idx = sorted(pairs)
+    return face_scale(actor.neutral[idx], character.vertices[landmarks[[pairs[i] for i in idx]]],
+                      [actor.names[i] for i in idx])
+
+
 def observable_shapes(character: Character, marker_vertices: np.ndarray, radius: float,
                       exclude: Sequence[str] = UNOBSERVABLE, include: Sequence[str] = ()) -> dict[str, str]:
     """Shapes the markers cannot observe, with the reason: {shape name: why}.
@@ -355,7 +371,7 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
                    override: dict[int, int] | None = None, landmarks: np.ndarray | None = None,
                    exclude: Sequence[str] = UNOBSERVABLE, include: Sequence[str] = (),
                    radius: float = REGION_RADIUS, max_frames: int = 800, ridge: float = 1e-4,
-                   snap_landmarks: bool = True) -> ActorPair:
+                   snap_landmarks: bool = True, scale: float | None = None) -> ActorPair:
     """Cubic tables s -> character weights from parameter-shape pairs.
 
     Parameters
@@ -372,6 +388,8 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     max_frames : int, training frames used (evenly spaced) for the bounded least squares
     ridge : float, Tikhonov weight on w (relative to the mean squared basis column)
     snap_landmarks : landmark markers take their landmark's vertex
+    scale : float, the face-size ratio (character length per actor length) to use; None: measured
+        (:func:`landmark_scale`, else the FAPU ratio)
 
     Left-out shapes keep their name in the pair with all-zero cubic coefficients. The pair's
     s_lower/s_upper are the range of the training s (``ActorPair.weights`` clamps to it).
@@ -389,6 +407,17 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     sim, vertices = align.similarity, align.vertices
     rot = sim[:3, :3] / np.cbrt(np.linalg.det(sim[:3, :3]))
     fapu_actor, fapu_char, fapu_kind = face_units(actor, character, vertices, landmarks)
+    measured = landmark_scale(actor, character, landmarks, align.landmarks)
+    if scale is not None:
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"retarget_actor: scale: expected a positive ratio, got {scale!r}")
+        ratio, ratio_source = float(scale), "given"
+    elif measured is not None:
+        ratio, ratio_source = measured.ratio, f"median of {measured.n} landmark-distance ratios"
+    else:
+        ratio, ratio_source = fapu_char / fapu_actor, f"FAPU ({fapu_kind})"
+    fapu_fapu = fapu_char / fapu_actor
+    fapu_actor = fapu_char / ratio          # the actor length that stands for the character's FAPU
     left_out = observable_shapes(character, vertices, radius * fapu_char, exclude, include)
     used = np.array([j for j, n in enumerate(character.shape_names) if n not in left_out], dtype=np.int64)
     if len(used) == 0:
@@ -413,13 +442,16 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
                "landmarks": {actor.names[i]: lm for i, lm in sorted(align.landmarks.items())},
                "scale": float(np.cbrt(np.linalg.det(sim[:3, :3]))),
                "fapu_actor": fapu_actor, "fapu_character": fapu_char, "fapu": fapu_kind,
+               "face_scale": {"ratio": ratio, "source": ratio_source, "fapu_ratio": fapu_fapu,
+                              "landmarks": None if measured is None else measured.as_dict()},
                "frames": int(len(pick)), "s_source": source,
                "s_range": [s[pick].min(axis=0).round(4).tolist(), s[pick].max(axis=0).round(4).tolist()],
                "marker_fit_rms": float(np.sqrt(np.mean(resid) / len(vertices))),
                "weight_fit_rms": float(np.sqrt(np.mean((fit - weights) ** 2))),
                "overrides": len(override or {}), "shapes_used": int(len(used)), "shapes_left_out": left_out}
     settings = {"max_frames": max_frames, "ridge": ridge, "character": character.name, "exclude": list(exclude),
-                "include": list(include), "radius_fapu": radius, "snap_landmarks": snap_landmarks}
+                "include": list(include), "radius_fapu": radius, "snap_landmarks": snap_landmarks,
+                "face_scale": scale}
     return ActorPair(cubic=cubic, shape_names=character.shape_names, marker_names=actor.names,
                      marker_vertices=vertices, similarity=sim, s_lower=np.minimum(s[pick].min(axis=0), 0.0),
                      s_upper=np.maximum(s[pick].max(axis=0), 0.0),
