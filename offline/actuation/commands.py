@@ -130,6 +130,8 @@ def _retarget_actor(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     actor = Actor.load(args.actor)
     character = Character.load(args.character)
+    if character.n_shapes == 0:
+        raise InputFileError(f"{args.character}: {transfer.NO_SHAPES.format(name=character.name)}")
     override = (transfer.read_override(args.markers_to_mesh, actor.names, character.n_vertices)
                 if args.markers_to_mesh else None)
     landmarks = transfer.character_landmarks(character, args.landmarks)

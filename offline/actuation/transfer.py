@@ -262,6 +262,25 @@ def face_units(actor: Actor, character: Character, vertices: np.ndarray,
     return radius(src), radius(mapped), "marker cloud RMS radius"
 
 
+#: a character without expression shapes: what is wrong and what to do (the command adds the file's name)
+NO_SHAPES = ("character '{name}' has no expression shapes (0 blendshapes or morph targets), so an actor has "
+             "nothing to drive on it (imported from a neutral mesh alone, or a glTF/VRM without morph targets). "
+             "Import it with its shapes: "
+             "`facepuppet import-rig NEUTRAL.obj SHAPES_FOLDER -o CHARACTER.npz` (a folder of OBJs with the "
+             "neutral's vertex order, e.g. the ICT-FaceKit folder itself), or a glTF/VRM that has morph targets")
+
+
+def every_shape_left_out(name: str, left_out: dict[str, str]) -> str:
+    """Why no shape is left to fit, counted by reason, and the options that bring shapes back."""
+    reasons: dict[str, int] = {}
+    for why in left_out.values():
+        reasons[why] = reasons.get(why, 0) + 1
+    counted = "; ".join(f"{n} {why}" for why, n in sorted(reasons.items(), key=lambda item: -item[1]))
+    return (f"retarget_actor: every shape of '{name}' was left out ({len(left_out)} shapes: {counted}); "
+            "bring shapes back with --include-shapes PATTERN or a larger --region-radius, or check that the "
+            "actor's markers land on the character's face (--markers-to-mesh)")
+
+
 def landmark_scale(actor: Actor, character: Character, landmarks: np.ndarray | None,
                    pairs: dict[int, int]) -> FaceScale | None:
     """The face-size ratio from the landmark markers (``pairs``: marker index -> landmark), or None."""
@@ -394,6 +413,8 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     Left-out shapes keep their name in the pair with all-zero cubic coefficients. The pair's
     s_lower/s_upper are the range of the training s (``ActorPair.weights`` clamps to it).
     """
+    if character.n_shapes == 0:
+        raise UsageError(f"retarget_actor: {NO_SHAPES.format(name=character.name)}")
     source = "given"
     if s is None or disp is None:
         pairs = take_pairs(actor)
@@ -421,7 +442,7 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     left_out = observable_shapes(character, vertices, radius * fapu_char, exclude, include)
     used = np.array([j for j, n in enumerate(character.shape_names) if n not in left_out], dtype=np.int64)
     if len(used) == 0:
-        raise UsageError(f"retarget_actor: every shape of '{character.name}' was left out ({left_out})")
+        raise UsageError(every_shape_left_out(character.name, left_out))
     dense = character.dense_deltas().astype(np.float64)           # (S, n_vertices, 3)
     basis = dense[used][:, vertices, :].reshape(len(used), -1).T  # B, (3 n_markers, n_used)
     pick = np.unique(np.linspace(0, len(s) - 1, min(max_frames, len(s))).astype(int))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -305,3 +307,34 @@ def test_face_scale_of_other_proportions_says_it_is_uncertain_and_names_the_disa
     # a similar face with its markers a little off their landmarks (1 mm on a 10 cm face) is not called uncertain
     rng = np.random.default_rng(3)
     assert not face_scale(character + rng.normal(0, 0.1, character.shape), character, names).uncertain
+
+
+def test_a_character_without_shapes_is_refused_with_what_to_do(tmp_path):
+    """import-rig of a neutral OBJ alone gives 0 shapes; retarget-actor then says so and how to import it."""
+    obj = tmp_path / "face" / "neutral.obj"
+    obj.parent.mkdir()
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
+    character_path = tmp_path / "face.npz"
+    imported = subprocess.run([sys.executable, "-m", "facepuppet", "import-rig", str(obj), "-o", str(character_path)],
+                              capture_output=True, text=True, timeout=300)
+    assert imported.returncode == 0, imported.stderr
+    assert "shapes: 0" in imported.stdout and "no expression shapes" in imported.stdout
+    actor, _ = actor_on(grid_face())
+    done = subprocess.run([sys.executable, "-m", "facepuppet", "retarget-actor", str(actor.save(tmp_path / "a.npz")),
+                           str(character_path), "-o", str(tmp_path / "pair.npz")],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and not (tmp_path / "pair.npz").exists()
+    message = done.stderr
+    assert str(character_path) in message and "has no expression shapes" in message, message
+    assert "import-rig NEUTRAL.obj SHAPES_FOLDER" in message and "{" not in message   # no bare dict of reasons
+
+
+def test_every_shape_left_out_counts_the_reasons_and_names_the_options():
+    character = grid_face(extra=True)
+    actor, _ = actor_on(character)
+    override = {0: int(MARKER_VERTICES[0]), 5: int(MARKER_VERTICES[5]), 9: int(MARKER_VERTICES[9])}
+    with pytest.raises(ValueError) as refused:
+        retarget_actor(actor, character, override=override, exclude=("jaw*", "puff", "eyeLook*"), radius=1.0)
+    message = str(refused.value)
+    assert "every shape of 'grid' was left out (5 shapes: 4 excluded by name; 1 no marker within " in message
+    assert "--include-shapes" in message and "--region-radius" in message
