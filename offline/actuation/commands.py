@@ -16,6 +16,7 @@ from facepuppet.runtime.model.character import Character
 from facepuppet.offline.actuation import transfer
 from facepuppet.offline.actuation.face_scale import FaceScale
 from facepuppet.offline.actuation.pictures import actuation_sheet, face_actuation_sheet, signal_plot
+from facepuppet.offline.actuation.shape_choice import NO_SHAPES
 from facepuppet.offline.actuation.transfer_eval import transfer_error
 from facepuppet.offline.io.capture import read_capture
 
@@ -131,7 +132,7 @@ def _retarget_actor(args: argparse.Namespace) -> int:
     actor = Actor.load(args.actor)
     character = Character.load(args.character)
     if character.n_shapes == 0:
-        raise InputFileError(f"{args.character}: {transfer.NO_SHAPES.format(name=character.name)}")
+        raise InputFileError(f"{args.character}: {NO_SHAPES.format(name=character.name)}")
     override = (transfer.read_override(args.markers_to_mesh, actor.names, character.n_vertices)
                 if args.markers_to_mesh else None)
     landmarks = transfer.character_landmarks(character, args.landmarks)

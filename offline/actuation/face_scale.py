@@ -12,6 +12,10 @@ One ratio cannot be right for two faces of different proportions (a wider mouth,
 landmark distances then disagree with each other, not only with the scale. The middle half of the ratios
 measures that disagreement; when it is wide the scale is reported as uncertain, with the landmarks whose
 distances disagree most, and the user can choose the ratio (``retarget-actor --face-scale``).
+
+Each face's FAPU (:func:`face_units`, the inner-eye-corner distance, else the marker cloud's size) stays the
+unit of lengths on one face (the character's sets how near a marker must be to a shape's region), and gives
+the ratio when fewer than three markers sit on landmarks.
 """
 
 from __future__ import annotations
@@ -22,11 +26,16 @@ from typing import NamedTuple
 
 import numpy as np
 
+from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.model.character import Character
+
 #: the middle half of the ratios spans more than this fraction of the median: the scale is uncertain (one
 #: ratio then misstates a quarter of the face's distances by more than about half this, each way). On nine
 #: AnimFace landmarks of a 10 cm face, 1 mm of placement error per coordinate gives a spread of about 0.04,
 #: 3 mm about 0.12; a face 1.5 times wider than the other (same height) 0.19; the kit's takes onto ICT 0.3.
 UNCERTAIN_SPREAD = 0.15
+FAPU_MARKERS = ("Leye_Inside", "Reye_Inside")       # actor FAPU: inner-eye-corner distance
+FAPU_LANDMARKS = (39, 42)                           # character FAPU: the same, Multi-PIE 0-based
 MIN_DISTANCE = 1e-6  # distances shorter than this (either face, its units) give no ratio
 
 
@@ -112,3 +121,30 @@ def face_scale(actor_points: np.ndarray, character_points: np.ndarray,
     by_landmark = {name: round(float(np.median(v)), 4) for name, v in through.items() if v}
     by_landmark = dict(sorted(by_landmark.items(), key=lambda item: item[1]))
     return FaceScale(median, len(r), low, high, float(r.min()), float(r.max()), by_landmark)
+
+
+def landmark_scale(actor: Actor, character: Character, landmarks: np.ndarray | None,
+                   pairs: dict[int, int]) -> FaceScale | None:
+    """The face-size ratio from the landmark markers (``pairs``: marker index -> landmark), or None."""
+    if landmarks is None or len(pairs) < 3:
+        return None
+    idx = sorted(pairs)
+    return face_scale(actor.neutral[idx], character.vertices[landmarks[[pairs[i] for i in idx]]],
+                      [actor.names[i] for i in idx])
+
+
+def face_units(actor: Actor, character: Character, vertices: np.ndarray,
+               landmarks: np.ndarray | None) -> tuple[float, float, str]:
+    """FAPU on each face: (actor units, character units, kind).
+
+    The inner-eye-corner distance (markers :data:`FAPU_MARKERS`, landmarks :data:`FAPU_LANDMARKS`)
+    when both faces have them; otherwise the RMS radius of the marker cloud / its mapped vertices.
+    """
+    src = actor.neutral.astype(np.float64)
+    if all(n in actor.names for n in FAPU_MARKERS) and landmarks is not None and max(FAPU_LANDMARKS) < len(landmarks):
+        a, b = (src[actor.names.index(n)] for n in FAPU_MARKERS)
+        p, q = (character.vertices[landmarks[i]].astype(np.float64) for i in FAPU_LANDMARKS)
+        return float(np.linalg.norm(a - b)), float(np.linalg.norm(p - q)), "inner eye corners"
+    mapped = character.vertices[vertices].astype(np.float64)
+    radius = lambda p: float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))  # noqa: E731
+    return radius(src), radius(mapped), "marker cloud RMS radius"

@@ -21,7 +21,8 @@ Steps:
 2. Shapes: those the markers cannot observe are left out (weight 0): gaze and
    pupil shapes by name (:data:`UNOBSERVABLE`) and shapes whose moving skin
    region (|delta| >= half its largest) has no marker vertex within
-   ``radius`` (a fraction of the character's FAPU). ``include`` brings any back.
+   ``radius`` (a fraction of the character's FAPU). ``include`` brings any back
+   (:mod:`shape_choice`).
 3. Training pairs where the solve lands: the actuations of frames of the
    training take (the actor's ``s_samples``) and the rest pose s = 0, markers
    by eq 2. The take's frames matter because an actor's actuations can be
@@ -49,7 +50,6 @@ Steps:
 
 from __future__ import annotations
 
-import fnmatch
 import json
 import os
 from collections.abc import Sequence
@@ -63,11 +63,18 @@ from scipy.spatial import cKDTree
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.errors import InputFileError, UsageError
-from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
-from facepuppet.runtime.model.geometry import vertex_normals
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.actuation.cubic_fit import fit_polynomial
-from facepuppet.offline.actuation.face_scale import FaceScale, face_scale
+from facepuppet.offline.actuation.face_scale import face_units, landmark_scale
+from facepuppet.offline.actuation.shape_choice import (
+    NO_SHAPES,
+    REGION_RADIUS,
+    UNOBSERVABLE,
+    every_shape_left_out,
+    front_skin,
+    observable_shapes,
+)
 
 # AnimFace marker -> 0-based Multi-PIE 68 landmark (L/R = the subject's own side; 36-41 is the right eye).
 # Only markers that sit on the landmark: AnimFace's ``*eye_Outside`` markers sit on the temples
@@ -79,11 +86,6 @@ MARKER_LANDMARKS = {
     "Mouth_Up": 51, "Mouth_Down": 57,               # upper / lower lip, middle
     "Chin": 8,                                      # chin
 }
-FAPU_MARKERS = ("Leye_Inside", "Reye_Inside")       # actor FAPU: inner-eye-corner distance
-FAPU_LANDMARKS = (39, 42)                           # character FAPU: the same, Multi-PIE 0-based
-UNOBSERVABLE = ("eyeLook*", "PupilDilate*")         # markers on the skin cannot see gaze or pupils
-REGION_RADIUS = 0.3                                 # of the character's FAPU: a shape's region must have a
-                                                    # marker vertex this close
 
 
 def umeyama(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -167,16 +169,6 @@ class Alignment(NamedTuple):
     landmarks: dict
 
 
-def front_skin(character: Character) -> np.ndarray:
-    """Indices of the skin vertices that face the viewer (+z); all vertices if there are too few."""
-    kinds = character.material_params[:, 2].astype(int)
-    skin_tri = kinds[character.triangle_material] == MATERIAL_KINDS["skin"]
-    skin = np.unique(character.triangles[skin_tri])
-    normals = vertex_normals(character.vertices, character.triangles)
-    front = skin[normals[skin, 2] > 0.3] if len(skin) else np.arange(character.n_vertices)
-    return front if len(front) >= 3 else np.arange(character.n_vertices)
-
-
 def _icp(src: np.ndarray, verts: np.ndarray, front: np.ndarray, tree, override: dict, iterations: int):
     cloud = verts[front]
     face = cloud[cloud[:, 2] > np.percentile(cloud[:, 2], 40)]
@@ -243,81 +235,6 @@ def align_markers(actor: Actor, character: Character, override: dict[int, int] |
         idx = np.array(sorted(pairs))
         lm_rms = float(np.sqrt(np.mean(np.sum((verts[landmarks[[pairs[i] for i in idx]]] - moved[idx]) ** 2, 1))))
     return Alignment(m, vertices, rms, lm_rms, pairs)
-
-
-def face_units(actor: Actor, character: Character, vertices: np.ndarray,
-               landmarks: np.ndarray | None) -> tuple[float, float, str]:
-    """FAPU on each face: (actor units, character units, kind).
-
-    The inner-eye-corner distance (markers :data:`FAPU_MARKERS`, landmarks :data:`FAPU_LANDMARKS`)
-    when both faces have them; otherwise the RMS radius of the marker cloud / its mapped vertices.
-    """
-    src = actor.neutral.astype(np.float64)
-    if all(n in actor.names for n in FAPU_MARKERS) and landmarks is not None and max(FAPU_LANDMARKS) < len(landmarks):
-        a, b = (src[actor.names.index(n)] for n in FAPU_MARKERS)
-        p, q = (character.vertices[landmarks[i]].astype(np.float64) for i in FAPU_LANDMARKS)
-        return float(np.linalg.norm(a - b)), float(np.linalg.norm(p - q)), "inner eye corners"
-    mapped = character.vertices[vertices].astype(np.float64)
-    radius = lambda p: float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))  # noqa: E731
-    return radius(src), radius(mapped), "marker cloud RMS radius"
-
-
-#: a character without expression shapes: what is wrong and what to do (the command adds the file's name)
-NO_SHAPES = ("character '{name}' has no expression shapes (0 blendshapes or morph targets), so an actor has "
-             "nothing to drive on it (imported from a neutral mesh alone, or a glTF/VRM without morph targets). "
-             "Import it with its shapes: "
-             "`facepuppet import-rig NEUTRAL.obj SHAPES_FOLDER -o CHARACTER.npz` (a folder of OBJs with the "
-             "neutral's vertex order, e.g. the ICT-FaceKit folder itself), or a glTF/VRM that has morph targets")
-
-
-def every_shape_left_out(name: str, left_out: dict[str, str]) -> str:
-    """Why no shape is left to fit, counted by reason, and the options that bring shapes back."""
-    reasons: dict[str, int] = {}
-    for why in left_out.values():
-        reasons[why] = reasons.get(why, 0) + 1
-    counted = "; ".join(f"{n} {why}" for why, n in sorted(reasons.items(), key=lambda item: -item[1]))
-    return (f"retarget_actor: every shape of '{name}' was left out ({len(left_out)} shapes: {counted}); "
-            "bring shapes back with --include-shapes PATTERN or a larger --region-radius, or check that the "
-            "actor's markers land on the character's face (--markers-to-mesh)")
-
-
-def landmark_scale(actor: Actor, character: Character, landmarks: np.ndarray | None,
-                   pairs: dict[int, int]) -> FaceScale | None:
-    """The face-size ratio from the landmark markers (``pairs``: marker index -> landmark), or None."""
-    if landmarks is None or len(pairs) < 3:
-        return None
-    idx = sorted(pairs)
-    return face_scale(actor.neutral[idx], character.vertices[landmarks[[pairs[i] for i in idx]]],
-                      [actor.names[i] for i in idx])
-
-
-def observable_shapes(character: Character, marker_vertices: np.ndarray, radius: float,
-                      exclude: Sequence[str] = UNOBSERVABLE, include: Sequence[str] = ()) -> dict[str, str]:
-    """Shapes the markers cannot observe, with the reason: {shape name: why}.
-
-    A shape is left out when its name matches an ``exclude`` pattern (fnmatch), or when its moving
-    skin region (front skin vertices with |delta| >= half the largest) has no marker vertex within
-    ``radius`` (character units). Names matching an ``include`` pattern are never left out.
-    """
-    front = front_skin(character)
-    dense = character.dense_deltas().astype(np.float64)
-    marks = cKDTree(character.vertices[np.asarray(marker_vertices)].astype(np.float64))
-    out = {}
-    for j, name in enumerate(character.shape_names):
-        if any(fnmatch.fnmatchcase(name, p) for p in include):
-            continue
-        if any(fnmatch.fnmatchcase(name, p) for p in exclude):
-            out[name] = "excluded by name"
-            continue
-        length = np.linalg.norm(dense[j, front], axis=1)
-        if length.max(initial=0.0) <= 1e-6:
-            out[name] = "moves no front skin"
-            continue
-        region = character.vertices[front[length >= 0.5 * length.max()]].astype(np.float64)
-        dist, _ = marks.query(region)
-        if dist.min() > radius:
-            out[name] = f"no marker within {radius:.2f} {character.units} of its region"
-    return out
 
 
 def s_distribution(actor: Actor) -> tuple[np.ndarray, np.ndarray, str]:

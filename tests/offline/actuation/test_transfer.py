@@ -14,11 +14,10 @@ from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.geometry import euler_to_quat, quat_to_matrix
 
-from facepuppet.offline.actuation.face_scale import UNCERTAIN_SPREAD, FaceScale, face_scale
+from facepuppet.offline.actuation.face_scale import UNCERTAIN_SPREAD, FaceScale, face_scale, face_units
+from facepuppet.offline.actuation.shape_choice import observable_shapes
 from facepuppet.offline.actuation.transfer import (
     align_markers,
-    face_units,
-    observable_shapes,
     parameter_shape_pairs,
     read_landmarks,
     read_override,
