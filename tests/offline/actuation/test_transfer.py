@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.geometry import euler_to_quat, quat_to_matrix
 
@@ -337,3 +338,24 @@ def test_every_shape_left_out_counts_the_reasons_and_names_the_options():
     message = str(refused.value)
     assert "every shape of 'grid' was left out (5 shapes: 4 excluded by name; 1 no marker within " in message
     assert "--include-shapes" in message and "--region-radius" in message
+
+
+def test_retarget_actor_face_scale_option(tmp_path):
+    """--face-scale sets the ratio (the landmarks' own is still printed beside it); a ratio that is not a positive
+    number is refused, exit 2, before any work."""
+    character = grid_face()
+    actor, scale, landmarks = landmark_actor(character)
+    (tmp_path / "landmarks.json").write_text(json.dumps(landmarks.tolist()))
+    command = [sys.executable, "-m", "facepuppet", "retarget-actor", str(actor.save(tmp_path / "a.npz")),
+               str(character.save(tmp_path / "face.npz")), "--landmarks", str(tmp_path / "landmarks.json")]
+    done = subprocess.run(command + ["-o", str(tmp_path / "p.npz"), "--face-scale", "0.5"], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert f"face-size ratio 0.500 (given); the landmarks say {1 / scale:.3f}" in done.stdout
+    pair = ActorPair.load(tmp_path / "p.npz")
+    assert pair.metadata["metrics"]["fapu_character"] / pair.metadata["metrics"]["fapu_actor"] == pytest.approx(0.5)
+    for bad in ("-1", "0", "nan"):
+        refused = subprocess.run(command + ["-o", str(tmp_path / "q.npz"), "--face-scale", bad], capture_output=True,
+                                 text=True, timeout=300)
+        assert refused.returncode == 2 and "--face-scale: expected a positive ratio" in refused.stderr
+        assert not (tmp_path / "q.npz").exists()
