@@ -112,6 +112,9 @@ def _import_rig(args: argparse.Namespace) -> int:
         f"({100.0 * stored / max(dense, 1):.1f}%)\n"
         f"  file {out.stat().st_size / 1e6:.2f} MB, {seconds:.2f} s"
     )
+    if character.n_shapes == 0:
+        print("  note: no expression shapes (no shapes folder given): this character can be drawn but not driven "
+              "by weights or an actor; give its folder of shape OBJs to drive it")
     return 0
 
 

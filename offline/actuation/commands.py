@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.cli.progress import Progress
-from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.actuation import transfer
+from facepuppet.offline.actuation.face_scale import FaceScale
 from facepuppet.offline.actuation.pictures import actuation_sheet, face_actuation_sheet, signal_plot
+from facepuppet.offline.actuation.shape_choice import NO_SHAPES
 from facepuppet.offline.actuation.transfer_eval import transfer_error
 from facepuppet.offline.io.capture import read_capture
 
@@ -56,6 +59,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="shape names left out by name (default: eyeLook* PupilDilate*)")
     r.add_argument("--region-radius", type=float, default=None, metavar="FAPU",
                    help="a shape needs a marker within this many FAPU of its moving region (default 0.3)")
+    r.add_argument("--face-scale", type=float, metavar="RATIO",
+                   help="character length per actor length, by which the actor's motion is scaled (default: the "
+                        "median of the ratios of the distances between landmark markers on both faces, else the "
+                        "inner-eye-corner distances' ratio)")
     r.add_argument("--evaluate", type=Path, metavar="CAPTURE",
                    help="report the marker-space transfer error on this take's frames "
                         "(TRC/C3D/CSV, the actor's markers)")
@@ -103,10 +110,29 @@ def _train_actor(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scale_lines(m: dict, actor_units: str, units: str) -> str:
+    """What the actor's motion is multiplied by, from what, and whether the landmarks agree on it."""
+    scale = m["face_scale"]
+    measured = FaceScale.from_dict(scale["landmarks"]) if scale["landmarks"] else None
+    if scale["source"] == "given":
+        line = f"face-size ratio {scale['ratio']:.3f} (given)" + (
+            f"; the landmarks say {measured.ratio:.3f} (middle half {measured.low:.2f}-{measured.high:.2f})"
+            if measured else "")
+    elif measured is not None:
+        line = measured.summary()
+    else:
+        line = f"face-size ratio {scale['ratio']:.3f} (from the {scale['source']}; fewer than 3 landmark markers)"
+    return (f"{line}\n  FAPU ({m['fapu']}) {m['fapu_character']:.3f} {units} on the character, "
+            f"{m['fapu_actor']:.3f} {actor_units} on the actor at that ratio (the FAPU ratio is "
+            f"{scale['fapu_ratio']:.3f})")
+
+
 def _retarget_actor(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     actor = Actor.load(args.actor)
     character = Character.load(args.character)
+    if character.n_shapes == 0:
+        raise InputFileError(f"{args.character}: {NO_SHAPES.format(name=character.name)}")
     override = (transfer.read_override(args.markers_to_mesh, actor.names, character.n_vertices)
                 if args.markers_to_mesh else None)
     landmarks = transfer.character_landmarks(character, args.landmarks)
@@ -115,6 +141,10 @@ def _retarget_actor(args: argparse.Namespace) -> int:
         options["exclude"] = args.exclude_shapes
     if args.region_radius is not None:
         options["radius"] = args.region_radius
+    if args.face_scale is not None:
+        if not (math.isfinite(args.face_scale) and args.face_scale > 0):
+            raise UsageError(f"--face-scale: expected a positive ratio, got {args.face_scale!r}")
+        options["scale"] = args.face_scale
     pair = transfer.retarget_actor(actor, character, override=override, landmarks=landmarks, **options)
     out = pair.save(args.output)
     m = pair.metadata["metrics"]
@@ -124,8 +154,8 @@ def _retarget_actor(args: argparse.Namespace) -> int:
     print(f"{out}: {actor.n_markers} markers, K = {actor.n_actuations} -> {m['shapes_used']} of {character.n_shapes} "
           f"shapes of '{character.name}', {time.perf_counter() - start:.2f} s\n"
           f"  alignment: {lm}, scale {m['scale']:.3f}, RMS marker-to-skin {m['alignment_rms']:.3f} {u}, "
-          f"{m['overrides']} overrides; FAPU ({m['fapu']}) {m['fapu_actor']:.3f} {actor.units} -> "
-          f"{m['fapu_character']:.3f} {u}\n"
+          f"{m['overrides']} overrides\n"
+          f"  {_scale_lines(m, actor.units, u)}\n"
           f"  left out: " + (", ".join(f"{n} ({why})" for n, why in m["shapes_left_out"].items()) or "none") + "\n"
           f"  weights fit: {m['frames']} parameter-shape pairs, s from {m['s_source']}, marker RMS "
           f"{m['marker_fit_rms']:.3f} {u}, cubic weight RMS {m['weight_fit_rms']:.3f}")

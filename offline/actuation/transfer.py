@@ -21,7 +21,8 @@ Steps:
 2. Shapes: those the markers cannot observe are left out (weight 0): gaze and
    pupil shapes by name (:data:`UNOBSERVABLE`) and shapes whose moving skin
    region (|delta| >= half its largest) has no marker vertex within
-   ``radius`` (a fraction of the character's FAPU). ``include`` brings any back.
+   ``radius`` (a fraction of the character's FAPU). ``include`` brings any back
+   (:mod:`shape_choice`).
 3. Training pairs where the solve lands: the actuations of frames of the
    training take (the actor's ``s_samples``) and the rest pose s = 0, markers
    by eq 2. The take's frames matter because an actor's actuations can be
@@ -34,9 +35,14 @@ Steps:
    quantiles over the capture (``metrics["s_quantiles"]``, negative values
    included) -- each actuation alone across its range, sparse mixes, and
    dense mixes.
-4. Each pair's displacements in FAPU (inner-eye-corner distance on each face:
-   markers ``Leye_Inside``/``Reye_Inside``, landmarks 39/42; else the marker
-   cloud's RMS radius on both), rotated into the character's axes, expressed
+4. Each pair's displacements carried to the character's size, rotated into
+   its axes: multiplied by the face-size ratio, the median of the ratios of
+   the distances between landmark markers on both faces (:mod:`face_scale`;
+   one pair of markers, the inner eye corners, set it before, and one marker
+   off its landmark scaled the whole face); without three landmark markers
+   the FAPU ratio (inner-eye-corner distance on each face: markers
+   ``Leye_Inside``/``Reye_Inside``, landmarks 39/42; else the marker cloud's
+   RMS radius on both); or the ratio the user gives. Then expressed
    in the character's weights by bounded least squares
    (``scipy.optimize.lsq_linear``, 0 <= w <= 1, small ridge); then cubic
    tables s -> w fitted over that range (eqs 2-4).
@@ -44,7 +50,6 @@ Steps:
 
 from __future__ import annotations
 
-import fnmatch
 import json
 import os
 from collections.abc import Sequence
@@ -58,10 +63,18 @@ from scipy.spatial import cKDTree
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.errors import InputFileError, UsageError
-from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
-from facepuppet.runtime.model.geometry import vertex_normals
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.actuation.cubic_fit import fit_polynomial
+from facepuppet.offline.actuation.face_scale import face_units, landmark_scale
+from facepuppet.offline.actuation.shape_choice import (
+    NO_SHAPES,
+    REGION_RADIUS,
+    UNOBSERVABLE,
+    every_shape_left_out,
+    front_skin,
+    observable_shapes,
+)
 
 # AnimFace marker -> 0-based Multi-PIE 68 landmark (L/R = the subject's own side; 36-41 is the right eye).
 # Only markers that sit on the landmark: AnimFace's ``*eye_Outside`` markers sit on the temples
@@ -73,11 +86,6 @@ MARKER_LANDMARKS = {
     "Mouth_Up": 51, "Mouth_Down": 57,               # upper / lower lip, middle
     "Chin": 8,                                      # chin
 }
-FAPU_MARKERS = ("Leye_Inside", "Reye_Inside")       # actor FAPU: inner-eye-corner distance
-FAPU_LANDMARKS = (39, 42)                           # character FAPU: the same, Multi-PIE 0-based
-UNOBSERVABLE = ("eyeLook*", "PupilDilate*")         # markers on the skin cannot see gaze or pupils
-REGION_RADIUS = 0.3                                 # of the character's FAPU: a shape's region must have a
-                                                    # marker vertex this close
 
 
 def umeyama(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -161,16 +169,6 @@ class Alignment(NamedTuple):
     landmarks: dict
 
 
-def front_skin(character: Character) -> np.ndarray:
-    """Indices of the skin vertices that face the viewer (+z); all vertices if there are too few."""
-    kinds = character.material_params[:, 2].astype(int)
-    skin_tri = kinds[character.triangle_material] == MATERIAL_KINDS["skin"]
-    skin = np.unique(character.triangles[skin_tri])
-    normals = vertex_normals(character.vertices, character.triangles)
-    front = skin[normals[skin, 2] > 0.3] if len(skin) else np.arange(character.n_vertices)
-    return front if len(front) >= 3 else np.arange(character.n_vertices)
-
-
 def _icp(src: np.ndarray, verts: np.ndarray, front: np.ndarray, tree, override: dict, iterations: int):
     cloud = verts[front]
     face = cloud[cloud[:, 2] > np.percentile(cloud[:, 2], 40)]
@@ -237,52 +235,6 @@ def align_markers(actor: Actor, character: Character, override: dict[int, int] |
         idx = np.array(sorted(pairs))
         lm_rms = float(np.sqrt(np.mean(np.sum((verts[landmarks[[pairs[i] for i in idx]]] - moved[idx]) ** 2, 1))))
     return Alignment(m, vertices, rms, lm_rms, pairs)
-
-
-def face_units(actor: Actor, character: Character, vertices: np.ndarray,
-               landmarks: np.ndarray | None) -> tuple[float, float, str]:
-    """FAPU on each face: (actor units, character units, kind).
-
-    The inner-eye-corner distance (markers :data:`FAPU_MARKERS`, landmarks :data:`FAPU_LANDMARKS`)
-    when both faces have them; otherwise the RMS radius of the marker cloud / its mapped vertices.
-    """
-    src = actor.neutral.astype(np.float64)
-    if all(n in actor.names for n in FAPU_MARKERS) and landmarks is not None and max(FAPU_LANDMARKS) < len(landmarks):
-        a, b = (src[actor.names.index(n)] for n in FAPU_MARKERS)
-        p, q = (character.vertices[landmarks[i]].astype(np.float64) for i in FAPU_LANDMARKS)
-        return float(np.linalg.norm(a - b)), float(np.linalg.norm(p - q)), "inner eye corners"
-    mapped = character.vertices[vertices].astype(np.float64)
-    radius = lambda p: float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))  # noqa: E731
-    return radius(src), radius(mapped), "marker cloud RMS radius"
-
-
-def observable_shapes(character: Character, marker_vertices: np.ndarray, radius: float,
-                      exclude: Sequence[str] = UNOBSERVABLE, include: Sequence[str] = ()) -> dict[str, str]:
-    """Shapes the markers cannot observe, with the reason: {shape name: why}.
-
-    A shape is left out when its name matches an ``exclude`` pattern (fnmatch), or when its moving
-    skin region (front skin vertices with |delta| >= half the largest) has no marker vertex within
-    ``radius`` (character units). Names matching an ``include`` pattern are never left out.
-    """
-    front = front_skin(character)
-    dense = character.dense_deltas().astype(np.float64)
-    marks = cKDTree(character.vertices[np.asarray(marker_vertices)].astype(np.float64))
-    out = {}
-    for j, name in enumerate(character.shape_names):
-        if any(fnmatch.fnmatchcase(name, p) for p in include):
-            continue
-        if any(fnmatch.fnmatchcase(name, p) for p in exclude):
-            out[name] = "excluded by name"
-            continue
-        length = np.linalg.norm(dense[j, front], axis=1)
-        if length.max(initial=0.0) <= 1e-6:
-            out[name] = "moves no front skin"
-            continue
-        region = character.vertices[front[length >= 0.5 * length.max()]].astype(np.float64)
-        dist, _ = marks.query(region)
-        if dist.min() > radius:
-            out[name] = f"no marker within {radius:.2f} {character.units} of its region"
-    return out
 
 
 def s_distribution(actor: Actor) -> tuple[np.ndarray, np.ndarray, str]:
@@ -355,7 +307,7 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
                    override: dict[int, int] | None = None, landmarks: np.ndarray | None = None,
                    exclude: Sequence[str] = UNOBSERVABLE, include: Sequence[str] = (),
                    radius: float = REGION_RADIUS, max_frames: int = 800, ridge: float = 1e-4,
-                   snap_landmarks: bool = True) -> ActorPair:
+                   snap_landmarks: bool = True, scale: float | None = None) -> ActorPair:
     """Cubic tables s -> character weights from parameter-shape pairs.
 
     Parameters
@@ -372,10 +324,14 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     max_frames : int, training frames used (evenly spaced) for the bounded least squares
     ridge : float, Tikhonov weight on w (relative to the mean squared basis column)
     snap_landmarks : landmark markers take their landmark's vertex
+    scale : float, the face-size ratio (character length per actor length) to use; None: measured
+        (:func:`landmark_scale`, else the FAPU ratio)
 
     Left-out shapes keep their name in the pair with all-zero cubic coefficients. The pair's
     s_lower/s_upper are the range of the training s (``ActorPair.weights`` clamps to it).
     """
+    if character.n_shapes == 0:
+        raise UsageError(f"retarget_actor: {NO_SHAPES.format(name=character.name)}")
     source = "given"
     if s is None or disp is None:
         pairs = take_pairs(actor)
@@ -389,10 +345,21 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
     sim, vertices = align.similarity, align.vertices
     rot = sim[:3, :3] / np.cbrt(np.linalg.det(sim[:3, :3]))
     fapu_actor, fapu_char, fapu_kind = face_units(actor, character, vertices, landmarks)
+    measured = landmark_scale(actor, character, landmarks, align.landmarks)
+    if scale is not None:
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"retarget_actor: scale: expected a positive ratio, got {scale!r}")
+        ratio, ratio_source = float(scale), "given"
+    elif measured is not None:
+        ratio, ratio_source = measured.ratio, f"median of {measured.n} landmark-distance ratios"
+    else:
+        ratio, ratio_source = fapu_char / fapu_actor, f"FAPU ({fapu_kind})"
+    fapu_fapu = fapu_char / fapu_actor
+    fapu_actor = fapu_char / ratio          # the actor length that stands for the character's FAPU
     left_out = observable_shapes(character, vertices, radius * fapu_char, exclude, include)
     used = np.array([j for j, n in enumerate(character.shape_names) if n not in left_out], dtype=np.int64)
     if len(used) == 0:
-        raise UsageError(f"retarget_actor: every shape of '{character.name}' was left out ({left_out})")
+        raise UsageError(every_shape_left_out(character.name, left_out))
     dense = character.dense_deltas().astype(np.float64)           # (S, n_vertices, 3)
     basis = dense[used][:, vertices, :].reshape(len(used), -1).T  # B, (3 n_markers, n_used)
     pick = np.unique(np.linspace(0, len(s) - 1, min(max_frames, len(s))).astype(int))
@@ -413,13 +380,16 @@ def retarget_actor(actor: Actor, character: Character, s: np.ndarray | None = No
                "landmarks": {actor.names[i]: lm for i, lm in sorted(align.landmarks.items())},
                "scale": float(np.cbrt(np.linalg.det(sim[:3, :3]))),
                "fapu_actor": fapu_actor, "fapu_character": fapu_char, "fapu": fapu_kind,
+               "face_scale": {"ratio": ratio, "source": ratio_source, "fapu_ratio": fapu_fapu,
+                              "landmarks": None if measured is None else measured.as_dict()},
                "frames": int(len(pick)), "s_source": source,
                "s_range": [s[pick].min(axis=0).round(4).tolist(), s[pick].max(axis=0).round(4).tolist()],
                "marker_fit_rms": float(np.sqrt(np.mean(resid) / len(vertices))),
                "weight_fit_rms": float(np.sqrt(np.mean((fit - weights) ** 2))),
                "overrides": len(override or {}), "shapes_used": int(len(used)), "shapes_left_out": left_out}
     settings = {"max_frames": max_frames, "ridge": ridge, "character": character.name, "exclude": list(exclude),
-                "include": list(include), "radius_fapu": radius, "snap_landmarks": snap_landmarks}
+                "include": list(include), "radius_fapu": radius, "snap_landmarks": snap_landmarks,
+                "face_scale": scale}
     return ActorPair(cubic=cubic, shape_names=character.shape_names, marker_names=actor.names,
                      marker_vertices=vertices, similarity=sim, s_lower=np.minimum(s[pick].min(axis=0), 0.0),
                      s_upper=np.maximum(s[pick].max(axis=0), 0.0),

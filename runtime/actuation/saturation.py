@@ -2,7 +2,8 @@
 
 A weight held at 1.0 or an actuation held at a bound looks like any other strong expression in the
 picture; only a count tells the user that the character (or the actor table) ran out of range. The
-``solve`` stage counts every frame it solves; ``replay --stats`` prints the fractions by name.
+``solve`` stage counts every frame it solves; ``run --stats`` and ``replay --stats`` print the fractions by
+name, and without ``--stats`` a channel held at 1.0 in a tenth of the frames is still warned about.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import numpy as np
 
 #: a channel or actuation at its limit in at least this fraction of the solved frames is named in the summary
 REPORT_FRACTION = 0.01
+#: a channel at 1.0 in at least this fraction of the solved frames is warned about even without ``--stats``
+WARN_FRACTION = 0.1
 
 
 class SaturationCount:
@@ -65,3 +68,16 @@ class SaturationCount:
 
         return (f"solve saturation over {f['frames']} solved frames (>= {at_least:.0%} of them): channels at 1.0: "
                 f"{some(f['channels_at_1'])}; actuations at a bound: {some(f['actuations_at_bound'])}")
+
+
+def report_line(count: SaturationCount | None, stats: bool) -> str | None:
+    """What a command prints about saturation at its end: the count with ``--stats``; without, a warning when a
+    channel sat at 1.0 in at least :data:`WARN_FRACTION` of the solved frames (it looks like expression in
+    the picture otherwise); None when there is nothing to say (or no solve)."""
+    if count is None:
+        return None
+    if stats:
+        return count.line()
+    if count.fractions(WARN_FRACTION)["channels_at_1"]:
+        return "warning: " + count.line()
+    return None

@@ -19,6 +19,7 @@ import signal
 from dataclasses import dataclass
 from pathlib import Path
 
+from facepuppet.runtime.actuation.saturation import report_line
 from facepuppet.runtime.commands.run import report_outputs
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.files.json_limits import dumps_strict
@@ -27,8 +28,6 @@ from facepuppet.runtime.session.assemble import SessionResult, open_session
 from facepuppet.runtime.session.input_options import ReplayInputOptions
 from facepuppet.runtime.session.options import OutputOptions, PacingOptions, PictureOptions, StageOptions
 from facepuppet.runtime.session.recording_feed import RecordingFeed
-
-SATURATION_WARN = 0.1  # a channel at 1.0 in this fraction of the solved frames is warned about without --stats
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -99,10 +98,10 @@ def run_replay(args: argparse.Namespace) -> int:
     if feed.missing_line():
         print(feed.missing_line())
     print(loop.timer.table())
-    saturation = None if feed.solve is None else feed.solve.saturation
-    if saturation is not None and (plan.outputs.stats or saturation.fractions(SATURATION_WARN)["channels_at_1"]):
-        # always said when a channel sits at 1.0 for a tenth of the take: it looks like expression otherwise
-        print(("replay: " if plan.outputs.stats else "replay: warning: ") + saturation.line())
+    saturation = result.saturation
+    line = report_line(saturation, plan.outputs.stats)
+    if line is not None:
+        print(f"replay: {line}")
     if plan.outputs.stats:
         summary = {"n_ticks": loop.n_ticks, "path": result.path, "counters": c, "timings_ms": loop.timings}
         if saturation is not None:

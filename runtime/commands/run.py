@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from facepuppet.runtime.actuation.saturation import report_line
 from facepuppet.runtime.errors import RecordingFailed, UsageError
 from facepuppet.runtime.files.outputs import write_atomic
 from facepuppet.runtime.model.character import Character
@@ -134,6 +135,9 @@ def run_command(args: argparse.Namespace) -> int:
           f"{c['frames_received']}, stale dropped {c['stale_dropped']}, non-finite rejected "
           f"{c['nonfinite_rejected']}, late ticks "
           f"{c['late_ticks']} (skipped {c['skipped_ticks']})" + (" (window closed)" if loop.closed_by_window else ""))
+    line = report_line(result.saturation, plan.outputs.stats)
+    if line is not None:
+        print(f"run: {line}")
     if plan.outputs.stats:
         print("\n".join(result.stats.final()))
     report_outputs("run", plan.outputs, result)

@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 from facepuppet.runtime.actuation.actor import Actor
 from facepuppet.runtime.actuation.pair import ActorPair
+from facepuppet.runtime.actuation.saturation import SaturationCount
 from facepuppet.runtime.actuation.stage import ActorRetarget
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
@@ -177,6 +178,12 @@ class Chain:
     @property
     def drive(self) -> ExpressionDrive | None:
         return self.mapper.drive if self.mapper is not None else None
+
+    @property
+    def saturation(self) -> SaturationCount | None:
+        """The marker solve's count of frames at its limits, or None without a solve stage."""
+        solve = next((stage for stage in self.stages if getattr(stage, "name", None) == "solve"), None)
+        return None if solve is None else solve.saturation
 
     def add_mix(self, mix: Any, label: str | None = None) -> None:
         """Put the ``mix`` stage in the chain: after the audio tap, before every other stage; ``label`` names the

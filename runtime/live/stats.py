@@ -77,6 +77,9 @@ class LiveStats:
         same = time.get_clock_info("perf_counter").implementation == time.get_clock_info("monotonic").implementation
         self._offset = 0.0 if same else time.monotonic() - time.perf_counter()
         self.ticks = 0
+        #: {name: callable returning a JSON-serialisable dict}: counts other parts keep, put in the summary
+        #: under that name (the marker solve's saturation)
+        self.sections: dict[str, Callable[[], dict]] = {}
 
     def on_tick(self, info: TickInfo) -> None:
         """FrameLoop ``on_tick`` hook."""
@@ -171,7 +174,8 @@ class LiveStats:
     def summary(self) -> dict:
         """Counters and latency over the whole run (JSON-serialisable; NaN where nothing was measured, None
         where a count is unknown)."""
-        return {"ticks": self.ticks, "counters": self.counter_snapshot(), "latency_ms": self.whole_run()}
+        return {"ticks": self.ticks, "counters": self.counter_snapshot(), "latency_ms": self.whole_run(),
+                **{name: section() for name, section in self.sections.items()}}
 
     def final(self) -> list[str]:
         """The whole-run line and the JSON summary (``--stats`` at exit: the command prints them), strict JSON:

@@ -75,6 +75,7 @@ class SessionResult:
     fps : float, ticks per second of the tick grid
     recorder : the feed's SwitchableRecorder or None (closed once the session's block ends; its ``failure``
         says when a recording could not be written to its end, which stopped the run)
+    saturation : SaturationCount or None, the marker solve's frames at its limits (None without a solve)
     """
 
     loop: LoopResult
@@ -87,6 +88,7 @@ class SessionResult:
     panel: Any
     fps: float
     recorder: Any = None
+    saturation: Any = None
 
     @property
     def weights(self) -> WeightLog | None:
@@ -120,7 +122,8 @@ class Session:
         counters = (self.stats.counter_snapshot() if self.stats is not None
                     else {group: dict(values) for group, values in self.counters.items()})
         return SessionResult(result, self.renderer.path, self.chain.describe(), self.outputs, counters, self.stats,
-                             self.parts.address, self.panel, self.parts.fps, self.parts.recorder)
+                             self.parts.address, self.panel, self.parts.fps, self.parts.recorder,
+                             self.chain.saturation)
 
 
 @contextlib.contextmanager
@@ -200,6 +203,8 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
         counters["loop"] = loop.counters
         if stats is not None:
             stats.counters = feed.counters_view(parts, counters, chain)
+            if chain.saturation is not None:
+                stats.sections["saturation"] = chain.saturation.fractions
         yield Session(character, feed, bus, chain, parts, target, renderer, opened, stats, shown, loop, counters,
                       on_ready)
 

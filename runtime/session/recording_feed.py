@@ -155,7 +155,6 @@ class RecordingFeed:
         self.live: LiveRecording | None = None
         self.take: Any = None
         self.events: list = []  # the replay's tracking events, compared with the recording's at the end
-        self.solve: Any = None  # the chain's marker solve stage (its saturation count is reported), or None
         self.stop_event = threading.Event()
         self.signals: StopOnSignals | None = None
         self.progress: Progress | None = None
@@ -222,7 +221,6 @@ class RecordingFeed:
 
     def open(self, stack: contextlib.ExitStack, chain: Chain, bus: SessionBus,
              log: Callable[[str], None]) -> FeedParts:
-        self.solve = next((stage for stage in chain.stages if getattr(stage, "name", None) == "solve"), None)
         if self.take is not None:
             self._check_take_layouts(chain)
             source, ticks, fps = self._take_source(chain.marker_units, log)

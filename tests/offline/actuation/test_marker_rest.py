@@ -7,11 +7,15 @@ faces' FAPU into the character's units) + 0.1 cm. The takes' first and last fram
 neutral themselves (0.2-0.4 cm RMS away), so the character may move, but no more than the actor did: the
 jaw take's first frame (lips pressed, 0.89 cm at most on ICT's scale) once came out as an open mouth of
 2.65 cm. The actor's own neutral frame gives the character's neutral (under 0.05 cm).
+
+The scale between the faces that the tolerance uses is the pair's own; what retarget-actor prints about it
+is checked against the landmark distances computed here.
 """
 
 import json
 import subprocess
 import sys
+from itertools import combinations
 
 import numpy as np
 import pytest
@@ -22,6 +26,8 @@ from facepuppet.runtime.actuation.solver import MarkerSolver
 from facepuppet.runtime.model.character import Character
 
 from conftest import need_shared
+from facepuppet.offline.actuation.face_scale import UNCERTAIN_SPREAD
+from facepuppet.offline.actuation.transfer import MARKER_LANDMARKS, character_landmarks
 from facepuppet.offline.actuation.transfer_eval import head_coordinates
 from facepuppet.offline.io.capture import read_capture
 
@@ -45,7 +51,7 @@ def test_replay_of_a_take_through_its_own_actor_starts_and_ends_near_neutral(tak
     take = need_shared("markers", take_name)
     actor_path, pair_path, dump = tmp_path / "actor.npz", tmp_path / "pair.npz", tmp_path / "w.npy"
     facepuppet("train-actor", str(take), "-o", str(actor_path))
-    facepuppet("retarget-actor", str(actor_path), str(ict_character_path), "-o", str(pair_path))
+    retargeted = facepuppet("retarget-actor", str(actor_path), str(ict_character_path), "-o", str(pair_path))
     out = facepuppet("replay", str(take), "-c", str(ict_character_path), "--actor", str(actor_path), "--pair",
                      str(pair_path), "--headless", "--size", "64x48", "--fps", str(FPS), "--dump-weights",
                      str(dump), "--stats")
@@ -66,6 +72,17 @@ def test_replay_of_a_take_through_its_own_actor_starts_and_ends_near_neutral(tak
     # the actor's own neutral is the character's neutral
     rest = MarkerSolver(actor).solve(actor.neutral)
     assert mesh_offset(ict_character, pair.weights(rest)) < 0.05
+    # the face-size ratio is the median of the landmark-marker distance ratios, computed here on its own, and
+    # the command calls it uncertain exactly when their middle half is wider than UNCERTAIN_SPREAD of it
+    landmarks = character_landmarks(ict_character)
+    on = [name for name in MARKER_LANDMARKS if name in actor.names]
+    a = actor.neutral[[actor.names.index(n) for n in on]].astype(np.float64)
+    c = ict_character.vertices[landmarks[[MARKER_LANDMARKS[n] for n in on]]].astype(np.float64)
+    ratios = [np.linalg.norm(c[i] - c[j]) / np.linalg.norm(a[i] - a[j]) for i, j in combinations(range(len(on)), 2)]
+    low, median, high = np.quantile(ratios, [0.25, 0.5, 0.75])
+    assert scale == pytest.approx(median, rel=1e-4)
+    assert f"face-size ratio {median:.3f} (median of {len(ratios)} landmark-distance ratios" in retargeted.stdout
+    assert ("the scale is uncertain" in retargeted.stdout) == ((high - low) / median > UNCERTAIN_SPREAD)
     # saturation is counted by name in --stats
     summary = json.loads(next(line for line in out.stdout.splitlines() if line.startswith("{")))
     saturation = summary["saturation"]

@@ -2,19 +2,23 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from facepuppet.runtime.actuation.actor import Actor
+from facepuppet.runtime.actuation.pair import ActorPair
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.geometry import euler_to_quat, quat_to_matrix
 
+from facepuppet.offline.actuation.face_scale import UNCERTAIN_SPREAD, FaceScale, face_scale, face_units
+from facepuppet.offline.actuation.shape_choice import observable_shapes
 from facepuppet.offline.actuation.transfer import (
     align_markers,
-    face_units,
-    observable_shapes,
     parameter_shape_pairs,
     read_landmarks,
     read_override,
@@ -232,3 +236,126 @@ def test_face_actuation_cells_count_every_weight_they_show(egl_ctx):
     for k, (label, _) in enumerate(images[1:]):
         n = int(np.sum(pair.weights(np.eye(pair.cubic.shape[1])[k]) >= LABEL_WEIGHT))
         assert label.endswith(f": {n} weight{'s' if n != 1 else ''} >= {LABEL_WEIGHT:g}")
+
+
+def landmark_actor(character: Character, move: dict | None = None):
+    """The grid-face actor (scale 1.25) with its six landmark markers named, and the character's landmarks.
+
+    move : {marker name: (fraction, towards name)}: that marker placed off its landmark on the actor, moved that
+        fraction of the way towards another marker (its motion unchanged)
+    """
+    names = [LANDMARK_NAMES.get(i, f"m{i}") for i in range(len(MARKER_VERTICES))]
+    actor, scale = actor_on(character, names=names)
+    neutral = actor.neutral.astype(np.float64)
+    for name, (fraction, towards) in (move or {}).items():
+        i, j = names.index(name), names.index(towards)
+        neutral[i] += fraction * (neutral[j] - neutral[i])
+    actor = dataclasses.replace(actor, neutral=neutral)
+    landmarks = np.zeros(68, dtype=np.int64)
+    for i, name in LANDMARK_NAMES.items():
+        landmarks[LANDMARK_OF[name]] = MARKER_VERTICES[i]
+    return actor, scale, landmarks
+
+
+LANDMARK_OF = {"NoseTop": 27, "Reye_Inside": 39, "Leye_Inside": 42, "Mouth_Rend": 48, "Mouth_Lend": 54, "Chin": 8}
+
+
+def test_one_marker_off_its_landmark_does_not_scale_the_motion():
+    """Reye_Inside placed 30 % of the way towards Leye_Inside: the inner-eye-corner distance alone says the
+    character's face is 1/0.7 times larger than it is, and jawOpen at s = 0.8 would come out at 1.0."""
+    character = grid_face()
+    actor, scale, landmarks = landmark_actor(character, {"Reye_Inside": (0.3, "Leye_Inside")})
+    pair = retarget_actor(actor, character, landmarks=landmarks)
+    m = pair.metadata["metrics"]
+    assert m["fapu_character"] / m["fapu_actor"] == pytest.approx(1 / scale, rel=0.05)
+    jaw = pair.weights([0.8, 0.0])[list(character.shape_names).index("jawOpen")]
+    assert jaw == pytest.approx(0.8, abs=0.08)
+
+
+FACE = {"Reye_Inside": (-1.6, 3.0, 0.0), "Leye_Inside": (1.6, 3.0, 0.0), "NoseTop": (0.0, 3.4, 0.3),
+        "NoseHead": (0.0, 0.8, 2.0), "Mouth_Rend": (-2.4, -2.0, 0.5), "Mouth_Lend": (2.4, -2.0, 0.5),
+        "Mouth_Up": (0.0, -1.5, 1.0), "Mouth_Down": (0.0, -2.6, 0.9), "Chin": (0.0, -5.5, 0.2)}
+
+
+def test_face_scale_of_a_similar_face_is_its_size_and_sure():
+    names = list(FACE)
+    character = np.array([FACE[n] for n in names])
+    rot = quat_to_matrix(euler_to_quat(0.3, -0.2, 0.1)).astype(np.float64)
+    actor = 1.3 * character @ rot.T + [5.0, 1.0, -2.0]
+    found = face_scale(actor, character, names)
+    assert found.ratio == pytest.approx(1 / 1.3, rel=1e-9) and found.n == 36
+    assert found.spread < 1e-9 and not found.uncertain
+    assert "warning" not in found.summary() and "median of 36 landmark-distance ratios" in found.summary()
+    assert FaceScale.from_dict(json.loads(json.dumps(found.as_dict()))) == found
+    assert face_scale(actor[:2], character[:2], names[:2]) is None        # one distance cannot say
+
+
+def test_face_scale_of_other_proportions_says_it_is_uncertain_and_names_the_disagreeing_landmarks():
+    """The actor's face 1.5 times wider than the character's (eyes and mouth), as tall: horizontal
+    distances say 1/1.5, vertical ones 1; no ratio serves both."""
+    names = list(FACE)
+    character = np.array([FACE[n] for n in names])
+    actor = character * [1.5, 1.0, 1.0]
+    found = face_scale(actor, character, names)
+    assert 1 / 1.5 < found.ratio < 1.0 and found.least == pytest.approx(1 / 1.5) and found.most == pytest.approx(1)
+    assert found.uncertain and found.spread > UNCERTAIN_SPREAD
+    line = found.summary()
+    assert "warning: the scale is uncertain" in line and "--face-scale" in line
+    smallest, largest = list(found.by_landmark)[0], list(found.by_landmark)[-1]
+    assert smallest.startswith("Mouth_") and largest in ("NoseTop", "NoseHead", "Chin", "Mouth_Up", "Mouth_Down")
+    assert f"through {smallest} say" in line and f"through {largest} " in line
+    # a similar face with its markers a little off their landmarks (1 mm on a 10 cm face) is not called uncertain
+    rng = np.random.default_rng(3)
+    assert not face_scale(character + rng.normal(0, 0.1, character.shape), character, names).uncertain
+
+
+def test_a_character_without_shapes_is_refused_with_what_to_do(tmp_path):
+    """import-rig of a neutral OBJ alone gives 0 shapes; retarget-actor then says so and how to import it."""
+    obj = tmp_path / "face" / "neutral.obj"
+    obj.parent.mkdir()
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
+    character_path = tmp_path / "face.npz"
+    imported = subprocess.run([sys.executable, "-m", "facepuppet", "import-rig", str(obj), "-o", str(character_path)],
+                              capture_output=True, text=True, timeout=300)
+    assert imported.returncode == 0, imported.stderr
+    assert "shapes: 0" in imported.stdout and "no expression shapes" in imported.stdout
+    actor, _ = actor_on(grid_face())
+    done = subprocess.run([sys.executable, "-m", "facepuppet", "retarget-actor", str(actor.save(tmp_path / "a.npz")),
+                           str(character_path), "-o", str(tmp_path / "pair.npz")],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and not (tmp_path / "pair.npz").exists()
+    message = done.stderr
+    assert str(character_path) in message and "has no expression shapes" in message, message
+    assert "import-rig NEUTRAL.obj SHAPES_FOLDER" in message and "{" not in message   # no bare dict of reasons
+
+
+def test_every_shape_left_out_counts_the_reasons_and_names_the_options():
+    character = grid_face(extra=True)
+    actor, _ = actor_on(character)
+    override = {0: int(MARKER_VERTICES[0]), 5: int(MARKER_VERTICES[5]), 9: int(MARKER_VERTICES[9])}
+    with pytest.raises(ValueError) as refused:
+        retarget_actor(actor, character, override=override, exclude=("jaw*", "puff", "eyeLook*"), radius=1.0)
+    message = str(refused.value)
+    assert "every shape of 'grid' was left out (5 shapes: 4 excluded by name; 1 no marker within " in message
+    assert "--include-shapes" in message and "--region-radius" in message
+
+
+def test_retarget_actor_face_scale_option(tmp_path):
+    """--face-scale sets the ratio (the landmarks' own is still printed beside it); a ratio that is not a positive
+    number is refused, exit 2, before any work."""
+    character = grid_face()
+    actor, scale, landmarks = landmark_actor(character)
+    (tmp_path / "landmarks.json").write_text(json.dumps(landmarks.tolist()))
+    command = [sys.executable, "-m", "facepuppet", "retarget-actor", str(actor.save(tmp_path / "a.npz")),
+               str(character.save(tmp_path / "face.npz")), "--landmarks", str(tmp_path / "landmarks.json")]
+    done = subprocess.run(command + ["-o", str(tmp_path / "p.npz"), "--face-scale", "0.5"], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert f"face-size ratio 0.500 (given); the landmarks say {1 / scale:.3f}" in done.stdout
+    pair = ActorPair.load(tmp_path / "p.npz")
+    assert pair.metadata["metrics"]["fapu_character"] / pair.metadata["metrics"]["fapu_actor"] == pytest.approx(0.5)
+    for bad in ("-1", "0", "nan"):
+        refused = subprocess.run(command + ["-o", str(tmp_path / "q.npz"), "--face-scale", bad], capture_output=True,
+                                 text=True, timeout=300)
+        assert refused.returncode == 2 and "--face-scale: expected a positive ratio" in refused.stderr
+        assert not (tmp_path / "q.npz").exists()

@@ -26,6 +26,7 @@ from facepuppet.runtime.recording.session import read_session
 
 from helpers.elastic_models import random_model
 from helpers.logs import logged
+from helpers.marker_senders import marker_sender
 from helpers.small_characters import sphere_character
 from helpers.udp_helpers import free_udp_port
 
@@ -93,37 +94,6 @@ def actor_files(tmp_path_factory):
     paths = {"actor": actor.save(tmp / "actor.npz"), "pair": pair.save(tmp / "pair.npz"),
              "character": character.save(tmp / "grid.npz")}
     return paths, cap, truth, actor, pair
-
-
-def marker_sender(names, pose_at, units=None):
-    """A ``send(client, stop)`` for :func:`live`: the markers layout about every 0.2 s (with
-    ``/facepuppet/markers/units`` when ``units``) and, every 10 ms, a marker frame of ``pose_at(seconds since
-    the start)``, (n_markers, 3) float32."""
-
-    def send(client, stop):
-        layout = OscMessageBuilder("/facepuppet/markers/layout")
-        layout.add_arg(1)
-        for name in names:
-            layout.add_arg(name, "s")
-        declare = OscMessageBuilder("/facepuppet/markers/units")
-        declare.add_arg(1)
-        declare.add_arg(units or "", "s")
-        start, n = time.monotonic(), 0
-        while not stop.is_set():
-            if n % 20 == 0:
-                client.send(layout.build())
-                if units:
-                    client.send(declare.build())
-            m = OscMessageBuilder("/facepuppet/markers/frame")
-            m.add_arg(1)
-            m.add_arg(n)
-            m.add_arg(time.time(), "d")
-            m.add_arg(pose_at(time.monotonic() - start).astype("<f4").tobytes(), "b")
-            client.send(m.build())
-            n += 1
-            time.sleep(0.01)
-
-    return send
 
 
 @pytest.mark.gl
