@@ -35,7 +35,7 @@ $(STAMP): pyproject.toml .ci/system-deps
 	bash .ci/system-deps
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[offline,video,panel,test]'
+	$(PY) -m pip install --quiet -e '.[offline,video,panel,batch,test]'
 	touch $(STAMP)
 
 # Benchmarks on the real ICT head from ../shared/data (imported first).

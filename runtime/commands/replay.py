@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import argparse
 import signal
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.actuation.saturation import report_line
 from facepuppet.runtime.commands.run import report_outputs
@@ -28,6 +30,10 @@ from facepuppet.runtime.session.assemble import SessionResult, open_session
 from facepuppet.runtime.session.input_options import ReplayInputOptions
 from facepuppet.runtime.session.options import OutputOptions, PacingOptions, PictureOptions, StageOptions
 from facepuppet.runtime.session.recording_feed import RecordingFeed
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.protocols import TickObserver
+    from facepuppet.runtime.render.gl_context import GLTarget
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -74,14 +80,22 @@ class ReplayPlan:
                    PacingOptions.from_args(ns, fps=None), picture, OutputOptions.from_args(ns, picture))
 
 
-def replay(plan: ReplayPlan, keep_weights: bool = False) -> tuple[SessionResult, RecordingFeed]:
-    """Play the plan's recording; the result and the feed (its report)."""
+def replay(plan: ReplayPlan, keep_weights: bool = False, *, context: GLTarget | None = None,
+           observers: Sequence[TickObserver] = (), keeps_pictures: bool = False
+           ) -> tuple[SessionResult, RecordingFeed]:
+    """Play the plan's recording; the result and the feed (its report).
+
+    ``context``, ``observers`` and ``keeps_pictures`` are :func:`open_session`'s: ``facepuppet batch`` plays
+    each job through this function in its worker's one headless context, its frames at chosen times kept by an
+    observer of its own.
+    """
     character = Character.load(plan.character)
     video = plan.outputs.video
     feed = RecordingFeed(plan.replay, plan.stages, plan.pacing, plan.character,
                          progress_label="replay" if video is None else f"replay --video {video.path.name}")
     with open_session(character, feed, stages=plan.stages, outputs=plan.outputs, picture=plan.picture,
-                      keep_weights=keep_weights) as session:
+                      keep_weights=keep_weights, context=context, observers=observers,
+                      keeps_pictures=keeps_pictures) as session:
         result = session.run()
     return result, feed
 

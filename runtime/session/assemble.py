@@ -133,7 +133,8 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
                  keep_weights: bool = False, stats_interval_s: float | None = None,
                  on_chain: Callable[[Chain], None] | None = None, on_panel: Callable[[Any], None] | None = None,
                  on_ready: Callable[[tuple], None] | None = None, progress: Progress | None = None,
-                 log: Callable[[str], None] = logger.info) -> Iterator[Session]:
+                 log: Callable[[str], None] = logger.info, context: GLTarget | None = None,
+                 keeps_pictures: bool = False) -> Iterator[Session]:
     """Assemble a session (see the module docstring); everything opened is closed when the block ends.
 
     Parameters
@@ -151,6 +152,11 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
     on_panel : called with the panel once made (tests and benchmarks drive it)
     on_ready : called with the feed's address once everything is open, before the first tick
     progress : Progress or None, told the count of video frames written
+    context : GLTarget or None, a headless context of the caller's to draw in instead of a new one, left open
+        when the session ends (a batch worker draws job after job in one: making an EGL context costs more
+        than a short take's replay)
+    keeps_pictures : bool, an observer of the caller's keeps pictures as files (a batch job's frames at chosen
+        times): they are drawn at full quality, as ``--out`` and ``--video`` are, not at a live budget
 
     Raises
     ------
@@ -171,8 +177,10 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
         log(chain.describe())
         if on_chain is not None:
             on_chain(chain)
-        live = outputs.out is None and outputs.video is None  # pictures kept as files are drawn at full quality
-        target, renderer = _open_picture(stack, picture, feed.title, chain, character, live, parts.fps, log)
+        # pictures kept as files are drawn at full quality
+        live = outputs.out is None and outputs.video is None and not keeps_pictures
+        target, renderer = _open_picture(stack, picture, feed.title, chain, character, live, parts.fps, log,
+                                         context)
         watch = None
         if live and picture.render.msaa is None and picture.render.quality == "auto" \
                 and getattr(renderer, "samples", 0):
@@ -210,12 +218,13 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
 
 
 def _open_picture(stack: contextlib.ExitStack, picture: PictureOptions, title: str, chain: Chain,
-                  character: Character, live: bool, fps: float, log: Callable[[str], None]
-                  ) -> tuple[GLTarget, Renderer]:
+                  character: Character, live: bool, fps: float, log: Callable[[str], None],
+                  given: GLTarget | None = None) -> tuple[GLTarget, Renderer]:
     """The GL context (a window, or headless) and the renderer, at the picture quality of
     :mod:`~facepuppet.runtime.render.quality`: a window is opened again without multisampling when its
     renderer turns out to be a software rasteriser; an offscreen picture is drawn without MSAA when a few
-    timed frames take more than the live share of the frame budget."""
+    timed frames take more than the live share of the frame budget. A ``given`` context (headless, the
+    caller's) is drawn in and left open."""
     render = picture.render
     asked = choose_quality(render.msaa, render.quality, None, live=False).msaa  # before the renderer is known
 
@@ -224,14 +233,15 @@ def _open_picture(stack: contextlib.ExitStack, picture: PictureOptions, title: s
                               height=picture.height, title=title, log=log, samples=samples,
                               transparent=render.transparent)
 
-    target = context(asked)
+    target = context(asked) if given is None else given
     quality = choose_quality(render.msaa, render.quality, target.ctx.info.get("GL_RENDERER"), live)
     if quality.note:
         log(quality.note)
         if not target.headless and target.samples and target.samples != quality.msaa:
             target.close()
             target = context(quality.msaa)
-    stack.callback(target.close)
+    if given is None:
+        stack.callback(target.close)
     screen = None if target.headless else target.ctx.screen
 
     def renderer_at(samples: int) -> Renderer:

@@ -1,0 +1,130 @@
+"""``facepuppet batch JOBS.toml --out DIR``: every job of a jobs file replayed on a Dask cluster, resumably.
+
+Read and check the jobs file (:mod:`~facepuppet.offline.batch.jobs`; a bad one exits 2 before anything runs,
+and so does a group whose options ``replay`` itself refuses), hash every input once, skip each job whose folder
+in DIR already holds its result (:func:`~facepuppet.offline.batch.manifest.is_done`), run the others on the
+cluster (:mod:`~facepuppet.offline.batch.cluster`) with a progress line, then say what failed and why and write
+``DIR/batch.json`` (each job's status, message, ticks and wall time; the counts). Exit 0 when every job has its
+result, 1 when some failed.
+
+DIR is not refused when it exists: resuming into it is the point. One batch at a time writes into a DIR: the
+unfinished folders of ``DIR/.partial`` are removed when a batch ends.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import time
+from pathlib import Path
+
+from facepuppet.runtime.cli.progress import Progress
+from facepuppet.runtime.commands.replay import ReplayPlan
+from facepuppet.runtime.errors import FacepuppetError, UsageError
+from facepuppet.runtime.files.json_limits import dumps_strict
+from facepuppet.runtime.files.outputs import write_atomic
+
+from facepuppet.offline.batch import cluster
+from facepuppet.offline.batch.job_run import PARTIAL, replay_argv, replay_parser
+from facepuppet.offline.batch.jobs import Job, JobsFileError, load_jobs
+from facepuppet.offline.batch.manifest import input_hashes, is_done
+
+SUMMARY = "batch.json"
+PIPED_EVERY_S = 10.0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``batch`` to the ``facepuppet`` parser."""
+    p = subparsers.add_parser(
+        "batch", help="replay many takes on many characters (a jobs file) on a Dask cluster, resumably",
+        description="Run every job of a jobs file (groups of takes x characters with replay's options and the "
+                    "outputs to keep: weights, ARKit curves, video, frames at chosen times, a contact sheet) on a "
+                    "Dask cluster, each job into DIR/<job id>/ with a manifest (inputs' hashes, options, "
+                    "version, figures). A job whose result is already in DIR is skipped; a job that fails is "
+                    "reported and the others go on. Exit 0 when all passed, 1 when some failed, 2 for a bad "
+                    "jobs file. Needs the extra 'batch' (Dask distributed).")
+    p.add_argument("jobs", type=Path, metavar="JOBS.toml", help="the jobs file (docs/batch.md)")
+    p.add_argument("--out", dest="out_dir", type=Path, required=True, metavar="DIR",
+                   help="folder of the job folders; an existing one is resumed (its finished jobs skipped)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run on this existing Dask cluster (its workers need facepuppet and the jobs file's folder "
+                        "at the same path); default: a local cluster")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="worker processes of the local cluster (default: one per core)")
+    p.set_defaults(func=run_batch)
+
+
+def run_batch(args: argparse.Namespace) -> int:
+    """Run the ``batch`` command from parsed ``args``; returns the exit code."""
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: expected a number of processes >= 1, got {args.workers}")
+    if args.workers is not None and args.scheduler is not None:
+        raise UsageError("--workers: the workers of --scheduler's cluster are that cluster's; give one of them")
+    start = time.perf_counter()
+    jobs = load_jobs(args.jobs)
+    check_groups(args.jobs, jobs)
+    out: Path = args.out_dir
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    out = out.resolve()
+    cache: dict = {}
+    todo = [job for job in jobs if not is_done(job, input_hashes(job, cache), out)]
+    skipped = len(jobs) - len(todo)
+    groups = len({job.group for job in jobs})
+    print(f"batch: {len(jobs)} jobs in {groups} group{'s' if groups != 1 else ''}: {skipped} done already, "
+          f"{len(todo)} to run")
+    reports = run_on_cluster(todo, out, args.scheduler, args.workers) if todo else []
+    failed = [r for r in reports if r["status"] != "ok"]
+    for report in failed:
+        print(f"batch: {report['job']}: FAILED: {report['message'].strip()}")
+    wall = time.perf_counter() - start
+    _write_summary(out, jobs, reports, wall)
+    ran = len(reports) - len(failed)
+    print(f"batch: {ran} ran, {skipped} skipped, {len(failed)} failed, in {wall:.1f} s; results in {out}/<job id>, "
+          f"the list in {out / SUMMARY}")
+    return 1 if failed else 0
+
+
+def check_groups(path: Path, jobs: list[Job]) -> None:
+    """Refuse, before anything runs, a group whose options ``replay`` refuses (naming the jobs file and group)."""
+    parser = replay_parser()
+    seen = set()
+    for job in jobs:
+        if job.group in seen:
+            continue
+        seen.add(job.group)
+        try:
+            ReplayPlan.from_args(parser.parse_args(replay_argv(job)))
+        except FacepuppetError as exc:
+            raise JobsFileError(f"{path}: groups.{job.group}: {exc}") from None
+
+
+def run_on_cluster(jobs: list[Job], out: Path, scheduler: str | None = None, workers: int | None = None
+                   ) -> list[dict]:
+    """Run ``jobs`` into ``out`` on a cluster, with a progress line; each job's report, in the order they ended."""
+    try:
+        with cluster.open_client(scheduler, workers) as client:
+            failed = 0
+            with Progress("batch", total=len(jobs), unit="jobs", piped_every_s=PIPED_EVERY_S) as bar:
+                def done(report: dict) -> None:
+                    nonlocal failed
+                    failed += report["status"] != "ok"
+                    bar.advance(1, note=f"{failed} failed" if failed else "")
+
+                return cluster.run_jobs(client, jobs, out, done)
+    finally:
+        shutil.rmtree(out / PARTIAL, ignore_errors=True)
+
+
+def _write_summary(out: Path, jobs: list[Job], reports: list[dict], wall_s: float) -> None:
+    ran = {r["job"]: r for r in reports}
+    entries = {}
+    for job in jobs:
+        r = ran.get(job.id)
+        entries[job.id] = ({"status": "skipped"} if r is None else
+                           {"status": r["status"], "message": r["message"], "ticks": r["ticks"],
+                            "wall_s": round(r["wall_s"], 4)})
+    counts = {s: sum(e["status"] == s for e in entries.values()) for s in ("ok", "skipped", "failed")}
+    text = dumps_strict({"jobs": entries, "counts": counts, "wall_s": round(wall_s, 3)}, indent=1)
+    write_atomic(out / SUMMARY, lambda temp: temp.write_text(text + "\n", encoding="utf-8"))
