@@ -28,7 +28,7 @@ _BENCH_MODULES = ("facepuppet.offline.actuation.bench", "facepuppet.offline.elas
                   "facepuppet.offline.gestures.bench", "facepuppet.offline.kpls.bench",
                   "facepuppet.offline.io.gltf_bench", "facepuppet.offline.io.gltf_bombs_bench",
                   "facepuppet.offline.perfect_sync.bench", "facepuppet.offline.gpu_bench",
-                  "facepuppet.offline.replay_bench")
+                  "facepuppet.offline.replay_bench", "facepuppet.offline.batch.bench")
 
 
 def _modules(names):

@@ -17,11 +17,15 @@ import logging
 import os
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from facepuppet.runtime.errors import UsageError
 
 from facepuppet.offline.batch.job_run import run_job
 from facepuppet.offline.batch.jobs import Job
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 logger = logging.getLogger(__name__)
 
@@ -65,7 +69,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, log: C
         yield client
 
 
-def _say_dashboard(client, log: Callable[[str], None]) -> None:
+def _say_dashboard(client: Client, log: Callable[[str], None]) -> None:
     link = None
     with contextlib.suppress(Exception):  # a cluster without a dashboard answers in more than one way
         if client.scheduler_info().get("services", {}).get("dashboard"):
@@ -74,7 +78,7 @@ def _say_dashboard(client, log: Callable[[str], None]) -> None:
         log(f"batch: Dask's dashboard: {link}")
 
 
-def run_jobs(client, jobs: Iterable[Job], out: Path, on_done: Callable[[dict], None]) -> list[dict]:
+def run_jobs(client: Client, jobs: Iterable[Job], out: Path, on_done: Callable[[dict], None]) -> list[dict]:
     """Submit every job, call ``on_done(report)`` as each ends (in the order they end); the reports."""
     distributed = _distributed()
     futures = {}

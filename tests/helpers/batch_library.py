@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[2]
 def write_take(path: Path, seconds: float, phase: float = 0.0, rate: float = 30.0) -> Path:
     """A session take driving jawOpen and puff (the sphere's shapes) for ``seconds`` at ``rate`` frames/s."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    with SessionWriter(path) as w:
+    with SessionWriter(path, overwrite=True) as w:
         for i in range(int(round(seconds * rate))):
             w.write_frame(Frame(t=i / rate, source="test", channels=("jawOpen", "puff"),
                                 weights=np.array([0.5 + 0.5 * np.sin(i / 5 + phase), 0.25 + 0.2 * np.cos(i / 7)],
