@@ -10,7 +10,9 @@ writes, so the two are the same work). Measured:
   replay, as the command makes), one after another: ``per_job_s``, the cost of the work itself;
 * ``workers_1``, ``workers_2``: the same jobs through ``facepuppet batch``'s code on a LocalCluster of 1 and 2
   worker processes: ``start_s`` (the cluster started and its workers warmed: imports, one EGL context each),
-  then ``jobs_per_s`` and ``per_job_s`` over the jobs alone (submission to the last result), and
+  then ``jobs_per_s`` and ``per_job_s`` over the jobs alone (submission to the last result; the median of
+  ``--rounds`` passes, each pass of 1 worker right after a pass of plain replays, so that both meet the
+  machine's load of the same moment), and
   ``scheduling_overhead``: the time between jobs, ``(per_job_s * workers - job_wall_mean_s) / job_wall_mean_s``,
   where ``job_wall_mean_s`` is a job's own time inside its worker;
 * ``overhead``: 1 worker's per-job time against the plain replay's, ``(cluster - plain) / plain`` (the goal
@@ -18,8 +20,8 @@ writes, so the two are the same work). Measured:
 * ``subprocess_per_job_s``: a few jobs as a shell loop would run them, one ``facepuppet replay`` process each
   (start-up and imports included), for scale;
 * ``estimate``: 10,000 jobs (``--estimate-jobs``) on 1, 10 and 100 machines of this machine's cores, from
-  1 worker's per-job cost, every worker past the first at the measured scaling efficiency, plus one cluster
-  start: a paper figure, which assumes the jobs are like these and the shared filesystem keeps up.
+  1 worker's per-job cost, every worker at the measured scaling efficiency, plus one cluster start: a paper
+  figure, which assumes the jobs are like these and the shared filesystem keeps up.
 
 The figures move with the machine's load (``load_average`` is kept with them).
 """
@@ -57,6 +59,8 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--takes", type=int, default=8, help="takes in the generated library (default 8), one job each")
     p.add_argument("--seconds", type=float, default=2.0, help="seconds per take (default 2)")
     p.add_argument("--size", default="320x240", help="picture size of the jobs (default 320x240)")
+    p.add_argument("--rounds", type=int, default=3, help="passes over the jobs per measure, the median kept "
+                                                         "(default 3; a worker's first pass is its slowest)")
     p.add_argument("--estimate-jobs", type=int, default=10_000,
                    help="jobs in the paper estimate (default 10000)")
 
@@ -114,27 +118,37 @@ def _warm() -> str:
     return worker_context().ctx.info.get("GL_RENDERER", "")
 
 
-def _on_cluster(jobs: list[Job], out: Path, workers: int) -> dict:
+def _on_cluster(jobs: list[Job], out: Path, workers: int, rounds: int, plain: list[float] | None = None) -> dict:
+    """``rounds`` passes of every job on a LocalCluster of ``workers``; with ``plain``, each pass follows one of
+    plain replays in this process (appended to ``plain``), so both see the machine's load of the same moment."""
     start = time.perf_counter()
+    walls, inside = [], []
     with cluster.open_client(workers=workers, log=lambda line: None) as client:
         client.run(_warm)
-        started = time.perf_counter()
-        reports = cluster.run_jobs(client, jobs, out, lambda report: None)
-        wall = time.perf_counter() - started
-    failed = [r for r in reports if r["status"] != "ok"]
-    if failed:
-        raise UsageError(f"bench batch: {failed[0]['job']} failed: {failed[0]['message']}")
-    inside = statistics.fmean(r["wall_s"] for r in reports)
-    return {"workers": workers, "start_s": started - start, "jobs_s": wall, "jobs_per_s": len(jobs) / wall,
-            "per_job_s": wall / len(jobs), "job_wall_mean_s": inside,
-            "scheduling_overhead": (wall / len(jobs) * workers - inside) / inside}
+        started = time.perf_counter() - start
+        for k in range(rounds):
+            if plain is not None:
+                plain += _plain(jobs, out / f"plain{k}")
+            t = time.perf_counter()
+            reports = cluster.run_jobs(client, jobs, out / f"round{k}", lambda report: None)
+            walls.append(time.perf_counter() - t)
+            failed = [r for r in reports if r["status"] != "ok"]
+            if failed:
+                raise UsageError(f"bench batch: {failed[0]['job']} failed: {failed[0]['message']}")
+            inside.append(statistics.fmean(r["wall_s"] for r in reports))
+    wall = statistics.median(walls)
+    job_wall = statistics.median(inside)
+    return {"workers": workers, "start_s": started, "rounds_s": walls, "jobs_per_s": len(jobs) / wall,
+            "per_job_s": wall / len(jobs), "job_wall_mean_s": job_wall,
+            "scheduling_overhead": (wall / len(jobs) * workers - job_wall) / job_wall}
 
 
 def _estimate(per_job_s: float, efficiency: float, start_s: float, n_jobs: int, cores: int) -> list[dict]:
+    """Hours for ``n_jobs`` on each count of machines: every worker at the measured efficiency."""
     rows = []
     for machines in MACHINES:
         workers = machines * cores
-        rate = (1 + (workers - 1) * efficiency) / per_job_s
+        rate = workers * min(efficiency, 1.0) / per_job_s
         rows.append({"machines": machines, "workers": workers, "hours": (start_s + n_jobs / rate) / 3600})
     return rows
 
@@ -144,6 +158,8 @@ def run_bench(args: argparse.Namespace) -> dict:
         raise UsageError(f"bench batch --takes: expected 1 to 1000, got {args.takes}")
     if not 0 < args.seconds <= 600:
         raise UsageError(f"bench batch --seconds: expected a positive number up to 600, got {args.seconds!r}")
+    if not 1 <= args.rounds <= 20:
+        raise UsageError(f"bench batch --rounds: expected 1 to 20, got {args.rounds}")
     if args.estimate_jobs < 1:
         raise UsageError(f"bench batch --estimate-jobs: expected a positive count, got {args.estimate_jobs}")
     with tempfile.TemporaryDirectory(prefix="facepuppet-bench-batch-") as tmp:
@@ -151,11 +167,11 @@ def run_bench(args: argparse.Namespace) -> dict:
         lib = root / "lib"
         lib.mkdir()
         jobs = load_jobs(_library(lib, args.takes, args.seconds, args.size))
-        plain = _plain(jobs, root / "plain")
-        one = _on_cluster(jobs, root / "w1", 1)
-        two = _on_cluster(jobs, root / "w2", 2)
+        plain: list[float] = []
+        one = _on_cluster(jobs, root / "w1", 1, args.rounds, plain)
+        two = _on_cluster(jobs, root / "w2", 2, args.rounds)
         sub = _subprocess(jobs, root / "sub")
-    plain_per_job = sum(plain) / len(plain)
+    plain_per_job = statistics.median(sum(plain[k:k + len(jobs)]) for k in range(0, len(plain), len(jobs))) / len(jobs)
     efficiency = two["jobs_per_s"] / (2 * one["jobs_per_s"])
     cores = os.cpu_count() or 1
     return {
