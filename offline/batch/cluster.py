@@ -55,7 +55,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None, log: C
             raise UsageError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there: {exc}") from None
         with client:
             n = len(client.scheduler_info().get("workers", {}))
-            log(f"batch: on the cluster at {scheduler}, {n} workers")
+            log(f"batch: on the cluster at {scheduler}, {n} worker{'s' if n != 1 else ''}")
             _say_dashboard(client, log)
             yield client
         return

@@ -72,8 +72,8 @@ def run_batch(args: argparse.Namespace) -> int:
     todo = [job for job in jobs if not is_done(job, input_hashes(job, cache), out)]
     skipped = len(jobs) - len(todo)
     groups = len({job.group for job in jobs})
-    print(f"batch: {len(jobs)} jobs in {groups} group{'s' if groups != 1 else ''}: {skipped} done already, "
-          f"{len(todo)} to run")
+    print(f"batch: {len(jobs)} job{'s' if len(jobs) != 1 else ''} in {groups} group{'s' if groups != 1 else ''}: "
+          f"{skipped} done already, {len(todo)} to run")
     reports = run_on_cluster(todo, out, args.scheduler, args.workers) if todo else []
     failed = [r for r in reports if r["status"] != "ok"]
     for report in failed:
