@@ -25,7 +25,7 @@ from facepuppet.runtime.files.json_limits import dumps_strict
 from facepuppet.runtime.files.outputs import write_atomic
 
 from facepuppet.offline.batch import cluster
-from facepuppet.offline.batch.job_run import PARTIAL, replay_argv, replay_parser
+from facepuppet.offline.batch.job_run import PARTIAL, VIDEO, replay_argv, replay_parser
 from facepuppet.offline.batch.jobs import Job, JobsFileError, load_jobs
 from facepuppet.offline.batch.manifest import input_hashes, is_done
 
@@ -95,7 +95,8 @@ def check_groups(path: Path, jobs: list[Job]) -> None:
             continue
         seen.add(job.group)
         try:
-            ReplayPlan.from_args(parser.parse_args(replay_argv(job)))
+            video = Path(job.id + VIDEO) if job.outputs.video else None  # (its plan checks PyAV and the codec)
+            ReplayPlan.from_args(parser.parse_args(replay_argv(job, video)))
         except FacepuppetError as exc:
             raise JobsFileError(f"{path}: groups.{job.group}: {exc}") from None
 

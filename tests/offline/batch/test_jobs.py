@@ -121,3 +121,15 @@ def test_a_failed_job_leaves_no_folder_and_replaces_no_result(tmp_path):
     assert (out / job.id / "weights.npy").read_bytes() == before  # the earlier result stays whole
     assert not any((out / PARTIAL).iterdir())
     assert not is_done(job, input_hashes(job), out)  # but no longer counts for the changed take
+
+
+@pytest.mark.gl
+def test_frames_are_the_first_ticks_at_or_after_their_times_and_a_time_past_the_end_draws_none(tmp_path):
+    path = library(tmp_path / "lib", n_takes=1, seconds=0.3, outputs="weights = false\nframes = [0.05, 0.1, 9]")
+    job = load_jobs(path)[0]
+    assert run_job(job, tmp_path / "out")["status"] == "ok"
+    outputs = json.loads((tmp_path / "out" / job.id / "manifest.json").read_text())["outputs"]
+    assert outputs["frame_ticks"] == [2, 3] and outputs["frame_times"] == [0.05, 0.1]  # ticks at k / 30 s
+    assert outputs["frames_past_end"] == [9.0] and "weights" not in outputs
+    assert sorted(p.name for p in (tmp_path / "out" / job.id / "frames").iterdir()) == ["frame_00000.png",
+                                                                                       "frame_00001.png"]
