@@ -64,6 +64,13 @@ def worker_context() -> GLTarget:
     return target
 
 
+def _quiet():
+    stream = getattr(_quiet, "stream", None)
+    if stream is None:
+        stream = _quiet.stream = open(os.devnull, "w")  # kept open for the life of the process
+    return stream
+
+
 def replay_parser() -> argparse.ArgumentParser:
     parser = getattr(_local, "parser", None)
     if parser is None:
@@ -122,8 +129,9 @@ def run_job(job: Job, out: str | os.PathLike) -> dict:
     try:
         staging.mkdir(parents=True)
         # A worker's stderr may be the terminal the batch was started from: a replay's own progress line
-        # there would be drawn over the batch's.
-        with open(os.devnull, "w") as quiet, contextlib.redirect_stderr(quiet), BlasThreads(1):  # as `replay`
+        # there would be drawn over the batch's. (The null stream is never closed: a worker of more than one
+        # thread may put back another job's swap.)
+        with contextlib.redirect_stderr(_quiet()), BlasThreads(1):  # one BLAS thread, as `replay` has
             ticks = _play(job, staging, start)
         _into_place(staging, out / job.id)
         report.update(status="ok", ticks=ticks)
