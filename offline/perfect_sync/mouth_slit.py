@@ -37,6 +37,7 @@ WIDTH_RANGE = (0.6, 3.0)  # a mouth's width (ES)
 # the corner points lie this many ES past the end of the crease (measured on the source, the ICT head: its
 # crease fades below CREASE 0.07 cm = 0.019 ES inside its mouth corners)
 CORNER_PAST = 0.02
+AGREE = 0.03  # a point found within this many ES of the fit's place keeps the fit's (about two pixels)
 
 
 def _is_mouth(name: str) -> bool:
@@ -124,5 +125,8 @@ def mouth_places(source_positions: np.ndarray, names: Sequence[str], fitted: np.
         z = zbuf[rc[0], rc[1]]
         if not np.isfinite(z) or crease[rc[0], rc[1]]:  # in the crease the front-most skin is inside the mouth
             z = fit[idx[name], 2]
-        out[name] = (np.array([x0 + h * px[0], y0 + h * px[1], z]) + face.origin) @ face.frame
+        place = np.array([x0 + h * px[0], y0 + h * px[1], z])
+        if np.linalg.norm(place[:2] - fit[idx[name], :2]) <= AGREE * es:
+            continue  # the fit agrees within the slit's resolution: its place (and depth) stands
+        out[name] = (place + face.origin) @ face.frame
     return out

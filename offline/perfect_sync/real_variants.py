@@ -25,10 +25,11 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from scipy.spatial.distance import cdist
 
 from facepuppet.runtime.model.character import Character, sparse_deltas
 from facepuppet.runtime.model.geometry import vertex_normals
+
+from facepuppet.offline.elastic.thin_plate import thin_plate
 
 #: Multi-PIE landmark i → the MediaPipe face-mesh vertex at the same place (checked on the data kit: after a
 #: similarity alignment every inner landmark lies within 0.93 cm of ICT's, the contour within 1.7)
@@ -51,7 +52,7 @@ REGIONS = {
 USED = tuple(range(4, 68))  # the contour's outer points (0-3, 13-16) are a silhouette on a 3-D face
 # inner lips: upper ↔ lower partners (61↔67, 62↔66, 63↔65); the corners 60, 64 are their own
 INNER_LIP_PAIRS = ((61, 67), (62, 66), (63, 65))
-SMOOTHING = 0.05  # the spline's regularisation (units²): it need not pass exactly through every landmark
+SMOOTHING = 0.05  # the spline's regularisation (units): it need not pass exactly through every landmark
 
 
 def similarity(moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
@@ -63,27 +64,6 @@ def similarity(moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     r = u @ d @ vt
     scale = float((s * np.diag(d)).sum() / ((a - ma) ** 2).sum())
     return (a - ma) @ r * scale + mb
-
-
-def thin_plate(src: np.ndarray, dst: np.ndarray, smoothing: float = SMOOTHING) -> Callable[[np.ndarray], np.ndarray]:
-    """The 3-D thin-plate spline W with W(src) ≈ dst: φ(r) = r kernels on ``src`` plus an affine part."""
-    p = np.asarray(src, np.float64)
-    n = len(p)
-    k = np.linalg.norm(p[:, None] - p[None], axis=2) + smoothing * np.eye(n)
-    poly = np.column_stack([np.ones(n), p])
-    a = np.block([[k, poly], [poly.T, np.zeros((4, 4))]])
-    rhs = np.vstack([np.asarray(dst, np.float64), np.zeros((4, 3))])
-    coef = np.linalg.solve(a, rhs)
-    w, affine = coef[:n], coef[n:]
-
-    def warp(x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, np.float64)
-        out = np.column_stack([np.ones(len(x)), x]) @ affine
-        for start in range(0, len(x), 65536):  # (chunk, n) distances at a time
-            out[start:start + 65536] += cdist(x[start:start + 65536], p) @ w
-        return out
-
-    return warp
 
 
 def landmark_motion(ict_marks: np.ndarray, other_marks: np.ndarray) -> np.ndarray:
@@ -104,7 +84,7 @@ def proportion_warp(ict_marks: np.ndarray, motion: np.ndarray, regions: Sequence
     used = np.asarray(USED)
     step = np.where(np.isin(used, sorted(moved))[:, None], amount * motion[used], 0.0)
     src = np.asarray(ict_marks, np.float64)[used]
-    return thin_plate(src, src + step)
+    return thin_plate(src, src + step, SMOOTHING)
 
 
 def warped(character: Character, warp: Callable[[np.ndarray], np.ndarray], name: str) -> Character:
