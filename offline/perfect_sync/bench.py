@@ -50,7 +50,7 @@ from facepuppet.offline.perfect_sync.source import fit_kit_source
 
 GOAL_MEDIAN, GOAL_WORST, GOAL_COSINE = 0.15, 0.40, 0.7
 GOAL_GODETTE_S, GOAL_30K_S = 30.0, 120.0
-GOAL_LID = 0.25  # a cloned blink closes the lid: the mid-lid gap at most this fraction of the rest gap
+GOAL_LID = 0.25  # a cloned blink closes the lid: the mid-lid gap within ± this fraction of the rest gap
 DESIGN_VARIANT = "mediapipe"  # the real-proportions variant the cloning was designed on; the others are held out
 TAKE = "livelinkface_myslate_3.csv"  # the kit's Live Link Face take the side-by-side picture replays
 
@@ -85,7 +85,8 @@ def _summary(errs: dict) -> dict:
 
 
 def _closes(lids: dict) -> bool:
-    return all(v["cloned"] <= GOAL_LID * v["rest"] for v in lids.values()) and bool(lids)
+    """Each cloned blink brings the lids together: neither left open nor driven through the lower lid."""
+    return all(abs(v["cloned"]) <= GOAL_LID * v["rest"] for v in lids.values()) and bool(lids)
 
 
 def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> dict:
