@@ -10,7 +10,7 @@ file and the manifest field.
 The folder's layout (the batch runner writes it)::
 
     RUN/<job id>/manifest.json   {"format": "facepuppet-batch-job", "version": 1, "job": id, "status": "ok",
-                                  "take": path, "character": path, "inputs": {path: sha256},
+                                  "take": path, "character": path, "inputs": {path: "sha256:" hex},
                                   "options": {...}, "facepuppet": version, "path": "cpu" | "gpu",
                                   "channels": [shape names, in the weights' column order],
                                   "outputs": {"weights": "weights.npy", "frames": [...], "frame_times": [...],
@@ -49,7 +49,7 @@ MAX_WEIGHT_BYTES = 1 << 30      # weights.npy data: an hour at 60 fps of 500 sha
 MAX_PNG_BYTES = 256 << 20
 MAX_PNG_PIXELS = 8192 * 8192    # 8K square: a 4K frame is a quarter of it
 PATHS = ("cpu", "gpu")
-_SHA256 = re.compile(r"[0-9a-f]{64}")
+_SHA256 = re.compile(r"(sha256:)?[0-9a-f]{64}")
 
 
 class JobFolderError(InputFileError):
@@ -65,7 +65,7 @@ class Job:
     status : str, ``"ok"`` for a result; anything else is a job that failed (nothing below it is read)
     path : str, the deformation path the frames were drawn with (``"cpu"``/``"gpu"``), "" when not a result
     channels : tuple of str, the weights' columns
-    inputs : dict of path -> sha256 hex, the content of every input the job read
+    inputs : dict of path -> ``sha256:`` hex digest (or None), the content of every input the job read
     take, character : str, keys of ``inputs`` (or names only; never opened here)
     options : dict, the replay options
     version : str, the facepuppet version that wrote it
@@ -77,7 +77,7 @@ class Job:
     status: str
     path: str = ""
     channels: tuple[str, ...] = ()
-    inputs: dict[str, str] | None = None
+    inputs: dict[str, str | None] | None = None
     take: str = ""
     character: str = ""
     options: dict[str, Any] | None = None
@@ -150,8 +150,9 @@ def read_job(folder: str | os.PathLike) -> Job:
         m.fail("channels", "names a channel twice")
     inputs = m.get("inputs", dict)
     for key, digest in inputs.items():
-        if not isinstance(digest, str) or not _SHA256.fullmatch(digest):
-            m.fail(f"inputs[{key!r}]", "expected a sha256 digest (64 lowercase hex digits)")
+        # null: an input the runner could not read (its job failed; kept so that the job is run again)
+        if digest is not None and (not isinstance(digest, str) or not _SHA256.fullmatch(digest)):
+            m.fail(f"inputs[{key!r}]", "expected a sha256 digest ('sha256:' and 64 lowercase hex digits) or null")
     outputs = m.get("outputs", dict)
     weights = frames = times = None
     if "weights" in outputs:

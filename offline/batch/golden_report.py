@@ -120,7 +120,8 @@ def markdown(report: Report, pictures: dict[str, list[tuple[FrameDiff, str]]]) -
 def print_summary(report: Report) -> None:
     """The comparison in a few lines on stdout: the counts, then one line per changed job."""
     changed = report.changed
-    print(f"batch-compare: {len(report.jobs)} jobs, {len(changed)} changed beyond tolerance "
+    n = len(report.jobs)
+    print(f"batch-compare: {n} job{'' if n == 1 else 's'}, {len(changed)} changed beyond tolerance "
           f"(|Δweight| > {report.weight_tol:g} or more than {report.pixel_tol:.3%} of a frame's pixels over "
           f"{report.pixel_level} levels)")
     for job in changed:

@@ -32,7 +32,7 @@ def write_take(path: Path, drives: dict[str, float], n: int = 12, rate: float = 
 
 
 def sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return "sha256:" + hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def replay_job(run_dir: Path, job_id: str, take: Path, character: Path, path: str = "cpu") -> Path:
