@@ -52,6 +52,8 @@ class FrameDiff:
     mean_abs : float, mean |difference| over pixels and RGB, 0-255 levels (nan when the sizes differ)
     over : float, fraction of pixels whose largest RGB difference exceeds the comparison's ``pixel_level``
         (1.0 when the sizes differ)
+    note : str, what makes the two incomparable ("" when nothing does)
+    t : float or None, the take time the new frame shows (its manifest's ``frame_times``)
     """
 
     index: int
@@ -60,6 +62,7 @@ class FrameDiff:
     mean_abs: float
     over: float
     note: str = ""
+    t: float | None = None
 
 
 @dataclass
@@ -117,7 +120,7 @@ class JobDiff:
                 "channels_removed": self.channels_removed, "frames_comparable": self.frames_comparable,
                 "frames_compared": len(self.frames),
                 "max_frame_over": max((f.over for f in self.frames), default=0.0),
-                "worst_frames": [{"index": f.index, "new": str(f.new), "golden": str(f.golden),
+                "worst_frames": [{"index": f.index, "t": f.t, "new": str(f.new), "golden": str(f.golden),
                                   "mean_abs": f.mean_abs, "over": f.over, "note": f.note}
                                  for f in self.worst_frames(worst)]}
 
@@ -268,8 +271,11 @@ def _compare_frames(new: Job, golden: Job, diff: JobDiff, pixel_level: int) -> N
         n = min(len(new.frame_times), len(golden.frame_times))
         if not np.allclose(new.frame_times[:n], golden.frame_times[:n], rtol=0, atol=1e-6):
             diff.notes.append("frames drawn at other times")
+    times = new.frame_times or ()
     for i, (path_new, path_golden) in enumerate(zip(new.frames, golden.frames, strict=False)):
-        diff.frames.append(frame_difference(i, path_new, path_golden, pixel_level))
+        frame = frame_difference(i, path_new, path_golden, pixel_level)
+        frame.t = times[i] if i < len(times) else None
+        diff.frames.append(frame)
     sizes = [f for f in diff.frames if f.note]
     if sizes:
         diff.problems.append(f"{len(sizes)} frames of another size (first: frame {sizes[0].index}, {sizes[0].note})")

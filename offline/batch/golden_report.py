@@ -66,7 +66,8 @@ def side_by_side(frame: FrameDiff, height: int = THUMB_HEIGHT) -> np.ndarray:
     """golden | new | heat map of their difference, each ``height`` pixels high, labelled: (h, w, 3) uint8."""
     new, golden = load_frame(frame.new), load_frame(frame.golden)
     diff = difference_map(new, golden)
-    cells = [(f"golden, frame {frame.index}", golden), ("new", new),
+    when = "" if frame.t is None else f" ({frame.t:.3f} s)"
+    cells = [(f"golden, frame {frame.index}{when}", golden), ("new", new),
              (f"difference, max {int(diff.max())} levels", heat_map(diff))]
     return contact_sheet([(label, _scaled(rgb, height)) for label, rgb in cells], columns=3)
 
@@ -111,7 +112,8 @@ def markdown(report: Report, pictures: dict[str, list[tuple[FrameDiff, str]]]) -
             continue
         lines += [f"## {job.job}", "", job.summary(), ""]
         for frame, name in shown:
-            lines += [f"frame {frame.index}: {frame.over:.2%} of pixels over {report.pixel_level} levels, "
+            when = "" if frame.t is None else f" at {frame.t:.3f} s"
+            lines += [f"frame {frame.index}{when}: {frame.over:.2%} of pixels over {report.pixel_level} levels, "
                       f"mean |Δ| {frame.mean_abs:.2f} (heat: white at {HEAT_FULL} levels)", "",
                       f"![{_cell(job.job)} frame {frame.index}: golden, new, difference]({name})", ""]
     return "\n".join(lines)

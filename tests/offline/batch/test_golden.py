@@ -89,7 +89,8 @@ def test_the_report_shows_the_worst_frames_side_by_side(runs, tmp_path):
         assert np.any(golden != new) and heat.max() > 0   # the change is visible, and its heat drawn
     doc = json.loads((tmp_path / "report" / REPORT_JSON).read_text())
     assert doc["changed"] == [j.job for j in report.changed] and doc["jobs"] == 3
-    assert all(len(r["worst_frames"]) == 3 for r in doc["results"] if r["changed"])
+    worst = [f for r in doc["results"] if r["changed"] for f in r["worst_frames"]]
+    assert len(worst) == 6 and all(f["t"] == pytest.approx(f["index"] / 30) for f in worst)   # a 30 Hz take
     shutil.rmtree(PICTURES / "report", ignore_errors=True)
     shutil.copytree(tmp_path / "report", PICTURES / "report")
 
