@@ -27,6 +27,7 @@ import logging
 import math
 import os
 import re
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,6 +50,7 @@ MAX_WEIGHT_BYTES = 1 << 30      # weights.npy data: an hour at 60 fps of 500 sha
 MAX_PNG_BYTES = 256 << 20
 MAX_PNG_PIXELS = 8192 * 8192    # 8K square: a 4K frame is a quarter of it
 PATHS = ("cpu", "gpu")
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _SHA256 = re.compile(r"(sha256:)?[0-9a-f]{64}")
 
 
@@ -210,19 +212,22 @@ def load_weights(job: Job) -> np.ndarray:
 
 
 def load_frame(path: Path) -> np.ndarray:
-    """One frame as ndarray of shape (h, w, 3) uint8 RGB; its bytes and pixel count bounded before decoding."""
+    """One frame as ndarray of shape (h, w, 3) uint8 RGB; its bytes, and its pixel count from the PNG header,
+    bounded before anything is decoded."""
     size = path.stat().st_size
     if size > MAX_PNG_BYTES:
         raise JobFolderError(f"{path}: {size} bytes; a frame is at most {MAX_PNG_BYTES}")
+    with open(path, "rb") as f:
+        head = f.read(24)   # the signature, then the IHDR chunk's length, type, width and height
+    if len(head) < 24 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+        raise JobFolderError(f"{path}: not a readable PNG (no PNG signature and header)")
+    w, h = struct.unpack(">II", head[16:24])
+    if w * h > MAX_PNG_PIXELS:
+        raise JobFolderError(f"{path}: {w}x{h} pixels; a frame is at most {MAX_PNG_PIXELS}")
     try:
         with Image.open(path, formats=("PNG",)) as image:
-            w, h = image.size
-            if w * h > MAX_PNG_PIXELS:
-                raise JobFolderError(f"{path}: {w}x{h} pixels; a frame is at most {MAX_PNG_PIXELS}")
             return np.asarray(image.convert("RGB"))
     except (OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
-        if isinstance(exc, JobFolderError):
-            raise
         raise JobFolderError(f"{path}: not a readable PNG ({exc})") from None
 
 

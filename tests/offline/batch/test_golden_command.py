@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import os
 import shutil
+import struct
 import subprocess
 import sys
+import zlib
 
 import numpy as np
 import pytest
@@ -143,3 +145,21 @@ def test_a_bad_option_and_a_missing_run_exit_2(golden, tmp_path):
     assert bad.returncode == 2 and "--pixel-tol 2.0: expected a fraction of the pixels, in [0, 1]" in bad.stderr
     missing = batch_compare(tmp_path / "nowhere", golden)
     assert missing.returncode == 2 and "nowhere: expected a folder of batch jobs, found nothing" in missing.stderr
+
+
+def _png_declaring(width: int, height: int) -> bytes:
+    """A PNG whose header declares ``width`` x ``height`` RGB pixels, with almost no data behind it."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b""))
+
+
+def test_a_frame_declaring_too_many_pixels_is_refused_before_decoding(new):
+    frame = new / "take-sphere" / "frames" / "frame_00003.png"
+    frame.write_bytes(_png_declaring(100_000, 100_000))
+    with pytest.raises(JobFolderError, match=r"frame_00003.png: 100000x100000 pixels; a frame is at most"):
+        compare_runs(new, new)
+    frame.write_bytes(b"not a png")
+    with pytest.raises(JobFolderError, match=r"frame_00003.png: not a readable PNG"):
+        compare_runs(new, new)
