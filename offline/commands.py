@@ -22,7 +22,7 @@ from facepuppet.offline.io.rig_import import import_rig
 _COMMAND_MODULES = ("facepuppet.offline.actuation.commands", "facepuppet.offline.elastic.commands",
                     "facepuppet.offline.gestures.commands", "facepuppet.offline.kpls.commands",
                     "facepuppet.offline.io.gltf_commands", "facepuppet.offline.perfect_sync.commands",
-                    "facepuppet.offline.batch.commands")
+                    "facepuppet.offline.batch.commands", "facepuppet.offline.batch.golden_report")
 # Offline modules with ``register_benches(register_bench)``, same rule.
 _BENCH_MODULES = ("facepuppet.offline.actuation.bench", "facepuppet.offline.elastic.bench",
                   "facepuppet.offline.gestures.bench", "facepuppet.offline.kpls.bench",

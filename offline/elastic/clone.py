@@ -26,6 +26,9 @@ from facepuppet.runtime.model.character import MATERIAL_KINDS, Character, sparse
 from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.elastic.control_points import ControlPoints
+from facepuppet.offline.elastic.thin_plate import thin_plate
+
+WARP_SMOOTHING = 0.5  # the control points' map need not pass exactly through each (inner-eye distances)
 
 
 def fapu(positions: np.ndarray, points: ControlPoints) -> float:
@@ -76,6 +79,34 @@ def clone_parameters(params: np.ndarray, source_positions: np.ndarray, source_po
     return (scale * local @ r_t).astype(np.float32)  # FAPU scale, back out of the target frame (§5)
 
 
+def clone_parameters_warped(params: np.ndarray, source_positions: np.ndarray, source_points: ControlPoints,
+                            target_positions: np.ndarray, target_points: ControlPoints,
+                            smoothing: float = WARP_SMOOTHING) -> np.ndarray:
+    """Carry control displacements from source to target through the map between their control points.
+
+    §5 scales every displacement by one ratio (FAPU); a face whose eyes are smaller relative to its inner-eye
+    distance than the source's, or whose lip line lies lower, needs each point's displacement scaled and
+    turned by its own neighbourhood. Here the source's control points (in its face frame, FAPU-scaled) are
+    mapped onto the target's (in its face frame) by a thin-plate spline W (:func:`~.thin_plate.thin_plate`,
+    ``smoothing`` in inner-eye distances), and a displacement u of point p becomes W(p + u) − W(p): what
+    the same motion is on a face made by bending space from the source's to the target's (a point moved
+    onto another point's rest place lands on that point's place on the target). On the source itself W is
+    the identity and this is §5. Same arguments and result as :func:`clone_parameters`.
+    """
+    if tuple(source_points.names) != tuple(target_points.names):
+        raise InputFileError("correspondences: target control points must carry the source's names in its order")
+    src, tgt = np.asarray(source_positions, np.float64), np.asarray(target_positions, np.float64)
+    r_s, r_t = face_frame(src, source_points), face_frame(tgt, target_points)
+    es_t = fapu(tgt, target_points)
+    scale = es_t / fapu(src, source_points)
+    s_local = scale * src @ r_s.T  # source points in its face frame, at the target's size
+    warp = thin_plate(s_local, tgt @ r_t.T, smoothing * es_t)
+    u = scale * np.asarray(params, np.float64) @ r_s.T
+    flat = u.reshape(-1, u.shape[-2], 3)
+    moved = np.stack([warp(s_local + f) for f in flat]) - warp(s_local)[None]
+    return (moved.reshape(u.shape) @ r_t).astype(np.float32)  # back out of the target frame
+
+
 def mesh_character(vertices: np.ndarray, triangles: np.ndarray, name: str, units: str = "cm") -> Character:
     """A shape-less skin-coloured character for a bare target mesh."""
     v = np.asarray(vertices, np.float32)
@@ -117,17 +148,21 @@ def clone_model(
     target_points: ControlPoints,
     target_vertices: np.ndarray,
     build_model: Callable[[ControlPoints, np.ndarray, Sequence[str]], ElasticModel],
+    warped: bool = False,
 ) -> ElasticModel:
     """An elastic model for the target: its own basis, the source's parameters cloned (§5).
 
     ``build_model(points, params, shape_names)`` fits the target basis and
     returns the ElasticModel (the caller's settings: k, fixed ratio).
+    ``warped``: carry the parameters by :func:`clone_parameters_warped`
+    rather than §5's one scale.
     """
     names = tuple(source.control_names)
     src_points = ControlPoints(names, source.arrays["control_vertices"])
     tgt_points = target_points.reorder(names)
     tv = np.asarray(target_vertices, np.float64)
-    cloned = clone_parameters(
+    carry = clone_parameters_warped if warped else clone_parameters
+    cloned = carry(
         source.arrays["params"], source.arrays["control_positions"], src_points, tv[tgt_points.vertices], tgt_points
     )
     return build_model(tgt_points, cloned, source.shape_names)

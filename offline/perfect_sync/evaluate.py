@@ -116,3 +116,22 @@ def mid_lid_gap(character: Character, face: Face, points: ControlPoints, side: s
     up, low = near(mid("upper")), near(mid("lower"))
     rest = float((v[up] - v[low]) @ up_axis)
     return rest, float((v[up] + delta[up] - v[low] - delta[low]) @ up_axis)
+
+
+def lid_closure(truth: Character, cloned: Character, face: Face, points: ControlPoints) -> dict:
+    """{eyeBlinkLeft / eyeBlinkRight: {"rest", "true", "cloned"}}: the mid-lid gap (:func:`mid_lid_gap`, units) at
+    rest, in the true blink and in the cloned one; ``cloned`` as in :func:`truth_errors`, ``points`` the lid
+    control points on ``truth``'s mesh (a known set, not a proposal: the measure must not depend on what it
+    measures)."""
+    true = truth.dense_deltas()
+    dense = cloned.dense_deltas()
+    by = {canonical(n): s for s, n in enumerate(truth.shape_names)}
+    mine = {canonical(cloned.shape_names[s]): s for s in range(truth.n_shapes, cloned.n_shapes)}
+    out = {}
+    for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
+        if key not in by or key not in mine:
+            continue
+        rest, shut = mid_lid_gap(truth, face, points, side, true[by[key]])
+        _, closed = mid_lid_gap(truth, face, points, side, dense[mine[key]])
+        out[key] = {"rest": rest, "true": shut, "cloned": closed}
+    return out

@@ -46,8 +46,10 @@ from facepuppet.runtime.model.geometry import vertex_normals
 
 from facepuppet.offline.elastic.control_points import ControlPoints, read_control_points
 from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, boundary_loops, fix_inner_lips, mouth_slit
+from facepuppet.offline.perfect_sync.eye_openings import eye_points
 from facepuppet.offline.perfect_sync.face import Face
 from facepuppet.offline.perfect_sync.landmark_field import EYE_NAMES, MOUTH_NAMES, feature_places
+from facepuppet.offline.perfect_sync.mouth_slit import mouth_places
 from facepuppet.offline.perfect_sync.pieces import Pieces
 
 START_SCALES = (0.6, 0.8, 1.0, 1.25, 1.6)
@@ -197,11 +199,22 @@ def propose(source_positions: np.ndarray, source_names: Sequence[str], vertices:
     nose = int(cand[tree.query(fitted[i_nose])[1]])
     if np.linalg.norm(v[nose] - v[face.nose_tip]) > NOSE_SNAP * es:
         nose = face.nose_tip
-    taken = {nose}
+    # the eye's points on its lid margins and corners where its opening is found (the coarse fit misses them
+    # by millimetres on a head of other proportions, and the blinks lean on them)
+    on_lids = eye_points(source_positions, names, fitted, v, face, skin_triangles(face), cand)
+    fitted = np.array(fitted)
+    for name, place in mouth_places(source_positions, names, fitted, v, face, skin_triangles(face)).items():
+        fitted[names.index(name)] = place  # about the lips' meeting line
+    for name, vertex in on_lids.items():
+        fitted[names.index(name)] = v[vertex]
+    taken = {nose, *on_lids.values()}
     chosen = []
     for name, point in zip(names, fitted):
         if name == "nose_tip":
             chosen.append(nose)
+            continue
+        if name in on_lids:
+            chosen.append(on_lids[name])
             continue
         _, order = tree.query(point, k=min(len(cand), len(names) + 1))
         pick = next((int(cand[i]) for i in np.atleast_1d(order) if int(cand[i]) not in taken), None)

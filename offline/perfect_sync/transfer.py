@@ -225,7 +225,7 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
         return build_model(sub_v, sub_t, tgt_points, cloned, shape_names, k=k, fixed_ratio=fixed_ratio,
                            units=character.units, with_muscles=False)[0]
 
-    model = clone_model(folded, sub_points, sub_v, build)
+    model = clone_model(folded, sub_points, sub_v, build, warped=True)
     params = close_lids(model.arrays["params"], names, sub_points, sub_v)
     eyes = eyeballs(sub_v, sub_t, sub_points)
     dense = np.zeros((len(names), character.n_vertices, 3), np.float32)
