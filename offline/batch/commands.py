@@ -4,8 +4,10 @@ Read and check the jobs file (:mod:`~facepuppet.offline.batch.jobs`; a bad one e
 and so does a group whose options ``replay`` itself refuses), hash every input once, skip each job whose folder
 in DIR already holds its result (:func:`~facepuppet.offline.batch.manifest.is_done`), run the others on the
 cluster (:mod:`~facepuppet.offline.batch.cluster`) with a progress line, then say what failed and why and write
-``DIR/batch.json`` (each job's status, message, ticks and wall time; the counts). Exit 0 when every job has its
-result, 1 when some failed.
+``DIR/batch.json`` (each job's status, message, ticks and wall time; the counts). A failed job's folder, which
+can only hold the result of other inputs, is removed. With ``--against GOLDEN_DIR`` the run is then compared
+with an earlier one (:mod:`~facepuppet.offline.batch.golden`), the report in ``DIR/report/``. Exit 0 when every
+job has its result (and, with ``--against``, none changed beyond tolerance), 1 otherwise.
 
 DIR is not refused when it exists: resuming into it is the point. One batch at a time writes into a DIR: the
 unfinished folders of ``DIR/.partial`` are removed when a batch ends.
@@ -14,6 +16,7 @@ unfinished folders of ``DIR/.partial`` are removed when a batch ends.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import time
 from pathlib import Path
@@ -25,11 +28,14 @@ from facepuppet.runtime.files.json_limits import dumps_strict
 from facepuppet.runtime.files.outputs import write_atomic
 
 from facepuppet.offline.batch import cluster
+from facepuppet.offline.batch.golden import PIXEL_LEVEL, PIXEL_TOL, WEIGHT_TOL, compare_runs
+from facepuppet.offline.batch.golden_report import REPORT_MD, print_summary, write_report
 from facepuppet.offline.batch.job_run import PARTIAL, VIDEO, replay_argv, replay_parser
 from facepuppet.offline.batch.jobs import Job, JobsFileError, load_jobs
 from facepuppet.offline.batch.manifest import input_hashes, is_done
 
 SUMMARY = "batch.json"
+REPORT = "report"  # DIR/report/: --against's report (no manifest there: not a job folder)
 PIPED_EVERY_S = 10.0
 
 
@@ -41,8 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "outputs to keep: weights, ARKit curves, video, frames at chosen times, a contact sheet) on a "
                     "Dask cluster, each job into DIR/<job id>/ with a manifest (inputs' hashes, options, "
                     "version, figures). A job whose result is already in DIR is skipped; a job that fails is "
-                    "reported and the others go on. Exit 0 when all passed, 1 when some failed, 2 for a bad "
-                    "jobs file. Needs the extra 'batch' (Dask distributed).")
+                    "reported and the others go on. With --against, the run is then compared with an earlier "
+                    "one (see batch-compare). Exit 0 when all passed, 1 when some failed (or changed, with "
+                    "--against), 2 for a bad jobs file. Needs the extra 'batch' (Dask distributed).")
     p.add_argument("jobs", type=Path, metavar="JOBS.toml", help="the jobs file (docs/batch.md)")
     p.add_argument("--out", dest="out_dir", type=Path, required=True, metavar="DIR",
                    help="folder of the job folders; an existing one is resumed (its finished jobs skipped)")
@@ -51,6 +58,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "at the same path); default: a local cluster")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--against", type=Path, default=None, metavar="GOLDEN_DIR",
+                   help="after the run, compare each job folder of DIR with the one of the same id in GOLDEN_DIR "
+                        "(an earlier run) as batch-compare does: the jobs changed beyond tolerance, most changed "
+                        "first, and DIR/report/ (report.md with the worst frames side by side, report.json); "
+                        "exit 1 when any changed")
+    p.add_argument("--weight-tol", type=float, default=WEIGHT_TOL,
+                   help=f"with --against, the largest |Δweight| of a channel that is no change (default "
+                        f"{WEIGHT_TOL:g})")
+    p.add_argument("--pixel-tol", type=float, default=PIXEL_TOL,
+                   help=f"with --against, the fraction of a frame's pixels that may differ by more than "
+                        f"--pixel-level (default {PIXEL_TOL:g})")
+    p.add_argument("--pixel-level", type=int, default=PIXEL_LEVEL,
+                   help=f"with --against, the largest difference of a pixel (0-255) that counts as equal "
+                        f"(default {PIXEL_LEVEL})")
     p.set_defaults(func=run_batch)
 
 
@@ -60,6 +81,7 @@ def run_batch(args: argparse.Namespace) -> int:
         raise UsageError(f"--workers: expected a number of processes >= 1, got {args.workers}")
     if args.workers is not None and args.scheduler is not None:
         raise UsageError("--workers: the workers of --scheduler's cluster are that cluster's; give one of them")
+    _check_against(args)
     start = time.perf_counter()
     jobs = load_jobs(args.jobs)
     check_groups(args.jobs, jobs)
@@ -78,12 +100,64 @@ def run_batch(args: argparse.Namespace) -> int:
     failed = [r for r in reports if r["status"] != "ok"]
     for report in failed:
         print(f"batch: {report['job']}: FAILED: {report['message'].strip()}")
+        _discard(out, report["job"])
     wall = time.perf_counter() - start
     _write_summary(out, jobs, reports, wall)
     ran = len(reports) - len(failed)
     print(f"batch: {ran} ran, {skipped} skipped, {len(failed)} failed, in {wall:.1f} s; results in {out}/<job id>, "
           f"the list in {out / SUMMARY}")
-    return 1 if failed else 0
+    changed = _compare(out, args) if args.against is not None else []
+    return 1 if failed or changed else 0
+
+
+def _check_against(args: argparse.Namespace) -> None:
+    """Refuse ``--against`` and its tolerances before anything runs."""
+    if args.against is None:
+        for flag, value, default in (("--weight-tol", args.weight_tol, WEIGHT_TOL),
+                                     ("--pixel-tol", args.pixel_tol, PIXEL_TOL),
+                                     ("--pixel-level", args.pixel_level, PIXEL_LEVEL)):
+            if value != default:
+                raise UsageError(f"{flag}: a tolerance of --against GOLDEN_DIR; give --against too")
+        return
+    if not args.against.is_dir():
+        raise UsageError(f"--against {args.against}: expected the folder of an earlier batch run")
+    if args.against.resolve() == args.out_dir.resolve():
+        raise UsageError(f"--against {args.against}: the same folder as --out; name the earlier run's")
+    if not args.weight_tol >= 0:
+        raise UsageError(f"--weight-tol {args.weight_tol}: expected a number >= 0")
+    if not 0 <= args.pixel_tol <= 1:
+        raise UsageError(f"--pixel-tol {args.pixel_tol}: expected a fraction of the pixels, in [0, 1]")
+    if not 0 <= args.pixel_level <= 255:
+        raise UsageError(f"--pixel-level {args.pixel_level}: expected 0 to 255")
+
+
+def _compare(out: Path, args: argparse.Namespace) -> list:
+    """This run against ``--against``'s: the summary printed, the report in ``out/report``; the changed jobs."""
+    bar = Progress("batch --against", unit="jobs")
+
+    def progress(done: int, total: int, job: str) -> None:
+        bar.total = total
+        bar.update(done, note=job)
+
+    with bar:
+        report = compare_runs(out, args.against, weight_tol=args.weight_tol, pixel_tol=args.pixel_tol,
+                              pixel_level=args.pixel_level, progress=progress)
+    print_summary(report)
+    write_report(report, out / REPORT)
+    print(f"batch: the report against {args.against} in {out / REPORT / REPORT_MD}")
+    return report.changed
+
+
+def _discard(out: Path, job_id: str) -> None:
+    """Remove a failed job's folder: it holds the result of other inputs (a job whose result matched was
+    skipped), which a comparison against goldens would take for this run's."""
+    folder = out / job_id
+    if folder.is_dir():
+        aside = out / PARTIAL / f"{job_id}.failed"
+        aside.parent.mkdir(exist_ok=True)
+        shutil.rmtree(aside, ignore_errors=True)
+        os.replace(folder, aside)
+        shutil.rmtree(aside, ignore_errors=True)
 
 
 def check_groups(path: Path, jobs: list[Job]) -> None:

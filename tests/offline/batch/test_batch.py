@@ -18,6 +18,7 @@ from PIL import Image
 
 from facepuppet.runtime import cli
 from facepuppet.runtime.mapping.channels import ARKIT_NAMES
+from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.recording.livelinkface_csv import read_llf_csv
 
 from facepuppet.offline.batch.curves import arkit_curves
@@ -134,8 +135,12 @@ def test_a_damaged_take_and_a_missing_character_fail_their_jobs_only(tmp_path):
     jobs.write_text('[groups.g]\ntakes = ["takes/good.fps", "takes/damaged.csv"]\n'
                     'characters = ["chars/sphere.npz", "chars/missing.npz"]\npath = "cpu"\nsize = "32x24"\n')
     out = tmp_path / "out"
+    stale = out / "damaged--sphere--g"  # a result of other inputs, from an earlier run
+    stale.mkdir(parents=True)
+    (stale / "manifest.json").write_text("{}")
     result = run_batch(str(jobs), "--out", str(out), "--workers", "2")
     assert result.returncode == 1, result.stdout + result.stderr
+    assert not stale.exists()  # a failed job leaves no folder a comparison could take for this run's
     assert sorted(_manifests(out)) == ["good--sphere--g"]
     failed = [line for line in result.stdout.splitlines() if "FAILED" in line]
     assert len(failed) == 3
@@ -145,3 +150,22 @@ def test_a_damaged_take_and_a_missing_character_fail_their_jobs_only(tmp_path):
     summary = json.loads((out / "batch.json").read_text())
     assert summary["counts"] == {"ok": 1, "skipped": 0, "failed": 3}
     assert "missing.npz" in summary["jobs"]["good--missing--g"]["message"]
+
+
+def test_against_an_earlier_run_names_exactly_the_jobs_of_the_character_whose_shape_changed(tmp_path):
+    root = tmp_path / "lib"
+    jobs = library(root, n_takes=2, outputs="weights = true\nframes = [0.3, 0.6]")
+    old, new = tmp_path / "old", tmp_path / "new"
+    first = run_batch(str(jobs), "--out", str(old), "--workers", "2")
+    assert first.returncode == 0, first.stdout + first.stderr
+    bare = Character.load(root / "chars" / "bare.npz")
+    positions = np.array(bare.delta_positions)
+    positions[bare.shape_slice(bare.shape_names.index("puff"))] *= 1.5  # the rig change: one shape
+    bare.with_parts(delta_positions=positions).save(root / "chars" / "bare.npz")
+    second = run_batch(str(jobs), "--out", str(new), "--against", str(old), "--workers", "2")
+    assert second.returncode == 1, second.stdout + second.stderr  # something changed beyond tolerance
+    report = json.loads((new / "report" / "report.json").read_text())
+    assert sorted(report["changed"]) == ["take0--bare--g", "take1--bare--g"]
+    assert "2 changed beyond tolerance" in second.stdout and (new / "report" / "report.md").is_file()
+    same = run_batch(str(jobs), "--out", str(new), "--against", str(new / ".." / "new"), "--workers", "2")
+    assert same.returncode == 2 and "the same folder as --out" in same.stderr
