@@ -51,7 +51,8 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
         points, fitted = read_landmarks(landmarks, names, character.n_vertices), None
     else:
         points, fitted = propose(source.arrays["control_positions"], names, character.vertices, face, pieces)
-    doubtful = doubts(points, character.vertices, face, fitted, pieces)
+    doubtful = doubts(points, character.vertices, face, fitted, pieces,
+                      source_positions=source.arrays["control_positions"])
     def step(i: int, n: int, name: str) -> None:
         progress.total = n
         progress.update(i, name)
@@ -95,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
         write_control_points(args.pictures / "landmarks.json", points)
         face = find_face(character)
         bad = [n for d in report["doubts"] for n in d["points"]]
-        print(picture(args.pictures / "landmarks.png", character.vertices, face, points, bad))
+        print(picture(args.pictures / "landmarks.png", character.vertices, face, points, bad, report["doubts"]))
         (args.pictures / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
         from facepuppet.runtime.render.gl_context import GLUnavailable  # GL: importing it loads moderngl
 
