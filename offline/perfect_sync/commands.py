@@ -1,4 +1,7 @@
-"""``facepuppet perfect-sync``: ARKit-named shapes cloned onto any character's face (issue 14)."""
+"""``facepuppet perfect-sync``: ARKit-named shapes cloned onto any character's face (issue 14).
+
+Where the character has its own VRM expression for a channel (a blink, a vowel), the clone is used only where
+it is no worse than that expression (:mod:`.own_expressions`); the report says per channel which was used."""
 
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ from facepuppet.runtime.recording.replay_source import open_recording
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import FaceError, find_face
+from facepuppet.offline.perfect_sync.own_expressions import prefer_own
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
 from facepuppet.offline.perfect_sync.pieces import find_pieces
 from facepuppet.offline.perfect_sync.proposal import doubts, fapu_of, picture, propose, read_landmarks, skin_triangles
@@ -59,14 +63,16 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
 
     info: dict = {}
     keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
-    out, added = add_shapes(character, keys, dense, replace)
     es = max(fapu_of(points, character.vertices), 1e-12)
+    own = prefer_own(character, face, pieces, keys, dense, es)  # the artist's expression where the clone is worse
+    out, added = add_shapes(character, keys, dense, replace)
     largest = np.linalg.norm(dense, axis=2).max(axis=1) / es
     implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} inner-eye distances (> {IMPLAUSIBLE}): check the "
                                        "points"} for k, r in zip(keys, largest) if r > IMPLAUSIBLE]
     report = {"face": {"evidence": face.evidence, "mesh_vertices": int(len(face.mesh)), "skin_vertices":
                        int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
-              "pieces": info["pieces"], "doubts": doubtful, "implausible_shapes": implausible, **added}
+              "pieces": info["pieces"], "doubts": doubtful, "own_expressions": own,
+              "implausible_shapes": implausible, **added}
     return out, report, points
 
 
@@ -112,6 +118,11 @@ def _run(args: argparse.Namespace) -> int:
         print(f"doubtful: {', '.join(d['points'])}: {d['why']}")
     for d in report["implausible_shapes"]:
         print(f"implausible: {d['shape']}: {d['why']}")
+    for key, d in report["own_expressions"].items():
+        print(f"{key}: {d['used']}: {d['why']} (cosine {d['cosine']:.2f}, x{d['magnitude_ratio']:.2f})")
+    if report["doubts"] and not args.pictures:
+        print("perfect-sync: the doubtful points are drawn and numbered by --pictures DIR (DIR/landmarks.png); correct "
+              "them in DIR/landmarks.json and rerun with --landmarks DIR/landmarks.json")
     print(f"{args.output}: {len(report['added'])} ARKit shapes added, {len(report['kept'])} kept, "
           f"{len(report['replaced'])} replaced; {len(report['doubts'])} doubtful proposal(s)"
           + (f" (correct them in {args.pictures / 'landmarks.json'} and rerun with --landmarks)"
