@@ -36,6 +36,7 @@ file is the control-point file of :mod:`facepuppet.offline.elastic.control_point
 from __future__ import annotations
 
 import os
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -399,7 +400,7 @@ def picture(path: str | os.PathLike, vertices: np.ndarray, face: Face, points: C
     n = np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-18)
     legend = [f"{k + 1}: {', '.join(d['points'])}: {d['why']}" for k, d in enumerate(reasons)]
-    lines = [text[i:i + size // 6] for text in legend for i in range(0, len(text), size // 6)]
+    lines = [line for text in legend for line in textwrap.wrap(text, size // 6, subsequent_indent="   ")]
     img = Image.new("RGB", (size, size + 12 * len(lines) + (8 if lines else 0)), (24, 24, 28))
     draw = ImageDraw.Draw(img)
     depth = v[tris].min(1)[:, 2]
