@@ -64,7 +64,7 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
     info: dict = {}
     keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
     es = max(fapu_of(points, character.vertices), 1e-12)
-    own = prefer_own(character, face, pieces, keys, dense, es)  # the artist's expression where the clone is worse
+    own, defective = prefer_own(character, face, pieces, keys, dense, es)  # the artist's where the clone is worse
     out, added = add_shapes(character, keys, dense, replace)
     largest = np.linalg.norm(dense, axis=2).max(axis=1) / es
     implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} inner-eye distances (> {IMPLAUSIBLE}): check the "
@@ -72,6 +72,7 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
     report = {"face": {"evidence": face.evidence, "mesh_vertices": int(len(face.mesh)), "skin_vertices":
                        int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
               "pieces": info["pieces"], "doubts": doubtful, "own_expressions": own,
+              "defective_shapes": [{"shape": k, "why": "; ".join(w)} for k, w in defective.items()],
               "implausible_shapes": implausible, **added}
     return out, report, points
 
@@ -118,6 +119,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"doubtful: {', '.join(d['points'])}: {d['why']}")
     for d in report["implausible_shapes"]:
         print(f"implausible: {d['shape']}: {d['why']}")
+    for d in report["defective_shapes"]:
+        print(f"defective: {d['shape']}: {d['why']} (the character has no expression of its own for it)")
     for key, d in report["own_expressions"].items():
         print(f"{key}: {d['used']}: {d['why']} (cosine {d['cosine']:.2f}, x{d['magnitude_ratio']:.2f})")
     if report["doubts"] and not args.pictures:

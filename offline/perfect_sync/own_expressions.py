@@ -1,29 +1,32 @@
-"""The character's own VRM expressions against the cloned shapes of the same meaning: the better one is used.
+"""The cloned shapes' visible defects, and the character's own VRM expressions used where the clone is worse.
+
+Two defects a viewer sees at once are measured on every cloned shape at
+weight 1, on the drawn pieces (a decal face's eyes and mouth, the pieces
+lying on the skin: lashes, brows; :mod:`.pieces`):
+
+* **vanishing**: per drawn piece, the share of it (sampled over its
+  triangles) that is in front of every other surface at rest and goes behind
+  the skin or another mesh (the hair) in the shape: a brow pushed a few
+  millimetres back, a lash line closing into the skin, shows as torn or gone;
+* **parting**: the largest opening, in inner-eye distances, between drawn
+  pieces that touch at rest (a lash strip leaving its eye's outline).
 
 Where the artist already made an expression for an ARKit channel (``Blink_L``
 for eyeBlinkLeft, ``A`` for jawOpen, ``O`` for mouthFunnel, ``U`` for
-mouthPucker: :data:`CHANNEL_EXPRESSIONS`), the clone must not be worse than
-it. Both are measured at weight 1 on the face mesh:
-
-* **agreement**: the cosine of the two displacement fields and the ratio of
-  their norms (clone / expression);
-* **torn lines**: the largest change of an edge's length relative to its rest
-  length, over the face mesh's edges longer than 1 % of the inner-eye
-  distance (a drawn line or a lid torn apart or folded flat);
-* **vanishing**: the share of the drawn features (the decal eyes and mouth, the
-  pieces lying on the skin: lashes, brows) that is in front of everything at
-  rest and goes behind the skin or another mesh (the hair) in the shape.
-
-The clone is worse, and the expression is used in its place, when it tears
-more (``TEAR_FACTOR`` times the expression's, and by more than ``TEAR_MIN``),
-hides more of the drawn features (by ``VANISH_MORE``), or moves otherwise
-than the expression (cosine under ``AGREE``). Every channel with an
-expression is reported: which one was used and why, with the measures.
+mouthPucker: :data:`CHANNEL_EXPRESSIONS`), the clone is compared with it as
+well (the cosine of the two displacement fields over the face mesh and the
+ratio of their norms) and is **worse**, so that the expression is used in
+its place, when it hides more of a drawn piece (by ``VANISH_MORE`` of it),
+parts pieces further (``PART_FACTOR`` times the expression's and by
+``PART_MIN``), or moves otherwise (cosine under ``AGREE``). Each such
+channel is reported with what was used and why; a shape with a defect and
+no expression to fall back on is reported as defective.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from facepuppet.runtime.mapping.expressions import PRESET_SPELLINGS
 from facepuppet.runtime.model.character import Character
@@ -36,11 +39,16 @@ from facepuppet.offline.perfect_sync.triangles import skin_front_depth
 #: a decal eye are taken from the character's lookAt already, :func:`.transfer.decal_eye_looks`)
 CHANNEL_EXPRESSIONS = {"eyeBlinkLeft": "Blink_L", "eyeBlinkRight": "Blink_R", "jawOpen": "A",
                        "mouthFunnel": "O", "mouthPucker": "U"}
-TEAR_FACTOR, TEAR_MIN = 2.0, 0.5  # worse: edges strained more than twice the expression's and by 0.5 more
-VANISH_MORE = 0.05  # worse: this share more of the drawn features hidden than the expression hides
+VANISH_MORE = 0.15  # worse: a drawn piece with this share more of it hidden than the expression hides (Godette's
+# blinks: her own hide 75 % of her eye's largest piece, leaving the closed lash line; the clone's all of it)
+VANISHED = 0.25  # a defect: a drawn piece with this share of it newly hidden
+PART_FACTOR, PART_MIN = 2.0, 0.05  # worse: touching pieces parted twice the expression's and 0.05 ES more
+PARTED = 0.1  # a defect: touching pieces parted this many inner-eye distances
 AGREE = 0.3  # worse: a cosine to the expression under this (it moves something else)
-HIDDEN = 0.001  # a drawn vertex this many inner-eye distances behind the frontmost surface is hidden (decals lie
+HIDDEN = 0.001  # a drawn point this many inner-eye distances behind the frontmost surface is hidden (decals lie
 # a millimetre or two in front of the skin: a brow pushed back that far is gone)
+TOUCH = 0.03  # drawn pieces whose vertices lie within this many inner-eye distances touch
+SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [0.6, 0.2, 0.2], [0.2, 0.6, 0.2], [0.2, 0.2, 0.6]])
 
 
 def expression_deltas(character: Character, preset: str) -> np.ndarray | None:
@@ -63,94 +71,122 @@ def expression_deltas(character: Character, preset: str) -> np.ndarray | None:
     return None
 
 
-def _edges(face: Face) -> np.ndarray:
-    t = face.unwelded if face.unwelded is not None else face.triangles
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    return np.unique(np.sort(e, axis=1), axis=0)
+class Drawn:
+    """The drawn pieces of a face and what their defects are measured against (see the module doc)."""
+
+    def __init__(self, character: Character, face: Face, pieces: Pieces | None, es: float) -> None:
+        self.face, self.es = face, es
+        self.v = character.vertices.astype(np.float64)
+        drawn = np.zeros(0, np.int64)
+        if pieces is not None:
+            drawn = np.unique(np.concatenate([pieces.feature_vertices, pieces.on_skin]).astype(np.int64))
+        mine = np.zeros(character.n_vertices, bool)
+        mine[drawn] = True
+        t = face.unwelded if face.unwelded is not None else face.triangles
+        self.triangles = t[mine[t].all(axis=1)]
+        labels = pieces.labels if pieces is not None else np.zeros(character.n_vertices, np.int64)
+        self.piece = labels[self.triangles[:, 0]]
+        all_t = np.asarray(character.triangles, np.int64)
+        occluders = all_t[~mine[all_t].any(axis=1)]
+        if len(self.triangles):  # only those whose front view can reach the drawn pieces (grown by 2 ES)
+            local = face.to_frame(self.v)
+            lo = local[self.triangles.ravel(), :2].min(0) - 2 * es
+            hi = local[self.triangles.ravel(), :2].max(0) + 2 * es
+            box = local[occluders][:, :, :2]
+            occluders = occluders[((box.max(1) >= lo) & (box.min(1) <= hi)).all(axis=1)]
+        self.occluders = occluders
+        self.at_rest = self._shown(np.zeros_like(self.v))
+        lab = labels[drawn]
+        pairs = np.array(sorted(cKDTree(self.v[drawn]).query_pairs(TOUCH * es)), np.int64).reshape(-1, 2)
+        pairs = pairs[lab[pairs[:, 0]] != lab[pairs[:, 1]]]
+        self.touching = drawn[pairs]
+
+    def _shown(self, d: np.ndarray) -> np.ndarray:
+        """(n_triangles, n_samples) bool: each sample of each drawn triangle in front of every occluder."""
+        if not len(self.triangles):
+            return np.zeros((0, len(SAMPLES)), bool)
+        local = self.face.to_frame(self.v + d)
+        points = np.einsum("sk,tkc->tsc", SAMPLES, local[self.triangles]).reshape(-1, 3)
+        front = np.concatenate([skin_front_depth(points[i:i + 512, :2], local, self.occluders)
+                                for i in range(0, len(points), 512)])
+        return ~(front > points[:, 2] + HIDDEN * self.es).reshape(len(self.triangles), len(SAMPLES))
+
+    def vanishing(self, d: np.ndarray) -> dict:
+        """{piece label: share of it shown at rest and hidden under displacements ``d``} (pieces with any)."""
+        lost = self.at_rest & ~self._shown(d)
+        out = {}
+        for p in np.unique(self.piece):
+            rest = self.at_rest[self.piece == p].sum()
+            if rest and lost[self.piece == p].any():
+                out[int(p)] = float(lost[self.piece == p].sum() / rest)
+        return out
+
+    def parting(self, d: np.ndarray) -> float:
+        """The largest opening (inner-eye distances) between drawn pieces touching at rest, under ``d``."""
+        if not len(self.touching):
+            return 0.0
+        return float(np.linalg.norm(d[self.touching[:, 0]] - d[self.touching[:, 1]], axis=1).max() / self.es)
 
 
-def tear(vertices: np.ndarray, d: np.ndarray, edges: np.ndarray, es: float) -> float:
-    """Largest |length change / rest length| over ``edges`` longer than 1 % of ``es`` under displacements ``d``."""
-    v = np.asarray(vertices, np.float64)
-    rest = np.linalg.norm(v[edges[:, 1]] - v[edges[:, 0]], axis=1)
-    keep = rest > 0.01 * es
-    moved = np.linalg.norm(v[edges[keep, 1]] + d[edges[keep, 1]] - v[edges[keep, 0]] - d[edges[keep, 0]], axis=1)
-    return float(np.abs(moved / rest[keep] - 1.0).max(initial=0.0))
+def defects(drawn: Drawn, d: np.ndarray) -> list[str]:
+    """The visible defects of displacements ``d`` (n_vertices, 3) on their own (see the module doc)."""
+    out = []
+    gone = {p: s for p, s in drawn.vanishing(d).items() if s > VANISHED}
+    if gone:
+        out.append("a drawn piece goes behind the skin or hair (" + ", ".join(
+            f"piece {p}: {100 * s:.0f} %" for p, s in sorted(gone.items())) + ")")
+    part = drawn.parting(d)
+    if part > PARTED:
+        out.append(f"drawn pieces that touch part by {part:.2f} inner-eye distances")
+    return out
 
 
-def hidden_share(character: Character, face: Face, drawn: np.ndarray, d: np.ndarray, es: float) -> float:
-    """Share of the ``drawn`` vertices in front of every other surface at rest that go behind one (the skin, the
-    other meshes: the hair) under displacements ``d`` (the drawn pieces themselves are not occluders)."""
-    if not len(drawn):
-        return 0.0
-    t = np.asarray(character.triangles, np.int64)
-    mine = np.zeros(character.n_vertices, bool)
-    mine[drawn] = True
-    occluders = t[~mine[t].any(axis=1)]
-
-    def shown(displaced):
-        local = face.to_frame(displaced)
-        front = skin_front_depth(local[drawn, :2], local, occluders)
-        return ~(front > local[drawn, 2] + HIDDEN * es)
-
-    v = character.vertices.astype(np.float64)
-    at_rest = shown(v)
-    if not at_rest.any():
-        return 0.0
-    return float((at_rest & ~shown(v + d)).sum() / at_rest.sum())
-
-
-def measure(character: Character, face: Face, drawn: np.ndarray, clone: np.ndarray, own: np.ndarray,
-            es: float) -> dict:
-    """The module doc's measures of the cloned and the character's own displacements (n_vertices, 3)."""
-    mesh = face.mesh
+def compare(drawn: Drawn, mesh: np.ndarray, clone: np.ndarray, own: np.ndarray) -> dict:
+    """The measures of the cloned and the character's own displacements (n_vertices, 3) and why the clone is
+    worse ("worse": empty when it is not); see the module doc."""
     a, b = clone[mesh].ravel(), own[mesh].ravel()
     na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
-    edges = _edges(face)
-    v = character.vertices
-    return {"cosine": round(float(a @ b) / (na * nb), 3) if na > 0 and nb > 0 else 0.0,
-            "magnitude_ratio": round(na / nb, 3) if nb > 0 else None,
-            "tear_clone": round(tear(v, clone, edges, es), 3), "tear_own": round(tear(v, own, edges, es), 3),
-            "hidden_clone": round(hidden_share(character, face, drawn, clone, es), 3),
-            "hidden_own": round(hidden_share(character, face, drawn, own, es), 3)}
-
-
-def verdict(m: dict) -> list[str]:
-    """Why the clone is worse than the character's own expression by the measures ``m`` (empty: it is not)."""
-    why = []
-    if m["tear_clone"] > TEAR_FACTOR * m["tear_own"] + TEAR_MIN:
-        why.append(f"torn lines: an edge's length changes by {m['tear_clone']:.2f} of itself (the expression's "
-                   f"{m['tear_own']:.2f})")
-    if m["hidden_clone"] > m["hidden_own"] + VANISH_MORE:
-        why.append(f"vanishing: {100 * m['hidden_clone']:.0f} % of the drawn features go behind the skin or hair "
-                   f"(the expression's {100 * m['hidden_own']:.0f} %)")
-    if m["cosine"] < AGREE:
-        why.append(f"moves otherwise: cosine {m['cosine']:.2f} to the expression (< {AGREE})")
-    return why
+    cosine = float(a @ b) / (na * nb) if na > 0 and nb > 0 else 0.0
+    hid_c, hid_o = drawn.vanishing(clone), drawn.vanishing(own)
+    more = {p: s - hid_o.get(p, 0.0) for p, s in hid_c.items()}
+    part_c, part_o = drawn.parting(clone), drawn.parting(own)
+    worse = []
+    if more and max(more.values()) > VANISH_MORE:
+        p = max(more, key=more.get)
+        worse.append(f"vanishing: {100 * hid_c[p]:.0f} % of drawn piece {p} goes behind the skin or hair (the "
+                     f"expression's {100 * hid_o.get(p, 0.0):.0f} %)")
+    if part_c > PART_FACTOR * part_o + PART_MIN:
+        worse.append(f"parting: drawn pieces that touch part by {part_c:.2f} inner-eye distances (the "
+                     f"expression's {part_o:.2f})")
+    if cosine < AGREE:
+        worse.append(f"moves otherwise: cosine {cosine:.2f} to the expression (< {AGREE})")
+    return {"cosine": round(cosine, 3), "magnitude_ratio": round(na / nb, 3) if nb > 0 else None,
+            "hidden_clone": round(max(hid_c.values(), default=0.0), 3),
+            "hidden_own": round(max(hid_o.values(), default=0.0), 3),
+            "parting_clone": round(part_c, 3), "parting_own": round(part_o, 3), "worse": worse}
 
 
 def prefer_own(character: Character, face: Face, pieces: Pieces | None, keys: tuple[str, ...], dense: np.ndarray,
-               es: float) -> dict:
-    """For each channel of ``keys`` the character has an expression for, the clone in ``dense`` (n, n_vertices, 3)
-    replaced by it (in place) where the clone is worse (see the module doc). Returns {channel: {"used": "clone" or
-    "<preset> (the character's own)", "why": text, measures}}."""
-    drawn = np.zeros(0, np.int64)
-    if pieces is not None:
-        drawn = np.unique(np.concatenate([pieces.feature_vertices, pieces.on_skin]).astype(np.int64))
-    out = {}
-    for key, preset in CHANNEL_EXPRESSIONS.items():
-        if key not in keys:
-            continue
-        own = expression_deltas(character, preset)
-        if own is None:
-            continue
-        s = keys.index(key)
+               es: float) -> tuple[dict, dict]:
+    """Each cloned shape of ``keys`` in ``dense`` (n, n_vertices, 3) checked (see the module doc); where the
+    character has an expression for the channel and the clone is worse, the clone is replaced by it in place.
+    Returns ({channel: {"used": "clone" or "<preset> (the character's own)", "why", measures}} for the channels
+    with an expression, {channel: [defects]} for the shapes still defective)."""
+    drawn = Drawn(character, face, pieces, es)
+    used, defective = {}, {}
+    for s, key in enumerate(keys):
+        preset = CHANNEL_EXPRESSIONS.get(key)
+        own = expression_deltas(character, preset) if preset else None
         clone = dense[s].astype(np.float64)
-        m = measure(character, face, drawn, clone, own, es)
-        why = verdict(m)
-        if why:
-            dense[s] = own.astype(dense.dtype)
-            out[key] = {"used": f"{preset} (the character's own)", "why": "the clone is worse: " + "; ".join(why), **m}
-        else:
-            out[key] = {"used": "clone", "why": "no worse than the character's own " + preset, **m}
-    return out
+        if own is not None:
+            m = compare(drawn, face.mesh, clone, own)
+            if m["worse"]:
+                dense[s] = own.astype(dense.dtype)
+                used[key] = {"used": f"{preset} (the character's own)",
+                             "why": "the clone is worse: " + "; ".join(m["worse"]), **m}
+                continue
+            used[key] = {"used": "clone", "why": f"no worse than the character's own {preset}", **m}
+        found = defects(drawn, dense[s].astype(np.float64))
+        if found:
+            defective[key] = found
+    return used, defective
