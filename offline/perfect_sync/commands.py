@@ -64,7 +64,7 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
     info: dict = {}
     keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
     es = max(fapu_of(points, character.vertices), 1e-12)
-    own, defective = prefer_own(character, face, pieces, keys, dense, es)  # the artist's where the clone is worse
+    own, defective = prefer_own(character, face, pieces, keys, dense, es, points)  # the artist's where it is better
     out, added = add_shapes(character, keys, dense, replace)
     largest = np.linalg.norm(dense, axis=2).max(axis=1) / es
     implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} inner-eye distances (> {IMPLAUSIBLE}): check the "
@@ -120,7 +120,8 @@ def _run(args: argparse.Namespace) -> int:
     for d in report["implausible_shapes"]:
         print(f"implausible: {d['shape']}: {d['why']}")
     for d in report["defective_shapes"]:
-        print(f"defective: {d['shape']}: {d['why']} (the character has no expression of its own for it)")
+        print(f"defective: {d['shape']}: {d['why']} (no expression of the character's to fall back on; see it "
+              "with --pictures DIR --sheet)")
     for key, d in report["own_expressions"].items():
         print(f"{key}: {d['used']}: {d['why']} (cosine {d['cosine']:.2f}, x{d['magnitude_ratio']:.2f})")
     if report["doubts"] and not args.pictures:

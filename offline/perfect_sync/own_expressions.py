@@ -1,24 +1,22 @@
 """The cloned shapes' visible defects, and the character's own VRM expressions used where the clone is worse.
 
-Two defects a viewer sees at once are measured on every cloned shape at
+A defect a viewer sees at once is measured on every cloned shape at
 weight 1, on the drawn pieces (a decal face's eyes and mouth, the pieces
 lying on the skin: lashes, brows; :mod:`.pieces`):
 
 * **vanishing**: per drawn piece, the share of it (sampled over its
   triangles) that is in front of every other surface at rest and goes behind
   the skin or another mesh (the hair) in the shape: a brow pushed a few
-  millimetres back, a lash line closing into the skin, shows as torn or gone;
-* **parting**: the largest opening, in inner-eye distances, between drawn
-  pieces that touch at rest (a lash strip leaving its eye's outline).
+  millimetres back, a lash line closing into the skin, shows as torn or gone
+  (Godette's "eye lines break apart" and "brows vanish" were these).
 
 Where the artist already made an expression for an ARKit channel (``Blink_L``
 for eyeBlinkLeft, ``A`` for jawOpen, ``O`` for mouthFunnel, ``U`` for
 mouthPucker: :data:`CHANNEL_EXPRESSIONS`), the clone is compared with it as
 well (the cosine of the two displacement fields over the face mesh and the
 ratio of their norms) and is **worse**, so that the expression is used in
-its place, when it hides more of a drawn piece (by ``VANISH_MORE`` of it),
-parts pieces further (``PART_FACTOR`` times the expression's and by
-``PART_MIN``), or moves otherwise (cosine under ``AGREE``). Each such
+its place, when it hides more of a drawn piece (by ``VANISH_MORE`` of it)
+or moves otherwise (cosine under ``AGREE``). Each such
 channel is reported with what was used and why; a shape with a defect and
 no expression to fall back on is reported as defective.
 """
@@ -26,11 +24,11 @@ no expression to fall back on is reported as defective.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from facepuppet.runtime.mapping.expressions import PRESET_SPELLINGS
 from facepuppet.runtime.model.character import Character
 
+from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.perfect_sync.face import Face
 from facepuppet.offline.perfect_sync.pieces import Pieces
 from facepuppet.offline.perfect_sync.triangles import skin_front_depth
@@ -42,12 +40,9 @@ CHANNEL_EXPRESSIONS = {"eyeBlinkLeft": "Blink_L", "eyeBlinkRight": "Blink_R", "j
 VANISH_MORE = 0.15  # worse: a drawn piece with this share more of it hidden than the expression hides (Godette's
 # blinks: her own hide 75 % of her eye's largest piece, leaving the closed lash line; the clone's all of it)
 VANISHED = 0.25  # a defect: a drawn piece with this share of it newly hidden
-PART_FACTOR, PART_MIN = 2.0, 0.05  # worse: touching pieces parted twice the expression's and 0.05 ES more
-PARTED = 0.1  # a defect: touching pieces parted this many inner-eye distances
 AGREE = 0.3  # worse: a cosine to the expression under this (it moves something else)
 HIDDEN = 0.001  # a drawn point this many inner-eye distances behind the frontmost surface is hidden (decals lie
 # a millimetre or two in front of the skin: a brow pushed back that far is gone)
-TOUCH = 0.03  # drawn pieces whose vertices lie within this many inner-eye distances touch
 SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [0.6, 0.2, 0.2], [0.2, 0.6, 0.2], [0.2, 0.2, 0.6]])
 
 
@@ -74,7 +69,8 @@ def expression_deltas(character: Character, preset: str) -> np.ndarray | None:
 class Drawn:
     """The drawn pieces of a face and what their defects are measured against (see the module doc)."""
 
-    def __init__(self, character: Character, face: Face, pieces: Pieces | None, es: float) -> None:
+    def __init__(self, character: Character, face: Face, pieces: Pieces | None, es: float,
+                 points: ControlPoints | None = None) -> None:
         self.face, self.es = face, es
         self.v = character.vertices.astype(np.float64)
         drawn = np.zeros(0, np.int64)
@@ -96,10 +92,12 @@ class Drawn:
             occluders = occluders[((box.max(1) >= lo) & (box.min(1) <= hi)).all(axis=1)]
         self.occluders = occluders
         self.at_rest = self._shown(np.zeros_like(self.v))
-        lab = labels[drawn]
-        pairs = np.array(sorted(cKDTree(self.v[drawn]).query_pairs(TOUCH * es)), np.int64).reshape(-1, 2)
-        pairs = pairs[lab[pairs[:, 0]] != lab[pairs[:, 1]]]
-        self.touching = drawn[pairs]
+        self.names = {}  # piece label -> "the piece at <its nearest control point>", for the report
+        for p in np.unique(self.piece):
+            centre = self.v[np.unique(self.triangles[self.piece == p])].mean(0)
+            near = "" if points is None else points.names[int(np.argmin(np.linalg.norm(
+                self.v[points.vertices] - centre, axis=1)))]
+            self.names[int(p)] = f"the drawn piece at {near}" if near else f"drawn piece {p}"
 
     def _shown(self, d: np.ndarray) -> np.ndarray:
         """(n_triangles, n_samples) bool: each sample of each drawn triangle in front of every occluder."""
@@ -121,23 +119,17 @@ class Drawn:
                 out[int(p)] = float(lost[self.piece == p].sum() / rest)
         return out
 
-    def parting(self, d: np.ndarray) -> float:
-        """The largest opening (inner-eye distances) between drawn pieces touching at rest, under ``d``."""
-        if not len(self.touching):
-            return 0.0
-        return float(np.linalg.norm(d[self.touching[:, 0]] - d[self.touching[:, 1]], axis=1).max() / self.es)
-
 
 def defects(drawn: Drawn, d: np.ndarray) -> list[str]:
     """The visible defects of displacements ``d`` (n_vertices, 3) on their own (see the module doc)."""
     out = []
-    gone = {p: s for p, s in drawn.vanishing(d).items() if s > VANISHED}
+    gone: dict = {}  # by name: the two strips of one drawn lip are one piece to the reader
+    for p, s in drawn.vanishing(d).items():
+        if s > VANISHED:
+            gone[drawn.names[p]] = max(s, gone.get(drawn.names[p], 0.0))
     if gone:
         out.append("a drawn piece goes behind the skin or hair (" + ", ".join(
-            f"piece {p}: {100 * s:.0f} %" for p, s in sorted(gone.items())) + ")")
-    part = drawn.parting(d)
-    if part > PARTED:
-        out.append(f"drawn pieces that touch part by {part:.2f} inner-eye distances")
+            f"{name}: {100 * s:.0f} %" for name, s in sorted(gone.items())) + ")")
     return out
 
 
@@ -149,30 +141,27 @@ def compare(drawn: Drawn, mesh: np.ndarray, clone: np.ndarray, own: np.ndarray) 
     cosine = float(a @ b) / (na * nb) if na > 0 and nb > 0 else 0.0
     hid_c, hid_o = drawn.vanishing(clone), drawn.vanishing(own)
     more = {p: s - hid_o.get(p, 0.0) for p, s in hid_c.items()}
-    part_c, part_o = drawn.parting(clone), drawn.parting(own)
     worse = []
     if more and max(more.values()) > VANISH_MORE:
         p = max(more, key=more.get)
-        worse.append(f"vanishing: {100 * hid_c[p]:.0f} % of drawn piece {p} goes behind the skin or hair (the "
+        worse.append(f"vanishing: {100 * hid_c[p]:.0f} % of {drawn.names[p]} goes behind the skin or hair (the "
                      f"expression's {100 * hid_o.get(p, 0.0):.0f} %)")
-    if part_c > PART_FACTOR * part_o + PART_MIN:
-        worse.append(f"parting: drawn pieces that touch part by {part_c:.2f} inner-eye distances (the "
-                     f"expression's {part_o:.2f})")
     if cosine < AGREE:
         worse.append(f"moves otherwise: cosine {cosine:.2f} to the expression (< {AGREE})")
     return {"cosine": round(cosine, 3), "magnitude_ratio": round(na / nb, 3) if nb > 0 else None,
             "hidden_clone": round(max(hid_c.values(), default=0.0), 3),
             "hidden_own": round(max(hid_o.values(), default=0.0), 3),
-            "parting_clone": round(part_c, 3), "parting_own": round(part_o, 3), "worse": worse}
+            "worse": worse}
 
 
 def prefer_own(character: Character, face: Face, pieces: Pieces | None, keys: tuple[str, ...], dense: np.ndarray,
-               es: float) -> tuple[dict, dict]:
+               es: float, points: ControlPoints | None = None) -> tuple[dict, dict]:
     """Each cloned shape of ``keys`` in ``dense`` (n, n_vertices, 3) checked (see the module doc); where the
     character has an expression for the channel and the clone is worse, the clone is replaced by it in place.
     Returns ({channel: {"used": "clone" or "<preset> (the character's own)", "why", measures}} for the channels
-    with an expression, {channel: [defects]} for the shapes still defective)."""
-    drawn = Drawn(character, face, pieces, es)
+    with an expression, {channel: [defects]} for the others that are defective: an expression's own defects are
+    the artist's, and a clone no worse than it is kept). ``points`` name the drawn pieces by their nearest."""
+    drawn = Drawn(character, face, pieces, es, points)
     used, defective = {}, {}
     for s, key in enumerate(keys):
         preset = CHANNEL_EXPRESSIONS.get(key)
@@ -186,6 +175,7 @@ def prefer_own(character: Character, face: Face, pieces: Pieces | None, keys: tu
                              "why": "the clone is worse: " + "; ".join(m["worse"]), **m}
                 continue
             used[key] = {"used": "clone", "why": f"no worse than the character's own {preset}", **m}
+            continue
         found = defects(drawn, dense[s].astype(np.float64))
         if found:
             defective[key] = found
