@@ -13,6 +13,10 @@ against their width) leave the cloning nothing to tell the lips apart with, and
 crowded into a small share of the source's mouth width (against the eyes'
 distance, ``MOUTH_SPAN``) they may have missed the mouth.
 
+On a decal face (features drawn on pieces, :mod:`.pieces`) the eye's points
+must lie within the drawn eye's box and the mouth's on the drawn mouth
+(:func:`decal_doubts`).
+
 The points are compared on the front view (x, y of the face frame, x the
 character's left).
 """
@@ -23,6 +27,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+DECAL_MARGIN = 0.1  # a decal feature's points lie within its box grown by this share of its size
 ORDER_SLACK = 0.02  # an ordering broken by less than this many inner-eye distances is a tie, not a fault
 EYE_SHAPE = 3.0  # lids further apart (or closer) for the eye's width than this factor of the source's
 MOUTH_SPAN = 0.4  # mouth points spanning under this share of the source's width (in inner-eye distances)
@@ -50,10 +55,12 @@ def _y(p: dict, *names: str) -> float | None:
     return float(np.mean(got)) if got else None
 
 
-def order_doubts(source: np.ndarray, target: np.ndarray, names: Sequence[str], es: float) -> list[dict]:
+def order_doubts(source: np.ndarray, target: np.ndarray, names: Sequence[str], es: float,
+                 proportions: bool = True) -> list[dict]:
     """Doubts {"points", "why"} for the orderings of the module doc that ``target`` (front view (n, 2), in
-    ``names``' order; ``es`` its inner-eye distance) breaks, and for a mouth lying on a line against the
-    ``source``'s (n, 2)."""
+    ``names``' order; ``es`` its inner-eye distance) breaks, and (``proportions``) for eyes and a mouth far from
+    the ``source``'s (n, 2) proportions: not for features drawn on decals, whose points are placed by what is
+    drawn and whose motion is scaled by it (:mod:`.landmark_field`, :mod:`.drawn_eyes`)."""
     names = tuple(names)
     p = {n: np.asarray(target[i], np.float64) for i, n in enumerate(names)}
     q = {n: np.asarray(source[i], np.float64) for i, n in enumerate(names)}
@@ -71,7 +78,8 @@ def order_doubts(source: np.ndarray, target: np.ndarray, names: Sequence[str], e
             out.append({"points": upper + lower, "why": f"the upper lid is not above the lower one ({side} side)"})
         corners = [p.get(f"eye_inner_{side}"), p.get(f"eye_outer_{side}")]
         src_corners = [q.get(f"eye_inner_{side}"), q.get(f"eye_outer_{side}")]
-        if all(c is not None for c in corners + src_corners) and lid_up is not None and lid_low is not None:
+        if proportions and all(c is not None for c in corners + src_corners) and lid_up is not None and \
+                lid_low is not None:
             tall = (lid_up - lid_low) / max(abs(corners[1][0] - corners[0][0]), 1e-12)
             src_tall = ((_y(q, *upper) - _y(q, *lower)) / max(abs(src_corners[1][0] - src_corners[0][0]), 1e-12))
             if src_tall > 0 and not 1 / EYE_SHAPE < tall / src_tall < EYE_SHAPE:
@@ -98,7 +106,7 @@ def order_doubts(source: np.ndarray, target: np.ndarray, names: Sequence[str], e
         span = float(np.ptp(xs)) / es
         src_es = float(np.linalg.norm(q["eye_inner_L"] - q["eye_inner_R"])) if "eye_inner_L" in q else 0.0
         src_span = float(np.ptp([q[n][0] for n in mouth])) / src_es if src_es > 0 else 0.0
-        if src_span > 0 and span < MOUTH_SPAN * src_span:
+        if proportions and src_span > 0 and span < MOUTH_SPAN * src_span:
             out.append({"points": mouth, "why": f"the mouth's points are crowded into {span:.2f} inner-eye distances "
                                                 f"across (the source's {src_span:.2f}): the mouth is drawn very small "
                                                 "or the points missed it; the cloned mouth can only be as good as "
@@ -107,7 +115,7 @@ def order_doubts(source: np.ndarray, target: np.ndarray, names: Sequence[str], e
         src = np.array([q[n] for n in mouth])
         src_ratio = float(np.ptp(src[:, 1]) / max(np.ptp(src[:, 0]), 1e-12))
         ratio = float(np.ptp(ys) / max(np.ptp(xs), 1e-12))
-        if ratio < FLAT_MOUTH * src_ratio:
+        if proportions and ratio < FLAT_MOUTH * src_ratio:
             out.append({"points": mouth, "why": f"the mouth's points lie on a line: their height is {ratio:.2f} of "
                                                 f"their width (the source's {src_ratio:.2f}); the lips cannot be told "
                                                 "apart"})
@@ -115,6 +123,32 @@ def order_doubts(source: np.ndarray, target: np.ndarray, names: Sequence[str], e
                               ("lip_upper_R", "lip_lower_R")):
         if up_name in p and low_name in p and p[low_name][1] > p[up_name][1] - tie:
             out.append({"points": [up_name, low_name], "why": "the upper lip is not above the lower one"})
+    return out
+
+
+def decal_doubts(target: np.ndarray, names: Sequence[str], eyes: dict, mouth: tuple | None) -> list[dict]:
+    """Doubts for points of a decal face off what is drawn: an eye's corners and lids outside its box (``eyes``:
+    :attr:`~.pieces.Pieces.eyes`, boxes in the face frame) grown by ``DECAL_MARGIN`` of its size, the mouth's
+    points beyond its ends (``mouth``: :attr:`~.pieces.Pieces.mouth`) or further from its line than
+    ``DECAL_MARGIN`` of its width (``target``: front view (n, 2) in ``names``' order)."""
+    p = {n: np.asarray(target[i], np.float64) for i, n in enumerate(names)}
+    out = []
+    for side, (_, (x0, x1, y0, y1)) in eyes.items():
+        mx, my = DECAL_MARGIN * (x1 - x0), DECAL_MARGIN * (y1 - y0)
+        own = [n for n in p if n.endswith("_" + side) and n.startswith(("eye_inner", "eye_outer", "lid_"))]
+        off = [n for n in own if not (x0 - mx <= p[n][0] <= x1 + mx and y0 - my <= p[n][1] <= y1 + my)]
+        if off:
+            out.append({"points": off, "why": f"off the drawn {'left' if side == 'L' else 'right'} eye: outside its "
+                                              f"outline's box (grown by {DECAL_MARGIN:.0%}); the lids must lie on "
+                                              "the eye's opening"})
+    if mouth is not None:
+        _, (xr, xl), line = mouth
+        m = DECAL_MARGIN * (xl - xr)
+        own = [n for n in p if feature_of(n) == "mouth"]
+        off = [n for n in own if not (xr - m <= p[n][0] <= xl + m and abs(p[n][1] - np.polyval(line, p[n][0])) <= m)]
+        if off:
+            out.append({"points": off, "why": f"off the drawn mouth: beyond its ends or its line (by more than "
+                                              f"{DECAL_MARGIN:.0%} of its width)"})
     return out
 
 

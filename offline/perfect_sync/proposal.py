@@ -51,7 +51,7 @@ from facepuppet.offline.elastic.control_points import ControlPoints, read_contro
 from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, boundary_loops, fix_inner_lips, mouth_slit
 from facepuppet.offline.perfect_sync.face import Face
 from facepuppet.offline.perfect_sync.landmark_field import EYE_NAMES, MOUTH_NAMES, feature_places
-from facepuppet.offline.perfect_sync.layout_checks import by_feature, order_doubts
+from facepuppet.offline.perfect_sync.layout_checks import by_feature, decal_doubts, order_doubts
 from facepuppet.offline.perfect_sync.local_fit import poor_fits
 from facepuppet.offline.perfect_sync.pieces import Pieces
 
@@ -269,9 +269,10 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
     """Doubtful points: a list of {"points": [names], "why": text} (empty when none); see the module doc.
 
     With the source's control points (``source_positions`` (n_c, 3), in ``points``' order), also the points
-    whose place does not fit their neighbours by the source's layout (:mod:`.local_fit`, one doubt per feature)
-    and those breaking the order every face keeps (:mod:`.layout_checks`: the lids under the brow, the mouth's
-    corners at its ends).
+    breaking the order every face keeps (:mod:`.layout_checks`: the lids under the brow, the mouth's corners at
+    its ends) and, on a face whose points were fitted (not a decal face's, placed by what is drawn at its own
+    proportions), those whose place does not fit their neighbours by the source's layout (:mod:`.local_fit`,
+    one doubt per feature) and eyes or a mouth far from the source's proportions.
 
     With decal ``pieces`` (:func:`~.pieces.find_pieces`), the surface is the skin and what is drawn on it (the
     decal eyes, mouth and the pieces lying on the skin), and inner lips on a decal mouth need not have an opening
@@ -315,8 +316,12 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
     out += holes(points, v, face)
     if source_positions is not None:
         src = np.asarray(source_positions, np.float64)[:, :2]  # the source is stored +Y up, +X its left
-        out += by_feature(poor_fits(src, local[:, :2], points.names), points.names)
-        out += order_doubts(src, local[:, :2], points.names, es)
+        decal = pieces is not None and (bool(pieces.eyes) or pieces.mouth is not None)
+        if not decal:  # decal points are placed by what is drawn, at its proportions, not fitted to the layout
+            out += by_feature(poor_fits(src, local[:, :2], points.names), points.names)
+        out += order_doubts(src, local[:, :2], points.names, es, proportions=not decal)
+        if decal:
+            out += decal_doubts(local[:, :2], points.names, pieces.eyes, pieces.mouth)
     if UPPER in points.names and LOWER in points.names:
         up, low = points.vertex(UPPER), points.vertex(LOWER)
         if up == low or local[points.index(UPPER), 1] <= local[points.index(LOWER), 1]:
