@@ -18,6 +18,11 @@
   ``godette_llf_side_by_side.png``, a Live Link Face take of the kit replayed
   at 8 moments on Godette through her VRM presets (top) and on her clone
   through the ARKit shapes (bottom), the picture a user would compare.
+* The doubt report's figures (:mod:`.doubt_measure`): false alarms on the ICT
+  head's true points, the points moved out of place that it names, and the
+  MediaPipe face's proposed points far from their known meaning that it names;
+  Godette's channels taken from her own expressions and the shapes defective
+  without one (:mod:`.own_expressions`).
 * Time of the whole command's work per character (goals: Godette < 30 s, a
   30k-vertex face < 2 min; the ICT head has 26.7k vertices).
 """
@@ -39,6 +44,7 @@ from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.rig_import import import_rig
 from facepuppet.offline.kpls.targets import stylise
 from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
+from facepuppet.offline.perfect_sync.doubt_measure import doubt_figures
 from facepuppet.offline.perfect_sync.evaluate import godette_pairs, truth_errors
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
@@ -136,6 +142,8 @@ def run_bench(args: argparse.Namespace) -> dict:
                                  k: v["cosine"] is not None and v["cosine"] >= GOAL_COSINE for k, v in pairs.items()
                                  if k.split("~")[0] in ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")},
                              "n_doubts": len(report["doubts"]), "doubts": report["doubts"],
+                             "own_expressions": report["own_expressions"],
+                             "defective_shapes": report["defective_shapes"],
                              "meets_time_goal": seconds < GOAL_GODETTE_S,
                              **({"side_by_side": side} if side else {})}
         print(f"bench perfect-sync: Godette {seconds:.1f} s; cloned: " + ", ".join(
@@ -145,6 +153,11 @@ def run_bench(args: argparse.Namespace) -> dict:
             k for k, v in pairs.items() if v["from"] != "cloned"))
     else:
         result["godette"] = {"note": f"{godette_path} not in the data kit: not measured"}
+    result["doubts"] = doubt_figures(kit)  # does the doubt report name the wrong points, and only them?
+    d = result["doubts"]
+    print(f"bench perfect-sync: doubts: ICT true points {d['ict_true']['n_doubted']} doubted, moved points named "
+          f"{100 * d['ict_displaced_recall']:.0f} %" + (f"; MediaPipe: {len(d['mediapipe']['far_doubted'])} of "
+          f"{len(d['mediapipe']['far_from_meaning'])} far points doubted" if "mediapipe" in d else ""))
     result["face_30k"] = {"n_vertices": ict.n_vertices, "seconds": result["ict_variants"]["identical"]["seconds"],
                           "meets_goal": result["ict_variants"]["identical"]["seconds"] < GOAL_30K_S}
     return result

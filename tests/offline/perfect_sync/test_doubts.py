@@ -16,6 +16,7 @@ from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ControlPoints, ict_control_points
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.rig_import import import_rig
+from facepuppet.offline.perfect_sync.doubt_measure import DISPLACED, FAR, MEDIAPIPE, doubt_figures, moved
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.local_fit import POOR, residuals
 from facepuppet.offline.perfect_sync.pieces import find_pieces
@@ -23,12 +24,6 @@ from facepuppet.offline.perfect_sync.proposal import doubts, picture, propose, s
 from tests.conftest import need_shared
 
 pytestmark = pytest.mark.data
-
-# MediaPipe's canonical face: indices whose meaning is documented by its landmark map (the subject's right is R)
-MEDIAPIPE = {"eye_outer_R": 33, "eye_inner_R": 133, "eye_inner_L": 362, "eye_outer_L": 263, "mouth_corner_R": 61,
-             "mouth_corner_L": 291, "lip_upper_inner": 13, "lip_lower_inner": 14, "lip_upper": 0, "lip_lower": 17,
-             "chin": 152, "nose_tip": 1}
-
 
 @pytest.fixture(scope="module")
 def ict(ict_character):
@@ -45,28 +40,13 @@ def _doubted(points, character, face, source_positions, fitted=None, pieces=None
 
 
 def _moved(points: ControlPoints, character, face, name: str, to: np.ndarray) -> ControlPoints:
-    """``points`` with ``name`` on the free skin vertex nearest ``to``."""
-    v = character.vertices.astype(np.float64)
-    free = np.setdiff1d(face.skin, points.vertices)
-    vertices = points.vertices.copy()
-    vertices[points.index(name)] = free[np.argmin(np.linalg.norm(v[free] - to, axis=1))]
-    return ControlPoints(points.names, vertices)
+    return moved(points, character.vertices, face.skin, name, to)
 
 
 def test_the_true_ict_points_are_not_doubted(ict):
     c, face, points = ict
     source = c.vertices[points.vertices]
     assert _doubted(points, c, face, source) == set()
-
-
-CASES = {  # name moved, where to (as a function of the true places p and the inner-eye distance es)
-    "lid on the brow": ("lid_upper_inner_L", lambda p, es: 0.2 * p["lid_upper_inner_L"] + 0.8 * p["brow_inner_L"]),
-    "mouth corner a third inwards": ("mouth_corner_R", lambda p, es: p["mouth_corner_R"]
-                                     + (p["mouth_corner_L"] - p["mouth_corner_R"]) / 3),
-    "eye corner down": ("eye_outer_R", lambda p, es: p["eye_outer_R"] - [0, 0.4 * es, 0]),
-    "nose root up": ("nose_root", lambda p, es: p["nose_root"] + [0, 0.6 * es, 0]),
-    "lower lip up to the nose": ("lip_lower", lambda p, es: 0.5 * (p["lip_lower"] + p["nose_base"])),
-}
 
 
 def test_mouth_points_crowded_together_on_ict_are_named(ict):
@@ -80,10 +60,10 @@ def test_mouth_points_crowded_together_on_ict_are_named(ict):
     assert set(mouth) <= _doubted(wrong, c, face, v[points.vertices])
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("case", sorted(DISPLACED))
 def test_a_point_moved_out_of_place_on_ict_is_named(ict, case):
     c, face, points = ict
-    name, where = CASES[case]
+    name, where = DISPLACED[case]
     v = c.vertices.astype(np.float64)
     p = {n: v[i] for n, i in zip(points.names, points.vertices)}
     es = float(np.linalg.norm(p["eye_inner_L"] - p["eye_inner_R"]))
@@ -114,7 +94,7 @@ def test_mediapipe_points_of_known_meaning_fit_the_layout_and_far_proposals_are_
     assert r.max() < POOR, dict(zip(names, r.round(2)))
     # every proposed point far (> 0.3 inner-eye distances) from the vertex of its meaning is doubted
     found = _doubted(points, mp, face, source, fitted)
-    far = {n for n, i in MEDIAPIPE.items() if np.linalg.norm(v[points.vertex(n)] - v[i]) > 0.3 * es}
+    far = {n for n, i in MEDIAPIPE.items() if np.linalg.norm(v[points.vertex(n)] - v[i]) > FAR * es}
     assert far <= found, (far, found)
     assert len(found) <= 8, found
 
@@ -154,3 +134,15 @@ def test_godette_points_off_her_drawn_eye_or_mouth_are_doubted_and_the_picture_m
     img = np.asarray(Image.open(path).convert("RGB")).astype(int)
     red = (img[..., 0] > 200) & (img[..., 1] < 80) & (img[..., 2] < 80)
     assert red.sum() > 50  # the doubtful points are drawn red
+
+
+@pytest.mark.slow
+def test_bench_doubt_figures_say_what_the_tests_say():
+    """bench perfect-sync's doubt figures (JSON): no false alarm on ICT's true points, every moved point named,
+    MediaPipe's far proposals doubted and its known places under the threshold."""
+    figures = doubt_figures(need_shared("ict-facekit").parent)
+    assert figures["ict_true"]["n_doubted"] == 0
+    assert figures["ict_displaced_recall"] == 1.0, figures["ict_displaced"]
+    mp = figures["mediapipe"]
+    assert sorted(mp["far_from_meaning"]) == mp["far_doubted"], mp
+    assert mp["largest_residual_of_known_places"] < POOR
