@@ -45,7 +45,7 @@ from facepuppet.offline.io.rig_import import import_rig
 from facepuppet.offline.kpls.targets import stylise
 from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
 from facepuppet.offline.perfect_sync.doubt_measure import doubt_figures
-from facepuppet.offline.perfect_sync.evaluate import godette_pairs, truth_errors
+from facepuppet.offline.perfect_sync.evaluate import LOOKAT, OWN, godette_pairs, truth_errors
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
 from facepuppet.offline.perfect_sync.source import fit_kit_source
@@ -135,11 +135,12 @@ def run_bench(args: argparse.Namespace) -> dict:
         _sheet(args, out, report, "godette")
         side = _side_by_side(args, godette, out, kit / "tracker" / TAKE)
         face = find_face(godette)
-        pairs = godette_pairs(out, report["pieces"].get("eye_looks", {}), face.mesh)
+        pairs = godette_pairs(out, report["pieces"].get("eye_looks", {}), face.mesh, report["own_expressions"])
         result["godette"] = {"n_vertices": godette.n_vertices, "face_vertices": int(len(face.mesh)),
                              "skin_vertices": int(len(face.skin)), "seconds": seconds, "pairs": pairs,
                              "pieces": report["pieces"], "meets_cosine_goal": {
-                                 k: v["cosine"] is not None and v["cosine"] >= GOAL_COSINE for k, v in pairs.items()
+                                 k: v.get("clone_cosine", v["cosine"]) is not None  # the cloning's, used or not
+                                 and v.get("clone_cosine", v["cosine"]) >= GOAL_COSINE for k, v in pairs.items()
                                  if k.split("~")[0] in ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")},
                              "n_doubts": len(report["doubts"]), "doubts": report["doubts"],
                              "own_expressions": report["own_expressions"],
@@ -150,7 +151,10 @@ def run_bench(args: argparse.Namespace) -> dict:
             f"{k} cos {v['cosine']:.2f} x{v['magnitude_ratio']:.2f}" for k, v in pairs.items()
             if v["cosine"] is not None and v["from"] == "cloned"))
         print("bench perfect-sync: Godette, from the character's lookAt (not cloned): " + ", ".join(
-            k for k, v in pairs.items() if v["from"] != "cloned"))
+            k for k, v in pairs.items() if v["from"] == LOOKAT))
+        print("bench perfect-sync: Godette, her own expression where the clone was worse: " + ", ".join(
+            f"{k} (clone cos {v['clone_cosine']:.2f})" if "clone_cosine" in v else k
+            for k, v in pairs.items() if v["from"] == OWN))
     else:
         result["godette"] = {"note": f"{godette_path} not in the data kit: not measured"}
     result["doubts"] = doubt_figures(kit)  # does the doubt report name the wrong points, and only them?
