@@ -130,7 +130,7 @@ def run_bench(args: argparse.Namespace) -> dict:
         godette = read_gltf(godette_path)
         with Progress("perfect-sync Godette", total=None, unit="shapes") as bar:
             t = time.perf_counter()
-            out, report, _ = perfect_sync(godette, source, progress=bar)
+            out, report, _ = perfect_sync(godette, source, progress=bar, prefer_own=True)  # as the command does
             seconds = time.perf_counter() - t
         _sheet(args, out, report, "godette")
         side = _side_by_side(args, godette, out, kit / "tracker" / TAKE)

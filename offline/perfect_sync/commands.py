@@ -22,7 +22,7 @@ from facepuppet.runtime.recording.replay_source import open_recording
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import FaceError, find_face
-from facepuppet.offline.perfect_sync.own_expressions import prefer_own
+from facepuppet.offline.perfect_sync.own_expressions import prefer_own as prefer_own_expressions
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
 from facepuppet.offline.perfect_sync.pieces import find_pieces
 from facepuppet.offline.perfect_sync.proposal import doubts, fapu_of, picture, propose, read_landmarks, skin_triangles
@@ -46,8 +46,13 @@ def load_source(path: str | os.PathLike) -> ElasticModel:
 
 
 def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | None = None,
-                 replace: bool = False, progress: Progress | None = None) -> tuple[Character, dict, ControlPoints]:
-    """(character with the ARKit shapes, report, control points used); see the module doc."""
+                 replace: bool = False, progress: Progress | None = None,
+                 prefer_own: bool = False) -> tuple[Character, dict, ControlPoints]:
+    """(character with the ARKit shapes, report, control points used); see the module doc.
+
+    ``prefer_own`` (the command's way): a channel the character has its own expression for takes that
+    expression where the clone is worse (:mod:`.own_expressions`); without it every shape is the clone (what the
+    cloning's own measures and tests look at), and report["own_expressions"] says what would have been used."""
     face = find_face(character)
     names = tuple(source.control_names)
     pieces = find_pieces(character.vertices, face, skin_triangles(face))  # decal features place the points
@@ -64,7 +69,7 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
     info: dict = {}
     keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
     es = max(fapu_of(points, character.vertices), 1e-12)
-    own, defective = prefer_own(character, face, pieces, keys, dense, es, points)  # the artist's where it is better
+    own, defective = prefer_own_expressions(character, face, pieces, keys, dense, es, points, apply=prefer_own)
     out, added = add_shapes(character, keys, dense, replace)
     largest = np.linalg.norm(dense, axis=2).max(axis=1) / es
     implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} inner-eye distances (> {IMPLAUSIBLE}): check the "
@@ -91,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
         source = default_source(args.data)
     with Progress("perfect-sync", total=None, unit="shapes") as bar:
         try:
-            out, report, points = perfect_sync(character, source, args.landmarks, args.replace, bar)
+            out, report, points = perfect_sync(character, source, args.landmarks, args.replace, bar, prefer_own=True)
         except FaceError as exc:  # the message names the character by its name; say which file too
             text, own = str(exc), f"{character.name}: "
             raise FaceError(f"{args.character} ({character.name!r}): {text.removeprefix(own)}"

@@ -155,12 +155,13 @@ def compare(drawn: Drawn, mesh: np.ndarray, clone: np.ndarray, own: np.ndarray) 
 
 
 def prefer_own(character: Character, face: Face, pieces: Pieces | None, keys: tuple[str, ...], dense: np.ndarray,
-               es: float, points: ControlPoints | None = None) -> tuple[dict, dict]:
+               es: float, points: ControlPoints | None = None, apply: bool = True) -> tuple[dict, dict]:
     """Each cloned shape of ``keys`` in ``dense`` (n, n_vertices, 3) checked (see the module doc); where the
     character has an expression for the channel and the clone is worse, the clone is replaced by it in place.
     Returns ({channel: {"used": "clone" or "<preset> (the character's own)", "why", measures}} for the channels
     with an expression, {channel: [defects]} for the others that are defective: an expression's own defects are
-    the artist's, and a clone no worse than it is kept). ``points`` name the drawn pieces by their nearest."""
+    the artist's, and a clone no worse than it is kept). ``points`` name the drawn pieces by their nearest.
+    Without ``apply`` nothing is replaced: "used" is "clone" throughout and "why" says what would be used."""
     drawn = Drawn(character, face, pieces, es, points)
     used, defective = {}, {}
     for s, key in enumerate(keys):
@@ -169,10 +170,14 @@ def prefer_own(character: Character, face: Face, pieces: Pieces | None, keys: tu
         clone = dense[s].astype(np.float64)
         if own is not None:
             m = compare(drawn, face.mesh, clone, own)
-            if m["worse"]:
+            if m["worse"] and apply:
                 dense[s] = own.astype(dense.dtype)
                 used[key] = {"used": f"{preset} (the character's own)",
                              "why": "the clone is worse: " + "; ".join(m["worse"]), **m}
+                continue
+            if m["worse"]:
+                used[key] = {"used": "clone", "why": f"kept as asked, though worse than the character's own {preset}: "
+                                                     + "; ".join(m["worse"]), **m}
                 continue
             used[key] = {"used": "clone", "why": f"no worse than the character's own {preset}", **m}
             continue

@@ -76,7 +76,7 @@ def test_godette_perfect_sync_uses_her_own_where_the_clone_is_worse_and_says_whi
     points = ict_control_points(marks["idx_to_landmark_verts"], ict.vertices, ict.triangles, main_front(ict))
     source = fit_character(ict, points, with_muscles=False)[0]
     g, face, pieces = godette
-    out, report, _ = perfect_sync(g, source)
+    out, report, _ = perfect_sync(g, source, prefer_own=True)  # as the command does
     used = report["own_expressions"]
     assert set(used) == set(CHANNEL_EXPRESSIONS)  # she has every one of them
     dense = out.dense_deltas()
@@ -95,3 +95,24 @@ def test_godette_perfect_sync_uses_her_own_where_the_clone_is_worse_and_says_whi
     # the outer brow raises have no expression of hers to fall back on: reported, not hidden
     defective = {d["shape"] for d in report["defective_shapes"]}
     assert {"browOuterUpLeft", "browOuterUpRight"} <= defective, report["defective_shapes"]
+
+
+def test_the_command_prefers_her_own_and_says_so(tmp_path):
+    """The real command on Godette: her own blinks, O and U, and a line per channel saying which was used."""
+    import os
+    import subprocess
+    import sys
+
+    kit = need_shared("ict-facekit").parent
+    env = {**os.environ, "FACEPUPPET_DATA": str(kit), "XDG_CACHE_HOME": str(tmp_path / "cache")}
+    exe = [sys.executable, "-m", "facepuppet"]
+    subprocess.run(exe + ["import-rig", str(kit / "gltf" / "Godette_vrm_v4.vrm"), "-o", str(tmp_path / "g.npz")],
+                   check=True, env=env, capture_output=True)
+    run = subprocess.run(exe + ["perfect-sync", str(tmp_path / "g.npz"), "-o", str(tmp_path / "ps.npz")], env=env,
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.splitlines()
+    for key, preset in (("eyeBlinkLeft", "Blink_L"), ("mouthFunnel", "O"), ("mouthPucker", "U")):
+        assert any(line.startswith(f"{key}: {preset} (the character's own): the clone is worse") for line in lines)
+    assert any(line.startswith("jawOpen: clone: no worse") for line in lines), lines
+    assert any(line.startswith("defective: browOuterUpLeft") for line in lines), lines
