@@ -1,8 +1,10 @@
 """The cloned shapes' visible defects, and the character's own VRM expressions used where the clone is worse.
 
 A defect a viewer sees at once is measured on every cloned shape at
-weight 1, on the drawn pieces (a decal face's eyes and mouth, the pieces
-lying on the skin: lashes, brows; :mod:`.pieces`):
+weight 1, on the drawn pieces of a decal face (its eyes and mouth, the
+pieces lying on its skin: lashes, brows; :mod:`.pieces`; a face with its
+features in the skin, ICT's, is not measured: its thousands of lash and
+film vertices against its skin would cost minutes a shape):
 
 * **vanishing**: per drawn piece, the share of it (sampled over its
   triangles) that is in front of every other surface at rest and goes behind
@@ -74,7 +76,7 @@ class Drawn:
         self.face, self.es = face, es
         self.v = character.vertices.astype(np.float64)
         drawn = np.zeros(0, np.int64)
-        if pieces is not None:
+        if pieces is not None and (pieces.eyes or pieces.mouth is not None):  # a decal face: what is drawn
             drawn = np.unique(np.concatenate([pieces.feature_vertices, pieces.on_skin]).astype(np.int64))
         mine = np.zeros(character.n_vertices, bool)
         mine[drawn] = True
