@@ -26,6 +26,11 @@
   ``godette_llf_side_by_side.png``, a Live Link Face take of the kit replayed
   at 8 moments on Godette through her VRM presets (top) and on her clone
   through the ARKit shapes (bottom), the picture a user would compare.
+* The doubt report's figures (:mod:`.doubt_measure`): false alarms on the ICT
+  head's true points, the points moved out of place that it names, and the
+  MediaPipe face's proposed points far from their known meaning that it names;
+  Godette's channels taken from her own expressions and the shapes defective
+  without one (:mod:`.own_expressions`).
 * Time of the whole command's work per character (goals: Godette < 30 s, a
   30k-vertex face < 2 min; the ICT head has 26.7k vertices).
 """
@@ -50,7 +55,8 @@ from facepuppet.offline.io.obj import read_vertices_only
 from facepuppet.offline.io.rig_import import import_rig, read_ict_landmarks
 from facepuppet.offline.kpls.targets import stylise
 from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
-from facepuppet.offline.perfect_sync.evaluate import godette_pairs, lid_closure, truth_errors
+from facepuppet.offline.perfect_sync.doubt_measure import doubt_figures
+from facepuppet.offline.perfect_sync.evaluate import LOOKAT, OWN, godette_pairs, lid_closure, truth_errors
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
 from facepuppet.offline.perfect_sync.real_variants import VARIANTS, real_variants
@@ -186,27 +192,38 @@ def run_bench(args: argparse.Namespace) -> dict:
         godette = read_gltf(godette_path)
         with Progress("perfect-sync Godette", total=None, unit="shapes") as bar:
             t = time.perf_counter()
-            out, report, _ = perfect_sync(godette, source, progress=bar)
+            out, report, _ = perfect_sync(godette, source, progress=bar, prefer_own=True)  # as the command does
             seconds = time.perf_counter() - t
         _sheet(args, out, report, "godette")
         side = _side_by_side(args, godette, out, kit / "tracker" / TAKE)
         face = find_face(godette)
-        pairs = godette_pairs(out, report["pieces"].get("eye_looks", {}), face.mesh)
+        pairs = godette_pairs(out, report["pieces"].get("eye_looks", {}), face.mesh, report["own_expressions"])
         result["godette"] = {"n_vertices": godette.n_vertices, "face_vertices": int(len(face.mesh)),
                              "skin_vertices": int(len(face.skin)), "seconds": seconds, "pairs": pairs,
                              "pieces": report["pieces"], "meets_cosine_goal": {
-                                 k: v["cosine"] is not None and v["cosine"] >= GOAL_COSINE for k, v in pairs.items()
+                                 k: v.get("clone_cosine", v["cosine"]) is not None  # the cloning's, used or not
+                                 and v.get("clone_cosine", v["cosine"]) >= GOAL_COSINE for k, v in pairs.items()
                                  if k.split("~")[0] in ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")},
                              "n_doubts": len(report["doubts"]), "doubts": report["doubts"],
+                             "own_expressions": report["own_expressions"],
+                             "defective_shapes": report["defective_shapes"],
                              "meets_time_goal": seconds < GOAL_GODETTE_S,
                              **({"side_by_side": side} if side else {})}
         print(f"bench perfect-sync: Godette {seconds:.1f} s; cloned: " + ", ".join(
             f"{k} cos {v['cosine']:.2f} x{v['magnitude_ratio']:.2f}" for k, v in pairs.items()
             if v["cosine"] is not None and v["from"] == "cloned"))
         print("bench perfect-sync: Godette, from the character's lookAt (not cloned): " + ", ".join(
-            k for k, v in pairs.items() if v["from"] != "cloned"))
+            k for k, v in pairs.items() if v["from"] == LOOKAT))
+        print("bench perfect-sync: Godette, her own expression where the clone was worse: " + ", ".join(
+            f"{k} (clone cos {v['clone_cosine']:.2f})" if "clone_cosine" in v else k
+            for k, v in pairs.items() if v["from"] == OWN))
     else:
         result["godette"] = {"note": f"{godette_path} not in the data kit: not measured"}
+    result["doubts"] = doubt_figures(kit)  # does the doubt report name the wrong points, and only them?
+    d = result["doubts"]
+    print(f"bench perfect-sync: doubts: ICT true points {d['ict_true']['n_doubted']} doubted, moved points named "
+          f"{100 * d['ict_displaced_recall']:.0f} %" + (f"; MediaPipe: {len(d['mediapipe']['far_doubted'])} of "
+          f"{len(d['mediapipe']['far_from_meaning'])} far points doubted" if "mediapipe" in d else ""))
     result["face_30k"] = {"n_vertices": ict.n_vertices, "seconds": result["ict_variants"]["identical"]["seconds"],
                           "meets_goal": result["ict_variants"]["identical"]["seconds"] < GOAL_30K_S}
     return result

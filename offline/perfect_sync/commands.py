@@ -1,4 +1,7 @@
-"""``facepuppet perfect-sync``: ARKit-named shapes cloned onto any character's face (issue 14)."""
+"""``facepuppet perfect-sync``: ARKit-named shapes cloned onto any character's face (issue 14).
+
+Where the character has its own VRM expression for a channel (a blink, a vowel), the clone is used only where
+it is no worse than that expression (:mod:`.own_expressions`); the report says per channel which was used."""
 
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ from facepuppet.runtime.recording.replay_source import open_recording
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import FaceError, find_face
+from facepuppet.offline.perfect_sync.own_expressions import prefer_own as prefer_own_expressions
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
 from facepuppet.offline.perfect_sync.pieces import find_pieces
 from facepuppet.offline.perfect_sync.proposal import doubts, fapu_of, picture, propose, read_landmarks, skin_triangles
@@ -42,8 +46,13 @@ def load_source(path: str | os.PathLike) -> ElasticModel:
 
 
 def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | None = None,
-                 replace: bool = False, progress: Progress | None = None) -> tuple[Character, dict, ControlPoints]:
-    """(character with the ARKit shapes, report, control points used); see the module doc."""
+                 replace: bool = False, progress: Progress | None = None,
+                 prefer_own: bool = False) -> tuple[Character, dict, ControlPoints]:
+    """(character with the ARKit shapes, report, control points used); see the module doc.
+
+    ``prefer_own`` (the command's way): a channel the character has its own expression for takes that
+    expression where the clone is worse (:mod:`.own_expressions`); without it every shape is the clone (what the
+    cloning's own measures and tests look at), and report["own_expressions"] says what would have been used."""
     face = find_face(character)
     names = tuple(source.control_names)
     pieces = find_pieces(character.vertices, face, skin_triangles(face))  # decal features place the points
@@ -51,21 +60,25 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
         points, fitted = read_landmarks(landmarks, names, character.n_vertices), None
     else:
         points, fitted = propose(source.arrays["control_positions"], names, character.vertices, face, pieces)
-    doubtful = doubts(points, character.vertices, face, fitted, pieces)
+    doubtful = doubts(points, character.vertices, face, fitted, pieces,
+                      source_positions=source.arrays["control_positions"])
     def step(i: int, n: int, name: str) -> None:
         progress.total = n
         progress.update(i, name)
 
     info: dict = {}
     keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
-    out, added = add_shapes(character, keys, dense, replace)
     es = max(fapu_of(points, character.vertices), 1e-12)
+    own, defective = prefer_own_expressions(character, face, pieces, keys, dense, es, points, apply=prefer_own)
+    out, added = add_shapes(character, keys, dense, replace)
     largest = np.linalg.norm(dense, axis=2).max(axis=1) / es
     implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} inner-eye distances (> {IMPLAUSIBLE}): check the "
                                        "points"} for k, r in zip(keys, largest) if r > IMPLAUSIBLE]
     report = {"face": {"evidence": face.evidence, "mesh_vertices": int(len(face.mesh)), "skin_vertices":
                        int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
-              "pieces": info["pieces"], "doubts": doubtful, "implausible_shapes": implausible, **added}
+              "pieces": info["pieces"], "doubts": doubtful, "own_expressions": own,
+              "defective_shapes": [{"shape": k, "why": "; ".join(w)} for k, w in defective.items()],
+              "implausible_shapes": implausible, **added}
     return out, report, points
 
 
@@ -83,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
         source = default_source(args.data)
     with Progress("perfect-sync", total=None, unit="shapes") as bar:
         try:
-            out, report, points = perfect_sync(character, source, args.landmarks, args.replace, bar)
+            out, report, points = perfect_sync(character, source, args.landmarks, args.replace, bar, prefer_own=True)
         except FaceError as exc:  # the message names the character by its name; say which file too
             text, own = str(exc), f"{character.name}: "
             raise FaceError(f"{args.character} ({character.name!r}): {text.removeprefix(own)}"
@@ -95,7 +108,7 @@ def _run(args: argparse.Namespace) -> int:
         write_control_points(args.pictures / "landmarks.json", points)
         face = find_face(character)
         bad = [n for d in report["doubts"] for n in d["points"]]
-        print(picture(args.pictures / "landmarks.png", character.vertices, face, points, bad))
+        print(picture(args.pictures / "landmarks.png", character.vertices, face, points, bad, report["doubts"]))
         (args.pictures / "report.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
         from facepuppet.runtime.render.gl_context import GLUnavailable  # GL: importing it loads moderngl
 
@@ -111,6 +124,14 @@ def _run(args: argparse.Namespace) -> int:
         print(f"doubtful: {', '.join(d['points'])}: {d['why']}")
     for d in report["implausible_shapes"]:
         print(f"implausible: {d['shape']}: {d['why']}")
+    for d in report["defective_shapes"]:
+        print(f"defective: {d['shape']}: {d['why']} (no expression of the character's to fall back on; see it "
+              "with --pictures DIR --sheet)")
+    for key, d in report["own_expressions"].items():
+        print(f"{key}: {d['used']}: {d['why']} (cosine {d['cosine']:.2f}, x{d['magnitude_ratio']:.2f})")
+    if report["doubts"] and not args.pictures:
+        print("perfect-sync: the doubtful points are drawn and numbered by --pictures DIR (DIR/landmarks.png); correct "
+              "them in DIR/landmarks.json and rerun with --landmarks DIR/landmarks.json")
     print(f"{args.output}: {len(report['added'])} ARKit shapes added, {len(report['kept'])} kept, "
           f"{len(report['replaced'])} replaced; {len(report['doubts'])} doubtful proposal(s)"
           + (f" (correct them in {args.pictures / 'landmarks.json'} and rerun with --landmarks)"

@@ -13,8 +13,10 @@
 * :func:`godette_pairs`: every pair of :data:`GODETTE_PAIRS` the character
   has, each with where its cloned side came from: an eye look of a decal
   eye given by the character's own look expression is "from the character's
-  lookAt" (not cloned: its cosine says nothing of the cloning), the others
-  "cloned";
+  lookAt", a channel perfect-sync took from the character's own expression
+  because the clone was worse is "the character's own expression" (neither
+  cosine says anything of the cloning; the replaced clone's are kept), the
+  others "cloned";
 * :func:`mid_lid_gap`: the vertical gap between the lids half way between
   their inner and outer control points, at rest and in a shape.
 """
@@ -81,21 +83,35 @@ def pair_similarity(character: Character, cloned_name: str, artist_name: str, ve
 
 
 LOOKAT = "the character's lookAt"
+OWN = "the character's own expression (the clone was worse)"
 
 
-def godette_pairs(character: Character, eye_looks: dict, vertices: np.ndarray) -> dict:
+def godette_pairs(character: Character, eye_looks: dict, vertices: np.ndarray,
+                  own_expressions: dict | None = None) -> dict:
     """{"<cloned>~<artist>": {"cosine", "magnitude_ratio", "from"}} for each pair of :data:`GODETTE_PAIRS` whose
     shapes ``character`` has, over ``vertices``; "from" is :data:`LOOKAT` when every cloned shape of the pair took
     its look from the character's own look expression (``eye_looks``: perfect-sync's report["pieces"]
-    ["eye_looks"]), else "cloned"."""
+    ["eye_looks"]), :data:`OWN` when perfect-sync used the character's own expression in its place
+    (``own_expressions``: its report["own_expressions"]; the pair's cosine then says nothing of the cloning, and
+    "clone_cosine", "clone_magnitude_ratio" are the clone's against that expression), else "cloned"."""
+    own_expressions = own_expressions or {}
     out = {}
     for key, artist in GODETTE_PAIRS:
         parts = key.split("+")
         if artist not in character.shape_names or not all(k in character.shape_names for k in parts):
             continue
-        own = all("lookAt" in str(eye_looks.get(k, "")) for k in parts)
-        out[f"{key}~{artist}"] = {**pair_similarity(character, key, artist, vertices),
-                                  "from": LOOKAT if own else "cloned"}
+        pair = pair_similarity(character, key, artist, vertices)
+        replaced = [own_expressions[k] for k in parts if k in own_expressions and own_expressions[k]["used"] != "clone"]
+        if all("lookAt" in str(eye_looks.get(k, "")) for k in parts):
+            pair["from"] = LOOKAT
+        elif replaced and len(replaced) == len(parts):
+            pair["from"] = OWN
+            if len(parts) == 1:
+                pair["clone_cosine"] = replaced[0]["cosine"]
+                pair["clone_magnitude_ratio"] = replaced[0]["magnitude_ratio"]
+        else:
+            pair["from"] = "cloned"
+        out[f"{key}~{artist}"] = pair
     return out
 
 

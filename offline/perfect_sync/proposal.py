@@ -22,7 +22,9 @@ openings, :func:`~.pieces.find_pieces`: Godette's box head) the skin has no
 vertex where the features are, so the points are put on the features instead
 (:func:`_decal_proposal`), where the landmark field moving them places them.
 
-Doubts (:func:`doubts`): a sided point on the wrong side of the symmetry
+Doubts (:func:`doubts`): a point that does not fit its neighbours by the source's
+layout (:mod:`.local_fit`) or breaks the order of a face's features
+(:mod:`.layout_checks`), a sided point on the wrong side of the symmetry
 plane or far from its mirrored partner (asymmetric), a point off the skin or
 facing away (off the surface), the inner lips in the wrong order, on one
 vertex, or with no opening between them (lips not separated), a hole in the
@@ -34,6 +36,7 @@ file is the control-point file of :mod:`facepuppet.offline.elastic.control_point
 from __future__ import annotations
 
 import os
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -49,6 +52,8 @@ from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, boundary_
 from facepuppet.offline.perfect_sync.eye_openings import eye_points
 from facepuppet.offline.perfect_sync.face import Face
 from facepuppet.offline.perfect_sync.landmark_field import EYE_NAMES, MOUTH_NAMES, feature_places
+from facepuppet.offline.perfect_sync.layout_checks import by_feature, decal_doubts, order_doubts
+from facepuppet.offline.perfect_sync.local_fit import poor_fits
 from facepuppet.offline.perfect_sync.mouth_slit import mouth_places
 from facepuppet.offline.perfect_sync.pieces import Pieces
 
@@ -272,8 +277,15 @@ def fapu_of(points: ControlPoints, vertices: np.ndarray) -> float:
 
 
 def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
-           fitted: np.ndarray | None = None, pieces: Pieces | None = None) -> list[dict]:
+           fitted: np.ndarray | None = None, pieces: Pieces | None = None, *,
+           source_positions: np.ndarray | None = None) -> list[dict]:
     """Doubtful points: a list of {"points": [names], "why": text} (empty when none); see the module doc.
+
+    With the source's control points (``source_positions`` (n_c, 3), in ``points``' order), also the points
+    breaking the order every face keeps (:mod:`.layout_checks`: the lids under the brow, the mouth's corners at
+    its ends) and, on a face whose points were fitted (not a decal face's, placed by what is drawn at its own
+    proportions), those whose place does not fit their neighbours by the source's layout (:mod:`.local_fit`,
+    one doubt per feature) and eyes or a mouth far from the source's proportions.
 
     With decal ``pieces`` (:func:`~.pieces.find_pieces`), the surface is the skin and what is drawn on it (the
     decal eyes, mouth and the pieces lying on the skin), and inner lips on a decal mouth need not have an opening
@@ -315,6 +327,14 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
                 out.append({"points": [name], "why": f"off the surface: the fitted point is {d:.2f} FAPU from the "
                                                      f"nearest free skin vertex (> {OFF_SURFACE})"})
     out += holes(points, v, face)
+    if source_positions is not None:
+        src = np.asarray(source_positions, np.float64)[:, :2]  # the source is stored +Y up, +X its left
+        decal = pieces is not None and (bool(pieces.eyes) or pieces.mouth is not None)
+        if not decal:  # decal points are placed by what is drawn, at its proportions, not fitted to the layout
+            out += by_feature(poor_fits(src, local[:, :2], points.names), points.names)
+        out += order_doubts(src, local[:, :2], points.names, es, proportions=not decal)
+        if decal:
+            out += decal_doubts(local[:, :2], points.names, pieces.eyes, pieces.mouth)
     if UPPER in points.names and LOWER in points.names:
         up, low = points.vertex(UPPER), points.vertex(LOWER)
         if up == low or local[points.index(UPPER), 1] <= local[points.index(LOWER), 1]:
@@ -378,10 +398,12 @@ def read_landmarks(path: str | os.PathLike, names: Sequence[str], n_vertices: in
 
 
 def picture(path: str | os.PathLike, vertices: np.ndarray, face: Face, points: ControlPoints,
-            doubtful: Sequence[str] = (), size: int = 720) -> Path:
+            doubtful: Sequence[str] = (), reasons: Sequence[dict] = (), size: int = 720) -> Path:
     """A front view of the face mesh (the skin grey, its other pieces blue-grey, shaded by facing) with the
-    points: green, doubtful ones red. Triangles are painted back to front by their hindmost corner, so a decal
-    a hair in front of a large skin triangle shows over it."""
+    points: green, doubtful ones red in a red ring. With ``reasons`` (the doubts, :func:`doubts`) each doubt's
+    points carry its number and a legend under the face says why, so the picture alone tells the user what to
+    correct. Triangles are painted back to front by their hindmost corner, so a decal a hair in front of a
+    large skin triangle shows over it."""
     v = face.to_frame(np.asarray(vertices, np.float64))
     tris = face.triangles
     used = np.unique(tris)
@@ -395,7 +417,9 @@ def picture(path: str | os.PathLike, vertices: np.ndarray, face: Face, points: C
 
     n = np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-18)
-    img = Image.new("RGB", (size, size), (24, 24, 28))
+    legend = [f"{k + 1}: {', '.join(d['points'])}: {d['why']}" for k, d in enumerate(reasons)]
+    lines = [line for text in legend for line in textwrap.wrap(text, size // 6, subsequent_indent="   ")]
+    img = Image.new("RGB", (size, size + 12 * len(lines) + (8 if lines else 0)), (24, 24, 28))
     draw = ImageDraw.Draw(img)
     depth = v[tris].min(1)[:, 2]
     on_skin = np.isin(tris, face.skin).all(1)
@@ -406,12 +430,21 @@ def picture(path: str | os.PathLike, vertices: np.ndarray, face: Face, points: C
         x, y = xy(v[tris[k]])
         fill = (shade, shade, shade) if on_skin[k] else (int(0.55 * shade), int(0.7 * shade), shade)
         draw.polygon(list(zip(x.tolist(), y.tolist())), fill=fill)
-    bad = set(doubtful)
+    bad = set(doubtful) | {n for d in reasons for n in d["points"]}
+    number = {}
+    for k, d in enumerate(reasons):
+        for n in d["points"]:
+            number.setdefault(n, []).append(str(k + 1))
     for name, vertex in zip(points.names, points.vertices):
         x, y = xy(v[vertex])
         colour = (230, 40, 40) if name in bad else (40, 200, 60)
         draw.ellipse([x - 4, y - 4, x + 4, y + 4], fill=colour)
-        draw.text((x + 5, y - 5), name, fill=colour)
+        if name in bad:
+            draw.ellipse([x - 9, y - 9, x + 9, y + 9], outline=colour, width=2)
+        label = name + (f" [{','.join(number[name])}]" if name in number else "")
+        draw.text((x + 9, y - 5), label, fill=colour)
+    for i, line in enumerate(lines):
+        draw.text((6, size + 4 + 12 * i), line, fill=(230, 120, 120))
     path = Path(path)
     img.save(path)
     return path
