@@ -169,3 +169,48 @@ def test_against_an_earlier_run_names_exactly_the_jobs_of_the_character_whose_sh
     assert "2 changed beyond tolerance" in second.stdout and (new / "report" / "report.md").is_file()
     same = run_batch(str(jobs), "--out", str(new), "--against", str(new / ".." / "new"), "--workers", "2")
     assert same.returncode == 2 and "the same folder as --out" in same.stderr
+
+
+def _free_tcp_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_batch_runs_on_an_existing_cluster_given_by_scheduler(tmp_path):
+    """``--scheduler tcp://...``: a real ``dask scheduler`` and ``dask worker`` (separate processes, on
+    127.0.0.1) run the jobs, with the same weights a local cluster gives."""
+    import sys
+
+    root = tmp_path / "lib"
+    jobs = library(root, n_takes=1, outputs="weights = true")
+    port = _free_tcp_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, "PYTHONPATH": str(REPO / "tests")}
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", str(port), "--no-dashboard"], cwd=REPO, env=env,
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "1",
+                               "--nthreads", "1", "--host", "127.0.0.1", "--no-dashboard"], cwd=REPO, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        remote = run_batch(str(jobs), "--out", str(tmp_path / "remote"), "--scheduler", address)
+        assert remote.returncode == 0, remote.stdout + remote.stderr
+        assert "local cluster" not in remote.stdout and address in remote.stdout
+        local = run_batch(str(jobs), "--out", str(tmp_path / "local"), "--workers", "1")
+        assert local.returncode == 0, local.stdout + local.stderr
+        ours, theirs = _manifests(tmp_path / "remote"), _manifests(tmp_path / "local")
+        assert sorted(ours) == sorted(theirs) == ["take0--bare--g", "take0--sphere--g"]
+        for job in ours:
+            a = np.load(tmp_path / "remote" / job / "weights.npy")
+            b = np.load(tmp_path / "local" / job / "weights.npy")
+            assert a.tobytes() == b.tobytes()
+    finally:
+        for proc in (worker, scheduler):
+            proc.terminate()
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
