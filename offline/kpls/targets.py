@@ -100,10 +100,9 @@ def stylise_warp(character: Character, eye_scale: float = 1.35, jaw_stretch: flo
     return warp
 
 
-def stylise(character: Character, eye_scale: float = 1.35, jaw_stretch: float = 0.35,
-            taper: float = 0.12, name: str | None = None) -> Character:
-    """A cartoon blendshape rig: the warp f applied to the neutral and to each shape, f(v + d_s) − f(v)."""
-    warp = stylise_warp(character, eye_scale, jaw_stretch, taper)
+def warped_rig(character: Character, warp: Callable[[np.ndarray], np.ndarray], name: str) -> Character:
+    """``character`` under ``warp``: neutral W(v), each shape W(v + d) − W(v) (zero where d is), normals
+    recomputed; the rest of the character kept. The truth of a rig whose proportions a warp changed."""
     neutral = character.vertices.astype(np.float64)
     base = warp(neutral)
     tris = character.triangles.astype(np.int64)
@@ -113,22 +112,31 @@ def stylise(character: Character, eye_scale: float = 1.35, jaw_stretch: float = 
     for s in range(character.n_shapes):
         sl = character.shape_slice(s)
         idx = character.delta_indices[sl].astype(np.int64)
-        moved = neutral.copy()
-        moved[idx] += character.delta_positions[sl]
-        dense[s, idx] = (warp(moved[idx]) - base[idx]).astype(np.float32)
+        dense[s, idx] = (warp(neutral[idx] + character.delta_positions[sl]) - base[idx]).astype(np.float32)
         shaped = base.copy()
         shaped[idx] += dense[s, idx]
         dense_n[s] = vertex_normals(shaped, tris) - base_normals
     offsets, indices, positions = sparse_deltas(dense)
     normals = np.concatenate([dense_n[s, indices[offsets[s]:offsets[s + 1]]] for s in range(character.n_shapes)])
+    return character.with_parts(name=name, vertices=base.astype(np.float32), delta_offsets=offsets,
+                                delta_indices=indices, delta_positions=positions,
+                                delta_normals=normals.astype(np.float32),
+                                pivot=warp(character.pivot[None].astype(np.float64))[0].astype(np.float32))
+
+
+
+def stylise(character: Character, eye_scale: float = 1.35, jaw_stretch: float = 0.35,
+            taper: float = 0.12, name: str | None = None) -> Character:
+    """A cartoon blendshape rig: the warp f applied to the neutral and to each shape, f(v + d_s) − f(v)."""
+    w = warped_rig(character, stylise_warp(character, eye_scale, jaw_stretch, taper),
+                   name or f"{character.name} (stylised)")
     return Character(
-        name=name or f"{character.name} (stylised)", units=character.units, vertices=base.astype(np.float32),
+        name=w.name, units=character.units, vertices=w.vertices,
         triangles=character.triangles, triangle_material=character.triangle_material,
         vertex_color=character.vertex_color, material_names=character.material_names,
-        material_params=character.material_params,
-        pivot=warp(character.pivot[None].astype(np.float64))[0].astype(np.float32),
-        shape_names=character.shape_names, delta_offsets=offsets, delta_indices=indices,
-        delta_positions=positions, delta_normals=normals.astype(np.float32),
+        material_params=character.material_params, pivot=w.pivot,
+        shape_names=character.shape_names, delta_offsets=w.delta_offsets, delta_indices=w.delta_indices,
+        delta_positions=w.delta_positions, delta_normals=w.delta_normals,
         metadata={"settings": {"stylised_from": character.name, "eye_scale": eye_scale,
                                "jaw_stretch": jaw_stretch, "taper": taper}},
     )

@@ -26,10 +26,10 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from facepuppet.runtime.model.character import Character, sparse_deltas
-from facepuppet.runtime.model.geometry import vertex_normals
+from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.elastic.thin_plate import thin_plate
+from facepuppet.offline.kpls.targets import warped_rig
 
 #: Multi-PIE landmark i → the MediaPipe face-mesh vertex at the same place (checked on the data kit: after a
 #: similarity alignment every inner landmark lies within 0.93 cm of ICT's, the contour within 1.7)
@@ -87,29 +87,6 @@ def proportion_warp(ict_marks: np.ndarray, motion: np.ndarray, regions: Sequence
     return thin_plate(src, src + step, SMOOTHING)
 
 
-def warped(character: Character, warp: Callable[[np.ndarray], np.ndarray], name: str) -> Character:
-    """``character`` under ``warp``: neutral W(v), each shape W(v + d) − W(v) (zero where d is)."""
-    neutral = character.vertices.astype(np.float64)
-    base = warp(neutral)
-    tris = character.triangles.astype(np.int64)
-    base_normals = vertex_normals(base, tris)
-    dense = np.zeros((character.n_shapes, character.n_vertices, 3), np.float32)
-    dense_n = np.zeros_like(dense)
-    for s in range(character.n_shapes):
-        sl = character.shape_slice(s)
-        idx = character.delta_indices[sl].astype(np.int64)
-        dense[s, idx] = (warp(neutral[idx] + character.delta_positions[sl]) - base[idx]).astype(np.float32)
-        shaped = base.copy()
-        shaped[idx] += dense[s, idx]
-        dense_n[s] = vertex_normals(shaped, tris) - base_normals
-    offsets, indices, positions = sparse_deltas(dense)
-    normals = np.concatenate([dense_n[s, indices[offsets[s]:offsets[s + 1]]] for s in range(character.n_shapes)])
-    return character.with_parts(name=name, vertices=base.astype(np.float32), delta_offsets=offsets,
-                                delta_indices=indices, delta_positions=positions,
-                                delta_normals=normals.astype(np.float32),
-                                pivot=warp(character.pivot[None].astype(np.float64))[0].astype(np.float32))
-
-
 def fold_fraction(character: Character, warp: Callable[[np.ndarray], np.ndarray], step: float = 0.05) -> float:
     """Fraction of ``character``'s vertices where ``warp``'s Jacobian (central differences) is not positive: a
     warp that turns space inside out somewhere would make a head no face has."""
@@ -143,5 +120,5 @@ def real_variants(ict: Character, ict_marks: np.ndarray, other_vertices: np.ndar
         if labels is not None and label not in labels:
             continue
         w = proportion_warp(a, motion, regions, amount)
-        out.append((label, warped(ict, w, f"{ict.name} ({label})"), fold_fraction(ict, w)))
+        out.append((label, warped_rig(ict, w, f"{ict.name} ({label})"), fold_fraction(ict, w)))
     return out
