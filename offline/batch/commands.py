@@ -29,7 +29,13 @@ from facepuppet.runtime.files.outputs import write_atomic
 
 from facepuppet.offline.batch import cluster
 from facepuppet.offline.batch.golden import PIXEL_LEVEL, PIXEL_TOL, WEIGHT_TOL, compare_runs
-from facepuppet.offline.batch.golden_report import REPORT_MD, print_summary, write_report
+from facepuppet.offline.batch.golden_report import (
+    REPORT_MD,
+    add_tolerance_arguments,
+    check_tolerances,
+    print_summary,
+    write_report,
+)
 from facepuppet.offline.batch.job_run import PARTIAL, VIDEO, replay_argv, replay_parser
 from facepuppet.offline.batch.jobs import Job, JobsFileError, load_jobs
 from facepuppet.offline.batch.manifest import input_hashes, is_done
@@ -63,15 +69,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(an earlier run) as batch-compare does: the jobs changed beyond tolerance, most changed "
                         "first, and DIR/report/ (report.md with the worst frames side by side, report.json); "
                         "exit 1 when any changed")
-    p.add_argument("--weight-tol", type=float, default=WEIGHT_TOL,
-                   help=f"with --against, the largest |Δweight| of a channel that is no change (default "
-                        f"{WEIGHT_TOL:g})")
-    p.add_argument("--pixel-tol", type=float, default=PIXEL_TOL,
-                   help=f"with --against, the fraction of a frame's pixels that may differ by more than "
-                        f"--pixel-level (default {PIXEL_TOL:g})")
-    p.add_argument("--pixel-level", type=int, default=PIXEL_LEVEL,
-                   help=f"with --against, the largest difference of a pixel (0-255) that counts as equal "
-                        f"(default {PIXEL_LEVEL})")
+    add_tolerance_arguments(p, when="with --against, ")
     p.set_defaults(func=run_batch)
 
 
@@ -123,12 +121,7 @@ def _check_against(args: argparse.Namespace) -> None:
         raise UsageError(f"--against {args.against}: expected the folder of an earlier batch run")
     if args.against.resolve() == args.out_dir.resolve():
         raise UsageError(f"--against {args.against}: the same folder as --out; name the earlier run's")
-    if not args.weight_tol >= 0:
-        raise UsageError(f"--weight-tol {args.weight_tol}: expected a number >= 0")
-    if not 0 <= args.pixel_tol <= 1:
-        raise UsageError(f"--pixel-tol {args.pixel_tol}: expected a fraction of the pixels, in [0, 1]")
-    if not 0 <= args.pixel_level <= 255:
-        raise UsageError(f"--pixel-level {args.pixel_level}: expected 0 to 255")
+    check_tolerances(args)
 
 
 def _compare(out: Path, args: argparse.Namespace) -> list:

@@ -143,24 +143,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("new_dir", type=Path, metavar="NEW_DIR", help="the run to check (folder of job folders)")
     p.add_argument("golden_dir", type=Path, metavar="GOLDEN_DIR", help="the earlier run it is compared with")
     p.add_argument("--out", type=Path, metavar="REPORT_DIR", help="folder to write the report into")
-    p.add_argument("--weight-tol", type=float, default=WEIGHT_TOL,
-                   help=f"largest |Δweight| of a channel that is no change (default {WEIGHT_TOL:g})")
-    p.add_argument("--pixel-tol", type=float, default=PIXEL_TOL,
-                   help=f"fraction of a frame's pixels that may differ by more than --pixel-level (default "
-                        f"{PIXEL_TOL:g})")
-    p.add_argument("--pixel-level", type=int, default=PIXEL_LEVEL,
-                   help=f"largest difference of a pixel (0-255, its most different RGB channel) that counts "
-                        f"as equal (default {PIXEL_LEVEL})")
+    add_tolerance_arguments(p)
     p.set_defaults(func=_batch_compare)
 
 
 def _batch_compare(args: argparse.Namespace) -> int:
-    if not args.weight_tol >= 0:
-        raise UsageError(f"--weight-tol {args.weight_tol}: expected a number >= 0")
-    if not 0 <= args.pixel_tol <= 1:
-        raise UsageError(f"--pixel-tol {args.pixel_tol}: expected a fraction of the pixels, in [0, 1]")
-    if not 0 <= args.pixel_level <= 255:
-        raise UsageError(f"--pixel-level {args.pixel_level}: expected 0 to 255")
+    check_tolerances(args)
     bar = Progress("batch-compare", unit="jobs")
 
     def progress(done: int, total: int, job: str) -> None:
@@ -194,3 +182,25 @@ def _cell(text: object) -> str:
     """``text`` safe inside a Markdown table cell and heading: pipes escaped, one line."""
     return str(text).replace("|", "\\|").replace("\n", " ")
 
+
+def add_tolerance_arguments(p: argparse.ArgumentParser, when: str = "") -> None:
+    """``--weight-tol``, ``--pixel-tol`` and ``--pixel-level`` (``batch-compare``'s, and ``batch --against``'s
+    with ``when`` = "with --against, ")."""
+    p.add_argument("--weight-tol", type=float, default=WEIGHT_TOL,
+                   help=f"{when}the largest |Δweight| of a channel that is no change (default {WEIGHT_TOL:g})")
+    p.add_argument("--pixel-tol", type=float, default=PIXEL_TOL,
+                   help=f"{when}the fraction of a frame's pixels that may differ by more than --pixel-level "
+                        f"(default {PIXEL_TOL:g})")
+    p.add_argument("--pixel-level", type=int, default=PIXEL_LEVEL,
+                   help=f"{when}the largest difference of a pixel (0-255, its most different RGB channel) that "
+                        f"counts as equal (default {PIXEL_LEVEL})")
+
+
+def check_tolerances(args: argparse.Namespace) -> None:
+    """UsageError for a tolerance out of its range."""
+    if not args.weight_tol >= 0:
+        raise UsageError(f"--weight-tol {args.weight_tol}: expected a number >= 0")
+    if not 0 <= args.pixel_tol <= 1:
+        raise UsageError(f"--pixel-tol {args.pixel_tol}: expected a fraction of the pixels, in [0, 1]")
+    if not 0 <= args.pixel_level <= 255:
+        raise UsageError(f"--pixel-level {args.pixel_level}: expected 0 to 255")
