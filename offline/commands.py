@@ -82,10 +82,6 @@ def _import_rig(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     bar = Progress("import-rig", unit="shapes")
 
-    def progress(i: int, n: int, name: str) -> None:
-        bar.total = n
-        bar.update(i, note=name)
-
     with bar:
         character = import_rig(
             args.neutral,
@@ -95,7 +91,7 @@ def _import_rig(args: argparse.Namespace) -> int:
             units=args.units,
             landmarks=args.landmarks,
             forward=args.forward,
-            progress=progress,
+            progress=bar.step,
         )
     out = character.save(args.output)
     seconds = time.perf_counter() - start
@@ -130,12 +126,8 @@ def _import_gltf(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     bar = Progress("import-rig", unit="meshes")
 
-    def progress(i: int, n: int, name: str) -> None:
-        bar.total = n
-        bar.update(i, note=name)
-
     with bar:
-        character = read_gltf(args.neutral, name=args.name, progress=progress)
+        character = read_gltf(args.neutral, name=args.name, progress=bar.step)
     out = character.save(args.output)
     _print_gltf_summary(character, time.perf_counter() - start, out)
     return 0

@@ -128,13 +128,9 @@ def _compare(out: Path, args: argparse.Namespace) -> list:
     """This run against ``--against``'s: the summary printed, the report in ``out/report``; the changed jobs."""
     bar = Progress("batch --against", unit="jobs")
 
-    def progress(done: int, total: int, job: str) -> None:
-        bar.total = total
-        bar.update(done, note=job)
-
     with bar:
         report = compare_runs(out, args.against, weight_tol=args.weight_tol, pixel_tol=args.pixel_tol,
-                              pixel_level=args.pixel_level, progress=progress)
+                              pixel_level=args.pixel_level, progress=bar.step)
     print_summary(report)
     write_report(report, out / REPORT)
     print(f"batch: the report against {args.against} in {out / REPORT / REPORT_MD}")

@@ -151,13 +151,9 @@ def _batch_compare(args: argparse.Namespace) -> int:
     check_tolerances(args)
     bar = Progress("batch-compare", unit="jobs")
 
-    def progress(done: int, total: int, job: str) -> None:
-        bar.total = total
-        bar.update(done, note=job)
-
     with bar:
         report = compare_runs(args.new_dir, args.golden_dir, weight_tol=args.weight_tol,
-                              pixel_tol=args.pixel_tol, pixel_level=args.pixel_level, progress=progress)
+                              pixel_tol=args.pixel_tol, pixel_level=args.pixel_level, progress=bar.step)
     print_summary(report)
     if args.out is not None:
         write_report(report, args.out)

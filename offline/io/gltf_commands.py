@@ -46,12 +46,8 @@ def _export(args: argparse.Namespace) -> int:
     # a progress line for big characters (drawn only on a terminal, as every command's)
     bar = Progress("export-character", unit="primitives", enabled=None if character.n_vertices > 20000 else False)
 
-    def progress(i: int, n: int, name: str) -> None:
-        bar.total = n
-        bar.update(i, note=name)
-
     with bar:
-        summary = export_character(character, args.output, vrm=args.vrm, progress=progress)
+        summary = export_character(character, args.output, vrm=args.vrm, progress=bar.step)
     print(describe(summary))
     problems = check_gltf(args.output)
     if problems:  # a bug of the exporter, not of the input: say so plainly, keep the file for a report

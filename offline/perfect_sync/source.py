@@ -80,12 +80,8 @@ def fit_kit_source(folder: Path, log: Callable[[str], None] = logger.info) -> El
     start = time.perf_counter()
     bar = Progress("perfect-sync: source: reading the ICT shapes", unit="shapes")
 
-    def read(i: int, n: int, name: str) -> None:
-        bar.total = n
-        bar.update(i, note=name)
-
     with bar:
-        ict = import_rig(folder / NEUTRAL, folder, progress=read)
+        ict = import_rig(folder / NEUTRAL, folder, progress=bar.step)
     read_s = time.perf_counter() - start
     marks = read_ict_landmarks(folder / LANDMARKS, ict.n_vertices)
     points = ict_control_points(marks, ict.vertices, ict.triangles, main_front(ict))

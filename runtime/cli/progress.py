@@ -101,6 +101,12 @@ class Progress:
         self._drawn_at = now
         self._draw(note, end="")
 
+    def step(self, done: float, total: float, note: str = "") -> None:
+        """:meth:`update` with the total as well: the ``progress(i, n, name)`` callback that long work (a
+        reader, an exporter, a comparison) reports through, when the total is known only as it goes."""
+        self.total = total
+        self.update(done, note=note)
+
     def advance(self, n: float = 1, note: str = "") -> None:
         """Add ``n`` steps done."""
         self.update(self.done + n, note)
