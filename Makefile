@@ -31,11 +31,13 @@ setup: $(STAMP)
 system-deps:
 	bash .ci/system-deps
 
-$(STAMP): pyproject.toml .ci/system-deps
+$(STAMP): pyproject.toml package.json package-lock.json .ci/system-deps
 	bash .ci/system-deps
+	# The tests' reference implementations (glTF-Validator, three-vrm, playwright-core), pinned by the lock file.
+	command -v npm >/dev/null 2>&1 && npm ci --no-audit --no-fund --silent || echo "facepuppet: npm missing or failed; the tests against the glTF-Validator, three-vrm and Chromium will skip"
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[offline,video,panel,batch,test]'
+	$(PY) -m pip install --quiet -e '.[offline,video,panel,batch,web,vcam,test]'
 	touch $(STAMP)
 
 # Benchmarks on the real ICT head from ../shared/data (imported first).
@@ -58,4 +60,4 @@ bench-check: $(STAMP)
 		--render-size 1280x720 --latency-seconds 5 --out .bench
 
 clean:
-	rm -rf $(VENV) build dist *.egg-info demo-out bench-out .bench
+	rm -rf $(VENV) node_modules build dist *.egg-info demo-out bench-out .bench
