@@ -1,0 +1,183 @@
+"""Pictures handed from the frame loop to a live consumer (a virtual camera, a network stream) that must never
+slow the loop.
+
+A live output's consumer (a camera driver, a video encoder, a socket) can stall for any reason: a codec's
+slow frame, a kernel buffer full, a viewer not reading. The frame loop only reads the tick's pixels back (it
+owns the GL context) and puts them in a one-picture mailbox; one worker thread takes them out and does the
+rest. When the worker is still busy and a picture is already waiting, the waiting one is replaced by the new
+one and counted as dropped: the viewer always gets the newest picture, late ones never pile up, and the
+loop's cost is the read-back plus a lock, whatever the consumer does.
+
+:class:`TickReadback` reads one tick's pixels once for every live output that wants them (a stream and a
+virtual camera in one run cost one read); :func:`composite_over` puts a picture with alpha over the key colour
+of an output that carries none.
+
+A consumer that raises is logged once and given nothing more: later pictures are counted as dropped, the
+run goes on (a show does not stop because a viewer's network went away), and :attr:`FrameHandoff.failure`
+says why.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from facepuppet.runtime.live.timing import DurationSketch
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.live.loop import TickInfo
+
+logger = logging.getLogger(__name__)
+
+
+class TickReadback:
+    """The pixels of the newest tick, read from the renderer once however many outputs ask.
+
+    The array is the renderer's fresh copy (:meth:`~facepuppet.runtime.render.renderer.FaceRenderer.read_pixels`);
+    outputs share it and must not write into it.
+    """
+
+    def __init__(self) -> None:
+        self._key: tuple | None = None
+        self._pixels: np.ndarray | None = None
+        self.reads = 0
+
+    def pixels(self, info: TickInfo) -> np.ndarray:
+        key = (id(info.renderer), info.k, info.stamps[4])
+        if key != self._key:
+            self._pixels = info.renderer.read_pixels()
+            self._key = key
+            self.reads += 1
+        return self._pixels
+
+
+def composite_over(pixels: np.ndarray, key: tuple[int, int, int]) -> np.ndarray:
+    """(h, w, 3) uint8: straight-alpha RGBA ``pixels`` over the colour ``key``; RGB ones as they are."""
+    if pixels.shape[2] == 3:
+        return pixels
+    a = pixels[:, :, 3:4].astype(np.uint16)
+    rgb = pixels[:, :, :3].astype(np.uint16) * a + np.asarray(key, np.uint16) * (255 - a)
+    return ((rgb + 127) // 255).astype(np.uint8)
+
+
+class FrameHandoff:
+    """One worker thread consuming the pictures the frame loop offers, newest first, dropping what it cannot take.
+
+    Parameters
+    ----------
+    consume : callable(k, t, stamp, pixels) run in the worker for each picture taken: ``k`` the tick, ``t`` its
+        time (s), ``stamp`` its GPU-finished time (``time.perf_counter``), ``pixels`` the (h, w, 3|4) uint8 array
+    name : str, the output's name (the thread's name and the log lines)
+    clock : callable, seconds on the loop's timer clock (``time.perf_counter``)
+
+    Attributes
+    ----------
+    counters : dict: ``offered`` (pictures the loop handed over), ``sent`` (consumed), ``dropped`` (replaced
+        while waiting, or offered after a failure), ``failed`` (1 once the consumer raised)
+    loop : DurationSketch, seconds the loop spent per tick in :meth:`take` (the read-back, the lock, the mailbox)
+    work : DurationSketch, seconds the worker spent per picture
+    delay : DurationSketch, seconds from the tick's GPU-finished stamp to the consumer's return (what a
+        viewer waits on top of the drawing, before its own transport and display)
+    failure : str or None, why the consumer stopped
+    """
+
+    def __init__(self, consume: Callable[[int, float, float, np.ndarray], None], name: str,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        self._consume = consume
+        self.name = name
+        self._clock = clock
+        self._cond = threading.Condition()
+        self._waiting: tuple | None = None
+        self._busy = False
+        self._closing = False
+        self.counters = {"offered": 0, "sent": 0, "dropped": 0, "failed": 0}
+        self.loop = DurationSketch()
+        self.work = DurationSketch()
+        self.delay = DurationSketch()
+        self.failure: str | None = None
+        self._thread = threading.Thread(target=self._run, name=f"out-{name}", daemon=True)
+        self._thread.start()
+
+    def take(self, info: TickInfo, readback: TickReadback) -> None:
+        """Tick observer's part: the tick's pixels read back (once for every output) and offered."""
+        t0 = self._clock()
+        self.offer(info.k, info.t, info.stamps[4], readback.pixels(info))
+        self.loop.add(self._clock() - t0)
+
+    def offer(self, k: int, t: float, stamp: float, pixels: np.ndarray) -> bool:
+        """Hand a picture over without waiting; False when it (or the one it replaced) was dropped."""
+        c = self.counters
+        with self._cond:
+            c["offered"] += 1
+            if self.failure is not None or self._closing:
+                c["dropped"] += 1
+                kept = False
+            else:
+                kept = self._waiting is None
+                if not kept:
+                    c["dropped"] += 1  # the older waiting picture gives way to the newer one
+                self._waiting = (k, t, stamp, pixels)
+                self._cond.notify()
+        return kept
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._waiting is None and not self._closing:
+                    self._cond.wait()
+                item, self._waiting = self._waiting, None
+                if item is None:  # closing, nothing left
+                    return
+                self._busy = True
+            k, t, stamp, pixels = item
+            t0 = self._clock()
+            try:
+                self._consume(k, t, stamp, pixels)
+            except Exception as exc:  # the run goes on; said once
+                with self._cond:
+                    self.failure = f"{type(exc).__name__}: {exc}"
+                    self.counters["failed"] = 1
+                    self.counters["dropped"] += 1
+                    self._busy = False
+                    if self._waiting is not None:
+                        self._waiting = None
+                        self.counters["dropped"] += 1
+                    self._cond.notify_all()
+                logger.warning("%s: stopped sending: %s (the run goes on without it)", self.name, self.failure)
+                return
+            t1 = self._clock()
+            self.work.add(t1 - t0)
+            self.delay.add(t1 - stamp)
+            with self._cond:
+                self.counters["sent"] += 1
+                self._busy = False
+                self._cond.notify_all()
+
+    def drain(self) -> None:
+        """Wait until the worker has taken and finished every picture offered so far (tests, the end of a run)."""
+        with self._cond:
+            while (self._waiting is not None or self._busy) and self.failure is None and self._thread.is_alive():
+                self._cond.wait(0.1)
+
+    def close(self) -> None:
+        """Finish the waiting picture, then stop the worker (once)."""
+        with self._cond:
+            self._closing = True
+            self._cond.notify_all()
+        self._thread.join()
+
+    def costs(self) -> dict:
+        """The figures of :meth:`~facepuppet.runtime.live.stats.LiveStats`' kind, in ms: the loop's share, the
+        worker's, the delay to the consumer; and the counts."""
+        def q(sketch: DurationSketch) -> dict:
+            if not sketch.n:
+                return {"n": 0}
+            return {"n": sketch.n, "p50": sketch.quantile(0.5) * 1e3, "p99": sketch.quantile(0.99) * 1e3,
+                    "max": sketch.max * 1e3}
+        return {"loop_ms": q(self.loop), "worker_ms": q(self.work), "delay_ms": q(self.delay),
+                **self.counters, "failure": self.failure}

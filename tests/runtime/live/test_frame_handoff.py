@@ -1,0 +1,95 @@
+"""The handoff between the frame loop and a live output's thread: the loop never waits on the consumer; a slow
+consumer loses the older waiting picture (counted), a failing one is stopped and the run goes on."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from facepuppet.runtime.live.frame_handoff import FrameHandoff, TickReadback, composite_over
+
+
+def _picture(k: int) -> np.ndarray:
+    return np.full((4, 6, 3), k, np.uint8)
+
+
+def test_a_stalled_consumer_keeps_only_the_newest_waiting_picture():
+    entered, release = threading.Event(), threading.Event()
+    got: list[int] = []
+
+    def consume(k, t, stamp, pixels):
+        got.append(k)
+        entered.set()
+        release.wait()
+
+    handoff = FrameHandoff(consume, "test")
+    assert handoff.offer(0, 0.0, 0.0, _picture(0))
+    assert entered.wait(30)              # the worker holds picture 0 and is stalled
+    kept = [handoff.offer(k, k / 10, 0.0, _picture(k)) for k in range(1, 6)]  # returns at once each time
+    assert kept == [True, False, False, False, False]
+    release.set()
+    handoff.drain()
+    handoff.close()
+    assert got == [0, 5]                 # the newest waiting picture went out; 1..4 were replaced
+    assert handoff.counters == {"offered": 6, "sent": 2, "dropped": 4, "failed": 0}
+    assert handoff.delay.n == handoff.work.n == 2
+
+
+def test_a_consumer_that_raises_is_stopped_and_the_offers_go_on_counted():
+    def consume(k, t, stamp, pixels):
+        raise OSError("network unreachable")
+
+    handoff = FrameHandoff(consume, "test")
+    handoff.offer(0, 0.0, 0.0, _picture(0))
+    handoff.drain()
+    for k in range(1, 4):
+        handoff.offer(k, 0.0, 0.0, _picture(k))  # no exception reaches the loop
+    handoff.close()
+    assert handoff.failure == "OSError: network unreachable"
+    assert handoff.counters["failed"] == 1 and handoff.counters["sent"] == 0
+    assert handoff.counters["dropped"] == 4 and handoff.counters["offered"] == 4
+
+
+def test_close_sends_the_picture_still_waiting():
+    got = []
+    handoff = FrameHandoff(lambda k, t, s, p: got.append(k), "test")
+    for k in range(3):
+        handoff.offer(k, 0.0, 0.0, _picture(k))
+    handoff.close()
+    assert got[-1] == 2 and handoff.counters["sent"] + handoff.counters["dropped"] == 3
+
+
+class _Renderer:
+    def __init__(self):
+        self.reads = 0
+
+    def read_pixels(self):
+        self.reads += 1
+        return _picture(self.reads)
+
+
+class _Info:
+    def __init__(self, renderer, k):
+        self.renderer, self.k, self.t, self.stamps = renderer, k, k / 10, (0.0, 0.0, 0.0, 0.0, float(k))
+
+
+def test_the_pixels_of_a_tick_are_read_once_for_every_output():
+    renderer, readback = _Renderer(), TickReadback()
+    a = readback.pixels(_Info(renderer, 1))
+    b = readback.pixels(_Info(renderer, 1))
+    c = readback.pixels(_Info(renderer, 2))
+    assert a is b and renderer.reads == 2 and int(c[0, 0, 0]) == 2
+
+
+def test_a_picture_with_alpha_goes_over_the_key_colour():
+    rgba = np.zeros((2, 3, 4), np.uint8)
+    rgba[0, 0] = (200, 100, 50, 255)     # opaque: as drawn
+    rgba[0, 1] = (200, 100, 50, 0)       # nothing drawn: the key
+    rgba[0, 2] = (255, 255, 255, 128)    # half: between them
+    out = composite_over(rgba, (0, 255, 0))
+    assert out.shape == (2, 3, 3) and out.dtype == np.uint8
+    assert tuple(out[0, 0]) == (200, 100, 50) and tuple(out[0, 1]) == (0, 255, 0)
+    assert tuple(out[0, 2]) == (128, 255, 128)
+    rgb = rgba[:, :, :3].copy()
+    assert composite_over(rgb, (0, 255, 0)) is rgb
