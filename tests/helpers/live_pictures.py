@@ -5,7 +5,9 @@ Live Link Face take to replay, and an MPEG-TS byte stream decoded by PyAV."""
 from __future__ import annotations
 
 import io
+import socket
 import threading
+import time
 
 import numpy as np
 
@@ -73,3 +75,32 @@ def decode_ts(data: bytes):
             frames.append(frame.to_ndarray(format="rgb24"))
             times.append(float(frame.pts * frame.time_base))
     return frames, [t - times[0] for t in times]
+
+
+class Receiver:
+    """A UDP socket on 127.0.0.1 bound before anything is sent, and a thread keeping every datagram."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.port = self.sock.getsockname()[1]
+        self.datagrams: list[bytes] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.datagrams.append(self.sock.recv(65536))
+            except TimeoutError:
+                continue
+
+    def stop(self) -> bytes:
+        time.sleep(0.2)  # what is still in flight on loopback
+        self._stop.set()
+        self._thread.join()
+        self.sock.close()
+        return b"".join(self.datagrams)

@@ -4,8 +4,6 @@ refused before any work (exit 2, naming --stream); ``srt://`` refused where this
 
 from __future__ import annotations
 
-import socket
-import threading
 import time
 
 import numpy as np
@@ -15,41 +13,12 @@ from PIL import Image
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.live.stream_out import StreamSink, output_protocols, plan_stream
 
-from helpers.live_pictures import decode_ts, write_take
+from helpers.live_pictures import Receiver, decode_ts, write_take
 from helpers.small_characters import sphere_character
 
 av = pytest.importorskip("av", reason="PyAV is not installed: pip install -e '.[video]' (make setup installs it)")
 
 JAWS = [0.1, 0.3, 0.5, 0.7, 0.9, 0.6, 0.4, 0.2]
-
-
-class Receiver:
-    """A UDP socket on 127.0.0.1 bound before anything is sent, and a thread keeping every datagram."""
-
-    def __init__(self) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(0.1)
-        self.port = self.sock.getsockname()[1]
-        self.datagrams: list[bytes] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                self.datagrams.append(self.sock.recv(65536))
-            except TimeoutError:
-                continue
-
-    def stop(self) -> bytes:
-        time.sleep(0.2)  # what is still in flight on loopback
-        self._stop.set()
-        self._thread.join()
-        self.sock.close()
-        return b"".join(self.datagrams)
 
 
 @pytest.fixture
