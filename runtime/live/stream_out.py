@@ -33,6 +33,7 @@ import ctypes.util
 import functools
 import logging
 import re
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
@@ -174,7 +175,11 @@ class StreamSink:
     ----------
     counters : dict, the handoff's counts (``sent`` = pictures encoded and sent)
     packets, bytes : int, TS packets muxed and their payload bytes
+    recent : deque of (pts, GPU-finished stamp) of the last ``RECENT`` pictures sent: what a viewer's
+        latency is measured against (``bench latency --stream``)
     """
+
+    RECENT = 1 << 14
 
     name = "stream"
 
@@ -197,6 +202,7 @@ class StreamSink:
         self._t0: float | None = None
         self._last = -1
         self.packets = self.bytes = 0
+        self.recent: deque[tuple[int, float]] = deque(maxlen=self.RECENT)
         self._closed = False
         self.handoff = FrameHandoff(self._send, "stream")
         self.counters = self.handoff.counters
@@ -214,6 +220,7 @@ class StreamSink:
         frame.time_base = TIME_BASE
         self._mux(self._video.encode(frame))
         self._last = pts
+        self.recent.append((pts, stamp))
 
     def _mux(self, packets) -> None:
         for packet in packets:
