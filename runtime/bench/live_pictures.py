@@ -46,10 +46,11 @@ RECEIVER_SETTLE_S = 1.0  # the receiver's first second: probing and the first ke
 class NullBackend:
     """A pyvirtualcam backend that accepts every frame and keeps nothing (no device on this machine)."""
 
-    def __init__(self, *, width: int, height: int, fps: float, fourcc: int, device: str | None, **kw) -> None:
+    def __init__(self, *, width: int, height: int, fps: float, fourcc: int, device: str | None,
+                 **kw: object) -> None:
         self._device = device or "(no device: pyvirtualcam backend seam)"
 
-    def send(self, frame) -> None:
+    def send(self, frame: np.ndarray) -> None:
         pass
 
     def close(self) -> None:
@@ -58,7 +59,7 @@ class NullBackend:
     def device(self) -> str:
         return self._device
 
-    def native_fourcc(self):
+    def native_fourcc(self) -> int | None:
         return None
 
 

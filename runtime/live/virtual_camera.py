@@ -39,6 +39,8 @@ from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.live.frame_handoff import FrameHandoff, TickReadback, composite_over
 
 if TYPE_CHECKING:
+    import pyvirtualcam
+
     from facepuppet.runtime.live.loop import TickInfo
 
 logger = logging.getLogger(__name__)
@@ -136,7 +138,8 @@ class VirtualCameraSink:
 
     name = "virtual_camera"
 
-    def __init__(self, camera, plan: VirtualCameraPlan, readback: TickReadback | None = None) -> None:
+    def __init__(self, camera: pyvirtualcam.Camera, plan: VirtualCameraPlan,
+                 readback: TickReadback | None = None) -> None:
         self.camera = camera
         self.plan = plan
         self.readback = readback or TickReadback()
