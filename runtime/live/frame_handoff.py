@@ -12,6 +12,10 @@ loop's cost is the read-back plus a lock, whatever the consumer does.
 virtual camera in one run cost one read); :func:`composite_over` puts a picture with alpha over the key colour
 of an output that carries none.
 
+An output announced at a frame rate (a camera at ``--fps``) takes at most one picture per slot of that rate's
+grid (``fps``): a live run drawing on arrival of a 120 Hz tracker draws 120 ticks a second, and the ticks
+between slots are left out before their pixels are read (counted as ``over_rate``).
+
 A consumer that raises is logged once and given nothing more: later pictures are counted as dropped, the
 run goes on (a show does not stop because a viewer's network went away), and :attr:`FrameHandoff.failure`
 says why.
@@ -20,6 +24,7 @@ says why.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -73,12 +78,14 @@ class FrameHandoff:
     consume : callable(k, t, stamp, pixels) run in the worker for each picture taken: ``k`` the tick, ``t`` its
         time (s), ``stamp`` its GPU-finished time (``time.perf_counter``), ``pixels`` the (h, w, 3|4) uint8 array
     name : str, the output's name (the thread's name and the log lines)
+    fps : float or None, at most one picture per 1/fps slot of tick time (None: every tick)
     clock : callable, seconds on the loop's timer clock (``time.perf_counter``)
 
     Attributes
     ----------
     counters : dict: ``offered`` (pictures the loop handed over), ``sent`` (consumed), ``dropped`` (replaced
-        while waiting, or offered after a failure), ``failed`` (1 once the consumer raised)
+        while waiting, or offered after a failure), ``failed`` (1 once the consumer raised), ``over_rate``
+        (ticks left out between two slots of ``fps``; their pixels were not read)
     loop : DurationSketch, seconds the loop spent per tick in :meth:`take` (the read-back, the lock, the mailbox)
     work : DurationSketch, seconds the worker spent per picture
     delay : DurationSketch, seconds from the tick's GPU-finished stamp to the consumer's return (what a
@@ -86,8 +93,11 @@ class FrameHandoff:
     failure : str or None, why the consumer stopped
     """
 
+    #: a tick up to this fraction of a slot early still takes that slot (tick times jitter on arrival)
+    SLOT_SLACK = 0.1
+
     def __init__(self, consume: Callable[[int, float, float, np.ndarray], None], name: str,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
+                 fps: float | None = None, clock: Callable[[], float] = time.perf_counter) -> None:
         self._consume = consume
         self.name = name
         self._clock = clock
@@ -95,7 +105,9 @@ class FrameHandoff:
         self._waiting: tuple | None = None
         self._busy = False
         self._closing = False
-        self.counters = {"offered": 0, "sent": 0, "dropped": 0, "failed": 0}
+        self.counters = {"offered": 0, "sent": 0, "dropped": 0, "failed": 0, "over_rate": 0}
+        self._fps = None if fps is None else float(fps)
+        self._slot = -math.inf
         self.loop = DurationSketch()
         self.work = DurationSketch()
         self.delay = DurationSketch()
@@ -104,7 +116,14 @@ class FrameHandoff:
         self._thread.start()
 
     def take(self, info: TickInfo, readback: TickReadback) -> None:
-        """Tick observer's part: the tick's pixels read back (once for every output) and offered."""
+        """Tick observer's part: the tick's pixels read back (once for every output) and offered, unless the
+        tick falls in a slot of ``fps`` already taken."""
+        if self._fps is not None:
+            slot = math.floor(info.t * self._fps + self.SLOT_SLACK)
+            if slot <= self._slot:
+                self.counters["over_rate"] += 1
+                return
+            self._slot = slot
         t0 = self._clock()
         self.offer(info.k, info.t, info.stamps[4], readback.pixels(info))
         self.loop.add(self._clock() - t0)

@@ -4,7 +4,8 @@ What goes out: H.264 (libx264, preset ``ultrafast``, tune ``zerolatency``: no B-
 frame leaves as soon as it is encoded) in 4:2:0, a keyframe every second so a viewer that joins late starts
 within one, in MPEG-TS, through PyAV (the optional extra ``video``). Each picture carries its tick's time
 (90 kHz, from the first picture sent), so a live run drawing on arrival streams a variable frame rate as
-drawn. A picture with alpha is composited over the key colour (green), as the virtual camera does; an opaque
+drawn, at most ``--fps`` pictures a second (the ticks between are left out, counted as ``over_rate``). A
+picture with alpha is composited over the key colour (green), as the virtual camera does; an opaque
 one goes as drawn.
 
 Destinations (``--stream``), nothing else:
@@ -204,7 +205,7 @@ class StreamSink:
         self.packets = self.bytes = 0
         self.recent: deque[tuple[int, float]] = deque(maxlen=self.RECENT)
         self._closed = False
-        self.handoff = FrameHandoff(self._send, "stream")
+        self.handoff = FrameHandoff(self._send, "stream", fps=fps)
         self.counters = self.handoff.counters
 
     def __call__(self, info: TickInfo) -> None:

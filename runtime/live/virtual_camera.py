@@ -6,7 +6,9 @@ viewer can remove: the background is green (0, 255, 0, what OBS's chroma key fil
 ``--background R,G,B`` names another; with ``--background transparent`` the frames keep their alpha for
 ``--video`` and the camera gets them composited over green.
 
-The camera is opened at the start, at the run's frame rate (``--fps``; a replay's take rate) and size. A
+The camera is opened at the start, at the run's frame rate (``--fps``; a replay's take rate) and size, and
+takes at most that many frames a second (a run drawing on arrival of a faster tracker leaves the ticks
+between out, counted as ``over_rate``). A
 camera that cannot be opened (pyvirtualcam missing, no v4l2loopback module loaded, the named device absent or
 not a loopback one, no permission) does not stop the run: the reason is said once with the command that
 makes the device, e.g. ``sudo modprobe v4l2loopback devices=1 exclusive_caps=1 card_label=facepuppet``
@@ -129,6 +131,7 @@ class VirtualCameraSink:
     camera : a ``pyvirtualcam.Camera`` (RGB frames of the plan's size), closed with the sink
     plan : VirtualCameraPlan
     readback : TickReadback, shared with the session's other live outputs
+    fps : float or None, at most this many frames a second of tick time (the rate the camera announces)
 
     Attributes
     ----------
@@ -139,12 +142,12 @@ class VirtualCameraSink:
     name = "virtual_camera"
 
     def __init__(self, camera: pyvirtualcam.Camera, plan: VirtualCameraPlan,
-                 readback: TickReadback | None = None) -> None:
+                 readback: TickReadback | None = None, fps: float | None = None) -> None:
         self.camera = camera
         self.plan = plan
         self.readback = readback or TickReadback()
         self.device: str = camera.device
-        self.handoff = FrameHandoff(self._send, "virtual camera")
+        self.handoff = FrameHandoff(self._send, "virtual camera", fps=fps)
         self.counters = self.handoff.counters
 
     def __call__(self, info: TickInfo) -> None:
@@ -182,7 +185,7 @@ def open_virtual_camera(plan: VirtualCameraPlan, fps: float, readback: TickReadb
     if camera is None:
         log(f"virtual camera: not available: {reason}; the run goes on without it")
         return None
-    sink = VirtualCameraSink(camera, plan, readback)
+    sink = VirtualCameraSink(camera, plan, readback, fps)
     log(plan.describe(fps).replace(plan.device or "the first v4l2loopback device", sink.device, 1)
         + f" (pyvirtualcam {camera.backend} backend)")
     return sink

@@ -32,7 +32,7 @@ def test_a_stalled_consumer_keeps_only_the_newest_waiting_picture():
     handoff.drain()
     handoff.close()
     assert got == [0, 5]                 # the newest waiting picture went out; 1..4 were replaced
-    assert handoff.counters == {"offered": 6, "sent": 2, "dropped": 4, "failed": 0}
+    assert handoff.counters == {"offered": 6, "sent": 2, "dropped": 4, "failed": 0, "over_rate": 0}
     assert handoff.delay.n == handoff.work.n == 2
 
 
@@ -93,3 +93,21 @@ def test_a_picture_with_alpha_goes_over_the_key_colour():
     assert tuple(out[0, 2]) == (128, 255, 128)
     rgb = rgba[:, :, :3].copy()
     assert composite_over(rgb, (0, 255, 0)) is rgb
+
+
+def test_an_output_at_a_frame_rate_takes_one_tick_per_slot_of_it():
+    """Ticks of a 120 Hz tracker drawn on arrival (times jittered by up to a tenth of a slot early or late) to an
+    output at 60 fps: every other tick, and the ticks left out are never read back."""
+    renderer, readback = _Renderer(), TickReadback()
+    got = []
+    handoff = FrameHandoff(lambda k, t, s, p: got.append(k), "test", fps=60.0)
+    jitter = np.random.default_rng(0).uniform(-0.08, 0.08, 240) / 60
+    for k in range(240):
+        info = _Info(renderer, k)
+        info.t = 5.0 + k / 120 + jitter[k]
+        handoff.take(info, readback)
+        handoff.drain()
+    handoff.close()
+    c = handoff.counters
+    assert c["offered"] == 120 and c["over_rate"] == 120 and renderer.reads == 120
+    assert c["sent"] == len(got) == 120 and got == list(range(0, 240, 2))
