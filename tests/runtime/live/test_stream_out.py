@@ -4,6 +4,7 @@ refused before any work (exit 2, naming --stream); ``srt://`` refused where this
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 from PIL import Image
 
 from facepuppet.runtime.cli import main
+from facepuppet.runtime.commands import replay as replay_command
 from facepuppet.runtime.live.stream_out import StreamSink, output_protocols, plan_stream
 
 from helpers.live_pictures import Receiver, decode_ts, write_take
@@ -136,3 +138,25 @@ def test_srt_is_refused_naming_the_missing_support_where_ffmpeg_has_no_libsrt(tm
     err = capsys.readouterr().err
     assert code == 2 and "--stream srt://127.0.0.1:9000" in err and "without SRT (libsrt)" in err, err
     assert "udp://HOST:PORT" in err
+
+
+@pytest.mark.gl
+def test_the_video_and_the_stream_read_each_tick_back_once_between_them(tmp_path, receiver):
+    character = tmp_path / "sphere.npz"
+    sphere_character().save(character)
+    take = tmp_path / "take.csv"
+    write_take(take, JAWS)
+    plan = replay_command.ReplayPlan.from_args(_replay_ns([
+        str(take), "-c", str(character), "--headless", "--size", "64x48", "--fps", "10",
+        "--video", str(tmp_path / "take.mp4"), "--stream", f"udp://127.0.0.1:{receiver.port}"]))
+    result, _ = replay_command.replay(plan)
+    frames, _ = decode_ts(receiver.stop())
+    video, stream = result.outputs.video, result.outputs.stream
+    assert video.readback is stream.readback and video.readback.reads == result.loop.n_ticks == len(JAWS)
+    assert video.frames == len(JAWS) and len(frames) == stream.counters["sent"] >= 1
+
+
+def _replay_ns(argv):
+    parser = argparse.ArgumentParser(prog="facepuppet")
+    replay_command.register(parser.add_subparsers())
+    return parser.parse_args(["replay", *argv])
