@@ -3,10 +3,13 @@ slow the loop.
 
 A live output's consumer (a camera driver, a video encoder, a socket) can stall for any reason: a codec's
 slow frame, a kernel buffer full, a viewer not reading. The frame loop only reads the tick's pixels back (it
-owns the GL context) and puts them in a one-picture mailbox; one worker thread takes them out and does the
-rest. When the worker is still busy and a picture is already waiting, the waiting one is replaced by the new
-one and counted as dropped: the viewer always gets the newest picture, late ones never pile up, and the
-loop's cost is the read-back plus a lock, whatever the consumer does.
+owns the GL context), as the framebuffer holds them (RGBA, bottom row first: the cheapest read, with no
+conversion or copy), and puts them in a one-picture mailbox; one worker thread takes them out and does the
+rest (the picture turned top row first, RGB or straight RGBA, by
+:func:`~facepuppet.runtime.render.readback.finish_rgba`, then the output's own work). When the worker is
+still busy and a picture is already waiting, the waiting one is replaced by the new one and counted as
+dropped: the viewer always gets the newest picture, late ones never pile up, and the loop's cost is the
+read-back plus a lock, whatever the consumer does.
 
 :class:`TickReadback` reads one tick's pixels once for every live output that wants them (a stream and a
 virtual camera in one run cost one read); :func:`composite_over` puts a picture with alpha over the key colour
@@ -23,6 +26,7 @@ says why.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import threading
@@ -33,6 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.live.timing import DurationSketch
+from facepuppet.runtime.render.readback import finish_rgba
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
@@ -43,22 +48,50 @@ logger = logging.getLogger(__name__)
 class TickReadback:
     """The pixels of the newest tick, read from the renderer once however many outputs ask.
 
-    The array is the renderer's fresh copy (:meth:`~facepuppet.runtime.render.renderer.FaceRenderer.read_pixels`);
-    outputs share it and must not write into it.
+    :meth:`pixels` gives the finished picture (:meth:`~facepuppet.runtime.render.renderer.FaceRenderer.read_pixels`:
+    top row first; the video), :meth:`picture` whatever is at hand, the framebuffer's own RGBA when nothing
+    was read yet, with the function that finishes it (the live outputs, in their threads). Outputs share the
+    arrays and must not write into them.
+
+    Attributes
+    ----------
+    reads : int, reads from the GPU (one a tick however many outputs)
     """
 
     def __init__(self) -> None:
         self._key: tuple | None = None
         self._pixels: np.ndarray | None = None
+        self._raw: np.ndarray | None = None
+        self._finish: Callable[[np.ndarray], np.ndarray] | None = None
         self.reads = 0
 
-    def pixels(self, info: TickInfo) -> np.ndarray:
+    def _tick(self, info: TickInfo) -> None:
         key = (id(info.renderer), info.k, info.stamps[4])
         if key != self._key:
-            self._pixels = info.renderer.read_pixels()
-            self._key = key
+            self._key, self._pixels, self._raw = key, None, None
             self.reads += 1
+            if hasattr(info.renderer, "read_rgba"):
+                self._raw = info.renderer.read_rgba()
+                self._finish = functools.partial(finish_rgba, transparent=bool(info.renderer.transparent))
+            else:
+                self._pixels = info.renderer.read_pixels()
+
+    def pixels(self, info: TickInfo) -> np.ndarray:
+        """The tick's finished picture: (h, w, 3) RGB or (h, w, 4) straight RGBA, top row first."""
+        key = (id(info.renderer), info.k, info.stamps[4])
+        if key != self._key:  # nothing read yet this tick: read it finished
+            self._key, self._raw, self._pixels = key, None, info.renderer.read_pixels()
+            self.reads += 1
+        elif self._pixels is None:  # a live output read it as stored: finish that
+            self._pixels = self._finish(self._raw)
         return self._pixels
+
+    def picture(self, info: TickInfo) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray] | None]:
+        """The tick's picture as read, and the function that finishes it (None: finished already)."""
+        self._tick(info)
+        if self._pixels is not None:
+            return self._pixels, None
+        return self._raw, self._finish
 
 
 def composite_over(pixels: np.ndarray, key: tuple[int, int, int]) -> np.ndarray:
@@ -125,11 +158,14 @@ class FrameHandoff:
                 return
             self._slot = slot
         t0 = self._clock()
-        self.offer(info.k, info.t, info.stamps[4], readback.pixels(info))
+        pixels, finish = readback.picture(info)
+        self.offer(info.k, info.t, info.stamps[4], pixels, finish)
         self.loop.add(self._clock() - t0)
 
-    def offer(self, k: int, t: float, stamp: float, pixels: np.ndarray) -> bool:
-        """Hand a picture over without waiting; False when it (or the one it replaced) was dropped."""
+    def offer(self, k: int, t: float, stamp: float, pixels: np.ndarray,
+              finish: Callable[[np.ndarray], np.ndarray] | None = None) -> bool:
+        """Hand a picture over without waiting (``finish``: what turns it into the consumer's picture, run in
+        the worker); False when it (or the one it replaced) was dropped."""
         c = self.counters
         with self._cond:
             c["offered"] += 1
@@ -140,7 +176,7 @@ class FrameHandoff:
                 kept = self._waiting is None
                 if not kept:
                     c["dropped"] += 1  # the older waiting picture gives way to the newer one
-                self._waiting = (k, t, stamp, pixels)
+                self._waiting = (k, t, stamp, pixels, finish)
                 self._cond.notify()
         return kept
 
@@ -153,10 +189,10 @@ class FrameHandoff:
                 if item is None:  # closing, nothing left
                     return
                 self._busy = True
-            k, t, stamp, pixels = item
+            k, t, stamp, pixels, finish = item
             t0 = self._clock()
             try:
-                self._consume(k, t, stamp, pixels)
+                self._consume(k, t, stamp, pixels if finish is None else finish(pixels))
             except Exception as exc:  # the run goes on; said once
                 with self._cond:
                     self.failure = f"{type(exc).__name__}: {exc}"
