@@ -5,6 +5,8 @@ refused before any work (exit 2, naming --stream); ``srt://`` refused where this
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -160,3 +162,13 @@ def _replay_ns(argv):
     parser = argparse.ArgumentParser(prog="facepuppet")
     replay_command.register(parser.add_subparsers())
     return parser.parse_args(["replay", *argv])
+
+
+def test_the_command_refuses_a_bad_stream_url_with_exit_2(tmp_path):
+    """The real ``facepuppet run``: exit 2, one line naming --stream, nothing opened."""
+    done = subprocess.run([sys.executable, "-m", "facepuppet", "run", "-c", str(tmp_path / "absent.npz"),
+                           "--input", "vmc", "--headless", "--stream", "rtmp://127.0.0.1/live"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert "--stream rtmp://127.0.0.1/live: expected udp://HOST:PORT or srt://HOST:PORT, not rtmp://" in done.stderr
+    assert "Traceback" not in done.stderr
