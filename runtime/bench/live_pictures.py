@@ -19,6 +19,10 @@ For each output:
   matched by the picture's presentation time; the frames drawn before the receiver had been decoding for a
   second (stream probing, the wait for a keyframe, the burst that follows) are reported apart.
 
+Before the runs, each output's thread is timed alone (``isolated``: ``ISOLATED_FRAMES`` synthetic pictures at
+the size, handed over as the loop hands them, RGBA bottom row first, one at a time, nothing else running in
+this process): its cost per frame without the run's load on the same cores.
+
 Where no v4l2loopback device can be opened (this machine), the camera's part goes through pyvirtualcam's
 backend seam with a backend that takes each frame and does nothing with it: the figures are then facepuppet's
 side only (read-back, composite, handoff), without the driver's conversion and copy; the result says which.
@@ -37,10 +41,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from facepuppet.runtime.live.virtual_camera import plan_virtual_camera, why_unavailable
+from facepuppet.runtime.live.stream_out import StreamSink, plan_stream
+from facepuppet.runtime.live.virtual_camera import VirtualCameraSink, plan_virtual_camera, why_unavailable
+from facepuppet.runtime.render.readback import top_first
 
 NULL_BACKEND = "facepuppet-bench-null"
-RECEIVER_SETTLE_S = 1.0  # the receiver's first second: probing and the first keyframe
+RECEIVER_SETTLE_S = 1.0
+ISOLATED_FRAMES = 120  # the receiver's first second: probing and the first keyframe
 
 
 class NullBackend:
@@ -149,19 +156,56 @@ def _viewer_latency(lines: list[str], sent: list[tuple[int, float]]) -> dict:
             "first_second_ms": _percentiles(first)}
 
 
+def _isolated(sink, width: int, height: int, n: int = ISOLATED_FRAMES) -> dict:
+    """The sink's thread timed alone on ``n`` pictures at its size, each stored and finished as the loop's."""
+    rng = np.random.default_rng(0)
+    base = rng.integers(0, 200, (height, width, 4), dtype=np.uint8)
+    base[..., 3] = 255
+    try:
+        for k in range(n):
+            raw = base.copy()
+            raw[:, (7 * k) % width] = 255  # a moving line: the encoder sees motion
+            sink.handoff.offer(k, k / 60, time.perf_counter(), raw, top_first)
+            sink.handoff.drain()
+    finally:
+        sink.close()
+    return {"frames": n, "worker_ms": sink.handoff.costs()["worker_ms"]}
+
+
+def isolated_costs(width: int, height: int, camera: bool, stream: bool, real_camera: bool) -> dict:
+    """Each output's thread alone (see the module doc): ``{"virtual_camera": ..., "stream": ...}``."""
+    import pyvirtualcam
+
+    out = {}
+    if camera:
+        plan = plan_virtual_camera(None, width, height, 60.0, (0.0, 1.0, 0.0), False)
+        cam = pyvirtualcam.Camera(width, height, 60.0, fmt=pyvirtualcam.PixelFormat.RGBA,
+                                  backend=None if real_camera else NULL_BACKEND)
+        out["virtual_camera"] = _isolated(VirtualCameraSink(cam, plan), width, height)
+    if stream:
+        port = _free_udp_port()  # nothing listens there: the datagrams go nowhere
+        plan = plan_stream(f"udp://127.0.0.1:{port}", width, height, 60.0, (0.0, 0.0, 0.0), False)
+        out["stream"] = _isolated(StreamSink(plan, 60.0), width, height)
+    return out
+
+
 def live_picture_phases(args: argparse.Namespace, results: dict, phase: Callable[..., dict]) -> None:
     """The runs without and with each output asked for (see the module doc); into ``results``."""
     import pyvirtualcam
 
+    width, height = (int(v) for v in args.pictures_size.lower().split("x"))
+    real = why_unavailable(plan_virtual_camera(None, width, height, args.fps, (0.0, 1.0, 0.0), False)) is None
+    if not real:
+        pyvirtualcam.register_backend(NULL_BACKEND, NullBackend)
+    alone = results["pictures_isolated"] = isolated_costs(width, height, args.virtual_camera, args.stream, real)
+    for name, figures in alone.items():
+        w = figures["worker_ms"]
+        print(f"latency bench [pictures, {name} thread alone]: {figures['frames']} frames at {width}x{height}, "
+              f"ms per frame p50 {w.get('p50', math.nan):.2f}, p99 {w.get('p99', math.nan):.2f}")
     pictures = argparse.Namespace(**{**vars(args), "size": args.pictures_size})
     base = results["pictures_baseline"] = phase(pictures, args.rate, args.seconds)
     _print("alone", base, {})
-    width, height = (int(v) for v in args.pictures_size.lower().split("x"))
     if args.virtual_camera:
-        plan = plan_virtual_camera(None, width, height, args.fps, (0.0, 1.0, 0.0), False)
-        real = why_unavailable(plan) is None
-        if not real:
-            pyvirtualcam.register_backend(NULL_BACKEND, NullBackend)
 
         def with_camera(run_plan):
             camera = dataclasses.replace(run_plan.outputs.virtual_camera, backend=None if real else NULL_BACKEND)

@@ -5,14 +5,14 @@ A live output's consumer (a camera driver, a video encoder, a socket) can stall 
 slow frame, a kernel buffer full, a viewer not reading. The frame loop only reads the tick's pixels back (it
 owns the GL context), as the framebuffer holds them (RGBA, bottom row first: the cheapest read, with no
 conversion or copy), and puts them in a one-picture mailbox; one worker thread takes them out and does the
-rest (the picture turned top row first, RGB or straight RGBA, by
-:func:`~facepuppet.runtime.render.readback.finish_rgba`, then the output's own work). When the worker is
+rest (the picture turned top row first by :func:`~facepuppet.runtime.render.readback.top_first`, RGBA with
+colour x alpha, then the output's own work). When the worker is
 still busy and a picture is already waiting, the waiting one is replaced by the new one and counted as
 dropped: the viewer always gets the newest picture, late ones never pile up, and the loop's cost is the
 read-back plus a lock, whatever the consumer does.
 
 :class:`TickReadback` reads one tick's pixels once for every live output that wants them (a stream and a
-virtual camera in one run cost one read); :func:`composite_over` puts a picture with alpha over the key colour
+virtual camera in one run cost one read); :func:`over_key` puts a picture with alpha over the key colour
 of an output that carries none.
 
 An output announced at a frame rate (a camera at ``--fps``) takes at most one picture per slot of that rate's
@@ -26,7 +26,6 @@ says why.
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import threading
@@ -37,7 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.live.timing import DurationSketch
-from facepuppet.runtime.render.readback import finish_rgba
+from facepuppet.runtime.render.readback import top_first
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
@@ -46,60 +45,67 @@ logger = logging.getLogger(__name__)
 
 
 class TickReadback:
-    """The pixels of the newest tick, read from the renderer once however many outputs ask.
+    """The pixels of the newest tick, read from the renderer once a tick for every output that wants them.
 
     :meth:`pixels` gives the finished picture (:meth:`~facepuppet.runtime.render.renderer.FaceRenderer.read_pixels`:
-    top row first; the video), :meth:`picture` whatever is at hand, the framebuffer's own RGBA when nothing
-    was read yet, with the function that finishes it (the live outputs, in their threads). Outputs share the
-    arrays and must not write into them.
+    top row first, RGB or straight RGBA; the video), :meth:`stored` the framebuffer's own RGBA with the
+    function that turns it into what a live output takes (:func:`live_picture`), run in the output's
+    thread. Outputs share the arrays and must not write into them.
 
     Attributes
     ----------
-    reads : int, reads from the GPU (one a tick however many outputs)
+    reads : int, reads from the GPU
     """
 
     def __init__(self) -> None:
-        self._key: tuple | None = None
+        self._pixels_key: tuple | None = None
         self._pixels: np.ndarray | None = None
-        self._raw: np.ndarray | None = None
-        self._finish: Callable[[np.ndarray], np.ndarray] | None = None
+        self._stored_key: tuple | None = None
+        self._stored: tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]] | None = None
         self.reads = 0
-
-    def _tick(self, info: TickInfo) -> None:
-        key = (id(info.renderer), info.k, info.stamps[4])
-        if key != self._key:
-            self._key, self._pixels, self._raw = key, None, None
-            self.reads += 1
-            if hasattr(info.renderer, "read_rgba"):
-                self._raw = info.renderer.read_rgba()
-                self._finish = functools.partial(finish_rgba, transparent=bool(info.renderer.transparent))
-            else:
-                self._pixels = info.renderer.read_pixels()
 
     def pixels(self, info: TickInfo) -> np.ndarray:
         """The tick's finished picture: (h, w, 3) RGB or (h, w, 4) straight RGBA, top row first."""
         key = (id(info.renderer), info.k, info.stamps[4])
-        if key != self._key:  # nothing read yet this tick: read it finished
-            self._key, self._raw, self._pixels = key, None, info.renderer.read_pixels()
+        if key != self._pixels_key:
+            self._pixels_key, self._pixels = key, info.renderer.read_pixels()
             self.reads += 1
-        elif self._pixels is None:  # a live output read it as stored: finish that
-            self._pixels = self._finish(self._raw)
         return self._pixels
 
-    def picture(self, info: TickInfo) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray] | None]:
-        """The tick's picture as read, and the function that finishes it (None: finished already)."""
-        self._tick(info)
-        if self._pixels is not None:
-            return self._pixels, None
-        return self._raw, self._finish
+    def stored(self, info: TickInfo) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+        """The tick's picture as read, and the function that makes it a live picture (:func:`live_picture`)."""
+        key = (id(info.renderer), info.k, info.stamps[4])
+        if key != self._stored_key:
+            if hasattr(info.renderer, "read_rgba"):
+                self._stored = (info.renderer.read_rgba(), top_first)
+                self.reads += 1
+            else:  # a renderer that can only give the finished picture
+                self._stored = (self.pixels(info), live_picture)
+            self._stored_key = key
+        return self._stored
 
 
-def composite_over(pixels: np.ndarray, key: tuple[int, int, int]) -> np.ndarray:
-    """(h, w, 3) uint8: straight-alpha RGBA ``pixels`` over the colour ``key``; RGB ones as they are."""
+def live_picture(pixels: np.ndarray) -> np.ndarray:
+    """What a live output takes: (h, w, 4) RGBA, top row first, colour x alpha; from a finished picture ((h, w, 3)
+    RGB, or (h, w, 4) straight RGBA: a renderer without ``read_rgba``)."""
+    if pixels.shape[2] == 3:
+        out = np.empty((*pixels.shape[:2], 4), np.uint8)
+        out[:, :, :3] = pixels
+        out[:, :, 3] = 255
+        return out
+    a = pixels[:, :, 3:4].astype(np.uint16)
+    out = pixels.copy()
+    out[:, :, :3] = (pixels[:, :, :3].astype(np.uint16) * a + 127) // 255
+    return out
+
+
+def over_key(pixels: np.ndarray, key: tuple[int, int, int]) -> np.ndarray:
+    """(h, w, 3) uint8: a live picture ((h, w, 4) RGBA, colour x alpha) over the colour ``key``; an (h, w, 3) RGB
+    one as it is."""
     if pixels.shape[2] == 3:
         return pixels
     a = pixels[:, :, 3:4].astype(np.uint16)
-    rgb = pixels[:, :, :3].astype(np.uint16) * a + np.asarray(key, np.uint16) * (255 - a)
+    rgb = pixels[:, :, :3].astype(np.uint16) * 255 + np.asarray(key, np.uint16) * (255 - a)
     return ((rgb + 127) // 255).astype(np.uint8)
 
 
@@ -158,7 +164,7 @@ class FrameHandoff:
                 return
             self._slot = slot
         t0 = self._clock()
-        pixels, finish = readback.picture(info)
+        pixels, finish = readback.stored(info)
         self.offer(info.k, info.t, info.stamps[4], pixels, finish)
         self.loop.add(self._clock() - t0)
 

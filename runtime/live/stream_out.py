@@ -45,7 +45,7 @@ from urllib.parse import parse_qsl, urlsplit
 import numpy as np
 
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.live.frame_handoff import FrameHandoff, TickReadback, composite_over
+from facepuppet.runtime.live.frame_handoff import FrameHandoff, TickReadback, over_key
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.loop import TickInfo
@@ -73,6 +73,8 @@ class StreamPlan:
     width, height : int, pixels
     fps : float or None, the rate the encoder is told (None: the session's); a keyframe every ``fps`` pictures
     key : tuple of 3 int, the colour pictures with alpha are composited over
+    transparent : bool, the picture has alpha (``--background transparent``): composited over ``key``; else
+        encoded from the framebuffer's RGBA as it is (the conversion to 4:2:0 ignores the alpha)
     """
 
     url: str
@@ -84,6 +86,7 @@ class StreamPlan:
     height: int
     fps: float | None = None
     key: tuple[int, int, int] = KEY_GREEN
+    transparent: bool = False
 
     def describe(self, fps: float) -> str:
         return (f"stream: {self.given}, MPEG-TS H.264 (libx264 ultrafast zerolatency) {self.width}x{self.height}, "
@@ -163,7 +166,8 @@ def plan_stream(given: str, width: int, height: int, fps: float | None,
     url = text if scheme != "udp" or "pkt_size" in keys else text + ("&" if parts.query else "?") + \
         f"pkt_size={TS_PACKETS}"
     key = KEY_GREEN if transparent else tuple(int(round(min(max(c, 0.0), 1.0) * 255)) for c in background)
-    return StreamPlan(url, text, scheme, host, port, int(width), int(height), fps, key)  # type: ignore[arg-type]
+    return StreamPlan(url, text, scheme, host, port, int(width), int(height), fps, key,  # type: ignore[arg-type]
+                      bool(transparent))
 
 
 class StreamSink:
@@ -215,8 +219,11 @@ class StreamSink:
         if self._t0 is None:
             self._t0 = t
         pts = max(self._last + 1, int(round((t - self._t0) / TIME_BASE)))
-        rgb = np.ascontiguousarray(composite_over(pixels, self.plan.key))
-        frame = self.av.VideoFrame.from_ndarray(rgb, format="rgb24")
+        if self.plan.transparent or pixels.shape[2] == 3:
+            frame = self.av.VideoFrame.from_ndarray(np.ascontiguousarray(over_key(pixels, self.plan.key)),
+                                                    format="rgb24")
+        else:  # RGBA converts to 4:2:0 faster than RGB, and the loop read it so
+            frame = self.av.VideoFrame.from_ndarray(np.ascontiguousarray(pixels), format="rgba")
         frame.pts = pts
         frame.time_base = TIME_BASE
         self._mux(self._video.encode(frame))

@@ -70,7 +70,6 @@ from facepuppet.runtime.inputs.audio import read_wav
 
 if TYPE_CHECKING:
     from facepuppet.runtime.cli.progress import Progress
-    from facepuppet.runtime.live.frame_handoff import TickReadback
     from facepuppet.runtime.live.loop import TickInfo
 
 AUDIO_RATE = 48000
@@ -256,8 +255,6 @@ class VideoSink:
     plan : VideoPlan, from :func:`plan_video`
     fps : float, ticks per second of the tick grid (the time base is 1 / fps)
     progress : Progress or None, told the count of frames written
-    readback : TickReadback or None, the tick's pixels read once for every output that wants them (a session's
-        outputs share one); None: read here
 
     Attributes
     ----------
@@ -265,8 +262,7 @@ class VideoSink:
     audio_samples : int, samples of sound written
     """
 
-    def __init__(self, plan: VideoPlan, fps: float, progress: Progress | None = None,
-                 readback: TickReadback | None = None) -> None:
+    def __init__(self, plan: VideoPlan, fps: float, progress: Progress | None = None) -> None:
 
         self.av = _av()
         self.plan = plan
@@ -274,7 +270,6 @@ class VideoSink:
         if not self.rate > 0:
             raise VideoError(f"--video: expected a positive frame rate, got {fps!r}")
         self.progress = progress
-        self.readback = readback
         self._outputs = OutputSet()
         self._temp = self._outputs.path(plan.path)
         self._out = None
@@ -315,7 +310,7 @@ class VideoSink:
 
     def __call__(self, info: TickInfo) -> None:
         """Tick observer: encode the tick's picture (``renderer.read_pixels()``) as the frame of tick ``k``."""
-        self.write(info.k, info.renderer.read_pixels() if self.readback is None else self.readback.pixels(info))
+        self.write(info.k, info.renderer.read_pixels())
 
     def write(self, k: int, pixels: np.ndarray) -> None:
         """Encode ``pixels`` (h, w, 3) or (h, w, 4) uint8, top row first, as the frame of tick ``k``."""

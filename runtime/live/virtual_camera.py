@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.errors import UsageError
-from facepuppet.runtime.live.frame_handoff import FrameHandoff, TickReadback, composite_over
+from facepuppet.runtime.live.frame_handoff import FrameHandoff, TickReadback, live_picture, over_key
 
 if TYPE_CHECKING:
     import pyvirtualcam
@@ -64,6 +64,8 @@ class VirtualCameraPlan:
     fps : float or None, the frame rate announced to the camera (None: the session's)
     key : tuple of 3 int, 0..255, the colour frames with alpha are composited over
     backend : str or None, pyvirtualcam's backend by name (None: each of the platform's in turn)
+    transparent : bool, the picture has alpha (``--background transparent``): composited over ``key`` and sent
+        as RGB; else sent as the framebuffer holds it, RGBA (the camera's conversion ignores the alpha)
     """
 
     device: str | None
@@ -72,6 +74,7 @@ class VirtualCameraPlan:
     fps: float | None = None
     key: tuple[int, int, int] = (0, 255, 0)
     backend: str | None = None
+    transparent: bool = False
 
     def describe(self, fps: float) -> str:
         where = self.device or "the first v4l2loopback device"
@@ -98,7 +101,8 @@ def plan_virtual_camera(device: str | None, width: int, height: int, fps: float 
         raise UsageError(f"--virtual-camera {device}: is a folder; name a device such as /dev/video7")
     key_rgb = KEY_GREEN if transparent else background
     key = tuple(int(round(min(max(c, 0.0), 1.0) * 255)) for c in key_rgb)
-    return VirtualCameraPlan(device, int(width), int(height), fps, key)  # type: ignore[arg-type]
+    return VirtualCameraPlan(device, int(width), int(height), fps, key,  # type: ignore[arg-type]
+                             transparent=bool(transparent))
 
 
 def setup_command(device: str | None) -> str:
@@ -128,7 +132,8 @@ class VirtualCameraSink:
 
     Parameters
     ----------
-    camera : a ``pyvirtualcam.Camera`` (RGB frames of the plan's size), closed with the sink
+    camera : a ``pyvirtualcam.Camera`` of the plan's size, RGB frames when the plan is transparent, else RGBA;
+        closed with the sink
     plan : VirtualCameraPlan
     readback : TickReadback, shared with the session's other live outputs
     fps : float or None, at most this many frames a second of tick time (the rate the camera announces)
@@ -154,7 +159,10 @@ class VirtualCameraSink:
         self.handoff.take(info, self.readback)
 
     def _send(self, k: int, t: float, stamp: float, pixels: np.ndarray) -> None:
-        self.camera.send(composite_over(pixels, self.plan.key))
+        if self.plan.transparent:
+            self.camera.send(over_key(pixels, self.plan.key))
+        else:
+            self.camera.send(pixels if pixels.shape[2] == 4 else live_picture(pixels))
 
     def costs(self) -> dict:
         return self.handoff.costs()
@@ -178,8 +186,9 @@ def open_virtual_camera(plan: VirtualCameraPlan, fps: float, readback: TickReadb
         import pyvirtualcam
 
         try:
-            camera = pyvirtualcam.Camera(plan.width, plan.height, fps, fmt=pyvirtualcam.PixelFormat.RGB,
-                                         device=plan.device, backend=plan.backend)
+            fmt = pyvirtualcam.PixelFormat.RGB if plan.transparent else pyvirtualcam.PixelFormat.RGBA
+            camera = pyvirtualcam.Camera(plan.width, plan.height, fps, fmt=fmt, device=plan.device,
+                                         backend=plan.backend)
         except Exception as exc:  # pyvirtualcam says why in a RuntimeError per backend tried
             reason = f"{' '.join(str(exc).split())}; a loopback device is made with: {setup_command(plan.device)}"
     if camera is None:

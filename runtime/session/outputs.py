@@ -92,7 +92,6 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
     extra : observers of the caller's, called after the pictures and before what is sent
     """
     outputs = Outputs()
-    readback = TickReadback()  # each tick's pixels read once for the video and the live pictures
     if keep_weights or options.dump_weights is not None:
         outputs.weights = WeightLog()
         outputs.observers.append(outputs.weights)
@@ -101,7 +100,7 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
         stack.callback(outputs.pngs.close)
         outputs.observers.append(outputs.pngs)
     if options.video is not None:
-        video = VideoSink(options.video, fps, progress=progress, readback=readback)
+        video = VideoSink(options.video, fps, progress=progress)
         stack.push(_complete_or_abort(video))
         log(options.video.describe(fps))
         outputs.video = video
@@ -125,7 +124,7 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
         outputs.llf = llf
         outputs.observers.append(llf.on_tick)
         outputs.counters["llf_out"] = llf.counters
-    _open_live_pictures(options, stack, outputs, fps, readback, log)
+    _open_live_pictures(options, stack, outputs, fps, log)
     if options.vmc_out is not None or options.events_out is not None:
         if chain.filter is None:
             if options.events_out is not None:  # (--vmc-out alone: its tracking flag, nothing to say)
@@ -141,9 +140,10 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
 
 
 def _open_live_pictures(options: OutputOptions, stack: contextlib.ExitStack, outputs: Outputs, fps: float,
-                        readback: TickReadback, log: Callable[[str], None]) -> None:
+                        log: Callable[[str], None]) -> None:
     """The virtual camera and the stream, at the run's frame rate (``--fps``; else the session's), sharing one
-    read-back of each tick's pixels with the video."""
+    read-back of each tick's pixels as the framebuffer holds them (the video reads its own, finished)."""
+    readback = TickReadback()
     if options.virtual_camera is not None:
         plan = options.virtual_camera
         camera = open_virtual_camera(plan, plan.fps or fps, readback, log)

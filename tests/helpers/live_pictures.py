@@ -34,7 +34,8 @@ class RecordingBackend:
 
     def send(self, frame: np.ndarray) -> None:
         with self.lock:
-            self.frames.append(np.array(frame, copy=True).reshape(self.height, self.width, 3))
+            channels = frame.size // (self.width * self.height)   # RGB or RGBA, as the fourcc says
+            self.frames.append(np.array(frame, copy=True).reshape(self.height, self.width, channels))
 
     def close(self) -> None:
         self.closed = True

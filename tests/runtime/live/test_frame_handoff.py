@@ -7,7 +7,7 @@ import threading
 
 import numpy as np
 
-from facepuppet.runtime.live.frame_handoff import FrameHandoff, TickReadback, composite_over
+from facepuppet.runtime.live.frame_handoff import FrameHandoff, TickReadback, live_picture, over_key
 
 
 def _picture(k: int) -> np.ndarray:
@@ -80,19 +80,29 @@ def test_the_pixels_of_a_tick_are_read_once_for_every_output():
     b = readback.pixels(_Info(renderer, 1))
     c = readback.pixels(_Info(renderer, 2))
     assert a is b and renderer.reads == 2 and int(c[0, 0, 0]) == 2
+    stored, finish = readback.stored(_Info(renderer, 2))   # no read_rgba: the finished picture, made live
+    assert stored is c and renderer.reads == 2 and finish(stored).shape == (4, 6, 4)
 
 
-def test_a_picture_with_alpha_goes_over_the_key_colour():
-    rgba = np.zeros((2, 3, 4), np.uint8)
+def test_a_live_picture_with_alpha_goes_over_the_key_colour():
+    rgba = np.zeros((2, 3, 4), np.uint8)   # colour x alpha, as the framebuffer holds it
     rgba[0, 0] = (200, 100, 50, 255)     # opaque: as drawn
-    rgba[0, 1] = (200, 100, 50, 0)       # nothing drawn: the key
-    rgba[0, 2] = (255, 255, 255, 128)    # half: between them
-    out = composite_over(rgba, (0, 255, 0))
+    rgba[0, 1] = (0, 0, 0, 0)            # nothing drawn: the key
+    rgba[0, 2] = (128, 128, 128, 128)    # white at half alpha: between them
+    out = over_key(rgba, (0, 255, 0))
     assert out.shape == (2, 3, 3) and out.dtype == np.uint8
     assert tuple(out[0, 0]) == (200, 100, 50) and tuple(out[0, 1]) == (0, 255, 0)
     assert tuple(out[0, 2]) == (128, 255, 128)
     rgb = rgba[:, :, :3].copy()
-    assert composite_over(rgb, (0, 255, 0)) is rgb
+    assert over_key(rgb, (0, 255, 0)) is rgb
+
+
+def test_a_finished_picture_becomes_a_live_one():
+    """A renderer without read_rgba: its RGB gains an opaque alpha, its straight RGBA is multiplied by alpha."""
+    rgb = np.full((2, 2, 3), 90, np.uint8)
+    assert live_picture(rgb).tolist() == [[[90, 90, 90, 255]] * 2] * 2
+    straight = np.array([[[200, 100, 50, 128], [10, 20, 30, 0]]], np.uint8)
+    assert live_picture(straight).tolist() == [[[100, 50, 25, 128], [0, 0, 0, 0]]]
 
 
 def test_an_output_at_a_frame_rate_takes_one_tick_per_slot_of_it():

@@ -74,7 +74,7 @@ def test_a_live_run_feeds_the_camera_and_the_stream_and_counts_them(tmp_path):
         assert counters["offered"] == counters["sent"] + counters["dropped"]
         assert counters["sent"] >= 1 and counters["failed"] == 0
     assert len(camera.frames) == cam["sent"] and len(frames) == stream["sent"]
-    assert tuple(camera.frames[-1][0, 0]) == (0, 255, 0)
+    assert tuple(camera.frames[-1][0, 0, :3]) == (0, 255, 0)
     np.testing.assert_allclose(frames[-1][1, 1], (0, 255, 0), atol=12)   # the stream shows the same green
     final = "\n".join(result.stats.final())   # what --stats prints at exit
     assert "virtual_camera: offered=" in final and "stream: offered=" in final

@@ -5,6 +5,7 @@ refused before any work (exit 2, naming --stream); ``srt://`` refused where this
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import subprocess
 import sys
 import time
@@ -17,7 +18,7 @@ from facepuppet.runtime.cli import main
 from facepuppet.runtime.commands import replay as replay_command
 from facepuppet.runtime.live.stream_out import StreamSink, output_protocols, plan_stream
 
-from helpers.live_pictures import Receiver, decode_ts, write_take
+from helpers.live_pictures import Receiver, decode_ts, register_recording_backend, write_take
 from helpers.small_characters import sphere_character
 
 av = pytest.importorskip("av", reason="PyAV is not installed: pip install -e '.[video]' (make setup installs it)")
@@ -143,19 +144,21 @@ def test_srt_is_refused_naming_the_missing_support_where_ffmpeg_has_no_libsrt(tm
 
 
 @pytest.mark.gl
-def test_the_video_and_the_stream_read_each_tick_back_once_between_them(tmp_path, receiver):
+def test_the_camera_and_the_stream_read_each_tick_back_once_between_them(tmp_path, receiver):
     character = tmp_path / "sphere.npz"
     sphere_character().save(character)
     take = tmp_path / "take.csv"
     write_take(take, JAWS)
     plan = replay_command.ReplayPlan.from_args(_replay_ns([
         str(take), "-c", str(character), "--headless", "--size", "64x48", "--fps", "10",
-        "--video", str(tmp_path / "take.mp4"), "--stream", f"udp://127.0.0.1:{receiver.port}"]))
+        "--virtual-camera", "--stream", f"udp://127.0.0.1:{receiver.port}"]))
+    plan = dataclasses.replace(plan, outputs=dataclasses.replace(plan.outputs, virtual_camera=dataclasses.replace(
+        plan.outputs.virtual_camera, backend=register_recording_backend())))
     result, _ = replay_command.replay(plan)
     frames, _ = decode_ts(receiver.stop())
-    video, stream = result.outputs.video, result.outputs.stream
-    assert video.readback is stream.readback and video.readback.reads == result.loop.n_ticks == len(JAWS)
-    assert video.frames == len(JAWS) and len(frames) == stream.counters["sent"] >= 1
+    camera, stream = result.outputs.virtual_camera, result.outputs.stream
+    assert camera.readback is stream.readback and stream.readback.reads == result.loop.n_ticks == len(JAWS)
+    assert len(frames) == stream.counters["sent"] >= 1 and camera.counters["sent"] >= 1
 
 
 def _replay_ns(argv):

@@ -77,14 +77,14 @@ def test_the_drawn_frames_reach_the_camera_over_green_at_the_run_rate(tmp_path):
     result, _ = replay_command.replay(plan)
     (camera,) = RecordingBackend.opened
     assert camera.closed and (camera.width, camera.height, camera.fps) == (48, 40, 10.0)
-    assert camera.fourcc == pyvirtualcam.util.encode_fourcc("raw ")       # RGB frames
+    assert camera.fourcc == pyvirtualcam.util.encode_fourcc("ABGR")       # RGBA frames, as the loop read them
     drawn = _pngs(tmp_path / "frames")
     counters = result.outputs.virtual_camera.counters
     assert len(drawn) == len(JAWS) == counters["offered"] == counters["sent"] + counters["dropped"]
     assert counters["sent"] == len(camera.frames) >= 1
-    assert _in_order(camera.frames, drawn)
+    assert _in_order([f[:, :, :3] for f in camera.frames], drawn)
     for frame in camera.frames:
-        assert tuple(frame[0, 0]) == (0, 255, 0)                             # the key colour in the corner
+        assert tuple(frame[0, 0]) == (0, 255, 0, 255)                        # the key colour in the corner
 
 
 @pytest.mark.gl
@@ -94,7 +94,7 @@ def test_a_transparent_picture_goes_to_the_camera_over_green_and_keeps_its_alpha
     RecordingBackend.opened.clear()
     replay_command.replay(plan)
     (camera,) = RecordingBackend.opened
-    assert camera.device() == "/dev/video42"
+    assert camera.device() == "/dev/video42" and camera.fourcc == pyvirtualcam.util.encode_fourcc("raw ")
     drawn = _pngs(tmp_path / "frames")
     assert drawn[0].shape[2] == 4 and drawn[0][0, 0, 3] == 0
     over = [np.where(d[:, :, 3:4] == 255, d[:, :, :3], 0) for d in drawn]
@@ -109,7 +109,7 @@ def test_a_background_colour_is_the_key(tmp_path):
     plan = _with_backend(_replay_plan(tmp_path, "--virtual-camera", "--background", "0,0,255"))
     RecordingBackend.opened.clear()
     replay_command.replay(plan)
-    assert tuple(RecordingBackend.opened[-1].frames[0][0, 0]) == (0, 0, 255)
+    assert tuple(RecordingBackend.opened[-1].frames[0][0, 0, :3]) == (0, 0, 255)
     assert plan.outputs.virtual_camera.key == (0, 0, 255)
 
 
@@ -175,7 +175,7 @@ def test_frames_written_to_a_loopback_device_are_read_back():
 
     width, height = 64, 48
     plan = plan_virtual_camera(device, width, height, 30.0, (0.0, 1.0, 0.0), False)
-    camera = pyvirtualcam.Camera(width, height, 30.0, fmt=pyvirtualcam.PixelFormat.RGB, device=device,
+    camera = pyvirtualcam.Camera(width, height, 30.0, fmt=pyvirtualcam.PixelFormat.RGBA, device=device,
                                  backend="v4l2loopback")
     sink = VirtualCameraSink(camera, plan)
     grey = np.full((height, width, 3), 200, np.uint8)
