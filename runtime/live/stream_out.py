@@ -148,8 +148,11 @@ def plan_stream(given: str, width: int, height: int, fps: float | None,
             raise _refuse(text, f"the query option {key!r} is not a plain key=value")
         if key in ("listen", "mode") and value not in ("", "0", "caller"):
             raise _refuse(text, f"{key}={value}: facepuppet sends a stream, it does not listen for one")
-    import av  # the optional extra: PyAV
-
+    try:
+        import av  # the optional extra: PyAV
+    except ImportError:
+        raise _refuse(text, "needs PyAV, which is not installed: pip install 'facepuppet[video]' (or pip install "
+                            "av)") from None
     protocols = output_protocols()
     if scheme == "srt" and protocols is not None and "srt" not in protocols:
         raise _refuse(text, f"this PyAV's FFmpeg ({av.__version__}, FFmpeg {av.ffmpeg_version_info}) was built "

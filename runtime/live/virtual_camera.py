@@ -76,8 +76,9 @@ class VirtualCameraPlan:
     backend: str | None = None
     transparent: bool = False
 
-    def describe(self, fps: float) -> str:
-        where = self.device or "the first v4l2loopback device"
+    def describe(self, fps: float, device: str | None = None) -> str:
+        """One line for the start of a run (``device``: the one opened)."""
+        where = device or self.device or "the first v4l2loopback device"
         return (f"virtual camera: {where}, {self.width}x{self.height} at {fps:g} fps, key colour "
                 f"{self.key[0]},{self.key[1]},{self.key[2]}")
 
@@ -195,6 +196,5 @@ def open_virtual_camera(plan: VirtualCameraPlan, fps: float, readback: TickReadb
         log(f"virtual camera: not available: {reason}; the run goes on without it")
         return None
     sink = VirtualCameraSink(camera, plan, readback, fps)
-    log(plan.describe(fps).replace(plan.device or "the first v4l2loopback device", sink.device, 1)
-        + f" (pyvirtualcam {camera.backend} backend)")
+    log(plan.describe(fps, sink.device) + f" (pyvirtualcam {camera.backend} backend)")
     return sink
