@@ -225,12 +225,21 @@ class FrameHandoff:
             while (self._waiting is not None or self._busy) and self.failure is None and self._thread.is_alive():
                 self._cond.wait(0.1)
 
-    def close(self) -> None:
-        """Finish the waiting picture, then stop the worker (once)."""
+    #: seconds :meth:`close` waits for a consumer still busy (a device or a socket that blocks)
+    CLOSE_WAIT_S = 5.0
+
+    def close(self) -> bool:
+        """Finish the waiting picture, then stop the worker; False when the consumer is still busy after
+        ``CLOSE_WAIT_S`` (it is left behind, said once: the end of a run never hangs on a viewer)."""
         with self._cond:
             self._closing = True
             self._cond.notify_all()
-        self._thread.join()
+        self._thread.join(self.CLOSE_WAIT_S)
+        if self._thread.is_alive():
+            logger.warning("%s: still busy %g s after the end of the run; left behind", self.name,
+                           self.CLOSE_WAIT_S)
+            return False
+        return True
 
     def costs(self) -> dict:
         """The figures of :meth:`~facepuppet.runtime.live.stats.LiveStats`' kind, in ms: the loop's share, the

@@ -247,8 +247,9 @@ class StreamSink:
         if self._closed:
             return
         self._closed = True
+        if not self.handoff.close():  # the encoder or the socket still busy: left to the process's end
+            return
         try:
-            self.handoff.close()
             if self.handoff.failure is None and self._t0 is not None:
                 self._mux(self._video.encode(None))
         finally:

@@ -170,12 +170,13 @@ class VirtualCameraSink:
 
     def close(self) -> None:
         """Send what is waiting, stop the thread, release the device (once)."""
+        ended = False
         try:
-            self.handoff.close()
+            ended = self.handoff.close()
         finally:
-            if self.camera is not None:
+            if self.camera is not None and ended:  # a camera still writing is left to the process's end
                 self.camera.close()
-                self.camera = None
+            self.camera = None
 
 
 def open_virtual_camera(plan: VirtualCameraPlan, fps: float, readback: TickReadback | None = None,

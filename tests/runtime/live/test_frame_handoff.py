@@ -121,3 +121,12 @@ def test_an_output_at_a_frame_rate_takes_one_tick_per_slot_of_it():
     c = handoff.counters
     assert c["offered"] == 120 and c["over_rate"] == 120 and renderer.reads == 120
     assert c["sent"] == len(got) == 120 and got == list(range(0, 240, 2))
+
+
+def test_close_does_not_hang_on_a_consumer_that_never_returns():
+    stuck = threading.Event()
+    handoff = FrameHandoff(lambda k, t, s, p: stuck.wait(), "test")
+    handoff.CLOSE_WAIT_S = 0.2
+    handoff.offer(0, 0.0, 0.0, _picture(0))
+    assert handoff.close() is False       # said and left behind
+    stuck.set()
