@@ -19,9 +19,10 @@ For each output:
   matched by the picture's presentation time. Measured here: a frame leaves facepuppet within its encode
   (whole datagrams flushed as it is muxed), and FFmpeg's receiving side hands it on about two frame intervals
   later (the MPEG-TS demuxer ends a video PES, which has no length, when the next one starts, and the H.264
-  parser ends an access unit likewise): at 30 fps ~69 ms, at 60 fps ~35 ms, the same with ``low_delay``; a
-  player built on FFmpeg (OBS's Media Source) has that too. The frames drawn before the receiver had been decoding for a
-  second (stream probing, the wait for a keyframe, the burst that follows) are reported apart.
+  parser ends an access unit likewise): 69 ms at 30 fps (640x360, with or without ``low_delay``); a player
+  built on FFmpeg (OBS's Media Source) has that too, and a stream at a higher ``--fps`` shortens it. The
+  frames drawn before the receiver had been decoding for a second (stream probing, the wait for a keyframe,
+  the burst that follows) are reported apart.
 
 Before the runs, each output's thread is timed alone (``isolated``: ``ISOLATED_FRAMES`` synthetic pictures at
 the size, handed over as the loop hands them, RGBA bottom row first, one at a time, nothing else running in
