@@ -57,6 +57,7 @@ from facepuppet.runtime.render.paths.base import PATH_TEXTURE_UNITS, Deformation
 from facepuppet.runtime.render.paths.cpu import CpuPath
 from facepuppet.runtime.render.paths.elastic import ElasticPath
 from facepuppet.runtime.render.paths.gpu import GpuPath
+from facepuppet.runtime.render.readback import straighten
 from facepuppet.runtime.render.shader_loader import load_program
 
 logger = logging.getLogger(__name__)
@@ -455,11 +456,16 @@ class FaceRenderer:
         data = fbo.read(viewport=(0, 0, self.width, self.height), components=k, alignment=1)
         image = np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, k)[::-1].copy()
         if self.transparent:  # the framebuffer holds colour x alpha over the clear (0, 0, 0, 0)
-            a = image[:, :, 3:4].astype(np.uint16)
-            part = (a > 0) & (a < 255)
-            straight = np.minimum((image[:, :, :3].astype(np.uint32) * 255 + a // 2) // np.maximum(a, 1), 255)
-            image[:, :, :3] = np.where(part, straight, image[:, :, :3]).astype(np.uint8)
+            straighten(image)
         return image
+
+    def read_rgba(self) -> np.ndarray:
+        """The last frame as the framebuffer holds it: (height, width, 4) uint8 RGBA, bottom row first, colour x
+        alpha when transparent (read-only); the cheapest read, finished elsewhere by
+        :func:`~facepuppet.runtime.render.readback.finish_rgba`."""
+        fbo = self._framebuffers.resolved()
+        data = fbo.read(viewport=(0, 0, self.width, self.height), components=4, alignment=1)
+        return np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, 4)
 
     def project(self, points: np.ndarray, head_rotation: np.ndarray | None = None,
                 head_translation: np.ndarray | None = None) -> np.ndarray:
