@@ -48,7 +48,7 @@ from facepuppet.offline.io.gltf import (
 )
 from facepuppet.offline.io.gltf.write_materials import write_materials
 from facepuppet.offline.io.gltf.write_meshes import plan_meshes, write_meshes
-from facepuppet.offline.io.gltf.write_nodes import place_meshes, write_nodes, write_skin
+from facepuppet.offline.io.gltf.write_nodes import place_meshes, plan_hosts, rigid_frames, write_nodes, write_skin
 from facepuppet.offline.io.gltf.write_state import GENERATOR, ExportError, ExportSummary, Progress, WriteState
 
 __all__ = ["ExportError", "ExportSummary", "build_gltf", "encode_glb", "export_character", "output_format"]
@@ -148,6 +148,8 @@ def _build(w: WriteState) -> tuple[dict, bytes]:
     doc: dict[str, Any] = {"asset": _asset(c), "scene": 0}
     nodes = write_nodes(w)
     plan_meshes(w)
+    plan_hosts(w)
+    rigid_frames(w)
     materials, textures = write_materials(w)
     for writer in MATERIAL_EXTENSION_WRITERS:
         writer(w, materials)
@@ -157,7 +159,7 @@ def _build(w: WriteState) -> tuple[dict, bytes]:
     doc["scenes"] = [{"nodes": roots + list(range(w.n_skeleton_nodes, len(nodes)))}]
     doc["nodes"] = nodes
     doc["meshes"] = meshes
-    if c.skeleton is not None:
+    if c.skeleton is not None and w.joints is not None:
         doc["skins"] = [write_skin(w)]
     doc["materials"] = materials
     doc.update(textures)
