@@ -24,6 +24,7 @@ from typing import Any
 
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.structure_limits import check_kept_json
+from facepuppet.offline.io.gltf.write_state import WriteState
 
 #: The texture-info fields of a core glTF material besides the base colour texture.
 CORE_TEXTURES = ("normalTexture", "occlusionTexture", "emissiveTexture")
@@ -147,3 +148,46 @@ def kept(source: dict, key: str, default: Any) -> Any:
     k = source.get("kept")
     v = k.get(key) if isinstance(k, dict) else None
     return v if isinstance(v, type(default)) else default
+
+
+def write_kept_textures(w: WriteState, images: list[dict], textures: list[dict], samplers: list[dict],
+                        sampler_of: dict[tuple, int]) -> None:
+    """Append the images and textures kept raw (after the look's, texture i = image i there), and record where
+    each file texture and image went (``w.file_texture``, ``w.file_image``): a file texture the look holds is
+    the written texture of its stored one."""
+    n_look = len(textures)
+    entries = [e for e in kept(w.c.source, "textures", []) if isinstance(e, list) and len(e) >= 3
+               and isinstance(e[0], int) and isinstance(e[2], int)]
+    for t, kind, ref, *_ in entries:
+        if kind == "look" and 0 <= ref < n_look:
+            w.file_texture[int(t)] = ref
+    for entry in kept(w.c.source, "images", []):
+        try:
+            data = base64.b64decode(entry["data"], validate=True)
+        except (KeyError, TypeError, ValueError):
+            w.warn(f"settings.source.kept.images: {str(entry)[:60]!r} is not an image entry; skipped")
+            continue
+        w.file_image[int(entry.get("image", -1))] = len(images)
+        image = {"mimeType": entry.get("mimeType", "image/png"), "bufferView": w.buf.view(data)}
+        if entry.get("name"):
+            image["name"] = entry["name"]
+        images.append(image)
+    for t, kind, ref, *rest in entries:
+        if kind != "image" or ref not in w.file_image:
+            continue
+        codes = tuple(int(x) for x in (rest[0] if rest and isinstance(rest[0], list) else [0, 0, 0, 0]))
+        if codes not in sampler_of:
+            sampler_of[codes] = len(samplers)
+            samplers.append({k: v for k, v in zip(("magFilter", "minFilter", "wrapS", "wrapT"), codes) if v})
+        w.file_texture[int(t)] = len(textures)
+        textures.append({"source": w.file_image[ref], "sampler": sampler_of[codes]})
+
+
+def kept_texture_info(w: WriteState, info: Any) -> dict | None:
+    """A file's texture info (``{"index": file texture, ...}``) onto the written textures; None when it names
+    no texture that was written."""
+    if not isinstance(info, dict) or not isinstance(info.get("index"), int) or info["index"] not in w.file_texture:
+        return None
+    out = {k: v for k, v in info.items() if k in ("texCoord", "scale", "strength", "extensions")}
+    out["index"] = w.file_texture[info["index"]]
+    return out

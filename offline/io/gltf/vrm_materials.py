@@ -17,6 +17,14 @@ import numpy as np
 
 from facepuppet.runtime.model.character_parts import SHADING
 
+from facepuppet.offline.io.gltf.kept_parts import kept_texture_info
+from facepuppet.offline.io.gltf.mtoon_convert import (
+    merge_properties0,
+    mtoon1_from_0,
+    mtoon1_kept,
+    properties0,
+    properties0_from_1,
+)
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.write_state import WriteState
 
@@ -101,24 +109,65 @@ def write_material_properties(w: WriteState, raw: dict, vrm: dict[str, Any]) -> 
 
 
 def write_mtoon(w: WriteState, materials: list[dict]) -> None:
-    """``VRMC_materials_mtoon`` on each toon material of a VRM 1.0 (its shade texture: the base colour's)."""
+    """``VRMC_materials_mtoon`` on each toon material of a VRM 1.0: the shade from the look (its texture: the
+    file's, else the base colour's), the rest (outline, rim, matcap, UV animation) from the file's own MToon,
+    converted from a VRM 0.x's material property (:mod:`.mtoon_convert`)."""
     lk = w.c.look
     if w.fmt != "vrm1" or lk is None:
         return
+    props = properties0(w)
     for i, mat in enumerate(materials):
         if int(lk.shading[i, 0]) != SHADING["toon"]:
             continue
-        mt = {"specVersion": "1.0", "shadeColorFactor": [float(x) for x in lk.shading[i, 2:5]],
-              "shadingShiftFactor": float(lk.shading[i, 5]), "shadingToonyFactor": float(lk.shading[i, 6])}
-        if int(lk.texture[i]) >= 0:
+        mt: dict[str, Any] = {"specVersion": "1.0"}
+        prop = props.get(i)
+        if prop is not None and prop.get("shader") == "VRM/MToon":
+            mt.update(mtoon1_from_0(w, prop))
+            _core_textures_from_0(w, prop, mat)
+        else:
+            mt.update(mtoon1_kept(w, i))
+        mt.update({"specVersion": "1.0", "shadeColorFactor": [float(x) for x in lk.shading[i, 2:5]],
+                   "shadingShiftFactor": float(lk.shading[i, 5]), "shadingToonyFactor": float(lk.shading[i, 6])})
+        if int(lk.texture[i]) >= 0 and "shadeMultiplyTexture" not in mt:
             mt["shadeMultiplyTexture"] = {"index": int(lk.texture[i])}
         mat.setdefault("extensions", {})["VRMC_materials_mtoon"] = mt
         w.ext_used.add("VRMC_materials_mtoon")
 
 
+def _core_textures_from_0(w: WriteState, prop: dict, mat: dict) -> None:
+    """A VRM 0.x MToon's normal map (``_BumpMap``, ``_BumpScale``) and emission map onto the core material,
+    where it has none of its own."""
+    tex = prop.get("textureProperties") if isinstance(prop.get("textureProperties"), dict) else {}
+    fl = prop.get("floatProperties") if isinstance(prop.get("floatProperties"), dict) else {}
+    for key0, key in (("_BumpMap", "normalTexture"), ("_EmissionMap", "emissiveTexture")):
+        info = kept_texture_info(w, {"index": tex.get(key0)})
+        if info is not None and key not in mat:
+            mat[key] = info
+            if key0 == "_BumpMap" and isinstance(fl.get("_BumpScale"), (int, float)):
+                info["scale"] = float(fl["_BumpScale"])
+
+
 def _material0(w: WriteState, i: int, mat: dict) -> dict:
     """The VRM 0.x material property of material ``i``: VRM/MToon, a VRM/Unlit shader, or the glTF material
-    as it is (VRM_USE_GLTFSHADER)."""
+    as it is (VRM_USE_GLTFSHADER); over the file's own property when it came from a VRM 0.x (what the look
+    does not say stays), or with a VRM 1.0's outline, rim and the rest converted."""
+    prop = _look_material0(w, i, mat)
+    raw = properties0(w).get(i)
+    if raw is not None:
+        return merge_properties0(w, raw, prop)
+    if prop["shader"] == "VRM/MToon":
+        mt = mtoon1_kept(w, i)
+        if mt:
+            fl, vec, tex, kw = properties0_from_1(w, mt, mat)
+            prop["floatProperties"] = {**fl, **prop["floatProperties"]}
+            prop["vectorProperties"] = {**vec, **prop["vectorProperties"]}
+            prop["textureProperties"] = {**tex, **prop["textureProperties"]}
+            prop["keywordMap"] = {**kw, **prop["keywordMap"]}
+    return prop
+
+
+def _look_material0(w: WriteState, i: int, mat: dict) -> dict:
+    """The VRM 0.x material property of material ``i`` from its look alone."""
     lk = w.c.look
     prop = {"name": mat["name"], "shader": "VRM_USE_GLTFSHADER", "renderQueue": -1, "floatProperties": {},
             "vectorProperties": {}, "textureProperties": {}, "keywordMap": {}, "tagMap": {}}

@@ -26,6 +26,7 @@ from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import ALPHA_MODES
 from facepuppet.runtime.render.layers import LAYER_KINDS
 
+from facepuppet.offline.io.gltf.kept_parts import kept, kept_texture_info, write_kept_textures
 from facepuppet.offline.io.gltf.write_state import WriteState
 
 _ALPHA_NAME = {v: k for k, v in ALPHA_MODES.items()}
@@ -37,11 +38,15 @@ def write_materials(w: WriteState) -> tuple[list[dict], dict]:
     doc); the extension writers add to them after."""
     c, lk = w.c, w.c.look
     mats = []
+    textures = _textures(w)  # first: a kept material names the written textures
+    raw_materials = kept(c.source, "materials", [])
     for i, name in enumerate(c.material_names):
         shine = float(c.material_params[i, 1])
         rough = float(np.clip((2.0 / (max(shine, 0.0) + 2.0)) ** 0.25, 0.0, 1.0))
         pbr: dict[str, Any] = {"metallicFactor": 0.0, "roughnessFactor": round(rough, 6)}
         mat: dict[str, Any] = {"name": name, "pbrMetallicRoughness": pbr}
+        if i < len(raw_materials):  # the file's own metal/roughness and other textures, as it had them
+            _kept_core(w, raw_materials[i], mat)
         kind = int(round(float(c.material_params[i, 2])))
         if kind != MATERIAL_KINDS["skin"]:  # read back by the importer; other readers ignore extras
             mat["extras"] = {"facepuppet": {"kind": _KIND_NAME.get(kind, "skin"),
@@ -72,18 +77,37 @@ def write_materials(w: WriteState) -> tuple[list[dict], dict]:
             mat["doubleSided"] = True
         mats.append(mat)
     w.materials = mats
-    return mats, _textures(w)
+    return mats, textures
+
+
+def _kept_core(w: WriteState, raw: dict, mat: dict) -> None:
+    """The core fields the look does not hold, from the file's material ``raw``: metallic and roughness factors
+    (the spec's defaults, 1, where the file had none), the metal/roughness, normal, occlusion and emissive
+    textures onto the written textures."""
+    pbr = mat["pbrMetallicRoughness"]
+    raw_pbr = raw.get("pbrMetallicRoughness") if isinstance(raw.get("pbrMetallicRoughness"), dict) else {}
+    for key in ("metallicFactor", "roughnessFactor"):
+        v = raw_pbr.get(key, 1.0)
+        pbr[key] = float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else 1.0
+    info = kept_texture_info(w, raw_pbr.get("metallicRoughnessTexture"))
+    if info is not None:
+        pbr["metallicRoughnessTexture"] = info
+    for key in ("normalTexture", "occlusionTexture", "emissiveTexture"):
+        info = kept_texture_info(w, raw.get(key))
+        if info is not None:
+            mat[key] = info
 
 
 def _textures(w: WriteState) -> dict:
+    """The look's textures (PNG from the stored texels; texture i is image i), then those kept raw from the file
+    (:func:`.kept_parts.write_kept_textures`)."""
     lk = w.c.look
-    if lk is None or not len(lk.texture_names):
-        return {}
-    from PIL import Image
-
     images, textures, samplers = [], [], []
     sampler_of: dict[tuple, int] = {}
-    for t, name in enumerate(lk.texture_names):
+    names = lk.texture_names if lk is not None else ()
+    if names:
+        from PIL import Image
+    for t, name in enumerate(names):
         png = io.BytesIO()
         Image.fromarray(np.ascontiguousarray(lk.image(t)), "RGBA").save(png, format="PNG", compress_level=4)
         images.append({"name": name, "mimeType": "image/png", "bufferView": w.buf.view(png.getvalue())})
@@ -92,5 +116,8 @@ def _textures(w: WriteState) -> dict:
             sampler_of[codes] = len(samplers)
             samplers.append({k: v for k, v in zip(("magFilter", "minFilter", "wrapS", "wrapT"), codes) if v})
         textures.append({"name": name, "source": t, "sampler": sampler_of[codes]})
+    write_kept_textures(w, images, textures, samplers, sampler_of)
     w.summary.n_textures = len(textures)
+    if not images:
+        return {}
     return {"images": images, "textures": textures, "samplers": samplers}

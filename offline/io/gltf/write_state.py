@@ -88,6 +88,8 @@ class WriteState:
     host: list[int] = field(default_factory=list)  # the node holding each mesh (-1 until placed: a new node)
     # write_materials
     materials: list[dict] = field(default_factory=list)
+    file_texture: dict[int, int] = field(default_factory=dict)  # file texture -> written texture (kept_parts)
+    file_image: dict[int, int] = field(default_factory=dict)  # file image -> written image (kept_parts)
 
     def warn(self, text: str) -> None:
         self.summary.warnings.append(text)
