@@ -169,6 +169,10 @@ def _build(w: WriteState) -> tuple[dict, bytes]:
     elif w.fmt == "vrm1":
         doc["extensions"] = {"VRMC_vrm": _vrm_object(w, {"specVersion": "1.0"}, VRM1_PARTS)}
         w.ext_used.add("VRMC_vrm")
+        spring = vrm_spring_bone.spring_bone1(w, nodes)  # may add the tail nodes of VRM 0.x leaves
+        if spring is not None:
+            doc["extensions"]["VRMC_springBone"] = spring
+            w.ext_used.add("VRMC_springBone")
     doc["accessors"] = w.buf.accessors
     doc["bufferViews"] = w.buf.views
     blob = w.buf.data()
@@ -177,8 +181,13 @@ def _build(w: WriteState) -> tuple[dict, bytes]:
         doc["extensionsUsed"] = sorted(w.ext_used)
     s = w.summary
     s.n_meshes, s.n_nodes, s.n_materials = len(meshes), len(nodes), len(materials)
+    doc["scenes"] = [{"nodes": [j for j in doc["scenes"][0]["nodes"] if j not in _child_nodes(nodes)]}]
     s.n_primitives = sum(len(m["primitives"]) for m in meshes)
     return {k: v for k, v in doc.items() if v != [] or k in ("buffers",)}, blob
+
+
+def _child_nodes(nodes: list[dict]) -> set[int]:
+    return {c for n in nodes for c in n.get("children", [])}
 
 
 def _vrm_object(w: WriteState, out: dict[str, Any], parts: tuple[VrmPart, ...]) -> dict[str, Any]:

@@ -46,6 +46,7 @@ class ExportSummary:
     n_targets: int = 0
     n_sparse_targets: int = 0
     n_expressions: int = 0
+    n_springs: int = 0
     added_expressions: list[str] = field(default_factory=list)
     turned_y180: bool = False
     bytes: int = 0
