@@ -118,6 +118,7 @@ def _textures(w: WriteState) -> dict:
         textures.append({"name": name, "source": t, "sampler": sampler_of[codes]})
     write_kept_textures(w, images, textures, samplers, sampler_of)
     w.summary.n_textures = len(textures)
+    w.textures = textures
     if not images:
         return {}
     return {"images": images, "textures": textures, "samplers": samplers}

@@ -91,6 +91,7 @@ class WriteState:
     materials: list[dict] = field(default_factory=list)
     file_texture: dict[int, int] = field(default_factory=dict)  # file texture -> written texture (kept_parts)
     file_image: dict[int, int] = field(default_factory=dict)  # file image -> written image (kept_parts)
+    textures: list[dict] = field(default_factory=list)  # the written textures (a later part may add one)
 
     def warn(self, text: str) -> None:
         self.summary.warnings.append(text)
