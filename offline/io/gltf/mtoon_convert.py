@@ -147,6 +147,9 @@ def merge_properties0(w: WriteState, raw: dict, prop: dict) -> dict:
         if info is not None:
             textures[k] = info["index"]
     out["textureProperties"] = {**textures, **prop.get("textureProperties", {})}
+    if raw.get("shader") == "VRM_USE_GLTFSHADER" and prop["shader"] != "VRM/MToon":
+        out["name"] = prop["name"]  # the glTF material says it all (an unlit one by KHR_materials_unlit)
+        return out
     for key in ("name", "shader", "renderQueue"):
         out[key] = prop[key]
     return out

@@ -1,0 +1,78 @@
+// Loads each VRM named on the command line with three.js's GLTFLoader and @pixiv/three-vrm's VRMLoaderPlugin
+// (the reference VRM implementation) in node, and prints one JSON line per file with what three-vrm found:
+// spring-bone joints and colliders, the look-at type and range maps, the first-person annotations, the MToon
+// materials with their outline and rim, the expressions' material binds, the meta.
+// Node has no DOM: a GLTFLoader plugin hands three-vrm an empty texture for every glTF texture (no image is
+// decoded; nothing here looks at texels), which is all that needs a browser.
+import fs from "node:fs";
+import path from "node:path";
+import * as THREE from "three";
+import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
+import { VRMLoaderPlugin } from "@pixiv/three-vrm";
+
+class NoImages {
+  constructor(parser) { this.parser = parser; this.name = "facepuppet_tests_no_images"; }
+  loadTexture() { return Promise.resolve(new THREE.Texture()); }
+}
+
+const round = (v) => Math.round(v * 1e6) / 1e6;
+const vec = (v) => [round(v.x), round(v.y), round(v.z)];
+
+for (const file of process.argv.slice(2)) {
+  const bytes = fs.readFileSync(file);
+  const buffer = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
+  const loader = new GLTFLoader();
+  loader.register((parser) => new NoImages(parser));
+  loader.register((parser) => new VRMLoaderPlugin(parser));
+  const warnings = [];
+  const warn = console.warn;
+  console.warn = (...a) => warnings.push(a.map(String).join(" "));
+  const gltf = await new Promise((resolve, reject) => loader.parse(buffer, path.dirname(file) + "/", resolve, reject));
+  console.warn = warn;
+  const vrm = gltf.userData.vrm;
+  const out = { file, warnings, vrm: vrm != null };
+  if (vrm) {
+    const sb = vrm.springBoneManager;
+    out.joints = sb ? [...sb.joints].map((j) => ({ bone: j.bone.name, child: j.child ? j.child.name : null,
+                                                     stiffness: round(j.settings.stiffness),
+                                                     dragForce: round(j.settings.dragForce),
+                                                     hitRadius: round(j.settings.hitRadius),
+                                                     gravityPower: round(j.settings.gravityPower),
+                                                     gravityDir: vec(j.settings.gravityDir),
+                                                     colliderGroups: j.colliderGroups.length })) : [];
+    out.colliders = sb ? [...sb.colliders].map((c) => ({ node: c.parent ? c.parent.name : null,
+                                                         type: c.shape.type, radius: round(c.shape.radius),
+                                                         offset: vec(c.shape.offset) })) : [];
+    const la = vrm.lookAt;
+    out.lookAt = la ? { applier: la.applier.constructor.type ?? la.applier.type ?? null,
+                        offsetFromHeadBone: vec(la.offsetFromHeadBone),
+                        ranges: ["rangeMapHorizontalInner", "rangeMapHorizontalOuter", "rangeMapVerticalDown",
+                                 "rangeMapVerticalUp"].map((k) => la.applier[k]
+                                   ? [round(la.applier[k].inputMaxValue), round(la.applier[k].outputScale)] : null) }
+                    : null;
+    out.firstPerson = vrm.firstPerson ? vrm.firstPerson.meshAnnotations.map((a) => a.type) : null;
+    const mtoon = new Map();
+    gltf.scene.traverse((o) => {
+      const mats = o.material ? (Array.isArray(o.material) ? o.material : [o.material]) : [];
+      for (const m of mats) {
+        if (m.isMToonMaterial && !m.isOutline) {
+          mtoon.set(m.name, { outlineWidthMode: m.outlineWidthMode, outlineWidthFactor: round(m.outlineWidthFactor),
+                              outlineLightingMixFactor: round(m.outlineLightingMixFactor),
+                              outlineColorFactor: [round(m.outlineColorFactor.r), round(m.outlineColorFactor.g),
+                                                   round(m.outlineColorFactor.b)],
+                              parametricRimFresnelPowerFactor: round(m.parametricRimFresnelPowerFactor),
+                              rimLightingMixFactor: round(m.rimLightingMixFactor),
+                              giEqualizationFactor: round(m.giEqualizationFactor) });
+        }
+      }
+    });
+    out.mtoon = Object.fromEntries(mtoon);
+    out.expressionMaterialBinds = {};
+    for (const e of vrm.expressionManager ? vrm.expressionManager.expressions : []) {
+      const kinds = e.binds.map((b) => b.constructor.name).filter((n) => n !== "VRMExpressionMorphTargetBind");
+      if (kinds.length) out.expressionMaterialBinds[e.expressionName] = kinds;
+    }
+    out.meta = vrm.meta;
+  }
+  console.log(JSON.stringify(out));
+}
