@@ -46,6 +46,7 @@ def write_spring_bones0(w: WriteState, raw: dict, vrm: dict[str, Any]) -> None:
         vrm["secondaryAnimation"] = _secondary0_from_1(w, kept(src, "spring_bone", {}), w.node_map())
     else:
         vrm["secondaryAnimation"] = _secondary0(w, raw.get("secondaryAnimation"), w.node_map())
+    w.summary.n_springs = len(vrm["secondaryAnimation"]["boneGroups"])
 
 
 def spring_bone1(w: WriteState, nodes: list[dict]) -> dict | None:

@@ -11,7 +11,10 @@ VRMC_materials_mtoon), and for a VRM the parts of :data:`VRM0_PARTS` or
 :data:`VRM1_PARTS`, in their order, make the ``VRM`` / ``VRMC_vrm`` extension
 object: meta, humanoid, first person and look-at, expressions (with a custom
 expression per ARKit-named shape, for perfect sync), and in 0.x the spring
-bones and material properties.
+bones and material properties; a VRM 1.0's spring bones are the document's
+``VRMC_springBone``. What the file had beyond the character's own parts comes
+back from ``settings.source.kept`` (:mod:`.kept_parts`), converted when the
+VRM version changes.
 
 Frame: glTF units are metres (cm and mm are scaled); a VRM 0.x file faces
 −Z, so for VRM 0.x output everything is turned 180° about +Y (vertices,
@@ -243,5 +246,7 @@ def describe(summary: ExportSummary) -> str:
     if s.format.startswith("vrm"):
         added = f", {len(s.added_expressions)} added for perfect sync" if s.added_expressions else ""
         lines.append(f"  expressions: {s.n_expressions}{added}")
+        if s.n_springs:
+            lines.append(f"  springs: {s.n_springs}")
     lines += [f"  warning: {w}" for w in s.warnings]
     return "\n".join(lines)
