@@ -191,3 +191,12 @@ def kept_texture_info(w: WriteState, info: Any) -> dict | None:
     out = {k: v for k, v in info.items() if k in ("texCoord", "scale", "strength", "extensions")}
     out["index"] = w.file_texture[info["index"]]
     return out
+
+
+def kept_material(w: WriteState, i: int) -> dict:
+    """The file's JSON of stored material ``i`` when the character still has that material (same index and
+    name: a character changed after import keeps only what still matches), else {}."""
+    mats = kept(w.c.source, "materials", [])
+    raw = mats[i] if i < len(mats) and isinstance(mats[i], dict) else {}
+    name = raw.get("name") if isinstance(raw.get("name"), str) and raw.get("name") else f"material{i}"
+    return raw if i < len(w.c.material_names) and w.c.material_names[i] == name else {}

@@ -14,7 +14,7 @@ import numpy as np
 
 from facepuppet.runtime.model.character_parts import SHADING
 
-from facepuppet.offline.io.gltf.kept_parts import kept
+from facepuppet.offline.io.gltf.kept_parts import kept_material
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.write_state import WriteState
 
@@ -69,11 +69,10 @@ def write_unlit(w: WriteState, materials: list[dict]) -> None:
     lk = w.c.look
     if lk is None:
         return
-    raw = kept(w.c.source, "materials", [])
     for i, mat in enumerate(materials):
         shading = int(lk.shading[i, 0])
         toon = shading == SHADING["toon"]
-        had = i < len(raw) and {"KHR_materials_unlit", "VRMC_materials_mtoon"} <= set(extensions_of(raw[i]))
+        had = {"KHR_materials_unlit", "VRMC_materials_mtoon"} <= set(extensions_of(kept_material(w, i)))
         if shading == SHADING["unlit"] or (toon and (w.fmt != "vrm1" or had)):
             mat.setdefault("extensions", {})["KHR_materials_unlit"] = {}
             w.ext_used.add("KHR_materials_unlit")

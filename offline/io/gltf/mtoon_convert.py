@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.offline.io.gltf.kept_parts import MTOON_TEXTURES, kept, kept_texture_info
+from facepuppet.offline.io.gltf.kept_parts import MTOON_TEXTURES, kept_material, kept_texture_info
 from facepuppet.offline.io.gltf.write_state import WriteState
 
 _WIDTH_MODES = ("none", "worldCoordinates", "screenCoordinates")
@@ -51,8 +51,7 @@ def properties0(w: WriteState) -> dict[int, dict]:
 def mtoon1_kept(w: WriteState, i: int) -> dict:
     """The file's own VRMC_materials_mtoon of stored material ``i`` (a VRM 1.0 or glTF source), its textures
     onto the written ones; {} when it had none."""
-    mats = kept(w.c.source, "materials", [])
-    ext = mats[i].get("extensions") if i < len(mats) and isinstance(mats[i], dict) else None
+    ext = kept_material(w, i).get("extensions")
     mt = ext.get("VRMC_materials_mtoon") if isinstance(ext, dict) else None
     if not isinstance(mt, dict):
         return {}

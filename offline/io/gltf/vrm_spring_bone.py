@@ -76,13 +76,13 @@ def _secondary0(w: WriteState, raw: Any, remap: Callable[[Any], int | None]) -> 
     for k, g in enumerate(raw.get("boneGroups", []) if isinstance(raw.get("boneGroups"), list) else []):
         if not isinstance(g, dict):
             continue
-        bones = [remap(b) for b in g.get("bones", []) if remap(b) is not None]
+        bones = [remap(b) for b in _list(g.get("bones")) if remap(b) is not None]
         if not bones:
             w.warn(f"secondaryAnimation.boneGroups[{k}] dropped: none of its bones is in the character")
             continue
         centre = g.get("center", -1)
         g = {**g, "bones": bones, "center": remap(centre) if remap(centre) is not None else -1,
-             "colliderGroups": [new_index[i] for i in g.get("colliderGroups", []) if i in new_index]}
+             "colliderGroups": [new_index[i] for i in _list(g.get("colliderGroups")) if i in new_index]}
         groups.append(g)
     return {**raw, "boneGroups": groups, "colliderGroups": colliders}
 
@@ -106,7 +106,7 @@ def _spring1_from_0(w: WriteState, sec: dict, nodes: list[dict]) -> dict:
     colliders, groups = [], []
     for g in sec["colliderGroups"]:
         members = []
-        for c in g.get("colliders", []) if isinstance(g.get("colliders"), list) else []:
+        for c in _list(g.get("colliders")):
             if not isinstance(c, dict):
                 continue
             o = c.get("offset") if isinstance(c.get("offset"), dict) else {}
@@ -173,13 +173,13 @@ def _spring1(w: WriteState, raw: dict) -> dict:
         colliders.append({**c, "node": node})
     out["colliders"] = colliders
     groups = out.get("colliderGroups") if isinstance(out.get("colliderGroups"), list) else []
-    out["colliderGroups"] = [{**g, "colliders": [new_index[i] for i in g.get("colliders", []) if i in new_index]}
+    out["colliderGroups"] = [{**g, "colliders": [new_index[i] for i in _list(g.get("colliders")) if i in new_index]}
                              for g in groups if isinstance(g, dict)]
     springs = []
     for i, s in enumerate(out.get("springs", []) if isinstance(out.get("springs"), list) else []):
         if not isinstance(s, dict):
             continue
-        joints = [{**j, "node": remap(j.get("node"))} for j in s.get("joints", []) if isinstance(j, dict)
+        joints = [{**j, "node": remap(j.get("node"))} for j in _list(s.get("joints")) if isinstance(j, dict)
                   and remap(j.get("node")) is not None]
         if len(joints) < 2:
             w.warn(f"VRMC_springBone.springs[{i}] dropped: fewer than two of its joints are in the character")
@@ -223,7 +223,7 @@ def _secondary0_from_1(w: WriteState, raw: dict, remap: Callable[[Any], int | No
         j = s["joints"][0]
         gd = j.get("gravityDir") if isinstance(j.get("gravityDir"), list) and len(j["gravityDir"]) == 3 \
             else [0, -1, 0]
-        cgs = sorted({of_collider[c] for g in s.get("colliderGroups", []) if isinstance(g, int)
+        cgs = sorted({of_collider[c] for g in _list(s.get("colliderGroups")) if isinstance(g, int)
                       and 0 <= g < len(one["colliderGroups"]) for c in one["colliderGroups"][g]["colliders"]})
         bone_groups.append({"comment": s.get("name", ""), "stiffiness": _num(j.get("stiffness"), 1.0),
                             "gravityPower": _num(j.get("gravityPower"), 0.0),
@@ -232,6 +232,10 @@ def _secondary0_from_1(w: WriteState, raw: dict, remap: Callable[[Any], int | No
                             "hitRadius": _num(j.get("hitRadius"), 0.0), "bones": [j["node"]],
                             "colliderGroups": cgs})
     return {"boneGroups": bone_groups, "colliderGroups": groups0}
+
+
+def _list(v: Any) -> list:
+    return v if isinstance(v, list) else []
 
 
 def _num(v: Any, default: float) -> float:

@@ -26,7 +26,7 @@ from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import ALPHA_MODES
 from facepuppet.runtime.render.layers import LAYER_KINDS
 
-from facepuppet.offline.io.gltf.kept_parts import kept, kept_texture_info, write_kept_textures
+from facepuppet.offline.io.gltf.kept_parts import kept_material, kept_texture_info, write_kept_textures
 from facepuppet.offline.io.gltf.write_state import WriteState
 
 _ALPHA_NAME = {v: k for k, v in ALPHA_MODES.items()}
@@ -39,14 +39,14 @@ def write_materials(w: WriteState) -> tuple[list[dict], dict]:
     c, lk = w.c, w.c.look
     mats = []
     textures = _textures(w)  # first: a kept material names the written textures
-    raw_materials = kept(c.source, "materials", [])
     for i, name in enumerate(c.material_names):
         shine = float(c.material_params[i, 1])
         rough = float(np.clip((2.0 / (max(shine, 0.0) + 2.0)) ** 0.25, 0.0, 1.0))
         pbr: dict[str, Any] = {"metallicFactor": 0.0, "roughnessFactor": round(rough, 6)}
         mat: dict[str, Any] = {"name": name, "pbrMetallicRoughness": pbr}
-        if i < len(raw_materials):  # the file's own metal/roughness and other textures, as it had them
-            _kept_core(w, raw_materials[i], mat)
+        raw = kept_material(w, i)
+        if raw:  # the file's own metal/roughness and other textures, as it had them
+            _kept_core(w, raw, mat)
         kind = int(round(float(c.material_params[i, 2])))
         if kind != MATERIAL_KINDS["skin"]:  # read back by the importer; other readers ignore extras
             mat["extras"] = {"facepuppet": {"kind": _KIND_NAME.get(kind, "skin"),

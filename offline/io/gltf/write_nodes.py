@@ -150,11 +150,13 @@ def place_meshes(w: WriteState, nodes: list[dict], n_meshes: int) -> None:
     """Put each mesh on a node (in place in ``nodes``; ``w.host`` becomes the written node): a rigid mesh on its
     own node, unskinned; a skinned one back on the node that held it in the file when that node's transform
     can go (a root that is no joint and no parent: the spec ignores a skinned mesh's node transform), else on a
-    new root node named after it; every skinned mesh's node carries the skin."""
+    new root node named after it (also when it is a humanoid bone); every skinned mesh's node carries the
+    skin."""
     k = w.c.skeleton
     needed = set(w.joints.tolist()) if w.joints is not None else set()
     if k is not None:
         needed |= {int(p) for p in k.parent if p >= 0} | {j for j in range(k.n_nodes) if k.parent[j] >= 0}
+        needed |= {int(j) for j in k.bones.values()}
     for m in range(n_meshes):
         h = w.host[m]
         if h >= 0 and (w.rigid[m] or h not in needed):
