@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from facepuppet.runtime.model.character import Character
+
 from conftest import need_shared
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf.write import export_character
@@ -186,3 +188,21 @@ def test_a_built_unskinned_two_mesh_vrm1_exports_valid_and_keeps_its_parts(tmp_p
     assert {k: a["meta"][k] for k in ("allowRedistribution", "modification", "creditNotation", "commercialUsage")} \
         == {"allowRedistribution": True, "modification": "prohibited", "creditNotation": "required",
             "commercialUsage": "personalNonProfit"}
+
+
+TABLES_V1 = Path(__file__).resolve().parents[2] / "runtime" / "files" / "data" / "tables_v1" / "character.npz"
+
+
+@pytest.mark.parametrize("fmt", ["glb", "gltf"])
+def test_an_obj_character_exports_valid(tmp_path, fmt):
+    """An OBJ rig's character (no skeleton, no layout, vertex colours) as plain glTF: nothing reported."""
+    need_validator()
+    (report,) = validate(export(Character.load(TABLES_V1), tmp_path, fmt))
+    assert report["numErrors"] == 0 and report["numWarnings"] == 0, problems(report, ERROR) + problems(report, WARNING)
+
+
+@pytest.mark.slow
+def test_the_ict_head_exports_valid(ict_character, tmp_path):
+    need_validator()
+    (report,) = validate(export(ict_character, tmp_path, "glb"))
+    assert report["numErrors"] == 0 and report["numWarnings"] == 0, problems(report, ERROR) + problems(report, WARNING)
