@@ -32,7 +32,7 @@ CORE_TEXTURES = ("normalTexture", "occlusionTexture", "emissiveTexture")
 MTOON_TEXTURES = ("shadeMultiplyTexture", "shadingShiftTexture", "matcapTexture", "rimMultiplyTexture",
                   "outlineWidthMultiplyTexture", "uvAnimationMaskTexture")
 #: The most bytes of images kept raw (base64 in the character's 4 MiB JSON manifest): a thumbnail and a few
-#: small textures (Godette's thumbnail and metal/roughness map are 60 kB); 2048² normal maps do not fit.
+#: small textures (Godette's thumbnail and metal/roughness map: 60 kB and 22 kB); 2048² normal maps do not fit.
 MAX_KEPT_IMAGE_BYTES = 1_500_000
 _SIGNATURES = {b"\x89PNG\r\n\x1a\n": "image/png", b"\xff\xd8\xff": "image/jpeg"}
 

@@ -12,6 +12,7 @@ implementation, and must give what it gives for the original.
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -21,6 +22,7 @@ import numpy as np
 import pytest
 
 from conftest import need_shared
+from facepuppet.offline.io.gltf import kept_parts
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf.write import export_character
 from helpers.gltf_validator import ERROR, REPO, WARNING, codes, problems, validate
@@ -282,3 +284,26 @@ def test_kept_images_are_base64_of_the_file_bytes():
     entry = next(e for e in kept["images"] if e["image"] == thumb)
     assert base64.b64decode(entry["data"]) == image_bytes(need_shared("gltf", "Godette_vrm_v4.vrm"), thumb)
     assert entry["mimeType"] == "image/jpeg"
+
+
+def test_a_character_changed_after_import_uses_only_the_kept_parts_that_still_match(tmp_path):
+    """The kept material JSON follows a material by index and name: one renamed is written from its look."""
+    c = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
+    names = list(c.material_names)
+    names[names.index("Backpack")] = "Rucksack"
+    changed = dataclasses.replace(c, material_names=tuple(names))
+    out = export_character(changed, tmp_path / "changed.vrm", vrm=1).path
+    doc = vrm_json(out)
+    rucksack = next(m for m in doc["materials"] if m["name"] == "Rucksack")
+    assert "metallicRoughnessTexture" not in rucksack["pbrMetallicRoughness"]
+    assert rucksack["pbrMetallicRoughness"]["metallicFactor"] == 0.0  # the look's (no metal/roughness of its own)
+    face = next(m for m in doc["materials"] if m["name"] == "Face")
+    assert face["extensions"]["VRMC_materials_mtoon"]["outlineWidthMode"] == "screenCoordinates"
+
+
+def test_an_image_past_the_kept_bytes_is_dropped_with_a_warning(monkeypatch):
+    monkeypatch.setattr(kept_parts, "MAX_KEPT_IMAGE_BYTES", 30_000)  # the 60 kB thumbnail no longer fits
+    c = read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm"))
+    kept_names = [e["name"] for e in c.source["kept"]["images"]]
+    assert "godette_thumbnail" not in kept_names and "fabric" in kept_names  # its 22 kB still fit
+    assert any("images[1]" in w and "not kept for export" in w for w in c.source["warnings"])
