@@ -1,7 +1,8 @@
 // Loads each VRM named on the command line with three.js's GLTFLoader and @pixiv/three-vrm's VRMLoaderPlugin
 // (the reference VRM implementation) in node, and prints one JSON line per file with what three-vrm found:
 // spring-bone joints and colliders, the look-at type and range maps, the first-person annotations, the MToon
-// materials with their outline and rim, the expressions' material binds, the meta.
+// materials with their outline and rim, the expressions' material binds, the meta, and each MToon material's
+// colour and texture offset with the "sad" expression at full weight.
 // Node has no DOM: a GLTFLoader plugin hands three-vrm an empty texture for every glTF texture (no image is
 // decoded; nothing here looks at texels), which is all that needs a browser.
 import fs from "node:fs";
@@ -73,6 +74,22 @@ for (const file of process.argv.slice(2)) {
       if (kinds.length) out.expressionMaterialBinds[e.expressionName] = kinds;
     }
     out.meta = vrm.meta;
+    // what three-vrm draws with "sad" at full weight: each MToon material's colour and base texture offset
+    out.sad = null;
+    if (vrm.expressionManager && vrm.expressionManager.getExpression("sad")) {
+      vrm.expressionManager.setValue("sad", 1.0);
+      vrm.update(1 / 60);
+      out.sad = {};
+      gltf.scene.traverse((o) => {
+        const mats = o.material ? (Array.isArray(o.material) ? o.material : [o.material]) : [];
+        for (const m of mats) {
+          if (m.isMToonMaterial && !m.isOutline && m.color) {
+            out.sad[m.name] = { color: [round(m.color.r), round(m.color.g), round(m.color.b)],
+                                mapOffset: m.map ? [round(m.map.offset.x), round(m.map.offset.y)] : null };
+          }
+        }
+      });
+    }
   }
   console.log(JSON.stringify(out));
 }

@@ -5,8 +5,10 @@ writers put them back on the expression of the same name, in the version
 being written, converted as VRM runtimes read them (three-vrm's 0.x loader):
 a 0.x property ``_Color``, ``_EmissionColor``, ``_ShadeColor``, ``_RimColor``
 or ``_OutlineColor`` is the 1.0 colour bind of type ``color``,
-``emissionColor``, ``shadeColor``, ``rimColor``, ``outlineColor`` (0.x
-colours sRGB, 1.0's linear, alpha as it is); ``_MainTex_ST`` (scale u, v,
+``emissionColor``, ``shadeColor``, ``rimColor``, ``outlineColor``, its
+target value taken as it is (three-vrm, the reference this project draws
+against, applies a 0.x bind's colour unconverted, unlike a 0.x material's
+own ``_Color``, which it decodes from sRGB); ``_MainTex_ST`` (scale u, v,
 offset u, v with v from the bottom) is a texture transform bind whose v
 offset is 1 − v offset − v scale. 1.0's ``matcapColor`` has no 0.x property
 and is dropped going to 0.x (with a warning). A 0.x bind names its material,
@@ -71,7 +73,7 @@ def _from0(w: WriteState, raw: dict) -> dict[str, MaterialBinds]:
             if prop == "_MainTex_ST":
                 binds.transforms.append((m, tv[0:2], [tv[2], 1.0 - tv[3] - tv[1]]))
             elif prop in _COLOUR_0_TO_1:
-                binds.colours.append((m, _COLOUR_0_TO_1[prop], [*_linear(tv[:3]), tv[3]]))
+                binds.colours.append((m, _COLOUR_0_TO_1[prop], tv))
             else:
                 w.warn(f"blendShapeGroups[{g}].materialValues: property {prop!r} has no VRM bind; dropped")
         if binds.colours or binds.transforms:
@@ -117,7 +119,7 @@ def write_binds0(w: WriteState, name: str, binds: MaterialBinds | None) -> list[
             w.warn(f"expression {name!r}: a {kind} bind has no VRM 0.x property; dropped")
             continue
         out.append({"materialName": w.c.material_names[m], "propertyName": _COLOUR_1_TO_0[kind],
-                    "targetValue": [*_srgb(rgba[:3]), float(rgba[3])]})
+                    "targetValue": [float(x) for x in rgba]})
     for m, scale, offset in binds.transforms:
         out.append({"materialName": w.c.material_names[m], "propertyName": "_MainTex_ST",
                     "targetValue": [scale[0], scale[1], offset[0], 1.0 - offset[1] - scale[1]]})
@@ -141,13 +143,3 @@ def write_binds1(binds: MaterialBinds | None) -> dict[str, list]:
 def _numbers(v: Any, n: int) -> bool:
     return isinstance(v, list) and len(v) >= n and all(
         isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in v)
-
-
-def _linear(c: list[float]) -> list[float]:
-    a = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
-    return [float(x) for x in np.where(a <= 0.04045, a / 12.92, ((a + 0.055) / 1.055) ** 2.4)]
-
-
-def _srgb(c: list[float]) -> list[float]:
-    a = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
-    return [float(x) for x in np.where(a <= 0.0031308, 12.92 * a, 1.055 * a ** (1 / 2.4) - 0.055)]

@@ -255,6 +255,9 @@ def test_three_vrm_finds_the_same_springs_look_at_and_mtoon_in_the_exports(expor
         kinds = {k: sorted(set(v)) for k, v in original["expressionMaterialBinds"].items()}
         assert {k: sorted(set(v)) for k, v in got["expressionMaterialBinds"].items()} == kinds
         assert kinds == {"sad": ["_VRMExpressionMaterialColorBind2", "_VRMExpressionTextureTransformBind2"]}
+        # and what they do: at full "sad" three-vrm draws the face blue, its texture shifted, as from the original
+        assert got["sad"] == original["sad"]
+        assert original["sad"]["Face"] == {"color": [0.2, 0.3, 1.0], "mapOffset": [0.25, 0.0]}
     # the look-at offset: the VRM 1.0 faces +Z, a VRM 0.x (as three-vrm loads it, unturned) -Z
     assert one["lookAt"]["offsetFromHeadBone"] == pytest.approx(
         np.multiply(original["lookAt"]["offsetFromHeadBone"], [-1, 1, -1]).tolist(), abs=1e-6)
