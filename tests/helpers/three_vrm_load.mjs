@@ -9,7 +9,7 @@ import fs from "node:fs";
 import path from "node:path";
 import * as THREE from "three";
 import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
-import { VRMLoaderPlugin } from "@pixiv/three-vrm";
+import { VRMLoaderPlugin, VRMUtils } from "@pixiv/three-vrm";
 
 class NoImages {
   constructor(parser) { this.parser = parser; this.name = "facepuppet_tests_no_images"; }
@@ -17,6 +17,35 @@ class NoImages {
 }
 
 const round = (v) => Math.round(v * 1e6) / 1e6;
+
+// The spring joints' world rotations after one scripted head motion: the avatar turned to face +Z
+// (VRMUtils.rotateVRM0 for a VRM 0.x), the head yawed 0.6 rad and back over 0.5 s at 60 frames/s, then 0.25 s
+// of hold; each joint bone's world quaternion (x, y, z, w) by bone name, at rest and after the motion.
+function swing(vrm) {
+  if (!vrm.springBoneManager || !vrm.humanoid) return null;
+  if (vrm.meta && vrm.meta.metaVersion === "0") VRMUtils.rotateVRM0(vrm);
+  vrm.scene.updateMatrixWorld(true);
+  vrm.springBoneManager.setInitState();
+  const head = vrm.humanoid.getNormalizedBoneNode("head");
+  const q = new THREE.Quaternion();
+  const pose = () => {
+    const out = {};
+    for (const j of vrm.springBoneManager.joints) {
+      j.bone.getWorldQuaternion(q);
+      out[j.bone.name] = [round(q.x), round(q.y), round(q.z), round(q.w)];
+    }
+    return out;
+  };
+  vrm.update(1 / 60);
+  const rest = pose();
+  for (let f = 0; f < 45; f++) {
+    const t = f / 60;
+    head.rotation.set(0, t < 0.5 ? 0.6 * Math.sin(Math.PI * t / 0.5) : 0, 0);
+    head.position.set(0, 0, 0);
+    vrm.update(1 / 60);
+  }
+  return { rest, moved: pose() };
+}
 const vec = (v) => [round(v.x), round(v.y), round(v.z)];
 
 for (const file of process.argv.slice(2)) {
@@ -74,6 +103,7 @@ for (const file of process.argv.slice(2)) {
       if (kinds.length) out.expressionMaterialBinds[e.expressionName] = kinds;
     }
     out.meta = vrm.meta;
+    out.swing = swing(vrm);
     // what three-vrm draws with "sad" at full weight: each MToon material's colour and base texture offset
     out.sad = null;
     if (vrm.expressionManager && vrm.expressionManager.getExpression("sad")) {

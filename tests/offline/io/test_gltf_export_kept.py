@@ -258,6 +258,18 @@ def test_three_vrm_finds_the_same_springs_look_at_and_mtoon_in_the_exports(expor
         # and what they do: at full "sad" three-vrm draws the face blue, its texture shifted, as from the original
         assert got["sad"] == original["sad"]
         assert original["sad"]["Face"] == {"color": [0.2, 0.3, 1.0], "mapOffset": [0.25, 0.0]}
+    # the springs move alike: one head motion in three-vrm (tests/helpers/three_vrm_load.mjs, swing) turns the
+    # joints up to ~12° from rest; the exports' joints end within 0.5° of the original's. Not 0: the exports
+    # store node transforms as float32 (the original's JSON has float64), and a hair joint touching a collider
+    # sphere turns that 1e-7 m into ~0.15°.
+    def angle(a, b):
+        return float(np.degrees(2 * np.arccos(min(1.0, abs(float(np.dot(a, b)))))))
+
+    swing = original["swing"]
+    assert max(angle(swing["rest"][k], swing["moved"][k]) for k in swing["rest"]) > 5.0
+    for got in (one, zero):
+        assert set(got["swing"]["moved"]) == set(swing["moved"])
+        assert max(angle(swing["moved"][k], got["swing"]["moved"][k]) for k in swing["moved"]) < 0.5
     # the look-at offset: the VRM 1.0 faces +Z, a VRM 0.x (as three-vrm loads it, unturned) -Z
     assert one["lookAt"]["offsetFromHeadBone"] == pytest.approx(
         np.multiply(original["lookAt"]["offsetFromHeadBone"], [-1, 1, -1]).tolist(), abs=1e-6)
