@@ -12,8 +12,9 @@ the offset (0.x from the first-person bone, in Unity's axes; 1.0 from the
 head, in glTF's, both facing +Z) reverses x; ``lookAtTypeName`` Bone /
 BlendShape is type bone / expression; each 0.x curve map's ``xRange`` /
 ``yRange`` is a 1.0 range map's ``inputMaxValue`` / ``outputScale`` (1.0 maps
-linearly: a 0.x curve's shape is lost, and a 1.0 map goes back as the linear
-curve); the mesh annotations' flags (``ThirdPersonOnly`` / ``thirdPersonOnly``)
+linearly: a 0.x curve rides along in the range map's ``extras.vrm0Curve``,
+for the way back, and a 1.0 map without one goes back as the linear curve);
+the mesh annotations' flags (``ThirdPersonOnly`` / ``thirdPersonOnly``)
 move from the file's meshes to the nodes that hold them and back.
 """
 
@@ -89,6 +90,8 @@ def _first_person1_from_0(w: WriteState, vrm: dict[str, Any]) -> None:
         m = first.get(key0)
         if isinstance(m, dict):
             look[key1] = {"inputMaxValue": _num(m.get("xRange"), 90.0), "outputScale": _num(m.get("yRange"), 10.0)}
+            if _curve(m.get("curve")) and m["curve"] != _LINEAR_CURVE:  # 1.0 maps linearly: the curve rides along
+                look[key1]["extras"] = {"vrm0Curve": [float(x) for x in m["curve"]]}
     vrm["lookAt"] = look
 
 
@@ -114,9 +117,17 @@ def _first_person0_from_1(w: WriteState, head: int) -> dict:
         for key0, key1 in _MAPS:
             m = look.get(key1)
             if isinstance(m, dict):
-                out[key0] = {"curve": list(_LINEAR_CURVE), "xRange": _num(m.get("inputMaxValue"), 90.0),
+                extras = m.get("extras") if isinstance(m.get("extras"), dict) else {}
+                curve = extras.get("vrm0Curve") if _curve(extras.get("vrm0Curve")) else list(_LINEAR_CURVE)
+                out[key0] = {"curve": curve, "xRange": _num(m.get("inputMaxValue"), 90.0),
                              "yRange": _num(m.get("outputScale"), 10.0)}
     return out
+
+
+def _curve(v: Any) -> bool:
+    """A 0.x look-at curve: Unity keyframes, four numbers each (time, value, in and out tangents)."""
+    return isinstance(v, list) and len(v) % 4 == 0 and 0 < len(v) <= 256 and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)
 
 
 def _num(v: Any, default: float) -> float:

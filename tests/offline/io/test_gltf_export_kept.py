@@ -120,6 +120,8 @@ def test_vrm0_keeps_springs_colliders_look_at_first_person(exported, key):
         assert fg[key0] == pytest.approx(fw[key0]) if isinstance(fw[key0], dict) else fg[key0] == fw[key0]
     for key0 in ("lookAtHorizontalInner", "lookAtHorizontalOuter", "lookAtVerticalDown", "lookAtVerticalUp"):
         assert (fg[key0]["xRange"], fg[key0]["yRange"]) == pytest.approx((fw[key0]["xRange"], fw[key0]["yRange"]))
+        if "curve" in fw[key0]:  # through VRM 1.0 too: its range map carries the curve in extras
+            assert fg[key0]["curve"] == pytest.approx(fw[key0]["curve"])
     flags = [a["firstPersonFlag"] for a in fw["meshAnnotations"]]
     assert [a["firstPersonFlag"] for a in fg["meshAnnotations"]] == flags
     names = [want["nodes"][want["extensions"]["VRM"]["firstPerson"]["firstPersonBone"]]["name"]]
