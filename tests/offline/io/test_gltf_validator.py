@@ -160,8 +160,11 @@ def test_a_built_unskinned_two_mesh_vrm1_exports_valid_and_keeps_its_parts(tmp_p
         check_against(original, report, fmt)
         doc = glb_chunks(outs[fmt].read_bytes())[0]
         assert "skins" not in doc  # unskinned meshes stay unskinned (no SKIN_NO_COMMON_ROOT)
-    back = read_gltf(outs["vrm1"])
-    np.testing.assert_allclose(back.vertices, c.vertices, atol=1e-6)
+    for fmt in ("vrm0", "vrm1"):  # in their nodes' frames in the file, where they were in the character
+        back = read_gltf(outs[fmt])
+        np.testing.assert_allclose(back.vertices, c.vertices, atol=1e-6)
+        np.testing.assert_allclose(back.dense_deltas(), c.dense_deltas(), atol=1e-6)
+        np.testing.assert_allclose(back.rest_normals(), c.rest_normals(), atol=1e-5)
     one = glb_chunks(outs["vrm1"].read_bytes())[0]
     names = [n.get("name") for n in one["nodes"]]
     spring = one["extensions"]["VRMC_springBone"]
