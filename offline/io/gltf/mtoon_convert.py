@@ -3,7 +3,8 @@
 The look keeps MToon's shade colour, shift and toony factors (the writers in
 :mod:`.vrm_materials` write them); the rest is kept raw from the file
 (VRM 0.x ``materialProperties`` inside the kept VRM extension, VRM 1.0
-``VRMC_materials_mtoon`` in ``settings.source.kept.materials``) and written
+``VRMC_materials_mtoon`` in ``settings.source.kept.materials``, or its copy in
+``extras.facepuppet.mtoon`` of a GLB that export-character wrote) and written
 back here, in the file's version or converted field by field as the VRM
 migration does it (and three-vrm's 0.x compatibility reads it): 0.x colours
 are sRGB, 1.0's linear; ``_OutlineWidth`` is in centimetres, ``outlineWidthFactor``
@@ -51,8 +52,13 @@ def properties0(w: WriteState) -> dict[int, dict]:
 def mtoon1_kept(w: WriteState, i: int) -> dict:
     """The file's own VRMC_materials_mtoon of stored material ``i`` (a VRM 1.0 or glTF source), its textures
     onto the written ones; {} when it had none."""
-    ext = kept_material(w, i).get("extensions")
+    raw = kept_material(w, i)
+    ext = raw.get("extensions")
     mt = ext.get("VRMC_materials_mtoon") if isinstance(ext, dict) else None
+    if not isinstance(mt, dict):  # a GLB of ours: the same object in extras (see vrm_materials.write_mtoon)
+        extras = raw.get("extras") if isinstance(raw.get("extras"), dict) else {}
+        ours = extras.get("facepuppet") if isinstance(extras.get("facepuppet"), dict) else {}
+        mt = ours.get("mtoon")
     if not isinstance(mt, dict):
         return {}
     out = copy.deepcopy(mt)

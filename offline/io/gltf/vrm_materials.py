@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import SHADING
 
 from facepuppet.offline.io.gltf.kept_parts import kept_texture_info
@@ -27,6 +28,8 @@ from facepuppet.offline.io.gltf.mtoon_convert import (
 )
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.write_state import WriteState
+
+_KIND_NAME = {v: k for k, v in MATERIAL_KINDS.items()}
 
 
 def read_material_properties(state: ReadState) -> None:
@@ -42,13 +45,16 @@ def read_material_properties(state: ReadState) -> None:
 
 
 def read_mtoon(state: ReadState) -> None:
-    """The shading rows of the materials with ``VRMC_materials_mtoon`` (VRM 1.0)."""
+    """The shading rows of the materials with ``VRMC_materials_mtoon`` (VRM 1.0), or with the same object in
+    ``extras.facepuppet.mtoon`` (a GLB or .gltf that ``export-character`` wrote)."""
     f = state.f
     shading = state.look.shading
     for i, m in enumerate(f.items("materials")):
         mt1 = extensions_of(m).get("VRMC_materials_mtoon")
+        mw = f"materials[{i}].extensions.VRMC_materials_mtoon"
+        if not isinstance(mt1, dict):  # a GLB of ours keeps it beside its unlit fallback
+            mt1, mw = facepuppet_mtoon(m), f"materials[{i}].extras.facepuppet.mtoon"
         if isinstance(mt1, dict):
-            mw = f"materials[{i}].extensions.VRMC_materials_mtoon"
             shading[i, 0] = SHADING["toon"]
             shading[i, 2:5] = f.numbers(mt1, "shadeColorFactor", 3, mw, [0, 0, 0])
             shading[i, 5] = f.get(mt1, "shadingShiftFactor", float, mw, 0.0)
@@ -111,9 +117,11 @@ def write_material_properties(w: WriteState, raw: dict, vrm: dict[str, Any]) -> 
 def write_mtoon(w: WriteState, materials: list[dict]) -> None:
     """``VRMC_materials_mtoon`` on each toon material of a VRM 1.0: the shade from the look (its texture: the
     file's, else the base colour's), the rest (outline, rim, matcap, UV animation) from the file's own MToon,
-    converted from a VRM 0.x's material property (:mod:`.mtoon_convert`)."""
+    converted from a VRM 0.x's material property (:mod:`.mtoon_convert`). A GLB or .gltf keeps the same object
+    in ``extras.facepuppet.mtoon`` (for the importer; its viewers draw the unlit fallback), not as the extension:
+    beside KHR_materials_unlit it would be two shading extensions on one material."""
     lk = w.c.look
-    if w.fmt != "vrm1" or lk is None:
+    if w.fmt == "vrm0" or lk is None:
         return
     props = properties0(w)
     for i, mat in enumerate(materials):
@@ -130,8 +138,22 @@ def write_mtoon(w: WriteState, materials: list[dict]) -> None:
                    "shadingShiftFactor": float(lk.shading[i, 5]), "shadingToonyFactor": float(lk.shading[i, 6])})
         if int(lk.texture[i]) >= 0 and "shadeMultiplyTexture" not in mt:
             mt["shadeMultiplyTexture"] = {"index": int(lk.texture[i])}
+        if w.fmt != "vrm1":
+            kind, spec, shine = (float(x) for x in w.c.material_params[i, [2, 0, 1]])
+            ours = mat.setdefault("extras", {}).setdefault("facepuppet", {
+                "kind": _KIND_NAME.get(int(round(kind)), "skin"), "specular": spec, "shininess": shine})
+            ours["mtoon"] = mt
+            continue
         mat.setdefault("extensions", {})["VRMC_materials_mtoon"] = mt
         w.ext_used.add("VRMC_materials_mtoon")
+
+
+def facepuppet_mtoon(m: Any) -> dict | None:
+    """A material's ``extras.facepuppet.mtoon`` (MToon as VRMC_materials_mtoon says it), or None."""
+    extras = m.get("extras") if isinstance(m, dict) else None
+    ours = extras.get("facepuppet") if isinstance(extras, dict) else None
+    mt = ours.get("mtoon") if isinstance(ours, dict) else None
+    return mt if isinstance(mt, dict) else None
 
 
 def _core_textures_from_0(w: WriteState, prop: dict, mat: dict) -> None:

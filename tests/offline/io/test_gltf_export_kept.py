@@ -208,13 +208,18 @@ def rounded(v):
     return round(v, 6) + 0.0 if isinstance(v, float) else v
 
 
-def test_the_glb_falls_back_to_unlit_for_plain_viewers(exported):
+def test_the_glb_falls_back_to_unlit_for_plain_viewers_and_keeps_mtoon_for_the_importer(exported):
     got = vrm_json(exported["glb"])
     for m in got["materials"]:
         if m["name"] in ("Face", "Body", "GodotLogo"):
             assert "KHR_materials_unlit" in m.get("extensions", {}), m["name"]
     assert "KHR_materials_unlit" not in next(m for m in got["materials"] if m["name"] == "Backpack").get(
         "extensions", {})
+    # and the importer gets MToon back (kept in the material's extras.facepuppet, not a second extension)
+    c, back = read_gltf(exported["original"]), read_gltf(exported["glb"])
+    np.testing.assert_allclose(back.look.shading, c.look.shading, atol=1e-6)
+    face = next(m for m in got["materials"] if m["name"] == "Face")
+    assert face["extras"]["facepuppet"]["mtoon"]["outlineWidthMode"] == "screenCoordinates"
 
 
 def three_vrm(*paths: Path) -> list[dict]:
