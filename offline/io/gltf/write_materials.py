@@ -3,13 +3,16 @@
 baseColorFactor/-Texture, emissive, alphaMode/alphaCutoff, doubleSided;
 metallicFactor 0 and a roughness from the stored shininess (Blinn-Phong n ->
 GGX: roughness = (2 / (n + 2))^(1/4)), since a character keeps no
-metal/roughness. An OBJ rig's ``hidden`` material is written BLEND with alpha
+metal/roughness, unless the file it came from had the material: then its
+own metallic and roughness factors and its metal/roughness, normal,
+occlusion and emissive textures (:mod:`.kept_parts`). An OBJ rig's ``hidden`` material is written BLEND with alpha
 0 (kept, not drawn); its thin layers (eye occlusion, films, lashes) BLEND and
 double-sided, with the fade the renderer gives them
 (``render.layers.vertex_opacity``) as COLOR_0 alpha (RGBA, :mod:`.write_meshes`),
 so any glTF viewer draws them see-through. A material kind other than skin
 (eye, teeth, lashes …) and its specular/shininess go in
-``material.extras.facepuppet`` for the importer. Textures: PNG, lossless,
+``material.extras.facepuppet`` for the importer (with, in a GLB or .gltf, a toon
+material's MToon: :func:`.vrm_materials.write_mtoon`). Textures: PNG, lossless,
 re-encoded from the stored texels; samplers from the stored codes. The
 extensions (unlit, texture transform, MToon) are written after, each by its
 own writer.
