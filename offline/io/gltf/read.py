@@ -218,6 +218,7 @@ def _character(state: ReadState, name: str | None) -> Character:
         "default_weights": geo["default_weights"],
         "warnings": state.warnings,
         "pivot_rule": pivot_rule,
+        "kept": state.kept,
     }
     if not isinstance(name, str) or not name:
         name = str(meta.get("title") or meta.get("name") or f.path.stem) or f.path.stem

@@ -80,6 +80,7 @@ class ReadState:
     expressions: Expressions | None = None
     meta: dict = field(default_factory=dict)
     credits: str = ""
+    kept: dict[str, Any] = field(default_factory=dict)  # kept_parts: raw JSON and textures for export
 
     @property
     def doc(self) -> dict:
