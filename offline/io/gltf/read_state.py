@@ -80,6 +80,8 @@ class ReadState:
     expressions: Expressions | None = None
     meta: dict = field(default_factory=dict)
     credits: str = ""
+    springs: dict = field(default_factory=dict)  # read_springs: chains and colliders
+    look_at: dict = field(default_factory=dict)  # read_look_at: type, range maps, eye nodes
 
     @property
     def doc(self) -> dict:
