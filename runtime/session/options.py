@@ -11,7 +11,7 @@ of its options (a benchmark's or a test's) takes their defaults.
 group              options                                                     commands
 =================  ==========================================================  ===================
 PictureOptions     --size, --path, --headless, --framing, --background,        run, replay, demo
-                   --msaa, --credits
+                   --msaa, --credits, --no-springs
 PacingOptions      --fps, --draw, --duration                                   run, replay, demo
 StageOptions       --actor, --pair, --marker-units, --retarget, --elastic,     run, replay
                    --config, --profile, --calibrate, --gestures, --gesture-seed
@@ -65,6 +65,7 @@ class PictureOptions:
     path : str, the deformation path (``auto``, ``gpu``, ``cpu``)
     headless : bool, offscreen through EGL even where a display exists
     render : RenderOptions (framing, background, MSAA, credits)
+    springs : bool, simulate the character's spring bones (``--no-springs``: rigid)
     """
 
     width: int = 1280
@@ -72,6 +73,7 @@ class PictureOptions:
     path: str = "auto"
     headless: bool = False
     render: RenderOptions = field(default_factory=RenderOptions)
+    springs: bool = True
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser, size: str = "1280x720",
@@ -80,6 +82,8 @@ class PictureOptions:
         parser.add_argument("--size", default=size, help=f"image size WIDTHxHEIGHT (default {size})")
         parser.add_argument("--path", choices=PATHS, default="auto", help="deformation path")
         add_render_arguments(parser)
+        parser.add_argument("--no-springs", dest="springs", action="store_false",
+                            help="leave a VRM avatar's spring bones (hair, ribbons) rigid instead of simulating them")
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> PictureOptions:
@@ -87,7 +91,8 @@ class PictureOptions:
         path = get(ns, "path", "auto")
         if path not in PATHS:
             raise UsageError(f"--path: expected one of {', '.join(PATHS)}, got {path!r}")
-        return cls(width, height, path, bool(get(ns, "headless", False)), render_options(ns))
+        return cls(width, height, path, bool(get(ns, "headless", False)), render_options(ns),
+                   bool(get(ns, "springs", True)))
 
 
 # -- ticks ------------------------------------------------------------------------------------------------
