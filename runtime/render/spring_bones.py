@@ -53,12 +53,18 @@ STEP_S = 1.0 / 60.0
 MAX_GAP_S = 0.5
 
 
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Row lengths (n,) of ``v`` (n, 3) (np.linalg.norm's axis handling costs more than the sum on 3 columns)."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
+
+
 def _rotation_between(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
     """Rotation matrices (n, 3, 3) turning unit vectors ``a`` onto ``b`` (n, 3) (Rodrigues' formula)."""
-    v = np.cross(a, b)
-    c = np.einsum("ij,ij->i", a, b)
+    ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
+    bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
+    x, y, z = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx  # v = a × b
+    c = ax * bx + ay * by + az * bz
     k = 1.0 / np.maximum(1.0 + c, 1e-9)
-    x, y, z = v[:, 0], v[:, 1], v[:, 2]
     # R = I + [v]x + [v]x^2 / (1 + c)
     out[:, 0, 0] = 1.0 - (y * y + z * z) * k
     out[:, 1, 1] = 1.0 - (x * x + z * z) * k
@@ -258,17 +264,17 @@ class SpringBones:
             rest = np.matmul(pw, self._local[idx])  # the joint's frame, unturned
             head = rest[:, :3, 3]
             axis = np.einsum("nij,nj->ni", rest[:, :3, :3], self._axis[idx])
-            axis /= np.linalg.norm(axis, axis=1)[:, None]
+            axis /= _norm(axis)[:, None]
             nxt = new_w[idx] + axis * self._push[idx, None] + self._gravity[idx]  # 2, 3: stiffness, gravity
             length = self._length_w[idx, None]
             d = nxt - head
-            nxt = head + d * (length / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None])  # 4: length
+            nxt = head + d * (length / np.maximum(_norm(d), 1e-12)[:, None])  # 4: length
             if colliders is not None:
                 nxt = self._collide(idx, nxt, head, length, colliders)  # 5
             new_w[idx] = nxt
             # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame
             local_dir = np.einsum("nji,nj->ni", rest[:, :3, :3], nxt - head)
-            local_dir /= np.maximum(np.linalg.norm(local_dir, axis=1), 1e-12)[:, None]
+            local_dir /= np.maximum(_norm(local_dir), 1e-12)[:, None]
             turn = _rotation_between(self._axis[idx], local_dir, self._turn[idx])
             self._turn[idx] = turn
             out = w[nd + idx]
@@ -299,7 +305,7 @@ class SpringBones:
         push = np.where(inside, depth / np.maximum(dist, 1e-12), 0.0)
         nxt = nxt + np.einsum("nc,nci->ni", push, rel)
         d = nxt - head
-        return head + d * (length / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None])
+        return head + d * (length / np.maximum(_norm(d), 1e-12)[:, None])
 
     def _pose(self, skinning: np.ndarray, model: np.ndarray) -> None:
         """The joints' skinning matrices at the frame's pose with the last step's turns: the roots of the chains
@@ -312,7 +318,10 @@ class SpringBones:
             rest = np.matmul(np.matmul(w[self._anchor[idx]], self._rel[idx]), self._local[idx])
             w[nd + idx] = np.matmul(rest, t4[idx])
         joints = w[nd:]
-        d = np.matmul(np.linalg.inv(model), np.matmul(joints, self._g_inv))
+        inv = np.eye(4)  # the model matrix is rigid (a head translation, root motion)
+        inv[:3, :3] = model[:3, :3].T
+        inv[:3, 3] = -inv[:3, :3] @ model[:3, 3]
+        d = np.matmul(inv, np.matmul(joints, self._g_inv))
         skinning[self.rig.node] = d
         if len(self._follow_nodes):
             skinning[self._follow_nodes] = skinning[self.rig.node[self._follow_joint]]
