@@ -20,11 +20,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from facepuppet.runtime.files.tables import TablesError
+
+if TYPE_CHECKING:  # for the hint only: character.py imports this module to check its table (a cycle)
+    from facepuppet.runtime.model.character import Character
 
 #: Bounds on what a table may ask of the simulation (the importer's own bounds are the same).
 MAX_JOINTS = 4096
@@ -232,7 +235,7 @@ def _below(parent: np.ndarray, node: int, ancestor: int) -> bool:
     return False
 
 
-def springs_of(character) -> SpringRig | None:
+def springs_of(character: Character) -> SpringRig | None:
     """The character's springs (None without a skeleton or springs); checked as :func:`spring_rig` says."""
     if character.skeleton is None:
         return None
