@@ -26,12 +26,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from facepuppet.runtime.files.tables import TablesError
 from facepuppet.runtime.mapping.channels import canonical
+
+if TYPE_CHECKING:  # for the hint only: character.py imports this module to check its table (a cycle)
+    from facepuppet.runtime.model.character import Character
 
 #: Degrees of eye turn an adapter writes as eye-look weight 1 (:mod:`facepuppet.runtime.inputs.phone`).
 EYE_RANGE_DEG = 30.0
@@ -164,6 +167,13 @@ def _range_map(raw: Any, where: str) -> RangeMap:
     if len(keys) > 64 or not np.isfinite(keys).all() or np.any(np.diff(keys[:, 0]) <= 0):
         _fail(f"{where}.curve", "expected at most 64 finite keys with increasing times")
     return RangeMap(vals[0], vals[1], keys)
+
+
+def look_at_of_character(character: Character) -> LookAt | None:
+    """The character's look-at (None without a skeleton or look-at), checked as :func:`look_at_of` says."""
+    if character.skeleton is None:
+        return None
+    return look_at_of(character.metadata.get("settings", {}), character.skeleton.n_nodes)
 
 
 def look_at_of(settings: Mapping, n_nodes: int) -> LookAt | None:
