@@ -161,6 +161,17 @@ class SpringBones:
         follow = [(s, int(joint_of[above[s]])) for s in range(n_nodes) if joint_of[s] < 0 and above[s] >= 0]
         self._follow_nodes = np.array([f for f, _ in follow], np.int64)
         self._follow_joint = np.array([j for _, j in follow], np.int64)
+        # what each level's step reads, gathered once
+        rel_local = np.matmul(rel, local)
+        reach = rig.collider_radius[None, :] + rig.hit_radius[:, None]  # (n, c)
+        self._level_data = []
+        for idx in self._levels:
+            hits = rig.hits[idx]
+            self._level_data.append((idx, anchor[idx], rel_local[idx], self._axis[idx], self._push[idx, None],
+                                     self._gravity[idx], self._length_w[idx, None],
+                                     hits if hits.any() else None, reach[idx]))
+        self._any_capsule = bool(self._capsule.any())
+        self._turn_buf = np.zeros((max(n, 1), 3, 3))
         self.moved_nodes = np.zeros(n_nodes, bool)
         self.moved_nodes[rig.node] = True
         self.moved_nodes[self._follow_nodes] = True
@@ -256,49 +267,44 @@ class SpringBones:
         colliders = None
         if self.rig.n_colliders:
             cw = w[self._collider_row]
-            ends = (np.einsum("cij,cj->ci", cw[:, :3, :3], self.rig.collider_offset) + cw[:, :3, 3],
-                    np.einsum("cij,cj->ci", cw[:, :3, :3], self.rig.collider_tail) + cw[:, :3, 3])
-            colliders = ends
-        for idx in self._levels:
-            pw = np.matmul(w[self._anchor[idx]], self._rel[idx])
-            rest = np.matmul(pw, self._local[idx])  # the joint's frame, unturned
+            colliders = (np.einsum("cij,cj->ci", cw[:, :3, :3], self.rig.collider_offset) + cw[:, :3, 3],
+                         np.einsum("cij,cj->ci", cw[:, :3, :3], self.rig.collider_tail) + cw[:, :3, 3])
+        for idx, anchor, rel_local, axis0, push, gravity, length, hits, reach in self._level_data:
+            rest = np.matmul(w[anchor], rel_local)  # the joint's frame, unturned
             head = rest[:, :3, 3]
-            axis = np.einsum("nij,nj->ni", rest[:, :3, :3], self._axis[idx])
+            axis = np.einsum("nij,nj->ni", rest[:, :3, :3], axis0)
             axis /= _norm(axis)[:, None]
-            nxt = new_w[idx] + axis * self._push[idx, None] + self._gravity[idx]  # 2, 3: stiffness, gravity
-            length = self._length_w[idx, None]
+            nxt = new_w[idx] + axis * push + gravity  # 2, 3: stiffness, gravity
             d = nxt - head
             nxt = head + d * (length / np.maximum(_norm(d), 1e-12)[:, None])  # 4: length
-            if colliders is not None:
-                nxt = self._collide(idx, nxt, head, length, colliders)  # 5
+            if hits is not None:
+                nxt = self._collide(nxt, head, length, colliders, hits, reach)  # 5
             new_w[idx] = nxt
             # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame
             local_dir = np.einsum("nji,nj->ni", rest[:, :3, :3], nxt - head)
             local_dir /= np.maximum(_norm(local_dir), 1e-12)[:, None]
-            turn = _rotation_between(self._axis[idx], local_dir, self._turn[idx])
+            turn = _rotation_between(axis0, local_dir, self._turn_buf[:len(idx)])
             self._turn[idx] = turn
-            out = w[nd + idx]
-            out[:] = rest
-            out[:, :3, :3] = np.matmul(rest[:, :3, :3], turn)
-            w[nd + idx] = out
+            rest[:, :3, :3] = np.matmul(rest[:, :3, :3], turn)
+            w[nd + idx] = rest
         self._prev[:] = self._cur
         self._cur[:] = self._to_center(new_w)
 
-    def _collide(self, idx: np.ndarray, nxt: np.ndarray, head: np.ndarray, length: np.ndarray,
-                 colliders: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        """Tails (n, 3) pushed out of the colliders they hit, then put back at bone length."""
-        hits = self.rig.hits[idx]
-        if not hits.any():
-            return nxt
+    def _collide(self, nxt: np.ndarray, head: np.ndarray, length: np.ndarray,
+                 colliders: tuple[np.ndarray, np.ndarray], hits: np.ndarray, reach: np.ndarray) -> np.ndarray:
+        """Tails (n, 3) pushed out of the colliders they hit (``hits`` (n, c), ``reach`` (n, c): radius plus hit
+        radius), then put back at bone length."""
         start, end = colliders
         rel = nxt[:, None, :] - start[None]  # (n, c, 3)
-        seg = end - start
-        seg_sq = np.einsum("ci,ci->c", seg, seg)
-        along = np.einsum("nci,ci->nc", rel, seg)
-        frac = np.where(self._capsule & (seg_sq > 0), np.clip(along / np.maximum(seg_sq, 1e-12), 0.0, 1.0), 0.0)
-        rel -= frac[:, :, None] * seg[None]  # from the closest point of the capsule's segment (a sphere: start)
-        dist = np.linalg.norm(rel, axis=2)
-        depth = self.rig.collider_radius[None] + self.rig.hit_radius[idx, None] - dist
+        if self._any_capsule:  # from the closest point of a capsule's segment (a sphere: its centre)
+            seg = end - start
+            seg_sq = np.einsum("ci,ci->c", seg, seg)
+            along = np.einsum("nci,ci->nc", rel, seg)
+            frac = np.where(self._capsule & (seg_sq > 0), np.clip(along / np.maximum(seg_sq, 1e-12), 0.0, 1.0),
+                            0.0)
+            rel -= frac[:, :, None] * seg[None]
+        dist = np.sqrt(np.einsum("nci,nci->nc", rel, rel))
+        depth = reach - dist
         inside = hits & (depth > 0)
         if not inside.any():
             return nxt
@@ -314,9 +320,8 @@ class SpringBones:
         w[:nd] = self._wd_cur
         t4 = self._turn4
         t4[:, :3, :3] = self._turn
-        for idx in self._levels:
-            rest = np.matmul(np.matmul(w[self._anchor[idx]], self._rel[idx]), self._local[idx])
-            w[nd + idx] = np.matmul(rest, t4[idx])
+        for idx, anchor, rel_local, *_ in self._level_data:
+            w[nd + idx] = np.matmul(np.matmul(w[anchor], rel_local), t4[idx])
         joints = w[nd:]
         inv = np.eye(4)  # the model matrix is rigid (a head translation, root motion)
         inv[:3, :3] = model[:3, :3].T
