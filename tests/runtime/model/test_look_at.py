@@ -1,5 +1,6 @@
 """Look-at: range maps and VRM 0.x curves, the gaze read from eye-look channels, and an expression-type look-at
-driving the Look* expressions through its maps (the bone type is drawn in tests/runtime/render/test_look_at_render.py)."""
+driving the Look* expressions through its maps (the bone type is drawn in
+tests/runtime/render/test_look_at_render.py)."""
 
 from __future__ import annotations
 

@@ -54,3 +54,25 @@ def test_hair_keeps_moving_after_the_head_stops_then_rests(egl_ctx, path):
     assert sum(moving[:3]) > 20  # the hair swings on after the stop ...
     assert sum(1 for x in moving if x) >= 4  # ... for several frames ...
     assert moving[-10:] == [0] * 10  # ... and comes to rest
+
+
+@pytest.mark.slow
+def test_a_replay_swings_the_hair_the_same_every_time_and_no_springs_turns_it_off(tmp_path):
+    from PIL import Image
+
+    from facepuppet.runtime.cli import main
+
+    take = need_shared("tracker", "livelinkface_myslate_3.csv")
+    path = tmp_path / "godette.npz"
+    read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm")).save(path)
+    runs = {}
+    for name, extra in (("a", []), ("b", []), ("rigid", ["--no-springs"])):
+        out = tmp_path / name
+        assert main(["replay", str(take), "-c", str(path), "--headless", "--size", "96x96", "--duration", "1.5",
+                     "--path", "cpu", "--out", str(out), *extra]) == 0
+        runs[name] = [np.asarray(Image.open(p)) for p in sorted(out.glob("*.png"))]
+    assert len(runs["a"]) == len(runs["b"]) == len(runs["rigid"]) > 30
+    for x, y in zip(runs["a"], runs["b"]):
+        np.testing.assert_array_equal(x, y)  # recorded time: the same motion every time
+    differ = sum(bool((np.abs(x.astype(int) - y.astype(int)) > 8).any()) for x, y in zip(runs["a"], runs["rigid"]))
+    assert differ > 5  # the head moves in the take: the hair swings where --no-springs keeps it rigid
