@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from PIL import Image
 
+from facepuppet.runtime.cli import main
 from facepuppet.runtime.render.renderer import FaceRenderer
 
 from conftest import need_shared
@@ -58,10 +60,6 @@ def test_hair_keeps_moving_after_the_head_stops_then_rests(egl_ctx, path):
 
 @pytest.mark.slow
 def test_a_replay_swings_the_hair_the_same_every_time_and_no_springs_turns_it_off(tmp_path):
-    from PIL import Image
-
-    from facepuppet.runtime.cli import main
-
     take = need_shared("tracker", "livelinkface_myslate_3.csv")
     path = tmp_path / "godette.npz"
     read_gltf(need_shared("gltf", "Godette_vrm_v4.vrm")).save(path)
