@@ -158,7 +158,8 @@ class Character:
             check_normals(self.normals, n_v)
         if self.skeleton is not None:  # the spring bones and look-at a VRM brings (settings JSON), checked once
             settings = self.metadata.get("settings", {})
-            spring_rig(settings.get("springs"), self.skeleton.parent)
+            if settings.get("springs") is not None:
+                spring_rig(settings["springs"], self.skeleton.parent, self.skeleton.global_transforms())
             look_at_of(settings, self.skeleton.n_nodes)
         for arr in self._arrays().values():
             arr.setflags(write=False)

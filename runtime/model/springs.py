@@ -148,7 +148,7 @@ def _obj(v: Any, where: str) -> Mapping:
     return v
 
 
-def spring_rig(springs: Any, parent: np.ndarray) -> SpringRig | None:
+def spring_rig(springs: Any, parent: np.ndarray, rest_world: np.ndarray | None = None) -> SpringRig | None:
     """The checked :class:`SpringRig` of a character's ``settings["springs"]`` (None when it has none).
 
     Parameters
@@ -156,6 +156,9 @@ def spring_rig(springs: Any, parent: np.ndarray) -> SpringRig | None:
     springs : the JSON value (None: no springs)
     parent : ndarray (n_nodes,) int, the skeleton's parents (node indices are checked against it, and each
         joint's tail node must lie below its joint)
+    rest_world : ndarray (n_nodes, 4, 4), the skeleton's rest world transforms, or None: when given, the
+        joints, their parents and the colliders' and centers' nodes must have invertible ones (the simulation
+        works in their frames)
 
     Raises
     ------
@@ -211,6 +214,13 @@ def spring_rig(springs: Any, parent: np.ndarray) -> SpringRig | None:
     for a, b in zip(rows, rows[1:]):
         if a[0] == b[0]:
             _fail(f"{b[-1]}.node", f"node {b[0]} is simulated twice")
+    if rest_world is not None:
+        used = [(r[0], f"{r[-1]}.node") for r in rows] + [(int(parent[r[0]]), f"{r[-1]}.node") for r in rows]
+        used += [(n, f"{_W}.colliders[{i}].node") for i, n in enumerate(c_node)]
+        used += [(r[8], f"{r[-1]}.center") for r in rows]
+        for n, where in used:
+            if n >= 0 and not abs(np.linalg.det(rest_world[n][:3, :3])) > 1e-12:
+                _fail(where, f"node {n} has a singular rest transform (a zero scale): no frame to simulate in")
     hits = np.zeros((len(rows), len(colliders)), bool)
     for i, r in enumerate(rows):
         hits[i, r[10]] = True
@@ -239,4 +249,7 @@ def springs_of(character: Character) -> SpringRig | None:
     """The character's springs (None without a skeleton or springs); checked as :func:`spring_rig` says."""
     if character.skeleton is None:
         return None
-    return spring_rig(character.metadata.get("settings", {}).get("springs"), character.skeleton.parent)
+    springs = character.metadata.get("settings", {}).get("springs")
+    if springs is None:
+        return None
+    return spring_rig(springs, character.skeleton.parent, character.skeleton.global_transforms())

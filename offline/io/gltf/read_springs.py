@@ -117,8 +117,10 @@ def _children(state: ReadState) -> list[list[int]]:
     return out
 
 
-def _local_point(state: ReadState, node: int, tail_node: int) -> list[float]:
+def _local_point(state: ReadState, node: int, tail_node: int, where: str) -> list[float]:
     """The rest position of ``tail_node`` in the frame of ``node``."""
+    if not abs(np.linalg.det(state.world[node][:3, :3])) > 1e-12:
+        state.f.fail(where, f"node {node} has a singular transform (a zero scale): a joint needs a frame")
     p = np.linalg.solve(state.world[node], state.world[tail_node][:, 3])
     return [float(x) for x in p[:3]]
 
@@ -197,7 +199,8 @@ def _read1(state: ReadState, ext: Any) -> dict:
                 state.warn(f"{where}.joints[{i}]: node {node} is already simulated by another spring (dropped)")
                 continue
             taken.add(node)
-            joints.append(_joint(node, tail, _local_point(state, node, tail), settings[i]))
+            joints.append(_joint(node, tail, _local_point(state, node, tail, f"{where}.joints[{i}].node"),
+                                 settings[i]))
         group_refs = _list(state, spring.get("colliderGroups", []), f"{where}.colliderGroups", MAX_COLLIDERS)
         cols = [c for i, g in enumerate(group_refs)
                 for c in groups[_index(state, g, len(groups), f"{where}.colliderGroups[{i}]",

@@ -182,3 +182,12 @@ def test_bad_spring_tables_are_refused_naming_the_field(change, field):
     change(springs)
     with pytest.raises(TablesError, match=field.replace("[", r"\[").replace("]", r"\]")):
         spring_rig(springs, sk.parent)
+
+
+def test_a_joint_on_a_zero_scaled_node_is_refused_not_crashed():
+    sk = chain_skeleton(2)
+    springs = chain_springs(sk)
+    world = sk.global_transforms()
+    world[2, :3, :3] = 0.0
+    with pytest.raises(TablesError, match=r"settings.springs.chains\[0\].joints\[0\].node: node 2 has a singular"):
+        spring_rig(springs, sk.parent, world)
