@@ -36,6 +36,14 @@ pushes of the colliders a tail is inside are added (the specification applies
 them one after the other; the two differ only for a tail inside two colliders
 at once). Bones are assumed uniformly scaled (turns are taken from the
 transposed rest frame).
+
+**Preallocated.** Every array a step or a frame writes (tails, frames, turns,
+collision distances, the skinning matrices) is allocated once, in the
+constructor; the arithmetic writes into them (``out=``, in place), the level
+runs are slices (:mod:`facepuppet.runtime.render.spring_layout`). What a frame
+still allocates is NumPy's own: array views, and the internal buffer of a few
+strided or broadcast operations (freed by the operation); a chain with a center
+also inverts its center's matrix each step (``np.linalg.inv``).
 """
 
 from __future__ import annotations
@@ -44,6 +52,7 @@ import numpy as np
 
 from facepuppet.runtime.model.character_parts import Skeleton
 from facepuppet.runtime.model.springs import SpringRig
+from facepuppet.runtime.render.spring_layout import MODEL_ROW, WORLD_ROW, spring_layout
 
 #: The fixed internal step, seconds. The specification's update is tuned per step (the drag takes its share
 #: of the velocity once a step), and avatars are authored in apps stepping at 60 frames/s (UniVRM, three-vrm
@@ -51,31 +60,6 @@ from facepuppet.runtime.model.springs import SpringRig
 STEP_S = 1.0 / 60.0
 #: A gap between frames longer than this (or time going back) restarts the simulation at rest.
 MAX_GAP_S = 0.5
-
-
-def _norm(v: np.ndarray) -> np.ndarray:
-    """Row lengths (n,) of ``v`` (n, 3) (np.linalg.norm's axis handling costs more than the sum on 3 columns)."""
-    return np.sqrt(np.einsum("ij,ij->i", v, v))
-
-
-def _rotation_between(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """Rotation matrices (n, 3, 3) turning unit vectors ``a`` onto ``b`` (n, 3) (Rodrigues' formula)."""
-    ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
-    bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
-    x, y, z = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx  # v = a × b
-    c = ax * bx + ay * by + az * bz
-    k = 1.0 / np.maximum(1.0 + c, 1e-9)
-    # R = I + [v]x + [v]x^2 / (1 + c)
-    out[:, 0, 0] = 1.0 - (y * y + z * z) * k
-    out[:, 1, 1] = 1.0 - (x * x + z * z) * k
-    out[:, 2, 2] = 1.0 - (x * x + y * y) * k
-    out[:, 0, 1] = -z + x * y * k
-    out[:, 1, 0] = z + x * y * k
-    out[:, 0, 2] = y + x * z * k
-    out[:, 2, 0] = -y + x * z * k
-    out[:, 1, 2] = -x + y * z * k
-    out[:, 2, 1] = x + y * z * k
-    return out
 
 
 class SpringBones:
@@ -91,92 +75,58 @@ class SpringBones:
     matrices the head pose gives (n_nodes, 4, 4) and the model matrix (root
     motion); it writes the spring joints' skinning matrices into those
     matrices. :meth:`tails` gives the tails' world positions.
+
+    Attributes
+    ----------
+    moved_nodes : ndarray (n_nodes,) bool, the nodes the springs move (joints and the nodes below them)
+    steps : int, the steps taken since the start
     """
 
     def __init__(self, rig: SpringRig, skeleton: Skeleton, step_s: float = STEP_S) -> None:
         if not step_s > 0:
             raise ValueError(f"step_s: expected a positive step, got {step_s}")
         self.rig, self.step_s = rig, float(step_s)
-        n, n_nodes = rig.n_joints, skeleton.n_nodes
-        g = skeleton.global_transforms()
-        self._g = g
-        self._g_inv = np.linalg.inv(g[rig.node]) if n else np.zeros((0, 4, 4))
-        parent = skeleton.parent.astype(np.int64)
-        joint_of = np.full(n_nodes, -1, np.int64)
-        joint_of[rig.node] = np.arange(n)
-        # the nearest joint above each node (itself excluded), -1 when none
-        above = np.full(n_nodes, -1, np.int64)
-        for s in range(n_nodes):
-            p = int(parent[s])
-            if p >= 0:
-                above[s] = p if joint_of[p] >= 0 else above[p]
-        # drivers: the nodes whose pose comes from the head pose alone (row 0: the model matrix itself)
-        drivers = [-1]
-        anchor_is_joint = np.array([above[j] >= 0 for j in rig.node], bool)
-        for j in range(n):
-            if not anchor_is_joint[j]:
-                drivers.append(int(parent[rig.node[j]]))
-        drivers += [int(x) for x in rig.collider_node] + [int(x) for x in rig.center if x >= 0]
-        self._drivers = np.array(list(dict.fromkeys(drivers)), np.int64)
-        row = {int(d): i for i, d in enumerate(self._drivers)}
-        nd = len(self._drivers)
-        self._nd = nd
-        # W: the world transforms of the drivers, then of the joints (this step's)
-        self._w = np.tile(np.eye(4), (nd + n, 1, 1))
-        self._wd_prev = np.tile(np.eye(4), (nd, 1, 1))
-        self._wd_cur = np.tile(np.eye(4), (nd, 1, 1))
-        anchor = np.empty(n, np.int64)
-        rel = np.tile(np.eye(4), (n, 1, 1))
-        local = np.empty((n, 4, 4))
-        level = np.zeros(n, np.int64)
-        for j in range(n):
-            node, p = int(rig.node[j]), int(parent[rig.node[j]])
-            g_parent = g[p] if p >= 0 else np.eye(4)
-            local[j] = np.linalg.solve(g_parent, g[node])
-            if anchor_is_joint[j]:
-                a = int(joint_of[above[node]])
-                anchor[j] = nd + a
-                rel[j] = np.linalg.solve(g[above[node]], g_parent)
-                level[j] = level[a] + 1  # parents first: a's level is known
-            else:
-                anchor[j] = row[p]
-        self._anchor, self._rel, self._local = anchor, rel, local
-        self._levels = [np.flatnonzero(level == v) for v in range(int(level.max()) + 1 if n else 0)]
-        self._center = np.array([row[int(c)] if c >= 0 else 0 for c in rig.center], np.int64)
-        self._has_center = bool((rig.center >= 0).any())
-        self._collider_row = np.array([row[int(c)] for c in rig.collider_node], np.int64)
-        self._capsule = rig.collider_shape == 1
-        self._length = np.linalg.norm(rig.tail, axis=1)  # rest length in the node's frame
-        scale = np.linalg.norm(g[rig.node][:, :3, 0], axis=1) if n else np.zeros(0)
-        self._length_w = self._length * scale
-        self._axis = rig.tail / np.maximum(self._length, 1e-12)[:, None]
-        self._inertia = 1.0 - rig.drag
-        self._push = rig.stiffness * self.step_s
-        self._gravity = rig.gravity_dir * (rig.gravity_power * self.step_s)[:, None]
-        self._cur = np.zeros((n, 3))
-        self._prev = np.zeros((n, 3))
+        lay = self._lay = spring_layout(rig, skeleton, self.step_s)
+        n, nd, c = rig.n_joints, len(lay.driver_nodes), rig.n_colliders
+        self.moved_nodes = lay.moved_nodes
+        self._nj0 = 2 + nd  # W's first joint row
+        self._w = np.tile(np.eye(4), (lay.n_rows, 1, 1))
+        self._wd_prev = np.tile(np.eye(4), (nd + 2, 1, 1))
+        self._wd_cur = np.tile(np.eye(4), (nd + 2, 1, 1))
+        self._wd_tmp = np.zeros((nd + 2, 4, 4))
+        self._drv32 = np.zeros((nd, 4, 4), np.float32)
+        self._drv = np.zeros((nd, 4, 4))
+        self._cur, self._prev, self._new = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        self._a3, self._b3, self._sq = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        self._len = np.zeros(n)
+        self._k = np.zeros(n)
+        self._frame = np.zeros((n, 4, 4))  # each joint's unturned frame this step
+        self._anchors = np.zeros((n, 4, 4))
+        self._rot = np.zeros((n, 3, 3))
         self._turn = np.tile(np.eye(3), (n, 1, 1))  # each joint's turn from its rest, in its rest frame
         self._turn4 = np.tile(np.eye(4), (n, 1, 1))
-        # nodes below a joint that are not joints follow their joint's skinning matrix
-        follow = [(s, int(joint_of[above[s]])) for s in range(n_nodes) if joint_of[s] < 0 and above[s] >= 0]
-        self._follow_nodes = np.array([f for f, _ in follow], np.int64)
-        self._follow_joint = np.array([j for _, j in follow], np.int64)
-        # what each level's step reads, gathered once
-        rel_local = np.matmul(rel, local)
-        reach = rig.collider_radius[None, :] + rig.hit_radius[:, None]  # (n, c)
-        self._level_data = []
-        for idx in self._levels:
-            hits = rig.hits[idx]
-            self._level_data.append((idx, anchor[idx], rel_local[idx], self._axis[idx], self._push[idx, None],
-                                     self._gravity[idx], self._length_w[idx, None],
-                                     hits if hits.any() else None, reach[idx]))
-        self._any_capsule = bool(self._capsule.any())
-        self._turn_buf = np.zeros((max(n, 1), 3, 3))
-        self.moved_nodes = np.zeros(n_nodes, bool)
-        self.moved_nodes[rig.node] = True
-        self.moved_nodes[self._follow_nodes] = True
+        self._centers = np.zeros((n, 4, 4))
+        self._skin = np.zeros((n, 4, 4))
+        self._skin2 = np.zeros((n, 4, 4))
+        self._skin32 = np.zeros((n, 4, 4), np.float32)
+        self._follow = np.zeros((len(lay.follow_nodes), 4, 4), np.float32)
+        self._inv_model = np.eye(4)
+        self._identity = np.eye(4)
+        self._has_center = bool((lay.center_row != WORLD_ROW).any())
+        self._any_capsule = bool((rig.collider_shape == 1).any())
+        self._capsule = (rig.collider_shape == 1).astype(np.float64)
+        self._cw = np.zeros((c, 4, 4))
+        self._c_start, self._c_end, self._seg = np.zeros((c, 3)), np.zeros((c, 3)), np.zeros((c, 3))
+        self._seg_sq = np.zeros(c)
+        self._rel = np.zeros((n, c, 3))
+        self._rel2 = np.zeros((n, c, 3))
+        self._nc = np.zeros((n, c))
+        self._depth = np.zeros((n, c))
+        self._inside = np.zeros((n, c), bool)
+        self._outside = np.zeros((n, c), bool)
+        self._level_hits = [bool(lay.hits[a:b].any()) for a, b in lay.levels]
         self._t_sim = self._t_last = None
-        self.steps = 0  # steps taken since the start (a measure for tests and benchmarks)
+        self.steps = 0
 
     # -- per frame ------------------------------------------------------------------------------------------
     def reset(self) -> None:
@@ -199,11 +149,10 @@ class SpringBones:
         """
         if not self.rig.n_joints:
             return skinning
-        model = np.eye(4) if model is None else np.asarray(model, np.float64)
-        self._driver_worlds(skinning, model, self._wd_cur)
+        self._driver_worlds(skinning, model)
         t = float(t)
         if self._t_last is None or t < self._t_last or t - self._t_last > MAX_GAP_S:
-            self._start(skinning, model, t)
+            self._start(t)
         else:
             span = t - self._t_last
             while self._t_sim + self.step_s <= t + 1e-9:
@@ -214,119 +163,206 @@ class SpringBones:
                 self.steps += 1
             self._t_last = t
         self._wd_prev[:] = self._wd_cur
-        self._pose(skinning, model)
+        self._pose(skinning)
         return skinning
 
     def tails(self) -> np.ndarray:
-        """The tails' positions (n_joints, 3) float64, world (the model matrix applied), after the last step."""
-        if not self._has_center:
-            return self._cur.copy()
-        c = self._w[self._center]
-        return np.einsum("nij,nj->ni", c[:, :3, :3], self._cur) + c[:, :3, 3]
+        """The tails' positions (n_joints, 3) float64, world (the model matrix applied), after the last step,
+        in the rig's joint order."""
+        out = np.empty((self.rig.n_joints, 3))
+        out[self._lay.order] = self._from_center(self._cur, np.empty_like(self._cur))
+        return out
 
     # -- the parts of a frame ---------------------------------------------------------------------------------
-    def _driver_worlds(self, skinning: np.ndarray, model: np.ndarray, out: np.ndarray) -> None:
-        d = self._drivers
-        out[0] = model
-        if len(d) > 1:
-            np.matmul(model, np.matmul(skinning[d[1:]].astype(np.float64), self._g[d[1:]]), out=out[1:])
+    def _driver_worlds(self, skinning: np.ndarray, model: np.ndarray | None) -> None:
+        """This frame's world transforms of the drivers (rows 1 .. of ``W``): model · skinning · rest."""
+        cur = self._wd_cur
+        cur[MODEL_ROW] = self._identity if model is None else model
+        if len(self._drv):
+            np.take(skinning, self._lay.driver_nodes, axis=0, out=self._drv32, mode="clip")
+            self._drv[:] = self._drv32
+            np.matmul(self._drv, self._lay.g_drivers, out=self._drv)
+            np.matmul(cur[MODEL_ROW], self._drv, out=cur[2:])
+        m = cur[MODEL_ROW]  # rigid: the inverse is the transpose and the turned translation
+        inv = self._inv_model
+        inv[:3, :3] = m[:3, :3].T
+        np.matmul(inv[:3, :3], m[:3, 3], out=inv[:3, 3])
+        inv[:3, 3] *= -1.0
 
     def _wd_lerp(self, alpha: float) -> None:
-        w = self._w[:self._nd]
+        w = self._w[:self._nj0]
         np.multiply(self._wd_prev, 1.0 - alpha, out=w)
-        w += alpha * self._wd_cur
+        np.multiply(self._wd_cur, alpha, out=self._wd_tmp)
+        w += self._wd_tmp
 
-    def _start(self, skinning: np.ndarray, model: np.ndarray, t: float) -> None:
+    def _start(self, t: float) -> None:
         """At rest in the current pose: tails where the pose puts them, no velocity."""
-        self._w[:self._nd] = self._wd_cur
+        self._w[:self._nj0] = self._wd_cur
         self._turn[:] = np.eye(3)
-        rig = self.rig
-        world = model @ skinning[rig.node].astype(np.float64) @ self._g[rig.node]
-        tails = np.einsum("nij,nj->ni", world[:, :3, :3], rig.tail) + world[:, :3, 3]
-        self._cur[:] = self._to_center(tails)
+        self._turn4[:, :3, :3] = self._turn
+        self._pose_frames()
+        lay = self._lay
+        joints = self._w[self._nj0:]
+        tails = np.einsum("nij,nj->ni", joints[:, :3, :3], lay.axis * lay.length[:, None]) + joints[:, :3, 3]
+        self._to_center(tails, self._cur)
         self._prev[:] = self._cur
         self._t_sim = self._t_last = t
 
-    def _to_center(self, points: np.ndarray) -> np.ndarray:
+    def _to_center(self, points: np.ndarray, out: np.ndarray) -> np.ndarray:
         if not self._has_center:
-            return points
-        inv = np.linalg.inv(self._w[self._center])
-        return np.einsum("nij,nj->ni", inv[:, :3, :3], points) + inv[:, :3, 3]
+            out[:] = points
+            return out
+        np.take(self._w, self._lay.center_row, axis=0, out=self._centers, mode="clip")
+        inv = np.linalg.inv(self._centers)
+        np.einsum("nij,nj->ni", inv[:, :3, :3], points, out=out)
+        out += inv[:, :3, 3]
+        return out
 
-    def _from_center(self, points: np.ndarray) -> np.ndarray:
+    def _from_center(self, points: np.ndarray, out: np.ndarray) -> np.ndarray:
         if not self._has_center:
-            return points
-        c = self._w[self._center]
-        return np.einsum("nij,nj->ni", c[:, :3, :3], points) + c[:, :3, 3]
+            out[:] = points
+            return out
+        np.take(self._w, self._lay.center_row, axis=0, out=self._centers, mode="clip")
+        np.einsum("nij,nj->ni", self._centers[:, :3, :3], points, out=out)
+        out += self._centers[:, :3, 3]
+        return out
+
+    def _dot(self, a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Row dot products (n,) of ``a``, ``b`` (n, 3) into ``out`` (einsum would buffer the products)."""
+        sq = self._sq[:len(a)]
+        np.multiply(a, b, out=sq)
+        return np.sum(sq, axis=1, out=out)
+
+    def _normalise_to(self, v: np.ndarray, length: np.ndarray | float, lens: np.ndarray) -> np.ndarray:
+        """``v`` (n, 3) scaled in place to ``length``."""
+        self._dot(v, v, lens)
+        np.sqrt(lens, out=lens)
+        np.maximum(lens, 1e-12, out=lens)
+        np.divide(length, lens, out=lens)
+        v *= lens[:, None]
+        return v
 
     def _step(self) -> None:
         """One step of :data:`STEP_S` for every joint, level by level (the numbered steps of the module doc)."""
-        w, nd = self._w, self._nd
-        cur_w = self._from_center(self._cur)
-        new_w = cur_w + (cur_w - self._from_center(self._prev)) * self._inertia[:, None]  # 1: inertia
-        colliders = None
+        lay, w, j0 = self._lay, self._w, self._nj0
+        new, a3, b3 = self._new, self._a3, self._b3
+        self._from_center(self._cur, new)
+        self._from_center(self._prev, a3)
+        np.subtract(new, a3, out=a3)
+        a3 *= lay.inertia
+        new += a3  # 1: inertia
         if self.rig.n_colliders:
-            cw = w[self._collider_row]
-            colliders = (np.einsum("cij,cj->ci", cw[:, :3, :3], self.rig.collider_offset) + cw[:, :3, 3],
-                         np.einsum("cij,cj->ci", cw[:, :3, :3], self.rig.collider_tail) + cw[:, :3, 3])
-        for idx, anchor, rel_local, axis0, push, gravity, length, hits, reach in self._level_data:
-            rest = np.matmul(w[anchor], rel_local)  # the joint's frame, unturned
-            head = rest[:, :3, 3]
-            axis = np.einsum("nij,nj->ni", rest[:, :3, :3], axis0)
-            axis /= _norm(axis)[:, None]
-            nxt = new_w[idx] + axis * push + gravity  # 2, 3: stiffness, gravity
-            d = nxt - head
-            nxt = head + d * (length / np.maximum(_norm(d), 1e-12)[:, None])  # 4: length
-            if hits is not None:
-                nxt = self._collide(nxt, head, length, colliders, hits, reach)  # 5
-            new_w[idx] = nxt
+            np.take(w, lay.collider_row, axis=0, out=self._cw, mode="clip")
+            np.einsum("cij,cj->ci", self._cw[:, :3, :3], self.rig.collider_offset, out=self._c_start)
+            self._c_start += self._cw[:, :3, 3]
+            np.einsum("cij,cj->ci", self._cw[:, :3, :3], self.rig.collider_tail, out=self._c_end)
+            self._c_end += self._cw[:, :3, 3]
+        for (s, e), hits in zip(lay.levels, self._level_hits):
+            frame = self._frame[s:e]
+            np.take(w, lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
+            np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=frame)  # the joint's frame, unturned
+            head, rot = frame[:, :3, 3], frame[:, :3, :3]
+            axis, nxt, d, lens = a3[s:e], new[s:e], b3[s:e], self._len[s:e]
+            np.einsum("nij,nj->ni", rot, lay.axis[s:e], out=axis)
+            self._normalise_to(axis, lay.push[s:e, 0], lens)
+            nxt += axis  # 2: stiffness
+            nxt += lay.gravity[s:e]  # 3: gravity
+            np.subtract(nxt, head, out=d)
+            np.add(head, self._normalise_to(d, lay.length[s:e], lens), out=nxt)  # 4: length
+            if hits:
+                self._collide(s, e, head)  # 5: collisions
             # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame
-            local_dir = np.einsum("nji,nj->ni", rest[:, :3, :3], nxt - head)
-            local_dir /= np.maximum(_norm(local_dir), 1e-12)[:, None]
-            turn = _rotation_between(axis0, local_dir, self._turn_buf[:len(idx)])
-            self._turn[idx] = turn
-            rest[:, :3, :3] = np.matmul(rest[:, :3, :3], turn)
-            w[nd + idx] = rest
+            np.subtract(nxt, head, out=d)
+            np.einsum("nji,nj->ni", rot, d, out=axis)
+            self._normalise_to(axis, 1.0, lens)
+            self._rotation_between(lay.axis[s:e], axis, self._turn[s:e], d, lens)
+            np.matmul(rot, self._turn[s:e], out=self._rot[s:e])
+            rot[:] = self._rot[s:e]
+            w[j0 + s:j0 + e] = frame
         self._prev[:] = self._cur
-        self._cur[:] = self._to_center(new_w)
+        self._to_center(new, self._cur)
 
-    def _collide(self, nxt: np.ndarray, head: np.ndarray, length: np.ndarray,
-                 colliders: tuple[np.ndarray, np.ndarray], hits: np.ndarray, reach: np.ndarray) -> np.ndarray:
-        """Tails (n, 3) pushed out of the colliders they hit (``hits`` (n, c), ``reach`` (n, c): radius plus hit
-        radius), then put back at bone length."""
-        start, end = colliders
-        rel = nxt[:, None, :] - start[None]  # (n, c, 3)
+    def _collide(self, s: int, e: int, head: np.ndarray) -> None:
+        """The level's tails pushed out of the colliders they hit, then put back at bone length."""
+        lay, nxt = self._lay, self._new[s:e]
+        rel, nc, depth, inside = self._rel[s:e], self._nc[s:e], self._depth[s:e], self._inside[s:e]
+        np.subtract(nxt[:, None, :], self._c_start[None], out=rel)
         if self._any_capsule:  # from the closest point of a capsule's segment (a sphere: its centre)
-            seg = end - start
-            seg_sq = np.einsum("ci,ci->c", seg, seg)
-            along = np.einsum("nci,ci->nc", rel, seg)
-            frac = np.where(self._capsule & (seg_sq > 0), np.clip(along / np.maximum(seg_sq, 1e-12), 0.0, 1.0),
-                            0.0)
-            rel -= frac[:, :, None] * seg[None]
-        dist = np.sqrt(np.einsum("nci,nci->nc", rel, rel))
-        depth = reach - dist
-        inside = hits & (depth > 0)
+            np.subtract(self._c_end, self._c_start, out=self._seg)
+            np.einsum("ci,ci->c", self._seg, self._seg, out=self._seg_sq)
+            np.maximum(self._seg_sq, 1e-12, out=self._seg_sq)
+            np.einsum("nci,ci->nc", rel, self._seg, out=nc)
+            nc /= self._seg_sq
+            np.clip(nc, 0.0, 1.0, out=nc)
+            nc *= self._capsule
+            np.multiply(nc[:, :, None], self._seg[None], out=self._rel2[s:e])
+            rel -= self._rel2[s:e]
+        np.einsum("nci,nci->nc", rel, rel, out=nc)
+        np.sqrt(nc, out=nc)  # distances
+        np.subtract(lay.reach[s:e], nc, out=depth)
+        np.greater(depth, 0.0, out=inside)
+        inside &= lay.hits[s:e]
         if not inside.any():
-            return nxt
-        push = np.where(inside, depth / np.maximum(dist, 1e-12), 0.0)
-        nxt = nxt + np.einsum("nc,nci->ni", push, rel)
-        d = nxt - head
-        return head + d * (length / np.maximum(_norm(d), 1e-12)[:, None])
+            return
+        np.maximum(nc, 1e-12, out=nc)
+        np.divide(depth, nc, out=depth)
+        np.logical_not(inside, out=self._outside[s:e])
+        np.copyto(depth, 0.0, where=self._outside[s:e])
+        push = self._a3[s:e]
+        np.einsum("nc,nci->ni", depth, rel, out=push)
+        nxt += push
+        d = self._b3[s:e]
+        np.subtract(nxt, head, out=d)
+        np.add(head, self._normalise_to(d, lay.length[s:e], self._len[s:e]), out=nxt)
 
-    def _pose(self, skinning: np.ndarray, model: np.ndarray) -> None:
+    def _rotation_between(self, a: np.ndarray, b: np.ndarray, out: np.ndarray, v: np.ndarray,
+                          c: np.ndarray) -> None:
+        """``out`` (n, 3, 3): the rotations turning unit vectors ``a`` onto ``b`` (n, 3), Rodrigues' formula for
+        unit vectors ``R = c I + [v]x + v vᵀ / (1 + c)`` with v = a × b, c = a · b (``v``, ``c``: scratch)."""
+        ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
+        bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
+        k = self._k[:len(a)]
+        for i, (p, q, r, t) in enumerate(((ay, bz, az, by), (az, bx, ax, bz), (ax, by, ay, bx))):
+            np.multiply(p, q, out=v[:, i])
+            np.multiply(r, t, out=k)
+            v[:, i] -= k
+        self._dot(a, b, c)
+        np.add(c, 1.0, out=k)
+        np.maximum(k, 1e-9, out=k)
+        np.divide(1.0, k, out=k)
+        vk = self._sq[:len(a)]  # v / (1 + c), column by column (a broadcast product would be buffered)
+        for j in range(3):
+            np.multiply(v[:, j], k, out=vk[:, j])
+        for i in range(3):
+            for j in range(3):
+                np.multiply(v[:, i], vk[:, j], out=out[:, i, j])
+            out[:, i, i] += c
+        out[:, 0, 1] -= v[:, 2]
+        out[:, 1, 0] += v[:, 2]
+        out[:, 0, 2] += v[:, 1]
+        out[:, 2, 0] -= v[:, 1]
+        out[:, 1, 2] -= v[:, 0]
+        out[:, 2, 1] += v[:, 0]
+
+    def _pose_frames(self) -> None:
+        """The joints' world frames at the frame's pose with the last step's turns (``W``'s joint rows)."""
+        lay, w, j0 = self._lay, self._w, self._nj0
+        for s, e in lay.levels:
+            np.take(w, lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
+            np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=self._frame[s:e])
+            np.matmul(self._frame[s:e], self._turn4[s:e], out=w[j0 + s:j0 + e])
+
+    def _pose(self, skinning: np.ndarray) -> None:
         """The joints' skinning matrices at the frame's pose with the last step's turns: the roots of the chains
         stay on the head as it is now (the steps may be up to one step behind)."""
-        w, nd = self._w, self._nd
-        w[:nd] = self._wd_cur
-        t4 = self._turn4
-        t4[:, :3, :3] = self._turn
-        for idx, anchor, rel_local, *_ in self._level_data:
-            w[nd + idx] = np.matmul(np.matmul(w[anchor], rel_local), t4[idx])
-        joints = w[nd:]
-        inv = np.eye(4)  # the model matrix is rigid (a head translation, root motion)
-        inv[:3, :3] = model[:3, :3].T
-        inv[:3, 3] = -inv[:3, :3] @ model[:3, 3]
-        d = np.matmul(inv, np.matmul(joints, self._g_inv))
-        skinning[self.rig.node] = d
-        if len(self._follow_nodes):
-            skinning[self._follow_nodes] = skinning[self.rig.node[self._follow_joint]]
+        lay = self._lay
+        self._w[:self._nj0] = self._wd_cur
+        self._turn4[:, :3, :3] = self._turn
+        self._pose_frames()
+        np.matmul(self._w[self._nj0:], lay.g_inv, out=self._skin)
+        np.matmul(self._inv_model, self._skin, out=self._skin2)
+        self._skin32[:] = self._skin2
+        skinning[lay.node] = self._skin32
+        if len(lay.follow_nodes):
+            np.take(skinning, lay.node[lay.follow_joint], axis=0, out=self._follow, mode="clip")
+            skinning[lay.follow_nodes] = self._follow
