@@ -5,7 +5,8 @@
 // tail, radius}], joints [{node, tail_node (-1: virtual tail), stiffness, drag, gravity_power, gravity_dir,
 // hit_radius, center (-1: none), colliders [index]}], frames [{node index: local matrix (16)}] (the posed locals
 // of the nodes a frame moves), dt (seconds per frame).
-// Output (stdout, JSON): {"tails": [frame][joint][x, y, z]}, the joints' tails in world space after each frame.
+// Output (stdout, JSON): {"tails": [frame][joint][x, y, z], "heads": [frame][joint][x, y, z]}, the joints' tails
+// and their bones' own positions in world space after each frame.
 import { readFileSync } from "node:fs";
 import * as THREE from "three";
 import {
@@ -54,6 +55,7 @@ const joints = input.joints.map((j) => {
 manager.setInitState();
 
 const tails = [];
+const heads = [];
 const world = new THREE.Vector3();
 for (const frame of input.frames) {
   for (const [index, matrix] of Object.entries(frame)) {
@@ -67,5 +69,9 @@ for (const frame of input.frames) {
     if (j.center) world.applyMatrix4(j.center.matrixWorld);
     return [world.x, world.y, world.z];
   }));
+  heads.push(joints.map((j) => {
+    world.setFromMatrixPosition(j.bone.matrixWorld);
+    return [world.x, world.y, world.z];
+  }));
 }
-process.stdout.write(JSON.stringify({ tails }));
+process.stdout.write(JSON.stringify({ tails, heads }));
