@@ -11,7 +11,7 @@ of its options (a benchmark's or a test's) takes their defaults.
 group              options                                                     commands
 =================  ==========================================================  ===================
 PictureOptions     --size, --path, --headless, --framing, --background,        run, replay, demo
-                   --msaa, --credits
+                   --msaa, --credits, --no-springs
 PacingOptions      --fps, --draw, --duration                                   run, replay, demo
 StageOptions       --actor, --pair, --marker-units, --retarget, --elastic,     run, replay
                    --config, --profile, --calibrate, --gestures, --gesture-seed
@@ -68,6 +68,7 @@ class PictureOptions:
     path : str, the deformation path (``auto``, ``gpu``, ``cpu``)
     headless : bool, offscreen through EGL even where a display exists
     render : RenderOptions (framing, background, MSAA, credits)
+    springs : bool, simulate the character's spring bones (``--no-springs``: rigid)
     """
 
     width: int = 1280
@@ -75,6 +76,7 @@ class PictureOptions:
     path: str = "auto"
     headless: bool = False
     render: RenderOptions = field(default_factory=RenderOptions)
+    springs: bool = True
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser, size: str = "1280x720",
@@ -83,6 +85,8 @@ class PictureOptions:
         parser.add_argument("--size", default=size, help=f"image size WIDTHxHEIGHT (default {size})")
         parser.add_argument("--path", choices=PATHS, default="auto", help="deformation path")
         add_render_arguments(parser)
+        parser.add_argument("--no-springs", dest="springs", action="store_false",
+                            help="leave a VRM avatar's spring bones (hair, ribbons) rigid instead of simulating them")
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> PictureOptions:
@@ -93,7 +97,7 @@ class PictureOptions:
         render = render_options(ns)
         if get(ns, "virtual_camera") is not None and get(ns, "background") is None:  # a camera's key colour
             render = dataclasses.replace(render, background=KEY_GREEN)
-        return cls(width, height, path, bool(get(ns, "headless", False)), render)
+        return cls(width, height, path, bool(get(ns, "headless", False)), render, bool(get(ns, "springs", True)))
 
 
 # -- ticks ------------------------------------------------------------------------------------------------
