@@ -18,6 +18,7 @@ from facepuppet.offline.elastic.control_points import ControlPoints, ict_control
 from facepuppet.offline.elastic.params import fit_character
 from facepuppet.offline.io.obj import read_vertices_only
 from facepuppet.offline.perfect_sync import evaluate
+from facepuppet.offline.perfect_sync.bench import point_error
 from facepuppet.offline.perfect_sync.commands import perfect_sync
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.lip_contact import INNER_CORNERS, lip_contact
@@ -102,3 +103,15 @@ def test_a_head_with_tucked_in_mouth_corners_gets_them_and_clones_within_the_goa
     # measured 13.9 %, worst 25.8 % (before: 16.2 %, worst 25.8 %)
     assert np.median(list(errs.values())) < 0.15
     assert max(errs.values()) < 0.40
+
+
+def test_the_bench_names_the_proposed_point_furthest_from_the_true_one(ict_character, marks):
+    c = ict_character
+    truth = ict_control_points(marks, c.vertices, c.triangles, main_front(c))
+    assert point_error(truth, truth, c.vertices)["median"] == 0.0
+    moved = truth.vertices.copy()
+    moved[truth.index("mouth_inner_L")] = truth.vertex("mouth_corner_L")
+    err = point_error(ControlPoints(truth.names, moved), truth, c.vertices)
+    v = c.vertices.astype(np.float64)
+    expected = float(np.linalg.norm(v[truth.vertex("mouth_corner_L")] - v[truth.vertex("mouth_inner_L")]))
+    assert err["worst"][0] == "mouth_inner_L" and err["worst"][1] == pytest.approx(expected, abs=1e-3)
