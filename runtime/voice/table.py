@@ -231,30 +231,38 @@ class VoiceEvaluator:
         n_f, n_o = len(table.feature_mean), len(table.outputs)
         self._z = np.zeros(n_f, np.float32)
         self._y = np.zeros(n_o, np.float32)
+        self._centre = np.zeros(n_o, np.float32)
         self._k = np.zeros(len(table.train_inputs), np.float32) if table.model == "kpls" else None
+        n_train = len(table.train_inputs) if table.model == "kpls" else 1
+        self._mean_row = np.full(n_train, 1.0 / n_train, np.float32)  # mean(k) as a dot product
+        self._one, self._zero = np.float32(1.0), np.float32(0.0)
+        self._minus_two, self._minus_gamma = np.float32(-2.0), np.float32(-table.gamma)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         t, z, y = self.table, self._z, self._y
-        np.subtract(x, t.feature_mean, out=z, casting="unsafe")
+        np.copyto(z, x, casting="unsafe")
+        np.subtract(z, t.feature_mean, out=z)
         np.multiply(z, t._inv_scale, out=z)
         if t.model == "kpls":
             k = self._k
             np.dot(t.train_inputs, z, out=k)
             # rbf: exp(-γ (‖z‖² + ‖X_i‖² − 2 X_i·z))
-            k *= -2.0
-            k += t._train_sq
-            k += float(np.dot(z, z))
-            np.maximum(k, 0.0, out=k)
-            k *= -t.gamma
+            np.multiply(k, self._minus_two, out=k)
+            np.add(k, t._train_sq, out=k)
+            np.add(k, np.float32(np.dot(z, z)), out=k)
+            np.maximum(k, self._zero, out=k)
+            np.multiply(k, self._minus_gamma, out=k)
             np.exp(k, out=k)
             np.dot(k, t.dual_coef, out=y)  # Ouzounis eq. 10, one kernel row
-            y -= float(k.mean()) * t._coef_sum  # Ouzounis eq. 8, centring of the test row
-            y += t._offset
+            np.multiply(t._coef_sum, np.float32(np.dot(k, self._mean_row)), out=self._centre)
+            np.subtract(y, self._centre, out=y)  # Ouzounis eq. 8, centring of the test row
+            np.add(y, t._offset, out=y)
         else:
             np.dot(z, t.coef, out=y)
-            y += t.output_mean
-        np.clip(y, 0.0, 1.0, out=y)
+            np.add(y, t.output_mean, out=y)
+        np.minimum(y, self._one, out=y)
+        np.maximum(y, self._zero, out=y)
         level = float(x[-1])
         if level < t.gate_db + GATE_SPAN_DB:
-            y *= max(0.0, (level - t.gate_db) / GATE_SPAN_DB)
+            np.multiply(y, np.float32(max(0.0, (level - t.gate_db) / GATE_SPAN_DB)), out=y)
         return y
