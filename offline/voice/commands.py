@@ -23,6 +23,7 @@ from facepuppet.runtime.voice.features import FeatureSpec, features_of
 from facepuppet.runtime.voice.table import VoiceTable
 
 from facepuppet.offline.gestures.speech_intensity import read_speech
+from facepuppet.offline.voice.calibrate import add_parser as add_calibrate_voice
 from facepuppet.offline.voice.fit import CURVE_FPS, MODEL_NAMES, fit_voice, report_lines
 
 DEFAULT_MAP = "facegood_to_arkit.csv"
@@ -71,6 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument("wav", type=Path, help="speech WAV")
     q.add_argument("-o", "--output", type=Path, required=True, help="CSV to write")
     q.set_defaults(func=voice_curves_command)
+    add_calibrate_voice(subparsers)
 
 
 def fit_voice_command(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:

@@ -41,8 +41,7 @@ from facepuppet.runtime.recording.recorder import PacketRecorder
 from facepuppet.runtime.recording.switch import SwitchableRecorder
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
 from facepuppet.runtime.session.stop_signals import StopOnSignals
-from facepuppet.runtime.voice.source import MicVoice, WavVoice
-from facepuppet.runtime.voice.table import VoiceTable
+from facepuppet.runtime.voice.source import MicVoice, WavVoice, load_voice
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.bus import SessionBus
@@ -109,7 +108,7 @@ class LiveFeed:
         # from here on a SIGTERM or Ctrl-C ends the run cleanly (the loop stops at its next tick)
         stack.enter_context(StopOnSignals(self.stop_event))
         inputs = self.inputs
-        table = VoiceTable.load(self.stages.voice) if self.stages.voice is not None else None
+        table = load_voice(self.stages.voice) if self.stages.voice is not None else None
         if table is not None and inputs.audio is None and inputs.audio_file is None:
             raise UsageError(f"--voice {self.stages.voice}: needs --audio [DEVICE] or --audio-file WAV to listen to")
         if inputs.audio is not None or inputs.audio_file is not None:
@@ -126,7 +125,7 @@ class LiveFeed:
                            audio_level=self.audio.level if self.audio is not None else None,
                            keep_snapshots=self.midrun, packets=self.recordable, voice=voice)
 
-    def _open_voice(self, table: VoiceTable, log: Callable[[str], None]):
+    def _open_voice(self, table, log: Callable[[str], None]):
         """The voice's channel source of ``--voice``: the WAV on the run's clock, or the microphone's blocks (None,
         said, when there is no microphone: the run goes on without the voice)."""
         delay_s = self.stages.voice_delay / 1000.0

@@ -196,9 +196,9 @@ class StageOptions:
         group.add_argument("--gestures", type=Path, default=None, metavar="GESTURES.npz",
                            help="gesture tables (build-gestures): add voice-driven blinks, brows and head motion")
         group.add_argument("--gesture-seed", type=int, default=0, help="seed of the gesture synthesis (default 0)")
-        group.add_argument("--voice", type=Path, default=None, metavar="VOICE.npz",
-                           help="voice table (fit-voice): the mouth learned from the voice of --audio/--audio-file "
-                                "(replay: the channels the run recorded)")
+        group.add_argument("--voice", type=Path, default=None, metavar="VOICE.npz|PROFILE.toml",
+                           help="voice table (fit-voice) or calibrated vowels (calibrate-voice): the mouth from the "
+                                "voice of --audio/--audio-file (replay: the channels the run recorded)")
         group.add_argument("--voice-mode", choices=("loss", "hybrid"), default="loss",
                            help="loss (default): the voice's mouth where [tracking_loss] mouth = \"voice\"; "
                                 "hybrid: the tracker drives everything but the mouth")

@@ -42,8 +42,8 @@ from facepuppet.runtime.recording.take_rate import take_rate
 from facepuppet.runtime.recording.ticked_source import TickedSource, decode_live_recording, read_live_session
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
 from facepuppet.runtime.session.stop_signals import StopOnSignals
+from facepuppet.runtime.voice.source import load_voice
 from facepuppet.runtime.voice.stage import RecordedVoice
-from facepuppet.runtime.voice.table import VoiceTable
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.bus import SessionBus
@@ -186,7 +186,7 @@ class RecordingFeed:
         """The voice channels a ``--voice`` run kept, for ``replay --voice`` (its table names the channels)."""
         if self.stages.voice is None:
             return None
-        table = VoiceTable.load(self.stages.voice)
+        table = load_voice(self.stages.voice)
         if self.session is None or not self.session.voice:
             raise InputFileError(f"{self.path}: --voice {self.stages.voice}: the recording kept no voice channels "
                                  "(it was not made by run --voice)")

@@ -24,11 +24,19 @@ import numpy as np
 from facepuppet.runtime.inputs.audio import read_wav
 from facepuppet.runtime.voice.features import VoiceFeatures
 from facepuppet.runtime.voice.table import VoiceTable
+from facepuppet.runtime.voice.vowels import VowelProfile
 
 if TYPE_CHECKING:
     import os
 
 MAX_DELAY_S = 1.0
+
+
+def load_voice(path: str | os.PathLike) -> VoiceTable | VowelProfile:
+    """What ``--voice`` names: a calibrated vowel profile (``.toml``, calibrate-voice) or a voice table (fit-voice)."""
+    if Path(path).suffix.lower() == ".toml":
+        return VowelProfile.load(path)
+    return VoiceTable.load(path)
 
 
 class VoiceChannels:
