@@ -134,28 +134,3 @@ class MicVoice:
     def close(self) -> None:
         self.mic.on_block = None
 
-
-def onset_latency(table: VoiceTable, fps: float = 60.0, onset_s: float = 0.5, rate: int = 16000) -> dict:
-    """Time from a sound onset in a WAV stream to the first tick whose jaw-like channel moves, on ``fps`` ticks.
-
-    The stream is silence, then from ``onset_s`` a loud vowel-like buzz; ticks at k / fps push the samples
-    up to their time (:class:`WavVoice`'s way). Returns the onset, the first tick that moved and the
-    latency in ms (the hop that holds the onset plus the wait for the next tick).
-    """
-    t = np.arange(int(rate * (onset_s + 0.5))) / rate
-    x = np.where(t >= onset_s, 0.3 * np.sign(np.sin(2 * np.pi * 150 * t)) * np.sin(2 * np.pi * 700 * t), 0.0)
-    voice = VoiceChannels(table, rate)
-    base, pos, k = None, 0, 0
-    while True:
-        k += 1
-        tick = k / fps
-        end = min(int(round(tick * rate)), len(x))
-        voice.push(x[pos:end])
-        pos = end
-        v = voice.values()
-        if base is None:
-            base = v
-        if np.abs(v - base).max() > 0.01 and tick >= onset_s:
-            return {"onset_s": onset_s, "tick_s": tick, "latency_ms": (tick - onset_s) * 1000.0, "fps": fps}
-        if end >= len(x):
-            return {"onset_s": onset_s, "tick_s": math.nan, "latency_ms": math.nan, "fps": fps}
