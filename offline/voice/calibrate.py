@@ -1,6 +1,6 @@
 """``facepuppet calibrate-voice``: the user's A, I, U, E, O (and silence) -> a vowel profile (TOML).
 
-Each vowel comes from a WAV (``--wav A=a.wav``, one per vowel, a few seconds of it held) or, with ``--record
+Each vowel comes from a WAV (``--wav A=a.wav``, one per vowel, a few seconds of it held) or, with ``--from-mic
 SECONDS``, from the microphone, prompted vowel by vowel. The profile is built by the runtime
 (:func:`~facepuppet.runtime.voice.vowels.build_profile`), so what ``run --voice profile.toml`` matches is what
 was measured here; the command prints how many of each take's voiced hops the profile recognises.
@@ -51,18 +51,18 @@ def record_takes(seconds: float, device, log: Callable[[str], None]) -> tuple[di
 
 
 def calibrate_voice_command(args: argparse.Namespace, log: Callable[[str], None] = print) -> int:
-    if args.record is not None:
+    if args.from_mic is not None:
         if args.wav:
-            raise UsageError("calibrate-voice: --record or --wav, not both")
-        if not 0.5 <= args.record <= 30:
-            raise UsageError(f"--record: expected 0.5..30 seconds per take, got {args.record:g}")
-        takes, rate = record_takes(args.record, args.device, log)
+            raise UsageError("calibrate-voice: --from-mic or --wav, not both")
+        if not 0.5 <= args.from_mic <= 30:
+            raise UsageError(f"--from-mic: expected 0.5..30 seconds per take, got {args.from_mic:g}")
+        takes, rate = record_takes(args.from_mic, args.device, log)
     else:
         given = dict(args.wav or ())
         missing = [v for v in VOWELS if v not in given]
         if missing:
             raise UsageError(f"calibrate-voice: no --wav for {', '.join(missing)} (give --wav A=a.wav ... for each "
-                             "of A I U E O, or --record SECONDS)")
+                             "of A I U E O, or --from-mic SECONDS)")
         takes, rate = {}, None
         for name, path in given.items():
             x, r = read_wav(path)
@@ -94,7 +94,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--wav", type=parse_take, action="append", metavar="VOWEL=FILE.wav",
                    help="one take per vowel (A, I, U, E, O) and optionally silence, a few seconds each")
-    p.add_argument("--record", type=float, metavar="SECONDS", help="record each take from the microphone instead")
-    p.add_argument("--device", default=None, help="input device for --record (default: the system's)")
+    p.add_argument("--from-mic", type=float, metavar="SECONDS", help="record each take from the microphone instead")
+    p.add_argument("--device", default=None, help="input device for --from-mic (default: the system's)")
     p.add_argument("-o", "--output", type=Path, required=True, help="profile to write (.toml)")
     p.set_defaults(func=calibrate_voice_command)

@@ -139,3 +139,25 @@ def test_a_missing_microphone_is_said_and_the_run_goes_on(tmp_path):
     assert any("no audio" in line for line in logs), logs
     assert any("no voice; the run goes on" in line for line in logs), logs
     assert result.loop.n_ticks > 0
+
+
+def test_with_several_inputs_the_voice_is_a_mix_source_of_its_channels_and_the_replay_agrees(tmp_path):
+    table, wav, char = _files(tmp_path, vowel_buzz(1.5))
+
+    def send(client, stop):  # the tracker has only the brows: the mouth comes from the voice
+        while not stop.is_set():
+            vmc(client, {"BrowInnerUp": 0.5})
+            time.sleep(0.01)
+
+    record, replay_w = tmp_path / "take.fps", tmp_path / "replay.npy"
+    result, logs = live(["-c", str(char), "--input", "vmc", "--input", "audio", "--duration", "1.5", "--audio-file",
+                         str(wav), "--voice", str(table), "--record", str(record)], send, tmp_path)
+    assert any(line.startswith("stages: vmc+audio→audio→voice→mix") for line in logs), logs
+    w = result.weights.array[-40:]
+    assert np.ptp(w[:, 0]) > 0.1 and np.ptp(w[:, 1]) > 0.02  # jawOpen and mouthFunnel from the voice
+    assert np.abs(w[:, 2] - 0.5).max() < 0.05  # the brows from the tracker
+    args = parser().parse_args(["replay", str(record), "-c", str(char), "--headless", "--size", "48x40",
+                                "--voice", str(table), "--dump-weights", str(replay_w)])
+    with logged([]):
+        assert replay.run_replay(args) == 0
+    np.testing.assert_array_equal(np.load(replay_w), result.weights.array)
