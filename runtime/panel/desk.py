@@ -161,7 +161,7 @@ class DeskPanel:
         self.ui = Ui(imgui)
         self.rects = self.ui.rects
         self._input = InputStatus(counters=counters, stats=stats, recorder=recorder, pipeline=pipeline,
-                                  input_kind=input_kind, address=address)
+                                  input_kind=input_kind, address=address, voice=getattr(chain, "voice", None))
         self._status = self._input.numbers  # the status numbers (the settings show the recording's)
         self._list = ChannelList(imgui, self.mapper)
         self._profile = ProfileControls()
