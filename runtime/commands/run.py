@@ -83,6 +83,8 @@ class RunPlan:
                                   or (inputs.audio is None and inputs.audio_file is None)):
             raise UsageError("--input audio: needs --gestures GESTURES.npz or --voice VOICE.npz, and --audio [DEVICE] "
                              "or --audio-file WAV")
+        if stages.voice is not None and inputs.audio is None and inputs.audio_file is None:
+            raise UsageError(f"--voice {stages.voice}: needs --audio [DEVICE] or --audio-file WAV to listen to")
         picture = PictureOptions.from_args(ns)
         return cls(Path(ns.character), inputs, stages, PacingOptions.from_args(ns), picture,
                    OutputOptions.from_args(ns, picture), record, PanelOptions.from_args(ns),
