@@ -74,15 +74,21 @@ class VoiceStage:
 
 class HybridMouth:
     """The ``hybrid`` stage: the voice's channels replace the tracker's mouth channels of the same names
-    (channels the frame lacks are added); the rest of the face stays the tracker's."""
+    (channels the frame lacks are added); the rest of the face stays the tracker's, its last frame on a tick
+    without a new one."""
 
     name = "hybrid"
 
     def __init__(self, voice: VoiceStage) -> None:
         self.voice = voice
         self._maps: dict = {}
+        self._last: Frame | None = None
 
     def __call__(self, frame: Frame | None, t: float) -> Frame | None:
+        if frame is not None and frame.weights is not None:
+            self._last = frame
+        elif frame is None and self._last is not None:
+            frame = self._last  # a tick without a new frame: the tracker's face holds, the voice's mouth moves on
         values = self.voice.values
         if values is None:
             return frame
