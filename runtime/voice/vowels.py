@@ -26,6 +26,7 @@ import numpy as np
 
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.files.input_files import regular_file
+from facepuppet.runtime.files.outputs import write_atomic
 from facepuppet.runtime.voice.features import FeatureSpec, VoiceFeatures
 
 FORMAT = "facepuppet-voice-profile"
@@ -121,8 +122,6 @@ class VowelProfile:
         return "\n".join(lines) + "\n"
 
     def save(self, path: str | os.PathLike) -> Path:
-        from facepuppet.runtime.files.outputs import write_atomic
-
         return write_atomic(path, lambda temp: temp.write_text(self.to_toml()))
 
     @classmethod
