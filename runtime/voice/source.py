@@ -69,7 +69,19 @@ class VoiceChannels:
         """Feed samples (shape (k,), float in [-1, 1]); evaluates each hop completed."""
         self.features.push(samples)
 
+    listener = None  # callable taking each hop's feature vector (a view), in the pushing thread: a recalibration
+
+    def use(self, model) -> None:
+        """Evaluate ``model`` (a table or profile with the same outputs) from the next hop; call it from the thread
+        that pushes (a recalibration finishing in its listener), so no hop sees half of the change."""
+        if tuple(model.outputs) != tuple(self.table.outputs):
+            raise ValueError("voice: a new model must give the same channels")
+        self.table = model
+        self.evaluate = model.evaluator()
+
     def _on_hop(self, features: VoiceFeatures) -> None:
+        if self.listener is not None:
+            self.listener(features.vector())
         d = self.delay_hops + 1
         self._at = (self._at + 1) % d
         np.copyto(self._ring[self._at], self.evaluate(features.vector()))

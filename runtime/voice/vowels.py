@@ -242,49 +242,59 @@ class VowelEvaluator:
         return y
 
 
+def feature_rows(x: np.ndarray, spec: FeatureSpec) -> np.ndarray:
+    """The feature vector after each whole hop of samples ``x``, shape (k, n_features) (newest mel frame, level)."""
+    ex = VoiceFeatures(spec)
+    hop = ex.hop_n
+    rows = []
+    for start in range(0, len(x) - hop + 1, hop):
+        ex.push(x[start:start + hop])
+        rows.append(ex.vector().copy())
+    return np.array(rows).reshape(-1, spec.n_features)
+
+
 def build_profile(takes: dict[str, np.ndarray], sample_rate: float, silence: np.ndarray | None = None) -> tuple[
         VowelProfile, dict]:
-    """A profile from one recording per vowel (samples at ``sample_rate``), each a few seconds of the vowel held.
-
-    The template is the mean MFCC over the voiced hops (within 20 dB of the take's loudest); the temperature is a
-    quarter of the median distance between templates; openness runs from 10 dB over the silence's level (at
-    least -60 dBFS; -50 dBFS without a silence take) to the vowels' median level. Returns (profile, report of
-    per-vowel hops and levels).
-    """
+    """A profile from one recording per vowel (samples at ``sample_rate``), each a few seconds of the vowel held
+    (:func:`profile_from_rows` over each take's hops)."""
     spec = VOWEL_SPEC.at_rate(sample_rate)
     missing = [v for v in VOWELS if v not in takes]
     if missing:
         raise ValueError(f"calibrate-voice: no recording of {', '.join(missing)}")
+    rows = {v: feature_rows(np.asarray(takes[v], np.float64), spec) for v in VOWELS}
+    if silence is not None and len(silence):
+        rows["silence"] = feature_rows(np.asarray(silence, np.float64), spec)
+    return profile_from_rows(rows, spec)
 
-    def frames(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        ex = VoiceFeatures(spec)
-        rows, levels = [], []
-        hop = ex.hop_n
-        for start in range(0, len(x) - hop + 1, hop):
-            ex.push(x[start:start + hop])
-            v = ex.vector()
-            rows.append(v[:spec.n_mels].copy())
-            levels.append(v[-1])
-        return np.array(rows).reshape(-1, spec.n_mels), np.array(levels)
 
+def profile_from_rows(rows: dict[str, np.ndarray], spec: FeatureSpec) -> tuple[VowelProfile, dict]:
+    """A profile from the feature rows (k, n_features) of each vowel's take (and optionally ``"silence"``).
+
+    The template is the mean MFCC over the voiced hops (within 20 dB of the take's loudest); the temperature is a
+    quarter of the median distance between templates; openness runs from 10 dB over the silence's level (at
+    least -60 dBFS; -50 dBFS without a silence take) to the vowels' median level. Returns (profile, report of
+    per-vowel hops and levels). ValueError when a vowel's take is missing or silent.
+    """
+    n = spec.n_mels
     templates, voiced_levels, report = [], [], {}
     for v in VOWELS:
-        mel, lv = frames(np.asarray(takes[v], np.float64))
+        X = rows.get(v)
+        lv = X[:, -1] if X is not None else np.zeros(0)
         if len(lv) == 0 or lv.max() <= -90:
-            raise ValueError(f"calibrate-voice: the recording of {v} is silent")
+            raise ValueError(f"calibrate-voice: the recording of {v} is {'missing' if X is None else 'silent'}")
         keep = lv >= lv.max() - 20.0
-        templates.append(mfcc_of_frames(mel[keep]).mean(axis=0))
+        templates.append(mfcc_of_frames(X[keep, :n]).mean(axis=0))
         voiced_levels.extend(lv[keep].tolist())
         report[v] = {"hops": int(keep.sum()), "level_db": float(np.median(lv[keep]))}
     T = np.array(templates)
     d = np.sqrt(((T[:, None] - T[None]) ** 2).sum(-1))[np.triu_indices(len(VOWELS), 1)]
     sil = None
     floor = -50.0
-    if silence is not None and len(silence):
-        mel, lv = frames(np.asarray(silence, np.float64))
-        sil = mfcc_of_frames(mel).mean(axis=0)
-        floor = float(min(max(np.median(lv) + 10.0, -60.0), np.median(voiced_levels) - 12.0))
-        report["silence"] = {"hops": int(len(lv)), "level_db": float(np.median(lv))}
+    quiet = rows.get("silence")
+    if quiet is not None and len(quiet):
+        sil = mfcc_of_frames(quiet[:, :n]).mean(axis=0)
+        floor = float(min(max(np.median(quiet[:, -1]) + 10.0, -60.0), np.median(voiced_levels) - 12.0))
+        report["silence"] = {"hops": int(len(quiet)), "level_db": float(np.median(quiet[:, -1]))}
     ceiling = float(max(np.median(voiced_levels), floor + 6.0))
     profile = VowelProfile(T, sil, float(max(np.median(d) / 4.0, 1e-2)), floor, ceiling, spec)
     report["template_distance_median"] = float(np.median(d))
@@ -293,10 +303,5 @@ def build_profile(takes: dict[str, np.ndarray], sample_rate: float, silence: np.
 
 def voiced_hops(profile: VowelProfile, x: np.ndarray, rate: float) -> np.ndarray:
     """Feature rows of the hops within 20 dB of the take's loudest (the vowel held), shape (k, n_features)."""
-    ex = VoiceFeatures(profile.spec.at_rate(rate))
-    rows = []
-    for start in range(0, len(x) - ex.hop_n + 1, ex.hop_n):
-        ex.push(x[start:start + ex.hop_n])
-        rows.append(ex.vector().copy())
-    X = np.array(rows).reshape(-1, profile.spec.n_features)
+    X = feature_rows(x, profile.spec.at_rate(rate))
     return X[X[:, -1] >= X[:, -1].max() - 20.0] if len(X) else X
