@@ -270,7 +270,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
         chain.audio = AudioTap(audio_level)
         stages.append(chain.audio)
     if voice is not None:
-        chain.voice = VoiceStage(voice, make_frame=voice_only)
+        chain.voice = VoiceStage(voice, make_frame=voice_only, path=str(voice_table or ""))
         stages.append(chain.voice)
         log(f"voice: {voice_table} ({len(chain.voice.outputs)} mouth channels, "
             f"{'the voice alone' if voice_only else getattr(options, 'voice_mode', 'loss')})")

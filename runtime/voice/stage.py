@@ -48,12 +48,14 @@ class VoiceStage:
     ----------
     source : has ``outputs`` (tuple of ARKit names) and ``channels(t) -> ndarray (n_outputs,) or None``
     make_frame : bool, with the voice alone: a tick without a frame gets the voice's frame
+    path : str, the ``--voice`` file
     """
 
     name = "voice"
 
-    def __init__(self, source, make_frame: bool = False) -> None:
+    def __init__(self, source, make_frame: bool = False, path: str = "") -> None:
         self.source = source
+        self.path = path  # the --voice file (the panel names it and saves a re-calibration over it)
         self.outputs = tuple(source.outputs)
         self.make_frame = make_frame
         self.values: np.ndarray | None = None
