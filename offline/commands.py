@@ -23,13 +23,15 @@ from facepuppet.offline.io.rig_import import import_rig
 _COMMAND_MODULES = ("facepuppet.offline.actuation.commands", "facepuppet.offline.elastic.commands",
                     "facepuppet.offline.gestures.commands", "facepuppet.offline.kpls.commands",
                     "facepuppet.offline.io.gltf_commands", "facepuppet.offline.perfect_sync.commands",
-                    "facepuppet.offline.batch.commands", "facepuppet.offline.batch.golden_report")
+                    "facepuppet.offline.batch.commands", "facepuppet.offline.batch.golden_report",
+                    "facepuppet.offline.voice.commands")
 # Offline modules with ``register_benches(register_bench)``, same rule.
 _BENCH_MODULES = ("facepuppet.offline.actuation.bench", "facepuppet.offline.elastic.bench",
                   "facepuppet.offline.gestures.bench", "facepuppet.offline.kpls.bench",
                   "facepuppet.offline.io.gltf_bench", "facepuppet.offline.io.gltf_bombs_bench",
                   "facepuppet.offline.perfect_sync.bench", "facepuppet.offline.gpu_bench",
-                  "facepuppet.offline.replay_bench", "facepuppet.offline.batch.bench")
+                  "facepuppet.offline.replay_bench", "facepuppet.offline.batch.bench",
+                  "facepuppet.offline.voice.bench")
 
 
 def _modules(names):
