@@ -40,6 +40,7 @@ from facepuppet.runtime.render.face_mesh import vertex_materials, visible_triang
 from facepuppet.runtime.render.framebuffers import Framebuffers
 from facepuppet.runtime.render.framing import frame_character
 from facepuppet.runtime.render.layers import SUBTLE_LAYER_KINDS, has_layers, vertex_opacity
+from facepuppet.runtime.render.material_binds import MaterialBinds
 from facepuppet.runtime.render.options import FRAMINGS
 from facepuppet.runtime.render.parts_path import (
     HeadPose,
@@ -48,7 +49,9 @@ from facepuppet.runtime.render.parts_path import (
     look_of,
     make_textures,
     material_block,
+    material_model_of,
     material_variant,
+    outline_variant,
     variant_defines,
     vertex_attributes,
 )
@@ -63,6 +66,8 @@ logger = logging.getLogger(__name__)
 
 PATHS = ("auto", "gpu", "cpu", "elastic")
 BASE_TEXTURE_UNIT = PATH_TEXTURE_UNITS  # a material's base colour texture, above the path's units
+METAL_ROUGH_TEXTURE_UNIT = BASE_TEXTURE_UNIT + 1  # its metallic-roughness texture (linear)
+OUTLINE_TEXTURE_UNIT = BASE_TEXTURE_UNIT + 2  # its MToon outline width texture (linear, vertex stage)
 
 
 def realistic_weights(n_shapes: int, n_active: int = 10) -> np.ndarray:
@@ -91,6 +96,7 @@ class FaceRenderer:
     msaa : int, samples of the offscreen framebuffer (0 or 1: none; capped at the context's maximum);
         a window's samples are the window's (``create_context(samples=...)``)
     log : callable(str), receives the one-line path report
+    outlines : bool, draw the MToon outlines of the materials that have them (False: the surfaces only)
     subtle_layers : bool, draw the subtle see-through eye layers (lid shadow, wet films:
         :data:`~facepuppet.runtime.render.layers.SUBTLE_LAYER_KINDS`); False leaves them out where a frame
         budget asks (:mod:`~facepuppet.runtime.render.quality`); the lashes are always drawn
@@ -129,6 +135,7 @@ class FaceRenderer:
         msaa: int = 0,
         credits: str | None = None,
         subtle_layers: bool = True,
+        outlines: bool = True,
     ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
@@ -151,14 +158,19 @@ class FaceRenderer:
         self._head_pose = HeadPose(character) if self.parts else None
         self.cull_back_faces = bool(cull_back_faces)
         self.subtle_layers = bool(subtle_layers)
+        self.outlines = bool(outlines)
+        self.material_time = 0.0  # seconds, MToon's UV animation (set_material_time)
         self._framebuffers = Framebuffers(ctx, (self.width, self.height), self.samples, target_fbo)
         self.fbo = self._framebuffers.fbo
         self.camera = frame_character(character, framing, self.width / self.height)
         self._setup_buffers()
         self._look = look_of(character) if self.parts else None
         self._textures = make_textures(ctx, self._look) if self.parts else []
-        self._materials = [ctx.buffer(material_block(character, m)) for m in range(len(character.material_names))] \
-            if self.parts else []
+        model = material_model_of(character)
+        self._data_textures = make_textures(ctx, model, srgb=False) if self.parts else []
+        self._binds = MaterialBinds(character)
+        self._materials = [ctx.buffer(material_block(character, m, self._binds.rows))
+                           for m in range(len(character.material_names))] if self.parts else []
         if path == "elastic" and elastic is None:
             raise ValueError("elastic: path 'elastic' needs an ElasticModel (elastic=...)")
         candidates = [self._make_path(name, elastic) for name in (("gpu", "cpu") if path == "auto" else (path,))]
@@ -192,6 +204,10 @@ class FaceRenderer:
                 subtle = np.isin(c.material_params[:, 2].round().astype(int), SUBTLE_LAYER_KINDS)
                 self._groups = [g for g in self._groups if not subtle[g.material]]
             self._variant_of = [material_variant(c, m) for m in range(len(c.material_names))]
+            self._outline_of = [outline_variant(c, m) for m in range(len(c.material_names))]
+            # MToon outlines: the opaque and masked groups of the materials that have one (after the surfaces)
+            self._outline_groups = [g for g in self._groups if self.outlines and not g.blend
+                                    and self._outline_of[g.material] is not None]
             self._ibo = ctx.buffer(tris.tobytes() if len(tris) else b"\0" * 12)
             self.n_indices = len(tris) * 3
             self.n_one_sided_indices = 0
@@ -228,11 +244,16 @@ class FaceRenderer:
             prog = load_program(self.ctx, "face.glsl", defines or None)
             return {None: prog}, {None: self._vao(prog, vbo)}
         programs, vaos = {}, {}
-        for key in dict.fromkeys(self._variant_of[g.material] for g in self._groups) or [(0, 0, 0, 0, 0)]:
+        keys = [self._variant_of[g.material] for g in self._groups]
+        keys += [self._outline_of[g.material] for g in self._outline_groups]
+        for key in dict.fromkeys(keys) or [(0,) * 10]:
             prog = load_program(self.ctx, "character.glsl", {**defines, **variant_defines(key)})
             prog["Material"].binding = 0
-            if "u_base_texture" in prog:
-                prog["u_base_texture"].value = BASE_TEXTURE_UNIT
+            for name, unit in (("u_base_texture", BASE_TEXTURE_UNIT),
+                               ("u_metal_rough_texture", METAL_ROUGH_TEXTURE_UNIT),
+                               ("u_outline_texture", OUTLINE_TEXTURE_UNIT)):
+                if name in prog:
+                    prog[name].value = unit
             programs[key], vaos[key] = prog, self._vao(prog, vbo)
         return programs, vaos
 
@@ -316,6 +337,13 @@ class FaceRenderer:
         else:
             self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
         self._deformation.prepare(w, joints)
+        if self.parts and self._binds.active:  # expressions' material binds: the changed materials' blocks
+            for m in self._binds.update(w):
+                self._materials[m].write(material_block(self.character, int(m), self._binds.rows))
+
+    def set_material_time(self, seconds: float) -> None:
+        """The time of MToon's UV animation (scroll and rotation speeds are per second) for the next frames."""
+        self.material_time = float(seconds)
 
     def prepare_controls(self, controls: np.ndarray, head_rotation: np.ndarray | None = None,
                          head_translation: np.ndarray | None = None) -> None:
@@ -338,6 +366,9 @@ class FaceRenderer:
         if self.parts:
             self._draw_opaque_groups()
             clock.mark("opaque")
+            if self._outline_groups:
+                self._draw_outlines()
+                clock.mark("outline")
             self._draw_blended_groups()
             clock.mark("blended")
         else:
@@ -359,11 +390,16 @@ class FaceRenderer:
         """The pose and the camera, in every program of the path."""
         model, view_projection = self._pose.T.tobytes(), self.camera.view_projection.T.tobytes()
         eye = tuple(float(x) for x in self.camera.eye)
+        tan_half_fov = 1.0 / float(self.camera.projection[1, 1])
         for prog in self._deformation.programs.values():
             prog["u_model"].write(model)
             prog["u_view_projection"].write(view_projection)
             if "u_eye" in prog:  # an unlit or toon variant does not read it
                 prog["u_eye"].value = eye
+            if "u_time" in prog:  # a variant with MToon's UV animation
+                prog["u_time"].value = self.material_time
+            if "u_tan_half_fov" in prog:  # a screen-width outline
+                prog["u_tan_half_fov"].value = tan_half_fov
 
     def _clear(self) -> None:
         """Bind the framebuffer and clear it; depth test on, the blend function every blended pass uses."""
@@ -411,12 +447,23 @@ class FaceRenderer:
         self.ctx.disable(moderngl.BLEND)
         self.fbo.depth_mask = True
 
-    def _draw_groups(self, groups: list) -> None:
-        """One draw call per group with its material and texture; culling as each group asks (off after)."""
-        ctx, look, variants, vaos = self.ctx, self._look, self._variant_of, self._deformation.vaos
+    def _draw_outlines(self) -> None:
+        """A character with parts, the MToon outlines: the back faces of the outlined opaque groups pushed out
+        along the normals (front faces culled), depth tested and written like a surface."""
+        self.ctx.enable(moderngl.CULL_FACE)
+        self.ctx.cull_face = "front"
+        self._draw_groups(self._outline_groups, self._outline_of, culled=True)
+        self.ctx.cull_face = "back"
+
+    def _draw_groups(self, groups: list, variants: list | None = None, culled: bool = False) -> None:
+        """One draw call per group with its material and textures; culling as each group asks (off after;
+        ``culled``: as set by the caller)."""
+        ctx, look, vaos = self.ctx, self._look, self._deformation.vaos
+        variants = self._variant_of if variants is None else variants
+        model = material_model_of(self.character)
         culling = None
         for g in groups:
-            if g.cull != culling:
+            if g.cull != culling and not culled:
                 (ctx.enable if g.cull else ctx.disable)(moderngl.CULL_FACE)
                 culling = g.cull
             if g.blend:
@@ -426,6 +473,10 @@ class FaceRenderer:
             t = int(look.texture[g.material])
             if t >= 0:
                 self._textures[t].use(BASE_TEXTURE_UNIT)
+            for col, unit in ((model.pbr[g.material, 2], METAL_ROUGH_TEXTURE_UNIT),
+                              (model.mtoon[g.material, 6], OUTLINE_TEXTURE_UNIT)):
+                if col >= 0:
+                    self._data_textures[int(col)].use(unit)
             vaos[variants[g.material]].render(moderngl.TRIANGLES, vertices=g.count, first=g.first)
         ctx.disable(moderngl.CULL_FACE)
 
@@ -478,7 +529,7 @@ class FaceRenderer:
     def close(self) -> None:
         """Release every GL object this renderer made."""
         self._deformation.release()
-        for obj in self._textures + self._materials:
+        for obj in self._textures + self._materials + self._data_textures:
             obj.release()
         if self._label is not None:
             self._label.release()
