@@ -29,6 +29,7 @@ animation; lit materials by the studio kinds).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -141,7 +142,7 @@ class MaterialModel:
                 "material_texture_info": self.texture_info, "material_texture_pixels": self.texture_pixels}
 
     @classmethod
-    def from_arrays(cls, a) -> MaterialModel:
+    def from_arrays(cls, a: Mapping[str, np.ndarray]) -> MaterialModel:
         return cls(*(a[k] for k in SECTIONS))
 
 
