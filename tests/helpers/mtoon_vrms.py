@@ -7,9 +7,11 @@ colour (VRM 1.0 ``materialColorBinds``, VRM 0.x ``materialValues``).
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 from helpers.gltf_writer import GltfBuilder
 from helpers.small_characters import uv_sphere
@@ -17,16 +19,23 @@ from helpers.small_characters import uv_sphere
 
 def ball_vrm(path: Path, *, version: str = "1.0", outline_mode: str = "screenCoordinates",
              outline_width: float = 0.01, tint: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0),
-             base: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 1.0)) -> Path:
+             base: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 1.0),
+             rim: tuple[float, float, float] = (0.0, 0.0, 0.0), half_width_texture: bool = False) -> Path:
     """A VRM (``version`` "1.0" or "0.x") of a unit ball with an MToon material (``base`` colour, linear; white
-    shade; outline red, unlit by the lighting mix) and an expression ``Tint`` binding its colour to ``tint``."""
+    shade; outline red, unlit by the lighting mix; parametric ``rim`` colour, fresnel power 2) and an
+    expression ``Tint`` binding its colour to ``tint``. ``half_width_texture`` (1.0 only): an outline width
+    texture whose green is 1 where u < 0.5 and 0 elsewhere (u runs round the ball: its +x half, seen from +z,
+    against its -x half)."""
     v, tris = uv_sphere()
     b = GltfBuilder()
     pos = b.accessor(v.astype(np.float32), minmax=True)
     nrm = b.accessor((v / np.linalg.norm(v, axis=1, keepdims=True)).astype(np.float32))
     idx = b.accessor(tris.astype(np.uint32).ravel())
+    u = (v[:, 0] > 0).astype(np.float32) * 0.5 + 0.25  # 0.75 on the +x half, 0.25 on the -x half
+    uv = b.accessor(np.stack([u, np.full(len(v), 0.5, np.float32)], axis=1))
     doc = b.doc
-    doc["meshes"] = [{"name": "ball", "primitives": [{"attributes": {"POSITION": pos, "NORMAL": nrm},
+    doc["meshes"] = [{"name": "ball", "primitives": [{"attributes": {"POSITION": pos, "NORMAL": nrm,
+                                                                     "TEXCOORD_0": uv},
                                                       "indices": idx, "material": 0}]}]
     doc["nodes"] = [{"name": "ball", "mesh": 0}]
     doc["scenes"], doc["scene"] = [{"nodes": [0]}], 0
@@ -34,7 +43,17 @@ def ball_vrm(path: Path, *, version: str = "1.0", outline_mode: str = "screenCoo
     if version == "1.0":
         material["extensions"] = {"VRMC_materials_mtoon": {
             "specVersion": "1.0", "shadeColorFactor": [1, 1, 1], "outlineWidthMode": outline_mode,
-            "outlineWidthFactor": outline_width, "outlineColorFactor": [1, 0, 0], "outlineLightingMixFactor": 0.0}}
+            "outlineWidthFactor": outline_width, "outlineColorFactor": [1, 0, 0], "outlineLightingMixFactor": 0.0,
+            "parametricRimColorFactor": list(rim), "parametricRimFresnelPowerFactor": 2.0}}
+        if half_width_texture:
+            pixels = np.zeros((4, 4, 3), np.uint8)
+            pixels[:, :2, 1] = 255
+            png = io.BytesIO()
+            Image.fromarray(pixels).save(png, format="PNG")
+            doc["images"] = [{"bufferView": b.view(png.getvalue()), "mimeType": "image/png"}]
+            doc["samplers"] = [{"magFilter": 9728, "minFilter": 9728}]
+            doc["textures"] = [{"source": 0, "sampler": 0}]
+            material["extensions"]["VRMC_materials_mtoon"]["outlineWidthMultiplyTexture"] = {"index": 0}
         doc["extensions"] = {"VRMC_vrm": {
             "specVersion": "1.0", "meta": {"name": "ball", "authors": ["tests"], "licenseUrl": "https://vrm.dev/licenses/1.0/"},
             "humanoid": {"humanBones": {}},

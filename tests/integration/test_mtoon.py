@@ -78,6 +78,8 @@ def test_godette_outlines_are_drawn_where_three_vrm_draws_them(egl_ctx, godette,
     assert (ref & near_ours).sum() / ref.sum() > 0.95
     assert (ours & near_ref).sum() / ours.sum() > 0.95
     assert (ours & ref).sum() / (ours | ref).sum() > 0.85  # exact IoU, measured 0.94
+    # the whole picture (toon, rim, outline colours and their lighting mix, the straps): 0.17 / 255 measured
+    assert np.abs(on.astype(int) - ref_on.astype(int)).mean() < 1.5
     # and where the brief says: hair (top), hands (sides), boots (bottom)
     rows, cols = np.nonzero(ours)
     assert rows.min() < 0.2 * H and rows.max() > 0.85 * H and cols.min() < 0.2 * W and cols.max() > 0.8 * W
@@ -182,6 +184,39 @@ def test_world_outline_is_a_width_in_metres(egl_ctx, tmp_path):
     px_per_m = (edge[1, 0] - edge[0, 0])
     grown = silhouette_radius(on) - silhouette_radius(off)
     assert grown == pytest.approx(0.05 * px_per_m, rel=0.25, abs=1.0)
+
+
+def test_outline_width_texture_keeps_the_outline_off_where_its_green_is_zero(egl_ctx, tmp_path):
+    c = read_gltf(ball_vrm(tmp_path / "ball.vrm", outline_width=0.03, half_width_texture=True))
+    on, r = draw(egl_ctx, c, size=(320, 320))
+    off, _ = draw(egl_ctx, c, outlines=False, size=(320, 320))
+    mask = outline_mask(on, off)
+    centre = r.project(np.zeros((1, 3)))[0]
+    cols = np.nonzero(mask)[1]
+    assert len(cols) > 100
+    # green is 1 for u < 0.5: the ball's -x half (u 0.25), on the picture's left (the camera looks along -z);
+    # a few pixels where the triangles of the seam between the halves interpolate u
+    assert (cols < centre[0]).mean() > 0.9
+
+
+def test_parametric_rim_brightens_the_rim_not_the_centre(egl_ctx, tmp_path):
+    plain = read_gltf(ball_vrm(tmp_path / "plain.vrm", outline_mode="none", base=(0.2, 0.2, 0.2, 1.0)))
+    rimmed = read_gltf(ball_vrm(tmp_path / "rim.vrm", outline_mode="none", base=(0.2, 0.2, 0.2, 1.0),
+                                rim=(0.0, 0.0, 1.0)))
+    a, r = draw(egl_ctx, plain, size=(320, 320))
+    b, _ = draw(egl_ctx, rimmed, size=(320, 320))
+    gain = b[..., 2].astype(int) - a[..., 2].astype(int)
+    assert np.abs(b[..., :2].astype(int) - a[..., :2].astype(int)).max() <= 2  # only blue added
+    # the rim adds colour x (1 - N.V)^power (lift 0): at points of the ball's equator from facing to grazing
+    for x in (0.0, 0.5, 0.8, 0.95):
+        p = np.array([x, 0.0, np.sqrt(1 - x * x)])  # on the surface; the unit ball's normal is p
+        v = r.camera.eye - p
+        rim = (1.0 - float(p @ (v / np.linalg.norm(v)))) ** 2
+        px, py = (int(round(q)) for q in r.project(p[None])[0])
+        lin = (a[py, px, 2] / 255.0) ** 2.2
+        want = 255.0 * min(lin + rim, 1.0) ** (1 / 2.2)
+        assert abs(int(b[py, px, 2]) - want) < 12, (x, int(b[py, px, 2]), want)
+    assert gain.max() > 100
 
 
 def test_outlines_off_and_no_outline_material_draw_the_same(egl_ctx, tmp_path):
