@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from facepuppet.runtime.errors import FacepuppetError
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.material_model import BIND_KINDS, BIND_SHAPE_PREFIX, OUTLINE_MODES
 from facepuppet.runtime.render.material_binds import MaterialBinds
@@ -97,3 +98,48 @@ def test_a_bad_material_colour_bind_is_refused_by_its_json_path(tmp_path):
     assert "ball.vrm" in done.stderr and "expressions.custom.Tint.materialColorBinds[0].type" in done.stderr
     assert not (tmp_path / "x.npz").exists()
     assert json.dumps("glow") in done.stderr or "glow" in done.stderr
+
+
+def _paths(value, path: tuple = ()):
+    yield path
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield from _paths(v, path + (k,))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _paths(v, path + (i,))
+
+
+@pytest.mark.parametrize("version", ["1.0", "0.x"])
+def test_every_wrong_type_in_the_material_parts_is_read_or_refused_naming_the_file(tmp_path, version):
+    # the MToon outline / rim / UV fields, the width texture and the material binds: a value of each wrong type
+    # at each of their paths reads, or is refused by the project's error naming the file; never another exception
+    path = ball_vrm(tmp_path / "ball.vrm", version=version, half_width_texture=version == "1.0",
+                    rim=(0.5, 0.5, 0.5))
+    doc, blob = glb_chunks(path.read_bytes())
+    roots = [("materials",), ("extensions", "VRMC_vrm", "expressions")] if version == "1.0" else \
+        [("extensions", "VRM", "materialProperties"), ("extensions", "VRM", "blendShapeMaster")]
+    forged_file, bugs, n = tmp_path / "forged.vrm", [], 0
+    for root in roots:
+        at = doc
+        for k in root:
+            at = at[k]
+        for sub in _paths(at):
+            for value in ([], {}, "x", 1.5, -1, None, True, 1e308):
+                forged_doc = json.loads(json.dumps(doc))
+                target = forged_doc
+                full = root + sub
+                for k in full[:-1]:
+                    target = target[k]
+                target[full[-1]] = value
+                write_glb(forged_file, forged_doc, blob)
+                n += 1
+                try:
+                    read_gltf(forged_file)
+                except FacepuppetError as exc:
+                    if not str(exc).startswith(str(forged_file)):
+                        bugs.append(f"{full} = {value!r}: the refusal does not name the file: {exc}")
+                except Exception as exc:  # noqa: BLE001 - any other exception is the bug looked for
+                    bugs.append(f"{full} = {value!r}: {type(exc).__name__}: {exc}")
+    assert n > 200
+    assert not bugs, f"{len(bugs)} of {n}:\n" + "\n".join(bugs[:30])
