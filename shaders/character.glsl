@@ -11,7 +11,8 @@
 // ALPHA_MODE (0 opaque, 1 mask, 2 blend), SHADING (0 lit, 1 unlit, 2 toon), TEXTURED and
 // MIRROR (0 or 1), KIND (a lit material's kind, lighting.glsl), PBR (a lit material drawn by the
 // glTF metallic-roughness model: 0 no, 1 yes, 2 with its metallic-roughness texture), RIM (MToon's
-// parametric rim), UV_ANIM (MToon's UV scroll and rotation), OUTLINE (the outline pass of the
+// rim: parametric rim and matcap), MATCAP and RIM_TEX (its matcap and multiply textures), UV_ANIM and
+// UV_MASK (MToon's UV scroll and rotation, and its mask texture), OUTLINE (the outline pass of the
 // material: 0 the surface, 1 world width, 2 screen width) and OUTLINE_TEX (its width texture) are
 // #defines, so a variant carries no branch, texture fetch or discard it does not use. On a software rasteriser that
 // is a third of the shading time, and an opaque variant without discard lets the depth test
@@ -34,6 +35,7 @@ layout(std140) uniform Material {
     vec4 m_rim_lift;        // rim lift, rim lighting mix, 0, 0
     vec4 m_uv_anim;         // UV scroll u, v per second, rotation in radians per second, 0
     vec4 m_pbr;             // metallic, roughness, 0, 0
+    vec4 m_matcap;          // matcap factor (linear), 0
 };
 
 #ifdef VERTEX_SHADER
@@ -115,7 +117,8 @@ void main() {
 #include "lighting.glsl"
 
 #if !defined(ALPHA_MODE) || !defined(SHADING) || !defined(TEXTURED) || !defined(MIRROR) || !defined(KIND) \
-    || !defined(PBR) || !defined(RIM) || !defined(UV_ANIM) || !defined(OUTLINE)
+    || !defined(PBR) || !defined(RIM) || !defined(UV_ANIM) || !defined(OUTLINE) || !defined(MATCAP) \
+    || !defined(RIM_TEX) || !defined(UV_MASK)
 #error "character.glsl: the variant's #defines must all be given (parts_path.material_variant)"
 #endif
 #define ALPHA_OPAQUE 0
@@ -129,6 +132,16 @@ uniform vec3 u_eye;
 uniform float u_time;   // seconds, for MToon's UV animation
 #if PBR == 2
 uniform sampler2D u_metal_rough_texture;   // linear: roughness in green, metallic in blue
+#endif
+#if MATCAP
+uniform mat4 u_view;                        // the matcap is looked up by the view-space normal
+uniform sampler2D u_matcap_texture;        // sRGB
+#endif
+#if RIM_TEX
+uniform sampler2D u_rim_texture;           // sRGB, multiplies the rim
+#endif
+#if UV_MASK
+uniform sampler2D u_uv_mask_texture;       // linear: blue scales the UV animation
 #endif
 // The uniform environment of the metallic-roughness model (linear radiance): the reference page of the
 // tests gives three.js the same one (a PMREM of a uniform colour) with a key light of radiance 1.
@@ -213,10 +226,16 @@ void main() {
     vec4 texel = vec4(1.0);
 #if UV_ANIM
     // MToon's UV animation: a turn about the texture's centre, then a scroll (before the texture transform)
-    float phase = m_uv_anim.z * u_time;
+#if UV_MASK
+    float anim_mask = texture(u_uv_mask_texture, v_uv).b;
+#else
+    float anim_mask = 1.0;
+#endif
+    float phase = m_uv_anim.z * u_time * anim_mask;
     vec2 centred = v_uv - 0.5;
     vec2 anim_uv = vec2(cos(phase) * centred.x + sin(phase) * centred.y,
-                        -sin(phase) * centred.x + cos(phase) * centred.y) + 0.5 + m_uv_anim.xy * u_time;
+                        -sin(phase) * centred.x + cos(phase) * centred.y) + 0.5
+                   + m_uv_anim.xy * u_time * anim_mask;
 #else
     vec2 anim_uv = v_uv;
 #endif
@@ -248,9 +267,21 @@ void main() {
 #if SHADING == SHADING_TOON
     vec3 color = toon(base.rgb, m_shade_shift.rgb * v_color * texel.rgb, n);
 #if RIM
-    // parametric rim; its lighting mix takes the key light's radiance, 1, so it adds as it is
+    // parametric rim and matcap, times the rim texture; the lighting mix takes the key light's radiance, 1,
+    // so the rim adds as it is
     vec3 v = normalize(u_eye - v_world);
-    color += m_rim.rgb * pow(clamp(1.0 - dot(v, n) + m_rim_lift.x, 0.0, 1.0), m_rim.a);
+    vec3 rim = m_rim.rgb * pow(clamp(1.0 - dot(v, n) + m_rim_lift.x, 0.0, 1.0), m_rim.a);
+#if MATCAP
+    vec3 view_n = normalize(mat3(u_view) * n);
+    vec3 view_v = normalize(mat3(u_view) * v);
+    vec3 mx = normalize(vec3(view_v.z, 0.0, -view_v.x));
+    vec3 my = cross(view_v, mx);
+    rim += m_matcap.rgb * texture(u_matcap_texture, 0.5 + 0.5 * vec2(dot(mx, view_n), -dot(my, view_n))).rgb;
+#endif
+#if RIM_TEX
+    rim *= texture(u_rim_texture, uv).rgb;
+#endif
+    color += rim;
 #endif
 #else
     vec3 v = normalize(u_eye - v_world);

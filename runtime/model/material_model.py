@@ -41,10 +41,15 @@ from facepuppet.runtime.files.tables import Section, TablesError
 #: part's own textures, or -1; speeds per second (scroll in UV units, rotation in radians).
 MTOON_COLUMNS = ("outline_mode", "outline_width", "outline_r", "outline_g", "outline_b", "outline_lighting_mix",
                  "outline_width_texture", "rim_r", "rim_g", "rim_b", "rim_fresnel_power", "rim_lift",
-                 "rim_lighting_mix", "uv_scroll_u", "uv_scroll_v", "uv_rotation")
+                 "rim_lighting_mix", "uv_scroll_u", "uv_scroll_v", "uv_rotation", "rim_texture", "matcap_r",
+                 "matcap_g", "matcap_b", "matcap_texture", "uv_mask_texture")
 OUTLINE_MODES = {"none": 0, "worldCoordinates": 1, "screenCoordinates": 2}
-#: A material without MToon: no outline, no rim (power 5 as the spec's default, lift 0), no UV animation.
-NO_MTOON = (0, 0, 0, 0, 0, 1, -1, 0, 0, 0, 5, 0, 1, 0, 0, 0)
+#: A material without MToon: no outline, no rim (power 5 as the spec's default, lift 0), no UV animation, no
+#: rim, matcap or UV mask texture. The rim multiply and matcap textures are colours (sRGB); the outline
+#: width, UV mask and metallic-roughness textures are data (linear).
+NO_MTOON = (0, 0, 0, 0, 0, 1, -1, 0, 0, 0, 5, 0, 1, 0, 0, 0, -1, 1, 1, 1, -1, -1)
+#: The ``material_mtoon`` columns that name a texture, and whether it holds colours (sRGB)
+MTOON_TEXTURES = {6: False, 16: True, 20: True, 21: False}
 #: ``material_pbr`` columns: metallic, roughness, metallic-roughness texture (-1 none), model (1: lit by
 #: the glTF metallic-roughness model; 0: by the studio lighting of its kind)
 PBR_COLUMNS = ("metallic", "roughness", "metallic_roughness_texture", "model")
@@ -123,7 +128,8 @@ class MaterialModel:
             _fail("material_pbr", f"expected shape {(n_materials, len(PBR_COLUMNS))}, found {self.pbr.shape}")
         if not set(np.unique(self.mtoon[:, 0]).tolist()) <= set(OUTLINE_MODES.values()):
             _fail("material_mtoon", "outline mode codes must be 0 (none), 1 (world) or 2 (screen)")
-        for name, col in (("material_mtoon", self.mtoon[:, 6]), ("material_pbr", self.pbr[:, 2])):
+        for name, col in [*(("material_mtoon", self.mtoon[:, c]) for c in MTOON_TEXTURES),
+                          ("material_pbr", self.pbr[:, 2])]:
             if len(col) and (col.min() < -1 or col.max() >= n_textures or np.any(col != np.round(col))):
                 _fail(name, f"texture index out of range for {n_textures} textures")
         n = len(self.bind_shape)
@@ -154,5 +160,5 @@ def default_material_model(n_materials: int) -> MaterialModel:
                          np.zeros((0, 7), np.int32), np.zeros((0, 4), np.uint8))
 
 
-__all__ = ["BIND_KINDS", "BIND_SHAPE_PREFIX", "MTOON_COLUMNS", "MaterialModel", "NO_MTOON", "OUTLINE_MODES",
-           "PBR_COLUMNS", "SECTIONS", "default_material_model"]
+__all__ = ["BIND_KINDS", "BIND_SHAPE_PREFIX", "MTOON_COLUMNS", "MTOON_TEXTURES", "MaterialModel", "NO_MTOON",
+           "OUTLINE_MODES", "PBR_COLUMNS", "SECTIONS", "default_material_model"]

@@ -104,7 +104,7 @@ def material_model_of(character: Character) -> MaterialModel:
 
 
 def material_block(character: Character, m: int, rows: MaterialRows | None = None) -> bytes:
-    """The std140 ``Material`` block of material ``m`` (13 vec4, see character.glsl); ``rows``: the values
+    """The std140 ``Material`` block of material ``m`` (14 vec4, see character.glsl); ``rows``: the values
     that expressions' material binds change (default: the character's own)."""
     look = look_of(character)
     rows = rows if rows is not None else MaterialRows.of(character)
@@ -118,7 +118,7 @@ def material_block(character: Character, m: int, rows: MaterialRows | None = Non
         wrap_s, wrap_t = (int(x) for x in look.texture_info[t, 5:7])
         mirror = (float(wrap_s == MIRRORED_REPEAT), float(wrap_t == MIRRORED_REPEAT))
     uv = uv_matrix(*(float(x) for x in rows.uv_transform[m]))
-    block = np.zeros((13, 4), np.float32)
+    block = np.zeros((14, 4), np.float32)
     block[0] = rows.base_color[m]
     block[1] = (*rows.emissive[m], look.alpha[m, 1])
     block[2] = (*rows.shade[m], shading[5])
@@ -131,21 +131,25 @@ def material_block(character: Character, m: int, rows: MaterialRows | None = Non
     block[10, :2] = (mt[11], mt[12])
     block[11, :3] = mt[13:16]
     block[12, :2] = pbr[:2]
+    block[13, :3] = mt[17:20]
     return block.tobytes()
 
 
 #: The #defines that make one variant of ``character.glsl``, in the order of a variant key
-VARIANT_DEFINES = ("ALPHA_MODE", "SHADING", "TEXTURED", "MIRROR", "KIND", "PBR", "RIM", "UV_ANIM", "OUTLINE",
-                   "OUTLINE_TEX")
+VARIANT_DEFINES = ("ALPHA_MODE", "SHADING", "TEXTURED", "MIRROR", "KIND", "PBR", "RIM", "UV_ANIM", "MATCAP",
+                   "RIM_TEX", "UV_MASK", "OUTLINE", "OUTLINE_TEX")
+_SURFACE_DEFINES = len(VARIANT_DEFINES) - 2
 _LIT, _TOON = 0, 2
 
 
 def material_variant(character: Character, m: int) -> tuple[int, ...]:
     """The variant of material ``m``'s surface: (alpha mode, shading code, textured, mirrored wrap, lighting
-    kind, metallic-roughness, rim, UV animation, 0, 0), each an int; the kind
+    kind, metallic-roughness, rim, UV animation, matcap, rim texture, UV animation mask, 0, 0), each an int;
+    the kind
     (:data:`~facepuppet.runtime.model.character.MATERIAL_KINDS`) only for lit materials of the studio
     lighting (eyes, teeth, lashes ... as ``face.glsl`` draws them), else 0; metallic-roughness 1 for a lit
-    glTF material (2 with its texture); rim and UV animation for toon materials whose MToon has them.
+    glTF material (2 with its texture); rim (parametric rim or matcap) and its textures and the UV animation
+    and its mask for toon materials whose MToon has them.
 
     ``character.glsl`` is compiled once per distinct variant with these as #defines
     (:data:`VARIANT_DEFINES`): a variant has no branch, texture fetch or discard it does not use. Its
@@ -164,10 +168,11 @@ def material_variant(character: Character, m: int) -> tuple[int, ...]:
         pbr = 2 if model.pbr[m, 2] >= 0 else 1
     kind = int(round(float(character.material_params[m, 2]))) if shading == _LIT and not pbr else 0
     mt = model.mtoon[m]
-    rim = int(shading == _TOON and bool(np.any(mt[7:10] > 0)))
+    matcap = int(shading == _TOON and mt[20] >= 0 and bool(np.any(mt[17:20] > 0)))
+    rim = int(shading == _TOON and (bool(np.any(mt[7:10] > 0)) or bool(matcap)))
     uv_anim = int(bool(np.any(mt[13:16] != 0)))
     return (int(round(float(look.alpha[m, 0]))), shading, int(t >= 0), int(mirrored), kind, pbr, rim, uv_anim,
-            0, 0)
+            matcap, int(rim and mt[16] >= 0), int(uv_anim and mt[21] >= 0), 0, 0)
 
 
 def outline_variant(character: Character, m: int) -> tuple[int, ...] | None:
@@ -177,7 +182,7 @@ def outline_variant(character: Character, m: int) -> tuple[int, ...] | None:
     look = look_of(character)
     if int(mt[0]) == 0 or mt[1] <= 0 or int(round(float(look.alpha[m, 0]))) == _BLEND:
         return None
-    return (*material_variant(character, m)[:8], int(mt[0]), int(mt[6] >= 0))
+    return (*material_variant(character, m)[:_SURFACE_DEFINES], int(mt[0]), int(mt[6] >= 0))
 
 
 def variant_defines(variant: tuple[int, ...]) -> dict[str, int]:

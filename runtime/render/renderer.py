@@ -33,6 +33,7 @@ import numpy as np
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.material_model import MTOON_TEXTURES
 from facepuppet.runtime.render.camera import model_matrix
 from facepuppet.runtime.render.cpu_deform import check_weights
 from facepuppet.runtime.render.credits_label import CreditsLabel
@@ -43,6 +44,7 @@ from facepuppet.runtime.render.layers import SUBTLE_LAYER_KINDS, has_layers, ver
 from facepuppet.runtime.render.material_binds import MaterialBinds
 from facepuppet.runtime.render.options import FRAMINGS
 from facepuppet.runtime.render.parts_path import (
+    VARIANT_DEFINES,
     HeadPose,
     draw_groups,
     has_parts,
@@ -68,6 +70,13 @@ PATHS = ("auto", "gpu", "cpu", "elastic")
 BASE_TEXTURE_UNIT = PATH_TEXTURE_UNITS  # a material's base colour texture, above the path's units
 METAL_ROUGH_TEXTURE_UNIT = BASE_TEXTURE_UNIT + 1  # its metallic-roughness texture (linear)
 OUTLINE_TEXTURE_UNIT = BASE_TEXTURE_UNIT + 2  # its MToon outline width texture (linear, vertex stage)
+#: A material's textures beyond the base colour: (uniform, unit, material model table, column); the MToon
+#: columns' colour space is :data:`~facepuppet.runtime.model.material_model.MTOON_TEXTURES`'s
+MATERIAL_TEXTURES = (("u_metal_rough_texture", METAL_ROUGH_TEXTURE_UNIT, "pbr", 2),
+                     ("u_outline_texture", OUTLINE_TEXTURE_UNIT, "mtoon", 6),
+                     ("u_rim_texture", BASE_TEXTURE_UNIT + 3, "mtoon", 16),
+                     ("u_matcap_texture", BASE_TEXTURE_UNIT + 4, "mtoon", 20),
+                     ("u_uv_mask_texture", BASE_TEXTURE_UNIT + 5, "mtoon", 21))
 
 
 def realistic_weights(n_shapes: int, n_active: int = 10) -> np.ndarray:
@@ -167,7 +176,11 @@ class FaceRenderer:
         self._look = look_of(character) if self.parts else None
         self._textures = make_textures(ctx, self._look) if self.parts else []
         model = material_model_of(character)
-        self._data_textures = make_textures(ctx, model, srgb=False) if self.parts else []
+        # data textures (linear), and those the MToon rim and matcap read as colours (sRGB) once more
+        self._data_textures = make_textures(ctx, model, srgb=False) if self.parts and len(model.texture_info) \
+            else []
+        self._colour_data_textures = make_textures(ctx, model) if self.parts and len(model.texture_info) and \
+            np.any(model.mtoon[:, [c for c, colour in MTOON_TEXTURES.items() if colour]] >= 0) else []
         self._binds = MaterialBinds(character)
         self._materials = [ctx.buffer(material_block(character, m, self._binds.rows))
                            for m in range(len(character.material_names))] if self.parts else []
@@ -246,12 +259,10 @@ class FaceRenderer:
         programs, vaos = {}, {}
         keys = [self._variant_of[g.material] for g in self._groups]
         keys += [self._outline_of[g.material] for g in self._outline_groups]
-        for key in dict.fromkeys(keys) or [(0,) * 10]:
+        for key in dict.fromkeys(keys) or [(0,) * len(VARIANT_DEFINES)]:
             prog = load_program(self.ctx, "character.glsl", {**defines, **variant_defines(key)})
             prog["Material"].binding = 0
-            for name, unit in (("u_base_texture", BASE_TEXTURE_UNIT),
-                               ("u_metal_rough_texture", METAL_ROUGH_TEXTURE_UNIT),
-                               ("u_outline_texture", OUTLINE_TEXTURE_UNIT)):
+            for name, unit in (("u_base_texture", BASE_TEXTURE_UNIT), *((n, u) for n, u, _, _ in MATERIAL_TEXTURES)):
                 if name in prog:
                     prog[name].value = unit
             programs[key], vaos[key] = prog, self._vao(prog, vbo)
@@ -400,6 +411,8 @@ class FaceRenderer:
                 prog["u_time"].value = self.material_time
             if "u_tan_half_fov" in prog:  # a screen-width outline
                 prog["u_tan_half_fov"].value = tan_half_fov
+            if "u_view" in prog:  # a matcap
+                prog["u_view"].write(self.camera.view.T.tobytes())
 
     def _clear(self) -> None:
         """Bind the framebuffer and clear it; depth test on, the blend function every blended pass uses."""
@@ -473,10 +486,11 @@ class FaceRenderer:
             t = int(look.texture[g.material])
             if t >= 0:
                 self._textures[t].use(BASE_TEXTURE_UNIT)
-            for col, unit in ((model.pbr[g.material, 2], METAL_ROUGH_TEXTURE_UNIT),
-                              (model.mtoon[g.material, 6], OUTLINE_TEXTURE_UNIT)):
-                if col >= 0:
-                    self._data_textures[int(col)].use(unit)
+            for _, unit, table, col in MATERIAL_TEXTURES:
+                k = int(getattr(model, table)[g.material, col])
+                if k >= 0:
+                    colour = table == "mtoon" and MTOON_TEXTURES[col]
+                    (self._colour_data_textures if colour else self._data_textures)[k].use(unit)
             vaos[variants[g.material]].render(moderngl.TRIANGLES, vertices=g.count, first=g.first)
         ctx.disable(moderngl.CULL_FACE)
 
@@ -529,7 +543,7 @@ class FaceRenderer:
     def close(self) -> None:
         """Release every GL object this renderer made."""
         self._deformation.release()
-        for obj in self._textures + self._materials + self._data_textures:
+        for obj in self._textures + self._materials + self._data_textures + self._colour_data_textures:
             obj.release()
         if self._label is not None:
             self._label.release()

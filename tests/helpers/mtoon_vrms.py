@@ -20,12 +20,14 @@ from helpers.small_characters import uv_sphere
 def ball_vrm(path: Path, *, version: str = "1.0", outline_mode: str = "screenCoordinates",
              outline_width: float = 0.01, tint: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0),
              base: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 1.0),
-             rim: tuple[float, float, float] = (0.0, 0.0, 0.0), half_width_texture: bool = False) -> Path:
+             rim: tuple[float, float, float] = (0.0, 0.0, 0.0), half_width_texture: bool = False,
+             mtoon_textures: dict | None = None, mtoon_extra: dict | None = None) -> Path:
     """A VRM (``version`` "1.0" or "0.x") of a unit ball with an MToon material (``base`` colour, linear; white
     shade; outline red, unlit by the lighting mix; parametric ``rim`` colour, fresnel power 2) and an
     expression ``Tint`` binding its colour to ``tint``. ``half_width_texture`` (1.0 only): an outline width
     texture whose green is 1 where u < 0.5 and 0 elsewhere (u runs round the ball: its +x half, seen from +z,
-    against its -x half)."""
+    against its -x half). ``mtoon_textures``: {VRMC_materials_mtoon texture field: (r, g, b) uint8}, each a
+    uniform 2x2 PNG; ``mtoon_extra``: more VRMC_materials_mtoon fields (1.0)."""
     v, tris = uv_sphere()
     b = GltfBuilder()
     pos = b.accessor(v.astype(np.float32), minmax=True)
@@ -45,15 +47,21 @@ def ball_vrm(path: Path, *, version: str = "1.0", outline_mode: str = "screenCoo
             "specVersion": "1.0", "shadeColorFactor": [1, 1, 1], "outlineWidthMode": outline_mode,
             "outlineWidthFactor": outline_width, "outlineColorFactor": [1, 0, 0], "outlineLightingMixFactor": 0.0,
             "parametricRimColorFactor": list(rim), "parametricRimFresnelPowerFactor": 2.0}}
+        mt = material["extensions"]["VRMC_materials_mtoon"]
+        mt.update(mtoon_extra or {})
+        images = dict(mtoon_textures or {})
         if half_width_texture:
             pixels = np.zeros((4, 4, 3), np.uint8)
             pixels[:, :2, 1] = 255
+            images["outlineWidthMultiplyTexture"] = pixels
+        for field, pixels in images.items():
+            pixels = np.broadcast_to(np.asarray(pixels, np.uint8), (2, 2, 3)) if np.ndim(pixels) == 1 else pixels
             png = io.BytesIO()
-            Image.fromarray(pixels).save(png, format="PNG")
-            doc["images"] = [{"bufferView": b.view(png.getvalue()), "mimeType": "image/png"}]
+            Image.fromarray(np.ascontiguousarray(pixels)).save(png, format="PNG")
+            doc.setdefault("images", []).append({"bufferView": b.view(png.getvalue()), "mimeType": "image/png"})
             doc["samplers"] = [{"magFilter": 9728, "minFilter": 9728}]
-            doc["textures"] = [{"source": 0, "sampler": 0}]
-            material["extensions"]["VRMC_materials_mtoon"]["outlineWidthMultiplyTexture"] = {"index": 0}
+            doc.setdefault("textures", []).append({"source": len(doc["images"]) - 1, "sampler": 0})
+            mt[field] = {"index": len(doc["textures"]) - 1}
         doc["extensions"] = {"VRMC_vrm": {
             "specVersion": "1.0", "meta": {"name": "ball", "authors": ["tests"], "licenseUrl": "https://vrm.dev/licenses/1.0/"},
             "humanoid": {"humanBones": {}},

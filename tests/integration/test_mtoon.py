@@ -219,6 +219,34 @@ def test_parametric_rim_brightens_the_rim_not_the_centre(egl_ctx, tmp_path):
     assert gain.max() > 100
 
 
+def test_matcap_adds_its_colour_and_the_rim_texture_multiplies_the_rim(egl_ctx, tmp_path):
+    grey = (0.2, 0.2, 0.2, 1.0)
+    plain = read_gltf(ball_vrm(tmp_path / "plain.vrm", outline_mode="none", base=grey))
+    matcap = read_gltf(ball_vrm(tmp_path / "matcap.vrm", outline_mode="none", base=grey,
+                                mtoon_textures={"matcapTexture": (0, 128, 0)}))
+    masked = read_gltf(ball_vrm(tmp_path / "masked.vrm", outline_mode="none", base=grey, rim=(0.0, 0.0, 1.0),
+                                mtoon_textures={"matcapTexture": (0, 128, 0), "rimMultiplyTexture": (0, 0, 0)}))
+    a, r = draw(egl_ctx, plain, size=(200, 200))
+    b, _ = draw(egl_ctx, matcap, size=(200, 200))
+    c, _ = draw(egl_ctx, masked, size=(200, 200))
+    px, py = (int(round(q)) for q in r.project(np.array([[0.0, 0.0, 1.0]]))[0])
+    lin = (a[py, px, 1] / 255.0) ** 2.2
+    added = (128 / 255.0) ** 2.2  # a uniform matcap of sRGB 128 green, factor 1, adds its linear value
+    assert abs(int(b[py, px, 1]) - 255.0 * (lin + added) ** (1 / 2.2)) < 6
+    assert abs(int(b[py, px, 0]) - int(a[py, px, 0])) <= 1
+    np.testing.assert_array_equal(c, a)  # a black rim texture takes the matcap and the parametric rim away
+
+
+def test_uv_animation_mask_compiles_and_a_zero_mask_stills_nothing_else(egl_ctx, tmp_path):
+    c = read_gltf(ball_vrm(tmp_path / "ball.vrm", outline_mode="none",
+                           mtoon_textures={"uvAnimationMaskTexture": (0, 0, 0)},
+                           mtoon_extra={"uvAnimationScrollXSpeedFactor": 1.0}))
+    assert c.material_model.mtoon[0, 21] >= 0
+    a, _ = draw(egl_ctx, c, size=(120, 120), time=0.0)
+    b, _ = draw(egl_ctx, c, size=(120, 120), time=0.3)
+    np.testing.assert_array_equal(a, b)
+
+
 def test_outlines_off_and_no_outline_material_draw_the_same(egl_ctx, tmp_path):
     c = read_gltf(ball_vrm(tmp_path / "ball.vrm", outline_mode="none"))
     on, _ = draw(egl_ctx, c, size=(200, 200))

@@ -67,6 +67,9 @@ def _mtoon0_row(state: ReadState, prop: dict, w: str) -> np.ndarray:
     row[13] = f.get(floats, "_UvAnimScrollX", float, fw, 0.0)
     row[14] = -f.get(floats, "_UvAnimScrollY", float, fw, 0.0)
     row[15] = f.get(floats, "_UvAnimRotation", float, fw, 0.0)
+    for key, col in (("_RimTexture", 16), ("_SphereAdd", 20), ("_UvAnimMaskTexture", 21)):
+        if key in textures:
+            row[col] = state.use_texture({"index": textures[key]}, f"{w}.textureProperties.{key}", data=True)
     return row
 
 
@@ -90,6 +93,10 @@ def _mtoon1_row(state: ReadState, mt1: dict, mw: str) -> np.ndarray:
     row[13] = f.get(mt1, "uvAnimationScrollXSpeedFactor", float, mw, 0.0)
     row[14] = f.get(mt1, "uvAnimationScrollYSpeedFactor", float, mw, 0.0)
     row[15] = f.get(mt1, "uvAnimationRotationSpeedFactor", float, mw, 0.0)
+    row[17:20] = f.numbers(mt1, "matcapFactor", 3, mw, [1, 1, 1])
+    for key, col in (("rimMultiplyTexture", 16), ("matcapTexture", 20), ("uvAnimationMaskTexture", 21)):
+        if key in mt1:
+            row[col] = state.use_texture(mt1[key], f"{mw}.{key}", data=True)
     return row
 
 
