@@ -33,7 +33,6 @@ import numpy as np
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.model.character import Character
-from facepuppet.runtime.model.material_model import MTOON_TEXTURES
 from facepuppet.runtime.render.camera import model_matrix
 from facepuppet.runtime.render.cpu_deform import check_weights
 from facepuppet.runtime.render.credits_label import CreditsLabel
@@ -41,24 +40,20 @@ from facepuppet.runtime.render.face_mesh import vertex_materials, visible_triang
 from facepuppet.runtime.render.framebuffers import Framebuffers
 from facepuppet.runtime.render.framing import frame_character
 from facepuppet.runtime.render.layers import SUBTLE_LAYER_KINDS, has_layers, vertex_opacity
-from facepuppet.runtime.render.material_binds import MaterialBinds
+from facepuppet.runtime.render.material_gl import SAMPLER_UNITS, MaterialGl
 from facepuppet.runtime.render.options import FRAMINGS
 from facepuppet.runtime.render.parts_path import (
     VARIANT_DEFINES,
     HeadPose,
     draw_groups,
     has_parts,
-    look_of,
-    make_textures,
-    material_block,
-    material_model_of,
     material_variant,
     outline_variant,
     variant_defines,
     vertex_attributes,
 )
 from facepuppet.runtime.render.pass_clock import NO_CLOCK, NoClock, PassClock
-from facepuppet.runtime.render.paths.base import PATH_TEXTURE_UNITS, DeformationPath
+from facepuppet.runtime.render.paths.base import DeformationPath
 from facepuppet.runtime.render.paths.cpu import CpuPath
 from facepuppet.runtime.render.paths.elastic import ElasticPath
 from facepuppet.runtime.render.paths.gpu import GpuPath
@@ -67,16 +62,6 @@ from facepuppet.runtime.render.shader_loader import load_program
 logger = logging.getLogger(__name__)
 
 PATHS = ("auto", "gpu", "cpu", "elastic")
-BASE_TEXTURE_UNIT = PATH_TEXTURE_UNITS  # a material's base colour texture, above the path's units
-METAL_ROUGH_TEXTURE_UNIT = BASE_TEXTURE_UNIT + 1  # its metallic-roughness texture (linear)
-OUTLINE_TEXTURE_UNIT = BASE_TEXTURE_UNIT + 2  # its MToon outline width texture (linear, vertex stage)
-#: A material's textures beyond the base colour: (uniform, unit, material model table, column); the MToon
-#: columns' colour space is :data:`~facepuppet.runtime.model.material_model.MTOON_TEXTURES`'s
-MATERIAL_TEXTURES = (("u_metal_rough_texture", METAL_ROUGH_TEXTURE_UNIT, "pbr", 2),
-                     ("u_outline_texture", OUTLINE_TEXTURE_UNIT, "mtoon", 6),
-                     ("u_rim_texture", BASE_TEXTURE_UNIT + 3, "mtoon", 16),
-                     ("u_matcap_texture", BASE_TEXTURE_UNIT + 4, "mtoon", 20),
-                     ("u_uv_mask_texture", BASE_TEXTURE_UNIT + 5, "mtoon", 21))
 
 
 def realistic_weights(n_shapes: int, n_active: int = 10) -> np.ndarray:
@@ -173,17 +158,7 @@ class FaceRenderer:
         self.fbo = self._framebuffers.fbo
         self.camera = frame_character(character, framing, self.width / self.height)
         self._setup_buffers()
-        self._look = look_of(character) if self.parts else None
-        self._textures = make_textures(ctx, self._look) if self.parts else []
-        model = material_model_of(character)
-        # data textures (linear), and those the MToon rim and matcap read as colours (sRGB) once more
-        self._data_textures = make_textures(ctx, model, srgb=False) if self.parts and len(model.texture_info) \
-            else []
-        self._colour_data_textures = make_textures(ctx, model) if self.parts and len(model.texture_info) and \
-            np.any(model.mtoon[:, [c for c, colour in MTOON_TEXTURES.items() if colour]] >= 0) else []
-        self._binds = MaterialBinds(character)
-        self._materials = [ctx.buffer(material_block(character, m, self._binds.rows))
-                           for m in range(len(character.material_names))] if self.parts else []
+        self._material_gl = MaterialGl(ctx, character) if self.parts else None
         if path == "elastic" and elastic is None:
             raise ValueError("elastic: path 'elastic' needs an ElasticModel (elastic=...)")
         candidates = [self._make_path(name, elastic) for name in (("gpu", "cpu") if path == "auto" else (path,))]
@@ -262,7 +237,7 @@ class FaceRenderer:
         for key in dict.fromkeys(keys) or [(0,) * len(VARIANT_DEFINES)]:
             prog = load_program(self.ctx, "character.glsl", {**defines, **variant_defines(key)})
             prog["Material"].binding = 0
-            for name, unit in (("u_base_texture", BASE_TEXTURE_UNIT), *((n, u) for n, u, _, _ in MATERIAL_TEXTURES)):
+            for name, unit in SAMPLER_UNITS:
                 if name in prog:
                     prog[name].value = unit
             programs[key], vaos[key] = prog, self._vao(prog, vbo)
@@ -348,9 +323,8 @@ class FaceRenderer:
         else:
             self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
         self._deformation.prepare(w, joints)
-        if self.parts and self._binds.active:  # expressions' material binds: the changed materials' blocks
-            for m in self._binds.update(w):
-                self._materials[m].write(material_block(self.character, int(m), self._binds.rows))
+        if self._material_gl is not None:  # expressions' material binds: the changed materials' blocks
+            self._material_gl.update(w)
 
     def set_material_time(self, seconds: float) -> None:
         """The time of MToon's UV animation (scroll and rotation speeds are per second) for the next frames."""
@@ -471,9 +445,8 @@ class FaceRenderer:
     def _draw_groups(self, groups: list, variants: list | None = None, culled: bool = False) -> None:
         """One draw call per group with its material and textures; culling as each group asks (off after;
         ``culled``: as set by the caller)."""
-        ctx, look, vaos = self.ctx, self._look, self._deformation.vaos
+        ctx, materials, vaos = self.ctx, self._material_gl, self._deformation.vaos
         variants = self._variant_of if variants is None else variants
-        model = material_model_of(self.character)
         culling = None
         for g in groups:
             if g.cull != culling and not culled:
@@ -482,15 +455,7 @@ class FaceRenderer:
             if g.blend:
                 ctx.enable(moderngl.BLEND)
                 self.fbo.depth_mask = False
-            self._materials[g.material].bind_to_uniform_block(0)
-            t = int(look.texture[g.material])
-            if t >= 0:
-                self._textures[t].use(BASE_TEXTURE_UNIT)
-            for _, unit, table, col in MATERIAL_TEXTURES:
-                k = int(getattr(model, table)[g.material, col])
-                if k >= 0:
-                    colour = table == "mtoon" and MTOON_TEXTURES[col]
-                    (self._colour_data_textures if colour else self._data_textures)[k].use(unit)
+            materials.use(g.material)
             vaos[variants[g.material]].render(moderngl.TRIANGLES, vertices=g.count, first=g.first)
         ctx.disable(moderngl.CULL_FACE)
 
@@ -543,8 +508,8 @@ class FaceRenderer:
     def close(self) -> None:
         """Release every GL object this renderer made."""
         self._deformation.release()
-        for obj in self._textures + self._materials + self._data_textures + self._colour_data_textures:
-            obj.release()
+        if self._material_gl is not None:
+            self._material_gl.release()
         if self._label is not None:
             self._label.release()
         self._attr_vbo.release()
