@@ -9,11 +9,34 @@
 //
 // The fragment stage is compiled once per material variant (parts_path.material_variant):
 // ALPHA_MODE (0 opaque, 1 mask, 2 blend), SHADING (0 lit, 1 unlit, 2 toon), TEXTURED and
-// MIRROR (0 or 1) and KIND (a lit material's kind, lighting.glsl) are #defines, so a variant
-// carries no branch, texture fetch or discard it does not use. On a software rasteriser that
+// MIRROR (0 or 1), KIND (a lit material's kind, lighting.glsl), PBR (a lit material drawn by the
+// glTF metallic-roughness model: 0 no, 1 yes, 2 with its metallic-roughness texture), RIM (MToon's
+// rim: parametric rim and matcap), MATCAP and RIM_TEX (its matcap and multiply textures), UV_ANIM and
+// UV_MASK (MToon's UV scroll and rotation, and its mask texture), OUTLINE (the outline pass of the
+// material: 0 the surface, 1 world width, 2 screen width) and OUTLINE_TEX (its width texture) are
+// #defines, so a variant carries no branch, texture fetch or discard it does not use. On a software rasteriser that
 // is a third of the shading time, and an opaque variant without discard lets the depth test
 // run before the shader (early z).
 #version 330 core
+
+// The material of this draw call: one uniform buffer per material (runtime/render/parts_path.py).
+layout(std140) uniform Material {
+    vec4 m_base_color;      // baseColorFactor, linear RGBA
+    vec4 m_emissive_cutoff; // emissiveFactor (linear), alphaCutoff
+    vec4 m_shade_shift;     // MToon shade colour (linear), shading shift
+    vec4 m_modes;           // alpha mode, shading code, shading toony, has texture (the first two and the
+                            // last are also the variant's #defines)
+    vec4 m_mirror_light;    // mirrored wrap s, t (done here; the sampler clamps), specular, shininess
+    vec4 m_uv_row0;         // KHR_texture_transform T * R * S, first two rows
+    vec4 m_uv_row1;
+    vec4 m_outline_color;   // MToon outline colour (linear), its lighting mix
+    vec4 m_outline;         // outline width (metres, or a fraction of the view's half height), 0, 0, 0
+    vec4 m_rim;             // parametric rim colour (linear), its fresnel power
+    vec4 m_rim_lift;        // rim lift, rim lighting mix, 0, 0
+    vec4 m_uv_anim;         // UV scroll u, v per second, rotation in radians per second, 0
+    vec4 m_pbr;             // metallic, roughness, 0, 0
+    vec4 m_matcap;          // matcap factor (linear), 0
+};
 
 #ifdef VERTEX_SHADER
 #ifdef GPU_DEFORM
@@ -40,6 +63,14 @@ mat4 joint(float j) {
 
 uniform mat4 u_model;           // whole-character translation (and, without a skeleton, the head pose)
 uniform mat4 u_view_projection;
+#if defined(OUTLINE) && OUTLINE
+// The outline pass (VRMC_materials_mtoon-1.0, as three-vrm draws it): the back faces pushed out along the
+// unit normal by the width; in screen mode the width scales with the view depth, a fraction of the half height.
+uniform float u_tan_half_fov;
+#if OUTLINE_TEX
+uniform sampler2D u_outline_texture;   // its green channel multiplies the width (linear)
+#endif
+#endif
 
 out vec3 v_world;
 out vec3 v_normal;
@@ -65,15 +96,30 @@ void main() {
     v_color = in_color;
     v_uv = in_uv;
     v_opacity = in_opacity;
+#if defined(OUTLINE) && OUTLINE
+    float width = m_outline.x;
+#if OUTLINE_TEX
+    width *= textureLod(u_outline_texture, in_uv, 0.0).g;
+#endif
+#if OUTLINE == 2
+    width *= (u_view_projection * world).w * u_tan_half_fov;
+#endif
+    world.xyz += normalize(v_normal) * width;
     gl_Position = u_view_projection * world;
+    gl_Position.z += 1e-6 * gl_Position.w;
+#else
+    gl_Position = u_view_projection * world;
+#endif
 }
 #endif
 
 #ifdef FRAGMENT_SHADER
 #include "lighting.glsl"
 
-#if !defined(ALPHA_MODE) || !defined(SHADING) || !defined(TEXTURED) || !defined(MIRROR) || !defined(KIND)
-#error "character.glsl: ALPHA_MODE, SHADING, TEXTURED, MIRROR and KIND must be defined (parts_path.material_variant)"
+#if !defined(ALPHA_MODE) || !defined(SHADING) || !defined(TEXTURED) || !defined(MIRROR) || !defined(KIND) \
+    || !defined(PBR) || !defined(RIM) || !defined(UV_ANIM) || !defined(OUTLINE) || !defined(MATCAP) \
+    || !defined(RIM_TEX) || !defined(UV_MASK)
+#error "character.glsl: the variant's #defines must all be given (parts_path.material_variant)"
 #endif
 #define ALPHA_OPAQUE 0
 #define ALPHA_MASK 1
@@ -83,17 +129,24 @@ void main() {
 #define SHADING_TOON 2
 
 uniform vec3 u_eye;
-// The material of this draw call: one uniform buffer per material (runtime/render/parts_path.py).
-layout(std140) uniform Material {
-    vec4 m_base_color;      // baseColorFactor, linear RGBA
-    vec4 m_emissive_cutoff; // emissiveFactor (linear), alphaCutoff
-    vec4 m_shade_shift;     // MToon shade colour (linear), shading shift
-    vec4 m_modes;           // alpha mode, shading code, shading toony, has texture (the first two and the
-                            // last are also the variant's #defines)
-    vec4 m_mirror_light;    // mirrored wrap s, t (done here; the sampler clamps), specular, shininess
-    vec4 m_uv_row0;         // KHR_texture_transform T * R * S, first two rows
-    vec4 m_uv_row1;
-};
+uniform float u_time;   // seconds, for MToon's UV animation
+#if PBR == 2
+uniform sampler2D u_metal_rough_texture;   // linear: roughness in green, metallic in blue
+#endif
+#if MATCAP
+uniform mat4 u_view;                        // the matcap is looked up by the view-space normal
+uniform sampler2D u_matcap_texture;        // sRGB
+#endif
+#if RIM_TEX
+uniform sampler2D u_rim_texture;           // sRGB, multiplies the rim
+#endif
+#if UV_MASK
+uniform sampler2D u_uv_mask_texture;       // linear: blue scales the UV animation
+#endif
+// The uniform environment of the metallic-roughness model (linear radiance): the reference page of the
+// tests gives three.js the same one (a PMREM of a uniform colour) with a key light of radiance 1.
+const vec3 ENV_RADIANCE = vec3(0.25);
+const float PI = 3.14159265;
 uniform sampler2D u_base_texture;
 
 in vec3 v_world;
@@ -134,11 +187,61 @@ vec3 toon(vec3 lit_color, vec3 shade_color, vec3 n) {
     return mix(shade_color, lit_color, t);
 }
 
+#if PBR
+// The glTF metallic-roughness model as three.js's MeshStandardMaterial draws it: the key light (radiance 1)
+// through Lambert and GGX (Smith height-correlated visibility, Schlick's Fresnel), and the uniform
+// environment through the analytic split-sum fit with multiple scattering (three.js's DFGApprox).
+vec3 metal_rough(vec3 base, float metal, float rough, vec3 n, vec3 v) {
+    rough = clamp(rough, 0.0525, 1.0);
+    vec3 diffuse = base * (1.0 - metal);
+    vec3 f0 = mix(vec3(0.04), base, metal);
+    vec3 l = normalize(KEY_DIR);
+    vec3 h = normalize(l + v);
+    float nl = clamp(dot(n, l), 0.0, 1.0);
+    float nv = clamp(dot(n, v), 0.0, 1.0);
+    float nh = clamp(dot(n, h), 0.0, 1.0);
+    float vh = clamp(dot(v, h), 0.0, 1.0);
+    float a2 = rough * rough * rough * rough;
+    float fresnel = exp2((-5.55473 * vh - 6.98316) * vh);
+    vec3 f = f0 * (1.0 - fresnel) + fresnel;
+    float gv = nl * sqrt(a2 + (1.0 - a2) * nv * nv);
+    float gl = nv * sqrt(a2 + (1.0 - a2) * nl * nl);
+    float vis = 0.5 / max(gv + gl, 1e-6);
+    float dd = nh * nh * (a2 - 1.0) + 1.0;
+    vec3 color = nl * (diffuse + PI * f * vis * a2 / (PI * dd * dd));
+    vec4 r = rough * vec4(-1.0, -0.0275, -0.572, 0.022) + vec4(1.0, 0.0425, 1.04, -0.04);
+    float a004 = min(r.x * r.x, exp2(-9.28 * nv)) * r.x + r.y;
+    vec2 fab = vec2(-1.04, 1.04) * a004 + r.zw;
+    vec3 single = f0 * fab.x + fab.y;
+    float ems = 1.0 - (fab.x + fab.y);
+    vec3 favg = f0 + (1.0 - f0) * 0.047619;
+    vec3 multi = single * favg / (1.0 - ems * favg) * ems;
+    vec3 total = single + multi;
+    color += ENV_RADIANCE * (single + multi + diffuse * (1.0 - max(max(total.r, total.g), total.b)));
+    return color;
+}
+#endif
+
 void main() {
     vec4 texel = vec4(1.0);
-#if TEXTURED
-    vec3 uv1 = vec3(v_uv, 1.0);
+#if UV_ANIM
+    // MToon's UV animation: a turn about the texture's centre, then a scroll (before the texture transform)
+#if UV_MASK
+    float anim_mask = texture(u_uv_mask_texture, v_uv).b;
+#else
+    float anim_mask = 1.0;
+#endif
+    float phase = m_uv_anim.z * u_time * anim_mask;
+    vec2 centred = v_uv - 0.5;
+    vec2 anim_uv = vec2(cos(phase) * centred.x + sin(phase) * centred.y,
+                        -sin(phase) * centred.x + cos(phase) * centred.y) + 0.5
+                   + m_uv_anim.xy * u_time * anim_mask;
+#else
+    vec2 anim_uv = v_uv;
+#endif
+    vec3 uv1 = vec3(anim_uv, 1.0);
     vec2 uv = vec2(dot(m_uv_row0.xyz, uv1), dot(m_uv_row1.xyz, uv1));
+#if TEXTURED
 #if MIRROR
     texel = textureGrad(u_base_texture, mirror(uv), dFdx(uv), dFdy(uv));  // derivatives of the unfolded uv
 #else
@@ -163,13 +266,41 @@ void main() {
     if (!gl_FrontFacing) n = -n;
 #if SHADING == SHADING_TOON
     vec3 color = toon(base.rgb, m_shade_shift.rgb * v_color * texel.rgb, n);
+#if RIM
+    // parametric rim and matcap, times the rim texture; the lighting mix takes the key light's radiance, 1,
+    // so the rim adds as it is
+    vec3 v = normalize(u_eye - v_world);
+    vec3 rim = m_rim.rgb * pow(clamp(1.0 - dot(v, n) + m_rim_lift.x, 0.0, 1.0), m_rim.a);
+#if MATCAP
+    vec3 view_n = normalize(mat3(u_view) * n);
+    vec3 view_v = normalize(mat3(u_view) * v);
+    vec3 mx = normalize(vec3(view_v.z, 0.0, -view_v.x));
+    vec3 my = cross(view_v, mx);
+    rim += m_matcap.rgb * texture(u_matcap_texture, 0.5 + 0.5 * vec2(dot(mx, view_n), -dot(my, view_n))).rgb;
+#endif
+#if RIM_TEX
+    rim *= texture(u_rim_texture, uv).rgb;
+#endif
+    color += rim;
+#endif
 #else
     vec3 v = normalize(u_eye - v_world);
     if (dot(n, v) < 0.0) n = -n;
+#if PBR
+    vec2 mr = m_pbr.xy;
+#if PBR == 2
+    mr *= texture(u_metal_rough_texture, uv).bg;
+#endif
+    vec3 color = metal_rough(base.rgb, mr.x, mr.y, n, v);
+#else
     vec3 color = shade(base.rgb, KIND, m_mirror_light.z, m_mirror_light.w, n, v);
 #endif
 #endif
+#endif
     color += m_emissive_cutoff.rgb;
+#if OUTLINE
+    color = m_outline_color.rgb * mix(vec3(1.0), color, m_outline_color.a);
+#endif
     f_color = vec4(linear_to_srgb(color), alpha);
 }
 #endif

@@ -213,6 +213,8 @@ class FrameLoop:
         self.wake = wake
         self.shape_names = tuple(names)
         self.renderer = renderer
+        # MToon's UV animation runs on the tick's time (recorded time on replay, so a replay draws the same)
+        self._material_time = getattr(renderer, "set_material_time", None)
         self.clock = clock
         self.observers = tuple(observers)
         self.fps = float(fps)
@@ -347,6 +349,8 @@ class FrameLoop:
 
         if self._advance is not None:
             self._advance(t, frame)
+        if self._material_time is not None:
+            self._material_time(t)
         self.renderer.draw(self._weights, self._rotation, self._translation)
         if self.overlays:  # drawn over the character (the panel), with this tick's frames; stamps: last tick's
             info.k, info.t, info.raw, info.frame, info.weights = k, t, raw, self._frame, self._weights

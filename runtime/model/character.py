@@ -42,6 +42,7 @@ from facepuppet.runtime.model.character_parts import (
 )
 from facepuppet.runtime.model.geometry import vertex_normals
 from facepuppet.runtime.model.look_at import look_at_of
+from facepuppet.runtime.model.material_model import MaterialModel
 from facepuppet.runtime.model.springs import spring_rig
 
 # Material kinds the shader knows (column 2 of ``material_params``). "occlusion" (a dark soft shadow over
@@ -103,7 +104,7 @@ class Character:
     delta_normals : ndarray of shape (n_deltas, 3), float32
     metadata : dict, settings/metrics/input hash carried into the manifest; ``settings["source"]``
         says where a glTF/VRM character came from (format, VRM meta, the extension JSON kept for export)
-    skeleton, look, expressions, layout : the optional parts a glTF / VRM avatar brings
+    skeleton, look, expressions, layout, material_model : the optional parts a glTF / VRM avatar brings
         (:mod:`facepuppet.runtime.model.character_parts`); None for an OBJ rig
     normals : ndarray of shape (n_vertices, 3), float32, unit, the file's rest normals, or None (computed
         from the triangles, :meth:`rest_normals`)
@@ -129,6 +130,7 @@ class Character:
     expressions: Expressions | None = None
     layout: Layout | None = None
     normals: np.ndarray | None = None
+    material_model: MaterialModel | None = None
 
     def __post_init__(self) -> None:
         n_v = len(self.vertices)
@@ -161,6 +163,8 @@ class Character:
             if settings.get("springs") is not None:
                 spring_rig(settings["springs"], self.skeleton.parent, self.skeleton.global_transforms())
             look_at_of(settings, self.skeleton.n_nodes)
+        if self.material_model is not None:
+            self.material_model.check(len(self.material_names), self.n_shapes)
         for arr in self._arrays().values():
             arr.setflags(write=False)
 
@@ -206,6 +210,8 @@ class Character:
             out.update(primitives=lay.primitives)
         if self.normals is not None:
             out.update(vertex_normals=self.normals)
+        if self.material_model is not None:
+            out.update(self.material_model.arrays())
         return out
 
     def rest_normals(self) -> np.ndarray:
@@ -311,6 +317,9 @@ def _load_parts(a: Mapping[str, np.ndarray], channels: Mapping[str, list], parts
             _fail(missing[0], f"missing: the {part} part has {', '.join(have)} but not {', '.join(missing)}")
         if part == "normals":
             out["normals"] = a["vertex_normals"]
+            continue
+        if part == "material_model":
+            out["material_model"] = MaterialModel.from_arrays(a)
             continue
         group = next(g for g, (p, _) in PART_CHANNELS.items() if p == part)
         if group not in channels:

@@ -43,6 +43,7 @@ import numpy as np
 
 from facepuppet.runtime.files.tables import Section, TablesError
 from facepuppet.runtime.model.geometry import quat_to_matrix
+from facepuppet.runtime.model.material_model import SECTIONS as MATERIAL_MODEL_SECTIONS
 
 # -- codes ----------------------------------------------------------------
 ALPHA_MODES = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}
@@ -108,9 +109,11 @@ PART_SECTIONS: dict[str, dict[str, Section]] = {
         "vertex_normals": Section("float32", ("n_vertices", 3), "rest normals from the file, unit length",
                                   optional=True),
     },
+    # MToon outline / rim / UV animation, metallic-roughness and the material binds (runtime.material_model)
+    "material_model": MATERIAL_MODEL_SECTIONS,
 }
 #: Channel groups of the parts: group -> (part, named dimension its length must equal, or None); the
-#: ``normals`` part has none.
+#: ``normals`` and ``material_model`` parts have none.
 PART_CHANNELS = {"nodes": ("skeleton", "n_nodes"), "textures": ("look", "n_textures"),
                  "expressions": ("expressions", "n_expressions"), "meshes": ("layout", None)}
 

@@ -115,6 +115,8 @@ class CpuDeformer:
         else:
             np.copyto(out, self.rest)
         block = self._block
+        if not len(block):  # no shape moves a vertex (shapes that only carry an expression's material binds)
+            return out
         active = np.flatnonzero(weights)
         # measured on the ICT head: a saxpy per shape costs ~1.4x a shape's share of the product
         if 3 * len(active) >= 2 * len(weights):

@@ -42,6 +42,8 @@ from facepuppet.runtime.model.character_parts import (
     identity_look,
 )
 from facepuppet.runtime.model.geometry import quat_to_matrix
+from facepuppet.runtime.model.material_model import MaterialModel, default_material_model
+from facepuppet.runtime.render.material_binds import MaterialRows
 from facepuppet.runtime.render.triangle_order import cache_order
 
 #: Share of a head turn given to the neck bone (the head bone takes the rest); 0.3, as avatar apps do.
@@ -94,49 +96,93 @@ def uv_matrix(offset_u: float, offset_v: float, rotation: float, scale_u: float,
     return (t @ r @ np.diag([scale_u, scale_v, 1.0]))[:2]
 
 
-def material_block(character: Character, m: int) -> bytes:
-    """The std140 ``Material`` block of material ``m`` (7 vec4, see character.glsl)."""
+def material_model_of(character: Character) -> MaterialModel:
+    """The character's material model, or one with no MToon extras, the studio lighting and no binds."""
+    if character.material_model is not None:
+        return character.material_model
+    return default_material_model(len(character.material_names))
+
+
+def material_block(character: Character, m: int, rows: MaterialRows | None = None) -> bytes:
+    """The std140 ``Material`` block of material ``m`` (14 vec4, see character.glsl); ``rows``: the values
+    that expressions' material binds change (default: the character's own)."""
     look = look_of(character)
+    rows = rows if rows is not None else MaterialRows.of(character)
     params = character.material_params[m]
+    mt = material_model_of(character).mtoon[m]
+    pbr = material_model_of(character).pbr[m]
     t = int(look.texture[m])
     shading = look.shading[m]
     mirror = (0.0, 0.0)
     if t >= 0:
         wrap_s, wrap_t = (int(x) for x in look.texture_info[t, 5:7])
         mirror = (float(wrap_s == MIRRORED_REPEAT), float(wrap_t == MIRRORED_REPEAT))
-    uv = uv_matrix(*(float(x) for x in look.uv_transform[m]))
-    block = np.zeros((7, 4), np.float32)
-    block[0] = look.base_color[m]
-    block[1] = (*look.emissive[m], look.alpha[m, 1])
-    block[2] = (*shading[2:5], shading[5])
+    uv = uv_matrix(*(float(x) for x in rows.uv_transform[m]))
+    block = np.zeros((14, 4), np.float32)
+    block[0] = rows.base_color[m]
+    block[1] = (*rows.emissive[m], look.alpha[m, 1])
+    block[2] = (*rows.shade[m], shading[5])
     block[3] = (look.alpha[m, 0], shading[0], shading[6], float(t >= 0))
     block[4] = (*mirror, params[0], max(float(params[1]), 1.0))
     block[5, :3], block[6, :3] = uv[0], uv[1]
+    block[7] = (*rows.outline[m], mt[5])
+    block[8, 0] = mt[1]
+    block[9] = (*rows.rim[m], mt[10])
+    block[10, :2] = (mt[11], mt[12])
+    block[11, :3] = mt[13:16]
+    block[12, :2] = pbr[:2]
+    block[13, :3] = mt[17:20]
     return block.tobytes()
 
 
-#: The #defines that make one fragment variant of ``character.glsl``, in the order of a variant key
-VARIANT_DEFINES = ("ALPHA_MODE", "SHADING", "TEXTURED", "MIRROR", "KIND")
-_LIT = 0
+#: The #defines that make one variant of ``character.glsl``, in the order of a variant key
+VARIANT_DEFINES = ("ALPHA_MODE", "SHADING", "TEXTURED", "MIRROR", "KIND", "PBR", "RIM", "UV_ANIM", "MATCAP",
+                   "RIM_TEX", "UV_MASK", "OUTLINE", "OUTLINE_TEX")
+_SURFACE_DEFINES = len(VARIANT_DEFINES) - 2
+_LIT, _TOON = 0, 2
 
 
-def material_variant(character: Character, m: int) -> tuple[int, int, int, int, int]:
-    """The fragment variant of material ``m``: (alpha mode, shading code, textured, mirrored wrap, lighting
-    kind), each an int; the kind (:data:`~facepuppet.runtime.model.character.MATERIAL_KINDS`) only for lit
-    materials (the studio lighting of eyes, teeth, lashes ... as ``face.glsl`` draws them), else 0.
+def material_variant(character: Character, m: int) -> tuple[int, ...]:
+    """The variant of material ``m``'s surface: (alpha mode, shading code, textured, mirrored wrap, lighting
+    kind, metallic-roughness, rim, UV animation, matcap, rim texture, UV animation mask, 0, 0), each an int;
+    the kind
+    (:data:`~facepuppet.runtime.model.character.MATERIAL_KINDS`) only for lit materials of the studio
+    lighting (eyes, teeth, lashes ... as ``face.glsl`` draws them), else 0; metallic-roughness 1 for a lit
+    glTF material (2 with its texture); rim (parametric rim or matcap) and its textures and the UV animation
+    and its mask for toon materials whose MToon has them.
 
     ``character.glsl`` is compiled once per distinct variant with these as #defines
-    (:data:`VARIANT_DEFINES`): a variant has no branch, texture fetch or discard it does not use.
+    (:data:`VARIANT_DEFINES`): a variant has no branch, texture fetch or discard it does not use. Its
+    outline pass is :func:`outline_variant`.
     """
     look = look_of(character)
+    model = material_model_of(character)
     t = int(look.texture[m])
     mirrored = False
     if t >= 0:
         wrap_s, wrap_t = (int(x) for x in look.texture_info[t, 5:7])
         mirrored = MIRRORED_REPEAT in (wrap_s, wrap_t)
     shading = int(round(float(look.shading[m][0])))
-    kind = int(round(float(character.material_params[m, 2]))) if shading == _LIT else 0
-    return (int(round(float(look.alpha[m, 0]))), shading, int(t >= 0), int(mirrored), kind)
+    pbr = 0
+    if shading == _LIT and model.pbr[m, 3] > 0.5:
+        pbr = 2 if model.pbr[m, 2] >= 0 else 1
+    kind = int(round(float(character.material_params[m, 2]))) if shading == _LIT and not pbr else 0
+    mt = model.mtoon[m]
+    matcap = int(shading == _TOON and mt[20] >= 0 and bool(np.any(mt[17:20] > 0)))
+    rim = int(shading == _TOON and (bool(np.any(mt[7:10] > 0)) or bool(matcap)))
+    uv_anim = int(bool(np.any(mt[13:16] != 0)))
+    return (int(round(float(look.alpha[m, 0]))), shading, int(t >= 0), int(mirrored), kind, pbr, rim, uv_anim,
+            matcap, int(rim and mt[16] >= 0), int(uv_anim and mt[21] >= 0), 0, 0)
+
+
+def outline_variant(character: Character, m: int) -> tuple[int, ...] | None:
+    """The variant of material ``m``'s outline pass (its surface variant with OUTLINE = the width mode and
+    OUTLINE_TEX), or None when it draws none (mode none, width 0, or alpha BLEND)."""
+    mt = material_model_of(character).mtoon[m]
+    look = look_of(character)
+    if int(mt[0]) == 0 or mt[1] <= 0 or int(round(float(look.alpha[m, 0]))) == _BLEND:
+        return None
+    return (*material_variant(character, m)[:_SURFACE_DEFINES], int(mt[0]), int(mt[6] >= 0))
 
 
 def variant_defines(variant: tuple[int, ...]) -> dict[str, int]:
@@ -144,13 +190,15 @@ def variant_defines(variant: tuple[int, ...]) -> dict[str, int]:
     return dict(zip(VARIANT_DEFINES, variant))
 
 
-def make_textures(ctx: moderngl.Context, look: Look) -> list:
-    """One sRGB moderngl texture per look texture, with its glTF sampler's filters and wraps."""
+def make_textures(ctx: moderngl.Context, look: Look | MaterialModel, srgb: bool = True) -> list:
+    """One moderngl texture per texture of a look (sRGB: colours) or of a material model (``srgb=False``:
+    metallic-roughness, outline width, linear data), with its glTF sampler's filters and wraps."""
     out = []
     for t in range(len(look.texture_names)):
         image = np.ascontiguousarray(look.image(t))
         h, w = image.shape[:2]
-        tex = ctx.texture((w, h), 4, image.tobytes(), internal_format=_SRGB8_ALPHA8)  # row 0 = v 0 (glTF)
+        fmt = {"internal_format": _SRGB8_ALPHA8} if srgb else {}
+        tex = ctx.texture((w, h), 4, image.tobytes(), **fmt)  # row 0 = v 0 (glTF)
         mag, minf, wrap_s, wrap_t = (int(x) for x in look.texture_info[t, 3:7])
         mag_gl = moderngl.NEAREST if mag == NEAREST else moderngl.LINEAR
         if minf in _MIPMAP_MIN or minf == 0:
@@ -372,4 +420,5 @@ def joint_texels(matrices: np.ndarray) -> bytes:
 
 
 __all__ = ["NECK_SHARE", "CpuSkinner", "DrawGroup", "HeadPose", "draw_groups", "has_parts", "head_vertices",
-           "joint_texels", "look_of", "make_textures", "material_block", "uv_matrix", "vertex_attributes"]
+           "joint_texels", "look_of", "make_textures", "material_block", "material_model_of", "material_variant",
+           "outline_variant", "uv_matrix", "vertex_attributes"]

@@ -41,20 +41,20 @@ from facepuppet.runtime.render.face_mesh import vertex_materials, visible_triang
 from facepuppet.runtime.render.framebuffers import Framebuffers
 from facepuppet.runtime.render.framing import frame_character
 from facepuppet.runtime.render.layers import SUBTLE_LAYER_KINDS, has_layers, vertex_opacity
+from facepuppet.runtime.render.material_gl import SAMPLER_UNITS, MaterialGl
 from facepuppet.runtime.render.options import FRAMINGS
 from facepuppet.runtime.render.parts_path import (
+    VARIANT_DEFINES,
     HeadPose,
     draw_groups,
     has_parts,
-    look_of,
-    make_textures,
-    material_block,
     material_variant,
+    outline_variant,
     variant_defines,
     vertex_attributes,
 )
 from facepuppet.runtime.render.pass_clock import NO_CLOCK, NoClock, PassClock
-from facepuppet.runtime.render.paths.base import PATH_TEXTURE_UNITS, DeformationPath
+from facepuppet.runtime.render.paths.base import DeformationPath
 from facepuppet.runtime.render.paths.cpu import CpuPath
 from facepuppet.runtime.render.paths.elastic import ElasticPath
 from facepuppet.runtime.render.paths.gpu import GpuPath
@@ -65,7 +65,6 @@ from facepuppet.runtime.render.skeleton_motion import SkeletonMotion
 logger = logging.getLogger(__name__)
 
 PATHS = ("auto", "gpu", "cpu", "elastic")
-BASE_TEXTURE_UNIT = PATH_TEXTURE_UNITS  # a material's base colour texture, above the path's units
 
 
 def realistic_weights(n_shapes: int, n_active: int = 10) -> np.ndarray:
@@ -94,6 +93,7 @@ class FaceRenderer:
     msaa : int, samples of the offscreen framebuffer (0 or 1: none; capped at the context's maximum);
         a window's samples are the window's (``create_context(samples=...)``)
     log : callable(str), receives the one-line path report
+    outlines : bool, draw the MToon outlines of the materials that have them (False: the surfaces only)
     subtle_layers : bool, draw the subtle see-through eye layers (lid shadow, wet films:
         :data:`~facepuppet.runtime.render.layers.SUBTLE_LAYER_KINDS`); False leaves them out where a frame
         budget asks (:mod:`~facepuppet.runtime.render.quality`); the lashes are always drawn
@@ -134,6 +134,7 @@ class FaceRenderer:
         credits: str | None = None,
         subtle_layers: bool = True,
         springs: bool = True,
+        outlines: bool = True,
     ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
@@ -162,14 +163,13 @@ class FaceRenderer:
                 self._head_pose.moved_nodes = motion.moved_nodes  # the CPU skinner skins what the motion moves
         self.cull_back_faces = bool(cull_back_faces)
         self.subtle_layers = bool(subtle_layers)
+        self.outlines = bool(outlines)
+        self.material_time = 0.0  # seconds, MToon's UV animation (set_material_time)
         self._framebuffers = Framebuffers(ctx, (self.width, self.height), self.samples, target_fbo)
         self.fbo = self._framebuffers.fbo
         self.camera = frame_character(character, framing, self.width / self.height)
         self._setup_buffers()
-        self._look = look_of(character) if self.parts else None
-        self._textures = make_textures(ctx, self._look) if self.parts else []
-        self._materials = [ctx.buffer(material_block(character, m)) for m in range(len(character.material_names))] \
-            if self.parts else []
+        self._material_gl = MaterialGl(ctx, character) if self.parts else None
         if path == "elastic" and elastic is None:
             raise ValueError("elastic: path 'elastic' needs an ElasticModel (elastic=...)")
         candidates = [self._make_path(name, elastic) for name in (("gpu", "cpu") if path == "auto" else (path,))]
@@ -203,6 +203,10 @@ class FaceRenderer:
                 subtle = np.isin(c.material_params[:, 2].round().astype(int), SUBTLE_LAYER_KINDS)
                 self._groups = [g for g in self._groups if not subtle[g.material]]
             self._variant_of = [material_variant(c, m) for m in range(len(c.material_names))]
+            self._outline_of = [outline_variant(c, m) for m in range(len(c.material_names))]
+            # MToon outlines: the opaque and masked groups of the materials that have one (after the surfaces)
+            self._outline_groups = [g for g in self._groups if self.outlines and not g.blend
+                                    and self._outline_of[g.material] is not None]
             self._ibo = ctx.buffer(tris.tobytes() if len(tris) else b"\0" * 12)
             self.n_indices = len(tris) * 3
             self.n_one_sided_indices = 0
@@ -239,11 +243,14 @@ class FaceRenderer:
             prog = load_program(self.ctx, "face.glsl", defines or None)
             return {None: prog}, {None: self._vao(prog, vbo)}
         programs, vaos = {}, {}
-        for key in dict.fromkeys(self._variant_of[g.material] for g in self._groups) or [(0, 0, 0, 0, 0)]:
+        keys = [self._variant_of[g.material] for g in self._groups]
+        keys += [self._outline_of[g.material] for g in self._outline_groups]
+        for key in dict.fromkeys(keys) or [(0,) * len(VARIANT_DEFINES)]:
             prog = load_program(self.ctx, "character.glsl", {**defines, **variant_defines(key)})
             prog["Material"].binding = 0
-            if "u_base_texture" in prog:
-                prog["u_base_texture"].value = BASE_TEXTURE_UNIT
+            for name, unit in SAMPLER_UNITS:
+                if name in prog:
+                    prog[name].value = unit
             programs[key], vaos[key] = prog, self._vao(prog, vbo)
         return programs, vaos
 
@@ -330,6 +337,12 @@ class FaceRenderer:
         else:
             self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
         self._deformation.prepare(w, joints)
+        if self._material_gl is not None:  # expressions' material binds: the changed materials' blocks
+            self._material_gl.update(w)
+
+    def set_material_time(self, seconds: float) -> None:
+        """The time of MToon's UV animation (scroll and rotation speeds are per second) for the next frames."""
+        self.material_time = float(seconds)
 
     def advance(self, t: float, frame: Frame | None = None) -> None:
         """The next frame's time (seconds, the loop's tick time) and its frame (eye-look channels): what the
@@ -363,6 +376,9 @@ class FaceRenderer:
         if self.parts:
             self._draw_opaque_groups()
             clock.mark("opaque")
+            if self._outline_groups:
+                self._draw_outlines()
+                clock.mark("outline")
             self._draw_blended_groups()
             clock.mark("blended")
         else:
@@ -384,11 +400,18 @@ class FaceRenderer:
         """The pose and the camera, in every program of the path."""
         model, view_projection = self._pose.T.tobytes(), self.camera.view_projection.T.tobytes()
         eye = tuple(float(x) for x in self.camera.eye)
+        tan_half_fov = 1.0 / float(self.camera.projection[1, 1])
         for prog in self._deformation.programs.values():
             prog["u_model"].write(model)
             prog["u_view_projection"].write(view_projection)
             if "u_eye" in prog:  # an unlit or toon variant does not read it
                 prog["u_eye"].value = eye
+            if "u_time" in prog:  # a variant with MToon's UV animation
+                prog["u_time"].value = self.material_time
+            if "u_tan_half_fov" in prog:  # a screen-width outline
+                prog["u_tan_half_fov"].value = tan_half_fov
+            if "u_view" in prog:  # a matcap
+                prog["u_view"].write(self.camera.view.T.tobytes())
 
     def _clear(self) -> None:
         """Bind the framebuffer and clear it; depth test on, the blend function every blended pass uses."""
@@ -436,21 +459,28 @@ class FaceRenderer:
         self.ctx.disable(moderngl.BLEND)
         self.fbo.depth_mask = True
 
-    def _draw_groups(self, groups: list) -> None:
-        """One draw call per group with its material and texture; culling as each group asks (off after)."""
-        ctx, look, variants, vaos = self.ctx, self._look, self._variant_of, self._deformation.vaos
+    def _draw_outlines(self) -> None:
+        """A character with parts, the MToon outlines: the back faces of the outlined opaque groups pushed out
+        along the normals (front faces culled), depth tested and written like a surface."""
+        self.ctx.enable(moderngl.CULL_FACE)
+        self.ctx.cull_face = "front"
+        self._draw_groups(self._outline_groups, self._outline_of, culled=True)
+        self.ctx.cull_face = "back"
+
+    def _draw_groups(self, groups: list, variants: list | None = None, culled: bool = False) -> None:
+        """One draw call per group with its material and textures; culling as each group asks (off after;
+        ``culled``: as set by the caller)."""
+        ctx, materials, vaos = self.ctx, self._material_gl, self._deformation.vaos
+        variants = self._variant_of if variants is None else variants
         culling = None
         for g in groups:
-            if g.cull != culling:
+            if g.cull != culling and not culled:
                 (ctx.enable if g.cull else ctx.disable)(moderngl.CULL_FACE)
                 culling = g.cull
             if g.blend:
                 ctx.enable(moderngl.BLEND)
                 self.fbo.depth_mask = False
-            self._materials[g.material].bind_to_uniform_block(0)
-            t = int(look.texture[g.material])
-            if t >= 0:
-                self._textures[t].use(BASE_TEXTURE_UNIT)
+            materials.use(g.material)
             vaos[variants[g.material]].render(moderngl.TRIANGLES, vertices=g.count, first=g.first)
         ctx.disable(moderngl.CULL_FACE)
 
@@ -508,8 +538,8 @@ class FaceRenderer:
     def close(self) -> None:
         """Release every GL object this renderer made."""
         self._deformation.release()
-        for obj in self._textures + self._materials:
-            obj.release()
+        if self._material_gl is not None:
+            self._material_gl.release()
         if self._label is not None:
             self._label.release()
         self._attr_vbo.release()

@@ -30,11 +30,13 @@ import numpy as np
 from facepuppet.runtime.files.tables import TablesError, hash_inputs, naming_file
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.character_parts import Layout, Look, Skeleton
+from facepuppet.runtime.model.material_model import MaterialModel
 
 from facepuppet.offline.io.gltf import khr_materials, vrm_expressions, vrm_humanoid, vrm_materials, vrm_meta
 from facepuppet.offline.io.gltf.credits import credit_line, text
+from facepuppet.offline.io.gltf.kept_parts import keep_parts
 from facepuppet.offline.io.gltf.read_look_at import read_look_at
-from facepuppet.offline.io.gltf.read_materials import read_materials
+from facepuppet.offline.io.gltf.read_materials import decode_textures, read_materials
 from facepuppet.offline.io.gltf.read_meshes import Progress, read_geometry, read_shapes
 from facepuppet.offline.io.gltf.read_nodes import read_nodes
 from facepuppet.offline.io.gltf.read_springs import read_springs
@@ -115,6 +117,8 @@ def read_gltf(path: str | os.PathLike, *, name: str | None = None, progress: Pro
         _asset_meta(state)
         for reader in EXTENSION_READERS:
             reader.read(state)
+        decode_textures(state)  # every reader has named the textures its materials use
+        keep_parts(state, state.textures)  # what the look does not hold, kept raw for export
         return _character(state, name)
 
 
@@ -191,6 +195,7 @@ def _character(state: ReadState, name: str | None) -> Character:
                 shading=rows.shading.astype(np.float32), texture=rows.texture.astype(np.int32),
                 uv_transform=rows.uv_transform.astype(np.float32), texture_names=state.texture_names,
                 texture_info=state.texture_info, texture_pixels=state.texture_pixels)
+    material_model = _material_model(state)
     skeleton = Skeleton(tuple(state.node_names), state.parent.astype(np.int32), state.rest_local.astype(np.float32),
                         geo["vertex_nodes"].astype(np.uint16), geo["vertex_weights"].astype(np.float32),
                         state.bones)
@@ -200,6 +205,8 @@ def _character(state: ReadState, name: str | None) -> Character:
     for where, arr in (("morph targets", deltas["delta_positions"]), ("morph targets", deltas["delta_normals"]),
                        ("materials", look.base_color), ("materials", look.emissive), ("materials", look.alpha),
                        ("materials", look.shading), ("materials", look.uv_transform),
+                       ("materials", material_model.mtoon), ("materials", material_model.pbr),
+                       ("expressions", material_model.bind_value),
                        ("TEXCOORD_0", look.uv), ("COLOR_0", geo["colors"]),
                        ("skins", skeleton.rest_local), ("skins", skeleton.vertex_weights)):
         if not np.isfinite(arr).all():
@@ -257,9 +264,25 @@ def _character(state: ReadState, name: str | None) -> Character:
                 expressions=expressions,
                 layout=Layout(tuple(geo["mesh_names"]), geo["primitives"]),
                 normals=geo["normals"].astype(np.float32) if geo["file_normals"] else None,
+                material_model=material_model,
             )
         except TablesError as exc:  # a value the file allows but a character cannot hold
             raise GltfError(f.path, exc.field, exc.problem) from None
+
+
+def _material_model(state: ReadState) -> MaterialModel:
+    """The MToon rows, metallic-roughness rows and material binds the readers found."""
+    e = state.expressions
+    bind_shape = []
+    for name, *_ in state.material_binds:  # the last shape each expression binds is its own (vrm_expressions)
+        k = e.names.index(name)
+        bind_shape.append(int(e.binds(k)[0][-1]))
+    return MaterialModel(
+        mtoon=state.mtoon.astype(np.float32), pbr=state.pbr.astype(np.float32),
+        bind_shape=np.asarray(bind_shape, np.uint32),
+        bind_target=np.asarray([(m, k) for _, m, k, _ in state.material_binds], np.int32).reshape(-1, 2),
+        bind_value=np.asarray([v for *_, v in state.material_binds], np.float32).reshape(-1, 4),
+        texture_info=state.data_texture_info, texture_pixels=state.data_texture_pixels)
 
 
 def _pivot(state: ReadState, skeleton: Skeleton, vertices: np.ndarray) -> tuple[np.ndarray, str]:

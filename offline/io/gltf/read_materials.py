@@ -28,8 +28,8 @@ from PIL import Image, UnidentifiedImageError
 
 from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import ALPHA_MODES, IDENTITY_UV_TRANSFORM
+from facepuppet.runtime.model.material_model import NO_MTOON
 
-from facepuppet.offline.io.gltf.kept_parts import keep_parts
 from facepuppet.offline.io.gltf.names import UniqueNames
 from facepuppet.offline.io.gltf.read_state import LookRows, ReadState
 from facepuppet.offline.io.gltf_files import Opened
@@ -47,11 +47,18 @@ MAX_TEXTURE_TEXELS = 128 << 20
 
 
 def read_materials(state: ReadState) -> None:
-    """Fill the stored materials, their core look rows and the decoded textures (see the module doc)."""
+    """Fill the stored materials and their core look rows (see the module doc); the textures they use are
+    named, and decoded by :func:`decode_textures` once the extensions have named theirs."""
     default_material = _materials(state)
-    textures = _look_rows(state, default_material)
-    _textures(state, textures)
-    keep_parts(state, textures)
+    _look_rows(state, default_material)
+
+
+def decode_textures(state: ReadState) -> None:
+    """Decode every texture the materials and their extensions use: the look's (``state.textures``), then
+    the material model's (``state.data_textures``), under one texel budget."""
+    state.texture_names, state.texture_info, state.texture_pixels = _textures(state, state.textures)
+    _, state.data_texture_info, state.data_texture_pixels = _textures(state, state.data_textures,
+                                                                      len(state.texture_pixels))
 
 
 def _materials(state: ReadState) -> int | None:
@@ -99,9 +106,10 @@ def _material_kind(state: ReadState, m: dict, i: int) -> list[float]:
     return [float(spec), float(shine), float(MATERIAL_KINDS[kind]), 0.0]
 
 
-def _look_rows(state: ReadState, default_material: int | None) -> dict[int, int]:
+def _look_rows(state: ReadState, default_material: int | None) -> None:
     """The core glTF look of each material (base colour, emissive, alpha mode, double-sided, base colour
-    texture) into ``state.look``; returns {glTF texture index: stored texture index} of the textures used."""
+    texture) into ``state.look``, and its metallic-roughness into ``state.pbr`` (glTF's defaults: metallic 1,
+    roughness 1; lit by that model unless ``extras.facepuppet`` named a kind of the studio lighting)."""
     f, geo = state.f, state.geo
     if default_material is not None:
         geo["triangle_material"][geo["triangle_material"] == -1] = default_material
@@ -112,7 +120,7 @@ def _look_rows(state: ReadState, default_material: int | None) -> dict[int, int]
     rows = LookRows(base=np.ones((n_m, 4)), emissive=np.zeros((n_m, 3)),
                     alpha=np.tile([ALPHA_MODES["OPAQUE"], 0.5], (n_m, 1)), shading=np.zeros((n_m, 8)),
                     texture=np.full(n_m, -1, dtype=np.int64), uv_transform=np.tile(IDENTITY_UV_TRANSFORM, (n_m, 1)))
-    textures: dict[int, int] = {}  # glTF texture index -> stored texture index
+    pbr_rows = np.tile([1.0, 1.0, -1.0, 1.0], (n_m, 1))
     for i, m in enumerate(mats):
         w = f"materials[{i}]"
         pbr = f.get(m, "pbrMetallicRoughness", dict, w, {})
@@ -126,27 +134,37 @@ def _look_rows(state: ReadState, default_material: int | None) -> dict[int, int]
         rows.shading[i, 1] = 1.0 if f.get(m, "doubleSided", bool, w, False) else 0.0
         if "baseColorTexture" in pbr:
             info = f.get(pbr, "baseColorTexture", dict, f"{w}.pbrMetallicRoughness")
-            tw = f"{w}.pbrMetallicRoughness.baseColorTexture"
-            t = f.get(info, "index", int, tw)
-            f.obj("textures", t, f"{tw}.index")
-            if f.get(info, "texCoord", int, tw, 0) != 0:
-                state.warn(f"{tw}.texCoord: TEXCOORD_{info['texCoord']} asked for; only TEXCOORD_0 is read")
-            if t not in textures:
-                textures[t] = len(textures)
-            rows.texture[i] = textures[t]
+            rows.texture[i] = state.use_texture(info, f"{w}.pbrMetallicRoughness.baseColorTexture")
+        pw = f"{w}.pbrMetallicRoughness"
+        pbr_rows[i, 0] = np.clip(f.get(pbr, "metallicFactor", float, pw, 1.0), 0.0, 1.0)
+        pbr_rows[i, 1] = np.clip(f.get(pbr, "roughnessFactor", float, pw, 1.0), 0.0, 1.0)
+        if "metallicRoughnessTexture" in pbr:
+            info = f.get(pbr, "metallicRoughnessTexture", dict, pw)
+            pbr_rows[i, 2] = state.use_texture(info, f"{pw}.metallicRoughnessTexture", data=True)
+        pbr_rows[i, 3] = 1.0 if int(state.material_params[i, 2]) == MATERIAL_KINDS["skin"] and \
+            not _names_kind(m) else 0.0
     state.look = rows
-    return textures
+    state.pbr = pbr_rows
+    state.mtoon = np.tile(np.asarray(NO_MTOON, float), (n_m, 1))
 
 
-def _textures(state: ReadState, textures: dict[int, int]) -> None:
-    """Decode the used textures' images (PNG or JPEG, Pillow) and samplers into ``state.texture_*``.
+def _names_kind(m: dict) -> bool:
+    """Whether a material's ``extras.facepuppet`` names its kind (a character exported by facepuppet)."""
+    extras = m.get("extras")
+    return isinstance(extras, dict) and isinstance(extras.get("facepuppet"), dict)
+
+
+def _textures(state: ReadState, textures: dict[int, int],
+              already: int = 0) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """Decode the used textures' images (PNG or JPEG, Pillow) and samplers: (names, info, pixels);
+    ``already``: texels decoded before, counted in the budget.
 
     Every used image's size is read from its header first, and the sizes checked against
     :data:`MAX_TEXTURE_SIDE` and :data:`MAX_TEXTURE_TEXELS`, before any image is decoded; then each is
     decoded straight into its rows of the one texel array."""
     f = state.f
     used = [_texture(state, t) for t, _stored in sorted(textures.items(), key=lambda kv: kv[1])]
-    total = 0
+    total = already
     for u in used:
         if u.width > MAX_TEXTURE_SIDE or u.height > MAX_TEXTURE_SIDE:
             f.fail(u.where, f"{u.width}x{u.height} texels: larger than {MAX_TEXTURE_SIDE}x{MAX_TEXTURE_SIDE}")
@@ -154,7 +172,7 @@ def _textures(state: ReadState, textures: dict[int, int]) -> None:
         if total > MAX_TEXTURE_TEXELS:
             f.fail(u.where, f"{u.width}x{u.height} texels bring the used textures to {total} texels, more than "
                             f"the {MAX_TEXTURE_TEXELS} read ({MAX_TEXTURE_TEXELS * 4 >> 20} MiB of RGBA)")
-    pixels = np.empty((total, 4), np.uint8)
+    pixels = np.empty((total - already, 4), np.uint8)
     names, info = [], []
     first = 0
     unique = UniqueNames()
@@ -165,9 +183,7 @@ def _textures(state: ReadState, textures: dict[int, int]) -> None:
                                  else f"image{u.source}"))
         info.append([first, u.width, u.height, *u.sampler])
         first += n
-    state.texture_names = tuple(names)
-    state.texture_info = np.asarray(info, dtype=np.int32).reshape(-1, 7)
-    state.texture_pixels = pixels
+    return tuple(names), np.asarray(info, dtype=np.int32).reshape(-1, 7), pixels
 
 
 @dataclass(frozen=True)

@@ -75,6 +75,14 @@ class ReadState:
     texture_names: tuple[str, ...] = ()
     texture_info: np.ndarray | None = None
     texture_pixels: np.ndarray | None = None
+    textures: dict[int, int] = field(default_factory=dict)  # glTF texture -> look texture, in first-use order
+    data_textures: dict[int, int] = field(default_factory=dict)  # the same for the material model's textures
+    data_texture_info: np.ndarray | None = None
+    data_texture_pixels: np.ndarray | None = None
+    mtoon: np.ndarray | None = None  # (n_materials, 16) float64, runtime.material_model.MTOON_COLUMNS
+    pbr: np.ndarray | None = None  # (n_materials, 4) float64, runtime.material_model.PBR_COLUMNS
+    # material binds: (expression name, material, BIND_KINDS code, value (4,)); each expression gets a shape
+    material_binds: list[tuple[str, int, int, tuple[float, ...]]] = field(default_factory=list)
     # extension readers
     bones: dict[str, int] = field(default_factory=dict)
     expressions: Expressions | None = None
@@ -90,6 +98,20 @@ class ReadState:
 
     def warn(self, text: str) -> None:
         self.warnings.append(text)
+
+    def use_texture(self, info: Any, where: str, data: bool = False) -> int:
+        """The stored index of the texture a texture info object (``{"index": t, "texCoord": 0}``) names: a
+        colour texture of the look, or (``data``) one of the material model's (metallic-roughness, outline
+        width); the textures are decoded once every reader has named the ones it uses."""
+        f = self.f
+        if not isinstance(info, dict):
+            f.fail(where, "expected a texture info object")
+        t = f.get(info, "index", int, where)
+        f.obj("textures", t, f"{where}.index")
+        if f.get(info, "texCoord", int, where, 0) != 0:
+            self.warn(f"{where}.texCoord: TEXCOORD_{info['texCoord']} asked for; only TEXCOORD_0 is read")
+        used = self.data_textures if data else self.textures
+        return used.setdefault(t, len(used))
 
 
 def extensions_of(o: Any) -> dict:

@@ -8,6 +8,13 @@ One shape spans every mesh whose targets share its name, so the binds of one
 shape on several meshes are one bind. A bind naming no morph target of the
 scene is dropped with a warning.
 
+Material binds (0.x ``materialValues``, 1.0 ``materialColorBinds`` and
+``textureTransformBinds``) are read as three-vrm reads them (0.x colours as
+given, 0.x ``_MainTex_ST`` offsets flipped to glTF's top-left origin); an
+expression with any gets a shape of its own that moves no vertex
+(:data:`~facepuppet.runtime.model.material_model.BIND_SHAPE_PREFIX`), which
+carries its weight to the renderer.
+
 Written: the character's expressions (with the binds on materials the file
 had, :mod:`.vrm_material_binds`), and a custom expression for each shape
 whose name is one of ARKit's 52 and has no expression of its name yet
@@ -25,6 +32,7 @@ import numpy as np
 from facepuppet.runtime.mapping.channels import ARKIT_NAMES, canonical, pascal
 from facepuppet.runtime.mapping.vrm_names import VRM0_PRESETS, VRM1_FROM_VRM0
 from facepuppet.runtime.model.character_parts import OVERRIDES, Expressions
+from facepuppet.runtime.model.material_model import BIND_KINDS, BIND_SHAPE_PREFIX
 
 from facepuppet.offline.io.gltf.read_state import ReadState, target_names
 from facepuppet.offline.io.gltf.vrm_material_binds import material_binds, write_binds0, write_binds1
@@ -49,11 +57,14 @@ def read_expressions(state: ReadState) -> None:
         return
     names, presets, offsets, bs, bw, flags = [], [], [0], [], [], []
     seen: set[str] = set()
-    for name, preset, shapes, weights, flag in rows:
+    for name, preset, shapes, weights, flag, binds in rows:
         if name in seen:
             state.warn(f"expression {name!r} appears twice; the first is kept")
             continue
         seen.add(name)
+        if binds:
+            shapes, weights = [*shapes, _bind_shape(state, name)], [*weights, 1.0]
+            state.material_binds.extend((name, *b) for b in binds)
         # One shape spans every mesh whose targets share its name, and VRM binds it once per mesh:
         # the binds of one shape are one bind (the largest, with a warning when the meshes differ).
         merged: dict[int, float] = {}
@@ -71,6 +82,80 @@ def read_expressions(state: ReadState) -> None:
     state.expressions = Expressions(tuple(names), tuple(presets), np.asarray(offsets, dtype=np.int64),
                                     np.asarray(bs, dtype=np.uint32), np.asarray(bw, dtype=np.float32),
                                     np.asarray(flags, dtype=np.int32).reshape(-1, 4))
+
+
+def _bind_shape(state: ReadState, name: str) -> int:
+    """A shape that moves no vertex, appended to carry expression ``name``'s material binds; its index."""
+    shape = BIND_SHAPE_PREFIX + name
+    while shape in state.shape_names:
+        shape += "_"
+    state.shape_names = (*state.shape_names, shape)
+    offsets = state.deltas["delta_offsets"]
+    state.deltas["delta_offsets"] = np.append(offsets, offsets[-1]).astype(offsets.dtype)
+    return len(state.shape_names) - 1
+
+
+_V0_COLOR_PROPERTIES = {"_Color": "color", "_EmissionColor": "emissionColor", "_ShadeColor": "shadeColor",
+                        "_RimColor": "rimColor", "_OutlineColor": "outlineColor", "_SphereAdd": "matcapColor"}
+
+
+def _material_index(state: ReadState) -> dict:
+    mats = state.f.items("materials")
+    return {m.get("name"): i for i, m in enumerate(mats) if isinstance(m, dict) and isinstance(m.get("name"), str)}
+
+
+def _vrm0_material_values(state: ReadState, values: Any, where: str, by_name: dict) -> list:
+    """(material, kind, value (4,)) of a 0.x blend shape group's ``materialValues``; an unknown material or
+    property is dropped with a warning."""
+    f = state.f
+    if not isinstance(values, list):
+        f.fail(where, "expected an array")
+    out = []
+    for k, v in enumerate(values):
+        vw = f"{where}[{k}]"
+        if not isinstance(v, dict):
+            f.fail(vw, "expected an object")
+        material = by_name.get(f.get(v, "materialName", str, vw, ""))
+        prop = f.get(v, "propertyName", str, vw, "")
+        target = f.numbers(v, "targetValue", 4, vw, [0, 0, 0, 0])
+        if material is None:
+            state.warn(f"{vw}.materialName: no material of that name (dropped)")
+        elif prop in ("_MainTex_ST", "_MainTex"):
+            sx, sy, ox, oy = (float(x) for x in target)
+            out.append((material, BIND_KINDS["textureTransform"], (sx, sy, ox, 1.0 - oy - sy)))
+        elif prop in _V0_COLOR_PROPERTIES:
+            out.append((material, BIND_KINDS[_V0_COLOR_PROPERTIES[prop]], tuple(float(x) for x in target)))
+        else:
+            state.warn(f"{vw}.propertyName: {prop!r} is not a colour or _MainTex_ST (dropped)")
+    return out
+
+
+def _vrm1_material_binds(state: ReadState, e: dict, ew: str) -> list:
+    """(material, kind, value (4,)) of a 1.0 expression's ``materialColorBinds`` and ``textureTransformBinds``."""
+    f = state.f
+    out = []
+    for b, bind in enumerate(f.get(e, "materialColorBinds", list, ew, [])):
+        bw = f"{ew}.materialColorBinds[{b}]"
+        if not isinstance(bind, dict):
+            f.fail(bw, "expected an object")
+        material = f.get(bind, "material", int, bw)
+        f.obj("materials", material, f"{bw}.material")
+        kind = f.get(bind, "type", str, bw)
+        if kind not in BIND_KINDS or kind == "textureTransform":
+            f.fail(f"{bw}.type", f"{kind!r} is not one of color, emissionColor, shadeColor, matcapColor, "
+                                 "rimColor, outlineColor")
+        target = f.numbers(bind, "targetValue", 4, bw, None)
+        out.append((material, BIND_KINDS[kind], tuple(float(x) for x in target)))
+    for b, bind in enumerate(f.get(e, "textureTransformBinds", list, ew, [])):
+        bw = f"{ew}.textureTransformBinds[{b}]"
+        if not isinstance(bind, dict):
+            f.fail(bw, "expected an object")
+        material = f.get(bind, "material", int, bw)
+        f.obj("materials", material, f"{bw}.material")
+        scale = f.numbers(bind, "scale", 2, bw, [1, 1])
+        offset = f.numbers(bind, "offset", 2, bw, [0, 0])
+        out.append((material, BIND_KINDS["textureTransform"], (*map(float, scale), *map(float, offset))))
+    return out
 
 
 class _TargetNames:
@@ -114,6 +199,7 @@ def _vrm0_expressions(state: ReadState, shape_index: dict, target_name: _TargetN
         return mesh, f"mesh {mesh}"
 
     rows = []
+    by_name = _material_index(state)
     for g, group in enumerate(groups):
         gw = f"{w}[{g}]"
         if not isinstance(group, dict):
@@ -124,7 +210,9 @@ def _vrm0_expressions(state: ReadState, shape_index: dict, target_name: _TargetN
         shapes, weights = _binds(state, f.get(group, "binds", list, gw, []), f"{gw}.binds", mesh_of, 100.0,
                                  shape_index, target_name)
         binary = 1 if f.get(group, "isBinary", bool, gw, False) else 0
-        rows.append((name, preset, shapes, weights, [binary, 0, 0, 0]))
+        material_binds = _vrm0_material_values(state, group.get("materialValues", []), f"{gw}.materialValues",
+                                               by_name)
+        rows.append((name, preset, shapes, weights, [binary, 0, 0, 0], material_binds))
     return rows
 
 
@@ -180,7 +268,7 @@ def _vrm1_expressions(state: ReadState, shape_index: dict, target_name: _TargetN
                 if v not in OVERRIDES:
                     f.fail(f"{ew}.{k}", f"{v!r} is not none, block or blend")
                 flag.append(OVERRIDES[v])
-            rows.append((name, preset, shapes, weights, flag))
+            rows.append((name, preset, shapes, weights, flag, _vrm1_material_binds(state, e, ew)))
     return rows
 
 

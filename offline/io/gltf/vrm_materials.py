@@ -7,6 +7,12 @@ _ShadeToony)], converted both ways here; its colours are sRGB in the file and
 linear in the character. A 0.x material property names its glTF material (else
 its index does); VRM_USE_GLTFSHADER leaves the glTF material as it is. On a
 material with both, ``VRMC_materials_mtoon`` wins.
+
+The outline, rim and UV animation go to the material model's MToon row
+(:data:`~facepuppet.runtime.model.material_model.MTOON_COLUMNS`), 0.x converted
+as three-vrm's 0.x compatibility does: ``_OutlineWidth`` in centimetres (world)
+or hundredths (screen) times 0.01, the outline's lighting mix only in colour mode
+1, ``_UvAnimScrollY`` negated (Unity's v points up); colours as sRGB decoded.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ import numpy as np
 
 from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import SHADING
+from facepuppet.runtime.model.material_model import NO_MTOON, OUTLINE_MODES
 
 from facepuppet.offline.io.gltf.kept_parts import kept_texture_info
 from facepuppet.offline.io.gltf.mtoon_convert import (
@@ -42,6 +49,66 @@ def read_material_properties(state: ReadState) -> None:
         if row is not None:
             state.look.shading[i, :] = row
             state.look.shading[i, 1] = 1.0 if f.get(mats[i], "doubleSided", bool, f"materials[{i}]", False) else 0.0
+            state.pbr[i, 3] = 0.0
+
+
+def _mtoon0_row(state: ReadState, prop: dict, w: str) -> np.ndarray:
+    """The material model's MToon row of a VRM 0.x MToon material property."""
+    f = state.f
+    floats = f.get(prop, "floatProperties", dict, w, {})
+    vectors = f.get(prop, "vectorProperties", dict, w, {})
+    textures = f.get(prop, "textureProperties", dict, w, {})
+    fw, vw = f"{w}.floatProperties", f"{w}.vectorProperties"
+    row = np.asarray(NO_MTOON, float)
+    mode = int(f.get(floats, "_OutlineWidthMode", float, fw, 0.0))
+    if mode not in (0, 1, 2):
+        f.fail(f"{fw}._OutlineWidthMode", f"{mode} is not 0 (none), 1 (world) or 2 (screen)")
+    row[0] = mode
+    row[1] = max(0.01 * f.get(floats, "_OutlineWidth", float, fw, 0.0), 0.0)
+    row[2:5] = _srgb_to_linear(np.clip(f.numbers(vectors, "_OutlineColor", 4, vw, [0, 0, 0, 1])[:3], 0, 1))
+    colour_mode = int(f.get(floats, "_OutlineColorMode", float, fw, 0.0))
+    row[5] = f.get(floats, "_OutlineLightingMix", float, fw, 1.0) if colour_mode == 1 else 0.0
+    if "_OutlineWidthTexture" in textures:
+        row[6] = state.use_texture({"index": textures["_OutlineWidthTexture"]},
+                                   f"{w}.textureProperties._OutlineWidthTexture", data=True)
+    row[7:10] = _srgb_to_linear(np.clip(f.numbers(vectors, "_RimColor", 4, vw, [0, 0, 0, 1])[:3], 0, 1))
+    row[10] = f.get(floats, "_RimFresnelPower", float, fw, 1.0)
+    row[11] = f.get(floats, "_RimLift", float, fw, 0.0)
+    row[12] = f.get(floats, "_RimLightingMix", float, fw, 0.0)
+    row[13] = f.get(floats, "_UvAnimScrollX", float, fw, 0.0)
+    row[14] = -f.get(floats, "_UvAnimScrollY", float, fw, 0.0)
+    row[15] = f.get(floats, "_UvAnimRotation", float, fw, 0.0)
+    for key, col in (("_RimTexture", 16), ("_SphereAdd", 20), ("_UvAnimMaskTexture", 21)):
+        if key in textures:
+            row[col] = state.use_texture({"index": textures[key]}, f"{w}.textureProperties.{key}", data=True)
+    return row
+
+
+def _mtoon1_row(state: ReadState, mt1: dict, mw: str) -> np.ndarray:
+    """The material model's MToon row of a ``VRMC_materials_mtoon`` object (the spec's defaults)."""
+    f = state.f
+    row = np.asarray(NO_MTOON, float)
+    mode = f.get(mt1, "outlineWidthMode", str, mw, "none")
+    if mode not in OUTLINE_MODES:
+        f.fail(f"{mw}.outlineWidthMode", f"{mode!r} is not none, worldCoordinates or screenCoordinates")
+    row[0] = OUTLINE_MODES[mode]
+    row[1] = max(f.get(mt1, "outlineWidthFactor", float, mw, 0.0), 0.0)
+    row[2:5] = f.numbers(mt1, "outlineColorFactor", 3, mw, [0, 0, 0])
+    row[5] = f.get(mt1, "outlineLightingMixFactor", float, mw, 1.0)
+    if "outlineWidthMultiplyTexture" in mt1:
+        row[6] = state.use_texture(mt1["outlineWidthMultiplyTexture"], f"{mw}.outlineWidthMultiplyTexture", data=True)
+    row[7:10] = f.numbers(mt1, "parametricRimColorFactor", 3, mw, [0, 0, 0])
+    row[10] = f.get(mt1, "parametricRimFresnelPowerFactor", float, mw, 5.0)
+    row[11] = f.get(mt1, "parametricRimLiftFactor", float, mw, 0.0)
+    row[12] = f.get(mt1, "rimLightingMixFactor", float, mw, 1.0)
+    row[13] = f.get(mt1, "uvAnimationScrollXSpeedFactor", float, mw, 0.0)
+    row[14] = f.get(mt1, "uvAnimationScrollYSpeedFactor", float, mw, 0.0)
+    row[15] = f.get(mt1, "uvAnimationRotationSpeedFactor", float, mw, 0.0)
+    row[17:20] = f.numbers(mt1, "matcapFactor", 3, mw, [1, 1, 1])
+    for key, col in (("rimMultiplyTexture", 16), ("matcapTexture", 20), ("uvAnimationMaskTexture", 21)):
+        if key in mt1:
+            row[col] = state.use_texture(mt1[key], f"{mw}.{key}", data=True)
+    return row
 
 
 def read_mtoon(state: ReadState) -> None:
@@ -59,6 +126,8 @@ def read_mtoon(state: ReadState) -> None:
             shading[i, 2:5] = f.numbers(mt1, "shadeColorFactor", 3, mw, [0, 0, 0])
             shading[i, 5] = f.get(mt1, "shadingShiftFactor", float, mw, 0.0)
             shading[i, 6] = f.get(mt1, "shadingToonyFactor", float, mw, 0.9)
+            state.mtoon[i] = _mtoon1_row(state, mt1, mw)
+            state.pbr[i, 3] = 0.0
 
 
 def _material_properties(state: ReadState, mats: list) -> dict:
@@ -100,6 +169,7 @@ def _material_properties(state: ReadState, mats: list) -> dict:
             row[2:5] = _srgb_to_linear(np.clip(shade[:3], 0, 1))
             row[5] = -(lo + hi) / 2
             row[6] = np.clip((2.0 - (hi - lo)) / 2, 0.0, 1.0)
+            state.mtoon[i] = _mtoon0_row(state, prop, w)
             out[i] = row
         elif isinstance(shader, str) and shader.startswith("VRM/Unlit"):
             row[0] = SHADING["unlit"]
