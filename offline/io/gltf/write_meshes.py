@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from facepuppet.runtime.model.material_model import BIND_SHAPE_PREFIX
+
 from facepuppet.offline.io.gltf.names import UniqueNames
 from facepuppet.offline.io.gltf.write_buffer import ELEMENT_ARRAY_BUFFER
 from facepuppet.offline.io.gltf.write_state import ExportError, WriteState
@@ -78,6 +80,8 @@ def write_meshes(w: WriteState) -> list[dict]:
     mog = np.asarray(mesh_of_group + [-1])
     orphan = []
     for s in range(c.n_shapes):
+        if c.shape_names[s].startswith(BIND_SHAPE_PREFIX):  # carries material binds, written on the expression
+            continue
         sl = c.shape_slice(s)
         g = group_of[c.delta_indices[sl]]
         meshes = np.unique(mog[g[g >= 0]]) if len(g) else np.zeros(0, np.int64)
