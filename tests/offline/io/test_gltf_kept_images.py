@@ -22,6 +22,7 @@ from facepuppet.offline.io.gltf import kept_parts
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.gltf.write import export_character
 from helpers.gltf_characters import parts_character
+from helpers.gltf_validator import ERROR, WARNING, codes, need_validator, problems, validate
 from helpers.gltf_writer import glb_chunks, write_glb
 
 SIDE = 2048
@@ -91,3 +92,18 @@ def test_a_character_written_with_base64_kept_images_still_exports_them(tmp_path
     assert back.kept_images is None
     _, data = written_normal_map(export_character(back, tmp_path / "out.vrm", vrm=1).path)
     assert data == png
+
+
+def test_the_exports_with_the_kept_normal_map_are_valid(tmp_path):
+    """The Khronos glTF-Validator on the built file and on its exports: 0 errors, no warning the built file did
+    not have (VRM 0.x's extension name aside, which every 0.x file has)."""
+    need_validator()
+    built = with_normal_map(tmp_path, noise_png(256))
+    c = read_gltf(built)
+    outs = [export_character(c, tmp_path / f"v{v}.vrm", vrm=v).path for v in (0, 1)]
+    original, *reports = validate(built, *outs)
+    assert original["numErrors"] == 0, problems(original, ERROR)
+    for v, report in zip((0, 1), reports):
+        assert report["numErrors"] == 0, problems(report, ERROR)
+        allowed = set(codes(original, WARNING)) | ({"INVALID_EXTENSION_NAME_FORMAT"} if v == 0 else set())
+        assert set(codes(report, WARNING)) <= allowed, problems(report, WARNING)
