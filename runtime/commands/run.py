@@ -79,8 +79,12 @@ class RunPlan:
         record = RecordOptions.from_args(ns)
         if record.save_profile and stages.profile is None:
             raise UsageError("--save-profile: saves to --profile NAME|PATH; give one")
-        if inputs.voice_only and (stages.gestures is None or (inputs.audio is None and inputs.audio_file is None)):
-            raise UsageError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
+        if inputs.voice_only and ((stages.gestures is None and stages.voice is None)
+                                  or (inputs.audio is None and inputs.audio_file is None)):
+            raise UsageError("--input audio: needs --gestures GESTURES.npz or --voice VOICE.npz, and --audio [DEVICE] "
+                             "or --audio-file WAV")
+        if stages.voice is not None and inputs.audio is None and inputs.audio_file is None:
+            raise UsageError(f"--voice {stages.voice}: needs --audio [DEVICE] or --audio-file WAV to listen to")
         picture = PictureOptions.from_args(ns)
         return cls(Path(ns.character), inputs, stages, PacingOptions.from_args(ns), picture,
                    OutputOptions.from_args(ns, picture), record, PanelOptions.from_args(ns),

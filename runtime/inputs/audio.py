@@ -241,10 +241,14 @@ class MicLevel:
                                    "list devices with `python -m sounddevice`, or use --audio-file") from None
         self.device_name = str(info.get("name", device))
 
+    on_block = None  # callable taking each block's samples (n,) in the callback: the voice's features
+
     def _callback(self, indata, frames, time_info, status) -> None:
         if status:
             self.status_errors += 1
         self._slot[0] = self.meter.process(indata[:, 0])
+        if self.on_block is not None:
+            self.on_block(indata[:, 0])
 
     def level(self, t: float | None = None) -> float:
         """The latest smoothed level (dBFS); ``t`` is ignored (the microphone is live)."""

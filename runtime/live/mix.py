@@ -165,17 +165,26 @@ class VoiceMixSource:
     ----------
     level : callable t -> dBFS (the audio tap's level: the value the recording keeps)
     loss : LossSettings, its voice_floor_db / voice_ceiling_db give the line from level to jaw
+    voice : VoiceStage or None (``--voice``): its learned mouth channels instead of the level's jaw
     """
 
     channels = ("jawOpen",)
 
-    def __init__(self, level: Callable[[float], float], loss: LossSettings) -> None:
+    def __init__(self, level: Callable[[float], float], loss: LossSettings, voice=None) -> None:
         self.level = level
         self.loss = loss
+        self.voice = voice
+        if voice is not None:
+            self.channels = tuple(voice.outputs)
         self.counters: dict = {}
         self.frames_taken = 0
 
     def latest(self, t: float) -> tuple[Frame | None, int]:
+        if self.voice is not None:
+            frame = self.voice.frame(t)
+            if frame is not None:
+                self.frames_taken += 1
+            return frame, 0
         jaw = voice_jaw(float(self.level(t)), self.loss)
         if not math.isfinite(jaw):
             return None, 0

@@ -155,6 +155,7 @@ class RecordingHook:
         the last tick to the recorder (those the process receiver holds for it), its ``frames_taken`` says which
         frame the tick drew (a faithful replay needs it)
     audio : AudioTap or None, the tick's audio level (recorded as the stages used it)
+    voice : VoiceStage or None, the tick's voice channels (recorded as the stages used them)
     mix_sources : sequence of the other tracker inputs of a run with several (the mix stage's sources, in the
         order of the header's ``info.mix_sources``): their datagrams are delivered too, and a SOURCES record
         after each TICK says how many frames each had completed
@@ -163,8 +164,9 @@ class RecordingHook:
     """
 
     def __init__(self, recorder: PacketRecorder, source: FrameSource, audio: AudioTap | None = None,
-                 mix_sources: Sequence = ()) -> None:
+                 mix_sources: Sequence = (), voice=None) -> None:
         self.recorder = recorder
+        self.voice = voice
         self.mix_sources = tuple(mix_sources)
         self._mix_deliver = [d for s in self.mix_sources if (d := getattr(s, "deliver_packets", None)) is not None]
         self.source = source
@@ -185,6 +187,8 @@ class RecordingHook:
                 return
         if self.audio is not None:
             recorder.put_audio(info.t, self.audio.value)
+        if self.voice is not None and self.voice.values is not None:
+            recorder.put_voice(info.t, self.voice.values)
         if self._ticks:
             frames = self.source.frames_taken
             if saw is not None:  # a recording started mid-run counts only the frames it has the packets of

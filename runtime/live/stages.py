@@ -7,6 +7,7 @@ frame loop runs every tick, in this order (each present only when asked for):
 stage      what it does                                  module
 =========  ============================================  ===================================================
 audio      samples the voice level once per tick         :class:`AudioTap` (here)
+voice      samples the learned mouth once per tick       :mod:`facepuppet.runtime.voice.stage` (``--voice``)
 mix        several inputs: each channel and the head     :mod:`facepuppet.runtime.live.mix` (``--input A
            from the first live source in its order       --input B``, ``[mix]`` in ``--config``)
 solve      marker frame -> actuations s -> the           :mod:`facepuppet.runtime.actuation.stage`
@@ -60,6 +61,8 @@ from facepuppet.runtime.live.mapper import Mapper, follow_mapping
 from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.live.profiles import Profile, parse_config_text, profile_path
 from facepuppet.runtime.mapping.expressions import ExpressionDrive, expression_spellings, make_drive
+from facepuppet.runtime.model.look_at import look_at_of_character
+from facepuppet.runtime.voice.stage import HybridMouth, VoiceStage, with_voice
 
 if TYPE_CHECKING:
     import moderngl
@@ -159,6 +162,7 @@ class Chain:
     profile : Profile or None, ``--profile``'s file (Save / Save as / Revert)
     known_channels : tuple of str, the names a config's ``[channels.NAME]`` may use (to parse a config later)
     mix : MixStage or None, the mix of a run with several inputs (:meth:`add_mix`)
+    voice : VoiceStage or None, the learned mouth of ``--voice``
     """
 
     input: str
@@ -174,6 +178,7 @@ class Chain:
     profile: Any = None
     known_channels: tuple[str, ...] = ()
     mix: Any = None
+    voice: VoiceStage | None = None
 
     @property
     def drive(self) -> ExpressionDrive | None:
@@ -188,7 +193,7 @@ class Chain:
     def add_mix(self, mix: Any, label: str | None = None) -> None:
         """Put the ``mix`` stage in the chain: after the audio tap, before every other stage; ``label`` names the
         inputs in :meth:`describe` (e.g. ``livelinkface+audio``)."""
-        at = 1 if self.audio is not None else 0
+        at = (self.audio is not None) + (self.voice is not None)
         self.stages = (*self.stages[:at], mix, *self.stages[at:])
         self.mix = mix
         if label is not None:
@@ -219,7 +224,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
                 audio_level: Callable[[float], float] | None = None, voice_only: bool = False,
                 label: str | None = None, log: Callable[[str], None] = logger.info,
                 config_text: tuple[str, str] | None = None, schedule: Sequence[tuple[float, str, str]] = (),
-                keep_snapshots: bool = False) -> Chain:
+                keep_snapshots: bool = False, voice: Any = None) -> Chain:
     """The stage chain for the stage options, checked against the character; logs what it loaded.
 
     Parameters
@@ -239,6 +244,8 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
     schedule : (tick time, TOML text, where) triples, config changes the filter applies at those ticks (a
         recording's; ``where`` names the record in messages)
     keep_snapshots : bool, the filter keeps its state before each tick (a recording may start mid-run)
+    voice : the voice's channel source (``outputs``, ``channels(t)``) of ``--voice``, or None; adds the ``voice``
+        stage (and ``hybrid`` after the filter with ``--voice-mode hybrid``)
 
     Raises
     ------
@@ -255,17 +262,25 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
             tuple(elastic.muscle_names)
     solve = _load_solve(options.actor, options.pair, options.retarget, shapes, input_kind, log)
     kpls = _load_kpls(options.retarget, shapes, log) if options.retarget is not None else None
-    if voice_only and options.gestures is None:
-        raise UsageError("--input audio: needs --gestures GESTURES.npz and --audio [DEVICE] or --audio-file WAV")
+    voice_table = getattr(options, "voice", None)
+    if voice_only and options.gestures is None and voice_table is None:
+        raise UsageError("--input audio: needs --gestures GESTURES.npz or --voice VOICE.npz, and --audio [DEVICE] "
+                         "or --audio-file WAV")
     stages = []
     if audio_level is not None:
         chain.audio = AudioTap(audio_level)
         stages.append(chain.audio)
+    if voice is not None:
+        chain.voice = VoiceStage(voice, make_frame=voice_only, path=str(voice_table or ""))
+        stages.append(chain.voice)
+        log(f"voice: {voice_table} ({len(chain.voice.outputs)} mouth channels, "
+            f"{'the voice alone' if voice_only else getattr(options, 'voice_mode', 'loss')})")
     if solve is not None:
         stages.append(solve)
         chain.marker_units = solve.actor.units
     level = chain.audio.level if chain.audio is not None else None
     known = (*shapes, *chain.names, *chain.extra_names, *(kpls.model.source_names if kpls is not None else ()),
+             *(chain.voice.outputs if chain.voice is not None else ()),
              *expression_spellings(character))
     chain.known_channels = known
     if options.config is not None and options.profile is not None:
@@ -285,7 +300,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
     chain.config = config
     drive = None
     if elastic is None:  # the elastic path draws its own channels, not the character's shapes
-        drive = make_drive(shapes, character.expressions, config.mapping)
+        drive = make_drive(shapes, character.expressions, config.mapping, look_at=look_at_of_character(character))
         if drive is not None and input_kind == "vmc":
             # VMC names its channels: the avatar's expression names arrive as channels of their own
             chain.extra_names = tuple(dict.fromkeys((*chain.extra_names, *drive.receive_names())))
@@ -300,6 +315,8 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
         if options.calibrate:
             chain.filter.request_calibration()
         stages.append(chain.filter)
+        if chain.voice is not None:  # tracking lost: mouth = "voice" is the learned mouth
+            chain.filter.generator = with_voice(chain.voice)
         if elastic is None:  # a [mapping] applied live (the panel, a recorded change) maps from then on
             bus.on_config(follow_mapping(chain.mapper, character.expressions, log))
     if options.gestures is not None:
@@ -308,6 +325,11 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
         stages.append(layer)
         if chain.filter is not None:  # tracking lost: the voice / idle regions take the layer's face
             chain.filter.generator = lambda t: layer.compose(None, t)
+            if chain.voice is not None:  # ... with the learned mouth over it
+                chain.filter.generator = with_voice(chain.voice, chain.filter.generator)
+    if chain.voice is not None and getattr(options, "voice_mode", "loss") == "hybrid" and not voice_only:
+        stages.insert(stages.index(chain.filter) + 1 if chain.filter is not None else len(stages),
+                      HybridMouth(chain.voice))
     if kpls is not None:
         stages.append(kpls)
     chain.stages = tuple(stages)

@@ -23,8 +23,9 @@ Modes (each region's weight channels, and ``head`` for the pose):
 * ``voice`` (``mouth`` only): ``jawOpen`` follows the voice level (``--audio`` / ``--audio-file``),
   linear in dB between ``voice_floor_db`` and ``voice_ceiling_db``; the other mouth channels ease to neutral.
   With ``--gestures`` the gesture layer's lips (Ju & Lee) take the place of that line (see
-  :class:`~facepuppet.runtime.live.pipeline.LivePipeline`'s ``generator``). Without a level (no audio) it is
-  ``neutral``.
+  :class:`~facepuppet.runtime.live.pipeline.LivePipeline`'s ``generator``), and with ``--voice`` the learned
+  mouth (:mod:`facepuppet.runtime.voice.stage`: every mouth channel the voice table or vowel profile has, over
+  the layer's). Without a level (no audio) it is ``neutral``.
 * ``idle``: blinks (eyeBlink*) at seeded random intervals around ``idle_blink_s`` and, for ``head``, a small
   sway (a few degrees of yaw/pitch/roll as slow sums of sines); other channels of the region ease to neutral.
   With ``--gestures`` the gesture layer's blinks and head motion are used instead.

@@ -43,6 +43,7 @@ from facepuppet.runtime.panel.sections.profile import ProfileControls
 from facepuppet.runtime.panel.sections.record import RecordControls
 from facepuppet.runtime.panel.sections.response import response_section
 from facepuppet.runtime.panel.sections.tracking_loss import loss_section
+from facepuppet.runtime.panel.sections.voice import VoiceControls
 from facepuppet.runtime.panel.status import InputStatus
 from facepuppet.runtime.panel.ui import Ui
 
@@ -161,10 +162,11 @@ class DeskPanel:
         self.ui = Ui(imgui)
         self.rects = self.ui.rects
         self._input = InputStatus(counters=counters, stats=stats, recorder=recorder, pipeline=pipeline,
-                                  input_kind=input_kind, address=address)
+                                  input_kind=input_kind, address=address, voice=getattr(chain, "voice", None))
         self._status = self._input.numbers  # the status numbers (the settings show the recording's)
         self._list = ChannelList(imgui, self.mapper)
         self._profile = ProfileControls()
+        self._voice = VoiceControls()
         self._record = RecordControls(self._input)
         self.edits = 0
         self.draw_s = 0.0
@@ -313,7 +315,7 @@ class DeskPanel:
                 getattr(p, "counters", {}).get("calibrations", 0), getattr(p, "neutral_weights", None) is not None,
                 self._status.get("record"), getattr(rec, "recording", None), getattr(rec, "message", None),
                 getattr(getattr(self.chain, "profile", None), "exists", None), profile.message,
-                profile.warning, self.window_size, wide, 0.0 if wide else self._desk_bottom)
+                profile.warning, self.window_size, wide, 0.0 if wide else self._desk_bottom, self._voice.key())
 
     def _refresh(self, now: float) -> None:
         """The status numbers (rates, drops, latency percentiles, the record size) and their lines."""
@@ -374,6 +376,8 @@ class DeskPanel:
                     self.apply)
             section("loss", edit, loss_section)
         section("record", self._record.section, ui, self.recorder, pipeline)
+        if getattr(self.chain, "voice", None) is not None:
+            section("voice", self._voice.section, ui, self.chain.voice)
         section("info", info_section, ui, self.chain, self.character)
         imgui.end()
 

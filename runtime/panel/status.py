@@ -4,7 +4,7 @@ Kind, listening address and the frames' source, packets/s and frames drawn/s (ov
 by reason (every non-zero drop counter of the receiver and the loop, the kernel's ``kernel_dropped`` among them,
 said unknown where the system does not report it), age of the last new frame, tracking state
 (waiting / live / lost / easing back), receive→draw latency p50/p99 (``end_to_end`` of the live stats over the
-last half second).
+last half second), and with ``--voice`` the voice's mouth channels this tick.
 
 The numbers that need a percentile or a file size are refreshed twice a second (:meth:`InputStatus.refresh`),
 not every frame, and so are the lines made of them; the desk's window leaves room for the lines
@@ -44,6 +44,7 @@ class InputStatus:
     recorder : SwitchableRecorder, PacketRecorder or None, for the recording's file and size
     pipeline : LivePipeline or None, for the tracking state and its last event
     input_kind, address : str, what the run listens to and where
+    voice : VoiceStage or None, the voice's mouth channels (``--voice``): a line of their values each tick
 
     Attributes
     ----------
@@ -59,8 +60,12 @@ class InputStatus:
 
     def __init__(self, *, counters: Callable[[], dict] | None = None, stats: LiveStats | None = None,
                  recorder: SwitchableRecorder | PacketRecorder | None = None, pipeline: LivePipeline | None = None,
-                 input_kind: str = "", address: str = "") -> None:
+                 input_kind: str = "", address: str = "", voice: Any = None) -> None:
         self.counters, self.stats, self.recorder, self.pipeline = counters, stats, recorder, pipeline
+        self.voice = voice
+        # the voice's channels, shortened (mouthFunnel -> Funnel, mouthSmileLeft -> SmileL) to fit the panel
+        self._voice_names = tuple(n.removeprefix("mouth").replace("Left", "L").replace("Right", "R")
+                                  for n in getattr(voice, "outputs", ()))
         self.input_kind, self.address = input_kind, address
         self.numbers: dict[str, Any] = {}
         self.ticks = 0
@@ -147,7 +152,17 @@ class InputStatus:
         events = getattr(self.pipeline, "events", ())
         last = (f" ({'found' if events[-1][1] else 'lost'} at {events[-1][0]:.1f} s)" if events else "")
         return (f"{lines['where']}\n{lines['rates']}\nlast frame: {age}   tracking: {state}{last}\n{lines['latency']}",
-                lines["drops"])
+                lines["drops"] + self.voice_line())
+
+    def voice_line(self) -> str:
+        """A line ``voice: jawOpen 0.42  Funnel 0.10 ...`` of this tick's values after the drops ("" without
+        ``--voice``; ``voice: -`` before its first tick)."""
+        if self.voice is None:
+            return ""
+        values = self.voice.values
+        if values is None:
+            return "\nvoice: -"
+        return "\nvoice: " + "  ".join(f"{n} {float(v):.2f}" for n, v in zip(self._voice_names, values))
 
     def draw(self, imgui: Any, dl: Any, colour: int, where: tuple, now: float, spacing_y: float) -> None:
         """In the live layer: this tick's lines into the draw list ``dl`` at ``where`` (the room the desk left),

@@ -33,6 +33,7 @@ from facepuppet.runtime.recording.records import (
     encode_sources,
     encode_state,
     encode_tick,
+    encode_voice,
 )
 from facepuppet.runtime.recording.session import SessionWriter
 
@@ -94,6 +95,14 @@ class PacketRecorder:
             self.counters["record_dropped"] += 1
             return
         self._queue.append((RecordKind.AUDIO, t, level_db))
+        self._wake.set()
+
+    def put_voice(self, t: float, values) -> None:
+        """Queue one tick's voice channels (frame-loop thread; a copy is queued). Never blocks."""
+        if len(self._queue) >= self.capacity:
+            self.counters["record_dropped"] += 1
+            return
+        self._queue.append((RecordKind.VOICE, t, bytes(encode_voice(t, values))))
         self._wake.set()
 
     def put_tick(self, k: int, t: float, frames: int, t_clock: float) -> None:
@@ -179,6 +188,8 @@ class PacketRecorder:
         elif kind == RecordKind.EVENT:
             write(kind, encode_event(t, value))
             self.counters["events_recorded"] += 1
+        elif kind == RecordKind.VOICE:
+            write(kind, value)
         else:
             write(kind, encode_audio(t, value))
             self.counters["audio_recorded"] += 1

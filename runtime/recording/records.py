@@ -36,6 +36,10 @@ SOURCES   8     live recording with several inputs: ``b"S1"``, tick index
                 i64, count u16, then count x i64: frames each mix source
                 (the header's ``info.mix_sources``, in order) had completed
                 at that tick; one after each TICK record
+STATE     9     live recording started mid-run: the filter stage's state
+VOICE     10    live recording with ``--voice``: ``b"V1"``, tick time f64
+                (s), count u16, then count x f32: the voice's mouth
+                channels that tick (the header's ``info.voice_channels``)
 ========  ====  ==============================================================
 
 The PACKET/AUDIO/TICK/CONFIG/EVENT/SOURCES decoders return None for a payload they cannot decode
@@ -62,6 +66,7 @@ _TICK = struct.Struct("<2sqdqd")  # b"K1", tick index, tick time, frames complet
 _CONFIG_HEAD = struct.Struct("<2sd")  # b"C1" (CONFIG) or b"T1" (STATE), tick time; then the text
 _EVENT = struct.Struct("<2sdB")  # b"E1", tick time, found
 _SOURCES_HEAD = struct.Struct("<2sqH")  # b"S1", tick index, count (then count x i64)
+_VOICE_HEAD = struct.Struct("<2sdH")  # b"V1", tick time, count (then count x f32)
 
 
 class RecordKind(enum.IntEnum):
@@ -77,10 +82,11 @@ class RecordKind(enum.IntEnum):
     EVENT = 7  # live recording: tracking lost / found
     SOURCES = 8  # live recording, several inputs: frames each mix source had per tick
     STATE = 9  # live recording started mid-run: the filter stage's state at its start (JSON)
+    VOICE = 10  # live recording with --voice: the voice's mouth channels per tick
 
 
 RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG,
-                            RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE})
+                            RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE})
 
 
 class FrameFlags(enum.IntFlag):
@@ -239,6 +245,22 @@ def decode_packet_record(payload: bytes) -> Packet | None:
     except UnicodeDecodeError:
         return None
     return Packet(t, kind, bytes(payload[end:]))
+
+
+def encode_voice(t: float, values: np.ndarray) -> bytes:
+    """VOICE payload (see the module docstring)."""
+    v = np.asarray(values, "<f4")
+    return _VOICE_HEAD.pack(b"V1", t, len(v)) + v.tobytes()
+
+
+def decode_voice(payload: bytes) -> tuple[float, np.ndarray] | None:
+    """(t, channels float32) from a VOICE payload; None when it is not one this reader knows."""
+    if len(payload) < _VOICE_HEAD.size or payload[:2] != b"V1":
+        return None
+    _, t, n = _VOICE_HEAD.unpack_from(payload)
+    if len(payload) != _VOICE_HEAD.size + 4 * n:
+        return None
+    return t, np.frombuffer(payload, "<f4", n, _VOICE_HEAD.size).astype(np.float32)
 
 
 def decode_audio(payload: bytes) -> tuple[float, float] | None:

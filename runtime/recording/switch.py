@@ -331,6 +331,11 @@ class SwitchableRecorder:
         if r is not None:
             r.put_audio(t, level_db)
 
+    def put_voice(self, t: float, values) -> None:
+        r = self._recorder
+        if r is not None:
+            r.put_voice(t, values)
+
     def tick_frames(self, frames_taken: int, raw: Any) -> int:
         """The frame count a TICK record stores for this tick (see the module docstring). The filter stage's
         state before a tick is written as a STATE record (before this tick's TICK): at the recording's first

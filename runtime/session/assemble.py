@@ -172,7 +172,7 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
         chain = build_chain(stages, character, inputs.kind, bus=bus, filtered=inputs.filtered,
                             audio_level=inputs.audio_level, voice_only=inputs.voice_only, label=inputs.label,
                             log=log, config_text=inputs.config_text, schedule=inputs.schedule,
-                            keep_snapshots=inputs.keep_snapshots)
+                            keep_snapshots=inputs.keep_snapshots, voice=inputs.voice)
         parts = feed.open(stack, chain, bus, log)
         log(chain.describe())
         if on_chain is not None:
@@ -247,7 +247,7 @@ def _open_picture(stack: contextlib.ExitStack, picture: PictureOptions, title: s
     def renderer_at(samples: int) -> Renderer:
         return chain.renderer(target.ctx, character, picture.width, picture.height, picture.path, screen, log,
                               **render.renderer_kwargs(dataclasses.replace(quality, msaa=samples)),
-                              credits=character.credits if render.credits else None)
+                              credits=character.credits if render.credits else None, springs=picture.springs)
 
     renderer = renderer_at(quality.msaa)
     budgeted = live and render.msaa is None and render.quality == "auto"

@@ -51,6 +51,7 @@ class ChainInputs:
         names the record for messages)
     keep_snapshots : bool, the filter keeps its state before each tick (a recording may start mid-run)
     packets : bool, the receivers hand every datagram to the bus (a recording is possible)
+    voice : the voice's channel source (``outputs``, ``channels(t)``) for ``--voice``, or None
     """
 
     kind: str | None
@@ -62,6 +63,7 @@ class ChainInputs:
     schedule: list = field(default_factory=list)
     keep_snapshots: bool = False
     packets: bool = False
+    voice: Any = None
 
 
 @dataclass

@@ -41,6 +41,7 @@ from facepuppet.runtime.recording.recorder import PacketRecorder
 from facepuppet.runtime.recording.switch import SwitchableRecorder
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
 from facepuppet.runtime.session.stop_signals import StopOnSignals
+from facepuppet.runtime.voice.source import MicVoice, WavVoice, load_voice
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.bus import SessionBus
@@ -93,6 +94,7 @@ class LiveFeed:
         self.midrun = wants_panel(picture, panel)  # only the panel starts a recording once the run ticks
         self.title = f"facepuppet run ({inputs.input})"
         self.audio = None
+        self.voice_outputs: tuple[str, ...] = ()  # the VOICE records' channels (--voice)
         self.adapter = None  # the loop's input adapter, once open (None for the voice alone)
         self.fps = float(pacing.fps)
         # draw on arrival: tick labels on a 1 kHz grid (so a replay can follow them), redraws at --fps when idle
@@ -106,13 +108,35 @@ class LiveFeed:
         # from here on a SIGTERM or Ctrl-C ends the run cleanly (the loop stops at its next tick)
         stack.enter_context(StopOnSignals(self.stop_event))
         inputs = self.inputs
+        table = load_voice(self.stages.voice) if self.stages.voice is not None else None
+        if table is not None and inputs.audio is None and inputs.audio_file is None:
+            raise UsageError(f"--voice {self.stages.voice}: needs --audio [DEVICE] or --audio-file WAV to listen to")
         if inputs.audio is not None or inputs.audio_file is not None:
             self.audio = open_audio(device=inputs.audio, wav=inputs.audio_file, log=log)
             if self.audio is not None:
                 stack.callback(self.audio.close)
+        voice = None
+        if table is not None:
+            voice = self._open_voice(table, log)
+            if voice is not None:
+                stack.callback(voice.close)
+                self.voice_outputs = voice.outputs
         return ChainInputs(kind=inputs.kind, label=inputs.label, filtered=True, voice_only=inputs.voice_only,
                            audio_level=self.audio.level if self.audio is not None else None,
-                           keep_snapshots=self.midrun, packets=self.recordable)
+                           keep_snapshots=self.midrun, packets=self.recordable, voice=voice)
+
+    def _open_voice(self, table, log: Callable[[str], None]):
+        """The voice's channel source of ``--voice``: the WAV on the run's clock, or the microphone's blocks (None,
+        said, when there is no microphone: the run goes on without the voice)."""
+        delay_s = self.stages.voice_delay / 1000.0
+        if not 0.0 <= delay_s <= 1.0:
+            raise UsageError(f"--voice-delay: expected 0..1000 ms, got {self.stages.voice_delay:g}")
+        if self.inputs.audio_file is not None:
+            return WavVoice(self.inputs.audio_file, table, delay_s)
+        if self.audio is None or not hasattr(self.audio, "meter"):
+            log(f"--voice {self.stages.voice}: no audio input, so no voice; the run goes on without it")
+            return None
+        return MicVoice(self.audio, table, delay_s)
 
     # -- once the chain exists ---------------------------------------------------------------------
 
@@ -149,7 +173,7 @@ class LiveFeed:
         observers = []
         if recorder is not None:
             counters["record"] = recorder.counters
-            observers.append(RecordingHook(recorder, source, chain.audio, mix_sources=[
+            observers.append(RecordingHook(recorder, source, chain.audio, voice=chain.voice, mix_sources=[
                 s for _, s in chain.mix.tracker_sources()] if chain.mix else ()))
         return FeedParts(source, self.loop_fps, duration=self.pacing.duration, idle_fps=self.idle_fps,
                          catch_up=True, wake=self._arrival_wake(source, chain), address=source.address,
@@ -177,6 +201,8 @@ class LiveFeed:
                             "face_id": None if self.inputs.face_id is None else str(self.inputs.face_id)}}
         if bus.config is not None:
             info["config"] = config_to_toml(bus.config)
+        if self.voice_outputs:
+            info["voice_channels"] = list(self.voice_outputs)
         return info
 
     def _open_recorder(self, chain: Chain, bus: SessionBus, source, log) -> SwitchableRecorder:
@@ -220,7 +246,7 @@ class LiveFeed:
                 if chain.audio is None:
                     raise UsageError("--input audio: no audio level (--audio found no device); the voice input "
                                      "needs one")
-                sources[m.name] = VoiceMixSource(chain.audio.level, chain.config.loss)
+                sources[m.name] = VoiceMixSource(chain.audio.level, chain.config.loss, voice=chain.voice)
                 continue
             adapter = make_input_adapter(m.kind, chain.extra_names, log=log, face_id=inputs.face_id)
             cls = UdpProcessSource if inputs.receiver == "process" else UdpSource

@@ -11,7 +11,7 @@ of its options (a benchmark's or a test's) takes their defaults.
 group              options                                                     commands
 =================  ==========================================================  ===================
 PictureOptions     --size, --path, --headless, --framing, --background,        run, replay, demo
-                   --msaa, --credits
+                   --msaa, --credits, --no-springs
 PacingOptions      --fps, --draw, --duration                                   run, replay, demo
 StageOptions       --actor, --pair, --marker-units, --retarget, --elastic,     run, replay
                    --config, --profile, --calibrate, --gestures, --gesture-seed
@@ -68,6 +68,7 @@ class PictureOptions:
     path : str, the deformation path (``auto``, ``gpu``, ``cpu``)
     headless : bool, offscreen through EGL even where a display exists
     render : RenderOptions (framing, background, MSAA, credits)
+    springs : bool, simulate the character's spring bones (``--no-springs``: rigid)
     """
 
     width: int = 1280
@@ -75,6 +76,7 @@ class PictureOptions:
     path: str = "auto"
     headless: bool = False
     render: RenderOptions = field(default_factory=RenderOptions)
+    springs: bool = True
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser, size: str = "1280x720",
@@ -83,6 +85,8 @@ class PictureOptions:
         parser.add_argument("--size", default=size, help=f"image size WIDTHxHEIGHT (default {size})")
         parser.add_argument("--path", choices=PATHS, default="auto", help="deformation path")
         add_render_arguments(parser)
+        parser.add_argument("--no-springs", dest="springs", action="store_false",
+                            help="leave a VRM avatar's spring bones (hair, ribbons) rigid instead of simulating them")
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> PictureOptions:
@@ -93,7 +97,7 @@ class PictureOptions:
         render = render_options(ns)
         if get(ns, "virtual_camera") is not None and get(ns, "background") is None:  # a camera's key colour
             render = dataclasses.replace(render, background=KEY_GREEN)
-        return cls(width, height, path, bool(get(ns, "headless", False)), render)
+        return cls(width, height, path, bool(get(ns, "headless", False)), render, bool(get(ns, "springs", True)))
 
 
 # -- ticks ------------------------------------------------------------------------------------------------
@@ -152,6 +156,9 @@ class StageOptions:
     gestures : Path or None, the gesture tables (Ju & Lee)
     gesture_seed : int
     character : Path or None, the character's file (a profile notes what it was made for)
+    voice : Path or None, the voice table (fit-voice): the learned mouth from ``--audio`` / ``--audio-file``
+    voice_mode : str, where the voice's channels go: "loss" (tracking-loss ``mouth = "voice"``) or "hybrid"
+    voice_delay : float, ms the voice's channels are held back (0: none)
     """
 
     actor: Path | None = None
@@ -165,6 +172,9 @@ class StageOptions:
     gestures: Path | None = None
     gesture_seed: int = 0
     character: Path | None = None
+    voice: Path | None = None
+    voice_mode: str = "loss"
+    voice_delay: float = 0.0
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser, markers: bool = True) -> None:
@@ -196,6 +206,15 @@ class StageOptions:
         group.add_argument("--gestures", type=Path, default=None, metavar="GESTURES.npz",
                            help="gesture tables (build-gestures): add voice-driven blinks, brows and head motion")
         group.add_argument("--gesture-seed", type=int, default=0, help="seed of the gesture synthesis (default 0)")
+        group.add_argument("--voice", type=Path, default=None, metavar="VOICE.npz|PROFILE.toml",
+                           help="voice table (fit-voice) or calibrated vowels (calibrate-voice): the mouth from the "
+                                "voice of --audio/--audio-file (replay: the channels the run recorded)")
+        group.add_argument("--voice-mode", choices=("loss", "hybrid"), default="loss",
+                           help="loss (default): the voice's mouth where [tracking_loss] mouth = \"voice\"; "
+                                "hybrid: the tracker drives everything but the mouth")
+        group.add_argument("--voice-delay", type=float, default=0.0, metavar="MS",
+                           help="hold the voice's channels back MS milliseconds (0..1000) to line sound up with "
+                                "the picture")
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> StageOptions:
@@ -206,14 +225,17 @@ class StageOptions:
         character = get(ns, "character")
         return cls(get(ns, "actor"), get(ns, "pair"), get(ns, "marker_units"), get(ns, "retarget"),
                    get(ns, "elastic"), config, profile, bool(get(ns, "calibrate", False)), get(ns, "gestures"),
-                   int(get(ns, "gesture_seed", 0) or 0), None if character is None else Path(character))
+                   int(get(ns, "gesture_seed", 0) or 0), None if character is None else Path(character),
+                   get(ns, "voice"), get(ns, "voice_mode") or "loss", float(get(ns, "voice_delay", 0.0) or 0.0))
 
     def recorded(self) -> dict:
         """The options a recording's header keeps so that ``replay`` can rebuild the chain (as text)."""
         values = {"config": self.config, "profile": self.profile, "calibrate": self.calibrate,
                   "actor": self.actor, "pair": self.pair, "marker_units": self.marker_units,
                   "retarget": self.retarget, "elastic": self.elastic, "gestures": self.gestures,
-                  "gesture_seed": self.gesture_seed}
+                  "gesture_seed": self.gesture_seed, "voice": self.voice,
+                  "voice_mode": None if self.voice is None else self.voice_mode,
+                  "voice_delay": self.voice_delay or None}
         return {name: None if value is None else str(value) for name, value in values.items()}
 
 

@@ -42,6 +42,8 @@ from facepuppet.runtime.recording.take_rate import take_rate
 from facepuppet.runtime.recording.ticked_source import TickedSource, decode_live_recording, read_live_session
 from facepuppet.runtime.session.feeds import ChainInputs, FeedParts
 from facepuppet.runtime.session.stop_signals import StopOnSignals
+from facepuppet.runtime.voice.source import load_voice
+from facepuppet.runtime.voice.stage import RecordedVoice
 
 if TYPE_CHECKING:
     from facepuppet.runtime.live.bus import SessionBus
@@ -178,7 +180,22 @@ class RecordingFeed:
         config_text, schedule = self._recorded_config(info, filtered, log)
         return ChainInputs(kind=kind, label=f"replay({kind or 'frames'})", filtered=filtered,
                            voice_only=kind == "audio", audio_level=levels, config_text=config_text,
-                           schedule=schedule)
+                           schedule=schedule, voice=self._recorded_voice(info))
+
+    def _recorded_voice(self, info: dict) -> RecordedVoice | None:
+        """The voice channels a ``--voice`` run kept, for ``replay --voice`` (its table names the channels)."""
+        if self.stages.voice is None:
+            return None
+        table = load_voice(self.stages.voice)
+        if self.session is None or not self.session.voice:
+            raise InputFileError(f"{self.path}: --voice {self.stages.voice}: the recording kept no voice channels "
+                                 "(it was not made by run --voice)")
+        names = tuple(info.get("voice_channels") or table.outputs)
+        n = {len(v) for _, v in self.session.voice}
+        if n != {len(names)}:
+            raise InputFileError(f"{self.path}: VOICE records: expected {len(names)} channels "
+                                 f"(info.voice_channels), found {sorted(n)}")
+        return RecordedVoice(names, self.session.voice)
 
     def _filtered(self, info: dict, log: Callable[[str], None]) -> bool:
         """Whether the filter stage runs: asked for, implied, or (by default) a live run's or a take's."""
@@ -307,7 +324,7 @@ class RecordingFeed:
             if name == "audio":
                 if chain.audio is None:
                     raise InputFileError("replay: the recording mixed the voice but kept no audio levels")
-                sources[name] = VoiceMixSource(chain.audio.level, chain.config.loss)
+                sources[name] = VoiceMixSource(chain.audio.level, chain.config.loss, voice=chain.voice)
             else:
                 sources[name] = TickedSource(live.mix[name])
         settings = chain.config.mix

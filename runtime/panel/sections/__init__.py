@@ -13,5 +13,6 @@ what it changes:
   shows between frames (the name typed, the last message); its ``section`` draws and, on a button, calls its
   ``action`` (which the panel also offers: ``profile_action``, ``record_action``);
 * :mod:`.calibration` calls the pipeline's own calibrate and clear, at once (its line shows the new state in
-  the same frame); :mod:`.info` only shows.
+  the same frame); :mod:`.info` only shows; :mod:`.voice` (with ``--voice``) re-calibrates the vowels from the
+  live voice and saves the new profile.
 """

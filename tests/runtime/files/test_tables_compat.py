@@ -19,10 +19,11 @@ from facepuppet.runtime.files.tables import load_tables, save_tables, schema_of
 from facepuppet.runtime.gestures.tables import load_gesture_db
 from facepuppet.runtime.kpls.stage import KplsRetarget
 from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.voice.table import VoiceTable
 
 V1 = Path(__file__).parent / "data" / "tables_v1"
 CLASSES = {"character": Character, "actor": Actor, "actor_pair": ActorPair, "elastic": ElasticModel,
-           "retarget_kpls": KplsRetarget}
+           "retarget_kpls": KplsRetarget, "voice": VoiceTable}
 
 
 def archive_arrays(path) -> dict[str, np.ndarray]:

@@ -63,9 +63,10 @@ def test_config_event_and_sources_records_have_kinds_of_their_own_and_each_round
     from facepuppet.runtime.recording.records import RESERVED_KINDS, RecordKind
 
     kinds = [RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG, RecordKind.EVENT,
-             RecordKind.SOURCES, RecordKind.STATE]
+             RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE]
     assert len(set(kinds)) == len(kinds) and set(kinds) == RESERVED_KINDS
-    assert (RecordKind.CONFIG, RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE) == (6, 7, 8, 9)
+    assert (RecordKind.CONFIG, RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE) == \
+        (6, 7, 8, 9, 10)
     path = tmp_path / "all.fps"
     with PacketRecorder(path, "vmc") as rec:  # one live run's worth of each: a tuned, lost, mixed show
         rec.put_tick(0, 0.0, 1, 10.0)
@@ -216,3 +217,16 @@ def test_a_replay_finds_the_calibrate_requests_the_live_receivers_counted_not_th
     live = read_live_recording(path, lambda kind: make_adapter(kind))
     assert live.calibrate_packets == [1]
     assert len(live.frames) == 2
+
+
+def test_voice_records_round_trip_and_a_torn_one_is_skipped(tmp_path):
+    from facepuppet.runtime.recording.records import decode_voice, encode_voice
+
+    path = tmp_path / "voice.fps"
+    with PacketRecorder(path, "audio") as rec:
+        rec.put_voice(0.25, np.array([0.5, 0.125], np.float32))
+        rec.put_voice(0.5, np.array([0.0, 1.0], np.float32))
+    s = read_session(path)
+    assert [(t, v.tolist()) for t, v in s.voice] == [(0.25, [0.5, 0.125]), (0.5, [0.0, 1.0])]
+    payload = encode_voice(1.0, np.array([0.5, 0.25], np.float32))
+    assert decode_voice(payload[:-1]) is None and decode_voice(b"X1" + payload[2:]) is None

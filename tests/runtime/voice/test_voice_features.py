@@ -1,0 +1,83 @@
+"""The streaming log-mel features: the DFT written as matrices against NumPy's FFT, block sizes that do not
+matter, no allocation per block, silence at the floor."""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from facepuppet.runtime.voice.features import FLOOR_DB, FeatureSpec, VoiceFeatures, features_of, mel_filters
+
+
+def test_band_energies_equal_those_of_numpys_fft():
+    spec = FeatureSpec(n_mels=12, n_taps=1, step=1)
+    ex = VoiceFeatures(spec)
+    n = ex.window_n
+    x = np.random.default_rng(1).uniform(-0.5, 0.5, ex.hop_n * (n // ex.hop_n + 1))
+    ex.push(x)  # the last hop ends with the last sample: its window is the last n samples
+    x = x[-n:]
+    hann = 0.5 - 0.5 * np.cos(2 * np.pi * (np.arange(n) + 0.5) / n)
+    power = np.abs(np.fft.rfft(x * hann)) ** 2 / (hann.sum() / 2) ** 2
+    bands = 10 * np.log10(mel_filters(12, n, spec.sample_rate, spec.fmin, spec.fmax) @ power)
+    np.testing.assert_allclose(ex.vector()[:12], bands, atol=1e-6)
+
+
+def test_a_full_scale_sine_reads_about_0_db_in_its_band():
+    spec = FeatureSpec(n_taps=1)
+    t = np.arange(int(0.1 * spec.sample_rate)) / spec.sample_rate
+    v = features_of(np.sin(2 * np.pi * 1000 * t), spec, np.array([0.1]))[0]
+    assert -12.0 < v[:-1].max() < 0.5  # band energies are averages over the band's bins
+    assert v[-1] == pytest.approx(-3.01, abs=0.1)  # the level: a full-scale sine's RMS
+
+
+def test_the_features_do_not_depend_on_how_the_samples_are_cut_into_blocks():
+    spec = FeatureSpec()
+    x = np.random.default_rng(2).uniform(-0.3, 0.3, 8000)
+    whole = VoiceFeatures(spec)
+    whole.push(x)
+    cut = VoiceFeatures(spec)
+    rng = np.random.default_rng(3)
+    at = 0
+    while at < len(x):
+        k = int(rng.integers(1, 700))
+        cut.push(x[at:at + k])
+        at += k
+    assert cut.hops == whole.hops == len(x) // whole.hop_n
+    np.testing.assert_array_equal(cut.vector(), whole.vector())
+
+
+def test_silence_is_the_floor_and_features_are_causal():
+    spec = FeatureSpec()
+    x = np.zeros(16000)
+    x[8000:] = 0.5 * np.sin(np.arange(8000) * 0.3)
+    f = features_of(x, spec, np.array([0.4, 0.49, 0.6]))
+    assert (f[0] == FLOOR_DB).all() and (f[1] == FLOOR_DB).all()  # before the sound starts: nothing of it
+    assert f[2][-1] > -10
+
+
+def test_a_block_allocates_nothing_that_grows_with_the_spectrum():
+    ex = VoiceFeatures(FeatureSpec())
+    block = np.random.default_rng(4).uniform(-0.3, 0.3, 480)
+    for _ in range(5):
+        ex.push(block)
+        ex.vector()
+    tracemalloc.start()
+    try:
+        tracemalloc.reset_peak()
+        base = tracemalloc.get_traced_memory()[0]
+        for _ in range(50):
+            ex.push(block)
+            ex.vector()
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    # a spectrum is (window // 2 + 1) float64 = 4 KiB; per-block temporaries of that size would show here
+    assert peak < 1024, peak
+
+
+@pytest.mark.parametrize("bad", [{"n_mels": 0}, {"hop_s": 0.5}, {"fmax": 9000.0}, {"window_s": float("nan")}])
+def test_a_bad_spec_is_refused_naming_the_field(bad):
+    with pytest.raises(ValueError, match="FeatureSpec"):
+        FeatureSpec(**bad)
