@@ -90,12 +90,16 @@ class Section:
     ``shape`` lists dimensions as ints (fixed) or strings (named dimensions
     that must agree across the sections of one file, e.g. ``"n_vertices"``).
     A string of the form ``"n_shapes+1"`` is the named dimension plus one.
+    ``max_bytes`` bounds the array below :data:`MAX_SECTION_BYTES` where the
+    kind knows a tighter one (a section of file bytes kept whole); 0: no
+    bound of its own.
     """
 
     dtype: str
     shape: tuple[int | str, ...]
     kind: str = ""
     optional: bool = False
+    max_bytes: int = 0
 
     def __post_init__(self) -> None:
         if self.dtype not in ALLOWED_DTYPES:
@@ -277,6 +281,9 @@ def validate(
         raise TablesError(path, extra[0], f"not a section of kind {schema.kind!r}")
     dims = _section_dims(schema, arrays, path)
     for name, arr in arrays.items():
+        bound = schema.sections[name].max_bytes
+        if bound and arr.nbytes > bound:
+            raise TablesError(path, name, f"{arr.nbytes} bytes, more than the limit of {bound} bytes")
         if arr.dtype.kind == "f" and not np.isfinite(arr).all():
             raise TablesError(path, name, "contains NaN or infinity")
     _check_channels(schema, channels, dims, path)
@@ -641,7 +648,9 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
         _section_dims(schema, {name: _placeholder(meta) for name, meta in sections.items()}, path)
         arrays: dict[str, np.ndarray] = {}
         for name, meta in sections.items():
-            arr = _read_member(archive, members[name], path, name, expect=(meta["shape"], meta["dtype"]))
+            bound = schema.sections[name].max_bytes
+            arr = _read_member(archive, members[name], path, name, expect=(meta["shape"], meta["dtype"]),
+                               limit=min(bound, MAX_SECTION_BYTES) if bound else None)
             arr.setflags(write=False)
             arrays[name] = arr
     channels = manifest.get("channels", {})

@@ -41,6 +41,8 @@ from facepuppet.runtime.model.character_parts import (
     check_normals,
 )
 from facepuppet.runtime.model.geometry import vertex_normals
+from facepuppet.runtime.model.kept_images import SECTIONS as KEPT_IMAGE_SECTIONS
+from facepuppet.runtime.model.kept_images import KeptImages
 from facepuppet.runtime.model.look_at import look_at_of
 from facepuppet.runtime.model.material_model import MaterialModel
 from facepuppet.runtime.model.springs import spring_rig
@@ -69,11 +71,13 @@ CHARACTER_SCHEMA = register_schema(
             "delta_normals": Section("float32", ("n_deltas", 3), "normal delta"),
             # glTF / VRM parts (runtime.character_parts), each all or nothing; absent for OBJ rigs.
             **{name: spec for part in PART_SECTIONS.values() for name, spec in part.items()},
+            # image files kept whole for export (runtime.kept_images), both or neither
+            **KEPT_IMAGE_SECTIONS,
         },
         channels=("shapes", "materials"),
         channel_dims={"shapes": "n_shapes", "materials": "n_materials",
                       **{group: dim for group, (_, dim) in PART_CHANNELS.items() if dim}},
-        version=2,  # 2: the optional skeleton, look, expressions and layout parts
+        version=3,  # 2: the optional skeleton, look, expressions and layout parts; 3: the kept images, the material model
     )
 )
 
@@ -108,6 +112,7 @@ class Character:
         (:mod:`facepuppet.runtime.model.character_parts`); None for an OBJ rig
     normals : ndarray of shape (n_vertices, 3), float32, unit, the file's rest normals, or None (computed
         from the triangles, :meth:`rest_normals`)
+    kept_images : the image files kept whole for export (:mod:`facepuppet.runtime.model.kept_images`), or None
     """
 
     name: str
@@ -131,6 +136,7 @@ class Character:
     layout: Layout | None = None
     normals: np.ndarray | None = None
     material_model: MaterialModel | None = None
+    kept_images: KeptImages | None = None
 
     def __post_init__(self) -> None:
         n_v = len(self.vertices)
@@ -158,6 +164,8 @@ class Character:
             self.layout.check(n_v, len(self.triangles), len(self.material_names))
         if self.normals is not None:
             check_normals(self.normals, n_v)
+        if self.kept_images is not None:
+            self.kept_images.check()
         if self.skeleton is not None:  # the spring bones and look-at a VRM brings (settings JSON), checked once
             settings = self.metadata.get("settings", {})
             if settings.get("springs") is not None:
@@ -212,6 +220,8 @@ class Character:
             out.update(vertex_normals=self.normals)
         if self.material_model is not None:
             out.update(self.material_model.arrays())
+        if (kept := self.kept_images) is not None:
+            out.update(kept_image_offsets=kept.offsets, kept_image_bytes=kept.data)
         return out
 
     def rest_normals(self) -> np.ndarray:
@@ -308,6 +318,11 @@ class Character:
 def _load_parts(a: Mapping[str, np.ndarray], channels: Mapping[str, list], parts: Mapping[str, Any]) -> dict:
     """The optional parts present in loaded arrays; a part with only some of its sections is refused."""
     out: dict[str, Any] = {}
+    have = [name for name in KEPT_IMAGE_SECTIONS if name in a]
+    if len(have) == 1:
+        _fail(have[0], f"the kept images need both {' and '.join(KEPT_IMAGE_SECTIONS)}")
+    if have:
+        out["kept_images"] = KeptImages(a["kept_image_offsets"], a["kept_image_bytes"])
     for part, sections in PART_SECTIONS.items():
         have = [name for name in sections if name in a]
         if not have:

@@ -25,14 +25,15 @@ BONES = (
     ("rightUpperArm", "spine", (-0.2, 0.35, 0.0)), ("rightLowerArm", "rightUpperArm", (-0.25, 0.0, 0.0)),
     ("rightHand", "rightLowerArm", (-0.25, 0.0, 0.0)),
 )
-SHEARED = "hat"  # a child of the head whose rest matrix has a shear: written as a glTF matrix
+SHEARED = "hat"  # a child of the head whose rest matrix has a shear, which no glTF node transform can hold
+FEATHER = "feather"  # a child of the hat, turned and offset (only when a test asks for it)
 
 
-def _rest(mesh_nodes: bool = False) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+def _rest(mesh_nodes: bool = False, feather: bool = False) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     extra = ("BodyNode", "FaceNode") if mesh_nodes else ()
-    names = tuple(b[0] for b in BONES) + (SHEARED,) + extra
+    names = tuple(b[0] for b in BONES) + (SHEARED,) + extra + ((FEATHER,) if feather else ())
     parent = np.array([-1 if p is None else names.index(p) for _, p, _ in BONES] + [names.index("head")]
-                      + [-1] * len(extra), np.int32)
+                      + [-1] * len(extra) + ([names.index(SHEARED)] if feather else []), np.int32)
     rest = np.tile(np.eye(4, dtype=np.float32), (len(names), 1, 1))
     for j, (_, _, t) in enumerate(BONES):
         rest[j, :3, 3] = t
@@ -42,11 +43,15 @@ def _rest(mesh_nodes: bool = False) -> tuple[tuple[str, ...], np.ndarray, np.nda
     hat[0, 1] = 0.25  # shear
     hat[:3, 3] = (0.0, 0.12, 0.0)
     rest[names.index(SHEARED)] = hat
+    if feather:
+        c2, s2 = np.cos(0.5), np.sin(0.5)
+        rest[names.index(FEATHER), :3, :3] = np.array([[c2, -s2, 0], [s2, c2, 0], [0, 0, 1]], np.float32)
+        rest[names.index(FEATHER), :3, 3] = (0.05, 0.04, -0.02)
     return names, parent, rest
 
 
 def parts_character(units: str = "m", source_format: str = "vrm0", turned: bool = True,
-                    mesh_nodes: bool = False) -> Character:
+                    mesh_nodes: bool = False, face_on: str | None = None) -> Character:
     """Two meshes: ``Body`` (8 vertices over hips/spine, one primitive) and ``Face`` (6 vertices on the head,
     two primitives sharing them, two materials); four shapes (``Blink`` on the face, ``jawOpen`` an ARKit
     name without an expression, ``Spanning`` on both meshes, ``Still`` that moves nothing); three materials
@@ -55,9 +60,12 @@ def parts_character(units: str = "m", source_format: str = "vrm0", turned: bool 
 
     ``mesh_nodes``: the skeleton also has the two nodes that held the meshes in the file (``BodyNode``,
     ``FaceNode``), named in ``source.mesh_nodes``, with ``source.mesh_from_file`` = [1, 0] (the file had
-    the meshes the other way round) and a first-person annotation of the face in the raw extension."""
+    the meshes the other way round) and a first-person annotation of the face in the raw extension.
+
+    ``face_on``: the face's vertices follow this node instead of the head: ``hat`` (sheared) or ``feather`` (a
+    node added under the hat); with ``mesh_nodes`` that node held the face in the file (an unskinned mesh)."""
     rng = np.random.default_rng(7)
-    names, parent, rest = _rest(mesh_nodes)
+    names, parent, rest = _rest(mesh_nodes, feather=face_on == FEATHER)
     head = names.index("head")
     body = rng.uniform(-0.3, 0.3, (8, 3)) + (0, 1.2, 0)
     face = rng.uniform(-0.08, 0.08, (6, 3)) + (0, 1.65, 0.05)
@@ -72,7 +80,7 @@ def parts_character(units: str = "m", source_format: str = "vrm0", turned: bool 
     nodes[:8, 0], nodes[:8, 1] = 0, 1  # hips and spine, mixed
     w = rng.uniform(0.2, 0.8, 8)
     weights[:8, 0], weights[:8, 1] = w, 1 - w
-    nodes[8:, 0], weights[8:, 0] = head, 1.0
+    nodes[8:, 0], weights[8:, 0] = head if face_on is None else names.index(face_on), 1.0
     # shapes: CSR
     shapes = ("Blink", "jawOpen", "Spanning", "Still")
     idx = [np.array([8, 9], np.uint32), np.array([11], np.uint32), np.array([2, 12], np.uint32),
@@ -121,9 +129,9 @@ def parts_character(units: str = "m", source_format: str = "vrm0", turned: bool 
     source = {"format": source_format, "file": "quad.vrm", "turned_y180": turned and source_format == "vrm0",
               "meta": meta, "credits": "Quad by Someone, CC BY", "vrm_extension": raw, "node_from_file": node_from_file}
     if mesh_nodes:
-        source["mesh_nodes"] = [names.index("BodyNode"), names.index("FaceNode")]
+        source["mesh_nodes"] = [names.index("BodyNode"), names.index(face_on or "FaceNode")]
         source["mesh_from_file"] = [1, 0]
-        face_file_node = node_from_file[names.index("FaceNode")]
+        face_file_node = node_from_file[names.index(face_on or "FaceNode")]
         raw["firstPerson"]["meshAnnotations"] = ([{"mesh": 0, "firstPersonFlag": "ThirdPersonOnly"}]
                                                  if source_format == "vrm0" else
                                                  [{"node": face_file_node, "type": "thirdPersonOnly"}])

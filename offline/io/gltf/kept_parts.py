@@ -10,17 +10,23 @@ them in ``settings.source.kept``: ``materials`` (each file material's JSON),
 ``spring_bone``, and the textures they name: ``textures`` gives each named
 file texture as ``[file texture, "look", stored texture]`` when the look
 already holds it (a base colour texture), else ``[file texture, "image",
-file image, sampler codes]``; ``images`` holds the bytes of each such file
-image as the file had them (PNG or JPEG, base64, never re-encoded), so the
-export writes them back unchanged. The kept bytes are bounded by
-:data:`MAX_KEPT_IMAGE_BYTES` (they live in the character's JSON manifest);
-an image past it is dropped with a warning naming it.
+file image, sampler codes]``; ``images`` says of each such file image where
+it was (``image``), its ``name`` and ``mimeType``, and its ``index`` in the
+character's kept images (:mod:`facepuppet.runtime.model.kept_images`), which
+hold its bytes as the file had them (PNG or JPEG, never re-encoded), so the
+export writes them back unchanged. The kept bytes are bounded per image by
+:data:`MAX_KEPT_IMAGE_BYTES` and in all by :data:`MAX_KEPT_TOTAL_BYTES` (a
+4096² normal map fits); an image past them is dropped with a warning naming
+it. A character written when the bytes were base64 in the entry (``data``)
+still exports them.
 """
 
 from __future__ import annotations
 
 import base64
 from typing import Any
+
+from facepuppet.runtime.model import kept_images
 
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.structure_limits import check_kept_json
@@ -31,9 +37,9 @@ CORE_TEXTURES = ("normalTexture", "occlusionTexture", "emissiveTexture")
 #: The texture-info fields of VRMC_materials_mtoon.
 MTOON_TEXTURES = ("shadeMultiplyTexture", "shadingShiftTexture", "matcapTexture", "rimMultiplyTexture",
                   "outlineWidthMultiplyTexture", "uvAnimationMaskTexture")
-#: The most bytes of images kept raw (base64 in the character's 4 MiB JSON manifest): a thumbnail and a few
-#: small textures (Godette's thumbnail and metal/roughness map: 60 kB and 22 kB); 2048² normal maps do not fit.
-MAX_KEPT_IMAGE_BYTES = 1_500_000
+#: The most bytes of one image kept whole, and of all of them (the character table's bounds).
+MAX_KEPT_IMAGE_BYTES = kept_images.MAX_IMAGE_BYTES
+MAX_KEPT_TOTAL_BYTES = kept_images.MAX_TOTAL_BYTES
 _SIGNATURES = {b"\x89PNG\r\n\x1a\n": "image/png", b"\xff\xd8\xff": "image/jpeg"}
 
 
@@ -80,7 +86,7 @@ def keep_parts(state: ReadState, look_textures: dict[int, int]) -> None:
     if isinstance(spring, dict):
         check_kept_json(f, spring, "extensions.VRMC_springBone")
         kept["spring_bone"] = spring
-    budget = [MAX_KEPT_IMAGE_BYTES]
+    budget = [MAX_KEPT_TOTAL_BYTES]
     images: dict[int, dict] = {}
     textures = []
     tex_list = f.items("textures")
@@ -96,7 +102,11 @@ def keep_parts(state: ReadState, look_textures: dict[int, int]) -> None:
     for i in named_images:
         _image(state, i, images, budget)
     kept["textures"] = textures
-    kept["images"] = [images[i] for i in sorted(images)]
+    kept["images"] = []
+    for i in sorted(images):  # the bytes go to the character's kept images, the rest to the JSON
+        entry = dict(images[i])
+        state.kept_images.append(entry.pop("bytes"))
+        kept["images"].append({**entry, "index": len(state.kept_images) - 1})
 
 
 def _image(state: ReadState, i: int, images: dict[int, dict], budget: list[int]) -> bool:
@@ -110,17 +120,20 @@ def _image(state: ReadState, i: int, images: dict[int, dict], budget: list[int])
     if img is None:
         return False
     data = b""
+    bound = min(MAX_KEPT_IMAGE_BYTES, budget[0])  # checked before the bytes are copied
+    size = 0
     if isinstance(img.get("bufferView"), int):
-        buf, start, length, _ = f.view_bytes(img["bufferView"], f"{where}.bufferView")
-        if length <= budget[0]:
-            data = bytes(buf[start:start + length])
+        buf, start, size, _ = f.view_bytes(img["bufferView"], f"{where}.bufferView")
+        if size <= bound:
+            data = bytes(buf[start:start + size])
     elif isinstance(img.get("uri"), str):
         with f.open_image(img["uri"], f"{where}.uri") as opened:
-            if opened.size <= budget[0]:
-                data = opened.handle.read(opened.size + 1)
-    if not data or len(data) > budget[0]:
-        state.warn(f"{where}: not kept for export (its bytes would pass the {MAX_KEPT_IMAGE_BYTES} kept; only "
-                   "the look's base colour textures are kept whole)")
+            size = opened.size
+            if size <= bound:
+                data = opened.handle.read(size + 1)
+    if not data or len(data) > bound:
+        state.warn(f"{where}: not kept for export ({len(data) or size} bytes; an image kept whole may have "
+                   f"{MAX_KEPT_IMAGE_BYTES}, all of them {MAX_KEPT_TOTAL_BYTES}, {budget[0]} were left)")
         return False
     mime = next((m for sig, m in _SIGNATURES.items() if data.startswith(sig)), None)
     if mime is None:
@@ -128,7 +141,7 @@ def _image(state: ReadState, i: int, images: dict[int, dict], budget: list[int])
         return False
     budget[0] -= len(data)
     name = img.get("name") if isinstance(img.get("name"), str) else ""
-    images[i] = {"image": i, "name": name, "mimeType": mime, "data": base64.b64encode(data).decode("ascii")}
+    images[i] = {"image": i, "name": name, "mimeType": mime, "bytes": data}
     return True
 
 
@@ -162,9 +175,8 @@ def write_kept_textures(w: WriteState, images: list[dict], textures: list[dict],
         if kind == "look" and 0 <= ref < n_look:
             w.file_texture[int(t)] = ref
     for entry in kept(w.c.source, "images", []):
-        try:
-            data = base64.b64decode(entry["data"], validate=True)
-        except (KeyError, TypeError, ValueError):
+        data = _kept_bytes(w, entry)
+        if data is None:
             w.warn(f"settings.source.kept.images: {str(entry)[:60]!r} is not an image entry; skipped")
             continue
         w.file_image[int(entry.get("image", -1))] = len(images)
@@ -181,6 +193,20 @@ def write_kept_textures(w: WriteState, images: list[dict], textures: list[dict],
             samplers.append({k: v for k, v in zip(("magFilter", "minFilter", "wrapS", "wrapT"), codes) if v})
         w.file_texture[int(t)] = len(textures)
         textures.append({"source": w.file_image[ref], "sampler": sampler_of[codes]})
+
+
+def _kept_bytes(w: WriteState, entry: Any) -> bytes | None:
+    """A kept image entry's bytes: the character's kept image ``index``, or (written before the kept images were
+    a table section) its base64 ``data``; None when the entry names neither."""
+    if not isinstance(entry, dict):
+        return None
+    index, kept_all = entry.get("index"), w.c.kept_images
+    if isinstance(index, int) and not isinstance(index, bool):
+        return kept_all.image(index) if kept_all is not None and 0 <= index < len(kept_all) else None
+    try:
+        return base64.b64decode(entry["data"], validate=True)
+    except (KeyError, TypeError, ValueError):
+        return None
 
 
 def kept_texture_info(w: WriteState, info: Any) -> dict | None:

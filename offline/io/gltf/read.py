@@ -30,6 +30,7 @@ import numpy as np
 from facepuppet.runtime.files.tables import TablesError, hash_inputs, naming_file
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.model.character_parts import Layout, Look, Skeleton
+from facepuppet.runtime.model.kept_images import KeptImages
 from facepuppet.runtime.model.material_model import MaterialModel
 
 from facepuppet.offline.io.gltf import khr_materials, vrm_expressions, vrm_humanoid, vrm_materials, vrm_meta
@@ -265,6 +266,7 @@ def _character(state: ReadState, name: str | None) -> Character:
                 layout=Layout(tuple(geo["mesh_names"]), geo["primitives"]),
                 normals=geo["normals"].astype(np.float32) if geo["file_normals"] else None,
                 material_model=material_model,
+                kept_images=KeptImages.of(state.kept_images) if state.kept_images else None,
             )
         except TablesError as exc:  # a value the file allows but a character cannot hold
             raise GltfError(f.path, exc.field, exc.problem) from None

@@ -89,6 +89,7 @@ class ReadState:
     meta: dict = field(default_factory=dict)
     credits: str = ""
     kept: dict[str, Any] = field(default_factory=dict)  # kept_parts: raw JSON and textures for export
+    kept_images: list[bytes] = field(default_factory=list)  # kept_parts: the image files kept whole
     springs: dict = field(default_factory=dict)  # read_springs: chains and colliders
     look_at: dict = field(default_factory=dict)  # read_look_at: type, range maps, eye nodes
 

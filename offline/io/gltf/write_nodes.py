@@ -1,8 +1,15 @@
 """The written scene's nodes: the skeleton's hierarchy, the nodes holding the meshes, the skin.
 
 The skeleton's nodes go out parents first (the stored order) with their
-local rest matrices as translation/rotation/scale when they decompose
-without shear, else as ``matrix``. Each mesh goes back on the node that held
+local rest transforms as translation/rotation/scale. A glTF node cannot hold
+a shear (the spec asks a ``matrix`` to decompose into TRS), so a rest matrix
+that does not decompose goes out as its nearest rotation × scale (the polar
+decomposition) with its translation exact, and the written world transforms
+(``w.world``), not the character's, place everything below it: a child's
+local transform is taken from the written parent (so every node stays where
+it was), an unskinned mesh's vertices go into its written node's frame (the
+residual shear baked into them), and the inverse bind matrices invert the
+written joints (so a skinned mesh is drawn as it was at rest). Each mesh goes back on the node that held
 it in the file when the reader kept it (``settings.source.mesh_nodes``), else
 on a new root node of its own. A mesh whose every vertex follows only its
 own node (an unskinned mesh in the file: the reader made it follow its node)
@@ -24,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.model.geometry import matrix_to_quat
+from facepuppet.runtime.model.geometry import matrix_to_quat, quat_to_matrix
 
 from facepuppet.offline.io.gltf.write_state import WriteState
 
@@ -44,15 +51,34 @@ def write_nodes(w: WriteState) -> list[dict]:
     for j in range(k.n_nodes):
         if k.parent[j] >= 0:
             children[int(k.parent[j])].append(j)
+    want = k.global_transforms()
+    want[:, :3, 3] *= w.scale
+    want = t @ want  # the world rest transforms in the file's frame
+    w.world = np.empty_like(want)
+    exact = np.zeros(k.n_nodes, bool)  # the written world transform is the character's
+    sheared = []
     for j in range(k.n_nodes):
+        p = int(k.parent[j])
         local = np.asarray(k.rest_local[j], dtype=np.float64).copy()
         local[:3, 3] *= w.scale
-        if k.parent[j] < 0:  # turning the whole scene: the roots carry the turn, children are unchanged
+        if p < 0:  # turning the whole scene: the roots carry the turn, children are unchanged
             local = t @ local
-        node: dict[str, Any] = {"name": k.names[j], **_trs(local)}
+        elif not exact[p]:  # below an approximated node: from where its parent was written to where it is
+            local = np.linalg.inv(w.world[p]) @ want[j]
+        trs, written = _trs(local)
+        if written is None:  # no TRS at all (singular, or not affine): the exact matrix, as the character has it
+            trs, written = {"matrix": [float(x) for x in local.T.reshape(-1)]}, local
+        elif not np.allclose(written, local, atol=1e-6, rtol=0):
+            sheared.append(k.names[j])
+        w.world[j] = written if p < 0 else w.world[p] @ written
+        exact[j] = (p < 0 or exact[p]) and written is local
+        node: dict[str, Any] = {"name": k.names[j], **trs}
         if children[j]:
             node["children"] = children[j]
         nodes.append(node)
+    if sheared:
+        w.warn(f"nodes {', '.join(sheared)}: a rest transform with a shear, which a glTF node cannot hold; written "
+               "as its nearest rotation and scale, the rest baked into the unskinned meshes below it")
     return nodes
 
 
@@ -103,13 +129,13 @@ def plan_hosts(w: WriteState) -> None:
 
 def rigid_frames(w: WriteState) -> None:
     """The rigid meshes' vertices, normals and morph deltas into their node's frame (``w.vertices`` … in place):
-    points by the inverse of the node's world rest transform in the file, normals by its transpose's inverse."""
+    points by the inverse of the node's written world rest transform, normals by its transpose's inverse. A
+    normal delta goes by that map divided by the length it gives the vertex's unit normal, so that a viewer,
+    which turns ``n + w·dn`` by the node's normal matrix and renormalises, draws the direction of the world's
+    ``n + w·dn`` at every weight ``w``, also where the node scales unevenly or has a shear baked in."""
     k = w.c.skeleton
     if k is None or not any(w.rigid):
         return
-    t = TURN_Y180 if w.turn else np.eye(4)
-    world = k.global_transforms().astype(np.float64)
-    world[:, :3, 3] *= w.scale
     c = w.c
     vertex_mesh = np.full(c.n_vertices, -1, np.int64)
     for first, n, _, mesh, _ in w.primitives:
@@ -118,27 +144,26 @@ def rigid_frames(w: WriteState) -> None:
     for m, rigid in enumerate(w.rigid):
         if not rigid:
             continue
-        inv = np.linalg.inv(t @ world[w.host[m]])
+        inv = np.linalg.inv(w.world[w.host[m]])
         lin, shift = inv[:3, :3], inv[:3, 3]
         normal_lin = np.linalg.inv(lin).T
         sel = vertex_mesh == m
         w.vertices[sel] = (w.vertices[sel].astype(np.float64) @ lin.T + shift).astype(np.float32)
         nrm = w.normals[sel].astype(np.float64) @ normal_lin.T
-        w.normals[sel] = (nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)).astype(np.float32)
+        length = np.full(c.n_vertices, 1.0)
+        length[sel] = np.maximum(np.linalg.norm(nrm, axis=1), 1e-30)
+        w.normals[sel] = (nrm / length[sel, None]).astype(np.float32)
         ds = delta_mesh == m
         w.delta_pos[ds] = (w.delta_pos[ds].astype(np.float64) @ lin.T).astype(np.float32)
-        w.delta_nrm[ds] = (w.delta_nrm[ds].astype(np.float64) @ normal_lin.T).astype(np.float32)
+        along = length[c.delta_indices[ds].astype(np.int64), None]
+        w.delta_nrm[ds] = (w.delta_nrm[ds].astype(np.float64) @ normal_lin.T / along).astype(np.float32)
 
 
 def write_skin(w: WriteState) -> dict:
     """The one skin: the joints any vertex follows, their inverse bind matrices (the inverse of each joint's
-    rest world transform, turned and scaled as the nodes)."""
-    k = w.c.skeleton
-    t = TURN_Y180 if w.turn else np.eye(4)
-    world = k.global_transforms()
-    world[:, :3, 3] *= w.scale
+    written world rest transform: at rest every joint matrix is the identity)."""
     joints = w.joints
-    ibm = np.stack([np.linalg.inv(t @ world[j]) for j in joints])
+    ibm = np.stack([np.linalg.inv(w.world[j]) for j in joints])
     ibm[:, 3] = (0, 0, 0, 1)  # exact affine bottom row
     cols = np.ascontiguousarray(np.transpose(ibm, (0, 2, 1)), dtype=np.float32).reshape(len(joints), 16)
     acc = w.buf.accessor(cols, target=None)
@@ -173,20 +198,29 @@ def place_meshes(w: WriteState, nodes: list[dict], n_meshes: int) -> None:
             node["skin"] = 0
 
 
-def _trs(m: np.ndarray) -> dict:
-    """A node's local transform as glTF translation/rotation/scale when it decomposes, else ``matrix``."""
+def _trs(m: np.ndarray) -> tuple[dict, np.ndarray | None]:
+    """A node's local transform ``m`` as glTF translation/rotation/scale, and the matrix they make (``m`` itself,
+    the same object, when it decomposes exactly). One with a shear gets the nearest rotation × scale: the polar
+    decomposition ``A = R·P`` (R a rotation, P symmetric) with P's diagonal as the scale (a reflection keeps
+    R proper and flips the scale of x), the translation exact. (None, None) when ``m`` is not an invertible
+    affine transform."""
     m = np.asarray(m, dtype=np.float64)
-    out: dict[str, Any] = {}
     if np.allclose(m, np.eye(4), atol=1e-7):
-        return out
+        return {}, m
     lin = m[:3, :3]
+    if not np.allclose(m[3], (0, 0, 0, 1), atol=1e-7) or abs(np.linalg.det(lin)) < 1e-12 * max(
+            float(np.abs(lin).max()), 1e-30) ** 3:
+        return {}, None
     scale = np.linalg.norm(lin, axis=0)
-    ok = np.allclose(m[3], (0, 0, 0, 1), atol=1e-7) and np.all(scale > 1e-12)
-    if ok:
-        rot = lin / scale
-        ok = np.linalg.det(rot) > 0 and np.allclose(rot.T @ rot, np.eye(3), atol=1e-5)
-    if not ok:
-        return {"matrix": [float(x) for x in m.T.reshape(-1)]}  # column-major
+    rot = lin / scale
+    written: np.ndarray | None = m
+    if not (np.linalg.det(rot) > 0 and np.allclose(rot.T @ rot, np.eye(3), atol=1e-5)):
+        flip = np.diag([-1.0, 1.0, 1.0]) if np.linalg.det(lin) < 0 else np.eye(3)
+        u, _, vt = np.linalg.svd(lin @ flip)
+        rot = u @ vt
+        scale = np.diag(rot.T @ lin @ flip) * np.diag(flip)
+        written = None
+    out: dict[str, Any] = {}
     t = m[:3, 3]
     if np.any(np.abs(t) > 0):
         out["translation"] = [float(x) for x in t]
@@ -195,5 +229,8 @@ def _trs(m: np.ndarray) -> dict:
         out["rotation"] = [float(x) for x in q]
     if not np.allclose(scale, 1.0, atol=1e-7):
         out["scale"] = [float(x) for x in scale]
-    return out
-
+    if written is None:  # what a reader makes of the written numbers
+        written = np.eye(4)
+        written[:3, :3] = quat_to_matrix(out.get("rotation", (0, 0, 0, 1))) * np.asarray(out.get("scale", (1, 1, 1)))
+        written[:3, 3] = t
+    return out, written

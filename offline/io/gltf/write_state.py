@@ -78,6 +78,7 @@ class WriteState:
     delta_nrm: np.ndarray | None = None
     # write_skeleton
     n_skeleton_nodes: int = 0
+    world: np.ndarray | None = None  # (n_nodes, 4, 4) float64: each node's world rest transform as written
     joints: np.ndarray | None = None  # skeleton nodes the skinned meshes' vertices follow (the skin's joints)
     rigid: list[bool] = field(default_factory=list)  # per mesh: follows only its own node, written unskinned
     # write_meshes

@@ -20,12 +20,13 @@ from PIL import Image
 
 from facepuppet.runtime.cli import main
 from facepuppet.runtime.model.character import Character
+from facepuppet.runtime.model.geometry import vertex_normals
 
 from conftest import need_shared
 from facepuppet.offline.io.gltf import read as gltf_read
 from facepuppet.offline.io.gltf.write import ExportError, export_character
 from facepuppet.offline.io.gltf_check import check_gltf
-from helpers.gltf_characters import BONES, decode, node_worlds, parts_character, view_bytes
+from helpers.gltf_characters import BONES, FEATHER, SHEARED, decode, node_worlds, parts_character, view_bytes
 
 TABLES_V1 = Path(__file__).resolve().parents[2] / "runtime" / "files" / "data" / "tables_v1" / "character.npz"
 TURN = np.array([-1.0, 1.0, -1.0])
@@ -106,8 +107,13 @@ def test_skin_weights_joints_and_rest_pose(tmp_path, fmt):
         np.testing.assert_allclose(world[node] @ ibm[j], np.eye(4), atol=1e-5)
     # node rest transforms: the character's (turned for VRM 0.x), through the hierarchy
     t = np.diag([*frame(fmt), 1.0])
-    np.testing.assert_allclose(world[:k.n_nodes], t @ k.global_transforms(), atol=1e-5)
-    assert g.nodes[k.names.index("hat")].matrix is not None  # the sheared node as a matrix
+    want_world = t @ k.global_transforms()
+    hat = k.names.index(SHEARED)
+    others = [j for j in range(k.n_nodes) if j != hat]
+    np.testing.assert_allclose(world[others], want_world[others], atol=1e-5)
+    # the sheared node: glTF holds no shear (only TRS), so it is where it was, turned and scaled the nearest way
+    assert g.nodes[hat].matrix is None
+    np.testing.assert_allclose(world[hat][:, 3], want_world[hat][:, 3], atol=1e-6)
     assert g.nodes[k.names.index("neck")].rotation is not None and g.nodes[k.names.index("neck")].scale is not None
     want = np.zeros((c.n_vertices, k.n_nodes))
     np.add.at(want, (np.repeat(np.arange(c.n_vertices), 4), k.vertex_nodes.reshape(-1).astype(int)),
@@ -153,6 +159,78 @@ def test_textures_and_materials_read_back(tmp_path, fmt):
         mt = m1.extensions["VRMC_materials_mtoon"]
         np.testing.assert_allclose(mt["shadeColorFactor"], [0.4, 0.2, 0.3], atol=1e-6)
         assert mt["shadingShiftFactor"] == pytest.approx(-0.1) and mt["shadingToonyFactor"] == pytest.approx(0.8)
+
+
+def drawn_positions(g, blob) -> dict[int, list[np.ndarray]]:
+    """Per mesh, the world rest position of every vertex of its primitives, as a glTF viewer draws them: the
+    node's world transform, or the skin's joint matrices (joint world · inverse bind) blended by the weights."""
+    world = node_worlds(g)
+    out: dict[int, list[np.ndarray]] = {}
+    for node_index, node in enumerate(g.nodes):
+        if node.mesh is None:
+            continue
+        for prim in g.meshes[node.mesh].primitives:
+            p = np.c_[decode(g, blob, prim.attributes.POSITION), np.ones(g.accessors[prim.attributes.POSITION].count)]
+            drawn = out.setdefault(node.mesh, [])
+            if node.skin is None:
+                drawn.append((p @ world[node_index].T)[:, :3])
+                continue
+            skin = g.skins[node.skin]
+            ibm = decode(g, blob, skin.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
+            joint = world[np.asarray(skin.joints)] @ ibm
+            j = decode(g, blob, prim.attributes.JOINTS_0).astype(int)
+            wt = decode(g, blob, prim.attributes.WEIGHTS_0)
+            m = np.einsum("vi,vijk->vjk", wt, joint[j])
+            drawn.append(np.einsum("vjk,vk->vj", m, p)[:, :3])
+    return out
+
+
+@pytest.mark.parametrize("fmt", ["glb", "vrm0", "vrm1"])
+@pytest.mark.parametrize("face_on", [SHEARED, FEATHER])
+@pytest.mark.parametrize("mesh_nodes", [True, False])
+def test_a_sheared_node_s_meshes_are_drawn_where_they_were(tmp_path, fmt, face_on, mesh_nodes):
+    """The hat's rest matrix has a shear, which a glTF node cannot hold (only translation, rotation, scale):
+    the face follows the hat (or the feather under it), unskinned on that node (``mesh_nodes``) or skinned to
+    it; drawn from the file and read back, every vertex, normal and morph delta is where it was, and every
+    node is where it was."""
+    c, out, _ = write(tmp_path, fmt, face_on=face_on, mesh_nodes=mesh_nodes)
+    g, blob = load(out)
+    k = c.skeleton
+    assert all(n.matrix is None for n in g.nodes)
+    face = k.names.index(face_on)
+    assert (g.nodes[face].mesh == 1 and g.nodes[face].skin is None) if mesh_nodes else g.nodes[face].mesh is None
+    # drawn from the file (decoded here): the vertices where they were, in the file's frame
+    drawn = drawn_positions(g, blob)
+    seen: dict[int, int] = {}
+    for row in c.layout.primitives:
+        mesh = int(row[4])
+        prim = seen[mesh] = seen.get(mesh, -1) + 1
+        first, n = int(row[0]), int(row[1])
+        np.testing.assert_allclose(drawn[mesh][prim], c.vertices[first:first + n] * frame(fmt), atol=2e-6)
+    world = node_worlds(g)
+    np.testing.assert_allclose(world[:k.n_nodes, :3, 3], k.global_transforms()[:, :3, 3] * frame(fmt), atol=2e-6)
+    # read back (the reader may store the meshes in another order): the same vertices, morph deltas and normals
+    back = gltf_read.read_gltf(out)
+    ours, theirs = mesh_order(c), mesh_order(back)
+    np.testing.assert_allclose(back.vertices[theirs], c.vertices[ours], atol=2e-6)
+    shapes = [back.shape_names.index(n) for n in c.shape_names]
+    np.testing.assert_allclose(back.dense_deltas()[shapes][:, theirs], c.dense_deltas()[:, ours], atol=1e-6)
+    want_n = vertex_normals(c.vertices, c.triangles.astype(np.int64))
+    np.testing.assert_allclose(back.normals[theirs], want_n[ours], atol=1e-5)
+    # a normal delta read back is what the file draws at full weight: unit(n + dn) - n
+    dn = c.dense_deltas(normals=True)
+    full = want_n + dn
+    drawn_dn = np.where(np.any(dn != 0, axis=2, keepdims=True),
+                        full / np.linalg.norm(full, axis=2, keepdims=True) - want_n, 0.0)
+    np.testing.assert_allclose(back.dense_deltas(normals=True)[shapes][:, theirs], drawn_dn[:, ours], atol=1e-5)
+
+
+def mesh_order(c: Character) -> np.ndarray:
+    """The vertex indices of ``c``, mesh by mesh in the order of the meshes' names."""
+    ranges = {}
+    for first, n, _, _, mesh, _ in c.layout.primitives.tolist():
+        ranges.setdefault(c.layout.mesh_names[mesh], (first, n))
+    return np.concatenate([np.arange(f, f + n) for _, (f, n) in sorted(ranges.items())])
 
 
 def test_vrm0_toon_material_properties_give_back_the_stored_shading_range(tmp_path):
@@ -356,8 +434,12 @@ def test_round_trip_import_export_import(tmp_path):
             np.add.at(got, (np.arange(c.n_vertices), back.skeleton.vertex_nodes[:, i]),
                       back.skeleton.vertex_weights[:, i])
         np.testing.assert_allclose(got, want, atol=1e-6)
-        np.testing.assert_allclose(back.skeleton.global_transforms()[back_node], c.skeleton.global_transforms(),
-                                   atol=1e-5)
+        # every node where it was; the sheared hat turned and scaled the nearest way (a glTF node holds no shear)
+        got_world, want_world = back.skeleton.global_transforms()[back_node], c.skeleton.global_transforms()
+        np.testing.assert_allclose(got_world[:, :, 3], want_world[:, :, 3], atol=1e-5)
+        hat = c.skeleton.names.index(SHEARED)
+        others = [j for j in range(c.skeleton.n_nodes) if j != hat]
+        np.testing.assert_allclose(got_world[others], want_world[others], atol=1e-5)
         for t in range(2):
             np.testing.assert_array_equal(back.look.image(t), c.look.image(t))
         np.testing.assert_allclose(back.look.base_color, c.look.base_color, atol=1e-6)

@@ -97,7 +97,7 @@ def test_round_trip_keeps_every_array_and_the_manifest(saved):
     assert loaded.material_names == original.material_names
     assert loaded.units == "cm" and loaded.name == "quad"
     manifest = load_tables(saved).manifest
-    assert manifest["schema_version"] == CHARACTER_SCHEMA.version == 2  # 2: optional glTF parts
+    assert manifest["schema_version"] == CHARACTER_SCHEMA.version == 3  # 2: optional glTF parts; 3: kept images
     assert manifest["kind"] == "character"
     assert manifest["sections"]["vertices"] == {
         "shape": [4, 3], "dtype": "float32", "kind": "neutral vertex positions"
