@@ -77,7 +77,7 @@ CHARACTER_SCHEMA = register_schema(
         channels=("shapes", "materials"),
         channel_dims={"shapes": "n_shapes", "materials": "n_materials",
                       **{group: dim for group, (_, dim) in PART_CHANNELS.items() if dim}},
-        version=3,  # 2: the optional skeleton, look, expressions and layout parts; 3: the kept images, the material model
+        version=3,  # 2: skeleton, look, expressions and layout parts; 3: the kept images, the material model
     )
 )
 
