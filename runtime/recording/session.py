@@ -55,6 +55,7 @@ from facepuppet.runtime.recording.records import (
     Tick,
     decode_audio,
     decode_config,
+    decode_control,
     decode_event,
     decode_frame,
     decode_layout,
@@ -206,6 +207,7 @@ class Session:
     events : list of (tick time, found) pairs, the tracking lost (False) / found (True) events of a live run
     sources : list of (tick index, frames per mix source), one per tick of a run with several inputs
     states : list of (tick time, JSON text), the filter stage's state where a recording started mid-run (STATE)
+    controls : list of (tick time, JSON object), the control commands applied during a live run (CONTROL)
     skipped_bytes : int, bytes skipped over damaged records in the middle of the file
     damaged : list of (byte offset, bytes skipped), each damaged stretch that reading resynchronised past
     """
@@ -224,6 +226,7 @@ class Session:
     events: list[tuple[float, bool]] = field(default_factory=list)
     sources: list[tuple[int, tuple[int, ...]]] = field(default_factory=list)
     states: list[tuple[float, str]] = field(default_factory=list)
+    controls: list[tuple[float, dict]] = field(default_factory=list)
     skipped_bytes: int = 0
     damaged: list[tuple[int, int]] = field(default_factory=list)
 
@@ -381,6 +384,8 @@ def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, paylo
         session.sources.append(sources)
     elif kind == RecordKind.STATE and (state := decode_state(payload)) is not None:
         session.states.append(state)
+    elif kind == RecordKind.CONTROL and (command := decode_control(payload)) is not None:
+        session.controls.append(command)
     elif kind in RESERVED_KINDS:
         name = RecordKind(kind).name.lower()
         session.skipped[name] = session.skipped.get(name, 0) + 1
