@@ -215,15 +215,16 @@ class ControlServer:
         from websockets.http11 import Response
 
         path, _, query = request.path.partition("?")
-        host = request.headers.get("Host")
-        if not self._host_ok(host):
+        hosts, origins = request.headers.get_all("Host"), request.headers.get_all("Origin")
+        host = hosts[0] if len(hosts) == 1 else None  # two Host headers: which one a proxy read is unknown
+        if not self._host_ok(host) or len(origins) > 1:
             self.counters["refused_host"] += 1
             return connection.respond(403, "Host refused: use the address the run printed\n")
         if not self._token_ok(query):
             self.counters["refused_token"] += 1
             return connection.respond(401, "a token is needed: ?token=TOKEN (the run printed it)\n")
         if path == "/ws":
-            origin = request.headers.get("Origin")
+            origin = origins[0] if origins else None
             if origin is not None and origin != f"http://{host}":
                 self.counters["refused_origin"] += 1
                 self.log(f"web: refused a WebSocket from Origin {origin[:80]!r} (only this server's own pages)")
@@ -260,14 +261,13 @@ class ControlServer:
                     self.counters["closed_refused"] += 1
                     await ws.close(1008, "too many refused messages")
                     break
-        except ConnectionClosed:
-            pass
+        except ConnectionClosed as exc:
+            if exc.sent is not None and exc.sent.code == 1009:  # the library closed it: a message over max_size
+                self.counters["closed_oversize"] += 1
         finally:
             pusher.cancel()
             self.clients.discard(client)
             self._count_viewers()
-            if ws.close_code == 1009:
-                self.counters["closed_oversize"] += 1
 
     async def _send(self, client: _Client, message: str | bytes) -> bool:
         """Send, or drop the client when it has not read for STALL_S; False when it is gone."""
