@@ -6,8 +6,9 @@ while a view page is connected and its next frame is due; compressing and sendin
 server's thread. The page inflates the bytes (the browser's ``DecompressionStream``), turns the rows over
 and divides the colour by alpha (canvas ``ImageData`` is straight alpha).
 
-A view message is binary: the header :data:`HEADER` (``b"FPV1"``, width u32, height u32, flags u32, tick
-index u32, capture time f64 in ms since the epoch, for the page's lag) then the zlib stream of
+A view message is binary: the header :data:`HEADER` (28 bytes, little-endian, unpadded: ``b"FPV1"``, width u32,
+height u32, flags u32, tick index u32, capture time f64 in ms since the epoch, for the page's lag) then the zlib
+stream of
 ``width * height * 4`` bytes.
 """
 
