@@ -45,6 +45,7 @@ import numpy as np
 from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench, session_log
 from facepuppet.runtime.bench.render import pass_costs
 from facepuppet.runtime.bench.senders import SENDERS, decode_cost
+from facepuppet.runtime.bench.web import web_phases
 from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.commands.run import plan_from_argv, run_live
 from facepuppet.runtime.inputs.vmc import VmcAdapter
@@ -66,8 +67,10 @@ def rss_mb() -> float:
         return peak_rss_mb()
 
 
-def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
-    """One sender process at ``rate`` for ``seconds`` against one headless live run."""
+def _phase(args, rate: float, seconds: float, panel: str | None = None, extra: tuple[str, ...] = (),
+           started=None) -> dict:
+    """One sender process at ``rate`` for ``seconds`` against one headless live run (``extra``: more of the run's
+    options; ``started()``, called once the run listens, returns a callable that ends what it started)."""
 
     kind = getattr(args, "input", "vmc")
     probe = SENDERS[kind]("127.0.0.1", 9)  # datagrams per frame (VMC: status + the blend bundles); sends nothing
@@ -96,7 +99,7 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
             "--path", args.path, "--receiver", getattr(args, "receiver", "process"),
             "--draw", getattr(args, "draw", "arrival"), *(["--phone", phone] if phone else []),
             *(["--panel"] if panel is not None else []), "--quality", getattr(args, "quality", "auto"),
-            *(["--msaa", str(args.msaa)] if getattr(args, "msaa", None) is not None else [])]
+            *(["--msaa", str(args.msaa)] if getattr(args, "msaa", None) is not None else []), *extra]
     plan = replace(plan_from_argv(argv), panel=PanelOptions(panel is not None, hidden=panel == "hidden"))
     stop = threading.Event()
     sender_out: list[str] = []
@@ -106,8 +109,12 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
 
     t_first_last = [math.inf, -math.inf]
 
+    ending: list = []
+
     def on_ready(address):
         t_start[0] = time.monotonic()
+        if started is not None:
+            ending.append(started())
         if procs:  # the phone sender: go
             procs[0].stdin.write("go\n")
             procs[0].stdin.flush()
@@ -153,6 +160,8 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None) -> dict:
     try:
         result = run_live(plan, stop_event=stop, on_ready=on_ready, hooks=[sample], on_panel=shown_panel.append)
     finally:
+        for end in ending:
+            end()
         for proc in procs:
             proc.kill()
             proc.wait()
@@ -289,6 +298,9 @@ def bench_latency(args: argparse.Namespace) -> dict:
     if getattr(args, "panel", False):
         with session_log(args.verbose):
             _panel_phases(args, results)
+    if getattr(args, "web", False):
+        with session_log(args.verbose):
+            results["web"] = web_phases(args, _phase)
     if args.flood:
         with session_log(args.verbose):
             results["flood"] = _phase(args, args.rate * args.flood_factor, args.flood_seconds)
@@ -383,6 +395,11 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="then the same run with the operator's panel shown and hidden on alternate ticks: CPU "
                              "ms per tick p50/p99 of each, what the panel adds, and the GPU wait (the panel's draw "
                              "on llvmpipe)")
+    parser.add_argument("--web", action="store_true",
+                        help="then run --web: the view page's cost per frame at 1280x720 and the frame loop's p99 "
+                             "with 0 and 10 view clients connected")
+    parser.add_argument("--web-decode", action="store_true",
+                        help="with --web: the view clients inflate every frame's pixels (as a page does)")
     parser.add_argument("--flood", action="store_true", help="then flood: --flood-factor x the rate")
     parser.add_argument("--flood-factor", type=float, default=10.0, help="flood rate multiple (10)")
     parser.add_argument("--flood-seconds", type=float, default=60.0, help="seconds of flooding (60)")

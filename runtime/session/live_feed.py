@@ -92,6 +92,7 @@ class LiveFeed:
         # only the panel and the control API (``--web``) start a recording once the run ticks
         self.recordable = record.record is not None or wants_panel(picture, panel) or control
         self.midrun = wants_panel(picture, panel) or control
+        self.control = control
         self.title = f"facepuppet run ({inputs.input})"
         self.audio = None
         self.adapter = None  # the loop's input adapter, once open (None for the voice alone)
@@ -286,7 +287,7 @@ class LiveFeed:
         # loop each time: a short switch interval keeps datagrams from waiting in the kernel (measured, 0.5 ms
         # vs the default 5 ms: arrival -> read p50 3 vs 7 ms, p99 16 vs 30 ms). A receive process needs none.
         switch = sys.getswitchinterval()
-        if isinstance(parts.source, UdpSource):
+        if isinstance(parts.source, UdpSource) or self.control:  # (``--web``: the control server's thread)
             sys.setswitchinterval(min(switch, THREAD_SWITCH_INTERVAL_S))
         try:
             return loop.run(parts.source, duration=parts.duration)
