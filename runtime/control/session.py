@@ -14,8 +14,9 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
+from facepuppet.runtime.control.hotkeys import bind_hotkeys
 from facepuppet.runtime.control.options import ControlOptions
 from facepuppet.runtime.control.osc_server import OscControl
 from facepuppet.runtime.control.server import ControlServer, describe
@@ -30,6 +31,7 @@ if TYPE_CHECKING:
     from facepuppet.runtime.live.stages import Chain
     from facepuppet.runtime.model.character import Character
     from facepuppet.runtime.protocols import Renderer
+    from facepuppet.runtime.render.gl_context import GLTarget
     from facepuppet.runtime.session.feeds import FeedParts
 
 logger = logging.getLogger(__name__)
@@ -57,17 +59,29 @@ class ControlParts:
 
 def open_control(stack: contextlib.ExitStack, options: ControlOptions | None, chain: Chain, bus: SessionBus,
                  parts: FeedParts, renderer: Renderer, character: Character, log: Callable[[str], None] = logger.info,
-                 loop_counters: Callable[[], dict] = dict) -> ControlParts | None:
-    """The control stage (and ``--web``'s servers), or None when the session has no control at all."""
+                 loop_counters: Callable[[], dict] = dict, target: GLTarget | None = None,
+                 panel: Any = None) -> ControlParts | None:
+    """The control stage (and ``--web``'s servers, a window's ``[hotkeys]``), or None when the session has no
+    control at all. ``target``: the session's GL target (its window takes the hotkeys); ``panel``: the shown
+    DeskPanel or None (its text fields keep the keys)."""
     web = options.web if options is not None else None
     schedule = list(getattr(parts, "controls", ()) or ())
-    if web is None and not schedule:
+    config = chain.config
+    hotkeys = tuple(getattr(config, "hotkeys", ()) or ()) if parts.live else ()
+    window = target is not None and not target.headless
+    if hotkeys and not window:
+        log("control: [hotkeys] are keys of the window; a headless run has none")
+    if web is None and not schedule and not (hotkeys and window):
         return None
     actions = ShowActions(chain, parts.recorder, renderer, character, log)
     stage = ControlStage(trigger_names(chain), actions.table(), publish=bus.publish_control, schedule=schedule,
                          log=log)
     chain.stages = (*chain.stages, stage)
     opened = ControlParts(stage, counters={"control": stage.counters})
+    if hotkeys and window:
+        typing = (lambda: bool(panel.visible and panel.io.want_text_input)) if panel is not None else (lambda: False)
+        bind_hotkeys(target.window, hotkeys, stage.submit, typing)
+        log(f"control: hotkeys {', '.join(key for key, _ in hotkeys)} (the config's [hotkeys])")
     if web is None:
         return opened
     show = ShowState(chain, stage, actions, parts.recorder, loop_counters)

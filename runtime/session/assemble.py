@@ -207,7 +207,7 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
         if shown is None and not target.headless and chain.filter is not None:
             _bind_calibrate_key(target, chain.filter)
         controlled = open_control(stack, control, chain, bus, parts, renderer, character, log,
-                                  loop_counters=lambda: counters.get("loop", {}))
+                                  loop_counters=lambda: counters.get("loop", {}), target=target, panel=shown)
         if controlled is not None:
             counters.update(controlled.counters)
         loop = FrameLoop(chain.names, renderer, feed.clock(parts, target, paced),

@@ -176,3 +176,20 @@ def test_web_listens_on_loopback_by_default_and_another_host_needs_a_token():
         _options("--web", "nowhere")
     with pytest.raises(UsageError, match="--web-token: only with --web"):
         _options("--web-token", "a" * 20)
+
+
+def test_hotkeys_in_a_config_are_checked_and_saved_back_with_it():
+    from facepuppet.runtime.live.config import LiveConfigError
+    from facepuppet.runtime.live.profiles import config_to_toml, parse_config_text
+
+    text = '[hotkeys]\nj = { verb = "expression", name = "Joy", action = "toggle" }\nF5 = { verb = "calibrate" }\n'
+    config = parse_config_text(text, "live.toml")
+    assert config.hotkeys == (("J", {"verb": "expression", "name": "Joy", "action": "toggle"}),
+                              ("F5", {"verb": "calibrate"}))
+    assert parse_config_text(config_to_toml(config), "saved.toml").hotkeys == config.hotkeys
+    for bad, match in (('C = { verb = "calibrate" }', "hotkeys.C': C is the window's calibrate key"),
+                       ('F13 = { verb = "calibrate" }', "hotkeys.F13': a hotkey is a letter"),
+                       ('J = { verb = "status" }', "verb 'status' answers a client"),
+                       ('J = { verb = "expression", name = "Joy" }', "hotkeys.J': field 'action'")):
+        with pytest.raises(LiveConfigError, match=match):
+            parse_config_text("[hotkeys]\n" + bad, "live.toml")
