@@ -18,9 +18,9 @@ channels do not also drive ``Blink``; an expression at rest is not sent (NaN) an
 drive the face as if nothing had been triggered. For a character without VRM expressions the shapes
 themselves are the expressions, and the same rules hold by shape name.
 
-Recorded and replayed: ``expression`` and ``framing`` (the replay applies them again). ``calibrate`` and
-``profile`` are recorded too, and reach a replay through what they did: the config they put in force (a
-CONFIG record, neutral included). ``record`` is not part of the show.
+Every command applied is recorded; a replay applies ``expression`` and ``framing`` again. ``calibrate`` and
+``profile`` reach a replay through what they did: the config they put in force (a CONFIG record, neutral
+included). ``record`` is not part of the show (a start is the first CONTROL record of the file it starts).
 """
 
 from __future__ import annotations

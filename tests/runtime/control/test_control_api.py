@@ -23,10 +23,13 @@ pytestmark = [pytest.mark.gl, pytest.mark.slow]
 
 
 def _ask(ws, doc: dict) -> dict:
-    """Send ``doc`` and return the first JSON reply that is not a pushed weights message."""
+    """Send ``doc`` and return the first JSON reply that is not a pushed weights message (or a view frame)."""
     ws.send(json.dumps(doc))
     while True:
-        reply = json.loads(ws.recv(timeout=20))
+        message = ws.recv(timeout=20)
+        if isinstance(message, bytes):
+            continue
+        reply = json.loads(message)
         if reply.get("type") != "weights":
             return reply
 
@@ -176,3 +179,47 @@ def _dropped(ws) -> int:
     status = _ask(ws, {"verb": "status"})
     time.sleep(0.2)
     return status["web"]["dropped_slow"]
+
+
+def _coverage(ws) -> int:
+    """Pixels with alpha > 0 in the next view frame that arrives."""
+    from facepuppet.runtime.control.view_frames import decode
+
+    while True:
+        message = ws.recv(timeout=20)
+        if isinstance(message, bytes):
+            return int((decode(message)[5][..., 3] > 0).sum())
+
+
+def test_framing_profile_record_and_calibrate_verbs_act_on_the_show(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
+    monkeypatch.chdir(tmp_path)  # a recording named by a client goes into the run's folder
+    profiles = tmp_path / "xdg" / "facepuppet" / "profiles"
+    profiles.mkdir(parents=True)
+    with web_run(tmp_path, {"JawOpen": 0.2}, size="96x72") as run:  # jawOpen -> A (the default preset mapping)
+        (profiles / "loud.toml").write_text((tmp_path / "live.toml").read_text()
+                                            + "\n[channels.jawOpen]\ngain = 3.0\n")
+        with connect(f"ws://127.0.0.1:{run.port}/ws", max_size=1 << 24) as ws:
+            assert "loud" in _ask(ws, {"verb": "list"})["profiles"]
+            assert _ask(ws, {"verb": "view", "fps": 30})["fps"] == 30
+            before = _coverage(ws)
+            assert _ask(ws, {"verb": "framing", "framing": "head", "zoom": 2.0})["type"] == "ok"
+            run.wait_for(lambda: _coverage(ws) > 2 * before, what="the picture zoomed in")
+            assert _ask(ws, {"verb": "view", "fps": 0})["fps"] == 0
+            assert run.weight("ah") == pytest.approx(0.2)
+            assert _ask(ws, {"verb": "profile", "name": "loud"})["type"] == "ok"
+            run.wait_for(lambda: run.weight("ah") == pytest.approx(0.6), what="the profile's gain in force")
+            assert _ask(ws, {"verb": "record", "action": "start", "name": "mid"})["type"] == "ok"
+            run.wait_for(lambda: (tmp_path / "mid.fps").exists(), what="the recording started")
+            assert _ask(ws, {"verb": "calibrate"})["type"] == "ok"
+            run.wait_for(lambda: run.weight("ah") == 0.0, what="the calibrated neutral taken off")
+            assert _ask(ws, {"verb": "record", "action": "stop"})["type"] == "ok"
+            run.wait_for(lambda: not _ask(ws, {"verb": "status"})["recording"], what="the recording stopped")
+            status = _ask(ws, {"verb": "status"})
+            assert status["profile"] == "loud"
+            assert status["control"]["counters"] == {"commands_applied": 5, "commands_failed": 0,
+                                                     "commands_dropped": 0}
+    session = read_session(tmp_path / "mid.fps")
+    # the start is the first record of the file it started; calibrate is replayed through its CONFIG record
+    assert session.complete and [doc["verb"] for _, doc in session.controls] == ["record", "calibrate"]
+    assert len(session.configs) >= 2  # the config in force at the start, then the calibrated neutral
