@@ -19,6 +19,7 @@ each carries the load average at its end.
 
 from __future__ import annotations
 
+import argparse
 import json
 import socket
 import subprocess
@@ -150,7 +151,7 @@ def _clients_main(port: int, n: int, fps: float, inflate: bool) -> None:
     print(json.dumps({"lags_ms": lags, "frames": frames}))
 
 
-def web_phases(args, phase: Callable[..., dict]) -> dict:
+def web_phases(args: argparse.Namespace, phase: Callable[..., dict]) -> dict:
     """The figures of the module docstring; ``phase`` is the latency bench's one live run."""
     out: dict = {}
     out["view_cost"] = cost = view_cost(args.character)
