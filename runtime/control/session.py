@@ -14,6 +14,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from importlib.util import find_spec
 from typing import TYPE_CHECKING, Any
 
 from facepuppet.runtime.control.hotkeys import bind_hotkeys
@@ -84,6 +85,8 @@ def open_control(stack: contextlib.ExitStack, options: ControlOptions | None, ch
         log(f"control: hotkeys {', '.join(key for key, _ in hotkeys)} (the config's [hotkeys])")
     if web is None:
         return opened
+    if find_spec("websockets") is None:
+        raise UsageError("--web: needs the web extra (the websockets package): pip install 'facepuppet[web]'")
     show = ShowState(chain, stage, actions, parts.recorder, loop_counters)
     server = ControlServer(web[0], web[1], token=options.token, submit=stage.submit, answer=show.answer,
                            view_fps=options.view_fps, log=log)

@@ -26,6 +26,7 @@ included). ``record`` is not part of the show (a start is the first CONTROL reco
 from __future__ import annotations
 
 import logging
+import threading
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -77,6 +78,7 @@ class ControlStage:
         self._next = 0
         self.counters = {"commands_applied": 0, "commands_failed": 0, "commands_dropped": 0}
         self.applied: deque[tuple[float, dict, str]] = deque(maxlen=APPLIED_KEPT)
+        self._applied_lock = threading.Lock()  # the servers' threads read it for status
         self._values = np.full(len(self.triggers.names), np.nan, dtype=np.float32)
         self._shown = self._values.copy()
         self._last_in: Frame | None = None
@@ -134,7 +136,8 @@ class ControlStage:
         except (CommandError, ValueError, OSError) as exc:  # a profile that does not load, a record that fails
             note = str(exc)
         doc = command.to_json()
-        self.applied.append((t, doc, note))
+        with self._applied_lock:
+            self.applied.append((t, doc, note))
         if note:
             self.counters["commands_failed"] += 1
             self.log(f"control: {command.verb}: {note}")
@@ -183,5 +186,8 @@ class ControlStage:
     # -- what the status shows -----------------------------------------------------------------------
 
     def status(self) -> dict[str, Any]:
+        """What is triggered, the counters and the last commands applied (any thread)."""
+        with self._applied_lock:
+            last = list(self.applied)[-5:]
         return {"active": self.triggers.active(), "counters": dict(self.counters),
-                "last": [{"t": t, "command": doc, "error": note} for t, doc, note in list(self.applied)[-5:]]}
+                "last": [{"t": t, "command": doc, "error": note} for t, doc, note in last]}
