@@ -75,8 +75,10 @@ def open_control(stack: contextlib.ExitStack, options: ControlOptions | None, ch
     if web is None and not schedule and not (hotkeys and window):
         return None
     actions = ShowActions(chain, parts.recorder, renderer, character, log)
-    stage = ControlStage(trigger_names(chain), actions.table(), publish=bus.publish_control, schedule=schedule,
-                         log=log)
+    names = trigger_names(chain)
+    shapes = names == tuple(chain.names)  # no VRM expressions: the shapes are triggered, over the mapped frame
+    stage = ControlStage(names, actions.table(), publish=bus.publish_control, schedule=schedule, log=log,
+                         mapper=chain.mapper if shapes else None)
     chain.stages = (*chain.stages, stage)
     opened = ControlParts(stage, counters={"control": stage.counters})
     if hotkeys and window:

@@ -9,14 +9,20 @@ computes what the live run drew.
 
 **Stacking with the tracker's channels.** The stage runs last in the chain, after the filter, calibration,
 tracking loss, gestures and kernel PLS, so a triggered value is exactly what was asked for (never filtered,
-offset by the neutral or eased by a tracking loss). It writes each triggered expression into the frame as a
-channel of the expression's name: where the frame already has that channel (a VMC sender naming ``Joy``) the
-two combine by their maximum, a trigger never lowers what the tracker does; where it has not, the channel is
-added. A named expression channel wins over the default ARKit to VRM preset mapping in every frame that sends
-it (:mod:`~facepuppet.runtime.mapping.expressions`), so while ``Blink`` is triggered the tracker's eyeBlink
-channels do not also drive ``Blink``; an expression at rest is not sent (NaN) and the tracker's channels
-drive the face as if nothing had been triggered. For a character without VRM expressions the shapes
-themselves are the expressions, and the same rules hold by shape name.
+offset by the neutral or eased by a tracking loss). While every expression is at rest the frames pass through
+untouched: a run with the control API and nothing triggered draws what it draws without it. While one is not:
+
+* a character with VRM expressions gets each triggered expression written into the frame as a channel of the
+  expression's name: where the frame already has that channel (a VMC sender naming ``Joy``) the two combine by
+  their maximum, a trigger never lowers what the tracker does; where it has not, the channel is added (NaN,
+  not sent, for the expressions at rest). A named expression channel wins over the default ARKit to VRM
+  preset mapping in every frame that sends it (:mod:`~facepuppet.runtime.mapping.expressions`), so while
+  ``Blink`` is triggered the tracker's eyeBlink channels do not also drive ``Blink``;
+* a character without VRM expressions (its shapes are what is triggered) gets the frame mapped onto its
+  shapes here, by the session's own map (the one the loop would use), each triggered shape raised to its
+  value where the tracker drives it less, and the frame handed on in the shapes' own layout. Adding a shape's
+  name as a channel instead would change how the tracker's other channels map (an unsided ``browInnerUp``
+  no longer split onto ``browInnerUp_L``).
 
 Every command applied is recorded; a replay applies ``expression`` and ``framing`` again. ``calibrate`` and
 ``profile`` reach a replay through what they did: the config they put in force (a CONFIG record, neutral
@@ -37,6 +43,7 @@ import numpy as np
 from facepuppet.runtime.control.commands import Command, CommandError, parse_command
 from facepuppet.runtime.control.triggers import ExpressionTriggers
 from facepuppet.runtime.frames import Frame
+from facepuppet.runtime.live.mapper import Mapper
 from facepuppet.runtime.mapping.channels import canonical
 
 logger = logging.getLogger(__name__)
@@ -56,6 +63,8 @@ class ControlStage:
         record, framing); a missing verb is answered "not available in this session"
     publish : callable(t, dict) or None, the bus's :meth:`~facepuppet.runtime.live.bus.SessionBus.publish_control`
     schedule : sequence of (tick time, JSON object), recorded commands to apply at those ticks (a replay)
+    mapper : Mapper or None, the session's map step when ``names`` are the shapes it maps onto (a character
+        without VRM expressions): triggered shapes are laid over the mapped frame (see the module docstring)
 
     Attributes
     ----------
@@ -68,7 +77,8 @@ class ControlStage:
 
     def __init__(self, names: Sequence[str], actions: dict[str, Callable[[Command], str]] | None = None,
                  publish: Callable[[float, dict], None] | None = None,
-                 schedule: Sequence[tuple[float, dict]] = (), log: Callable[[str], None] = logger.info) -> None:
+                 schedule: Sequence[tuple[float, dict]] = (), log: Callable[[str], None] = logger.info,
+                 mapper: Mapper | None = None) -> None:
         self.triggers = ExpressionTriggers(names)
         self.actions = dict(actions or {})
         self.publish = publish
@@ -84,6 +94,7 @@ class ControlStage:
         self._last_in: Frame | None = None
         self._layouts: dict[tuple[str, ...] | None, tuple[tuple[str, ...], np.ndarray]] = {}
         self._folded = [canonical(n) for n in self.triggers.names]
+        self.mapper = mapper
 
     # -- from other threads ------------------------------------------------------------------------
 
@@ -155,14 +166,21 @@ class ControlStage:
         return ""
 
     def _compose(self, frame: Frame, values: np.ndarray) -> Frame:
-        """``frame`` with each triggered expression's channel written in (see the module docstring)."""
-        if frame.weights is None:
+        """``frame`` with each triggered expression laid over it (see the module docstring); as it is while every
+        expression is at rest."""
+        active = np.flatnonzero(~np.isnan(values))
+        if frame.weights is None or active.size == 0:
             return frame
+        if self.mapper is not None:
+            shapes = self.mapper.map_for(frame.channels, frame.source).apply(frame.weights)
+            shapes = np.array(shapes, dtype=np.float32)
+            shapes[active] = np.maximum(shapes[active], values[active])
+            return replace(frame, channels=self.triggers.names, weights=shapes)
         channels, where = self._layout(frame.channels)
         n = len(frame.weights)
         weights = np.full(len(channels), np.nan, dtype=np.float32)
         weights[:n] = frame.weights
-        for j in np.flatnonzero(~np.isnan(values)):
+        for j in active:
             i, v = where[j], values[j]
             weights[i] = v if np.isnan(weights[i]) else max(weights[i], v)
         return replace(frame, channels=channels, weights=weights)

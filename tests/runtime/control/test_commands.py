@@ -85,12 +85,12 @@ def _frame(t, **weights):
 def test_the_stage_stacks_by_maximum_adds_missing_channels_and_keeps_moving_without_new_frames():
     published = []
     stage = ControlStage(("Joy", "Blink"), publish=lambda t, doc: published.append((t, doc)))
-    out = stage(_frame(0.0, jawOpen=0.3, Joy=0.6), 0.0)
-    assert out.channels == ("jawOpen", "Joy", "Blink")
-    assert out.weights[:2].tolist() == pytest.approx([0.3, 0.6]) and np.isnan(out.weights[2])
+    first = _frame(0.0, jawOpen=0.3, Joy=0.6)
+    assert stage(first, 0.0) is first  # nothing triggered: the frame as it came
     stage.submit(parse_command({"verb": "expression", "name": "Joy", "action": "on", "value": 0.4, "fade": 0}))
     stage.submit(parse_command({"verb": "expression", "name": "Blink", "action": "on", "fade": 0.1}))
     out = stage(_frame(0.1, jawOpen=0.3, Joy=0.6), 0.1)
+    assert out.channels == ("jawOpen", "Joy", "Blink")  # Blink added, Joy the tracker's own channel
     assert out.weights.tolist()[:2] == pytest.approx([0.3, 0.6])  # the tracker's 0.6 over the trigger's 0.4
     assert out.weights[2] == 0.0  # Blink ramps from 0 over 0.1 s
     moving = stage(None, 0.15)  # no new frame: the ramp is drawn anyway, over the last frame
@@ -103,6 +103,22 @@ def test_the_stage_stacks_by_maximum_adds_missing_channels_and_keeps_moving_with
     stage(None, 0.4)
     assert stage.counters == {"commands_applied": 2, "commands_failed": 2, "commands_dropped": 0}
     assert len(published) == 2  # what failed is not recorded
+
+
+def test_a_rig_without_expressions_gets_its_shapes_raised_over_the_mapped_frame():
+    from facepuppet.runtime.live.mapper import Mapper
+
+    rig = ("browInnerUp_L", "browInnerUp_R", "jawOpen")
+    stage = ControlStage(rig, mapper=Mapper(rig, None, log=lambda s: None))
+    frame = _frame(0.0, browInnerUp=0.5, jawOpen=0.3)  # an unsided channel split onto both sides
+    assert stage(frame, 0.0) is frame
+    stage.submit(parse_command({"verb": "expression", "name": "jawOpen", "action": "on", "value": 0.8, "fade": 0}))
+    out = stage(_frame(0.1, browInnerUp=0.5, jawOpen=0.3), 0.1)
+    assert out.channels == rig and out.weights.tolist() == pytest.approx([0.5, 0.5, 0.8])
+    stage.submit(parse_command({"verb": "expression", "name": "browInnerUp_L", "action": "on", "value": 0.2,
+                                "fade": 0}))
+    out = stage(None, 0.2)  # no new frame: the last one, mapped again; the tracker's 0.5 over the trigger's 0.2
+    assert out.weights.tolist() == pytest.approx([0.5, 0.5, 0.8])
 
 
 def test_a_replay_schedule_applies_the_recorded_commands_at_their_ticks():
@@ -122,7 +138,8 @@ def test_a_replay_schedule_applies_the_recorded_commands_at_their_ticks():
         assert (a is None) == (b is None)
         if a is not None:
             np.testing.assert_array_equal(a.weights, b.weights)
-    assert any(d is not None and d.weights[1] == pytest.approx(1.0) for d in drawn_back)
+    assert any(d is not None and d.channels == ("jawOpen", "Joy") and d.weights[1] == pytest.approx(1.0)
+               for d in drawn_back)
 
 
 def test_the_rate_limit_lets_a_burst_through_then_its_rate():
