@@ -102,6 +102,7 @@ class ControlServer:
              "view_frames_encoded"), 0)
         self.clients: set[_Client] = set()
         self.viewers = 0  # read by the frame loop's thread (an int: one load)
+        self._grab_fps = self.view_fps
         self.address: tuple[str, int] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
@@ -163,7 +164,7 @@ class ControlServer:
     def wants_frame(self, now_s: float) -> bool:
         """Whether a view page waits for a frame that is due at ``now_s`` (monotonic s) and the last one is
         encoded (frame loop's thread: reads two numbers)."""
-        return self.viewers > 0 and not self._encoding and now_s - self._last_grab >= 1.0 / self.view_fps
+        return self.viewers > 0 and not self._encoding and now_s - self._last_grab >= 1.0 / self._grab_fps
 
     def offer_frame(self, width: int, height: int, flags: int, k: int, rgba: bytes, now_s: float) -> None:
         """Hand over the newest drawn frame (frame loop's thread; never blocks)."""
@@ -329,7 +330,10 @@ class ControlServer:
         return {**reply, "type": verb, "id": ident}
 
     def _count_viewers(self) -> None:
-        self.viewers = sum(1 for c in self.clients if c.view_fps > 0)
+        """How many view clients there are, and the fastest one's frame rate: the frames read back."""
+        rates = [c.view_fps for c in self.clients if c.view_fps > 0]
+        self._grab_fps = max(rates, default=self.view_fps)
+        self.viewers = len(rates)
 
     async def _push(self, client: _Client) -> None:
         """What a client subscribed to: status and weights at its rate, the newest view frame at its fps."""
