@@ -46,7 +46,9 @@ class ControlParts:
     ----------
     stage : ControlStage, in the chain
     server : ControlServer or None; osc : OscControl or None; show : ShowState or None
-    observers : list of TickObserver, for the frame loop (the show's figures, the view frames)
+    observers : list of TickObserver, for the frame loop (the show's figures)
+    overlays : list of loop overlays, called before the panel's (the view frames: read back before the panel
+        is drawn over the picture, so the view page never shows the panel)
     counters : dict of counter group -> counters (``control``, ``web``, ``osc_control``)
     """
 
@@ -55,6 +57,7 @@ class ControlParts:
     osc: OscControl | None = None
     show: ShowState | None = None
     observers: list = field(default_factory=list)
+    overlays: list = field(default_factory=list)
     counters: dict = field(default_factory=dict)
 
 
@@ -107,13 +110,15 @@ def open_control(stack: contextlib.ExitStack, options: ControlOptions | None, ch
     if options.generated:
         log(f"web: the token of this run (listening on {address[0]}, not loopback): {options.token}")
     opened.server, opened.osc, opened.show = server, osc, show
-    opened.observers = [show, view_observer(server)]
+    opened.observers = [show]
+    opened.overlays = [view_grabber(server)]
     opened.counters.update(web=server.counters, osc_control=osc.counters)
     return opened
 
 
-def view_observer(server: ControlServer) -> Callable[[TickInfo], None]:
-    """The tick observer that reads a frame back for the view pages when one is due (else costs one check)."""
+def view_grabber(server: ControlServer) -> Callable[[TickInfo], None]:
+    """The loop overlay that reads the drawn frame back for the view pages when one is due (else costs one
+    check); as an overlay it runs after the character's draw and before the panel's."""
     def observe(info: TickInfo) -> None:
         now = time.monotonic()
         if server.wants_frame(now):

@@ -215,7 +215,9 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
                                     *(controlled.observers if controlled is not None else ())],
                          fps=parts.fps, log=log, target=target,
                          stages=chain.stages, stop=getattr(feed, "stop", None), catch_up=parts.catch_up,
-                         idle_fps=parts.idle_fps, overlays=() if shown is None else (shown.overlay,),
+                         idle_fps=parts.idle_fps,
+                         overlays=(*(controlled.overlays if controlled is not None else ()),
+                                   *(() if shown is None else (shown.overlay,))),
                          wake=parts.wake, mapper=chain.mapper)
         counters["loop"] = loop.counters
         if stats is not None:

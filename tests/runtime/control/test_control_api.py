@@ -223,3 +223,18 @@ def test_framing_profile_record_and_calibrate_verbs_act_on_the_show(tmp_path, mo
     # the start is the first record of the file it started; calibrate is replayed through its CONFIG record
     assert session.complete and [doc["verb"] for _, doc in session.controls] == ["record", "calibrate"]
     assert len(session.configs) >= 2  # the config in force at the start, then the calibrated neutral
+
+
+def test_the_view_frames_are_read_before_the_panel_is_drawn_over_the_picture(tmp_path):
+    pytest.importorskip("imgui_bundle", reason="the panel's extra (imgui-bundle) is not installed")
+    from facepuppet.runtime.control.view_frames import decode
+
+    with web_run(tmp_path, size="480x360", extra=("--panel",)) as run:
+        run.wait_for(lambda: len(run.ticks) > 5, what="ticks with the panel")
+        with connect(f"ws://127.0.0.1:{run.port}/ws", max_size=1 << 24) as ws:
+            assert _ask(ws, {"verb": "view", "fps": 30})["type"] == "ok"
+            while isinstance(message := ws.recv(timeout=20), str):
+                pass
+            alpha = decode(message)[5][..., 3]
+    # the panel is drawn over the picture's left side, opaque; the view page gets the character alone
+    assert alpha[:, :40].max() == 0 and alpha.max() == 255
