@@ -11,6 +11,7 @@ from pathlib import Path
 from facepuppet.runtime.cli.progress import Progress
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.model.character import MATERIAL_KINDS, Character
+from facepuppet.runtime.model.springs import springs_of
 
 from facepuppet.offline.io import capture_replay
 from facepuppet.offline.io.gltf.read import read_gltf
@@ -158,6 +159,15 @@ def _print_gltf_summary(character: Character, seconds: float, out: Path) -> None
         print(f"  VRM meta: {shown}")
     if character.credits:
         print(f"  credits: {character.credits}")
+    rig = springs_of(character)
+    if rig is not None:
+        print(f"  spring bones: {len(rig.chain_names)} chains, {rig.n_joints} joints, {rig.n_colliders} colliders")
+        for line in rig.describe(character.skeleton.names):
+            print(f"    {line}")
+    look = character.metadata.get("settings", {}).get("look_at")
+    if look:
+        eyes = [k for k in ("left_eye", "right_eye") if look.get(k, -1) >= 0]
+        print(f"  look-at: {look['type']}" + (f" (eye bones: {', '.join(eyes)})" if look["type"] == "bone" else ""))
     for line in src.get("warnings", []):
         print(f"  warning: {line}")
     print(f"  file {out.stat().st_size / 1e6:.2f} MB, {seconds:.2f} s")

@@ -24,7 +24,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Write a character table as a VRM (.vrm: the version it came from, or --vrm), a GLB (.glb) or "
                     "a glTF with an embedded buffer (.gltf): meshes, skin, textures, materials, morph targets "
                     "with their names, VRM meta, humanoid and expressions (a custom expression for each shape "
-                    "with an ARKit name, for perfect sync). The file passes check-gltf.")
+                    "with an ARKit name, for perfect sync), and what the imported file had beyond them: spring "
+                    "bones and colliders, look-at, first person, MToon outline and rim, binds on materials, "
+                    "thumbnail, metal/roughness and other textures, converted when the VRM version changes. "
+                    "Toon materials fall back to KHR_materials_unlit for plain glTF viewers. The file passes "
+                    "check-gltf.")
     p.add_argument("character", type=Path, help="character table (.npz)")
     p.add_argument("-o", "--output", type=Path, required=True, help="file to write: .vrm, .glb or .gltf")
     p.add_argument("--vrm", type=int, choices=(0, 1), help="VRM version of a .vrm output (default: as it came; "

@@ -16,7 +16,8 @@
   cloning was designed on "mediapipe" (``DESIGN_VARIANT``); the figures of
   the set (``held_out``) are over the others. Besides the errors, the blinks'
   lid closure: the mid-lid gap at rest, true and cloned (within ±25 % of the
-  rest gap: neither left open nor driven through the lower lid).
+  rest gap: neither left open nor driven through the lower lid), and how far each proposed control point
+  lies from the true one (the variant's own landmarks), where the cloning's error comes from.
 * Godette (the data kit's VRM): cosine and magnitude ratio of each cloned
   shape against the artist's shape meaning the same (goal cosine >= 0.7 on
   the blinks and the open mouth), and the doubts of the proposal. Her decal
@@ -49,7 +50,7 @@ from facepuppet.runtime.model.character import Character
 
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.elastic.commands import main_front
-from facepuppet.offline.elastic.control_points import ict_control_points
+from facepuppet.offline.elastic.control_points import ControlPoints, ict_control_points
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.obj import read_vertices_only
 from facepuppet.offline.io.rig_import import import_rig, read_ict_landmarks
@@ -103,6 +104,16 @@ def _closes(lids: dict) -> bool:
     return all(abs(v["cloned"]) <= GOAL_LID * v["rest"] for v in lids.values()) and bool(lids)
 
 
+def point_error(proposed: ControlPoints, true: ControlPoints, vertices: np.ndarray) -> dict:
+    """How far each proposed control point lies from the true one (the head's units): {"per_point", "median",
+    "worst": [name, distance]}; where the cloning's error comes from, point by point."""
+    v = np.asarray(vertices, np.float64)
+    d = {n: round(float(np.linalg.norm(v[proposed.vertex(n)] - v[true.vertex(n)])), 3) for n in proposed.names
+         if n in true.names}
+    worst = max(d, key=d.get)
+    return {"per_point": d, "median": float(np.median(list(d.values()))), "worst": [worst, d[worst]]}
+
+
 def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> dict:
     """The ICT head warped to the MediaPipe face's proportions (:mod:`.real_variants`), each cloned and measured
     against its true shapes, with the blink's lid closure; the set's figures over the held-out variants."""
@@ -117,7 +128,7 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
     for label, variant, folded in real_variants(ict, marks, read_vertices_only(face_obj, 468), labels):
         with Progress(f"perfect-sync {label}", total=None, unit="shapes") as bar:
             t = time.perf_counter()
-            synced, report, _ = perfect_sync(_renamed(variant), source, progress=bar)
+            synced, report, used = perfect_sync(_renamed(variant), source, progress=bar)
             seconds = time.perf_counter() - t
         face = find_face(variant)
         errs = truth_errors(variant, synced, face)
@@ -125,11 +136,13 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
         lids = lid_closure(variant, synced, face, points)
         _sheet(args, synced, report, f"real_{label}")
         s = out["variants"][label] = {"seconds": seconds, "folded_fraction": folded, "n_doubts": len(report["doubts"]),
-                                      **_summary(errs), "lids": lids, "lids_close": _closes(lids)}
+                                      **_summary(errs), "lids": lids, "lids_close": _closes(lids),
+                                      "point_error": point_error(used, points, variant.vertices)}
         print(f"bench perfect-sync: {label}: median {100 * s['median']:.1f}%, worst {s['worst'][0]} "
               f"{100 * s['worst'][1]:.1f}%, {s['n_over_40']} over 40%; blink mid-lid gap " + ", ".join(
                   f"{v['cloned']:.2f} (true {v['true']:.2f}, rest {v['rest']:.2f})" for v in lids.values())
-              + f"; {seconds:.1f} s")
+              + f"; proposed points from the true ones: median {s['point_error']['median']:.2f} cm, worst "
+                f"{s['point_error']['worst'][0]} {s['point_error']['worst'][1]:.2f} cm; {seconds:.1f} s")
     held = {k: v for k, v in out["variants"].items() if k != DESIGN_VARIANT}
     if held:
         worst = max(held, key=lambda k: held[k]["worst"][1])

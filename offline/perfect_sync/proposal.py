@@ -15,7 +15,8 @@ ICT head's 47) are fitted to the target's skin coarsely and non-rigidly:
    bends to the target's proportions without collapsing;
 4. each point takes its nearest free skin vertex; ``nose_tip`` the face's
    detected nose tip unless the fit's lies within 0.3 FAPU of it; the inner lips the nearest skin vertex facing down
-   (upper) or up (lower), then put in order (:func:`fix_inner_lips`).
+   (upper) or up (lower), the mouth's inner corners where the lips touch
+   (:mod:`.lip_contact`), then put in order (:func:`fix_inner_lips`).
 
 On a decal face (its eyes or mouth drawn on pieces in front of a skin with no
 openings, :func:`~.pieces.find_pieces`: Godette's box head) the skin has no
@@ -27,8 +28,10 @@ layout (:mod:`.local_fit`) or breaks the order of a face's features
 (:mod:`.layout_checks`), a sided point on the wrong side of the symmetry
 plane or far from its mirrored partner (asymmetric), a point off the skin or
 facing away (off the surface), the inner lips in the wrong order, on one
-vertex, or with no opening between them (lips not separated), a hole in the
-skin among the points that is not an eye or the mouth (:func:`holes`). The landmarks
+vertex, or with no opening between them (lips not separated), a closed
+mouth's inner corners not where its lips touch (:func:`~.lip_contact.corner_doubts`),
+a hole in the skin among the points that is not an eye or the mouth
+(:func:`holes`). The landmarks
 file is the control-point file of :mod:`facepuppet.offline.elastic.control_points`;
 :func:`read_landmarks` refuses unknown and missing names.
 """
@@ -53,6 +56,7 @@ from facepuppet.offline.perfect_sync.eye_openings import eye_points
 from facepuppet.offline.perfect_sync.face import Face
 from facepuppet.offline.perfect_sync.landmark_field import EYE_NAMES, MOUTH_NAMES, feature_places
 from facepuppet.offline.perfect_sync.layout_checks import by_feature, decal_doubts, order_doubts
+from facepuppet.offline.perfect_sync.lip_contact import corner_doubts, inner_corners
 from facepuppet.offline.perfect_sync.local_fit import poor_fits
 from facepuppet.offline.perfect_sync.mouth_slit import mouth_places
 from facepuppet.offline.perfect_sync.pieces import Pieces
@@ -229,6 +233,7 @@ def propose(source_positions: np.ndarray, source_names: Sequence[str], vertices:
         taken.add(pick)
         chosen.append(pick)
     chosen = _inner_lips(names, chosen, fitted, v, face)
+    chosen, _ = inner_corners(names, chosen, v, face, skin_triangles(face))  # under the upper lip, not beside it
     points = ControlPoints(names, np.array(chosen, np.int64))
     fixed = fix_inner_lips(points, v, skin_triangles(face), cand)
     if len(np.unique(fixed.vertices)) == len(names):  # a lip line too small for its points: keep the fit's
@@ -345,11 +350,13 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
             width = np.ptp(v[[points.vertex(n) for n in corners]] @ face.frame[0]) if len(corners) == 2 else es
             joined = np.isin(skin_triangles(face), [up, low]).sum(axis=1) == 2
             on_decal = int(weld[up]) in decal_mouth and int(weld[low]) in decal_mouth
-            if not on_decal and joined.any() and mouth_slit(v, skin_triangles(face), 0.5 * (v[up] + v[low]),
-                                                            1.5 * width) is None:
+            slit = None if on_decal else mouth_slit(v, skin_triangles(face), 0.5 * (v[up] + v[low]), 1.5 * width)
+            if not on_decal and joined.any() and slit is None:
                 out.append({"points": [UPPER, LOWER], "why": "lips not separated: the inner lip points share a "
                                                              "triangle and no opening runs between the lips (a "
                                                              "closed mouth); jawOpen stretches them apart"})
+            if not on_decal and not decal_mouth and slit is None:  # a closed mouth: its inner corners on the contact
+                out += corner_doubts(points.names, points.vertices, v, face, skin_triangles(face))
     return out
 
 

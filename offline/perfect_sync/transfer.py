@@ -47,6 +47,7 @@ from facepuppet.offline.perfect_sync.landmark_field import feature_field, lip_li
 from facepuppet.offline.perfect_sync.on_skin import embed
 from facepuppet.offline.perfect_sync.pieces import Pieces, find_pieces
 from facepuppet.offline.perfect_sync.proposal import skin_triangles
+from facepuppet.offline.perfect_sync.skin_clearance import keep_clearance
 from facepuppet.offline.perfect_sync.triangles import nearest_triangles
 
 CLOSED_GAP = 0.05  # a closed blink leaves this fraction of the rest gap between the lid points
@@ -392,6 +393,8 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
         dense[np.ix_(jaw, pieces.mouth[0])] -= lip_line_motion(
             pieces, face, vertices, source.arrays["control_positions"], tuple(source.control_names), params[jaw],
             tuple(names[s] for s in jaw)).astype(dense.dtype)
+    # the skin stays: what the field moves slides over it (the drawn eyes' own closing below hides on purpose)
+    keep_clearance(dense, vertices, face, moved, skin_t)
     dense[:, pieces.upper_teeth] = 0.0  # fixed to the skull (pieces.mouth_sides)
     for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
         if key in names and side in pieces.eyes:  # the drawn eye closes on the line between its corners

@@ -42,6 +42,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from facepuppet.runtime.bench.live_pictures import add_arguments as add_live_picture_arguments
+from facepuppet.runtime.bench.live_pictures import live_picture_phases
 from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench, session_log
 from facepuppet.runtime.bench.render import pass_costs
 from facepuppet.runtime.bench.senders import SENDERS, decode_cost
@@ -67,10 +69,11 @@ def rss_mb() -> float:
         return peak_rss_mb()
 
 
-def _phase(args, rate: float, seconds: float, panel: str | None = None, extra: tuple[str, ...] = (),
-           started=None) -> dict:
-    """One sender process at ``rate`` for ``seconds`` against one headless live run (``extra``: more of the run's
-    options; ``started()``, called once the run listens, returns a callable that ends what it started)."""
+def _phase(args, rate: float, seconds: float, panel: str | None = None, extra_argv: tuple = (),
+           edit_plan=None, on_result=None, started=None) -> dict:
+    """One sender process at ``rate`` for ``seconds`` against one headless live run; ``extra_argv``: more of
+    run's options, ``edit_plan(plan)``: the plan changed, ``on_result(result)``: a dict of more figures,
+    ``started()``: called once the run listens, returns a callable that ends what it started."""
 
     kind = getattr(args, "input", "vmc")
     probe = SENDERS[kind]("127.0.0.1", 9)  # datagrams per frame (VMC: status + the blend bundles); sends nothing
@@ -99,8 +102,9 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None, extra: t
             "--path", args.path, "--receiver", getattr(args, "receiver", "process"),
             "--draw", getattr(args, "draw", "arrival"), *(["--phone", phone] if phone else []),
             *(["--panel"] if panel is not None else []), "--quality", getattr(args, "quality", "auto"),
-            *(["--msaa", str(args.msaa)] if getattr(args, "msaa", None) is not None else []), *extra]
+            *(["--msaa", str(args.msaa)] if getattr(args, "msaa", None) is not None else []), *extra_argv]
     plan = replace(plan_from_argv(argv), panel=PanelOptions(panel is not None, hidden=panel == "hidden"))
+    plan = plan if edit_plan is None else edit_plan(plan)
     stop = threading.Event()
     sender_out: list[str] = []
     rss: list[tuple[float, float]] = []
@@ -176,7 +180,7 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None, extra: t
         per_second[int(t)] = max(per_second.get(int(t), 0.0), ms)
     cpu = (result.loop.timer.samples("snapshot") + result.loop.timer.samples("map")
            + result.loop.timer.samples("draw_submit")) * 1e3
-    extra = {}
+    extra = {} if on_result is None else on_result(result)
     if panel is not None:
         p = result.panel
 
@@ -301,6 +305,9 @@ def bench_latency(args: argparse.Namespace) -> dict:
     if getattr(args, "web", False):
         with session_log(args.verbose):
             results["web"] = web_phases(args, _phase)
+    if getattr(args, "virtual_camera", False) or getattr(args, "stream", False):
+        with session_log(args.verbose):
+            live_picture_phases(args, results, _phase)
     if args.flood:
         with session_log(args.verbose):
             results["flood"] = _phase(args, args.rate * args.flood_factor, args.flood_seconds)
@@ -400,6 +407,7 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
                              "with 0 and 10 view clients connected")
     parser.add_argument("--web-decode", action="store_true",
                         help="with --web: the view clients inflate every frame's pixels (as a page does)")
+    add_live_picture_arguments(parser)
     parser.add_argument("--flood", action="store_true", help="then flood: --flood-factor x the rate")
     parser.add_argument("--flood-factor", type=float, default=10.0, help="flood rate multiple (10)")
     parser.add_argument("--flood-seconds", type=float, default=60.0, help="seconds of flooding (60)")

@@ -64,7 +64,7 @@ def head_poses(n_frames: int, fps: float = 60.0, degrees: float = 20.0) -> np.nd
 def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5,
                  poses: np.ndarray | None = None) -> dict:
     """Time ``renderer`` over the weight sequence (and head poses); per-stage ms statistics and frames/s."""
-    prepare, submit, draw, readback = [], [], [], []
+    prepare, submit, draw, readback, springs = [], [], [], [], []
     pose = (lambda i: None) if poses is None else (lambda i: poses[i % len(poses)])  # noqa: E731
     for i, w in enumerate(weights[:warmup]):
         renderer.draw(w, head_rotation=pose(i))
@@ -81,12 +81,15 @@ def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5,
         renderer.read_pixels()
         t3 = time.perf_counter()
         prepare.append((t1 - t0) * 1e3)
+        if getattr(renderer, "spring_ms", None) is not None:  # the spring step's part of prepare
+            springs.append(renderer.spring_ms)
         submit.append((ts - t1) * 1e3)
         draw.append((t2 - t1) * 1e3)
         readback.append((t3 - t2) * 1e3)
     total = time.perf_counter() - start
     render_s = (sum(prepare) + sum(draw)) / 1e3
     passes = time_passes(renderer, weights[:max(len(weights) // 2, 1)], poses)
+    spring = {"spring_ms": _stats(springs)} if springs else {}
     return {
         "frames": len(weights),
         "frames_per_s": len(weights) / render_s,
@@ -97,6 +100,7 @@ def measure_path(renderer: FaceRenderer, weights: np.ndarray, warmup: int = 5,
         "readback_ms": _stats(readback),
         "passes_ms": passes,
         "peak_rss_mb": peak_rss_mb(),
+        **spring,
     }
 
 

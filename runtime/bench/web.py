@@ -165,10 +165,12 @@ def web_phases(args: argparse.Namespace, phase: Callable[..., dict]) -> dict:
     idle_runs, busy_runs = [], []
     for _ in range(ROUNDS):  # by turns, so that both meet the same load
         port = free_port()
-        idle_runs.append(phase(args, args.rate, args.seconds, extra=("--web", f"127.0.0.1:{port}", *transparent)))
+        web = ("--web", f"127.0.0.1:{port}", *transparent)
+        idle_runs.append(phase(args, args.rate, args.seconds, extra_argv=web))
         port = free_port()
         got = [0] * CLIENTS
-        busy_runs.append(phase(args, args.rate, args.seconds, extra=("--web", f"127.0.0.1:{port}", *transparent),
+        web = ("--web", f"127.0.0.1:{port}", *transparent)
+        busy_runs.append(phase(args, args.rate, args.seconds, extra_argv=web,
                                started=view_clients(port, CLIENTS, CLIENT_FPS, lags, got,
                                                     inflate=getattr(args, "web_decode", False))))
         frames = [a + b for a, b in zip(frames, got)]

@@ -120,6 +120,9 @@ def run_replay(args: argparse.Namespace) -> int:
         summary = {"n_ticks": loop.n_ticks, "path": result.path, "counters": c, "timings_ms": loop.timings}
         if saturation is not None:
             summary["saturation"] = saturation.fractions()
+        for sink in (result.outputs.virtual_camera, result.outputs.stream):
+            if sink is not None:  # pictures sent and dropped, the loop's and the sender's ms
+                summary[sink.name] = sink.costs()
         print(dumps_strict(summary, sort_keys=True))
     report_outputs("replay", plan.outputs, result)
     if feed.events_line():

@@ -169,3 +169,20 @@ def report_outputs(command: str, outputs: OutputOptions, result: SessionResult) 
         print(f"{command}: sent {n} Live Link Face packets to {outputs.llf_out[0]}:{outputs.llf_out[1]}")
     if outputs.vmc_out is not None:
         print(f"{command}: sent {n} ticks as VMC to {outputs.vmc_out[0]}:{outputs.vmc_out[1]}")
+    report_live_pictures(command, outputs, result)
+
+
+def report_live_pictures(command: str, outputs: OutputOptions, result: SessionResult) -> None:
+    """The lines of the virtual camera and the stream: pictures sent and dropped (the loop never waits)."""
+    camera, stream = result.outputs.virtual_camera, result.outputs.stream
+    if outputs.virtual_camera is not None:
+        if camera is None:
+            print(f"{command}: no virtual camera (not available; said at the start)")
+        else:
+            c = camera.counters
+            print(f"{command}: sent {c['sent']} frames to the virtual camera {camera.device}, "
+                  f"dropped {c['dropped']}" + (f" (stopped: {camera.handoff.failure})" if c["failed"] else ""))
+    if stream is not None:
+        c = stream.counters
+        print(f"{command}: streamed {c['sent']} frames to {stream.plan.given}, dropped {c['dropped']}"
+              + (f" (stopped: {stream.handoff.failure})" if c["failed"] else ""))

@@ -14,6 +14,8 @@ folders) follow the same rules:
   ``os.replace`` (:func:`atomic_path`, :class:`OutputSet` for a command with
   several outputs: all are renamed into place only once every one is written,
   so a failure leaves none of them half-written or alone);
+* what is sent rather than written (``--vmc-out``, ``--llf-out``, ``--events-out``, ``--stream``,
+  ``--virtual-camera``: :data:`SENT_OUTPUTS`) has no file to refuse; its option group checks it;
 * ``run --record`` is the exception to atomic writing: a recording is appended as
   the run goes so that a crash keeps what was recorded; it is still refused
   when it exists, unless ``--force``.
@@ -38,6 +40,15 @@ from facepuppet.runtime.errors import FacepuppetError
 OUTPUT_OPTIONS: dict[str, str] = {
     "output": "file", "record": "file", "dump_weights": "file", "json": "file", "save_controls": "file",
     "gestures_out": "file", "video": "file", "out": "dir", "pictures": "dir",
+}
+
+
+#: option dest -> where it goes, for the outputs that are not files: nothing on disk to refuse or write
+#: atomically; each is checked by its own option group before any work (an address, a URL, a device) and none
+#: of them listens (run's inputs listen, on 127.0.0.1 unless --listen names another address)
+SENT_OUTPUTS: dict[str, str] = {
+    "vmc_out": "udp", "llf_out": "udp", "events_out": "udp", "stream": "url (udp://, srt://)",
+    "virtual_camera": "device (v4l2loopback)",
 }
 
 

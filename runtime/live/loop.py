@@ -235,6 +235,8 @@ class FrameLoop:
         self._rotation: np.ndarray | None = None
         self._translation: np.ndarray | None = None
         self._frame: Frame | None = None
+        # the renderer's clock for what moves on its own (spring bones) and the eyes' channels, when it has one
+        self._advance = getattr(renderer, "advance", None)
 
     @property
     def drive(self) -> ExpressionDrive | None:
@@ -343,6 +345,8 @@ class FrameLoop:
         t2 = now()
         add("map", t2 - t1)
 
+        if self._advance is not None:
+            self._advance(t, frame)
         self.renderer.draw(self._weights, self._rotation, self._translation)
         if self.overlays:  # drawn over the character (the panel), with this tick's frames; stamps: last tick's
             info.k, info.t, info.raw, info.frame, info.weights = k, t, raw, self._frame, self._weights

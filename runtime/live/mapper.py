@@ -126,7 +126,8 @@ def follow_mapping(mapper: Mapper, expressions: Expressions | None,
         if same_mapping(config.mapping, current):
             return
         try:
-            drive = make_drive(mapper.names, expressions, config.mapping)
+            look_at = mapper.drive.look_at if mapper.drive is not None else None
+            drive = make_drive(mapper.names, expressions, config.mapping, look_at)
         except MappingError as exc:
             log(f"mapping: warning: {exc}; the mapping in force stays")
             return

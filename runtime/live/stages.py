@@ -60,6 +60,7 @@ from facepuppet.runtime.live.mapper import Mapper, follow_mapping
 from facepuppet.runtime.live.pipeline import LivePipeline
 from facepuppet.runtime.live.profiles import Profile, parse_config_text, profile_path
 from facepuppet.runtime.mapping.expressions import ExpressionDrive, expression_spellings, make_drive
+from facepuppet.runtime.model.look_at import look_at_of_character
 
 if TYPE_CHECKING:
     import moderngl
@@ -285,7 +286,7 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
     chain.config = config
     drive = None
     if elastic is None:  # the elastic path draws its own channels, not the character's shapes
-        drive = make_drive(shapes, character.expressions, config.mapping)
+        drive = make_drive(shapes, character.expressions, config.mapping, look_at=look_at_of_character(character))
         if drive is not None and input_kind == "vmc":
             # VMC names its channels: the avatar's expression names arrive as channels of their own
             chain.extra_names = tuple(dict.fromkeys((*chain.extra_names, *drive.receive_names())))

@@ -99,6 +99,7 @@ from facepuppet.runtime.errors import FacepuppetError
 from facepuppet.runtime.mapping.channels import ARKIT_NAMES, ChannelMap, canonical
 from facepuppet.runtime.mapping.vrm_names import PRESET_MATRIX, VRM0_PRESETS, VRM1_FROM_VRM0
 from facepuppet.runtime.model.character_parts import OVERRIDES, Expressions
+from facepuppet.runtime.model.look_at import LOOK_EXPRESSIONS, Gaze, LookAt
 
 if TYPE_CHECKING:
     from facepuppet.runtime.model.character import Character
@@ -167,6 +168,8 @@ class ExpressionDrive:
     shape_names : sequence of n_shapes str, the character's shapes, in the renderer's order
     expressions : Expressions or None
     mapping : MappingSettings (``--config``'s ``[mapping]``; default: none)
+    look_at : LookAt or None, the avatar's look-at; an expression-type one sets LookLeft/Right/Up/Down from
+        the eye-look channels through its range maps (instead of the default preset mapping's sums)
 
     Raises
     ------
@@ -175,8 +178,9 @@ class ExpressionDrive:
     """
 
     def __init__(self, shape_names: Sequence[str], expressions: Expressions | None,
-                 mapping: MappingSettings | None = None) -> None:
+                 mapping: MappingSettings | None = None, look_at: LookAt | None = None) -> None:
         self.shape_names = tuple(shape_names)
+        self.look_at = look_at if look_at is not None and look_at.kind == "expression" else None
         self.expressions = expressions
         self.mapping = mapping or MappingSettings()
         n_s = len(self.shape_names)
@@ -201,6 +205,7 @@ class ExpressionDrive:
             for s in spellings:
                 self._by_name.setdefault(s.strip().lower(), e)
         self.preset_index = {p: e for e, p in enumerate(self.presets) if p}
+        self.look_index = tuple(self.preset_index.get(p) for p in LOOK_EXPRESSIONS)
         self.is_binary = flags[:, 0].astype(bool) if n_e else np.zeros(0, bool)
         self.overrides = self._overrides(flags)
         self._targets = self._resolve_mapping()
@@ -375,6 +380,15 @@ class ExpressionMap:
         if self._blink_split is not None:
             driven_e[self._blink_split[1]] = True
             driven_e[[p for p in self._blink_split[2] if p >= 0]] = True
+        # an expression-type look-at: Look* from the eye angles through the avatar's range maps
+        self._gaze = None
+        if drive.look_at is not None:
+            gaze = Gaze(channels)
+            pairs = [(k, e) for k, e in enumerate(drive.look_index) if e is not None]
+            if gaze.available and pairs:
+                self._gaze = (gaze, np.array([k for k, _ in pairs], np.intp),
+                              np.array([e for _, e in pairs], np.intp), np.zeros(4))
+                driven_e[self._gaze[2]] = True
         self.drives_expressions = bool(driven_e.any())
         self._first_targets = self._first_of(n, n_s)
         reach = (drive.binds[driven_e] != 0).any(axis=0) if n_e else np.zeros(n_s, bool)
@@ -468,6 +482,10 @@ class ExpressionMap:
                 if side >= 0:
                     e[side] += value - both
         np.clip(e, 0.0, 1.0, out=e)
+        if self._gaze is not None:
+            gaze, which, targets, angles = self._gaze
+            looks = self.drive.look_at.expression_weights(gaze.angles(x[:n], out=angles))
+            e[targets] = np.asarray(looks, np.float32)[which]
         if len(self._named_e):
             sent = np.fmax.reduce(x[self._named_src], axis=1)  # NaN only when no channel sent it
             e[self._named_e] = np.where(np.isnan(sent), e[self._named_e], np.clip(sent, 0.0, 1.0))
@@ -516,12 +534,12 @@ class ExpressionMap:
 
 
 def make_drive(shape_names: Sequence[str], expressions: Expressions | None,
-               mapping: MappingSettings | None = None) -> ExpressionDrive | None:
+               mapping: MappingSettings | None = None, look_at: LookAt | None = None) -> ExpressionDrive | None:
     """An :class:`ExpressionDrive` when the character has expressions or the config has a ``[mapping]``; else None
     (the frame loop then maps with a plain ChannelMap, as for every OBJ rig)."""
     if (expressions is None or expressions.n_expressions == 0) and (mapping is None or mapping.empty):
         return None
-    return ExpressionDrive(shape_names, expressions, mapping)
+    return ExpressionDrive(shape_names, expressions, mapping, look_at)
 
 
 def expression_spellings(character: Character) -> tuple[str, ...]:

@@ -41,6 +41,8 @@ from facepuppet.runtime.model.character_parts import (
     check_normals,
 )
 from facepuppet.runtime.model.geometry import vertex_normals
+from facepuppet.runtime.model.look_at import look_at_of
+from facepuppet.runtime.model.springs import spring_rig
 
 # Material kinds the shader knows (column 2 of ``material_params``). "occlusion" (a dark soft shadow over
 # the eye, fading from the lids) and "film" (a thin wet see-through layer: lacrimal fluid, eye blend) are
@@ -154,6 +156,11 @@ class Character:
             self.layout.check(n_v, len(self.triangles), len(self.material_names))
         if self.normals is not None:
             check_normals(self.normals, n_v)
+        if self.skeleton is not None:  # the spring bones and look-at a VRM brings (settings JSON), checked once
+            settings = self.metadata.get("settings", {})
+            if settings.get("springs") is not None:
+                spring_rig(settings["springs"], self.skeleton.parent, self.skeleton.global_transforms())
+            look_at_of(settings, self.skeleton.n_nodes)
         for arr in self._arrays().values():
             arr.setflags(write=False)
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from facepuppet.runtime.elastic.model import ElasticModel
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.render.camera import model_matrix
 from facepuppet.runtime.render.cpu_deform import check_weights
@@ -57,7 +58,9 @@ from facepuppet.runtime.render.paths.base import PATH_TEXTURE_UNITS, Deformation
 from facepuppet.runtime.render.paths.cpu import CpuPath
 from facepuppet.runtime.render.paths.elastic import ElasticPath
 from facepuppet.runtime.render.paths.gpu import GpuPath
+from facepuppet.runtime.render.readback import straighten
 from facepuppet.runtime.render.shader_loader import load_program
+from facepuppet.runtime.render.skeleton_motion import SkeletonMotion
 
 logger = logging.getLogger(__name__)
 
@@ -94,6 +97,7 @@ class FaceRenderer:
     subtle_layers : bool, draw the subtle see-through eye layers (lid shadow, wet films:
         :data:`~facepuppet.runtime.render.layers.SUBTLE_LAYER_KINDS`); False leaves them out where a frame
         budget asks (:mod:`~facepuppet.runtime.render.quality`); the lashes are always drawn
+    springs : bool, simulate the character's spring bones (VRM secondary animation); False leaves them rigid
     cull_back_faces : bool
         Cull back faces of closed, consistently wound surfaces (about half the
         triangles of a head; a large saving on a software rasteriser). Thin
@@ -129,6 +133,7 @@ class FaceRenderer:
         msaa: int = 0,
         credits: str | None = None,
         subtle_layers: bool = True,
+        springs: bool = True,
     ) -> None:
         if framing not in FRAMINGS:
             raise ValueError(f"framing: expected one of {FRAMINGS}, got {framing!r}")
@@ -149,6 +154,12 @@ class FaceRenderer:
         if self.parts and path == "elastic":
             raise UsageError("path: the elastic path draws characters without a skeleton or look only")
         self._head_pose = HeadPose(character) if self.parts else None
+        self._motion = None  # look-at and spring bones after the head pose (skinned characters with a head bone)
+        if self.parts and self._head_pose.available:
+            motion = SkeletonMotion(character, self._head_pose, springs=springs)
+            if motion.active:
+                self._motion = motion
+                self._head_pose.moved_nodes = motion.moved_nodes  # the CPU skinner skins what the motion moves
         self.cull_back_faces = bool(cull_back_faces)
         self.subtle_layers = bool(subtle_layers)
         self._framebuffers = Framebuffers(ctx, (self.width, self.height), self.samples, target_fbo)
@@ -312,10 +323,24 @@ class FaceRenderer:
         joints = None
         if self.parts and self._head_pose.available:  # the head turns through the skeleton, the body stays
             self._pose = model_matrix(None, head_translation)
-            joints = self._head_pose.matrices(head_rotation) if head_rotation is not None else None
+            if self._motion is not None:
+                joints = self._motion.matrices(head_rotation, self._pose)
+            else:
+                joints = self._head_pose.matrices(head_rotation) if head_rotation is not None else None
         else:
             self._pose = model_matrix(head_rotation, head_translation, self.character.pivot)
         self._deformation.prepare(w, joints)
+
+    def advance(self, t: float, frame: Frame | None = None) -> None:
+        """The next frame's time (seconds, the loop's tick time) and its frame (eye-look channels): what the
+        spring bones step to and the eyes look by. Without it each drawn frame advances 1/60 s."""
+        if self._motion is not None:
+            self._motion.set_frame(t, frame)
+
+    @property
+    def spring_ms(self) -> float | None:
+        """The last frame's spring simulation time, ms; None when nothing is simulated."""
+        return self._motion.spring_ms if self._motion is not None and self._motion.springs is not None else None
 
     def prepare_controls(self, controls: np.ndarray, head_rotation: np.ndarray | None = None,
                          head_translation: np.ndarray | None = None) -> None:
@@ -455,11 +480,16 @@ class FaceRenderer:
         data = fbo.read(viewport=(0, 0, self.width, self.height), components=k, alignment=1)
         image = np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, k)[::-1].copy()
         if self.transparent:  # the framebuffer holds colour x alpha over the clear (0, 0, 0, 0)
-            a = image[:, :, 3:4].astype(np.uint16)
-            part = (a > 0) & (a < 255)
-            straight = np.minimum((image[:, :, :3].astype(np.uint32) * 255 + a // 2) // np.maximum(a, 1), 255)
-            image[:, :, :3] = np.where(part, straight, image[:, :, :3]).astype(np.uint8)
+            straighten(image)
         return image
+
+    def read_rgba(self) -> np.ndarray:
+        """The last frame as the framebuffer holds it: (height, width, 4) uint8 RGBA, bottom row first, colour x
+        alpha when transparent (read-only); the cheapest read, finished elsewhere by
+        :func:`~facepuppet.runtime.render.readback.finish_rgba`."""
+        fbo = self._framebuffers.resolved()
+        data = fbo.read(viewport=(0, 0, self.width, self.height), components=4, alignment=1)
+        return np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, 4)
 
     def project(self, points: np.ndarray, head_rotation: np.ndarray | None = None,
                 head_translation: np.ndarray | None = None) -> np.ndarray:

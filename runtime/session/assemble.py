@@ -258,7 +258,7 @@ def _open_picture(stack: contextlib.ExitStack, picture: PictureOptions, title: s
     def renderer_at(samples: int) -> Renderer:
         return chain.renderer(target.ctx, character, picture.width, picture.height, picture.path, screen, log,
                               **render.renderer_kwargs(dataclasses.replace(quality, msaa=samples)),
-                              credits=character.credits if render.credits else None)
+                              credits=character.credits if render.credits else None, springs=picture.springs)
 
     renderer = renderer_at(quality.msaa)
     budgeted = live and render.msaa is None and render.quality == "auto"

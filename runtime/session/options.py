@@ -11,13 +11,13 @@ of its options (a benchmark's or a test's) takes their defaults.
 group              options                                                     commands
 =================  ==========================================================  ===================
 PictureOptions     --size, --path, --headless, --framing, --background,        run, replay, demo
-                   --msaa, --credits
+                   --msaa, --credits, --no-springs
 PacingOptions      --fps, --draw, --duration                                   run, replay, demo
 StageOptions       --actor, --pair, --marker-units, --retarget, --elastic,     run, replay
                    --config, --profile, --calibrate, --gestures, --gesture-seed
 OutputOptions      --out, --dump-weights, --video, --video-codec, --vmc-out,   run, replay (demo:
                    --vmc-extra, --vmc-presets, --vmc-names, --llf-out,         its pictures)
-                   --events-out, --stats
+                   --events-out, --stats, --virtual-camera, --stream
 LiveInputOptions   --input, --listen, --allow, --phone, --audio, --audio-file, run
                    --face-id, --receiver
 RecordOptions      --record, --save-profile                                    run
@@ -29,13 +29,16 @@ ReplayInputOptions SESSION, --max-gap, --pipeline                              r
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from facepuppet.runtime.commands.options import parse_host_port, parse_size
 from facepuppet.runtime.errors import UsageError
+from facepuppet.runtime.live.stream_out import StreamPlan, plan_stream
 from facepuppet.runtime.live.video_out import VideoError, VideoPlan, plan_video
+from facepuppet.runtime.live.virtual_camera import KEY_GREEN, VirtualCameraPlan, plan_virtual_camera
 from facepuppet.runtime.live.vmc_out import VMC_NAMES
 from facepuppet.runtime.render.options import RenderOptions, add_render_arguments, render_options
 
@@ -65,6 +68,7 @@ class PictureOptions:
     path : str, the deformation path (``auto``, ``gpu``, ``cpu``)
     headless : bool, offscreen through EGL even where a display exists
     render : RenderOptions (framing, background, MSAA, credits)
+    springs : bool, simulate the character's spring bones (``--no-springs``: rigid)
     """
 
     width: int = 1280
@@ -72,6 +76,7 @@ class PictureOptions:
     path: str = "auto"
     headless: bool = False
     render: RenderOptions = field(default_factory=RenderOptions)
+    springs: bool = True
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser, size: str = "1280x720",
@@ -80,6 +85,8 @@ class PictureOptions:
         parser.add_argument("--size", default=size, help=f"image size WIDTHxHEIGHT (default {size})")
         parser.add_argument("--path", choices=PATHS, default="auto", help="deformation path")
         add_render_arguments(parser)
+        parser.add_argument("--no-springs", dest="springs", action="store_false",
+                            help="leave a VRM avatar's spring bones (hair, ribbons) rigid instead of simulating them")
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> PictureOptions:
@@ -87,7 +94,10 @@ class PictureOptions:
         path = get(ns, "path", "auto")
         if path not in PATHS:
             raise UsageError(f"--path: expected one of {', '.join(PATHS)}, got {path!r}")
-        return cls(width, height, path, bool(get(ns, "headless", False)), render_options(ns))
+        render = render_options(ns)
+        if get(ns, "virtual_camera") is not None and get(ns, "background") is None:  # a camera's key colour
+            render = dataclasses.replace(render, background=KEY_GREEN)
+        return cls(width, height, path, bool(get(ns, "headless", False)), render, bool(get(ns, "springs", True)))
 
 
 # -- ticks ------------------------------------------------------------------------------------------------
@@ -226,6 +236,8 @@ class OutputOptions:
         where tracking lost / found go as OSC
     vmc_extra, vmc_presets : bool; vmc_names : str (``both``, ``arkit`` or ``vrm``)
     stats : bool, the command's counters and timings (each second and at exit live; one JSON line replayed)
+    virtual_camera : VirtualCameraPlan or None (``--virtual-camera [DEVICE]``)
+    stream : StreamPlan or None (``--stream URL``)
     """
 
     out: Path | None = None
@@ -238,11 +250,14 @@ class OutputOptions:
     llf_out: tuple[str, int] | None = None
     events_out: tuple[str, int] | None = None
     stats: bool = False
+    virtual_camera: VirtualCameraPlan | None = None
+    stream: StreamPlan | None = None
 
     @property
     def sends(self) -> bool:
-        """Whether anything is sent over the network (a receiver expects real time)."""
-        return self.vmc_out is not None or self.llf_out is not None or self.events_out is not None
+        """Whether anything is sent over the network or to a camera (a receiver expects real time)."""
+        return (self.vmc_out is not None or self.llf_out is not None or self.events_out is not None
+                or self.virtual_camera is not None or self.stream is not None)
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser, stats_help: str, sound_help: str | None = None) -> None:
@@ -284,6 +299,15 @@ class OutputOptions:
                            help="send tracking lost/found as OSC /facepuppet/tracking i (1 found, 0 lost) here "
                                 "(also sent to --vmc-out when given)")
         group.add_argument("--stats", action="store_true", help=stats_help)
+        group.add_argument("--virtual-camera", nargs="?", const="auto", default=None, metavar="DEVICE",
+                           help="also show the picture as a webcam (pyvirtualcam: v4l2loopback under Linux, e.g. "
+                                "/dev/video7; default the first loopback device), at the run's frame rate, over a "
+                                "green key colour unless --background names another; a missing device is said "
+                                "with the command that makes it, and the run goes on")
+        group.add_argument("--stream", default=None, metavar="URL",
+                           help="also send the picture as a live MPEG-TS H.264 stream to udp://HOST:PORT (OBS: "
+                                "Media Source, input udp://@:PORT) or srt://HOST:PORT (where FFmpeg has libsrt); "
+                                "nothing listens here")
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace, picture: PictureOptions) -> OutputOptions:
@@ -295,9 +319,17 @@ class OutputOptions:
                 raise UsageError(f"{flag}: needs --vmc-out HOST:PORT")
         llf_out = parse_host_port(get(ns, "llf_out"), "--llf-out") if get(ns, "llf_out") else None
         events_out = parse_host_port(get(ns, "events_out"), "--events-out") if get(ns, "events_out") else None
+        fps, render = get(ns, "fps"), picture.render
+        camera = get(ns, "virtual_camera")
+        camera = None if camera is None else plan_virtual_camera(
+            camera, picture.width, picture.height, fps, render.background, render.transparent)
+        stream = get(ns, "stream")
+        stream = None if stream is None else plan_stream(stream, picture.width, picture.height, fps,
+                                                         render.background, render.transparent)
         return cls(get(ns, "out"), get(ns, "dump_weights"), _video_plan(ns, picture), vmc_out,
                    bool(get(ns, "vmc_extra", False)), bool(get(ns, "vmc_presets", True)),
-                   get(ns, "vmc_names") or VMC_NAMES[0], llf_out, events_out, bool(get(ns, "stats", False)))
+                   get(ns, "vmc_names") or VMC_NAMES[0], llf_out, events_out, bool(get(ns, "stats", False)),
+                   camera, stream)
 
 
 def _video_plan(ns: argparse.Namespace, picture: PictureOptions) -> VideoPlan | None:

@@ -3,7 +3,8 @@ for ``run`` and ``replay``.
 
 Every output is a tick observer (:class:`~facepuppet.runtime.protocols.TickObserver`), called by the frame
 loop once the GPU is done with a tick, in this order: the weight log, PNG frames, the video, the caller's
-observers (the live stats, a benchmark's probe), then what is sent (VMC, Live Link Face). Tracking
+observers (the live stats, a benchmark's probe), then what is sent (VMC, Live Link Face, the virtual camera,
+the stream: the last two read the pixels back once between them and hand them to their own threads). Tracking
 events (``--events-out``, and ``--vmc-out``'s copy) are not per tick: the sender listens on the session's
 bus. Each output is registered on the session's ``ExitStack`` when it
 opens, so whatever opened is closed however the session ends; a video is completed only when the session
@@ -19,9 +20,12 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from facepuppet.runtime.live.events_out import TrackingEventSender
+from facepuppet.runtime.live.frame_handoff import TickReadback
 from facepuppet.runtime.live.llf_out import LlfSender
 from facepuppet.runtime.live.sinks import PngSink, WeightLog, png_workers
+from facepuppet.runtime.live.stream_out import StreamSink, open_stream
 from facepuppet.runtime.live.video_out import VideoSink
+from facepuppet.runtime.live.virtual_camera import VirtualCameraSink, open_virtual_camera
 from facepuppet.runtime.live.vmc_out import VmcSender, pipeline_status
 
 if TYPE_CHECKING:
@@ -45,6 +49,8 @@ class Outputs:
     weights : WeightLog or None (``--dump-weights``, or kept for the caller)
     pngs : PngSink or None; video : VideoSink or None
     vmc, llf : the senders or None; events : TrackingEventSender or None
+    virtual_camera : VirtualCameraSink or None (not asked for, or the camera could not be opened)
+    stream : StreamSink or None
     """
 
     observers: list = field(default_factory=list)
@@ -55,6 +61,8 @@ class Outputs:
     vmc: VmcSender | None = None
     llf: LlfSender | None = None
     events: TrackingEventSender | None = None
+    virtual_camera: VirtualCameraSink | None = None
+    stream: StreamSink | None = None
 
 
 def _complete_or_abort(video: VideoSink) -> Callable:
@@ -116,6 +124,7 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
         outputs.llf = llf
         outputs.observers.append(llf.on_tick)
         outputs.counters["llf_out"] = llf.counters
+    _open_live_pictures(options, stack, outputs, fps, log)
     if options.vmc_out is not None or options.events_out is not None:
         if chain.filter is None:
             if options.events_out is not None:  # (--vmc-out alone: its tracking flag, nothing to say)
@@ -128,3 +137,25 @@ def open_outputs(options: OutputOptions, stack: contextlib.ExitStack, chain: Cha
             outputs.events = events
             outputs.counters["events_out"] = events.counters
     return outputs
+
+
+def _open_live_pictures(options: OutputOptions, stack: contextlib.ExitStack, outputs: Outputs, fps: float,
+                        log: Callable[[str], None]) -> None:
+    """The virtual camera and the stream, at the run's frame rate (``--fps``; else the session's), sharing one
+    read-back of each tick's pixels as the framebuffer holds them (the video reads its own, finished)."""
+    readback = TickReadback()
+    if options.virtual_camera is not None:
+        plan = options.virtual_camera
+        camera = open_virtual_camera(plan, plan.fps or fps, readback, log)
+        if camera is not None:
+            stack.callback(camera.close)
+            outputs.virtual_camera = camera
+            outputs.observers.append(camera)
+            outputs.counters["virtual_camera"] = camera.counters
+    if options.stream is not None:
+        plan = options.stream
+        stream = open_stream(plan, plan.fps or fps, readback, log)
+        stack.callback(stream.close)
+        outputs.stream = stream
+        outputs.observers.append(stream)
+        outputs.counters["stream"] = stream.counters

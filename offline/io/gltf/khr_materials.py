@@ -14,6 +14,7 @@ import numpy as np
 
 from facepuppet.runtime.model.character_parts import SHADING
 
+from facepuppet.offline.io.gltf.kept_parts import kept_material
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.write_state import WriteState
 
@@ -60,10 +61,18 @@ def write_texture_transform(w: WriteState, materials: list[dict]) -> None:
 
 
 def write_unlit(w: WriteState, materials: list[dict]) -> None:
+    """KHR_materials_unlit on the unlit materials, and on the toon ones as the plain-glTF fallback (a viewer
+    without MToon draws them unlit, as an avatar app's flat-lit toon, not as dark lit PBR): in a GLB, a .gltf
+    and a VRM 0.x (whose MToon is in the VRM extension). In a VRM 1.0 a toon material carries
+    VRMC_materials_mtoon, and the unlit fallback beside it only where the file had both (the validator warns
+    about two shading extensions on one material)."""
     lk = w.c.look
     if lk is None:
         return
     for i, mat in enumerate(materials):
-        if int(lk.shading[i, 0]) == SHADING["unlit"]:
+        shading = int(lk.shading[i, 0])
+        toon = shading == SHADING["toon"]
+        had = {"KHR_materials_unlit", "VRMC_materials_mtoon"} <= set(extensions_of(kept_material(w, i)))
+        if shading == SHADING["unlit"] or (toon and (w.fmt != "vrm1" or had)):
             mat.setdefault("extensions", {})["KHR_materials_unlit"] = {}
             w.ext_used.add("KHR_materials_unlit")

@@ -33,9 +33,11 @@ from facepuppet.runtime.model.character_parts import Layout, Look, Skeleton
 
 from facepuppet.offline.io.gltf import khr_materials, vrm_expressions, vrm_humanoid, vrm_materials, vrm_meta
 from facepuppet.offline.io.gltf.credits import credit_line, text
+from facepuppet.offline.io.gltf.read_look_at import read_look_at
 from facepuppet.offline.io.gltf.read_materials import read_materials
 from facepuppet.offline.io.gltf.read_meshes import Progress, read_geometry, read_shapes
 from facepuppet.offline.io.gltf.read_nodes import read_nodes
+from facepuppet.offline.io.gltf.read_springs import read_springs
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.structure_limits import check_kept_json, check_structure
 from facepuppet.offline.io.gltf_container import GltfError, GltfFile, read_gltf_file
@@ -63,13 +65,15 @@ EXTENSION_READERS: tuple[ExtensionReader, ...] = (
     ExtensionReader(("VRM", "VRMC_vrm"), vrm_expressions.read_expressions),
     ExtensionReader(("VRM", "VRMC_vrm"), vrm_humanoid.read_humanoid),
     ExtensionReader(("VRM", "VRMC_vrm"), vrm_meta.read_meta),
+    ExtensionReader(("VRM", "VRMC_springBone"), read_springs),
+    ExtensionReader(("VRM", "VRMC_vrm"), read_look_at),  # after the humanoid: the eye bones
 )
 #: Extensions whose meaning the reader honours (may be required): KHR_mesh_quantization is plain accessor
 #: decoding (:mod:`facepuppet.offline.io.gltf_container`), the others have their reader.
 SUPPORTED_EXTENSIONS = frozenset({"KHR_mesh_quantization"}).union(*(r.extensions for r in EXTENSION_READERS))
-#: Used-only extensions that carry nothing the character needs (no warning): VRM's physics and constraints
+#: Used-only extensions that carry nothing the character needs (no warning): VRM's constraints and animation
 #: are kept in the raw VRM JSON for export.
-QUIET_EXTENSIONS = frozenset({"VRMC_springBone", "VRMC_node_constraint", "VRMC_vrm_animation"})
+QUIET_EXTENSIONS = frozenset({"VRMC_node_constraint", "VRMC_vrm_animation"})
 #: The fields of ``asset`` and of ``asset.extras`` a plain glTF's character keeps as its meta.
 _ASSET_META = ("copyright", "generator", "version")
 _EXTRAS_META = ("title", "author", "license", "source")
@@ -218,10 +222,15 @@ def _character(state: ReadState, name: str | None) -> Character:
         "default_weights": geo["default_weights"],
         "warnings": state.warnings,
         "pivot_rule": pivot_rule,
+        "kept": state.kept,
     }
     if not isinstance(name, str) or not name:
         name = str(meta.get("title") or meta.get("name") or f.path.stem) or f.path.stem
     settings = {"source": source, "name": name}
+    if state.springs.get("chains"):
+        settings["springs"] = state.springs
+    if state.look_at:
+        settings["look_at"] = state.look_at
     expressions = state.expressions
     metrics = {"n_vertices": int(len(vertices)), "n_triangles": int(len(geo["triangles"])),
                "n_meshes": len(geo["mesh_names"]), "n_primitives": int(len(geo["primitives"])),

@@ -29,6 +29,7 @@ from PIL import Image, UnidentifiedImageError
 from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import ALPHA_MODES, IDENTITY_UV_TRANSFORM
 
+from facepuppet.offline.io.gltf.kept_parts import keep_parts
 from facepuppet.offline.io.gltf.names import UniqueNames
 from facepuppet.offline.io.gltf.read_state import LookRows, ReadState
 from facepuppet.offline.io.gltf_files import Opened
@@ -50,6 +51,7 @@ def read_materials(state: ReadState) -> None:
     default_material = _materials(state)
     textures = _look_rows(state, default_material)
     _textures(state, textures)
+    keep_parts(state, textures)
 
 
 def _materials(state: ReadState) -> int | None:

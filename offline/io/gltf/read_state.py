@@ -80,6 +80,9 @@ class ReadState:
     expressions: Expressions | None = None
     meta: dict = field(default_factory=dict)
     credits: str = ""
+    kept: dict[str, Any] = field(default_factory=dict)  # kept_parts: raw JSON and textures for export
+    springs: dict = field(default_factory=dict)  # read_springs: chains and colliders
+    look_at: dict = field(default_factory=dict)  # read_look_at: type, range maps, eye nodes
 
     @property
     def doc(self) -> dict:

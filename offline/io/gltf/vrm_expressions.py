@@ -8,7 +8,8 @@ One shape spans every mesh whose targets share its name, so the binds of one
 shape on several meshes are one bind. A bind naming no morph target of the
 scene is dropped with a warning.
 
-Written: the character's expressions, and a custom expression for each shape
+Written: the character's expressions (with the binds on materials the file
+had, :mod:`.vrm_material_binds`), and a custom expression for each shape
 whose name is one of ARKit's 52 and has no expression of its name yet
 (perfect sync: ``EyeBlinkLeft`` …), each bound on every mesh that has the
 shape.
@@ -26,6 +27,7 @@ from facepuppet.runtime.mapping.vrm_names import VRM0_PRESETS, VRM1_FROM_VRM0
 from facepuppet.runtime.model.character_parts import OVERRIDES, Expressions
 
 from facepuppet.offline.io.gltf.read_state import ReadState, target_names
+from facepuppet.offline.io.gltf.vrm_material_binds import material_binds, write_binds0, write_binds1
 from facepuppet.offline.io.gltf.write_state import WriteState
 
 _VRM0_BY_LOWER = {p.lower(): p for p in VRM0_PRESETS}
@@ -218,11 +220,12 @@ def _mesh_binds(w: WriteState, binds: list[tuple[int, float]]) -> list[tuple[int
 def write_expressions0(w: WriteState, raw: dict, vrm: dict[str, Any]) -> None:
     """VRM 0.x ``blendShapeMaster.blendShapeGroups``: binds {mesh, index, weight 0..100}, isBinary."""
     groups = []
+    on_materials = material_binds(w)
     for name, preset, binds, flags in expression_rows(w):
         groups.append({"name": name, "presetName": preset.lower() if preset else "unknown",
                        "binds": [{"mesh": m, "index": k, "weight": float(np.clip(wt, 0, 1) * 100.0)}
                                  for m, k, wt in _mesh_binds(w, binds)],
-                       "materialValues": [], "isBinary": bool(flags[0])})
+                       "materialValues": write_binds0(w, name, on_materials.get(name)), "isBinary": bool(flags[0])})
     vrm["blendShapeMaster"] = {"blendShapeGroups": groups}
 
 
@@ -230,10 +233,11 @@ def write_expressions1(w: WriteState, raw: dict, vrm: dict[str, Any]) -> None:
     """VRM 1.0 ``expressions``: preset (by the 1.0 preset name) and custom, binds {node, index, weight 0..1},
     isBinary and the three overrides."""
     preset, custom = {}, {}
+    on_materials = material_binds(w)
     for name, p, binds, flags in expression_rows(w):
         e: dict[str, Any] = {"morphTargetBinds": [{"node": w.host[m], "index": k, "weight": float(np.clip(wt, 0, 1))}
                                                   for m, k, wt in _mesh_binds(w, binds)],
-                             "isBinary": bool(flags[0])}
+                             **write_binds1(on_materials.get(name)), "isBinary": bool(flags[0])}
         for col, key in ((1, "overrideBlink"), (2, "overrideLookAt"), (3, "overrideMouth")):
             e[key] = _OVERRIDE_NAME.get(int(flags[col]), "none")
         key = VRM1_FROM_VRM0.get(p, "") if p else (name if name in _VRM1_PRESETS else "")

@@ -15,10 +15,21 @@ from typing import Any
 
 import numpy as np
 
+from facepuppet.runtime.model.character import MATERIAL_KINDS
 from facepuppet.runtime.model.character_parts import SHADING
 
+from facepuppet.offline.io.gltf.kept_parts import kept_texture_info
+from facepuppet.offline.io.gltf.mtoon_convert import (
+    merge_properties0,
+    mtoon1_from_0,
+    mtoon1_kept,
+    properties0,
+    properties0_from_1,
+)
 from facepuppet.offline.io.gltf.read_state import ReadState, extensions_of
 from facepuppet.offline.io.gltf.write_state import WriteState
+
+_KIND_NAME = {v: k for k, v in MATERIAL_KINDS.items()}
 
 
 def read_material_properties(state: ReadState) -> None:
@@ -34,13 +45,16 @@ def read_material_properties(state: ReadState) -> None:
 
 
 def read_mtoon(state: ReadState) -> None:
-    """The shading rows of the materials with ``VRMC_materials_mtoon`` (VRM 1.0)."""
+    """The shading rows of the materials with ``VRMC_materials_mtoon`` (VRM 1.0), or with the same object in
+    ``extras.facepuppet.mtoon`` (a GLB or .gltf that ``export-character`` wrote)."""
     f = state.f
     shading = state.look.shading
     for i, m in enumerate(f.items("materials")):
         mt1 = extensions_of(m).get("VRMC_materials_mtoon")
+        mw = f"materials[{i}].extensions.VRMC_materials_mtoon"
+        if not isinstance(mt1, dict):  # a GLB of ours keeps it beside its unlit fallback
+            mt1, mw = facepuppet_mtoon(m), f"materials[{i}].extras.facepuppet.mtoon"
         if isinstance(mt1, dict):
-            mw = f"materials[{i}].extensions.VRMC_materials_mtoon"
             shading[i, 0] = SHADING["toon"]
             shading[i, 2:5] = f.numbers(mt1, "shadeColorFactor", 3, mw, [0, 0, 0])
             shading[i, 5] = f.get(mt1, "shadingShiftFactor", float, mw, 0.0)
@@ -101,24 +115,81 @@ def write_material_properties(w: WriteState, raw: dict, vrm: dict[str, Any]) -> 
 
 
 def write_mtoon(w: WriteState, materials: list[dict]) -> None:
-    """``VRMC_materials_mtoon`` on each toon material of a VRM 1.0 (its shade texture: the base colour's)."""
+    """``VRMC_materials_mtoon`` on each toon material of a VRM 1.0: the shade from the look (its texture: the
+    file's, else the base colour's), the rest (outline, rim, matcap, UV animation) from the file's own MToon,
+    converted from a VRM 0.x's material property (:mod:`.mtoon_convert`). A GLB or .gltf keeps the same object
+    in ``extras.facepuppet.mtoon`` (for the importer; its viewers draw the unlit fallback), not as the extension:
+    beside KHR_materials_unlit it would be two shading extensions on one material."""
     lk = w.c.look
-    if w.fmt != "vrm1" or lk is None:
+    if w.fmt == "vrm0" or lk is None:
         return
+    props = properties0(w)
     for i, mat in enumerate(materials):
         if int(lk.shading[i, 0]) != SHADING["toon"]:
             continue
-        mt = {"specVersion": "1.0", "shadeColorFactor": [float(x) for x in lk.shading[i, 2:5]],
-              "shadingShiftFactor": float(lk.shading[i, 5]), "shadingToonyFactor": float(lk.shading[i, 6])}
-        if int(lk.texture[i]) >= 0:
+        mt: dict[str, Any] = {"specVersion": "1.0"}
+        prop = props.get(i)
+        if prop is not None and prop.get("shader") == "VRM/MToon":
+            mt.update(mtoon1_from_0(w, prop))
+            _core_textures_from_0(w, prop, mat)
+        else:
+            mt.update(mtoon1_kept(w, i))
+        mt.update({"specVersion": "1.0", "shadeColorFactor": [float(x) for x in lk.shading[i, 2:5]],
+                   "shadingShiftFactor": float(lk.shading[i, 5]), "shadingToonyFactor": float(lk.shading[i, 6])})
+        if int(lk.texture[i]) >= 0 and "shadeMultiplyTexture" not in mt:
             mt["shadeMultiplyTexture"] = {"index": int(lk.texture[i])}
+        if w.fmt != "vrm1":
+            kind, spec, shine = (float(x) for x in w.c.material_params[i, [2, 0, 1]])
+            ours = mat.setdefault("extras", {}).setdefault("facepuppet", {
+                "kind": _KIND_NAME.get(int(round(kind)), "skin"), "specular": spec, "shininess": shine})
+            ours["mtoon"] = mt
+            continue
         mat.setdefault("extensions", {})["VRMC_materials_mtoon"] = mt
         w.ext_used.add("VRMC_materials_mtoon")
 
 
+def facepuppet_mtoon(m: Any) -> dict | None:
+    """A material's ``extras.facepuppet.mtoon`` (MToon as VRMC_materials_mtoon says it), or None."""
+    extras = m.get("extras") if isinstance(m, dict) else None
+    ours = extras.get("facepuppet") if isinstance(extras, dict) else None
+    mt = ours.get("mtoon") if isinstance(ours, dict) else None
+    return mt if isinstance(mt, dict) else None
+
+
+def _core_textures_from_0(w: WriteState, prop: dict, mat: dict) -> None:
+    """A VRM 0.x MToon's normal map (``_BumpMap``, ``_BumpScale``) and emission map onto the core material,
+    where it has none of its own."""
+    tex = prop.get("textureProperties") if isinstance(prop.get("textureProperties"), dict) else {}
+    fl = prop.get("floatProperties") if isinstance(prop.get("floatProperties"), dict) else {}
+    for key0, key in (("_BumpMap", "normalTexture"), ("_EmissionMap", "emissiveTexture")):
+        info = kept_texture_info(w, {"index": tex.get(key0)})
+        if info is not None and key not in mat:
+            mat[key] = info
+            if key0 == "_BumpMap" and isinstance(fl.get("_BumpScale"), (int, float)):
+                info["scale"] = float(fl["_BumpScale"])
+
+
 def _material0(w: WriteState, i: int, mat: dict) -> dict:
     """The VRM 0.x material property of material ``i``: VRM/MToon, a VRM/Unlit shader, or the glTF material
-    as it is (VRM_USE_GLTFSHADER)."""
+    as it is (VRM_USE_GLTFSHADER); over the file's own property when it came from a VRM 0.x (what the look
+    does not say stays), or with a VRM 1.0's outline, rim and the rest converted."""
+    prop = _look_material0(w, i, mat)
+    raw = properties0(w).get(i)
+    if raw is not None:
+        return merge_properties0(w, raw, prop)
+    if prop["shader"] == "VRM/MToon":
+        mt = mtoon1_kept(w, i)
+        if mt:
+            fl, vec, tex, kw = properties0_from_1(w, mt, mat)
+            prop["floatProperties"] = {**fl, **prop["floatProperties"]}
+            prop["vectorProperties"] = {**vec, **prop["vectorProperties"]}
+            prop["textureProperties"] = {**tex, **prop["textureProperties"]}
+            prop["keywordMap"] = {**kw, **prop["keywordMap"]}
+    return prop
+
+
+def _look_material0(w: WriteState, i: int, mat: dict) -> dict:
+    """The VRM 0.x material property of material ``i`` from its look alone."""
     lk = w.c.look
     prop = {"name": mat["name"], "shader": "VRM_USE_GLTFSHADER", "renderQueue": -1, "floatProperties": {},
             "vectorProperties": {}, "textureProperties": {}, "keywordMap": {}, "tagMap": {}}

@@ -11,7 +11,10 @@ VRMC_materials_mtoon), and for a VRM the parts of :data:`VRM0_PARTS` or
 :data:`VRM1_PARTS`, in their order, make the ``VRM`` / ``VRMC_vrm`` extension
 object: meta, humanoid, first person and look-at, expressions (with a custom
 expression per ARKit-named shape, for perfect sync), and in 0.x the spring
-bones and material properties.
+bones and material properties; a VRM 1.0's spring bones are the document's
+``VRMC_springBone``. What the file had beyond the character's own parts comes
+back from ``settings.source.kept`` (:mod:`.kept_parts`), converted when the
+VRM version changes.
 
 Frame: glTF units are metres (cm and mm are scaled); a VRM 0.x file faces
 −Z, so for VRM 0.x output everything is turned 180° about +Y (vertices,
@@ -48,7 +51,7 @@ from facepuppet.offline.io.gltf import (
 )
 from facepuppet.offline.io.gltf.write_materials import write_materials
 from facepuppet.offline.io.gltf.write_meshes import plan_meshes, write_meshes
-from facepuppet.offline.io.gltf.write_nodes import place_meshes, write_nodes, write_skin
+from facepuppet.offline.io.gltf.write_nodes import place_meshes, plan_hosts, rigid_frames, write_nodes, write_skin
 from facepuppet.offline.io.gltf.write_state import GENERATOR, ExportError, ExportSummary, Progress, WriteState
 
 __all__ = ["ExportError", "ExportSummary", "build_gltf", "encode_glb", "export_character", "output_format"]
@@ -148,6 +151,8 @@ def _build(w: WriteState) -> tuple[dict, bytes]:
     doc: dict[str, Any] = {"asset": _asset(c), "scene": 0}
     nodes = write_nodes(w)
     plan_meshes(w)
+    plan_hosts(w)
+    rigid_frames(w)
     materials, textures = write_materials(w)
     for writer in MATERIAL_EXTENSION_WRITERS:
         writer(w, materials)
@@ -157,7 +162,7 @@ def _build(w: WriteState) -> tuple[dict, bytes]:
     doc["scenes"] = [{"nodes": roots + list(range(w.n_skeleton_nodes, len(nodes)))}]
     doc["nodes"] = nodes
     doc["meshes"] = meshes
-    if c.skeleton is not None:
+    if c.skeleton is not None and w.joints is not None:
         doc["skins"] = [write_skin(w)]
     doc["materials"] = materials
     doc.update(textures)
@@ -167,6 +172,10 @@ def _build(w: WriteState) -> tuple[dict, bytes]:
     elif w.fmt == "vrm1":
         doc["extensions"] = {"VRMC_vrm": _vrm_object(w, {"specVersion": "1.0"}, VRM1_PARTS)}
         w.ext_used.add("VRMC_vrm")
+        spring = vrm_spring_bone.spring_bone1(w, nodes)  # may add the tail nodes of VRM 0.x leaves
+        if spring is not None:
+            doc["extensions"]["VRMC_springBone"] = spring
+            w.ext_used.add("VRMC_springBone")
     doc["accessors"] = w.buf.accessors
     doc["bufferViews"] = w.buf.views
     blob = w.buf.data()
@@ -175,8 +184,13 @@ def _build(w: WriteState) -> tuple[dict, bytes]:
         doc["extensionsUsed"] = sorted(w.ext_used)
     s = w.summary
     s.n_meshes, s.n_nodes, s.n_materials = len(meshes), len(nodes), len(materials)
+    doc["scenes"] = [{"nodes": [j for j in doc["scenes"][0]["nodes"] if j not in _child_nodes(nodes)]}]
     s.n_primitives = sum(len(m["primitives"]) for m in meshes)
     return {k: v for k, v in doc.items() if v != [] or k in ("buffers",)}, blob
+
+
+def _child_nodes(nodes: list[dict]) -> set[int]:
+    return {c for n in nodes for c in n.get("children", [])}
 
 
 def _vrm_object(w: WriteState, out: dict[str, Any], parts: tuple[VrmPart, ...]) -> dict[str, Any]:
@@ -232,5 +246,7 @@ def describe(summary: ExportSummary) -> str:
     if s.format.startswith("vrm"):
         added = f", {len(s.added_expressions)} added for perfect sync" if s.added_expressions else ""
         lines.append(f"  expressions: {s.n_expressions}{added}")
+        if s.n_springs:
+            lines.append(f"  springs: {s.n_springs}")
     lines += [f"  warning: {w}" for w in s.warnings]
     return "\n".join(lines)

@@ -8,7 +8,7 @@ min/max), NORMAL (the character's own ``normals`` where it has them, else
 area-weighted from the triangles, since a glTF without them is drawn flat),
 TEXCOORD_0 (with a Look), COLOR_0 (the vertex colours, when not all white; an
 OBJ rig's thin layers' fade as alpha), JOINTS_0 and WEIGHTS_0 (with a
-Skeleton).
+Skeleton, on a skinned mesh).
 
 Morph targets: per mesh, one target for each shape that moves a vertex of
 that mesh (POSITION and NORMAL deltas), named in ``mesh.extras.targetNames``;
@@ -99,7 +99,7 @@ def write_meshes(w: WriteState) -> list[dict]:
         for first, n, tri, _, mat in by_mesh[m]:
             key = (first, n)
             if key not in shared:
-                shared[key] = _vertex_accessors(w, first, n, w.targets[m])
+                shared[key] = _vertex_accessors(w, first, n, w.targets[m], skinned=not w.rigid[m])
             attrs, targets = shared[key]
             local = np.asarray(tri, dtype=np.int64) - first
             if len(local) and (local.min() < 0 or local.max() >= n):
@@ -129,7 +129,8 @@ def write_meshes(w: WriteState) -> list[dict]:
     return meshes
 
 
-def _vertex_accessors(w: WriteState, first: int, n: int, shapes: list[int]) -> tuple[dict, list[dict]]:
+def _vertex_accessors(w: WriteState, first: int, n: int, shapes: list[int],
+                      skinned: bool = True) -> tuple[dict, list[dict]]:
     c, buf = w.c, w.buf
     sl = slice(first, first + n)
     attrs = {"POSITION": buf.accessor(w.vertices[sl], minmax=True), "NORMAL": buf.accessor(w.normals[sl])}
@@ -140,7 +141,7 @@ def _vertex_accessors(w: WriteState, first: int, n: int, shapes: list[int]) -> t
         colour = np.c_[colour, w.opacity[sl]]
     if c.look is None or not np.allclose(colour, 1.0, atol=1e-6):
         attrs["COLOR_0"] = buf.accessor(np.clip(colour, 0.0, 1.0))
-    if c.skeleton is not None:
+    if c.skeleton is not None and skinned:
         k = c.skeleton
         joint_of = np.zeros(k.n_nodes, np.int64)
         joint_of[w.joints] = np.arange(len(w.joints))

@@ -46,6 +46,7 @@ class ExportSummary:
     n_targets: int = 0
     n_sparse_targets: int = 0
     n_expressions: int = 0
+    n_springs: int = 0
     added_expressions: list[str] = field(default_factory=list)
     turned_y180: bool = False
     bytes: int = 0
@@ -77,16 +78,20 @@ class WriteState:
     delta_nrm: np.ndarray | None = None
     # write_skeleton
     n_skeleton_nodes: int = 0
-    joints: np.ndarray | None = None  # skeleton nodes any vertex follows (the skin's joints)
+    joints: np.ndarray | None = None  # skeleton nodes the skinned meshes' vertices follow (the skin's joints)
+    rigid: list[bool] = field(default_factory=list)  # per mesh: follows only its own node, written unskinned
     # write_meshes
     primitives: list = field(default_factory=list)  # (first vertex, n vertices, triangles, mesh, material)
     mesh_names: list[str] = field(default_factory=list)
     host_names: list[str] = field(default_factory=list)  # names of the new nodes that would hold the meshes
     targets: list[list[int]] = field(default_factory=list)  # shapes of each mesh, in target order
     target_index: list[dict[int, int]] = field(default_factory=list)  # per mesh: shape -> target index
-    host: list[int] = field(default_factory=list)  # the node holding each written mesh
+    host: list[int] = field(default_factory=list)  # the node holding each mesh (-1 until placed: a new node)
     # write_materials
     materials: list[dict] = field(default_factory=list)
+    file_texture: dict[int, int] = field(default_factory=dict)  # file texture -> written texture (kept_parts)
+    file_image: dict[int, int] = field(default_factory=dict)  # file image -> written image (kept_parts)
+    textures: list[dict] = field(default_factory=list)  # the written textures (a later part may add one)
 
     def warn(self, text: str) -> None:
         self.summary.warnings.append(text)

@@ -158,5 +158,12 @@ class ElasticDraw:
     def read_pixels(self) -> np.ndarray:
         return self.renderer.read_pixels()
 
+    def read_rgba(self) -> np.ndarray:
+        return self.renderer.read_rgba()
+
+    @property
+    def transparent(self) -> bool:
+        return self.renderer.transparent
+
     def close(self) -> None:
         self.renderer.close()

@@ -9,7 +9,9 @@ import pytest
 
 from facepuppet.runtime.bench import registry as bench
 
+from facepuppet.offline.io.gltf.read import read_gltf
 from helpers.small_characters import sphere_character
+from helpers.vrm_rigs import look_at_vrm
 
 
 def parse(argv):
@@ -33,6 +35,18 @@ def test_bench_render_writes_json_for_both_paths(tmp_path):
         assert p["frames"] == 6 and p["frames_per_s"] > 0
         assert p["cpu_prepare_ms"]["p99"] >= p["cpu_prepare_ms"]["median"]
     assert results["gl_error"] == "GL_NO_ERROR"
+    assert all("spring_ms" not in p for p in results["paths"].values())  # no springs, no spring figure
+
+
+@pytest.mark.gl
+def test_bench_render_reports_the_spring_step_of_a_character_with_springs(tmp_path):
+    character_path = read_gltf(look_at_vrm(tmp_path / "eyes.vrm")).save(tmp_path / "eyes.npz")
+    out = tmp_path / "bench.json"
+    args = parse(["bench", "render", "--json", str(out), "-c", str(character_path), "--frames", "6",
+                  "--width", "64", "--height", "48"])
+    assert args.func(args) == 0
+    for p in json.loads(out.read_text())["results"]["paths"].values():
+        assert p["spring_ms"]["median"] > 0 and p["spring_ms"]["p99"] >= p["spring_ms"]["median"]
 
 
 def test_bench_lists_and_refuses_unknown_names(capsys):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from facepuppet.runtime import cli
-from facepuppet.runtime.files.outputs import OUTPUT_OPTIONS, OutputSet, atomic_path, output_actions
+from facepuppet.runtime.files.outputs import OUTPUT_OPTIONS, SENT_OUTPUTS, OutputSet, atomic_path, output_actions
 
 
 def _commands():
@@ -62,6 +62,19 @@ def test_the_walk_finds_the_outputs_of_every_command():
         for action in parser._actions:
             if any(s in ("-o", "--output", "--out", "--record", "--dump-weights") for s in action.option_strings):
                 assert action.dest in OUTPUT_OPTIONS or (name, action.dest) in resumed, (name, action.dest)
+
+
+def test_every_output_sent_rather_than_written_is_known_to_the_policy():
+    """The outputs that go to the network or a device are named in the policy (no file to refuse), and none is
+    also a file output."""
+    sent_flags = ("--vmc-out", "--llf-out", "--events-out", "--stream", "--virtual-camera")
+    seen = set()
+    for name, parser in _commands().items():
+        for action in parser._actions:
+            if any(s in sent_flags for s in action.option_strings):
+                assert action.dest in SENT_OUTPUTS and action.dest not in OUTPUT_OPTIONS, (name, action.dest)
+                seen.add(action.dest)
+    assert seen == set(SENT_OUTPUTS)
 
 
 @pytest.mark.parametrize("command, dest, kind, flag", CASES, ids=[f"{c}:{f}" for c, _, _, f in CASES])

@@ -253,3 +253,22 @@ def test_stages_run_in_order_and_the_last_frame_is_mapped_by_name():
     assert [c[2] for c in calls[::2]] == [True, True, False]          # the frame without weights, then none
     with pytest.raises(ValueError, match="names"):
         FrameLoop("ab", NullRenderer(), RecordedClock())
+
+
+def test_a_renderer_with_advance_gets_each_tick_time_and_new_frame_before_its_draw():
+    """The spring bones step on these times (recorded time on replay) and the eyes look by these frames."""
+    class MovingRenderer(StubRenderer):
+        def __init__(self):
+            super().__init__()
+            self.advances = []
+
+        def advance(self, t, frame):
+            self.advances.append((t, None if frame is None else frame.t, len(self.draws)))
+
+    frames = [_frame(0.0, 0.1), _frame(0.13, 0.2), _frame(0.31, 0.3)]
+    renderer = MovingRenderer()
+    FrameLoop(RIG.shape_names, renderer, RecordedClock(), fps=10.0, log=lambda s: None).run(ReplaySource(frames),
+                                                                                               duration=0.4)
+    assert [t for t, _, _ in renderer.advances] == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4])
+    assert [f for _, f, _ in renderer.advances] == [0.0, None, 0.13, None, 0.31]
+    assert [n for _, _, n in renderer.advances] == [0, 1, 2, 3, 4]  # each before its tick's draw

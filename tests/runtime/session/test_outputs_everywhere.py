@@ -18,7 +18,7 @@ from helpers.small_characters import sphere_character
 from helpers.udp_helpers import drain
 
 OUTPUT_OPTIONS = ("--vmc-out", "--vmc-extra", "--vmc-presets", "--vmc-names", "--llf-out", "--events-out", "--video",
-                  "--video-codec", "--out", "--dump-weights", "--stats")
+                  "--video-codec", "--out", "--dump-weights", "--stats", "--virtual-camera", "--stream")
 
 
 def _options(register) -> set[str]:

@@ -1,0 +1,368 @@
+"""Spring bone simulation: hair, ribbons and skirts that swing behind the head, as VRM avatar apps do.
+
+The algorithm is the one of the VRMC_springBone-1.0 specification
+("Spring bone algorithm"; three-vrm's ``VRMSpringBoneJoint.update`` is the
+same), per joint, parents first:
+
+1. inertia: ``next = current + (current - previous) · (1 - dragForce)``, in the
+   chain's center space (the center node's frame, or the character's), so a
+   center that jumps carries its chains without lag;
+2. stiffness toward the rest direction: ``+ axis_world · stiffness · Δt``,
+   where ``axis_world`` is the bone's rest axis carried by its parent's
+   current pose;
+3. gravity: ``+ gravityDir · gravityPower · Δt``;
+4. length: ``next = head + normalize(next - head) · boneLength``;
+5. collisions: a sphere (or capsule: the segment's closest point) of radius
+   r pushes the tail out to ``r + hitRadius`` from it, then the length is
+   restored;
+6. the joint turns so its rest axis points at the new tail.
+
+Symbols: ``current``/``previous`` tails (``_cur``, ``_prev``), ``Δt`` the fixed
+step :data:`STEP_S`.
+
+**Frame-rate independence.** The simulation steps on a fixed grid of
+:data:`STEP_S` seconds of the frames' time, whatever the frame rate; between
+two frames the driving pose (the head, the colliders' and centers' nodes) is
+interpolated linearly, so 30, 60 and 144 frames/s drive the same steps with
+nearly the same poses. The frames' time is the loop's tick time (recorded time
+on replay), so a replay gives the same motion every time. A jump back in
+time, or a gap over :data:`MAX_GAP_S`, restarts the simulation at rest in the
+current pose.
+
+**Vectorised.** Joints are processed by *level* (depth below the nearest
+joint above them): all joints of one level at once, in NumPy, levels in order;
+each level's collisions are computed against every collider together and the
+pushes of the colliders a tail is inside are added (the specification applies
+them one after the other; the two differ only for a tail inside two colliders
+at once). Bones are assumed uniformly scaled (turns are taken from the
+transposed rest frame).
+
+**Preallocated.** Every array a step or a frame writes (tails, frames, turns,
+collision distances, the skinning matrices) is allocated once, in the
+constructor; the arithmetic writes into them (``out=``, in place), the level
+runs are slices (:mod:`facepuppet.runtime.render.spring_layout`). What a frame
+still allocates is NumPy's own: array views, and the internal buffer of a few
+strided or broadcast operations (freed by the operation); a chain with a center
+also inverts its center's matrix each step (``np.linalg.inv``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from facepuppet.runtime.model.character_parts import Skeleton
+from facepuppet.runtime.model.springs import SpringRig
+from facepuppet.runtime.render.spring_layout import MODEL_ROW, WORLD_ROW, spring_layout
+
+#: The fixed internal step, seconds. The specification's update is tuned per step (the drag takes its share
+#: of the velocity once a step), and avatars are authored in apps stepping at 60 frames/s (UniVRM, three-vrm
+#: driven by a 60 Hz display): 60 steps a second move them as their authors saw them.
+STEP_S = 1.0 / 60.0
+#: A gap between frames longer than this (or time going back) restarts the simulation at rest.
+MAX_GAP_S = 0.5
+
+
+class SpringBones:
+    """The spring bones of one character, stepped on its frames' time.
+
+    Parameters
+    ----------
+    rig : SpringRig, the joints and colliders (:func:`~facepuppet.runtime.model.springs.spring_rig`)
+    skeleton : Skeleton, the character's nodes in their rest pose
+    step_s : float, the fixed internal step
+
+    Use: :meth:`advance` once per frame with the frame's time, the skinning
+    matrices the head pose gives (n_nodes, 4, 4) and the model matrix (root
+    motion); it writes the spring joints' skinning matrices into those
+    matrices. :meth:`tails` gives the tails' world positions.
+
+    Attributes
+    ----------
+    moved_nodes : ndarray (n_nodes,) bool, the nodes the springs move (joints and the nodes below them)
+    steps : int, the steps taken since the start
+    """
+
+    def __init__(self, rig: SpringRig, skeleton: Skeleton, step_s: float = STEP_S) -> None:
+        if not step_s > 0:
+            raise ValueError(f"step_s: expected a positive step, got {step_s}")
+        self.rig, self.step_s = rig, float(step_s)
+        lay = self._lay = spring_layout(rig, skeleton, self.step_s)
+        n, nd, c = rig.n_joints, len(lay.driver_nodes), rig.n_colliders
+        self.moved_nodes = lay.moved_nodes
+        self._nj0 = 2 + nd  # W's first joint row
+        self._w = np.tile(np.eye(4), (lay.n_rows, 1, 1))
+        self._wd_prev = np.tile(np.eye(4), (nd + 2, 1, 1))
+        self._wd_cur = np.tile(np.eye(4), (nd + 2, 1, 1))
+        self._wd_tmp = np.zeros((nd + 2, 4, 4))
+        self._drv32 = np.zeros((nd, 4, 4), np.float32)
+        self._drv = np.zeros((nd, 4, 4))
+        self._cur, self._prev, self._new = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        self._a3, self._b3, self._sq = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+        self._len = np.zeros(n)
+        self._k = np.zeros(n)
+        self._frame = np.zeros((n, 4, 4))  # each joint's unturned frame this step
+        self._anchors = np.zeros((n, 4, 4))
+        self._rot = np.zeros((n, 3, 3))
+        self._turn = np.tile(np.eye(3), (n, 1, 1))  # each joint's turn from its rest, in its rest frame
+        self._turn4 = np.tile(np.eye(4), (n, 1, 1))
+        self._centers = np.zeros((n, 4, 4))
+        self._skin = np.zeros((n, 4, 4))
+        self._skin2 = np.zeros((n, 4, 4))
+        self._skin32 = np.zeros((n, 4, 4), np.float32)
+        self._follow = np.zeros((len(lay.follow_nodes), 4, 4), np.float32)
+        self._inv_model = np.eye(4)
+        self._identity = np.eye(4)
+        self._has_center = bool((lay.center_row != WORLD_ROW).any())
+        self._any_capsule = bool((rig.collider_shape == 1).any())
+        self._capsule = (rig.collider_shape == 1).astype(np.float64)
+        self._cw = np.zeros((c, 4, 4))
+        self._c_start, self._c_end, self._seg = np.zeros((c, 3)), np.zeros((c, 3)), np.zeros((c, 3))
+        self._seg_sq = np.zeros(c)
+        self._rel = np.zeros((n, c, 3))
+        self._rel2 = np.zeros((n, c, 3))
+        self._nc = np.zeros((n, c))
+        self._depth = np.zeros((n, c))
+        self._inside = np.zeros((n, c), bool)
+        self._outside = np.zeros((n, c), bool)
+        self._level_hits = [bool(lay.hits[a:b].any()) for a, b in lay.levels]
+        self._t_sim = self._t_last = None
+        self.steps = 0
+
+    # -- per frame ------------------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget the motion: the next :meth:`advance` starts at rest in its pose."""
+        self._t_sim = self._t_last = None
+
+    def advance(self, t: float, skinning: np.ndarray, model: np.ndarray | None = None) -> np.ndarray:
+        """Step the simulation to time ``t`` and write the joints' skinning matrices.
+
+        Parameters
+        ----------
+        t : float, seconds, the frame's time (the loop's tick time)
+        skinning : ndarray (n_nodes, 4, 4) float32, the head pose's skinning matrices; the spring joints' and the
+            nodes below them are overwritten (in place)
+        model : ndarray (4, 4), the model matrix (root motion: head translation); None: identity
+
+        Returns
+        -------
+        ``skinning``
+        """
+        if not self.rig.n_joints:
+            return skinning
+        self._driver_worlds(skinning, model)
+        t = float(t)
+        if self._t_last is None or t < self._t_last or t - self._t_last > MAX_GAP_S:
+            self._start(t)
+        else:
+            span = t - self._t_last
+            while self._t_sim + self.step_s <= t + 1e-9:
+                alpha = 1.0 if span <= 0 else (self._t_sim + self.step_s - self._t_last) / span
+                self._wd_lerp(min(max(alpha, 0.0), 1.0))
+                self._step()
+                self._t_sim += self.step_s
+                self.steps += 1
+            self._t_last = t
+        self._wd_prev[:] = self._wd_cur
+        self._pose(skinning)
+        return skinning
+
+    def tails(self) -> np.ndarray:
+        """The tails' positions (n_joints, 3) float64, world (the model matrix applied), after the last step,
+        in the rig's joint order."""
+        out = np.empty((self.rig.n_joints, 3))
+        out[self._lay.order] = self._from_center(self._cur, np.empty_like(self._cur))
+        return out
+
+    # -- the parts of a frame ---------------------------------------------------------------------------------
+    def _driver_worlds(self, skinning: np.ndarray, model: np.ndarray | None) -> None:
+        """This frame's world transforms of the drivers (rows 1 .. of ``W``): model · skinning · rest."""
+        cur = self._wd_cur
+        cur[MODEL_ROW] = self._identity if model is None else model
+        if len(self._drv):
+            np.take(skinning, self._lay.driver_nodes, axis=0, out=self._drv32, mode="clip")
+            self._drv[:] = self._drv32
+            np.matmul(self._drv, self._lay.g_drivers, out=self._drv)
+            np.matmul(cur[MODEL_ROW], self._drv, out=cur[2:])
+        m = cur[MODEL_ROW]  # rigid: the inverse is the transpose and the turned translation
+        inv = self._inv_model
+        inv[:3, :3] = m[:3, :3].T
+        np.matmul(inv[:3, :3], m[:3, 3], out=inv[:3, 3])
+        inv[:3, 3] *= -1.0
+
+    def _wd_lerp(self, alpha: float) -> None:
+        w = self._w[:self._nj0]
+        np.multiply(self._wd_prev, 1.0 - alpha, out=w)
+        np.multiply(self._wd_cur, alpha, out=self._wd_tmp)
+        w += self._wd_tmp
+
+    def _start(self, t: float) -> None:
+        """At rest in the current pose: tails where the pose puts them, no velocity."""
+        self._w[:self._nj0] = self._wd_cur
+        self._turn[:] = np.eye(3)
+        self._turn4[:, :3, :3] = self._turn
+        self._pose_frames()
+        lay = self._lay
+        joints = self._w[self._nj0:]
+        tails = np.einsum("nij,nj->ni", joints[:, :3, :3], lay.axis * lay.length[:, None]) + joints[:, :3, 3]
+        self._to_center(tails, self._cur)
+        self._prev[:] = self._cur
+        self._t_sim = self._t_last = t
+
+    def _to_center(self, points: np.ndarray, out: np.ndarray) -> np.ndarray:
+        if not self._has_center:
+            out[:] = points
+            return out
+        np.take(self._w, self._lay.center_row, axis=0, out=self._centers, mode="clip")
+        inv = np.linalg.inv(self._centers)
+        np.einsum("nij,nj->ni", inv[:, :3, :3], points, out=out)
+        out += inv[:, :3, 3]
+        return out
+
+    def _from_center(self, points: np.ndarray, out: np.ndarray) -> np.ndarray:
+        if not self._has_center:
+            out[:] = points
+            return out
+        np.take(self._w, self._lay.center_row, axis=0, out=self._centers, mode="clip")
+        np.einsum("nij,nj->ni", self._centers[:, :3, :3], points, out=out)
+        out += self._centers[:, :3, 3]
+        return out
+
+    def _dot(self, a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Row dot products (n,) of ``a``, ``b`` (n, 3) into ``out`` (einsum would buffer the products)."""
+        sq = self._sq[:len(a)]
+        np.multiply(a, b, out=sq)
+        return np.sum(sq, axis=1, out=out)
+
+    def _normalise_to(self, v: np.ndarray, length: np.ndarray | float, lens: np.ndarray) -> np.ndarray:
+        """``v`` (n, 3) scaled in place to ``length``."""
+        self._dot(v, v, lens)
+        np.sqrt(lens, out=lens)
+        np.maximum(lens, 1e-12, out=lens)
+        np.divide(length, lens, out=lens)
+        v *= lens[:, None]
+        return v
+
+    def _step(self) -> None:
+        """One step of :data:`STEP_S` for every joint, level by level (the numbered steps of the module doc)."""
+        lay, w, j0 = self._lay, self._w, self._nj0
+        new, a3, b3 = self._new, self._a3, self._b3
+        self._from_center(self._cur, new)
+        self._from_center(self._prev, a3)
+        np.subtract(new, a3, out=a3)
+        a3 *= lay.inertia
+        new += a3  # 1: inertia
+        if self.rig.n_colliders:
+            np.take(w, lay.collider_row, axis=0, out=self._cw, mode="clip")
+            np.einsum("cij,cj->ci", self._cw[:, :3, :3], self.rig.collider_offset, out=self._c_start)
+            self._c_start += self._cw[:, :3, 3]
+            np.einsum("cij,cj->ci", self._cw[:, :3, :3], self.rig.collider_tail, out=self._c_end)
+            self._c_end += self._cw[:, :3, 3]
+        for (s, e), hits in zip(lay.levels, self._level_hits):
+            frame = self._frame[s:e]
+            np.take(w, lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
+            np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=frame)  # the joint's frame, unturned
+            head, rot = frame[:, :3, 3], frame[:, :3, :3]
+            axis, nxt, d, lens = a3[s:e], new[s:e], b3[s:e], self._len[s:e]
+            np.einsum("nij,nj->ni", rot, lay.axis[s:e], out=axis)
+            self._normalise_to(axis, lay.push[s:e, 0], lens)
+            nxt += axis  # 2: stiffness
+            nxt += lay.gravity[s:e]  # 3: gravity
+            np.subtract(nxt, head, out=d)
+            np.add(head, self._normalise_to(d, lay.length[s:e], lens), out=nxt)  # 4: length
+            if hits:
+                self._collide(s, e, head)  # 5: collisions
+            # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame
+            np.subtract(nxt, head, out=d)
+            np.einsum("nji,nj->ni", rot, d, out=axis)
+            self._normalise_to(axis, 1.0, lens)
+            self._rotation_between(lay.axis[s:e], axis, self._turn[s:e], d, lens)
+            np.matmul(rot, self._turn[s:e], out=self._rot[s:e])
+            rot[:] = self._rot[s:e]
+            w[j0 + s:j0 + e] = frame
+        self._prev[:] = self._cur
+        self._to_center(new, self._cur)
+
+    def _collide(self, s: int, e: int, head: np.ndarray) -> None:
+        """The level's tails pushed out of the colliders they hit, then put back at bone length."""
+        lay, nxt = self._lay, self._new[s:e]
+        rel, nc, depth, inside = self._rel[s:e], self._nc[s:e], self._depth[s:e], self._inside[s:e]
+        np.subtract(nxt[:, None, :], self._c_start[None], out=rel)
+        if self._any_capsule:  # from the closest point of a capsule's segment (a sphere: its centre)
+            np.subtract(self._c_end, self._c_start, out=self._seg)
+            np.einsum("ci,ci->c", self._seg, self._seg, out=self._seg_sq)
+            np.maximum(self._seg_sq, 1e-12, out=self._seg_sq)
+            np.einsum("nci,ci->nc", rel, self._seg, out=nc)
+            nc /= self._seg_sq
+            np.clip(nc, 0.0, 1.0, out=nc)
+            nc *= self._capsule
+            np.multiply(nc[:, :, None], self._seg[None], out=self._rel2[s:e])
+            rel -= self._rel2[s:e]
+        np.einsum("nci,nci->nc", rel, rel, out=nc)
+        np.sqrt(nc, out=nc)  # distances
+        np.subtract(lay.reach[s:e], nc, out=depth)
+        np.greater(depth, 0.0, out=inside)
+        inside &= lay.hits[s:e]
+        if not inside.any():
+            return
+        np.maximum(nc, 1e-12, out=nc)
+        np.divide(depth, nc, out=depth)
+        np.logical_not(inside, out=self._outside[s:e])
+        np.copyto(depth, 0.0, where=self._outside[s:e])
+        push = self._a3[s:e]
+        np.einsum("nc,nci->ni", depth, rel, out=push)
+        nxt += push
+        d = self._b3[s:e]
+        np.subtract(nxt, head, out=d)
+        np.add(head, self._normalise_to(d, lay.length[s:e], self._len[s:e]), out=nxt)
+
+    def _rotation_between(self, a: np.ndarray, b: np.ndarray, out: np.ndarray, v: np.ndarray,
+                          c: np.ndarray) -> None:
+        """``out`` (n, 3, 3): the rotations turning unit vectors ``a`` onto ``b`` (n, 3), Rodrigues' formula for
+        unit vectors ``R = c I + [v]x + v vᵀ / (1 + c)`` with v = a × b, c = a · b (``v``, ``c``: scratch)."""
+        ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
+        bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
+        k = self._k[:len(a)]
+        for i, (p, q, r, t) in enumerate(((ay, bz, az, by), (az, bx, ax, bz), (ax, by, ay, bx))):
+            np.multiply(p, q, out=v[:, i])
+            np.multiply(r, t, out=k)
+            v[:, i] -= k
+        self._dot(a, b, c)
+        np.add(c, 1.0, out=k)
+        np.maximum(k, 1e-9, out=k)
+        np.divide(1.0, k, out=k)
+        vk = self._sq[:len(a)]  # v / (1 + c), column by column (a broadcast product would be buffered)
+        for j in range(3):
+            np.multiply(v[:, j], k, out=vk[:, j])
+        for i in range(3):
+            for j in range(3):
+                np.multiply(v[:, i], vk[:, j], out=out[:, i, j])
+            out[:, i, i] += c
+        out[:, 0, 1] -= v[:, 2]
+        out[:, 1, 0] += v[:, 2]
+        out[:, 0, 2] += v[:, 1]
+        out[:, 2, 0] -= v[:, 1]
+        out[:, 1, 2] -= v[:, 0]
+        out[:, 2, 1] += v[:, 0]
+
+    def _pose_frames(self) -> None:
+        """The joints' world frames at the frame's pose with the last step's turns (``W``'s joint rows)."""
+        lay, w, j0 = self._lay, self._w, self._nj0
+        for s, e in lay.levels:
+            np.take(w, lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
+            np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=self._frame[s:e])
+            np.matmul(self._frame[s:e], self._turn4[s:e], out=w[j0 + s:j0 + e])
+
+    def _pose(self, skinning: np.ndarray) -> None:
+        """The joints' skinning matrices at the frame's pose with the last step's turns: the roots of the chains
+        stay on the head as it is now (the steps may be up to one step behind)."""
+        lay = self._lay
+        self._w[:self._nj0] = self._wd_cur
+        self._turn4[:, :3, :3] = self._turn
+        self._pose_frames()
+        np.matmul(self._w[self._nj0:], lay.g_inv, out=self._skin)
+        np.matmul(self._inv_model, self._skin, out=self._skin2)
+        self._skin32[:] = self._skin2
+        skinning[lay.node] = self._skin32
+        if len(lay.follow_nodes):
+            np.take(skinning, lay.node[lay.follow_joint], axis=0, out=self._follow, mode="clip")
+            skinning[lay.follow_nodes] = self._follow
