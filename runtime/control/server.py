@@ -166,8 +166,9 @@ class ControlServer:
         encoded (frame loop's thread: reads two numbers)."""
         return self.viewers > 0 and not self._encoding and now_s - self._last_grab >= 1.0 / self._grab_fps
 
-    def offer_frame(self, width: int, height: int, flags: int, k: int, rgba: bytes, now_s: float) -> None:
-        """Hand over the newest drawn frame (frame loop's thread; never blocks)."""
+    def offer_frame(self, width: int, height: int, flags: int, k: int, rgba: Any, now_s: float) -> None:
+        """Hand over the newest drawn frame (frame loop's thread; never blocks): ``rgba`` is bytes-like, C-contiguous,
+        ``height * width * 4`` bytes (kept, not copied: the renderer's read gives a new buffer every time)."""
         self._last_grab = now_s
         self._raw = (width, height, flags, k, now_ms(), rgba)
         self._encoding = True

@@ -1,7 +1,7 @@
 """The drawn frames of a run, with alpha, for the view page (an OBS Browser Source): read back and framed.
 
-The frame loop's thread only reads the picture back from the GPU (:func:`grab`: the resolved framebuffer's
-RGBA, as GL stores it: rows bottom-up, colour premultiplied by alpha over the transparent clear), and only
+The frame loop's thread only reads the picture back from the GPU (:func:`grab`: the renderer's ``read_rgba``,
+as GL stores it: rows bottom-up, colour premultiplied by alpha over the transparent clear), and only
 while a view page is connected and its next frame is due; compressing and sending happen on the control
 server's thread. The page inflates the bytes (the browser's ``DecompressionStream``), turns the rows over
 and divides the colour by alpha (canvas ``ImageData`` is straight alpha).
@@ -31,33 +31,30 @@ PREMULTIPLIED = 2  # colour times alpha (the framebuffer's over a transparent cl
 MAX_VIEW_PIXELS = 1280 * 720  # larger pictures are sent at half size each way
 
 
-def grab(renderer: Renderer) -> tuple[int, int, int, bytes]:
-    """(width, height, flags, RGBA bytes) of the renderer's last drawn frame, as cheaply as it can be read.
+def grab(renderer: Renderer) -> tuple[int, int, int, np.ndarray]:
+    """(width, height, flags, RGBA pixels, C-contiguous) of the renderer's last drawn frame, as cheaply as it
+    can be read.
 
-    The resolved framebuffer of a :class:`~facepuppet.runtime.render.renderer.FaceRenderer` is read as it is
-    (premultiplied, bottom-up: no conversion on the frame loop's thread); another renderer's ``read_pixels``
-    is taken (top row first, straight alpha, opaque when it has none). Pictures over MAX_VIEW_PIXELS are
-    halved each way by taking every other pixel."""
-    inner = getattr(renderer, "renderer", renderer)  # the elastic path wraps a FaceRenderer
-    framebuffers = getattr(inner, "_framebuffers", None)
-    if framebuffers is not None:
-        w, h = inner.width, inner.height
-        data = framebuffers.resolved().read(viewport=(0, 0, w, h), components=4, alignment=1)
-        flags = BOTTOM_UP | (PREMULTIPLIED if getattr(inner, "transparent", False) else 0)
-        if w * h > MAX_VIEW_PIXELS:
-            image = np.frombuffer(data, dtype=np.uint8).reshape(h, w, 4)[::2, ::2]
-            h, w = image.shape[:2]
-            data = np.ascontiguousarray(image).tobytes()
-        return w, h, flags, data
-    image = np.asarray(renderer.read_pixels())
-    if image.shape[2] == 3:
-        image = np.concatenate([image, np.full(image.shape[:2] + (1,), 255, np.uint8)], axis=2)
+    A renderer with ``read_rgba`` (:class:`~facepuppet.runtime.render.renderer.FaceRenderer`, the elastic path)
+    is read as the framebuffer holds it (premultiplied, bottom-up: no conversion on the frame loop's thread);
+    another renderer's ``read_pixels`` is taken (top row first, straight alpha, opaque when it has none).
+    Pictures over MAX_VIEW_PIXELS are halved each way by taking every other pixel."""
+    read = getattr(renderer, "read_rgba", None)
+    if read is not None:
+        image = read()
+        flags = BOTTOM_UP | (PREMULTIPLIED if getattr(renderer, "transparent", False) else 0)
+    else:
+        image = np.asarray(renderer.read_pixels())
+        flags = 0
+        if image.shape[2] == 3:
+            image = np.concatenate([image, np.full(image.shape[:2] + (1,), 255, np.uint8)], axis=2)
     if image.shape[0] * image.shape[1] > MAX_VIEW_PIXELS:
         image = image[::2, ::2]
-    return image.shape[1], image.shape[0], 0, np.ascontiguousarray(image).tobytes()
+    return image.shape[1], image.shape[0], flags, np.ascontiguousarray(image)
 
 
-def encode(width: int, height: int, flags: int, k: int, t_capture_ms: float, rgba: bytes, level: int = 1) -> bytes:
+def encode(width: int, height: int, flags: int, k: int, t_capture_ms: float, rgba: bytes | np.ndarray,
+           level: int = 1) -> bytes:
     """One view message (see the module docstring); zlib at ``level`` (1: fast; a transparent background
     compresses to almost nothing)."""
     return HEADER.pack(MAGIC, width, height, flags, k & 0xFFFFFFFF, t_capture_ms) + zlib.compress(rgba, level)
