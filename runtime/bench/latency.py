@@ -47,6 +47,7 @@ from facepuppet.runtime.bench.live_pictures import live_picture_phases
 from facepuppet.runtime.bench.registry import load_average, peak_rss_mb, register_bench, session_log
 from facepuppet.runtime.bench.render import pass_costs
 from facepuppet.runtime.bench.senders import SENDERS, decode_cost
+from facepuppet.runtime.bench.web import web_phases
 from facepuppet.runtime.commands.options import parse_size
 from facepuppet.runtime.commands.run import plan_from_argv, run_live
 from facepuppet.runtime.inputs.vmc import VmcAdapter
@@ -69,9 +70,10 @@ def rss_mb() -> float:
 
 
 def _phase(args, rate: float, seconds: float, panel: str | None = None, extra_argv: tuple = (),
-           edit_plan=None, on_result=None) -> dict:
+           edit_plan=None, on_result=None, started=None) -> dict:
     """One sender process at ``rate`` for ``seconds`` against one headless live run; ``extra_argv``: more of
-    run's options, ``edit_plan(plan)``: the plan changed, ``on_result(result)``: a dict of more figures."""
+    run's options, ``edit_plan(plan)``: the plan changed, ``on_result(result)``: a dict of more figures,
+    ``started()``: called once the run listens, returns a callable that ends what it started."""
 
     kind = getattr(args, "input", "vmc")
     probe = SENDERS[kind]("127.0.0.1", 9)  # datagrams per frame (VMC: status + the blend bundles); sends nothing
@@ -111,8 +113,12 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None, extra_ar
 
     t_first_last = [math.inf, -math.inf]
 
+    ending: list = []
+
     def on_ready(address):
         t_start[0] = time.monotonic()
+        if started is not None:
+            ending.append(started())
         if procs:  # the phone sender: go
             procs[0].stdin.write("go\n")
             procs[0].stdin.flush()
@@ -158,6 +164,8 @@ def _phase(args, rate: float, seconds: float, panel: str | None = None, extra_ar
     try:
         result = run_live(plan, stop_event=stop, on_ready=on_ready, hooks=[sample], on_panel=shown_panel.append)
     finally:
+        for end in ending:
+            end()
         for proc in procs:
             proc.kill()
             proc.wait()
@@ -294,6 +302,9 @@ def bench_latency(args: argparse.Namespace) -> dict:
     if getattr(args, "panel", False):
         with session_log(args.verbose):
             _panel_phases(args, results)
+    if getattr(args, "web", False):
+        with session_log(args.verbose):
+            results["web"] = web_phases(args, _phase)
     if getattr(args, "virtual_camera", False) or getattr(args, "stream", False):
         with session_log(args.verbose):
             live_picture_phases(args, results, _phase)
@@ -391,6 +402,11 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="then the same run with the operator's panel shown and hidden on alternate ticks: CPU "
                              "ms per tick p50/p99 of each, what the panel adds, and the GPU wait (the panel's draw "
                              "on llvmpipe)")
+    parser.add_argument("--web", action="store_true",
+                        help="then run --web: the view page's cost per frame at 1280x720 and the frame loop's p99 "
+                             "with 0 and 10 view clients connected")
+    parser.add_argument("--web-decode", action="store_true",
+                        help="with --web: the view clients inflate every frame's pixels (as a page does)")
     add_live_picture_arguments(parser)
     parser.add_argument("--flood", action="store_true", help="then flood: --flood-factor x the rate")
     parser.add_argument("--flood-factor", type=float, default=10.0, help="flood rate multiple (10)")

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.actuation.saturation import report_line
+from facepuppet.runtime.control.options import ControlOptions
 from facepuppet.runtime.errors import RecordingFailed, UsageError
 from facepuppet.runtime.files.outputs import write_atomic
 from facepuppet.runtime.model.character import Character
@@ -54,6 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         duration=None, duration_help="stop after this many seconds", draw=True)
     OutputOptions.add_arguments(p, stats_help="print counters and latencies every second and at exit")
     StageOptions.add_arguments(p)
+    ControlOptions.add_arguments(p)
     p.set_defaults(func=run_command)
 
 
@@ -70,6 +72,7 @@ class RunPlan:
     record: RecordOptions
     panel: PanelOptions
     force: bool = False
+    control: ControlOptions = ControlOptions()
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> RunPlan:
@@ -88,7 +91,7 @@ class RunPlan:
         picture = PictureOptions.from_args(ns)
         return cls(Path(ns.character), inputs, stages, PacingOptions.from_args(ns), picture,
                    OutputOptions.from_args(ns, picture), record, PanelOptions.from_args(ns),
-                   bool(getattr(ns, "force", False)))
+                   bool(getattr(ns, "force", False)), ControlOptions.from_args(ns))
 
 
 def plan_from_argv(argv: Sequence[str]) -> RunPlan:
@@ -115,11 +118,11 @@ def run_live(args: argparse.Namespace | RunPlan, stop_event: threading.Event | N
     plan = args if isinstance(args, RunPlan) else RunPlan.from_args(args)
     character = Character.load(plan.character)
     feed = LiveFeed(plan.inputs, plan.stages, plan.pacing, plan.record, plan.picture, plan.panel, plan.character,
-                    force=plan.force, stop_event=stop_event)
+                    force=plan.force, stop_event=stop_event, control=plan.control.web is not None)
     with open_session(character, feed, stages=plan.stages, outputs=plan.outputs, picture=plan.picture,
                       panel=plan.panel, observers=hooks, keep_weights=keep_weights,
                       stats_interval_s=1.0 if plan.outputs.stats else None, on_chain=on_chain, on_panel=on_panel,
-                      on_ready=on_ready) as session:
+                      on_ready=on_ready, control=plan.control) as session:
         result = session.run()
         if plan.record.save_profile and session.chain.profile is not None and session.chain.filter is not None:
             session.chain.profile.save(session.chain.filter.current_config())

@@ -1,6 +1,6 @@
 """What the parts of one session tell each other while it runs, through one small bus the session owns.
 
-Four kinds of news cross from one part to others; each has one publisher and any number of subscribers,
+Five kinds of news cross from one part to others; each has one publisher and any number of subscribers,
 all known when the session is assembled:
 
 ===============  =======================================  ==============================================
@@ -14,6 +14,8 @@ tracking         the filter stage: tracking lost (False)  the recorder (EVENT re
 calibration      the frame source's count of calibrate    the filter stage, which calibrates when the
 requests         messages (``/facepuppet/calibrate``)     sum grows
 packets          the receivers: each accepted datagram    the recorder
+control          the control stage: a command applied at  the recorder (a CONTROL record)
+                 a tick (an expression fired, framing)
 ===============  =======================================  ==============================================
 
 Config and tracking news and the calibration count are read on the frame-loop thread; packets arrive on a
@@ -33,6 +35,7 @@ from typing import Any
 ConfigListener = Callable[[float, Any], None]
 TrackingListener = Callable[[float, bool], None]
 PacketListener = Callable[[bytes, float, "tuple | None", "str | None"], None]
+ControlListener = Callable[[float, dict], None]
 
 
 class SessionBus:
@@ -55,6 +58,7 @@ class SessionBus:
         self._tracking: list[TrackingListener] = []
         self._packets: list[PacketListener] = []
         self._request_counts: list[Callable[[], int]] = []
+        self._control: list[ControlListener] = []
 
     # -- config -----------------------------------------------------------------------------------
 
@@ -86,6 +90,16 @@ class SessionBus:
     def calibration_requests(self) -> int:
         """The sum of the counts given to :meth:`count_requests` (only grows)."""
         return sum(int(count()) for count in self._request_counts)
+
+    # -- control commands -------------------------------------------------------------------------
+
+    def on_control(self, listener: ControlListener) -> None:
+        """Call ``listener(t, command)`` for each control command applied at tick time ``t`` (a JSON object)."""
+        self._control.append(listener)
+
+    def publish_control(self, t: float, command: dict) -> None:
+        for listener in self._control:
+            listener(t, command)
 
     # -- datagrams --------------------------------------------------------------------------------
 

@@ -72,6 +72,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from facepuppet.runtime.control.hotkeys import parse_hotkeys
 from facepuppet.runtime.errors import InputFileError
 from facepuppet.runtime.files.input_files import regular_file
 from facepuppet.runtime.live.mix import MixSettings, parse_mix
@@ -172,6 +173,8 @@ class LiveConfig:
     loss : LossSettings, the per-region tracking-loss modes of ``[tracking_loss]``
         (:mod:`~facepuppet.runtime.live.tracking_loss`)
     mix : MixSettings, the ``[mix]`` source orders of a run with several inputs (:mod:`~facepuppet.runtime.live.mix`)
+    hotkeys : tuple of (key, command object), the window's ``[hotkeys]``
+        (:mod:`~facepuppet.runtime.control.hotkeys`)
     path : str, the file it came from ("" for defaults)
     """
 
@@ -188,6 +191,7 @@ class LiveConfig:
     mapping: MappingSettings = MappingSettings()
     loss: LossSettings = LossSettings()
     mix: MixSettings = MixSettings()
+    hotkeys: tuple = ()
     path: str = ""
 
     def channel(self, name: str) -> ChannelSettings:
@@ -341,7 +345,7 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
     """
     known = {canonical(n): n for n in (*ARKIT_NAMES, *(known_channels or ()))}
     _table(where, "<top>", data, ("filter", "tracking_loss", "calibration", "channels", "default_channel",
-                                  "mapping", "face", "neutral", "profile", "mix"))
+                                  "mapping", "face", "neutral", "profile", "mix", "hotkeys"))
     cfg = LiveConfig(path=where)
     filters = dict(DEFAULT_FILTERS)
     for region, values in _table(where, "filter", data.get("filter", {}), REGIONS).items():
@@ -382,6 +386,7 @@ def parse_live_config(data: dict, where: str = "<config>", known_channels: Itera
         ease_out_s=_number(where, "tracking_loss.ease_out_s", loss.get("ease_out_s", cfg.ease_out_s), positive=True),
         ease_in_s=_number(where, "tracking_loss.ease_in_s", loss.get("ease_in_s", cfg.ease_in_s), positive=True),
         capture_s=_number(where, "calibration.capture_s", calib.get("capture_s", cfg.capture_s), positive=True),
+        hotkeys=parse_hotkeys(where, data["hotkeys"], LiveConfigError) if "hotkeys" in data else (),
     )
 
 

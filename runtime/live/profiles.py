@@ -162,6 +162,8 @@ def config_to_dict(config: LiveConfig) -> dict:
             doc["mix"]["regions"] = {r: list(v) for r, v in mix.regions.items()}
         if mix.channels:
             doc["mix"]["channels"] = {k: list(v) for k, v in mix.channels.items()}
+    if config.hotkeys:
+        doc["hotkeys"] = {key: dict(command) for key, command in config.hotkeys}
     return doc
 
 

@@ -28,6 +28,7 @@ from facepuppet.runtime.recording.records import (
     RecordKind,
     encode_audio,
     encode_config,
+    encode_control,
     encode_event,
     encode_packet_record,
     encode_sources,
@@ -137,6 +138,12 @@ class PacketRecorder:
             self._wake.set()
         return put
 
+    def put_control(self, t: float, command: dict) -> None:
+        """Queue one CONTROL record: a control command applied at tick time ``t``. Never blocks; not dropped for a
+        full queue (a replay needs every one, and the servers bound their rate)."""
+        self._queue.append((RecordKind.CONTROL, t, command))
+        self._wake.set()
+
     def put_sources(self, k: int, frames: tuple[int, ...]) -> None:
         """Queue one SOURCES record: frames each mix source had completed at tick ``k``. Never blocks."""
         if len(self._queue) >= self.capacity:
@@ -185,6 +192,8 @@ class PacketRecorder:
             self._ticks_written = (t if self._ticks_written is None else self._ticks_written[0], t)
         elif kind == RecordKind.SOURCES:
             write(kind, encode_sources(t, value))
+        elif kind == RecordKind.CONTROL:
+            write(kind, encode_control(t, value))
         elif kind == RecordKind.EVENT:
             write(kind, encode_event(t, value))
             self.counters["events_recorded"] += 1

@@ -36,13 +36,17 @@ SOURCES   8     live recording with several inputs: ``b"S1"``, tick index
                 i64, count u16, then count x i64: frames each mix source
                 (the header's ``info.mix_sources``, in order) had completed
                 at that tick; one after each TICK record
-STATE     9     live recording started mid-run: the filter stage's state
+STATE     9     live recording started mid-run: ``b"T1"``, tick time f64,
+                the filter stage's state (UTF-8 JSON)
 VOICE     10    live recording with ``--voice``: ``b"V1"``, tick time f64
                 (s), count u16, then count x f32: the voice's mouth
                 channels that tick (the header's ``info.voice_channels``)
+CONTROL   11    live recording: ``b"X1"``, tick time f64 (s), then the
+                control command applied at that tick as a UTF-8 JSON object
+                (:mod:`facepuppet.runtime.control.commands`)
 ========  ====  ==============================================================
 
-The PACKET/AUDIO/TICK/CONFIG/EVENT/SOURCES decoders return None for a payload they cannot decode
+The PACKET/AUDIO/TICK/CONFIG/EVENT/SOURCES/CONTROL decoders return None for a payload they cannot decode
 (the reader counts those as skipped); the FRAME and LAYOUT decoders raise
 ValueError (the reader treats that as corruption).
 """
@@ -50,13 +54,14 @@ ValueError (the reader treats that as corruption).
 from __future__ import annotations
 
 import enum
+import json
 import math
 import struct
 from dataclasses import dataclass
 
 import numpy as np
 
-from facepuppet.runtime.files.json_limits import JsonLimitError, loads_limited
+from facepuppet.runtime.files.json_limits import JsonLimitError, JsonTextError, loads_limited
 from facepuppet.runtime.frames import Frame
 
 _FRAME_HEAD = struct.Struct("<ddqIB")  # t, t_sender, number, layout id, flags
@@ -83,10 +88,12 @@ class RecordKind(enum.IntEnum):
     SOURCES = 8  # live recording, several inputs: frames each mix source had per tick
     STATE = 9  # live recording started mid-run: the filter stage's state at its start (JSON)
     VOICE = 10  # live recording with --voice: the voice's mouth channels per tick
+    CONTROL = 11  # live recording: a control command and the tick it was applied at (JSON)
 
 
 RESERVED_KINDS = frozenset({RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG,
-                            RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE})
+                            RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE,
+                            RecordKind.CONTROL})
 
 
 class FrameFlags(enum.IntFlag):
@@ -230,6 +237,29 @@ def encode_state(t: float, text: str) -> bytes:
 def decode_state(payload: bytes) -> tuple[float, str] | None:
     """(t, JSON text) from a STATE payload; None when it is not one this reader knows."""
     return _decode_text(b"T1", payload)
+
+
+MAX_CONTROL_JSON = 64 << 10  # a command is a few hundred bytes; the WebSocket's own limit is this
+
+
+def encode_control(t: float, command: dict) -> bytes:
+    """CONTROL payload: the command (a JSON object) applied at tick time ``t``."""
+    return _encode_text(b"X1", t, json.dumps(command, separators=(",", ":"), allow_nan=False))
+
+
+def decode_control(payload: bytes) -> tuple[float, dict] | None:
+    """(t, command object) from a CONTROL payload; None when it is not one this reader knows (or not an object
+    within the JSON limits)."""
+    if len(payload) > MAX_CONTROL_JSON + _CONFIG_HEAD.size:
+        return None
+    decoded = _decode_text(b"X1", payload)
+    if decoded is None:
+        return None
+    try:
+        doc = loads_limited(decoded[1], "CONTROL record")
+    except JsonTextError:
+        return None
+    return (decoded[0], doc) if isinstance(doc, dict) and math.isfinite(decoded[0]) else None
 
 
 def decode_packet_record(payload: bytes) -> Packet | None:

@@ -55,6 +55,7 @@ from facepuppet.runtime.recording.records import (
     Tick,
     decode_audio,
     decode_config,
+    decode_control,
     decode_event,
     decode_frame,
     decode_layout,
@@ -208,6 +209,7 @@ class Session:
     sources : list of (tick index, frames per mix source), one per tick of a run with several inputs
     states : list of (tick time, JSON text), the filter stage's state where a recording started mid-run (STATE)
     voice : list of (tick time, channels float32), the voice's mouth channels of a ``--voice`` run (VOICE)
+    controls : list of (tick time, JSON object), the control commands applied during a live run (CONTROL)
     skipped_bytes : int, bytes skipped over damaged records in the middle of the file
     damaged : list of (byte offset, bytes skipped), each damaged stretch that reading resynchronised past
     """
@@ -227,6 +229,7 @@ class Session:
     sources: list[tuple[int, tuple[int, ...]]] = field(default_factory=list)
     states: list[tuple[float, str]] = field(default_factory=list)
     voice: list = field(default_factory=list)
+    controls: list[tuple[float, dict]] = field(default_factory=list)
     skipped_bytes: int = 0
     damaged: list[tuple[int, int]] = field(default_factory=list)
 
@@ -386,6 +389,8 @@ def _apply_record(session: Session, layouts: dict[int, Layout], kind: int, paylo
         session.states.append(state)
     elif kind == RecordKind.VOICE and (voice := decode_voice(payload)) is not None:
         session.voice.append(voice)
+    elif kind == RecordKind.CONTROL and (command := decode_control(payload)) is not None:
+        session.controls.append(command)
     elif kind in RESERVED_KINDS:
         name = RecordKind(kind).name.lower()
         session.skipped[name] = session.skipped.get(name, 0) + 1

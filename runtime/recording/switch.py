@@ -380,6 +380,11 @@ class SwitchableRecorder:
         if r is not None:
             r.put_config(t, text)
 
+    def put_control(self, t: float, command: dict) -> None:
+        r = self._recorder
+        if r is not None:
+            r.put_control(t, command)
+
     def put_event(self, t: float, found: bool) -> None:
         r = self._recorder
         if r is not None:

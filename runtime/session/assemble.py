@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from facepuppet.runtime.control.session import open_control
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.live.bus import SessionBus
 from facepuppet.runtime.live.draw_budget import DrawBudgetWatch
@@ -45,6 +46,7 @@ from facepuppet.runtime.session.outputs import Outputs, open_outputs
 
 if TYPE_CHECKING:
     from facepuppet.runtime.cli.progress import Progress
+    from facepuppet.runtime.control.options import ControlOptions
     from facepuppet.runtime.live.loop import LoopResult
     from facepuppet.runtime.live.sinks import WeightLog
     from facepuppet.runtime.live.stages import Chain
@@ -134,7 +136,7 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
                  on_chain: Callable[[Chain], None] | None = None, on_panel: Callable[[Any], None] | None = None,
                  on_ready: Callable[[tuple], None] | None = None, progress: Progress | None = None,
                  log: Callable[[str], None] = logger.info, context: GLTarget | None = None,
-                 keeps_pictures: bool = False) -> Iterator[Session]:
+                 keeps_pictures: bool = False, control: ControlOptions | None = None) -> Iterator[Session]:
     """Assemble a session (see the module docstring); everything opened is closed when the block ends.
 
     Parameters
@@ -157,6 +159,8 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
         than a short take's replay)
     keeps_pictures : bool, an observer of the caller's keeps pictures as files (a batch job's frames at chosen
         times): they are drawn at full quality, as ``--out`` and ``--video`` are, not at a live budget
+    control : ControlOptions or None, ``run --web``: the control API (:mod:`~facepuppet.runtime.control`); a
+        replay of recorded control commands gets the control stage without it
 
     Raises
     ------
@@ -202,11 +206,18 @@ def open_session(character: Character, feed: Feed, *, stages: StageOptions = NO_
             watch.retarget.append(shown.draw_into)
         if shown is None and not target.headless and chain.filter is not None:
             _bind_calibrate_key(target, chain.filter)
+        controlled = open_control(stack, control, chain, bus, parts, renderer, character, log,
+                                  loop_counters=lambda: counters.get("loop", {}), target=target, panel=shown)
+        if controlled is not None:
+            counters.update(controlled.counters)
         loop = FrameLoop(chain.names, renderer, feed.clock(parts, target, paced),
-                         observers=[*opened.observers, *parts.observers, *([watch] if watch else [])],
+                         observers=[*opened.observers, *parts.observers, *([watch] if watch else []),
+                                    *(controlled.observers if controlled is not None else ())],
                          fps=parts.fps, log=log, target=target,
                          stages=chain.stages, stop=getattr(feed, "stop", None), catch_up=parts.catch_up,
-                         idle_fps=parts.idle_fps, overlays=() if shown is None else (shown.overlay,),
+                         idle_fps=parts.idle_fps,
+                         overlays=(*(controlled.overlays if controlled is not None else ()),
+                                   *(() if shown is None else (shown.overlay,))),
                          wake=parts.wake, mapper=chain.mapper)
         counters["loop"] = loop.counters
         if stats is not None:

@@ -85,6 +85,7 @@ class FeedParts:
     observers : list of TickObserver, the feed's own (the recording's per-tick records), called last
     live : bool, a live feed: the session adds the live stats and the operator's panel
     input_name : str, what the panel names as the input
+    controls : list of (tick time, JSON object), recorded control commands to apply at those ticks (a replay)
     """
 
     source: FrameSource
@@ -100,6 +101,7 @@ class FeedParts:
     observers: list = field(default_factory=list)
     live: bool = False
     input_name: str = ""
+    controls: list = field(default_factory=list)
 
 
 class Feed(Protocol):

@@ -85,13 +85,15 @@ class LiveFeed:
 
     def __init__(self, inputs: LiveInputOptions, stages: StageOptions, pacing: PacingOptions,
                  record: RecordOptions, picture: PictureOptions, panel: PanelOptions, character_path: Path,
-                 force: bool = False, stop_event: threading.Event | None = None) -> None:
+                 force: bool = False, stop_event: threading.Event | None = None, control: bool = False) -> None:
         self.inputs, self.stages, self.pacing, self.record = inputs, stages, pacing, record
         self.character_path = Path(character_path)
         self.force = force
         self.stop_event = stop_event or threading.Event()
-        self.recordable = record.record is not None or wants_panel(picture, panel)
-        self.midrun = wants_panel(picture, panel)  # only the panel starts a recording once the run ticks
+        # only the panel and the control API (``--web``) start a recording once the run ticks
+        self.recordable = record.record is not None or wants_panel(picture, panel) or control
+        self.midrun = wants_panel(picture, panel) or control
+        self.control = control
         self.title = f"facepuppet run ({inputs.input})"
         self.audio = None
         self.voice_outputs: tuple[str, ...] = ()  # the VOICE records' channels (--voice)
@@ -235,6 +237,7 @@ class LiveFeed:
         bus.on_packet(packet)
         bus.on_config(lambda t, config: holder.put_config(t, config_to_toml(config)))
         bus.on_tracking(holder.put_event)
+        bus.on_control(holder.put_control)
         return holder
 
     def _open_mix(self, stack: contextlib.ExitStack, chain: Chain, bus: SessionBus, log) -> None:
@@ -310,7 +313,7 @@ class LiveFeed:
         # loop each time: a short switch interval keeps datagrams from waiting in the kernel (measured, 0.5 ms
         # vs the default 5 ms: arrival -> read p50 3 vs 7 ms, p99 16 vs 30 ms). A receive process needs none.
         switch = sys.getswitchinterval()
-        if isinstance(parts.source, UdpSource):
+        if isinstance(parts.source, UdpSource) or self.control:  # (``--web``: the control server's thread)
             sys.setswitchinterval(min(switch, THREAD_SWITCH_INTERVAL_S))
         try:
             return loop.run(parts.source, duration=parts.duration)

@@ -261,7 +261,12 @@ class RecordingFeed:
         total = self._expected_ticks(source, ticks, fps)
         self.progress = Progress(self.progress_label, total=total, unit="ticks", piped_every_s=PIPED_EVERY_S)
         done = lambda info: self.progress.update(info.k + 1 if ticks is None else self.progress.done + 1)  # noqa: E731
-        return FeedParts(source, fps, ticks=ticks, duration=self.pacing.duration, observers=[done])
+        controls = list(self.session.controls) if self.session is not None else []
+        if controls:
+            log(f"replay: the live run's {len(controls)} control command{'s' if len(controls) != 1 else ''} "
+                "(expressions fired, framing) applied at their ticks")
+        return FeedParts(source, fps, ticks=ticks, duration=self.pacing.duration, observers=[done],
+                         controls=controls)
 
     def _source(self, log):
         """(frame source, the live tick schedule or None, ticks per second) for the recording."""

@@ -63,10 +63,10 @@ def test_config_event_and_sources_records_have_kinds_of_their_own_and_each_round
     from facepuppet.runtime.recording.records import RESERVED_KINDS, RecordKind
 
     kinds = [RecordKind.PACKET, RecordKind.AUDIO, RecordKind.TICK, RecordKind.CONFIG, RecordKind.EVENT,
-             RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE]
+             RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE, RecordKind.CONTROL]
     assert len(set(kinds)) == len(kinds) and set(kinds) == RESERVED_KINDS
-    assert (RecordKind.CONFIG, RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE) == \
-        (6, 7, 8, 9, 10)
+    assert (RecordKind.CONFIG, RecordKind.EVENT, RecordKind.SOURCES, RecordKind.STATE, RecordKind.VOICE,
+            RecordKind.CONTROL) == (6, 7, 8, 9, 10, 11)
     path = tmp_path / "all.fps"
     with PacketRecorder(path, "vmc") as rec:  # one live run's worth of each: a tuned, lost, mixed show
         rec.put_tick(0, 0.0, 1, 10.0)
@@ -76,8 +76,10 @@ def test_config_event_and_sources_records_have_kinds_of_their_own_and_each_round
         rec.put_event(1.25, True)
         rec.put_config(1.5, '[face]\nmirror = false\n')
         rec.put_state(1.75, '{"version": 1}')
+        rec.put_control(2.0, {"verb": "expression", "name": "Joy", "action": "on", "value": 1.0, "fade": 0.15})
     s = read_session(path)
     assert s.states == [(1.75, '{"version": 1}')]
+    assert s.controls == [(2.0, {"verb": "expression", "name": "Joy", "action": "on", "value": 1.0, "fade": 0.15})]
     assert s.configs == [(0.5, "[face]\nmirror = true\n"), (1.5, "[face]\nmirror = false\n")]
     assert s.events == [(0.75, False), (1.25, True)]
     assert s.sources == [(0, (1, 0))] and len(s.ticks) == 1 and not s.skipped
