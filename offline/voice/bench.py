@@ -133,7 +133,7 @@ def run_latency(table_path: Path, tmp: Path, fps: float = 60.0, onset_s: float =
             "goal<=40ms": bool((first - onset_s) * 1000.0 <= 40.0) if moved else False}
 
 
-def vowel_recognition(log) -> dict | None:
+def vowel_recognition(log: Callable[[str], None]) -> dict | None:
     """espeak-ng voices: two build a profile, five other voices and pitches are scored on their sustained vowels'
     voiced hops (None without espeak-ng)."""
     espeak = shutil.which("espeak-ng")

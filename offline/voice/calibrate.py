@@ -30,7 +30,7 @@ def parse_take(text: str) -> tuple[str, Path]:
     return key, Path(path)
 
 
-def record_takes(seconds: float, device, log: Callable[[str], None]) -> tuple[dict, int]:
+def record_takes(seconds: float, device: int | str | None, log: Callable[[str], None]) -> tuple[dict, int]:
     """Each take from the microphone, prompted; AudioUnavailable when there is none."""
     try:
         import sounddevice as sd

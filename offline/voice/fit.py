@@ -40,6 +40,8 @@ from facepuppet.offline.kpls.model import KernelPLS
 
 CURVE_FPS = 30.0
 MODEL_NAMES = ("level", "ridge", "kpls")
+#: A model's setting: None (level), a ridge alpha, or (components, gamma x 1/n_features) of kernel PLS.
+Setting = float | tuple[int, float] | None
 RIDGE_ALPHAS = (10.0, 100.0, 1000.0)
 KPLS_GRID = ((5, 0.1), (10, 0.1), (10, 0.3), (20, 0.1))  # (components, gamma x 1/n_features)
 MIN_STD = 1e-3  # a channel that moves less than this in the training speech is not learned
@@ -129,7 +131,7 @@ class Standardise:
         return (X - self.mean) / self.scale
 
 
-def fit_model(name: str, X: np.ndarray, Y: np.ndarray, setting) -> Callable[[np.ndarray], np.ndarray]:
+def fit_model(name: str, X: np.ndarray, Y: np.ndarray, setting: Setting) -> Callable[[np.ndarray], np.ndarray]:
     """A fitted predictor X -> Y of one model and setting (standardisation fitted on X)."""
     st = Standardise(X)
     Z = st(X)
@@ -157,7 +159,7 @@ def fold_r(P: np.ndarray, Y: np.ndarray, folds: list[np.ndarray]) -> np.ndarray:
         return np.nanmean(r, axis=0) if np.isfinite(r).any() else np.full(Y.shape[1], np.nan)
 
 
-def choose_setting(name: str, X: np.ndarray, Y: np.ndarray, k: int = 4):
+def choose_setting(name: str, X: np.ndarray, Y: np.ndarray, k: int = 4) -> Setting:
     """The setting of ``name`` with the best mean r under a contiguous k-fold split of (X, Y)."""
     grid = settings_of(name)
     if len(grid) == 1:
@@ -206,7 +208,7 @@ def cross_validate(X: np.ndarray, Y: np.ndarray, k: int = 5, models: Sequence[st
     return out
 
 
-def to_table(name: str, setting, X: np.ndarray, Y: np.ndarray, channels: Sequence[str], spec: FeatureSpec,
+def to_table(name: str, setting: Setting, X: np.ndarray, Y: np.ndarray, channels: Sequence[str], spec: FeatureSpec,
              lookahead_s: float, gate_db: float, metadata: dict) -> VoiceTable:
     """The runtime table of ``name`` fitted on all of (X, Y)."""
     st = Standardise(X)

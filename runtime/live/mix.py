@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -43,6 +44,9 @@ from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.live.tracking_loss import LossSettings, voice_jaw
 from facepuppet.runtime.mapping.channels import canonical, filter_region
 from facepuppet.runtime.model.geometry import nlerp, smoothstep
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.voice.stage import VoiceStage
 
 MIX_KEYS = ("order", "ease_s", "regions", "channels")
 MIX_REGIONS = ("eyes", "brows", "mouth", "other", "head")
@@ -170,7 +174,7 @@ class VoiceMixSource:
 
     channels = ("jawOpen",)
 
-    def __init__(self, level: Callable[[float], float], loss: LossSettings, voice=None) -> None:
+    def __init__(self, level: Callable[[float], float], loss: LossSettings, voice: VoiceStage | None = None) -> None:
         self.level = level
         self.loss = loss
         self.voice = voice

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from facepuppet.runtime.live.stages import AudioTap
     from facepuppet.runtime.protocols import FrameSource
     from facepuppet.runtime.recording.recorder import PacketRecorder
+    from facepuppet.runtime.voice.stage import VoiceStage
 
 
 def png_workers() -> int:
@@ -164,7 +165,7 @@ class RecordingHook:
     """
 
     def __init__(self, recorder: PacketRecorder, source: FrameSource, audio: AudioTap | None = None,
-                 mix_sources: Sequence = (), voice=None) -> None:
+                 mix_sources: Sequence = (), voice: VoiceStage | None = None) -> None:
         self.recorder = recorder
         self.voice = voice
         self.mix_sources = tuple(mix_sources)

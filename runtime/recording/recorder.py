@@ -41,6 +41,8 @@ from facepuppet.runtime.recording.session import SessionWriter
 if TYPE_CHECKING:
     import os
 
+    import numpy as np
+
 logger = logging.getLogger(__name__)
 
 
@@ -98,7 +100,7 @@ class PacketRecorder:
         self._queue.append((RecordKind.AUDIO, t, level_db))
         self._wake.set()
 
-    def put_voice(self, t: float, values) -> None:
+    def put_voice(self, t: float, values: np.ndarray) -> None:
         """Queue one tick's voice channels (frame-loop thread; a copy is queued). Never blocks."""
         if len(self._queue) >= self.capacity:
             self.counters["record_dropped"] += 1

@@ -36,6 +36,8 @@ from typing import TYPE_CHECKING, Any
 from facepuppet.runtime.errors import UsageError
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from facepuppet.runtime.frames import Frame
     from facepuppet.runtime.protocols import InputAdapter
     from facepuppet.runtime.recording.recorder import PacketRecorder
@@ -331,7 +333,7 @@ class SwitchableRecorder:
         if r is not None:
             r.put_audio(t, level_db)
 
-    def put_voice(self, t: float, values) -> None:
+    def put_voice(self, t: float, values: np.ndarray) -> None:
         r = self._recorder
         if r is not None:
             r.put_voice(t, values)

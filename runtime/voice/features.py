@@ -22,6 +22,7 @@ the features a table was fitted on and those it meets at run time are the same n
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,7 +110,7 @@ class VoiceFeatures:
     thread, with this extractor: a voice source predicts there.
     """
 
-    def __init__(self, spec: FeatureSpec, on_hop=None) -> None:
+    def __init__(self, spec: FeatureSpec, on_hop: Callable[[VoiceFeatures], None] | None = None) -> None:
         self.spec = spec
         rate = spec.sample_rate
         self.window_n = max(8, int(round(spec.window_s * rate)))

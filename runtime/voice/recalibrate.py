@@ -11,9 +11,14 @@ that cannot make one (a vowel too quiet) leaves the old profile and says why.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from facepuppet.runtime.voice.vowels import VOWELS, VowelProfile, profile_from_rows
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.voice.source import VoiceChannels
 
 PHASES = ("silence", *VOWELS)
 
@@ -28,7 +33,7 @@ class Recalibration:
     profile : VowelProfile or None, the new profile once built
     """
 
-    def __init__(self, channels, seconds: float = 2.0) -> None:
+    def __init__(self, channels: VoiceChannels, seconds: float = 2.0) -> None:
         if not isinstance(channels.table, VowelProfile):
             raise ValueError("re-calibration: the voice is not a vowel profile (--voice PROFILE.toml)")
         self.channels = channels

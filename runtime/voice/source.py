@@ -29,6 +29,8 @@ from facepuppet.runtime.voice.vowels import VowelProfile
 if TYPE_CHECKING:
     import os
 
+    from facepuppet.runtime.inputs.audio import MicLevel
+
 MAX_DELAY_S = 1.0
 
 
@@ -71,7 +73,7 @@ class VoiceChannels:
 
     listener = None  # callable taking each hop's feature vector (a view), in the pushing thread: a recalibration
 
-    def use(self, model) -> None:
+    def use(self, model: VoiceTable | VowelProfile) -> None:
         """Evaluate ``model`` (a table or profile with the same outputs) from the next hop; call it from the thread
         that pushes (a recalibration finishing in its listener), so no hop sees half of the change."""
         if tuple(model.outputs) != tuple(self.table.outputs):
@@ -131,7 +133,7 @@ class WavVoice:
 class MicVoice:
     """The voice channels of the microphone: the blocks a MicLevel receives, pushed in its callback."""
 
-    def __init__(self, mic, table: VoiceTable, delay_s: float = 0.0) -> None:
+    def __init__(self, mic: MicLevel, table: VoiceTable, delay_s: float = 0.0) -> None:
         self.voice = VoiceChannels(table, mic.meter.sample_rate, delay_s)
         self.mic = mic
         mic.on_block = self.voice.push

@@ -16,12 +16,16 @@ a replay of the same ticks hands every later stage the same numbers. Where they 
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.mapping.channels import canonical
+
+if TYPE_CHECKING:
+    from facepuppet.runtime.voice.source import MicVoice, WavVoice
 
 VOICE_MODES = ("loss", "hybrid")
 VOICE = "voice"
@@ -53,7 +57,7 @@ class VoiceStage:
 
     name = "voice"
 
-    def __init__(self, source, make_frame: bool = False, path: str = "") -> None:
+    def __init__(self, source: WavVoice | MicVoice | RecordedVoice, make_frame: bool = False, path: str = "") -> None:
         self.source = source
         self.path = path  # the --voice file (the panel names it and saves a re-calibration over it)
         self.outputs = tuple(source.outputs)
@@ -120,7 +124,8 @@ class HybridMouth:
         return cached
 
 
-def with_voice(voice: VoiceStage, other=None):
+def with_voice(voice: VoiceStage, other: Callable[[float], Frame | None] | None = None
+               ) -> Callable[[float], Frame | None]:
     """The filter's loss generator: the voice's channels, over the face of ``other`` (the gesture layer's) if any."""
     def generate(t: float) -> Frame | None:
         base = other(t) if other is not None else None

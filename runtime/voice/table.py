@@ -78,7 +78,7 @@ VOICE_SCHEMA = register_schema(
 _KPLS = ("train_inputs", "dual_coef", "kernel_col_mean", "kernel_grand_mean")
 
 
-def spec_from_array(a: np.ndarray, path=None) -> FeatureSpec:
+def spec_from_array(a: np.ndarray, path: str | os.PathLike | None = None) -> FeatureSpec:
     """The FeatureSpec of a ``feature_spec`` section (TablesError naming the field when it is not one)."""
     rate, window, hop, n_mels, fmin, fmax, n_taps, step = (float(v) for v in a)
     ints = (n_mels, n_taps, step)
