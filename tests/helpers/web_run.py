@@ -6,33 +6,18 @@ The tests of the control API (tests/runtime/control) drive it with real WebSocke
 from __future__ import annotations
 
 import argparse
-import socket
 import threading
 import time
 from contextlib import contextmanager
 
 from pythonosc.udp_client import SimpleUDPClient
 
+from facepuppet.runtime.bench.web import free_port as free_web_port
 from facepuppet.runtime.commands import run
 
 from helpers.udp_helpers import free_udp_port
 from helpers.vmc_run import NO_SMOOTHING, send_vmc
 from helpers.vrm_characters import preset_character
-
-
-def free_web_port() -> int:
-    """A port free for TCP (the WebSocket) and UDP (OSC) at once on 127.0.0.1."""
-    for _ in range(50):
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as tcp:
-            tcp.bind(("127.0.0.1", 0))
-            port = tcp.getsockname()[1]
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
-                try:
-                    udp.bind(("127.0.0.1", port))
-                except OSError:
-                    continue
-                return port
-    raise RuntimeError("no port free for both TCP and UDP")
 
 
 class WebRun:
