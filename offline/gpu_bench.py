@@ -133,6 +133,7 @@ def measure_case(renderer: FaceRenderer, weights: np.ndarray, poses: np.ndarray,
         clock.stop()
     names = list(dict.fromkeys(name for frame in clock.frames for name in frame))
     k = n // 2  # one frame drawn with the queries, then again without: the same pixels
+    renderer.advance(0.0)  # both at one time, so spring bones stand where they stood (unadvanced, each frame steps)
     renderer.prepare(weights[k], head_rotation=poses[k])
     clock.start()
     renderer.submit(clock)
@@ -140,6 +141,7 @@ def measure_case(renderer: FaceRenderer, weights: np.ndarray, poses: np.ndarray,
     clock.stop()
     timed = renderer.read_pixels()
     clock.frames.pop()
+    renderer.advance(0.0)
     renderer.prepare(weights[k], head_rotation=poses[k])
     renderer.submit()
     untimed = renderer.read_pixels()
