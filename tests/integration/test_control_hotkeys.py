@@ -24,7 +24,7 @@ from helpers.web_run import free_web_port
 
 XK_J = 0x006A
 
-HOTKEYS = '\n[hotkeys]\nJ = { verb = "expression", name = "Joy", action = "toggle", fade = 0.0 }\n'
+HOTKEYS = '\n[hotkeys]\nJ = { verb = "expression", name = "Joy", action = "on", fade = 0.0 }\n'
 
 
 @pytest.mark.slow
@@ -58,14 +58,21 @@ def test_a_hotkey_in_the_window_fires_its_expression(x_display, tmp_path, monkey
             assert _smile(ws, lambda v: v == 0.0), "the run draws Joy before the key"
             monkeypatch.setenv("DISPLAY", x_display)
             x = XTest()
+            fired = False
             try:
-                x.move(100, 100)  # no window manager: the keyboard follows the pointer
-                x.key(XK_J, True)
-                time.sleep(0.05)
-                x.key(XK_J, False)
+                # "on", not "toggle": under load the window may map or take the pointer late, so the key is
+                # pressed again until Joy shows (a press that lands twice changes nothing)
+                for _ in range(10):
+                    x.move(100, 100)  # no window manager: the keyboard follows the pointer
+                    x.key(XK_J, True)
+                    time.sleep(0.05)
+                    x.key(XK_J, False)
+                    if _smile(ws, lambda v: v == pytest.approx(1.0), wait_s=4.0):
+                        fired = True
+                        break
             finally:
                 x.close()
-            assert _smile(ws, lambda v: v == pytest.approx(1.0)), "the hotkey J did not fire Joy"
+            assert fired, "the hotkey J did not fire Joy"
             ws.send(json.dumps({"verb": "status"}))
     finally:
         stop.set()
@@ -86,11 +93,11 @@ def _connect(port: int, run: subprocess.Popen):
     raise AssertionError("the run's WebSocket never answered")
 
 
-def _smile(ws, want) -> bool:
+def _smile(ws, want, wait_s: float = 30.0) -> bool:
     """Whether a weights message shows ``smile`` as wanted within a bounded wait for the run."""
-    end = time.monotonic() + 30
+    end = time.monotonic() + wait_s
     while time.monotonic() < end:
-        doc = json.loads(ws.recv(timeout=30))
+        doc = json.loads(ws.recv(timeout=wait_s))
         if doc.get("type") == "weights" and doc["weights"] and want(doc["weights"]["smile"]):
             return True
     return False
