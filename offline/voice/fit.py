@@ -297,4 +297,12 @@ def report_lines(report: dict) -> list[str]:
     for c in report["channels"]:
         lines.append(f"  {c:<22}" + "".join(f"{report['held_out_r'][n][c]:>10.3f}" for n in names))
     lines.append(f"  {'mean':<22}" + "".join(f"{report['mean_r'][n]:>10.3f}" for n in names))
+    best, r = report["best"], report["held_out_r"]
+    if best != "level" and "level" in r:
+        weak = [c for c in report["channels"] if not r[best][c] > r["level"][c]]
+        if weak:
+            lines.append(f"warning: {', '.join(weak)}: held-out r of {best} not above the voice level's; on speech "
+                         "this table never saw they follow the voice no better than the level does (more paired "
+                         "speech of this speaker is the way up; with --voice-mode loss, the default, a tracker "
+                         "drives them while it sees the face)")
     return lines

@@ -18,6 +18,7 @@ from facepuppet.offline.voice.fit import (
     contiguous_folds,
     cross_validate,
     fit_voice,
+    report_lines,
     to_table,
 )
 from helpers.voice_tables import write_wav
@@ -135,3 +136,14 @@ def test_on_the_kits_speech_every_model_is_scored_and_the_table_is_small(tmp_pat
     assert r["ridge"]["jawOpen"] > r["level"]["jawOpen"]  # measured 0.70 vs 0.63
     assert r["ridge"]["mouthFunnel"] > r["level"]["mouthFunnel"]  # measured 0.50 vs 0.35
     assert table.save(tmp_path / "v.npz").stat().st_size < 1_000_000
+
+
+def test_the_report_names_the_channels_the_kept_model_does_not_lift_above_the_level():
+    report = {"folds": 5, "frames": 100, "best": "ridge", "channels": ["jawOpen", "mouthUpperUpLeft"],
+              "held_out_r": {"level": {"jawOpen": 0.6, "mouthUpperUpLeft": 0.19},
+                             "ridge": {"jawOpen": 0.7, "mouthUpperUpLeft": 0.17}},
+              "mean_r": {"level": 0.4, "ridge": 0.43}}
+    warnings = [line for line in report_lines(report) if line.startswith("warning:")]
+    assert len(warnings) == 1 and "mouthUpperUpLeft" in warnings[0] and "jawOpen" not in warnings[0]
+    report["held_out_r"]["ridge"]["mouthUpperUpLeft"] = 0.25  # above the level everywhere: nothing to say
+    assert not [line for line in report_lines(report) if line.startswith("warning:")]
