@@ -9,7 +9,9 @@ address                     args (extra ones ignored)         effect
 ``/VMC/Ext/Blend/Apply``    none                              emits one Frame of the values since
                                                               the last Apply (NaN where not sent)
 ``/VMC/Ext/Bone/Pos``       ``s name, f px py pz qx qy qz qw``  bone ``Head``: kept, attached to
-                                                              every later frame; other bones ignored
+                                                              every later frame; ``LeftEye`` /
+                                                              ``RightEye``: the gaze (see Eyes);
+                                                              other bones ignored
 ``/VMC/Ext/Root/Pos``       ``s name, f px py pz qx qy qz qw``  kept in :attr:`VmcAdapter.root_position`
                                                               / :attr:`root_rotation`
 ``/VMC/Ext/OK``             ``i loaded [i calibState calibMode  kept in :attr:`VmcAdapter.status`
@@ -59,6 +61,14 @@ room position (metres, not an offset of the head) and stays in
 :attr:`VmcAdapter.trackers`. Once a ``Head`` bone has come, trackers no longer
 move the head. At most ``MAX_TRACKERS`` serials are kept; further new ones
 are counted as ``unknown_address``.
+
+**Eyes.** The ``LeftEye`` and ``RightEye`` bones (their local rotation, the
+rest being the identity as in a VRM's normalised humanoid) are kept like the
+head and give every later frame the eyeLook* weights its blend values did not
+send: the bone's forward axis gives a yaw (+ toward the avatar's own left) and
+a pitch, at :data:`~facepuppet.runtime.inputs.phone.EYE_RANGE_DEG` degrees for
+weight 1, as the phone adapters write eye angles, so a look-at avatar turns its
+eyes by the sender's eye bones (:mod:`facepuppet.runtime.model.look_at`).
 """
 
 from __future__ import annotations
@@ -70,6 +80,7 @@ import numpy as np
 
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.osc import OscAdapter, all_finite, as_float, finite32, floats
+from facepuppet.runtime.inputs.phone import eyes_into
 from facepuppet.runtime.mapping.channels import ARKIT_NAMES, canonical
 from facepuppet.runtime.mapping.expressions import preset_of
 
@@ -114,6 +125,17 @@ PRESETS: dict[str, tuple[tuple[str, float], ...]] = {
 _CACHE_LIMIT = 1024  # name lookups remembered (bounded: a hostile sender can invent names)
 MAX_TRACKERS = 64  # tracker serials kept (bounded for the same reason)
 _TRACKERS = {"/VMC/Ext/Tra/Pos": "tracker", "/VMC/Ext/Hmd/Pos": "hmd"}
+
+
+_EYE_BONES = {"LeftEye": "Left", "RightEye": "Right"}
+
+
+def _gaze_angles(q: np.ndarray) -> tuple[float, float]:
+    """(pitch down, yaw toward the avatar's own left), degrees, of an eye bone's rotation (x, y, z, w), our
+    axes: where it turns the forward axis +Z."""
+    x, y, z, w = (float(v) for v in q)
+    fx, fy, fz = 2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)
+    return -math.degrees(math.atan2(fy, math.hypot(fx, fz))), math.degrees(math.atan2(fx, fz))
 
 
 def unity_to_ours(position: Sequence[float], rotation: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -171,6 +193,7 @@ class VmcAdapter(OscAdapter):
         self.camera: dict | None = None
         self.trackers: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
         self.head_source = "none"
+        self._eyes: dict[str, tuple[float, float]] = {}  # side -> (pitch down, yaw to the left), degrees
 
     def _message(self, address: str, params: list, t: float) -> None:
         if address == "/VMC/Ext/Blend/Val":
@@ -248,6 +271,8 @@ class VmcAdapter(OscAdapter):
         missing = np.isnan(weights)
         if missing.any():
             weights[missing] = np.array(preset, dtype=np.float32)[missing]
+        for side, (pitch, yaw) in self._eyes.items():
+            eyes_into(weights, side, pitch, yaw)
         n = len(direct)
         self._direct = [math.nan] * n
         self._preset = [math.nan] * n
@@ -281,6 +306,11 @@ class VmcAdapter(OscAdapter):
         return params[0], values, unity_to_ours(values[:3], [q / norm for q in values[3:7]])
 
     def _pose(self, params: list, root: bool) -> None:
+        if not root and params and type(params[0]) is str and params[0] in _EYE_BONES:
+            pose = self._named_pose(params)
+            if pose is not None:
+                self._eyes[_EYE_BONES[pose[0]]] = _gaze_angles(pose[2][1])
+            return
         if not root and params and type(params[0]) is str and params[0] != "Head":
             if floats(params, 1, 7) is None:
                 self._count("malformed")

@@ -222,3 +222,31 @@ def test_the_avatars_expression_names_arrive_as_their_own_channels_in_any_vrm_sp
     g = a.handle(blend(("Joy", 0.9), ("Sorrow", 0.5)), 2.0)  # Sorrow: not the avatar's -> the ARKit approximation
     assert g.weights[at["Joy"]] == pytest.approx(0.9) and g.weights[INDEX["browInnerUp"]] == pytest.approx(0.5)
     counts(a, datagrams=2, frames=2)
+
+
+def _unity_turn(axis: int, degrees: float) -> list[float]:
+    q = [0.0, 0.0, 0.0, math.cos(math.radians(degrees) / 2)]
+    q[axis] = math.sin(math.radians(degrees) / 2)
+    return q
+
+
+def test_eye_bones_give_the_eye_look_weights_the_blend_values_did_not_send():
+    a = VmcAdapter()
+    # Unity: +20 deg about +y turns the eyes to the avatar's right (x is its right there): the left eye in,
+    # the right eye out; +15 deg about +x looks down. 30 deg is weight 1, as the phone adapters write angles.
+    a.handle(bundle(msg("/VMC/Ext/Bone/Pos", "LeftEye", 0.03, 0.05, 0.0, *_unity_turn(1, 20.0)),
+                    msg("/VMC/Ext/Bone/Pos", "RightEye", -0.03, 0.05, 0.0, *_unity_turn(1, 20.0))), 1.0)
+    f = a.handle(blend(("JawOpen", 0.1)), 1.1)
+    w = dict(zip(f.channels, f.weights))
+    assert w["eyeLookInLeft"] == pytest.approx(20 / 30, abs=1e-5)
+    assert w["eyeLookOutRight"] == pytest.approx(20 / 30, abs=1e-5)
+    assert w["eyeLookOutLeft"] == 0 and w["eyeLookInRight"] == 0 and w["eyeLookUpLeft"] == 0
+    assert f.head_rotation is None  # eye bones do not turn the head
+    a.handle(bundle(msg("/VMC/Ext/Bone/Pos", "LeftEye", 0.0, 0.0, 0.0, *_unity_turn(0, 15.0))), 1.2)
+    f = a.handle(blend(("EyeLookDownLeft", 0.9)), 1.3)  # a sent weight wins over the bone's
+    w = dict(zip(f.channels, f.weights))
+    assert w["eyeLookDownLeft"] == pytest.approx(0.9) and w["eyeLookInLeft"] == pytest.approx(0.0, abs=1e-5)
+    assert w["eyeLookInRight"] == 0 and w["eyeLookOutRight"] == pytest.approx(20 / 30, abs=1e-5)
+    a.handle(bundle(msg("/VMC/Ext/Bone/Pos", "LeftEye", 0.0, 0.0, 0.0, *_unity_turn(0, 15.0))), 1.4)
+    f = a.handle(blend(("JawOpen", 0.1)), 1.5)
+    assert dict(zip(f.channels, f.weights))["eyeLookDownLeft"] == pytest.approx(0.5, abs=1e-5)
