@@ -62,6 +62,19 @@ STEP_S = 1.0 / 60.0
 MAX_GAP_S = 0.5
 
 
+#: ``(v, c) @ _SKEW_EYE`` is ``[v]x + c I`` flattened row-major (9,): the cross-product matrix of ``v`` (rows 0-2,
+#: ``v @ _SKEW_EYE[:3]`` alone) plus ``c`` on the diagonal (row 3).
+_SKEW_EYE = np.zeros((4, 9))
+_SKEW_EYE[[2, 1, 2, 0, 1, 0], [1, 2, 3, 5, 6, 7]] = (-1, 1, 1, -1, -1, 1)
+_SKEW_EYE[3, ::4] = 1.0
+
+
+def _turn_rows(m: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+    """``out[i] = m[i] @ v[i]`` for (n, 3, 3) ``m`` and (n, 3) ``v``: one batched product (a ufunc, where einsum's
+    Python dispatch costs more than the arithmetic of a few joints)."""
+    np.matmul(m, v[:, :, None], out=out[:, :, None])
+
+
 class SpringBones:
     """The spring bones of one character, stepped on its frames' time.
 
@@ -100,6 +113,7 @@ class SpringBones:
         self._a3, self._b3, self._sq = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
         self._len = np.zeros(n)
         self._k = np.zeros(n)
+        self._skew9, self._vc = np.zeros((n, 9)), np.zeros((n, 4))
         self._frame = np.zeros((n, 4, 4))  # each joint's unturned frame this step
         self._anchors = np.zeros((n, 4, 4))
         self._rot = np.zeros((n, 3, 3))
@@ -179,7 +193,7 @@ class SpringBones:
         cur = self._wd_cur
         cur[MODEL_ROW] = self._identity if model is None else model
         if len(self._drv):
-            np.take(skinning, self._lay.driver_nodes, axis=0, out=self._drv32, mode="clip")
+            skinning.take(self._lay.driver_nodes, axis=0, out=self._drv32, mode="clip")
             self._drv[:] = self._drv32
             np.matmul(self._drv, self._lay.g_drivers, out=self._drv)
             np.matmul(cur[MODEL_ROW], self._drv, out=cur[2:])
@@ -212,9 +226,9 @@ class SpringBones:
         if not self._has_center:
             out[:] = points
             return out
-        np.take(self._w, self._lay.center_row, axis=0, out=self._centers, mode="clip")
+        self._w.take(self._lay.center_row, axis=0, out=self._centers, mode="clip")
         inv = np.linalg.inv(self._centers)
-        np.einsum("nij,nj->ni", inv[:, :3, :3], points, out=out)
+        _turn_rows(inv[:, :3, :3], points, out)
         out += inv[:, :3, 3]
         return out
 
@@ -222,16 +236,16 @@ class SpringBones:
         if not self._has_center:
             out[:] = points
             return out
-        np.take(self._w, self._lay.center_row, axis=0, out=self._centers, mode="clip")
-        np.einsum("nij,nj->ni", self._centers[:, :3, :3], points, out=out)
+        self._w.take(self._lay.center_row, axis=0, out=self._centers, mode="clip")
+        _turn_rows(self._centers[:, :3, :3], points, out)
         out += self._centers[:, :3, 3]
         return out
 
-    def _dot(self, a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """Row dot products (n,) of ``a``, ``b`` (n, 3) into ``out`` (einsum would buffer the products)."""
-        sq = self._sq[:len(a)]
-        np.multiply(a, b, out=sq)
-        return np.sum(sq, axis=1, out=out)
+    @staticmethod
+    def _dot(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Row dot products (n,) of ``a``, ``b`` (n, 3) into ``out``: one (1, 3) · (3, 1) product per row."""
+        np.matmul(a[:, None, :], b[:, :, None], out=out[:, None, None])
+        return out
 
     def _normalise_to(self, v: np.ndarray, length: np.ndarray | float, lens: np.ndarray) -> np.ndarray:
         """``v`` (n, 3) scaled in place to ``length``."""
@@ -252,19 +266,19 @@ class SpringBones:
         a3 *= lay.inertia
         new += a3  # 1: inertia
         if self.rig.n_colliders:
-            np.take(w, lay.collider_row, axis=0, out=self._cw, mode="clip")
-            np.einsum("cij,cj->ci", self._cw[:, :3, :3], self.rig.collider_offset, out=self._c_start)
+            w.take(lay.collider_row, axis=0, out=self._cw, mode="clip")
+            _turn_rows(self._cw[:, :3, :3], self.rig.collider_offset, self._c_start)
             self._c_start += self._cw[:, :3, 3]
-            np.einsum("cij,cj->ci", self._cw[:, :3, :3], self.rig.collider_tail, out=self._c_end)
+            _turn_rows(self._cw[:, :3, :3], self.rig.collider_tail, self._c_end)
             self._c_end += self._cw[:, :3, 3]
         for (s, e), hits in zip(lay.levels, self._level_hits):
             frame = self._frame[s:e]
-            np.take(w, lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
+            w.take(lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
             np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=frame)  # the joint's frame, unturned
             head, rot = frame[:, :3, 3], frame[:, :3, :3]
             axis, nxt, d, lens = a3[s:e], new[s:e], b3[s:e], self._len[s:e]
-            np.einsum("nij,nj->ni", rot, lay.axis[s:e], out=axis)
-            self._normalise_to(axis, lay.push[s:e, 0], lens)
+            _turn_rows(rot, lay.axis[s:e], axis)  # the unit rest axis carried, times the frame's scale
+            axis *= lay.push[s:e]
             nxt += axis  # 2: stiffness
             nxt += lay.gravity[s:e]  # 3: gravity
             np.subtract(nxt, head, out=d)
@@ -273,9 +287,9 @@ class SpringBones:
                 self._collide(s, e, head)  # 5: collisions
             # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame
             np.subtract(nxt, head, out=d)
-            np.einsum("nji,nj->ni", rot, d, out=axis)
+            _turn_rows(rot.transpose(0, 2, 1), d, axis)
             self._normalise_to(axis, 1.0, lens)
-            self._rotation_between(lay.axis[s:e], axis, self._turn[s:e], d, lens)
+            self._rotation_between(lay.axis[s:e], axis, self._turn[s:e])
             np.matmul(rot, self._turn[s:e], out=self._rot[s:e])
             rot[:] = self._rot[s:e]
             w[j0 + s:j0 + e] = frame
@@ -289,15 +303,15 @@ class SpringBones:
         np.subtract(nxt[:, None, :], self._c_start[None], out=rel)
         if self._any_capsule:  # from the closest point of a capsule's segment (a sphere: its centre)
             np.subtract(self._c_end, self._c_start, out=self._seg)
-            np.einsum("ci,ci->c", self._seg, self._seg, out=self._seg_sq)
+            self._dot(self._seg, self._seg, self._seg_sq)
             np.maximum(self._seg_sq, 1e-12, out=self._seg_sq)
-            np.einsum("nci,ci->nc", rel, self._seg, out=nc)
+            np.matmul(rel[:, :, None, :], self._seg[None, :, :, None], out=nc[:, :, None, None])
             nc /= self._seg_sq
             np.clip(nc, 0.0, 1.0, out=nc)
             nc *= self._capsule
             np.multiply(nc[:, :, None], self._seg[None], out=self._rel2[s:e])
             rel -= self._rel2[s:e]
-        np.einsum("nci,nci->nc", rel, rel, out=nc)
+        np.matmul(rel[:, :, None, :], rel[:, :, :, None], out=nc[:, :, None, None])
         np.sqrt(nc, out=nc)  # distances
         np.subtract(lay.reach[s:e], nc, out=depth)
         np.greater(depth, 0.0, out=inside)
@@ -309,46 +323,38 @@ class SpringBones:
         np.logical_not(inside, out=self._outside[s:e])
         np.copyto(depth, 0.0, where=self._outside[s:e])
         push = self._a3[s:e]
-        np.einsum("nc,nci->ni", depth, rel, out=push)
+        np.matmul(depth[:, None, :], rel, out=push[:, None, :])
         nxt += push
         d = self._b3[s:e]
         np.subtract(nxt, head, out=d)
         np.add(head, self._normalise_to(d, lay.length[s:e], self._len[s:e]), out=nxt)
 
-    def _rotation_between(self, a: np.ndarray, b: np.ndarray, out: np.ndarray, v: np.ndarray,
-                          c: np.ndarray) -> None:
-        """``out`` (n, 3, 3): the rotations turning unit vectors ``a`` onto ``b`` (n, 3), Rodrigues' formula for
-        unit vectors ``R = c I + [v]x + v vᵀ / (1 + c)`` with v = a × b, c = a · b (``v``, ``c``: scratch)."""
-        ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
-        bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
-        k = self._k[:len(a)]
-        for i, (p, q, r, t) in enumerate(((ay, bz, az, by), (az, bx, ax, bz), (ax, by, ay, bx))):
-            np.multiply(p, q, out=v[:, i])
-            np.multiply(r, t, out=k)
-            v[:, i] -= k
+    def _rotation_between(self, a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+        """``out`` (n, 3, 3), contiguous: the rotations turning unit vectors ``a`` onto ``b`` (n, 3), Rodrigues'
+        formula for unit vectors ``R = [v]x + c I + v vᵀ / (1 + c)`` with v = a × b, c = a · b.
+
+        The cross product is ``[a]x`` times ``b``, and ``[v]x + c I`` flattened is ``(v, c)`` times the
+        constant :data:`_SKEW_EYE` (4, 9): each term is one batched product, a dozen whole-array operations
+        whatever the number of joints (a broadcast product would be buffered)."""
+        n = len(a)
+        skew, vc, k, vk = self._skew9[:n], self._vc[:n], self._k[:n], self._sq[:n]
+        v, c = vc[:, :3], vc[:, 3]
+        np.matmul(a, _SKEW_EYE[:3], out=skew)
+        np.matmul(skew.reshape(n, 3, 3), b[:, :, None], out=v[:, :, None])  # v = a × b
         self._dot(a, b, c)
         np.add(c, 1.0, out=k)
         np.maximum(k, 1e-9, out=k)
         np.divide(1.0, k, out=k)
-        vk = self._sq[:len(a)]  # v / (1 + c), column by column (a broadcast product would be buffered)
-        for j in range(3):
-            np.multiply(v[:, j], k, out=vk[:, j])
-        for i in range(3):
-            for j in range(3):
-                np.multiply(v[:, i], vk[:, j], out=out[:, i, j])
-            out[:, i, i] += c
-        out[:, 0, 1] -= v[:, 2]
-        out[:, 1, 0] += v[:, 2]
-        out[:, 0, 2] += v[:, 1]
-        out[:, 2, 0] -= v[:, 1]
-        out[:, 1, 2] -= v[:, 0]
-        out[:, 2, 1] += v[:, 0]
+        np.matmul(k[:, None, None], v[:, None, :], out=vk[:, None, :])
+        np.matmul(v[:, :, None], vk[:, None, :], out=out)  # v vᵀ / (1 + c)
+        np.matmul(vc, _SKEW_EYE, out=skew)
+        out.reshape(n, 9)[:] += skew  # + [v]x + c I
 
     def _pose_frames(self) -> None:
         """The joints' world frames at the frame's pose with the last step's turns (``W``'s joint rows)."""
         lay, w, j0 = self._lay, self._w, self._nj0
         for s, e in lay.levels:
-            np.take(w, lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
+            w.take(lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
             np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=self._frame[s:e])
             np.matmul(self._frame[s:e], self._turn4[s:e], out=w[j0 + s:j0 + e])
 
@@ -364,5 +370,5 @@ class SpringBones:
         self._skin32[:] = self._skin2
         skinning[lay.node] = self._skin32
         if len(lay.follow_nodes):
-            np.take(skinning, lay.node[lay.follow_joint], axis=0, out=self._follow, mode="clip")
+            skinning.take(lay.node[lay.follow_joint], axis=0, out=self._follow, mode="clip")
             skinning[lay.follow_nodes] = self._follow
