@@ -116,7 +116,6 @@ class SpringBones:
         self._skew9, self._vc = np.zeros((n, 9)), np.zeros((n, 4))
         self._frame = np.zeros((n, 4, 4))  # each joint's unturned frame this step
         self._anchors = np.zeros((n, 4, 4))
-        self._rot = np.zeros((n, 3, 3))
         self._turn = np.tile(np.eye(3), (n, 1, 1))  # each joint's turn from its rest, in its rest frame
         self._turn4 = np.tile(np.eye(4), (n, 1, 1))
         self._centers = np.zeros((n, 4, 4))
@@ -130,17 +129,21 @@ class SpringBones:
         self._any_capsule = bool((rig.collider_shape == 1).any())
         self._capsule = (rig.collider_shape == 1).astype(np.float64)
         self._cw = np.zeros((c, 4, 4))
-        self._c_start, self._c_end, self._seg = np.zeros((c, 3)), np.zeros((c, 3)), np.zeros((c, 3))
+        self._c_local = np.ones((c, 4, 2))
+        self._c_local[:, :3, 0], self._c_local[:, :3, 1] = rig.collider_offset, rig.collider_tail
+        self._c_world = np.zeros((c, 4, 2))
+        self._c_start, self._c_end = self._c_world[:, :3, 0], self._c_world[:, :3, 1]  # views
+        self._seg = np.zeros((c, 3))
         self._seg_sq = np.zeros(c)
         self._rel = np.zeros((n, c, 3))
         self._rel2 = np.zeros((n, c, 3))
         self._nc = np.zeros((n, c))
         self._depth = np.zeros((n, c))
-        self._inside = np.zeros((n, c), bool)
-        self._outside = np.zeros((n, c), bool)
         self._level_hits = [bool(lay.hits[a:b].any()) for a, b in lay.levels]
         self._t_sim = self._t_last = None
+        self._at_frame = False  # the last step's drivers were this frame's (its joint rows of W are the pose's)
         self.steps = 0
+        self._reach = np.where(lay.hits, lay.reach, -np.inf)  # a pair that does not collide is never inside
 
     # -- per frame ------------------------------------------------------------------------------------------
     def reset(self) -> None:
@@ -168,6 +171,7 @@ class SpringBones:
         if self._t_last is None or t < self._t_last or t - self._t_last > MAX_GAP_S:
             self._start(t)
         else:
+            self._at_frame = False
             span = t - self._t_last
             while self._t_sim + self.step_s <= t + 1e-9:
                 alpha = 1.0 if span <= 0 else (self._t_sim + self.step_s - self._t_last) / span
@@ -176,7 +180,7 @@ class SpringBones:
                 self._t_sim += self.step_s
                 self.steps += 1
             self._t_last = t
-        self._wd_prev[:] = self._wd_cur
+        self._wd_prev, self._wd_cur = self._wd_cur, self._wd_prev  # row 0 (the world) is the identity in both
         self._pose(skinning)
         return skinning
 
@@ -204,13 +208,19 @@ class SpringBones:
         inv[:3, 3] *= -1.0
 
     def _wd_lerp(self, alpha: float) -> None:
+        """The drivers at ``alpha`` between the last frame's and this frame's (``W``'s rows before the joints)."""
         w = self._w[:self._nj0]
+        self._at_frame = alpha == 1.0  # a frame on the step grid: the step's joint frames are the frame's own
+        if self._at_frame:
+            w[:] = self._wd_cur
+            return
         np.multiply(self._wd_prev, 1.0 - alpha, out=w)
         np.multiply(self._wd_cur, alpha, out=self._wd_tmp)
         w += self._wd_tmp
 
     def _start(self, t: float) -> None:
         """At rest in the current pose: tails where the pose puts them, no velocity."""
+        self._at_frame = False
         self._w[:self._nj0] = self._wd_cur
         self._turn[:] = np.eye(3)
         self._turn4[:, :3, :3] = self._turn
@@ -260,46 +270,50 @@ class SpringBones:
         """One step of :data:`STEP_S` for every joint, level by level (the numbered steps of the module doc)."""
         lay, w, j0 = self._lay, self._w, self._nj0
         new, a3, b3 = self._new, self._a3, self._b3
-        self._from_center(self._cur, new)
-        self._from_center(self._prev, a3)
-        np.subtract(new, a3, out=a3)
-        a3 *= lay.inertia
-        new += a3  # 1: inertia
+        if self._has_center:
+            self._from_center(self._cur, new)
+            self._from_center(self._prev, a3)
+            np.subtract(new, a3, out=a3)
+            a3 *= lay.inertia
+            new += a3  # 1: inertia
+        else:
+            np.subtract(self._cur, self._prev, out=a3)
+            a3 *= lay.inertia
+            np.add(self._cur, a3, out=new)  # 1: inertia
         if self.rig.n_colliders:
             w.take(lay.collider_row, axis=0, out=self._cw, mode="clip")
-            _turn_rows(self._cw[:, :3, :3], self.rig.collider_offset, self._c_start)
-            self._c_start += self._cw[:, :3, 3]
-            _turn_rows(self._cw[:, :3, :3], self.rig.collider_tail, self._c_end)
-            self._c_end += self._cw[:, :3, 3]
+            np.matmul(self._cw, self._c_local, out=self._c_world)  # offset and tail as homogeneous columns
         for (s, e), hits in zip(lay.levels, self._level_hits):
             frame = self._frame[s:e]
             w.take(lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
             np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=frame)  # the joint's frame, unturned
             head, rot = frame[:, :3, 3], frame[:, :3, :3]
             axis, nxt, d, lens = a3[s:e], new[s:e], b3[s:e], self._len[s:e]
-            _turn_rows(rot, lay.axis[s:e], axis)  # the unit rest axis carried, times the frame's scale
-            axis *= lay.push[s:e]
+            _turn_rows(rot, lay.axis[s:e], axis)
+            self._normalise_to(axis, lay.push[s:e, 0], lens)  # (an interpolated frame is not rigid)
             nxt += axis  # 2: stiffness
             nxt += lay.gravity[s:e]  # 3: gravity
             np.subtract(nxt, head, out=d)
             np.add(head, self._normalise_to(d, lay.length[s:e], lens), out=nxt)  # 4: length
             if hits:
                 self._collide(s, e, head)  # 5: collisions
-            # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame
-            np.subtract(nxt, head, out=d)
+            # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame (``d``: the tail from the
+            # head after 4 and 5)
             _turn_rows(rot.transpose(0, 2, 1), d, axis)
             self._normalise_to(axis, 1.0, lens)
             self._rotation_between(lay.axis[s:e], axis, self._turn[s:e])
-            np.matmul(rot, self._turn[s:e], out=self._rot[s:e])
-            rot[:] = self._rot[s:e]
-            w[j0 + s:j0 + e] = frame
-        self._prev[:] = self._cur
-        self._to_center(new, self._cur)
+            np.matmul(rot, self._turn[s:e], out=w[j0 + s:j0 + e, :3, :3])
+            w[j0 + s:j0 + e, :3, 3] = head  # the bottom row stays (0, 0, 0, 1)
+        if self._has_center:
+            self._prev[:] = self._cur
+            self._to_center(new, self._cur)
+        else:  # the buffers turned round: previous <- current <- new, the old previous is the next new
+            self._prev, self._cur, self._new = self._cur, self._new, self._prev
 
     def _collide(self, s: int, e: int, head: np.ndarray) -> None:
         """The level's tails pushed out of the colliders they hit, then put back at bone length."""
         lay, nxt = self._lay, self._new[s:e]
-        rel, nc, depth, inside = self._rel[s:e], self._nc[s:e], self._depth[s:e], self._inside[s:e]
+        rel, nc, depth = self._rel[s:e], self._nc[s:e], self._depth[s:e]
         np.subtract(nxt[:, None, :], self._c_start[None], out=rel)
         if self._any_capsule:  # from the closest point of a capsule's segment (a sphere: its centre)
             np.subtract(self._c_end, self._c_start, out=self._seg)
@@ -313,15 +327,12 @@ class SpringBones:
             rel -= self._rel2[s:e]
         np.matmul(rel[:, :, None, :], rel[:, :, :, None], out=nc[:, :, None, None])
         np.sqrt(nc, out=nc)  # distances
-        np.subtract(lay.reach[s:e], nc, out=depth)
-        np.greater(depth, 0.0, out=inside)
-        inside &= lay.hits[s:e]
-        if not inside.any():
+        np.subtract(self._reach[s:e], nc, out=depth)
+        np.maximum(depth, 0.0, out=depth)  # how far inside (0: outside, or a pair that does not collide)
+        if not depth.any():
             return
         np.maximum(nc, 1e-12, out=nc)
         np.divide(depth, nc, out=depth)
-        np.logical_not(inside, out=self._outside[s:e])
-        np.copyto(depth, 0.0, where=self._outside[s:e])
         push = self._a3[s:e]
         np.matmul(depth[:, None, :], rel, out=push[:, None, :])
         nxt += push
@@ -362,9 +373,10 @@ class SpringBones:
         """The joints' skinning matrices at the frame's pose with the last step's turns: the roots of the chains
         stay on the head as it is now (the steps may be up to one step behind)."""
         lay = self._lay
-        self._w[:self._nj0] = self._wd_cur
-        self._turn4[:, :3, :3] = self._turn
-        self._pose_frames()
+        if not self._at_frame:
+            self._w[:self._nj0] = self._wd_prev  # this frame's drivers (advance turned the buffers round)
+            self._turn4[:, :3, :3] = self._turn
+            self._pose_frames()
         np.matmul(self._w[self._nj0:], lay.g_inv, out=self._skin)
         np.matmul(self._inv_model, self._skin, out=self._skin2)
         self._skin32[:] = self._skin2

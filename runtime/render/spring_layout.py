@@ -46,7 +46,7 @@ class SpringLayout:
     axis : ndarray (n, 3), the unit rest direction of each joint's tail in its frame
     length : ndarray (n,), the bone lengths in world units
     inertia : ndarray (n, 3), 1 - drag (repeated per axis: an in-place product without broadcasting)
-    push : ndarray (n, 1), stiffness · step / the joint's scale (its frame's axis is that long)
+    push : ndarray (n, 1), stiffness · step
     gravity : ndarray (n, 3), gravity direction · power · step
     hits : ndarray (n, n_colliders) bool; reach : ndarray (n, n_colliders), collider radius + hit radius
     follow_nodes, follow_joint : ndarray (m,) int64, nodes below a joint that are not joints and the position
@@ -136,8 +136,7 @@ def spring_layout(rig: SpringRig, skeleton: Skeleton, step_s: float) -> SpringLa
         center_row=np.array([row[int(c)] if c >= 0 else WORLD_ROW for c in rig.center[order]], np.int64),
         collider_row=np.array([row[int(c)] for c in rig.collider_node], np.int64),
         axis=tail / np.maximum(rest_length, 1e-12)[:, None], length=rest_length * scale,
-        inertia=np.repeat((1.0 - rig.drag[order])[:, None], 3, axis=1),
-        push=(rig.stiffness[order] * step_s / np.maximum(scale, 1e-12))[:, None],
+        inertia=np.repeat((1.0 - rig.drag[order])[:, None], 3, axis=1), push=(rig.stiffness[order] * step_s)[:, None],
         gravity=rig.gravity_dir[order] * (rig.gravity_power[order] * step_s)[:, None],
         hits=hits, reach=rig.collider_radius[None, :] + rig.hit_radius[order][:, None],
         follow_nodes=np.array([s for s, _ in follow], np.int64),
