@@ -108,7 +108,7 @@ class SpringBones:
         self._wd_cur = np.tile(np.eye(4), (nd + 2, 1, 1))
         self._wd_tmp = np.zeros((nd + 2, 4, 4))
         self._drv32 = np.zeros((nd, 4, 4), np.float32)
-        self._drv = np.zeros((nd, 4, 4))
+        self._drv, self._drv_rest = np.zeros((nd, 4, 4)), np.zeros((nd, 4, 4))
         self._cur, self._prev, self._new = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
         self._a3, self._b3, self._sq = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
         self._len = np.zeros(n)
@@ -199,8 +199,8 @@ class SpringBones:
         if len(self._drv):
             skinning.take(self._lay.driver_nodes, axis=0, out=self._drv32, mode="clip")
             self._drv[:] = self._drv32
-            np.matmul(self._drv, self._lay.g_drivers, out=self._drv)
-            np.matmul(cur[MODEL_ROW], self._drv, out=cur[2:])
+            np.matmul(self._drv, self._lay.g_drivers, out=self._drv_rest)  # (in place would copy its input)
+            np.matmul(cur[MODEL_ROW], self._drv_rest, out=cur[2:])
         m = cur[MODEL_ROW]  # rigid: the inverse is the transpose and the turned translation
         inv = self._inv_model
         inv[:3, :3] = m[:3, :3].T
