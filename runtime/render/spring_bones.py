@@ -37,6 +37,14 @@ them one after the other; the two differ only for a tail inside two colliders
 at once). Bones are assumed uniformly scaled (turns are taken from the
 transposed rest frame).
 
+**Few calls.** For the few dozen joints of an avatar the arithmetic is nothing
+and each NumPy call's dispatch (about a microsecond, twice that when drawing
+the frame has left the caches cold) is the cost, so a step is arranged in as
+few calls as the algorithm allows: batched products (``matmul``) for the
+rotations, dot products and Rodrigues' formula, buffers turned round rather
+than copied, and the pose reusing the last step's joint frames when that step
+was at the frame's own drivers (a frame on the step grid).
+
 **Preallocated.** Every array a step or a frame writes (tails, frames, turns,
 collision distances, the skinning matrices) is allocated once, in the
 constructor; the arithmetic writes into them (``out=``, in place), the level
@@ -60,6 +68,19 @@ from facepuppet.runtime.render.spring_layout import MODEL_ROW, WORLD_ROW, spring
 STEP_S = 1.0 / 60.0
 #: A gap between frames longer than this (or time going back) restarts the simulation at rest.
 MAX_GAP_S = 0.5
+
+
+#: ``(v, c) @ _SKEW_EYE`` is ``[v]x + c I`` flattened row-major (9,): the cross-product matrix of ``v`` (rows 0-2,
+#: ``v @ _SKEW_EYE[:3]`` alone) plus ``c`` on the diagonal (row 3).
+_SKEW_EYE = np.zeros((4, 9))
+_SKEW_EYE[[2, 1, 2, 0, 1, 0], [1, 2, 3, 5, 6, 7]] = (-1, 1, 1, -1, -1, 1)
+_SKEW_EYE[3, ::4] = 1.0
+
+
+def _turn_rows(m: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+    """``out[i] = m[i] @ v[i]`` for (n, 3, 3) ``m`` and (n, 3) ``v``: one batched product (a ufunc, where einsum's
+    Python dispatch costs more than the arithmetic of a few joints)."""
+    np.matmul(m, v[:, :, None], out=out[:, :, None])
 
 
 class SpringBones:
@@ -95,14 +116,14 @@ class SpringBones:
         self._wd_cur = np.tile(np.eye(4), (nd + 2, 1, 1))
         self._wd_tmp = np.zeros((nd + 2, 4, 4))
         self._drv32 = np.zeros((nd, 4, 4), np.float32)
-        self._drv = np.zeros((nd, 4, 4))
+        self._drv, self._drv_rest = np.zeros((nd, 4, 4)), np.zeros((nd, 4, 4))
         self._cur, self._prev, self._new = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
         self._a3, self._b3, self._sq = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
         self._len = np.zeros(n)
         self._k = np.zeros(n)
+        self._skew9, self._vc = np.zeros((n, 9)), np.zeros((n, 4))
         self._frame = np.zeros((n, 4, 4))  # each joint's unturned frame this step
         self._anchors = np.zeros((n, 4, 4))
-        self._rot = np.zeros((n, 3, 3))
         self._turn = np.tile(np.eye(3), (n, 1, 1))  # each joint's turn from its rest, in its rest frame
         self._turn4 = np.tile(np.eye(4), (n, 1, 1))
         self._centers = np.zeros((n, 4, 4))
@@ -116,17 +137,21 @@ class SpringBones:
         self._any_capsule = bool((rig.collider_shape == 1).any())
         self._capsule = (rig.collider_shape == 1).astype(np.float64)
         self._cw = np.zeros((c, 4, 4))
-        self._c_start, self._c_end, self._seg = np.zeros((c, 3)), np.zeros((c, 3)), np.zeros((c, 3))
+        self._c_local = np.ones((c, 4, 2))
+        self._c_local[:, :3, 0], self._c_local[:, :3, 1] = rig.collider_offset, rig.collider_tail
+        self._c_world = np.zeros((c, 4, 2))
+        self._c_start, self._c_end = self._c_world[:, :3, 0], self._c_world[:, :3, 1]  # views
+        self._seg = np.zeros((c, 3))
         self._seg_sq = np.zeros(c)
         self._rel = np.zeros((n, c, 3))
         self._rel2 = np.zeros((n, c, 3))
         self._nc = np.zeros((n, c))
         self._depth = np.zeros((n, c))
-        self._inside = np.zeros((n, c), bool)
-        self._outside = np.zeros((n, c), bool)
         self._level_hits = [bool(lay.hits[a:b].any()) for a, b in lay.levels]
         self._t_sim = self._t_last = None
+        self._at_frame = False  # the last step's drivers were this frame's (its joint rows of W are the pose's)
         self.steps = 0
+        self._reach = np.where(lay.hits, lay.reach, -np.inf)  # a pair that does not collide is never inside
 
     # -- per frame ------------------------------------------------------------------------------------------
     def reset(self) -> None:
@@ -154,6 +179,7 @@ class SpringBones:
         if self._t_last is None or t < self._t_last or t - self._t_last > MAX_GAP_S:
             self._start(t)
         else:
+            self._at_frame = False
             span = t - self._t_last
             while self._t_sim + self.step_s <= t + 1e-9:
                 alpha = 1.0 if span <= 0 else (self._t_sim + self.step_s - self._t_last) / span
@@ -162,7 +188,7 @@ class SpringBones:
                 self._t_sim += self.step_s
                 self.steps += 1
             self._t_last = t
-        self._wd_prev[:] = self._wd_cur
+        self._wd_prev, self._wd_cur = self._wd_cur, self._wd_prev  # row 0 (the world) is the identity in both
         self._pose(skinning)
         return skinning
 
@@ -179,10 +205,10 @@ class SpringBones:
         cur = self._wd_cur
         cur[MODEL_ROW] = self._identity if model is None else model
         if len(self._drv):
-            np.take(skinning, self._lay.driver_nodes, axis=0, out=self._drv32, mode="clip")
+            skinning.take(self._lay.driver_nodes, axis=0, out=self._drv32, mode="clip")
             self._drv[:] = self._drv32
-            np.matmul(self._drv, self._lay.g_drivers, out=self._drv)
-            np.matmul(cur[MODEL_ROW], self._drv, out=cur[2:])
+            np.matmul(self._drv, self._lay.g_drivers, out=self._drv_rest)  # (in place would copy its input)
+            np.matmul(cur[MODEL_ROW], self._drv_rest, out=cur[2:])
         m = cur[MODEL_ROW]  # rigid: the inverse is the transpose and the turned translation
         inv = self._inv_model
         inv[:3, :3] = m[:3, :3].T
@@ -190,13 +216,19 @@ class SpringBones:
         inv[:3, 3] *= -1.0
 
     def _wd_lerp(self, alpha: float) -> None:
+        """The drivers at ``alpha`` between the last frame's and this frame's (``W``'s rows before the joints)."""
         w = self._w[:self._nj0]
+        self._at_frame = alpha == 1.0  # a frame on the step grid: the step's joint frames are the frame's own
+        if self._at_frame:
+            w[:] = self._wd_cur
+            return
         np.multiply(self._wd_prev, 1.0 - alpha, out=w)
         np.multiply(self._wd_cur, alpha, out=self._wd_tmp)
         w += self._wd_tmp
 
     def _start(self, t: float) -> None:
         """At rest in the current pose: tails where the pose puts them, no velocity."""
+        self._at_frame = False
         self._w[:self._nj0] = self._wd_cur
         self._turn[:] = np.eye(3)
         self._turn4[:, :3, :3] = self._turn
@@ -212,9 +244,9 @@ class SpringBones:
         if not self._has_center:
             out[:] = points
             return out
-        np.take(self._w, self._lay.center_row, axis=0, out=self._centers, mode="clip")
+        self._w.take(self._lay.center_row, axis=0, out=self._centers, mode="clip")
         inv = np.linalg.inv(self._centers)
-        np.einsum("nij,nj->ni", inv[:, :3, :3], points, out=out)
+        _turn_rows(inv[:, :3, :3], points, out)
         out += inv[:, :3, 3]
         return out
 
@@ -222,16 +254,16 @@ class SpringBones:
         if not self._has_center:
             out[:] = points
             return out
-        np.take(self._w, self._lay.center_row, axis=0, out=self._centers, mode="clip")
-        np.einsum("nij,nj->ni", self._centers[:, :3, :3], points, out=out)
+        self._w.take(self._lay.center_row, axis=0, out=self._centers, mode="clip")
+        _turn_rows(self._centers[:, :3, :3], points, out)
         out += self._centers[:, :3, 3]
         return out
 
-    def _dot(self, a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """Row dot products (n,) of ``a``, ``b`` (n, 3) into ``out`` (einsum would buffer the products)."""
-        sq = self._sq[:len(a)]
-        np.multiply(a, b, out=sq)
-        return np.sum(sq, axis=1, out=out)
+    @staticmethod
+    def _dot(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Row dot products (n,) of ``a``, ``b`` (n, 3) into ``out``: one (1, 3) · (3, 1) product per row."""
+        np.matmul(a[:, None, :], b[:, :, None], out=out[:, None, None])
+        return out
 
     def _normalise_to(self, v: np.ndarray, length: np.ndarray | float, lens: np.ndarray) -> np.ndarray:
         """``v`` (n, 3) scaled in place to ``length``."""
@@ -246,109 +278,102 @@ class SpringBones:
         """One step of :data:`STEP_S` for every joint, level by level (the numbered steps of the module doc)."""
         lay, w, j0 = self._lay, self._w, self._nj0
         new, a3, b3 = self._new, self._a3, self._b3
-        self._from_center(self._cur, new)
-        self._from_center(self._prev, a3)
-        np.subtract(new, a3, out=a3)
-        a3 *= lay.inertia
-        new += a3  # 1: inertia
+        if self._has_center:
+            self._from_center(self._cur, new)
+            self._from_center(self._prev, a3)
+            np.subtract(new, a3, out=a3)
+            a3 *= lay.inertia
+            new += a3  # 1: inertia
+        else:
+            np.subtract(self._cur, self._prev, out=a3)
+            a3 *= lay.inertia
+            np.add(self._cur, a3, out=new)  # 1: inertia
         if self.rig.n_colliders:
-            np.take(w, lay.collider_row, axis=0, out=self._cw, mode="clip")
-            np.einsum("cij,cj->ci", self._cw[:, :3, :3], self.rig.collider_offset, out=self._c_start)
-            self._c_start += self._cw[:, :3, 3]
-            np.einsum("cij,cj->ci", self._cw[:, :3, :3], self.rig.collider_tail, out=self._c_end)
-            self._c_end += self._cw[:, :3, 3]
+            w.take(lay.collider_row, axis=0, out=self._cw, mode="clip")
+            np.matmul(self._cw, self._c_local, out=self._c_world)  # offset and tail as homogeneous columns
         for (s, e), hits in zip(lay.levels, self._level_hits):
             frame = self._frame[s:e]
-            np.take(w, lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
+            w.take(lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
             np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=frame)  # the joint's frame, unturned
             head, rot = frame[:, :3, 3], frame[:, :3, :3]
             axis, nxt, d, lens = a3[s:e], new[s:e], b3[s:e], self._len[s:e]
-            np.einsum("nij,nj->ni", rot, lay.axis[s:e], out=axis)
-            self._normalise_to(axis, lay.push[s:e, 0], lens)
+            _turn_rows(rot, lay.axis[s:e], axis)
+            self._normalise_to(axis, lay.push[s:e, 0], lens)  # (an interpolated frame is not rigid)
             nxt += axis  # 2: stiffness
             nxt += lay.gravity[s:e]  # 3: gravity
             np.subtract(nxt, head, out=d)
             np.add(head, self._normalise_to(d, lay.length[s:e], lens), out=nxt)  # 4: length
             if hits:
                 self._collide(s, e, head)  # 5: collisions
-            # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame
-            np.subtract(nxt, head, out=d)
-            np.einsum("nji,nj->ni", rot, d, out=axis)
+            # 6: the turn taking the rest axis onto the new tail, in the joint's rest frame (``d``: the tail from the
+            # head after 4 and 5)
+            _turn_rows(rot.transpose(0, 2, 1), d, axis)
             self._normalise_to(axis, 1.0, lens)
-            self._rotation_between(lay.axis[s:e], axis, self._turn[s:e], d, lens)
-            np.matmul(rot, self._turn[s:e], out=self._rot[s:e])
-            rot[:] = self._rot[s:e]
-            w[j0 + s:j0 + e] = frame
-        self._prev[:] = self._cur
-        self._to_center(new, self._cur)
+            self._rotation_between(lay.axis[s:e], axis, self._turn[s:e])
+            np.matmul(rot, self._turn[s:e], out=w[j0 + s:j0 + e, :3, :3])
+            w[j0 + s:j0 + e, :3, 3] = head  # the bottom row stays (0, 0, 0, 1)
+        if self._has_center:
+            self._prev[:] = self._cur
+            self._to_center(new, self._cur)
+        else:  # the buffers turned round: previous <- current <- new, the old previous is the next new
+            self._prev, self._cur, self._new = self._cur, self._new, self._prev
 
     def _collide(self, s: int, e: int, head: np.ndarray) -> None:
         """The level's tails pushed out of the colliders they hit, then put back at bone length."""
         lay, nxt = self._lay, self._new[s:e]
-        rel, nc, depth, inside = self._rel[s:e], self._nc[s:e], self._depth[s:e], self._inside[s:e]
+        rel, nc, depth = self._rel[s:e], self._nc[s:e], self._depth[s:e]
         np.subtract(nxt[:, None, :], self._c_start[None], out=rel)
         if self._any_capsule:  # from the closest point of a capsule's segment (a sphere: its centre)
             np.subtract(self._c_end, self._c_start, out=self._seg)
-            np.einsum("ci,ci->c", self._seg, self._seg, out=self._seg_sq)
+            self._dot(self._seg, self._seg, self._seg_sq)
             np.maximum(self._seg_sq, 1e-12, out=self._seg_sq)
-            np.einsum("nci,ci->nc", rel, self._seg, out=nc)
+            np.matmul(rel[:, :, None, :], self._seg[None, :, :, None], out=nc[:, :, None, None])
             nc /= self._seg_sq
             np.clip(nc, 0.0, 1.0, out=nc)
             nc *= self._capsule
             np.multiply(nc[:, :, None], self._seg[None], out=self._rel2[s:e])
             rel -= self._rel2[s:e]
-        np.einsum("nci,nci->nc", rel, rel, out=nc)
+        np.matmul(rel[:, :, None, :], rel[:, :, :, None], out=nc[:, :, None, None])
         np.sqrt(nc, out=nc)  # distances
-        np.subtract(lay.reach[s:e], nc, out=depth)
-        np.greater(depth, 0.0, out=inside)
-        inside &= lay.hits[s:e]
-        if not inside.any():
+        np.subtract(self._reach[s:e], nc, out=depth)
+        np.maximum(depth, 0.0, out=depth)  # how far inside (0: outside, or a pair that does not collide)
+        if not depth.any():
             return
         np.maximum(nc, 1e-12, out=nc)
         np.divide(depth, nc, out=depth)
-        np.logical_not(inside, out=self._outside[s:e])
-        np.copyto(depth, 0.0, where=self._outside[s:e])
         push = self._a3[s:e]
-        np.einsum("nc,nci->ni", depth, rel, out=push)
+        np.matmul(depth[:, None, :], rel, out=push[:, None, :])
         nxt += push
         d = self._b3[s:e]
         np.subtract(nxt, head, out=d)
         np.add(head, self._normalise_to(d, lay.length[s:e], self._len[s:e]), out=nxt)
 
-    def _rotation_between(self, a: np.ndarray, b: np.ndarray, out: np.ndarray, v: np.ndarray,
-                          c: np.ndarray) -> None:
-        """``out`` (n, 3, 3): the rotations turning unit vectors ``a`` onto ``b`` (n, 3), Rodrigues' formula for
-        unit vectors ``R = c I + [v]x + v vᵀ / (1 + c)`` with v = a × b, c = a · b (``v``, ``c``: scratch)."""
-        ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
-        bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
-        k = self._k[:len(a)]
-        for i, (p, q, r, t) in enumerate(((ay, bz, az, by), (az, bx, ax, bz), (ax, by, ay, bx))):
-            np.multiply(p, q, out=v[:, i])
-            np.multiply(r, t, out=k)
-            v[:, i] -= k
+    def _rotation_between(self, a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+        """``out`` (n, 3, 3), contiguous: the rotations turning unit vectors ``a`` onto ``b`` (n, 3), Rodrigues'
+        formula for unit vectors ``R = [v]x + c I + v vᵀ / (1 + c)`` with v = a × b, c = a · b.
+
+        The cross product is ``[a]x`` times ``b``, and ``[v]x + c I`` flattened is ``(v, c)`` times the
+        constant :data:`_SKEW_EYE` (4, 9): each term is one batched product, a dozen whole-array operations
+        whatever the number of joints (a broadcast product would be buffered)."""
+        n = len(a)
+        skew, vc, k, vk = self._skew9[:n], self._vc[:n], self._k[:n], self._sq[:n]
+        v, c = vc[:, :3], vc[:, 3]
+        np.matmul(a, _SKEW_EYE[:3], out=skew)
+        np.matmul(skew.reshape(n, 3, 3), b[:, :, None], out=v[:, :, None])  # v = a × b
         self._dot(a, b, c)
         np.add(c, 1.0, out=k)
         np.maximum(k, 1e-9, out=k)
         np.divide(1.0, k, out=k)
-        vk = self._sq[:len(a)]  # v / (1 + c), column by column (a broadcast product would be buffered)
-        for j in range(3):
-            np.multiply(v[:, j], k, out=vk[:, j])
-        for i in range(3):
-            for j in range(3):
-                np.multiply(v[:, i], vk[:, j], out=out[:, i, j])
-            out[:, i, i] += c
-        out[:, 0, 1] -= v[:, 2]
-        out[:, 1, 0] += v[:, 2]
-        out[:, 0, 2] += v[:, 1]
-        out[:, 2, 0] -= v[:, 1]
-        out[:, 1, 2] -= v[:, 0]
-        out[:, 2, 1] += v[:, 0]
+        np.matmul(k[:, None, None], v[:, None, :], out=vk[:, None, :])
+        np.matmul(v[:, :, None], vk[:, None, :], out=out)  # v vᵀ / (1 + c)
+        np.matmul(vc, _SKEW_EYE, out=skew)
+        out.reshape(n, 9)[:] += skew  # + [v]x + c I
 
     def _pose_frames(self) -> None:
         """The joints' world frames at the frame's pose with the last step's turns (``W``'s joint rows)."""
         lay, w, j0 = self._lay, self._w, self._nj0
         for s, e in lay.levels:
-            np.take(w, lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
+            w.take(lay.anchor[s:e], axis=0, out=self._anchors[s:e], mode="clip")
             np.matmul(self._anchors[s:e], lay.rel_local[s:e], out=self._frame[s:e])
             np.matmul(self._frame[s:e], self._turn4[s:e], out=w[j0 + s:j0 + e])
 
@@ -356,13 +381,14 @@ class SpringBones:
         """The joints' skinning matrices at the frame's pose with the last step's turns: the roots of the chains
         stay on the head as it is now (the steps may be up to one step behind)."""
         lay = self._lay
-        self._w[:self._nj0] = self._wd_cur
-        self._turn4[:, :3, :3] = self._turn
-        self._pose_frames()
+        if not self._at_frame:
+            self._w[:self._nj0] = self._wd_prev  # this frame's drivers (advance turned the buffers round)
+            self._turn4[:, :3, :3] = self._turn
+            self._pose_frames()
         np.matmul(self._w[self._nj0:], lay.g_inv, out=self._skin)
         np.matmul(self._inv_model, self._skin, out=self._skin2)
         self._skin32[:] = self._skin2
         skinning[lay.node] = self._skin32
         if len(lay.follow_nodes):
-            np.take(skinning, lay.node[lay.follow_joint], axis=0, out=self._follow, mode="clip")
+            skinning.take(lay.node[lay.follow_joint], axis=0, out=self._follow, mode="clip")
             skinning[lay.follow_nodes] = self._follow

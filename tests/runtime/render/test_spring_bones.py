@@ -239,3 +239,20 @@ def test_a_frame_allocates_no_arrays_of_its_own():
     assert sb.steps == 39
     assert peak - base < 24_000, f"a frame allocated up to {peak - base} bytes at once"
     assert current - base < 4_000
+
+
+def test_a_frame_on_the_step_grid_poses_the_joints_as_a_frame_between_steps_does():
+    """A frame whose last step was at its own pose reuses that step's joint frames; the same frame given again
+    takes no step and poses the joints afresh from the drivers and the turns: the two must agree (float32
+    skinning)."""
+    sk = chain_skeleton(4, step=(0.08, -0.03, 0.02))
+    sb = SpringBones(rig_of(sk, chain_springs(sk, stiffness=1.0, drag=0.3, gravity_power=0.5)), sk)
+    model = np.eye(4)
+    for k in range(90):
+        t = k * STEP_S
+        model[0, 3] = 0.1 * np.sin(t)
+        on_grid = sb.advance(t, head_skinning(sk, yaw_quat(swing(t))), model)
+        steps = sb.steps
+        again = sb.advance(t, head_skinning(sk, yaw_quat(swing(t))), model)
+        assert sb.steps == steps  # no step the second time
+        np.testing.assert_allclose(again, on_grid, atol=1e-6, err_msg=f"frame {k}")
