@@ -8,7 +8,9 @@ MediaPipe face's proportions: 0.16 cm left of a 0.62 cm gap while the points the
 
 Here the lid is measured on the character's own rest skin, not on the points: its eye opening seen from
 the front (:func:`~.eye_openings.eye_opening`) gives, column by column across the eye, the upper and the
-lower lid margin; each is snapped to the skin vertex seen from the front nearest it. After the clone, the
+lower lid margin (the run of the opening at the eye's line); each is snapped to the nearest skin vertex seen
+from the front that lies on the lid's front (within :data:`DEPTH` of the front-most skin just beyond the
+margin in its column: the socket behind an eyeball, seen through the opening's edge, is no margin). After the clone, the
 gap left in each column (along the face's up) is compared with ``closed`` of its rest gap, and the upper
 lid is moved by the difference: a correction field that is the column's value on the upper margin and
 fades (a half cosine) to zero :data:`FADE` inner-eye distances above it, across the eye to zero just past
@@ -27,7 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from facepuppet.offline.elastic.control_points import ControlPoints
-from facepuppet.offline.perfect_sync.eye_openings import EYE_POINTS, VISIBLE, eye_opening
+from facepuppet.offline.perfect_sync.eye_openings import COLUMN, EYE_POINTS, VISIBLE, _margins, eye_opening
 
 logger = logging.getLogger(__name__)
 
@@ -75,12 +77,23 @@ def lid_margins(local: np.ndarray, skin_triangles: np.ndarray, skin: np.ndarray,
         if not len(seen):
             continue
         pairs: dict = {}  # upper margin vertex -> (its column's distance, the lower margin vertex)
+        reach = max(int(COLUMN * es / h), 1)
+        middle = int(round(np.flatnonzero(opening.any(axis=1)).mean()))
         for c in np.flatnonzero(opening.any(axis=0)):
-            rows = np.flatnonzero(opening[:, c])
             x = x0 + c * h
-            top, bottom = y0 + (rows.max() + 0.5) * h, y0 + (rows.min() - 0.5) * h
-            up = int(seen[np.argmin(np.hypot(local[seen, 0] - x, local[seen, 1] - top))])
-            low = int(seen[np.argmin(np.hypot(local[seen, 0] - x, local[seen, 1] - bottom))])
+            top, bottom = _margins(opening, c, middle)  # the run of the opening at the eye's line, not a fold
+            ends = []
+            for edge, rows in ((top, slice(int(top + 0.5), int(top + 0.5) + reach)),
+                               (bottom, slice(max(int(bottom - 0.5) - reach + 1, 0), int(bottom - 0.5) + 1))):
+                lid = zbuf[rows, c]  # the lid's front beside the opening: a margin vertex lies on it, not in the
+                lid = lid[np.isfinite(lid)]  # socket seen through the opening's edge
+                near = seen[local[seen, 2] >= (lid.max() if len(lid) else -np.inf) - DEPTH * es]
+                if not len(near):
+                    break
+                ends.append(int(near[np.argmin(np.hypot(local[near, 0] - x, local[near, 1] - (y0 + edge * h)))]))
+            if len(ends) < 2:
+                continue
+            up, low = ends
             off = abs(local[up, 0] - x)
             if up != low and (up not in pairs or off < pairs[up][0]):
                 pairs[up] = (off, low)  # several columns snap to one vertex: the column nearest it pairs it
