@@ -7,16 +7,19 @@ along the lid than the source's, the middle of the lid stays open (a head warped
 MediaPipe face's proportions: 0.16 cm left of a 0.62 cm gap while the points themselves met).
 
 Here the lid is measured on the character's own rest skin, not on the points: its eye opening seen from
-the front (:func:`~.eye_openings.eye_opening`) gives, column by column across the eye, the upper and the
-lower lid margin (the run of the opening at the eye's line); each is snapped to the nearest skin vertex seen
-from the front that lies on the lid's front (within :data:`DEPTH` of the front-most skin just beyond the
-margin in its column: the socket behind an eyeball, seen through the opening's edge, is no margin). After the clone, the
-gap left in each column (along the face's up) is compared with ``closed`` of its rest gap, and the upper
-lid is moved by the difference: a correction field that is the column's value on the upper margin and
-fades (a half cosine) to zero :data:`FADE` inner-eye distances above it, across the eye to zero just past
-its corners, and is zero on the lower lid (below the opening's middle line) and deep behind the lids (the
-socket behind an eyeball). Other shapes that close the same lid part of the way (a squint) are left as the
-clone made them: their lid is not meant to meet.
+the front (:func:`~.eye_openings.eye_opening`) gives, column by column across the eye between its corner
+points, the upper and the lower lid margin (the run of the opening at the eye's line; an opening beyond a
+corner, a crease by the nose, is no lid). Each is snapped to the nearest skin vertex seen from the front that
+lies on the lid's front (within :data:`DEPTH` of the front-most skin just beyond the margin in its column:
+the socket behind an eyeball, seen through the opening's edge, is no margin).
+
+After the clone, the gap left in each column (along the face's up) is held between 0 (the lids meet) and
+``closed`` of its rest gap: where it is wider (the lid left open) or below 0 (driven through the lower lid),
+the upper lid is moved by the difference; where the clone already closes the lid it is left as cloned. The
+correction is a field that is the column's value on the upper margin vertex and fades (a half cosine) to
+zero :data:`FADE` inner-eye distances above it, across the eye to zero just past its corners, and is zero on
+the lower lid (below the opening's middle line) and deep behind the lids. Other shapes that close the same
+lid part of the way (a squint) are left as the clone made them: their lid is not meant to meet.
 
 A face without an eye-like opening (eyes drawn shut, a decal eye) gets no field: said in the log.
 """
@@ -79,8 +82,11 @@ def lid_margins(local: np.ndarray, skin_triangles: np.ndarray, skin: np.ndarray,
         pairs: dict = {}  # upper margin vertex -> (its column's distance, the lower margin vertex)
         reach = max(int(COLUMN * es / h), 1)
         middle = int(round(np.flatnonzero(opening.any(axis=1)).mean()))
+        corners = sorted(local[[points.vertex(f"eye_inner_{side}"), points.vertex(f"eye_outer_{side}")], 0])
         for c in np.flatnonzero(opening.any(axis=0)):
             x = x0 + c * h
+            if not corners[0] < x < corners[1]:
+                continue  # the lids run between the eye's corners; an opening beyond (a crease by the nose) is not one
             top, bottom = _margins(opening, c, middle)  # the run of the opening at the eye's line, not a fold
             ends = []
             for edge, rows in ((top, slice(int(top + 0.5), int(top + 0.5) + reach)),
@@ -107,12 +113,12 @@ def lid_margins(local: np.ndarray, skin_triangles: np.ndarray, skin: np.ndarray,
 def seal_field(local: np.ndarray, d_local: np.ndarray, region: np.ndarray, margin: dict,
                closed: float) -> tuple[np.ndarray, float]:
     """(the upper lid's correction (len(region), 3) in the face frame, the largest column correction) that brings
-    each column's shaped gap (``d_local``: the shape's deltas (n, 3) in the face frame) to ``closed`` of its rest
-    gap; ``region`` the skin vertices the field may move (see the module doc)."""
+    each column's shaped gap (``d_local``: the shape's deltas (n, 3) in the face frame) between 0 and ``closed`` of
+    its rest gap; ``region`` the skin vertices the field may move (see the module doc)."""
     x, up, low, es = margin["x"], margin["upper"], margin["lower"], margin["es"]
     rest = local[up, 1] - local[low, 1]
     shaped = rest + d_local[up, 1] - d_local[low, 1]
-    need = closed * rest - shaped  # along up: negative brings the upper lid down
+    need = np.clip(shaped, 0.0, closed * rest) - shaped  # along up: negative brings the upper lid down
     order = np.argsort(x)
     x, need = x[order], need[order]
     y_up, y_low, z_up = local[up[order], 1], local[low[order], 1], local[up[order], 2]
