@@ -10,6 +10,7 @@ from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.io.capture import read_trc
 from facepuppet.offline.perfect_sync import evaluate
+from facepuppet.offline.perfect_sync.bench import _marker_heads
 from facepuppet.offline.perfect_sync.commands import perfect_sync
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.real_variants import MULTIPIE_TO_MARKERS, marker_variants, similarity
@@ -75,3 +76,14 @@ def test_the_held_out_actor_head_blinks_close_and_no_shape_is_over_40(ict_charac
         assert abs(gap["cloned"]) < 0.25 * gap["rest"], (key, gap)
     errs = evaluate.truth_errors(variant, out, face)
     assert max(errs.values()) < 0.40, max(errs.items(), key=lambda kv: kv[1])
+
+
+def test_the_bench_says_when_the_take_is_missing_or_not_asked_for(ict_character, marks, tmp_path):
+    out: dict = {}
+    assert _marker_heads(tmp_path / "none.trc", ict_character, marks, ["animface"], out) == []
+    assert "none.trc not in the data kit" in out["note_markers"]
+    out = {}
+    assert _marker_heads(tmp_path / "none.trc", ict_character, marks, ["mediapipe"], out) == [] and out == {}
+    take = need_shared("markers", "animface_jaw.trc")
+    [(label, _, folded)] = _marker_heads(take, ict_character, marks, ["animface_half"], out)
+    assert label == "animface_half" and folded == 0.0 and out == {}
