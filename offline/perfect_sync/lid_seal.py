@@ -6,12 +6,15 @@ sit along the lid. On a head whose lid curves differently, or whose points are p
 along the lid than the source's, the middle of the lid stays open (a head warped 1.5 times towards the
 MediaPipe face's proportions: 0.16 cm left of a 0.62 cm gap while the points themselves met).
 
-Here the lid is measured on the character's own rest skin, not on the points: its eye opening seen from
-the front (:func:`~.eye_openings.eye_opening`) gives, column by column across the eye between its corner
-points, the upper and the lower lid margin (the run of the opening at the eye's line; an opening beyond a
-corner, a crease by the nose, is no lid). Each is snapped to the nearest skin vertex seen from the front that
-lies on the lid's front (within :data:`DEPTH` of the front-most skin just beyond the margin in its column:
-the socket behind an eyeball, seen through the opening's edge, is no margin).
+Here the lid is measured on the character's own rest skin, not on the points: its eye opening seen from the
+front (:func:`~.eye_openings.eye_opening`) gives, column by column across the eye from its inner corner point
+to the opening's outer end, the upper and the lower lid margin (the run of the opening at the eye's line). The
+lids meet at the inner corner over the caruncle in a shallow crease, so an opening beyond that point is a
+crease by the nose, not a lid (on ICT's proportions variant it ran 0.7 cm on); the outer corner is a sharp
+meeting of the lids, where the opening's end is the corner (a proposed outer corner can be far off: 1.8 cm on
+the actor's-face variant, whose outer lid then stayed open). Each is snapped to the nearest skin vertex seen
+from the front that lies on the lid's front (within :data:`DEPTH` of the front-most skin just beyond the
+margin in its column: the socket behind an eyeball, seen through the opening's edge, is no margin).
 
 After the clone, the gap left in each column (along the face's up) is held between 0 (the lids meet) and
 ``closed`` of its rest gap: where it is wider (the lid left open) or below 0 (driven through the lower lid),
@@ -82,11 +85,11 @@ def lid_margins(local: np.ndarray, skin_triangles: np.ndarray, skin: np.ndarray,
         pairs: dict = {}  # upper margin vertex -> (its column's distance, the lower margin vertex)
         reach = max(int(COLUMN * es / h), 1)
         middle = int(round(np.flatnonzero(opening.any(axis=1)).mean()))
-        corners = sorted(local[[points.vertex(f"eye_inner_{side}"), points.vertex(f"eye_outer_{side}")], 0])
+        inner, outer = local[points.vertex(f"eye_inner_{side}"), 0], local[points.vertex(f"eye_outer_{side}"), 0]
         for c in np.flatnonzero(opening.any(axis=0)):
             x = x0 + c * h
-            if not corners[0] < x < corners[1]:
-                continue  # the lids run between the eye's corners; an opening beyond (a crease by the nose) is not one
+            if (x - inner) * np.sign(outer - inner) <= 0:
+                continue  # the lids meet at the inner corner; an opening beyond it is a crease by the nose
             top, bottom = _margins(opening, c, middle)  # the run of the opening at the eye's line, not a fold
             ends = []
             for edge, rows in ((top, slice(int(top + 0.5), int(top + 0.5) + reach)),

@@ -63,7 +63,7 @@ def test_the_variants_change_proportions_without_folding_and_keep_icts_depth_at_
 
 @pytest.mark.slow  # the kit source's fit (cached) and a clone of 26k vertices
 def test_the_held_out_actor_head_blinks_close_and_no_shape_is_over_40(ict_character, marks, markers):
-    """Measured: median 19.8 % (over the 15 % goal: said in the bench, not hidden), worst eyeBlinkRight 34.4 %;
+    """Measured: median 19.8 % (over the 15 % goal: said in the bench, not hidden), worst eyeLookInRight 33.1 %;
     blink mid-lid gaps 0.09 / 0.17 cm of 1.08 / 1.06 (true 0.13 / 0.12; without the lid seal 0.00 / 0.31).
     While the seal took its margins anywhere seen from the front, the socket behind the eyeball seen at the
     opening's edge was taken for one and the left blink was torn open to 0.29."""
@@ -74,6 +74,22 @@ def test_the_held_out_actor_head_blinks_close_and_no_shape_is_over_40(ict_charac
     points = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
     for key, gap in evaluate.lid_closure(variant, out, face, points).items():
         assert abs(gap["cloned"]) < 0.25 * gap["rest"], (key, gap)
+    # and along the whole lid, from the true inner to the true outer lid points (measured at most 0.17 of the
+    # rest gap; before the seal took the outer corner from the opening, the right outer lid stayed 1.14 open)
+    v, up, skin = variant.vertices.astype(np.float64), face.frame[1], face.skin
+    dense = out.dense_deltas()
+    names = list(out.shape_names)
+
+    def near(p):
+        return int(skin[np.argmin(np.linalg.norm(v[skin] - p, axis=1))])
+
+    for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
+        d = dense[names.index(key, variant.n_shapes)]
+        for f in (0.0, 0.25, 0.5, 0.75, 1.0):
+            a, b = (near((1 - f) * v[points.vertex(f"lid_{lid}_inner_{side}")] + f * v[points.vertex(
+                f"lid_{lid}_outer_{side}")]) for lid in ("upper", "lower"))
+            rest = (v[a] - v[b]) @ up
+            assert abs((v[a] + d[a] - v[b] - d[b]) @ up) < 0.25 * rest, (key, f, rest)
     errs = evaluate.truth_errors(variant, out, face)
     assert max(errs.values()) < 0.40, max(errs.items(), key=lambda kv: kv[1])
 
