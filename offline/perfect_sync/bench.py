@@ -51,6 +51,7 @@ from facepuppet.runtime.model.character import Character
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ControlPoints, ict_control_points
+from facepuppet.offline.io.capture import read_trc
 from facepuppet.offline.io.gltf.read import read_gltf
 from facepuppet.offline.io.obj import read_vertices_only
 from facepuppet.offline.io.rig_import import import_rig, read_ict_landmarks
@@ -60,13 +61,20 @@ from facepuppet.offline.perfect_sync.doubt_measure import doubt_figures
 from facepuppet.offline.perfect_sync.evaluate import LOOKAT, OWN, godette_pairs, lid_closure, truth_errors
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
-from facepuppet.offline.perfect_sync.real_variants import VARIANTS, real_variants
+from facepuppet.offline.perfect_sync.real_variants import (
+    MARKER_VARIANTS,
+    MULTIPIE_TO_MARKERS,
+    VARIANTS,
+    marker_variants,
+    real_variants,
+)
 from facepuppet.offline.perfect_sync.source import fit_kit_source
 
 GOAL_MEDIAN, GOAL_WORST, GOAL_COSINE = 0.15, 0.40, 0.7
 GOAL_GODETTE_S, GOAL_30K_S = 30.0, 120.0
 GOAL_LID = 0.25  # a cloned blink closes the lid: the mid-lid gap within ± this fraction of the rest gap
 DESIGN_VARIANT = "mediapipe"  # the real-proportions variant the cloning was designed on; the others are held out
+MARKER_TAKE = "animface_jaw.trc"  # the actor whose neutral face makes the second face's variants
 TAKE = "livelinkface_myslate_3.csv"  # the kit's Live Link Face take the side-by-side picture replays
 
 
@@ -74,7 +82,8 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
     add_data_argument(parser)
     parser.add_argument("--source", type=Path, help="source elastic table (default: fit-elastic of the kit's ICT)")
     parser.add_argument("--pictures", type=Path, help="folder for contact sheets of the cloned shapes (GL)")
-    parser.add_argument("--variants", nargs="*", choices=[v[0] for v in VARIANTS], default=None,
+    parser.add_argument("--variants", nargs="*", choices=[v[0] for v in VARIANTS + MARKER_VARIANTS],
+                        default=None,
                         help="real-proportion variants to measure (default: all; none with an empty list)")
 
 
@@ -118,14 +127,19 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
     """The ICT head warped to the MediaPipe face's proportions (:mod:`.real_variants`), each cloned and measured
     against its true shapes, with the blink's lid closure; the set's figures over the held-out variants."""
     face_obj = kit / "mediapipe" / "canonical_face_model.obj"
-    labels = args.variants if getattr(args, "variants", None) is not None else [v[0] for v in VARIANTS]
+    labels = args.variants if getattr(args, "variants", None) is not None else [v[0] for v in VARIANTS +
+                                                                                  MARKER_VARIANTS]
     if not labels:
         return {"note": "no variants asked for"}
-    if not face_obj.exists():
-        return {"note": f"{face_obj} not in the data kit: not measured"}
     marks = read_ict_landmarks(kit / "ict-facekit" / "vertex_indices.json", ict.n_vertices)
     out: dict = {"design": DESIGN_VARIANT, "goal_lid_gap": GOAL_LID, "variants": {}}
-    for label, variant, folded in real_variants(ict, marks, read_vertices_only(face_obj, 468), labels):
+    heads = []
+    if face_obj.exists():
+        heads += real_variants(ict, marks, read_vertices_only(face_obj, 468), labels)
+    else:
+        out["note"] = f"{face_obj} not in the data kit: its variants not measured"
+    heads += _marker_heads(kit / "markers" / MARKER_TAKE, ict, marks, labels, out)
+    for label, variant, folded in heads:
         with Progress(f"perfect-sync {label}", total=None, unit="shapes") as bar:
             t = time.perf_counter()
             synced, report, used = perfect_sync(_renamed(variant), source, progress=bar)
@@ -153,7 +167,33 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
                            "n_over_40": sum(v["n_over_40"] for v in held.values()),
                            "lids_close": all(v["lids_close"] for v in held.values()),
                            "meets_goal": all(v["meets_goal"] and v["lids_close"] for v in held.values())}
+    other = {k: v for k, v in held.items() if k in dict(MARKER_VARIANTS)}
+    if other:  # the one set built from another face than the design variant's: its figures on their own
+        out["other_face"] = {"take": MARKER_TAKE, "variants": sorted(other),
+                             "worst_median": max(v["median"] for v in other.values()),
+                             "worst": max(([k, *v["worst"]] for k, v in other.items()), key=lambda w: w[2]),
+                             "lids_close": all(v["lids_close"] for v in other.values()),
+                             "meets_goal": all(v["meets_goal"] and v["lids_close"] for v in other.values())}
     return out
+
+
+def _marker_heads(take: Path, ict: Character, marks: np.ndarray, labels: list, out: dict) -> list:
+    """The variants towards the actor of the marker ``take`` (its first frame with every needed marker: the
+    take's neutral start), or none, said in ``out["note_markers"]``, without the take."""
+    wanted = [v[0] for v in MARKER_VARIANTS if v[0] in labels]
+    if not wanted:
+        return []
+    if not take.exists():
+        out["note_markers"] = f"{take} not in the data kit: its variants not measured"
+        return []
+    capture = read_trc(take)
+    need = [capture.names.index(n) for _, n in MULTIPIE_TO_MARKERS]
+    whole = np.flatnonzero(np.isfinite(capture.markers[:, need]).all(axis=(1, 2)))
+    if not len(whole):
+        out["note_markers"] = f"{take}: no frame has every needed marker: its variants not measured"
+        return []
+    frame = capture.markers[whole[0]]
+    return marker_variants(ict, marks, {n: frame[capture.names.index(n)] for _, n in MULTIPIE_TO_MARKERS}, wanted)
 
 
 def _sheet(args: argparse.Namespace, character: Character, report: dict, label: str) -> None:

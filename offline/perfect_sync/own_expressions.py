@@ -10,15 +10,19 @@ film vertices against its skin would cost minutes a shape):
   triangles) that is in front of every other surface at rest and goes behind
   the skin or another mesh (the hair) in the shape: a brow pushed a few
   millimetres back, a lash line closing into the skin, shows as torn or gone
-  (Godette's "eye lines break apart" and "brows vanish" were these).
+  (Godette's "eye lines break apart" and "brows vanish" were these);
+* **folding**: per drawn piece, the share of its front-view area (its
+  triangles' areas seen from the front at rest) whose triangles turn over in
+  the shape (the front-view winding flips): a piece folded across itself is
+  drawn inside out, whether or not anything hides it.
 
 Where the artist already made an expression for an ARKit channel (``Blink_L``
 for eyeBlinkLeft, ``A`` for jawOpen, ``O`` for mouthFunnel, ``U`` for
 mouthPucker: :data:`CHANNEL_EXPRESSIONS`), the clone is compared with it as
 well (the cosine of the two displacement fields over the face mesh and the
 ratio of their norms) and is **worse**, so that the expression is used in
-its place, when it hides more of a drawn piece (by ``VANISH_MORE`` of it)
-or moves otherwise (cosine under ``AGREE``). Each such
+its place, when it hides or folds more of a drawn piece (by ``VANISH_MORE``
+of it) or moves otherwise (cosine under ``AGREE``). Each such
 channel is reported with what was used and why; a shape with a defect and
 no expression to fall back on is reported as defective.
 """
@@ -42,6 +46,9 @@ CHANNEL_EXPRESSIONS = {"eyeBlinkLeft": "Blink_L", "eyeBlinkRight": "Blink_R", "j
 VANISH_MORE = 0.15  # worse: a drawn piece with this share more of it hidden than the expression hides (Godette's
 # blinks: her own hide 75 % of her eye's largest piece, leaving the closed lash line; the clone's all of it)
 VANISHED = 0.25  # a defect: a drawn piece with this share of it newly hidden
+FOLDED = 0.25  # a defect: a drawn piece with this share of its front-view area turned over
+FLAT = 1e-4  # a triangle whose front-view area is under this fraction of its piece's largest is seen edge-on:
+# its winding says nothing
 AGREE = 0.3  # worse: a cosine to the expression under this (it moves something else)
 HIDDEN = 0.001  # a drawn point this many inner-eye distances behind the frontmost surface is hidden (decals lie
 # a millimetre or two in front of the skin: a brow pushed back that far is gone)
@@ -94,6 +101,7 @@ class Drawn:
             occluders = occluders[((box.max(1) >= lo) & (box.min(1) <= hi)).all(axis=1)]
         self.occluders = occluders
         self.at_rest = self._shown(np.zeros_like(self.v))
+        self.rest_area = self._front_area(np.zeros_like(self.v))
         self.names = {}  # piece label -> "the piece at <its nearest control point>", for the report
         for p in np.unique(self.piece):
             centre = self.v[np.unique(self.triangles[self.piece == p])].mean(0)
@@ -110,6 +118,28 @@ class Drawn:
         front = np.concatenate([skin_front_depth(points[i:i + 512, :2], local, self.occluders)
                                 for i in range(0, len(points), 512)])
         return ~(front > points[:, 2] + HIDDEN * self.es).reshape(len(self.triangles), len(SAMPLES))
+
+    def _front_area(self, d: np.ndarray) -> np.ndarray:
+        """(n_triangles,) signed area of each drawn triangle seen from the front (face frame x, y)."""
+        p = self.face.to_frame(self.v + d)[self.triangles][:, :, :2]
+        e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+        return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+    def folding(self, d: np.ndarray) -> dict:
+        """{piece label: share of its front-view area whose triangles turn over under displacements ``d``} (pieces
+        with any)."""
+        if not len(self.triangles):
+            return {}
+        rest = self.rest_area
+        flipped = np.sign(self._front_area(d)) != np.sign(rest)
+        out = {}
+        for p in np.unique(self.piece):
+            mine = self.piece == p
+            area = np.abs(rest[mine])
+            seen = area > FLAT * area.max(initial=0.0)
+            if seen.any() and (flipped[mine] & seen).any():
+                out[int(p)] = float(area[flipped[mine] & seen].sum() / area[seen].sum())
+        return out
 
     def vanishing(self, d: np.ndarray) -> dict:
         """{piece label: share of it shown at rest and hidden under displacements ``d``} (pieces with any)."""
@@ -132,6 +162,13 @@ def defects(drawn: Drawn, d: np.ndarray) -> list[str]:
     if gone:
         out.append("a drawn piece goes behind the skin or hair (" + ", ".join(
             f"{name}: {100 * s:.0f} %" for name, s in sorted(gone.items())) + ")")
+    turned: dict = {}
+    for p, s in drawn.folding(d).items():
+        if s > FOLDED:
+            turned[drawn.names[p]] = max(s, turned.get(drawn.names[p], 0.0))
+    if turned:
+        out.append("a drawn piece folds over (" + ", ".join(
+            f"{name}: {100 * s:.0f} % of its front-view area" for name, s in sorted(turned.items())) + ")")
     return out
 
 
@@ -148,11 +185,19 @@ def compare(drawn: Drawn, mesh: np.ndarray, clone: np.ndarray, own: np.ndarray) 
         p = max(more, key=more.get)
         worse.append(f"vanishing: {100 * hid_c[p]:.0f} % of {drawn.names[p]} goes behind the skin or hair (the "
                      f"expression's {100 * hid_o.get(p, 0.0):.0f} %)")
+    fold_c, fold_o = drawn.folding(clone), drawn.folding(own)
+    more = {p: s - fold_o.get(p, 0.0) for p, s in fold_c.items()}
+    if more and max(more.values()) > VANISH_MORE:
+        p = max(more, key=more.get)
+        worse.append(f"folding: {100 * fold_c[p]:.0f} % of {drawn.names[p]} folds over (the expression's "
+                     f"{100 * fold_o.get(p, 0.0):.0f} %)")
     if cosine < AGREE:
         worse.append(f"moves otherwise: cosine {cosine:.2f} to the expression (< {AGREE})")
     return {"cosine": round(cosine, 3), "magnitude_ratio": round(na / nb, 3) if nb > 0 else None,
             "hidden_clone": round(max(hid_c.values(), default=0.0), 3),
             "hidden_own": round(max(hid_o.values(), default=0.0), 3),
+            "folded_clone": round(max(fold_c.values(), default=0.0), 3),
+            "folded_own": round(max(fold_o.values(), default=0.0), 3),
             "worse": worse}
 
 

@@ -18,6 +18,14 @@ the mean of their upper and lower partners' motion (a face with its lips
 apart would tear ICT's closed lip line open). A region variant moves only
 some landmark groups (the others are held where they are), and a blend
 moves a fraction of the way.
+
+Every MediaPipe variant leans on one face. A second, independent face is a real actor's: the neutral first
+frame of the data kit's AnimFace marker take (:func:`marker_variants`). Its 41 markers are not anatomical
+landmarks: 23 of them sit near one (:data:`MULTIPIE_TO_MARKERS`), after a similarity alignment within
+0.3–1.7 cm of ICT's, and all on the skin's surface, in front of recessed places such as the eye corners
+(1.4 cm in front of ICT's). So only their front-view places (across and up, in ICT's frame after the
+alignment) move the landmarks; the depth stays ICT's, and the landmarks without a marker are carried by
+the spline.
 """
 
 from __future__ import annotations
@@ -106,6 +114,38 @@ VARIANTS = (
     ("mediapipe_nose_jaw", ("nose", "jaw"), 1.0),
     ("mediapipe_eyes_lips_strong", ("eyes", "lips"), 1.5),
 )
+
+
+#: Multi-PIE landmark → the AnimFace marker near it (the character's right is −x: 36-41, 17-21 and 48 are its right)
+MULTIPIE_TO_MARKERS = (
+    (36, "Reye_Outside"), (39, "Reye_Inside"), (42, "Leye_Inside"), (45, "Leye_Outside"),
+    (17, "Reyebrow_Outside"), (19, "Reyebrow_M"), (21, "Reyebrow_Inside"),
+    (22, "Leyebrow_Inside"), (24, "Leyebrow_M"), (26, "Leyebrow_Outside"),
+    (27, "NoseTop"), (30, "NoseHead"), (31, "NoseHead_R"), (35, "NoseHead_L"),
+    (48, "Mouth_Rend"), (50, "Mouth_UpR1"), (51, "Mouth_Up"), (52, "Mouth_UpL1"), (54, "Mouth_Lend"),
+    (56, "Mouth_DownL"), (57, "Mouth_Down"), (58, "Mouth_DownR"), (8, "Chin"),
+)
+#: the variants of :func:`marker_variants`: (label, amount)
+MARKER_VARIANTS = (("animface", 1.0), ("animface_half", 0.5))
+
+
+def marker_variants(ict: Character, ict_marks: np.ndarray, markers: dict,
+                    labels: Sequence[str] | None = None) -> list[tuple[str, Character, float]]:
+    """[(label, variant, fraction of vertices the warp folds)] of :data:`MARKER_VARIANTS` (those in ``labels``;
+    None: all): ``ict`` warped towards the face whose marker places (name → (3,), a neutral frame) ``markers``
+    gives, by the front-view places of :data:`MULTIPIE_TO_MARKERS` (see the module doc)."""
+    a = ict.vertices.astype(np.float64)[np.asarray(ict_marks, np.int64)]
+    idx = [i for i, _ in MULTIPIE_TO_MARKERS]
+    src = a[idx]
+    motion = similarity(np.asarray([markers[n] for _, n in MULTIPIE_TO_MARKERS], np.float64), src) - src
+    motion[:, 2] = 0.0  # markers sit on the skin in front of recessed landmarks: their depth says nothing
+    out = []
+    for label, amount in MARKER_VARIANTS:
+        if labels is not None and label not in labels:
+            continue
+        w = thin_plate(src, src + amount * motion, SMOOTHING)
+        out.append((label, warped_rig(ict, w, f"{ict.name} ({label})"), fold_fraction(ict, w)))
+    return out
 
 
 def real_variants(ict: Character, ict_marks: np.ndarray, other_vertices: np.ndarray,

@@ -44,6 +44,7 @@ from facepuppet.offline.perfect_sync.drawn_eyes import decal_blink, decal_narrow
 from facepuppet.offline.perfect_sync.eye_looks import decal_look_slide, look_expressions, look_keys
 from facepuppet.offline.perfect_sync.face import Face
 from facepuppet.offline.perfect_sync.landmark_field import feature_field, lip_line_motion
+from facepuppet.offline.perfect_sync.lid_seal import lid_margins, seal_blink
 from facepuppet.offline.perfect_sync.on_skin import embed
 from facepuppet.offline.perfect_sync.pieces import Pieces, find_pieces
 from facepuppet.offline.perfect_sync.proposal import skin_triangles
@@ -202,11 +203,13 @@ def spelled(key: str, style: str) -> str:
 def clone_face(source: ElasticModel, character: Character, face: Face, points: ControlPoints, *,
                k: int = DEFAULT_K, fixed_ratio: float = DEFAULT_FIXED_RATIO,
                progress: Callable[[int, int, str], None] | None = None,
-               info: dict | None = None) -> tuple[tuple[str, ...], np.ndarray]:
+               info: dict | None = None, seal: bool = True) -> tuple[tuple[str, ...], np.ndarray]:
     """Cloned ARKit shapes on ``character``: (canonical names, dense deltas (n, n_vertices, 3) float32).
 
+    ``seal``: the blinks' lids are brought together along the whole lid as measured on the character
+    (:mod:`.lid_seal`); False leaves them as the clone and :func:`close_lids` made them (to measure what it does).
     ``info``, when given, receives {"pieces": ...}: how the pieces that are not skin were moved
-    (:func:`carry_pieces`)."""
+    (:func:`carry_pieces`), and {"lid_seal": {blink: largest column correction (units)}}."""
     names, params = fold_source(source)
     weld = face.weld if face.weld is not None else np.arange(character.n_vertices)
     sub = np.unique(face.triangles)  # one vertex per position (the face's triangles are welded)
@@ -238,9 +241,16 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
         rel = sub_v[skin_local] - centre
         lid_skin[side] = skin_local[(np.linalg.norm(rel, axis=1) < reach) & (rel @ face.frame[2] > 0)]
     inside = mouth_parts(sub_v, sub_t, skin_local, _mouth_ball(sub_points, sub_v), face.frame[2])
+    sub_local = face.to_frame(sub_v)
+    skin_sub = np.unique(skin_local)
+    margins = lid_margins(sub_local, sub_t[np.isin(sub_t, skin_sub).all(axis=1)], skin_sub, sub_points) if seal else {}
+    sealed = {}
     for s, name in enumerate(names):
         pos, _ = model.deform(params[s], sub_v.astype(np.float32), up)
         d = pos - sub_v
+        largest = seal_blink(d, name, sub_local, skin_sub, margins, face.frame)
+        if largest is not None:
+            sealed[name] = round(largest, 4)
         for side, (members, centre) in eyes.items():
             turn = EYE_TURNS.get((name, side))
             if turn is not None:
@@ -262,6 +272,7 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
                                         character.delta_positions, character.n_vertices))
     if info is not None:
         info["pieces"] = carried
+        info["lid_seal"] = sealed
     return names, dense
 
 

@@ -53,7 +53,9 @@ def test_godettes_clone_hides_none_of_her_drawn_pieces(godette):
     g, _, _ = godette
     source = fit_kit_source(need_shared("ict-facekit"))
     _, report, _ = perfect_sync(g, source, prefer_own=True)
-    assert report["defective_shapes"] == [], report["defective_shapes"]  # before: 11
+    # before: 11 shapes defective, each hiding a drawn piece; none hides one now (what is still reported is a
+    # piece folding over: :func:`test_own_expressions.test_her_folded_mouth_is_reported`)
+    assert not [d for d in report["defective_shapes"] if "goes behind" in d["why"]], report["defective_shapes"]
     used = report["own_expressions"]
     assert set(used) == set(CHANNEL_EXPRESSIONS)
     for key in ("eyeBlinkLeft", "eyeBlinkRight", "mouthFunnel", "mouthPucker"):  # her own still, as before

@@ -1,0 +1,105 @@
+"""A second face for the real-proportion variants, independent of MediaPipe's: the actor of the kit's AnimFace
+marker take (its neutral first frame), whose markers near 23 of the Multi-PIE landmarks move ICT's."""
+
+import json
+
+import numpy as np
+import pytest
+
+from facepuppet.offline.elastic.commands import main_front
+from facepuppet.offline.elastic.control_points import ict_control_points
+from facepuppet.offline.io.capture import read_trc
+from facepuppet.offline.perfect_sync import evaluate
+from facepuppet.offline.perfect_sync.bench import _marker_heads
+from facepuppet.offline.perfect_sync.commands import perfect_sync
+from facepuppet.offline.perfect_sync.face import find_face
+from facepuppet.offline.perfect_sync.real_variants import MULTIPIE_TO_MARKERS, marker_variants, similarity
+from facepuppet.offline.perfect_sync.source import fit_kit_source
+from tests.conftest import need_shared
+
+
+@pytest.fixture(scope="module")
+def marks():
+    data = json.loads(need_shared("ict-facekit", "vertex_indices.json").read_text(encoding="utf-8"))
+    return np.asarray(data["idx_to_landmark_verts"], np.int64)
+
+
+@pytest.fixture(scope="module")
+def markers():
+    take = read_trc(need_shared("markers", "animface_jaw.trc"))
+    return {n: take.markers[0, take.names.index(n)].astype(np.float64) for _, n in MULTIPIE_TO_MARKERS}
+
+
+def test_the_markers_sit_near_their_landmarks_on_the_right_side(ict_character, marks, markers):
+    """After a similarity each marker lies within 2 cm of its ICT landmark (measured 0.31-1.73; the eye corners'
+    markers 1.4 cm in front: on the skin, not in the corner), every left marker on the character's left (+x)."""
+    idx = [i for i, _ in MULTIPIE_TO_MARKERS]
+    a = ict_character.vertices[marks[idx]].astype(np.float64)
+    b = similarity(np.asarray([markers[n] for _, n in MULTIPIE_TO_MARKERS]), a)
+    assert np.linalg.norm(b - a, axis=1).max() < 2.0
+    for (_, name), p in zip(MULTIPIE_TO_MARKERS, b):
+        if name.startswith("L") or name.endswith(("_L", "Lend", "L1", "DownL")):
+            assert p[0] > 0, name
+        if name.startswith("R") or name.endswith(("_R", "Rend", "R1", "DownR")):
+            assert p[0] < 0, name
+
+
+def test_the_variants_change_proportions_without_folding_and_keep_icts_depth_at_the_landmarks(ict_character, marks,
+                                                                                                markers):
+    heads = marker_variants(ict_character, marks, markers)
+    assert [h[0] for h in heads] == ["animface", "animface_half"]
+    moved = {}
+    for label, variant, folded in heads:
+        assert folded == 0.0, label
+        d = variant.vertices.astype(np.float64) - ict_character.vertices
+        moved[label] = np.linalg.norm(d, axis=1)
+        # only the front-view places move the landmarks: their depth change is the spline's smoothing, small
+        idx = [i for i, _ in MULTIPIE_TO_MARKERS]
+        assert np.abs(d[marks[idx], 2]).max() < 0.2, label
+        assert variant.n_shapes == ict_character.n_shapes
+    assert moved["animface"].max() > 1.0  # cm: a real change (measured 3.0 at most, 0.76 median)
+    np.testing.assert_allclose(moved["animface_half"], 0.5 * moved["animface"], rtol=0.02, atol=1e-3)
+
+
+@pytest.mark.slow  # the kit source's fit (cached) and a clone of 26k vertices
+def test_the_held_out_actor_head_blinks_close_and_no_shape_is_over_40(ict_character, marks, markers):
+    """Measured: median 19.8 % (over the 15 % goal: said in the bench, not hidden), worst eyeLookInRight 33.1 %;
+    blink mid-lid gaps 0.09 / 0.17 cm of 1.08 / 1.06 (true 0.13 / 0.12; without the lid seal 0.00 / 0.31).
+    While the seal took its margins anywhere seen from the front, the socket behind the eyeball seen at the
+    opening's edge was taken for one and the left blink was torn open to 0.29."""
+    [(_, variant, _)] = marker_variants(ict_character, marks, markers, ["animface"])
+    target = variant.with_parts(shape_names=tuple(f"truth{i}" for i in range(variant.n_shapes)), expressions=None)
+    out, _, _ = perfect_sync(target, fit_kit_source(need_shared("ict-facekit")))
+    face = find_face(variant)
+    points = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
+    for key, gap in evaluate.lid_closure(variant, out, face, points).items():
+        assert abs(gap["cloned"]) < 0.25 * gap["rest"], (key, gap)
+    # and along the whole lid, from the true inner to the true outer lid points (measured at most 0.17 of the
+    # rest gap; before the seal took the outer corner from the opening, the right outer lid stayed 1.14 open)
+    v, up, skin = variant.vertices.astype(np.float64), face.frame[1], face.skin
+    dense = out.dense_deltas()
+    names = list(out.shape_names)
+
+    def near(p):
+        return int(skin[np.argmin(np.linalg.norm(v[skin] - p, axis=1))])
+
+    for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
+        d = dense[names.index(key, variant.n_shapes)]
+        for f in (0.0, 0.25, 0.5, 0.75, 1.0):
+            a, b = (near((1 - f) * v[points.vertex(f"lid_{lid}_inner_{side}")] + f * v[points.vertex(
+                f"lid_{lid}_outer_{side}")]) for lid in ("upper", "lower"))
+            rest = (v[a] - v[b]) @ up
+            assert abs((v[a] + d[a] - v[b] - d[b]) @ up) < 0.25 * rest, (key, f, rest)
+    errs = evaluate.truth_errors(variant, out, face)
+    assert max(errs.values()) < 0.40, max(errs.items(), key=lambda kv: kv[1])
+
+
+def test_the_bench_says_when_the_take_is_missing_or_not_asked_for(ict_character, marks, tmp_path):
+    out: dict = {}
+    assert _marker_heads(tmp_path / "none.trc", ict_character, marks, ["animface"], out) == []
+    assert "none.trc not in the data kit" in out["note_markers"]
+    out = {}
+    assert _marker_heads(tmp_path / "none.trc", ict_character, marks, ["mediapipe"], out) == [] and out == {}
+    take = need_shared("markers", "animface_jaw.trc")
+    [(label, _, folded)] = _marker_heads(take, ict_character, marks, ["animface_half"], out)
+    assert label == "animface_half" and folded == 0.0 and out == {}
