@@ -67,6 +67,15 @@ no ``head_translation``. A record whose 3D fit failed (byte 28 = 0) carries
 no pose (the sender zeroes its 3D points); its weights are used and it is
 counted as ``no_fit``.
 
+**Gaze.** The fitted 3D points 66/68 (right pupil, right eyeball centre) and
+67/69 (left) give each eye's direction as the reference receiver turns them
+into its eye bones: forward = mirror(swapX(centre − pupil)), which in our axes
+is centre − pupil of the raw points. Its yaw (+ toward the person's own left)
+and pitch fill the eyeLook* channels at
+:data:`~facepuppet.runtime.inputs.phone.EYE_RANGE_DEG` degrees for weight 1,
+as the phone adapters write eye angles; a record without a fit, or a pupil on
+its centre, gives no gaze.
+
 **Picking the face.** ``face_id`` None (the default, ``--face-id`` not given)
 takes the first record of each datagram; an int takes the record with that
 id, and a datagram without it is counted as ``other_face`` (no frame).
@@ -90,6 +99,7 @@ import numpy as np
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.counted import counted
 from facepuppet.runtime.inputs.osc import COUNTER_NAMES
+from facepuppet.runtime.inputs.phone import eyes_into
 from facepuppet.runtime.mapping.channels import ARKIT_NAMES
 from facepuppet.runtime.model.geometry import quat_mul
 
@@ -157,6 +167,15 @@ def arkit_weights(features: Sequence[float], right_open: float, left_open: float
     w[_I["jawOpen"]] = _clip(f[_F["mouth_open"]])
     w[_I["mouthPucker"]] = _ramp(-wide, 0.3, 1.0)
     return w
+
+
+def gaze_angles(forward: Sequence[float]) -> tuple[float, float] | None:
+    """(pitch down, yaw toward the person's own left), degrees, of an eye's forward direction in our axes (x to
+    the person's left, y up, z out of the face); None for a zero vector."""
+    x, y, z = (float(v) for v in forward)
+    if math.hypot(x, y, z) < 1e-9:
+        return None
+    return -math.degrees(math.atan2(y, math.hypot(x, z))), math.degrees(math.atan2(x, z))
 
 
 def head_rotation(quaternion: Sequence[float]) -> np.ndarray | None:
@@ -243,11 +262,15 @@ class OpenSeeFaceAdapter:
             counters["no_fit"] += 1
         self.translation = np.array(rec["translation"], dtype=np.float32)
         self.camera = (float(rec["camera"][0]), float(rec["camera"][1]))
-        return Frame(
-            t=t, source=self.kind, channels=ARKIT_NAMES,
-            weights=arkit_weights(rec["features"], float(rec["right_open"]), float(rec["left_open"])),
-            head_rotation=rotation, t_sender=float(time),
-        )
+        weights = arkit_weights(rec["features"], float(rec["right_open"]), float(rec["left_open"]))
+        if fit:
+            points = rec["points3d"]
+            for side, pupil, centre in (("Right", 66, 68), ("Left", 67, 69)):
+                angles = gaze_angles(points[centre] - points[pupil])
+                if angles is not None:
+                    eyes_into(weights, side, *angles)
+        return Frame(t=t, source=self.kind, channels=ARKIT_NAMES, weights=weights, head_rotation=rotation,
+                     t_sender=float(time))
 
 
 def encode_record(*, time: float = 0.0, face_id: int = 0, camera: tuple[float, float] = (640.0, 360.0),

@@ -39,13 +39,26 @@ def test_published_sizes_and_default_port():
     assert default_port("openseeface") == 11573 and make_adapter("openseeface").face_id is None
 
 
+GAZE = {f"eyeLook{d}{s}" for d in ("In", "Out", "Up", "Down") for s in ("Left", "Right")}
+
+
+def eyes_points(right_forward=(0.0, 0.0, 1.0), left_forward=(0.0, 0.0, 1.0)) -> list:
+    """70 3D points whose eyes look along the given directions (our axes): centre = pupil + forward (the
+    reference receiver's eye forward is centre - pupil of the raw points)."""
+    points = [(0.01 * i, -0.02 * i, 0.03) for i in range(70)]
+    points[66], points[67] = (-0.03, 0.0, 0.0), (0.03, 0.0, 0.0)
+    points[68] = tuple(p + 0.012 * f for p, f in zip(points[66], right_forward))
+    points[69] = tuple(p + 0.012 * f for p, f in zip(points[67], left_forward))
+    return points
+
+
 def test_a_neutral_record_is_all_zero_mapped_channels_nan_elsewhere_and_rest_pose():
-    frame, adapter = frame_of(osf_record(time=1234.5))
+    frame, adapter = frame_of(osf_record(time=1234.5, points=eyes_points()))
     counts(adapter, datagrams=1, frames=1)
     assert frame.channels == ARKIT_NAMES and frame.t == 5.0 and frame.t_sender == 1234.5
     for name in ARKIT_NAMES:
         value = float(frame.weights[IDX[name]])
-        assert (value == 0.0) if name in MAPPED else math.isnan(value), name
+        assert (value == 0.0) if name in MAPPED | GAZE else math.isnan(value), name
     np.testing.assert_allclose(frame.head_rotation, [0, 0, 0, 1], atol=1e-6)
     assert frame.head_translation is None
     np.testing.assert_allclose(adapter.translation, [0.5, -0.25, 6.0])
@@ -277,3 +290,15 @@ def test_the_adapter_pickles_with_its_face_id():
 
     adapter = pickle.loads(pickle.dumps(OpenSeeFaceAdapter(face_id=9)))
     assert adapter.face_id == 9 and adapter.handle(osf_record(face_id=9), 0.0) is not None
+
+
+def test_the_eyes_3d_points_give_the_gaze_as_eye_look_weights():
+    yaw = (math.sin(math.radians(20)), 0.0, math.cos(math.radians(20)))  # 20 deg toward the person's own left
+    down = (0.0, -math.sin(math.radians(15)), math.cos(math.radians(15)))  # 15 deg down
+    frame, _ = frame_of(osf_record(points=eyes_points(right_forward=yaw, left_forward=down)))
+    w = {n: float(frame.weights[IDX[n]]) for n in GAZE}
+    assert w["eyeLookInRight"] == pytest.approx(20 / 30, abs=1e-4)  # the right eye turns to the nose
+    assert w["eyeLookDownLeft"] == pytest.approx(15 / 30, abs=1e-4)
+    assert sum(w.values()) == pytest.approx(20 / 30 + 15 / 30, abs=1e-4)
+    no_fit, _ = frame_of(osf_record(fit=0, points=eyes_points(right_forward=yaw)))
+    assert all(math.isnan(no_fit.weights[IDX[n]]) for n in GAZE)  # no fit: no gaze
