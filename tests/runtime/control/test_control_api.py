@@ -215,6 +215,9 @@ def test_framing_profile_record_and_calibrate_verbs_act_on_the_show(tmp_path, mo
             run.wait_for(lambda: run.weight("ah") == 0.0, what="the calibrated neutral taken off")
             assert _ask(ws, {"verb": "record", "action": "stop"})["type"] == "ok"
             run.wait_for(lambda: not _ask(ws, {"verb": "status"})["recording"], what="the recording stopped")
+            # the stop's effect can show before the frame loop has counted it applied: wait for the count
+            run.wait_for(lambda: _ask(ws, {"verb": "status"})["control"]["counters"]["commands_applied"] >= 5,
+                         what="the five commands counted")
             status = _ask(ws, {"verb": "status"})
             assert status["profile"] == "loud"
             assert status["control"]["counters"] == {"commands_applied": 5, "commands_failed": 0,
