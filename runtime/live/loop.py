@@ -28,6 +28,7 @@ the labels still replay tick for tick.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 import time
@@ -266,11 +267,25 @@ class FrameLoop:
             ("frames_received", "stale_dropped", "nonfinite_rejected", "ticks_without_new_frame", "late_ticks",
              "skipped_ticks"), 0))
         info = TickInfo(self.renderer)
-        n_ticks = 0
-        closed = False
         wait = self.wake if self.wake is not None else getattr(source, "wait_for_frame", None)
         arrival = schedule is None and self.idle_fps is not None and wait is not None
         idle_s = 0.0 if self.idle_fps is None else 1.0 / self.idle_fps
+        # What the session built before its first tick lives as long as the loop: frozen, a full collection
+        # (which a long show's ticks eventually trigger) does not scan it. With a character, the tables, the
+        # GL objects and the modules loaded, that scan took ~10 ms on the CI machine: a dropped frame each time.
+        gc.collect()
+        gc.freeze()
+        try:
+            return self._ticks(source, schedule, last, window, timer, info, wait, arrival, idle_s)
+        finally:
+            gc.unfreeze()  # the next session's objects, not this one's, are frozen by its own loop
+
+    def _ticks(self, source: FrameSource, schedule: list[int] | None, last: float, window: bool, timer: StageTimer,
+               info: TickInfo, wait: Callable[[float], object] | None, arrival: bool, idle_s: float) -> LoopResult:
+        """The ticks of :meth:`run`, from the clock's start."""
+        counters = self.counters
+        n_ticks = 0
+        closed = False
         self.clock.start()
         k = i = 0
         drawn_at = -math.inf

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import math
 from types import SimpleNamespace
 
@@ -272,3 +273,23 @@ def test_a_renderer_with_advance_gets_each_tick_time_and_new_frame_before_its_dr
     assert [t for t, _, _ in renderer.advances] == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4])
     assert [f for _, f, _ in renderer.advances] == [0.0, None, 0.13, None, 0.31]
     assert [n for _, _, n in renderer.advances] == [0, 1, 2, 3, 4]  # each before its tick's draw
+
+
+def test_what_was_built_before_the_first_tick_is_frozen_for_the_run_and_thawed_after():
+    """A full collection during a show does not scan the session's long-lived objects (tables, GL objects,
+    modules): they are frozen while the loop runs, and given back to the collector when it returns."""
+    class CountingRenderer(StubRenderer):
+        def __init__(self):
+            super().__init__()
+            self.frozen = []
+
+        def draw(self, weights, head_rotation=None, head_translation=None):
+            self.frozen.append(gc.get_freeze_count())
+            super().draw(weights, head_rotation, head_translation)
+
+    before = gc.get_freeze_count()
+    renderer = CountingRenderer()
+    FrameLoop(RIG.shape_names, renderer, RecordedClock(), fps=10.0, log=lambda s: None).run(
+        ReplaySource([_frame(0.0, 0.1)]), duration=0.2)
+    assert len(renderer.frozen) == 3 and min(renderer.frozen) > before + 1000  # the process's objects, frozen
+    assert gc.get_freeze_count() == before
