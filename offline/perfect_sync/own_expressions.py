@@ -155,21 +155,25 @@ class Drawn:
 def defects(drawn: Drawn, d: np.ndarray) -> list[str]:
     """The visible defects of displacements ``d`` (n_vertices, 3) on their own (see the module doc)."""
     out = []
-    gone: dict = {}  # by name: the two strips of one drawn lip are one piece to the reader
-    for p, s in drawn.vanishing(d).items():
-        if s > VANISHED:
-            gone[drawn.names[p]] = max(s, gone.get(drawn.names[p], 0.0))
+    gone = _worst_by_name(drawn, drawn.vanishing(d), VANISHED)
     if gone:
         out.append("a drawn piece goes behind the skin or hair (" + ", ".join(
             f"{name}: {100 * s:.0f} %" for name, s in sorted(gone.items())) + ")")
-    turned: dict = {}
-    for p, s in drawn.folding(d).items():
-        if s > FOLDED:
-            turned[drawn.names[p]] = max(s, turned.get(drawn.names[p], 0.0))
+    turned = _worst_by_name(drawn, drawn.folding(d), FOLDED)
     if turned:
         out.append("a drawn piece folds over (" + ", ".join(
             f"{name}: {100 * s:.0f} % of its front-view area" for name, s in sorted(turned.items())) + ")")
     return out
+
+
+def _worst_by_name(drawn: Drawn, share: dict, limit: float) -> dict[str, float]:
+    """The largest share over ``limit`` of each drawn piece's name (the two strips of one drawn lip are one
+    piece to the reader)."""
+    worst: dict[str, float] = {}
+    for p, s in share.items():
+        if s > limit:
+            worst[drawn.names[p]] = max(s, worst.get(drawn.names[p], 0.0))
+    return worst
 
 
 def compare(drawn: Drawn, mesh: np.ndarray, clone: np.ndarray, own: np.ndarray) -> dict:
