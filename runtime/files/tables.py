@@ -55,32 +55,18 @@ from typing import Any
 
 import numpy as np
 
-from facepuppet.runtime.errors import FacepuppetError
 from facepuppet.runtime.files.json_limits import JsonTextError, loads_limited
 from facepuppet.runtime.files.outputs import atomic_path
+from facepuppet.runtime.files.table_members import read_member
+from facepuppet.runtime.files.tables_error import NO_FILE, TablesError
 
 from facepuppet import __version__
 
 FORMAT_NAME = "facepuppet-tables"
 SCHEMA_VERSION = 1  # the schema version of a kind that declares none
 MANIFEST_KEY = "__manifest__"
-NO_FILE = "<tables>"  # the path of a TablesError about tables in memory
 ALLOWED_UNITS = ("", "mm", "cm", "m")
 ALLOWED_DTYPES = ("float32", "float64", "int32", "int64", "uint8", "uint16", "uint32", "bool")
-
-
-class TablesError(FacepuppetError, ValueError):
-    """A tables file (or tables about to be written) is not acceptable.
-
-    The message names the file and the field, what was expected and what was
-    found.
-    """
-
-    def __init__(self, path: str | os.PathLike | None, field_name: str, problem: str) -> None:
-        self.path = str(path) if path is not None else NO_FILE
-        self.field = field_name
-        self.problem = problem
-        super().__init__(f"{self.path}: {field_name}: {problem}")
 
 
 @dataclass(frozen=True)
@@ -446,96 +432,9 @@ def save_tables(
 MAX_MANIFEST_BYTES = 4 << 20  # a manifest is a few kB; 4 MiB is far beyond any real one
 MAX_MANIFEST_DEPTH = 32  # nesting of JSON objects and lists in a manifest
 MAX_SECTION_BYTES = 1 << 30  # one section's array; the largest real table (ICT deltas) is ~7 MB
-READ_CHUNK = 1 << 20  # decompress members this much at a time
-
-
-def _member_stream(archive: zipfile.ZipFile, member: str, path, field_name: str):
-    """Open one archive member for streaming; TablesError on a damaged archive."""
-    try:
-        return archive.open(member)
-    except Exception as exc:  # BadZipFile, NotImplementedError (encrypted/unknown method), OSError
-        raise TablesError(path, field_name, f"cannot be read, the file is damaged ({exc})") from None
-
-
-def _read_exact(stream, buffer: memoryview, path, field_name: str) -> None:
-    """Fill ``buffer`` from ``stream`` in chunks of at most READ_CHUNK bytes."""
-    done = 0
-    total = len(buffer)
-    try:
-        while done < total:
-            got = stream.readinto(buffer[done:done + min(READ_CHUNK, total - done)])
-            if not got:
-                raise TablesError(path, field_name, f"ends after {done} of {total} bytes; truncated?")
-            done += got
-    except TablesError:
-        raise
-    except Exception as exc:  # zlib.error, BadZipFile (CRC), EOFError on garbled data
-        raise TablesError(path, field_name, f"cannot be read, the file is damaged ({exc})") from None
-
-
-def _read_header(stream, path, field_name: str) -> tuple[tuple[int, ...], bool, np.dtype]:
-    """The ``.npy`` header of a member: (shape, fortran order, dtype); never unpickles."""
-    try:
-        version = np.lib.format.read_magic(stream)
-        if version == (1, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_1_0(stream)
-        elif version in ((2, 0), (3, 0)):
-            shape, fortran, dtype = np.lib.format.read_array_header_2_0(stream)
-        else:
-            raise ValueError(f"unsupported .npy version {version}")
-    except Exception as exc:  # ValueError on a bad header, zlib.error on garbled data
-        raise TablesError(path, field_name, f"is not a valid array ({exc})") from None
-    if dtype.hasobject:
-        raise TablesError(path, field_name, "holds pickled Python objects; tables files are never unpickled")
-    return shape, fortran, dtype
-
-
-def _read_member(archive: zipfile.ZipFile, member: str, path, field_name: str, *,
-                 expect: tuple[list, str] | None = None, limit: int | None = None) -> np.ndarray:
-    """One member's array, decompressed in bounded chunks.
-
-    ``expect`` is the (shape, dtype) the manifest declares: the member's
-    header must agree before its data is read. ``limit`` bounds the bytes
-    the array may hold. The zip entry's declared size must be the header
-    plus the data, so a member that would inflate past it is refused unread.
-    """
-    limit = MAX_SECTION_BYTES if limit is None else limit
-    declared = archive.getinfo(member).file_size
-    if declared > limit + 4096:
-        raise TablesError(path, field_name, f"declares {declared} bytes uncompressed, more than the "
-                                            f"limit of {limit} bytes")
-    with _member_stream(archive, member, path, field_name) as stream:
-        shape, fortran, dtype = _read_header(stream, path, field_name)
-        if expect is not None and (list(shape) != expect[0] or dtype.name != expect[1]):
-            raise TablesError(path, field_name,
-                              f"manifest says shape {expect[0]} dtype {expect[1]}, "
-                              f"archive holds shape {list(shape)} dtype {dtype.name}")
-        count = math.prod(shape)
-        nbytes = count * dtype.itemsize
-        if nbytes > limit:
-            raise TablesError(path, field_name, f"shape {list(shape)} {dtype.name} is {nbytes} bytes, more than "
-                                                f"the limit of {limit} bytes")
-        header = stream.tell() if stream.seekable() else None
-        if header is not None and declared != header + nbytes:
-            raise TablesError(path, field_name, f"the archive entry holds {declared} bytes, but a {list(shape)} "
-                                                f"{dtype.name} array needs {header + nbytes}")
-        arr = np.empty(count, dtype=dtype)
-        _read_exact(stream, memoryview(arr.view(np.uint8).reshape(-1)), path, field_name)
-        try:
-            if stream.read(1):
-                raise TablesError(path, field_name, "holds more bytes than its array")
-        except TablesError:
-            raise
-        except Exception as exc:  # CRC check at the end of the entry
-            raise TablesError(path, field_name, f"cannot be read, the file is damaged ({exc})") from None
-    if fortran:
-        return arr.reshape(shape[::-1]).transpose()
-    return arr.reshape(shape)
-
-
 def _parse_manifest(archive: zipfile.ZipFile, member: str, path) -> dict:
     """The manifest member, size- and depth-checked before it is parsed."""
-    raw = _read_member(archive, member, path, "manifest", limit=MAX_MANIFEST_BYTES)
+    raw = read_member(archive, member, path, "manifest", limit=MAX_MANIFEST_BYTES)
     if raw.dtype != np.uint8 or raw.ndim != 1:
         raise TablesError(path, "manifest", f"must be a uint8 byte string, found {raw.dtype} {raw.shape}")
     try:
@@ -649,8 +548,8 @@ def load_tables(path: str | os.PathLike, kind: str | None = None) -> Tables:
         arrays: dict[str, np.ndarray] = {}
         for name, meta in sections.items():
             bound = schema.sections[name].max_bytes
-            arr = _read_member(archive, members[name], path, name, expect=(meta["shape"], meta["dtype"]),
-                               limit=min(bound, MAX_SECTION_BYTES) if bound else None)
+            arr = read_member(archive, members[name], path, name, expect=(meta["shape"], meta["dtype"]),
+                              limit=min(bound, MAX_SECTION_BYTES) if bound else MAX_SECTION_BYTES)
             arr.setflags(write=False)
             arrays[name] = arr
     channels = manifest.get("channels", {})
