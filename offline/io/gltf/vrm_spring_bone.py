@@ -34,9 +34,8 @@ from typing import Any
 import numpy as np
 
 from facepuppet.offline.io.gltf.kept_parts import kept
+from facepuppet.offline.io.gltf.read_springs import VIRTUAL_TAIL
 from facepuppet.offline.io.gltf.write_state import WriteState
-
-VIRTUAL_TAIL = 0.07  # metres: VRM 0.x runtimes' tail of a leaf bone
 
 
 def write_spring_bones0(w: WriteState, raw: dict, vrm: dict[str, Any]) -> None:
@@ -121,7 +120,8 @@ def _spring1_from_0(w: WriteState, sec: dict, nodes: list[dict]) -> dict:
     springs = []
     for gi, g in enumerate(sec["boneGroups"]):
         gd = g.get("gravityDir") if isinstance(g.get("gravityDir"), dict) else {"x": 0, "y": -1, "z": 0}
-        settings = {"hitRadius": _num(g.get("hitRadius"), 0.0), "stiffness": _num(g.get("stiffiness"), 1.0),
+        stiffness = g.get("stiffiness", g.get("stiffness"))  # UniVRM's spelling, or the plain one
+        settings = {"hitRadius": _num(g.get("hitRadius"), 0.0), "stiffness": _num(stiffness, 1.0),
                     "gravityPower": _num(g.get("gravityPower"), 0.0),
                     "gravityDir": [0.0 - _num(gd.get("x"), 0.0), _num(gd.get("y"), -1.0), _num(gd.get("z"), 0.0)],
                     "dragForce": _num(g.get("dragForce"), 0.4)}

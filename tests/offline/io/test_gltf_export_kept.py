@@ -328,3 +328,21 @@ def test_an_image_past_the_kept_bytes_is_dropped_with_a_warning(monkeypatch):
     kept_names = [e["name"] for e in c.source["kept"]["images"]]
     assert "godette_thumbnail" not in kept_names and "fabric" in kept_names  # its 22 kB still fit
     assert any("images[1]" in w and "not kept for export" in w for w in c.source["warnings"])
+
+
+def test_a_vrm0_stiffness_in_the_plain_spelling_reaches_the_vrm1_springs(tmp_path):
+    """UniVRM writes "stiffiness"; a file spelled "stiffness" keeps its stiffness in the 1.0 springs, as the
+    importer's own reading of it does."""
+    doc, blob = glb_chunks(need_shared("gltf", "Godette_vrm_v4.vrm").read_bytes())
+    groups = doc["extensions"]["VRM"]["secondaryAnimation"]["boneGroups"]
+    want = {}
+    for g in groups:
+        g["stiffness"] = g.pop("stiffiness")
+        for b in g["bones"]:
+            want[doc["nodes"][b]["name"]] = g["stiffness"]
+    export_character(read_gltf(write_glb(tmp_path / "plain.vrm", doc, blob)), tmp_path / "plain1.vrm", vrm=1)
+    got = vrm_json(tmp_path / "plain1.vrm")
+    nodes = got["nodes"]
+    first = {nodes[s["joints"][0]["node"]]["name"]: s["joints"][0]["stiffness"]
+             for s in got["extensions"]["VRMC_springBone"]["springs"]}
+    assert want and {name: first[name] for name in want if name in first} == want
