@@ -196,7 +196,7 @@ def _exception_classes():
 
 def test_every_exception_class_of_the_project_is_a_facepuppet_error():
     found = _exception_classes()
-    assert ("facepuppet.runtime.files.tables", "TablesError") in found and len(found) > 15
+    assert ("facepuppet.runtime.files.tables_error", "TablesError") in found and len(found) > 15
     assert CONTROL_FLOW <= set(found)
     outside = [f"{module}.{name}" for module, name in found if (module, name) not in CONTROL_FLOW
                and not issubclass(getattr(importlib.import_module(module), name), FacepuppetError)]
