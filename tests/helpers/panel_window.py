@@ -44,6 +44,7 @@ class XTest:
         x11.XFlush.argtypes = [ctypes.c_void_p]
         x11.XSync.argtypes = [ctypes.c_void_p, ctypes.c_int]
         x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+        x11.XSetInputFocus.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.c_int, ctypes.c_ulong]
         xtst.XTestFakeKeyEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
         xtst.XTestFakeButtonEvent.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_ulong]
         xtst.XTestFakeMotionEvent.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_int,
@@ -56,6 +57,12 @@ class XTest:
     def key(self, keysym: int, down: bool) -> None:
         code = self.x11.XKeysymToKeycode(self.display, keysym)
         self.xtst.XTestFakeKeyEvent(self.display, code, int(down), 0)
+        self.x11.XSync(self.display, 0)
+
+    def focus_follows_pointer(self) -> None:
+        """Keyboard focus to PointerRoot: keys go to the window under the pointer (with no window manager, a
+        client that set the focus while its window was not yet viewable can leave it on None, and keys vanish)."""
+        self.x11.XSetInputFocus(self.display, 1, 1, 0)  # PointerRoot, RevertToPointerRoot, CurrentTime
         self.x11.XSync(self.display, 0)
 
     def move(self, x: float, y: float) -> None:

@@ -63,6 +63,7 @@ def test_a_hotkey_in_the_window_fires_its_expression(x_display, tmp_path, monkey
                 # "on", not "toggle": under load the window may map or take the pointer late, so the key is
                 # pressed again until Joy shows (a press that lands twice changes nothing)
                 for _ in range(10):
+                    x.focus_follows_pointer()
                     x.move(100, 100)  # no window manager: the keyboard follows the pointer
                     x.key(XK_J, True)
                     time.sleep(0.05)
