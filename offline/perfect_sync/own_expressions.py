@@ -14,14 +14,17 @@ film vertices against its skin would cost minutes a shape):
 * **folding**: per drawn piece, the share of its front-view area (its
   triangles' areas seen from the front at rest) whose triangles turn over in
   the shape (the front-view winding flips): a piece folded across itself is
-  drawn inside out, whether or not anything hides it.
+  drawn inside out, whether or not anything hides it;
+* **poking through**: per drawn piece, the largest share of one of its cross
+  bands that the skin shows through between triangle corners all in front of
+  it (:mod:`.poke_through`): a notch cut across a brow, which reads as a hook.
 
 Where the artist already made an expression for an ARKit channel (``Blink_L``
 for eyeBlinkLeft, ``A`` for jawOpen, ``O`` for mouthFunnel, ``U`` for
 mouthPucker: :data:`CHANNEL_EXPRESSIONS`), the clone is compared with it as
 well (the cosine of the two displacement fields over the face mesh and the
 ratio of their norms) and is **worse**, so that the expression is used in
-its place, when it hides or folds more of a drawn piece (by ``VANISH_MORE``
+its place, when it hides, folds or lets the skin through more of a drawn piece (by ``VANISH_MORE``
 of it) or moves otherwise (cosine under ``AGREE``). Each such
 channel is reported with what was used and why; a shape with a defect and
 no expression to fall back on is reported as defective.
@@ -37,6 +40,7 @@ from facepuppet.runtime.model.character import Character
 from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.perfect_sync.face import Face
 from facepuppet.offline.perfect_sync.pieces import Pieces
+from facepuppet.offline.perfect_sync.poke_through import PokeThrough
 from facepuppet.offline.perfect_sync.triangles import skin_front_depth
 
 #: ARKit channel -> the VRM 0.x preset meaning the same thing on its own (the vowels and blinks; the looks of
@@ -46,6 +50,9 @@ CHANNEL_EXPRESSIONS = {"eyeBlinkLeft": "Blink_L", "eyeBlinkRight": "Blink_R", "j
 VANISH_MORE = 0.15  # worse: a drawn piece with this share more of it hidden than the expression hides (Godette's
 # blinks: her own hide 75 % of her eye's largest piece, leaving the closed lash line; the clone's all of it)
 VANISHED = 0.25  # a defect: a drawn piece with this share of it newly hidden
+POKED = 0.25  # a defect: a cross band of a drawn piece with this share of it cut by the skin between its corners
+# (her own expressions: 0 on every piece; her cloned outer brow raises before the skin's clearance was kept over
+# the brows' triangles: 0.75 and 0.79)
 FOLDED = 0.25  # a defect: a drawn piece with this share of its front-view area turned over
 FLAT = 1e-4  # a triangle whose front-view area is under this fraction of its piece's largest is seen edge-on:
 # its winding says nothing
@@ -102,6 +109,7 @@ class Drawn:
         self.occluders = occluders
         self.at_rest = self._shown(np.zeros_like(self.v))
         self.rest_area = self._front_area(np.zeros_like(self.v))
+        self.poking = PokeThrough(face, self.v, self.triangles, self.piece, occluders, es, HIDDEN * es)
         self.names = {}  # piece label -> "the piece at <its nearest control point>", for the report
         for p in np.unique(self.piece):
             centre = self.v[np.unique(self.triangles[self.piece == p])].mean(0)
@@ -159,6 +167,10 @@ def defects(drawn: Drawn, d: np.ndarray) -> list[str]:
     if gone:
         out.append("a drawn piece goes behind the skin or hair (" + ", ".join(
             f"{name}: {100 * s:.0f} %" for name, s in sorted(gone.items())) + ")")
+    cut = _worst_by_name(drawn, drawn.poking(d), POKED)
+    if cut:
+        out.append("the skin shows through a drawn piece (" + ", ".join(
+            f"{name}: {100 * s:.0f} % of a cross band of it" for name, s in sorted(cut.items())) + ")")
     turned = _worst_by_name(drawn, drawn.folding(d), FOLDED)
     if turned:
         out.append("a drawn piece folds over (" + ", ".join(
@@ -195,6 +207,12 @@ def compare(drawn: Drawn, mesh: np.ndarray, clone: np.ndarray, own: np.ndarray) 
         p = max(more, key=more.get)
         worse.append(f"folding: {100 * fold_c[p]:.0f} % of {drawn.names[p]} folds over (the expression's "
                      f"{100 * fold_o.get(p, 0.0):.0f} %)")
+    poke_c, poke_o = drawn.poking(clone), drawn.poking(own)
+    more = {p: s - poke_o.get(p, 0.0) for p, s in poke_c.items()}
+    if more and max(more.values()) > VANISH_MORE:
+        p = max(more, key=more.get)
+        worse.append(f"poking through: the skin shows through {100 * poke_c[p]:.0f} % of a cross band of "
+                     f"{drawn.names[p]} (the expression's {100 * poke_o.get(p, 0.0):.0f} %)")
     if cosine < AGREE:
         worse.append(f"moves otherwise: cosine {cosine:.2f} to the expression (< {AGREE})")
     return {"cosine": round(cosine, 3), "magnitude_ratio": round(na / nb, 3) if nb > 0 else None,
@@ -202,6 +220,8 @@ def compare(drawn: Drawn, mesh: np.ndarray, clone: np.ndarray, own: np.ndarray) 
             "hidden_own": round(max(hid_o.values(), default=0.0), 3),
             "folded_clone": round(max(fold_c.values(), default=0.0), 3),
             "folded_own": round(max(fold_o.values(), default=0.0), 3),
+            "poked_clone": round(max(poke_c.values(), default=0.0), 3),
+            "poked_own": round(max(poke_o.values(), default=0.0), 3),
             "worse": worse}
 
 
