@@ -405,7 +405,7 @@ def carry_pieces(dense: np.ndarray, source: ElasticModel, names: tuple[str, ...]
             pieces, face, vertices, source.arrays["control_positions"], tuple(source.control_names), params[jaw],
             tuple(names[s] for s in jaw)).astype(dense.dtype)
     # the skin stays: what the field moves slides over it (the drawn eyes' own closing below hides on purpose)
-    keep_clearance(dense, vertices, face, moved, skin_t)
+    keep_clearance(dense, vertices, face, moved, skin_t, face.triangles[np.isin(face.triangles, moved).all(axis=1)])
     dense[:, pieces.upper_teeth] = 0.0  # fixed to the skull (pieces.mouth_sides)
     for key, side in (("eyeBlinkLeft", "L"), ("eyeBlinkRight", "R")):
         if key in names and side in pieces.eyes:  # the drawn eye closes on the line between its corners

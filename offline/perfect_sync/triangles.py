@@ -77,6 +77,10 @@ def skin_front_depth(xy: np.ndarray, local: np.ndarray, triangles: np.ndarray) -
     forward) through each of the points ``xy`` (m, 2), NaN where none crosses it; ``local`` the vertices in the
     face frame."""
     out = np.full(len(xy), -np.inf)
+    if len(xy) and len(triangles):  # only the triangles whose front-view box meets the points' box can cross them
+        box = local[np.asarray(triangles)][:, :, :2]
+        lo, hi = np.nanmin(xy, axis=0), np.nanmax(xy, axis=0)
+        triangles = np.asarray(triangles)[((box.max(axis=1) >= lo) & (box.min(axis=1) <= hi)).all(axis=1)]
     for start in range(0, len(triangles), 4096):
         t = local[triangles[start:start + 4096]]  # (k, 3, 3)
         a, b, c = t[:, 0], t[:, 1], t[:, 2]
