@@ -99,6 +99,8 @@ def _keep_triangles_clear(dense: np.ndarray, local: np.ndarray, face: Face, tria
             short = np.nan_to_num(floor - new[..., 2], nan=0.0, neginf=0.0).max(axis=1)
             for k in range(3):
                 np.maximum.at(lift, t[go][:, k], short)
+        if face.weld is not None:  # a seam's copies are lifted with their first copy, which the triangles hold
+            lift = np.maximum(lift, lift[face.weld])
         up = np.flatnonzero(lift > 0)
         if len(up):
             d[up, 2] += lift[up]
