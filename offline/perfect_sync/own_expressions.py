@@ -51,8 +51,8 @@ VANISH_MORE = 0.15  # worse: a drawn piece with this share more of it hidden tha
 # blinks: her own hide 75 % of her eye's largest piece, leaving the closed lash line; the clone's all of it)
 VANISHED = 0.25  # a defect: a drawn piece with this share of it newly hidden
 POKED = 0.25  # a defect: a cross band of a drawn piece with this share of it cut by the skin between its corners
-# (her own expressions: 0 on every piece; her cloned outer brow raises before the skin's clearance was kept over
-# the brows' triangles: 0.75 and 0.79)
+# (her own expressions: 0 on every piece; her cloned outer brow raises with the skin's clearance kept at the
+# corners only: 0.81)
 FOLDED = 0.25  # a defect: a drawn piece with this share of its front-view area turned over
 FLAT = 1e-4  # a triangle whose front-view area is under this fraction of its piece's largest is seen edge-on:
 # its winding says nothing

@@ -121,8 +121,8 @@ def test_the_true_shapes_of_ict_never_let_its_skin_through_its_lashes_and_films(
 
 @pytest.mark.slow
 def test_her_cloned_brows_keep_the_skin_behind_them(godette):
-    """Her clone, as the command makes it: no shape lets the skin through a drawn piece (before the clearance was
-    kept over the triangles: browOuterUpLeft 0.75, browOuterUpRight 0.79 of a band of the brow), and none is
+    """Her clone, as the command makes it: no shape lets the skin through a drawn piece (with the clearance kept
+    at the corners only: browOuterUpLeft and browOuterUpRight 0.81 of a band of the brow), and none is
     reported for it; the brows still rise (their highest point by at least a quarter of an inner-eye distance)."""
     g, face, pieces, drawn = godette
     out, report, _ = perfect_sync(g, fit_kit_source(need_shared("ict-facekit")), prefer_own=True)
