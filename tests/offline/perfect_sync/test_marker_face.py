@@ -103,3 +103,23 @@ def test_the_bench_says_when_the_take_is_missing_or_not_asked_for(ict_character,
     take = need_shared("markers", "animface_jaw.trc")
     [(label, _, folded)] = _marker_heads(take, ict_character, marks, ["animface_half"], out)
     assert label == "animface_half" and folded == 0.0 and out == {}
+
+
+def test_the_actor_variant_keeps_a_human_eye_and_nose(ict_character, marks, markers):
+    """The eye-corner markers sit on the skin outside the corners (4.5-5.0 cm apart after the alignment, where an
+    eye opening is about 3) and the nose-wing markers on the alae: taken as the corners they made 5 cm eyes
+    whose inner corners lay on the nose bridge. Each pair moves its feature by its centre, so the variant's eye
+    opening (corner to corner) stays within a human share of the inner-eye distance (ICT 0.73; measured 0.67
+    and 0.70 after; 1.9 before) and its nose as wide as ICT's within 10 %."""
+    for _, variant, _ in marker_variants(ict_character, marks, markers):
+        points = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
+        v = variant.vertices.astype(np.float64)
+
+        def gap(a, b, v=v, points=points):
+            return float(np.linalg.norm(v[points.vertex(a)] - v[points.vertex(b)]))
+
+        es = gap("eye_inner_L", "eye_inner_R")
+        for side in ("L", "R"):
+            assert 0.5 <= gap(f"eye_inner_{side}", f"eye_outer_{side}") / es <= 1.0, side
+        ict_nose = float(np.linalg.norm(np.subtract(*ict_character.vertices[marks[[31, 35]]].astype(np.float64))))
+        assert abs(float(np.linalg.norm(v[marks[31]] - v[marks[35]])) / ict_nose - 1.0) < 0.1
