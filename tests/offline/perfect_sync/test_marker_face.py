@@ -130,7 +130,8 @@ def test_the_proposed_eye_points_sit_on_the_actor_heads_eyes(ict_character, mark
     """The coarse fit lands the actor head's eyes 1 cm high and narrower than they are; snapped to the opening's
     pixel nearest the fit's corner, the corners stayed inside the opening, up to 1.06 cm from the true ones
     (the right outer corner). The outer corner is the opening's end and the inner one is sought from the fit
-    moved as the outer corner moved: measured at most 0.21 cm (animface) and 0.19 (animface_half)."""
+    moved as the outer corner moved: measured at most 0.21 cm (animface) and 0.19 (animface_half). The mouth's
+    corners likewise stayed inside its slit, 0.79 cm off; taken at the slit's ends, at most 0.16."""
     source = fit_kit_source(need_shared("ict-facekit"))
     names = tuple(source.control_names)
     for label, variant, _ in marker_variants(ict_character, marks, markers):
@@ -139,5 +140,5 @@ def test_the_proposed_eye_points_sit_on_the_actor_heads_eyes(ict_character, mark
         true = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
         v = variant.vertices.astype(np.float64)
         for name in names:
-            if name.startswith(("eye_", "lid_")):
+            if name.startswith(("eye_", "lid_", "mouth_corner")):
                 assert np.linalg.norm(v[proposed.vertex(name)] - v[true.vertex(name)]) < 0.3, (label, name)
