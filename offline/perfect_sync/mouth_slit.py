@@ -42,7 +42,8 @@ CORNER_PAST = 0.02
 AGREE = 0.03  # a point found within this many ES of the fit's place keeps the fit's (about two pixels)
 
 
-def _is_mouth(name: str) -> bool:
+def is_mouth_point(name: str) -> bool:
+    """Whether ``name`` is one of the mouth's points this module places."""
     return any(name == p or name.startswith(p + "_") for p in MOUTH_PREFIXES)
 
 
@@ -115,7 +116,7 @@ def mouth_places(source_positions: np.ndarray, names: Sequence[str], fitted: np.
     up_scale = f_tall / s_tall / h if s_tall > 0 and f_tall > 0 else scale
     out = {}
     for name in names:
-        if not _is_mouth(name):
+        if not is_mouth_point(name):
             continue
         p = src[idx[name]]
         if name in ("mouth_corner_L", "mouth_corner_R"):
