@@ -11,9 +11,9 @@ fitted points. Where the eye opens, the front-most skin is either missing (a hol
 or far behind the skin both above and below it in the same column (the socket behind an eyeball: ICT), so
 the opening is the connected region of such pixels at the eye's fitted centre. Its outer end is the eye's
 outer corner (wherever the fit put it: a fit high or narrower than the eye would keep it inside the opening);
-the inner corner is the opening's pixel nearest the fit's, the fit first moved as the outer corner moved (a
-crease of the MediaPipe-like heads joins the opening's inner end and runs on towards the nose, so that end is
-not the corner); in each column its top is the upper lid's margin, its bottom the lower's. The
+the inner corner is the opening's pixel nearest the fit's, the fit first moved as the outer corner moved where
+it lies off the opening (a crease of the MediaPipe-like heads joins the opening's inner end and runs on towards
+the nose, so that end is not the corner); in each column its top is the upper lid's margin, its bottom the lower's. The
 eye's six points are put at the source's places along the eye (their fraction of the corner-to-corner
 width) on those margins, each on the skin vertex seen from the front that lies nearest.
 
@@ -42,8 +42,8 @@ DEEP = 0.15  # skin this many ES behind the front-most skin above or below it in
 COLUMN = 0.3  # ... within this many ES up or down
 WIDTH_RANGE = (0.4, 2.0)  # an eye opening's width (ES)
 MAX_HEIGHT = 0.8  # ... and its largest height (ES)
-CORNER_BEYOND = 0.12  # a fitted inner corner this many ES past the opening's end along the eye is kept
-AGREE = 0.05  # an outer corner found within this many ES of the fit's leaves the fit's inner corner where it is
+CORNER_BEYOND = 0.12  # a fitted inner corner this many ES past the opening's end along the eye is kept; further
+# off the opening, it is first moved as the outer corner moved
 END_COLUMNS = 2  # an opening's outer end: the mean row of its columns this many pixels from its extreme one
 VISIBLE = 0.05  # a vertex within this many ES of the front-most skin at its pixel is seen from the front
 
@@ -128,8 +128,9 @@ def eye_points(source_positions: np.ndarray, names: Sequence[str], fitted: np.nd
         corner["eye_outer"] = np.array([end, rr[np.abs(cc - end) <= END_COLUMNS].mean()], np.float64)
         # the inner corner: the opening's pixel nearest the fit's, the fit's eye first moved as its outer corner
         # moved (a crease may join the opening's inner end and run on to the nose, so its end is not the corner)
-        moved = corner["eye_outer"] - f_out
-        f = (fit[idx[f"eye_inner_{side}"], :2] - (x0, y0)) / h + (moved if np.hypot(*moved) * h > AGREE * es else 0.0)
+        f = (fit[idx[f"eye_inner_{side}"], :2] - (x0, y0)) / h
+        if np.sqrt(((cc - f[0]) ** 2 + (rr - f[1]) ** 2).min()) * h > CORNER_BEYOND * es:  # off the opening
+            f = f + corner["eye_outer"] - f_out
         k = int(np.argmin((cc - f[0]) ** 2 + (rr - f[1]) ** 2))
         corner["eye_inner"] = np.array([cc[k], rr[k]], np.float64)
         # ... unless the fit's lies just beyond the opening's end: there the lids meet over the caruncle in a
