@@ -64,8 +64,10 @@ def test_the_variants_change_proportions_without_folding_and_keep_icts_depth_at_
 
 @pytest.mark.slow  # the kit source's fit (cached) and a clone of 26k vertices
 def test_the_held_out_actor_head_blinks_close_and_no_shape_is_over_40(ict_character, marks, markers):
-    """Measured: median 19.8 % (over the 15 % goal: said in the bench, not hidden), worst eyeLookInRight 33.1 %;
-    blink mid-lid gaps 0.09 / 0.17 cm of 1.08 / 1.06 (true 0.13 / 0.12; without the lid seal 0.00 / 0.31).
+    """Measured: median 13.1 %, worst eyeBlinkLeft 29.0 %; blink mid-lid gaps 0.14 / 0.05 cm of 1.03 / 1.01
+    (true 0.15 / 0.13). Before the eyes were moved by their markers' centre and the proposal took the eye's outer
+    corner and the mouth's corners at their openings' ends: median 19.8 %, worst 33.1 %, gaps 0.09 / 0.17 cm of
+    1.08 / 1.06 (without the lid seal 0.00 / 0.31).
     While the seal took its margins anywhere seen from the front, the socket behind the eyeball seen at the
     opening's edge was taken for one and the left blink was torn open to 0.29."""
     [(_, variant, _)] = marker_variants(ict_character, marks, markers, ["animface"])
@@ -131,14 +133,19 @@ def test_the_proposed_eye_points_sit_on_the_actor_heads_eyes(ict_character, mark
     pixel nearest the fit's corner, the corners stayed inside the opening, up to 1.06 cm from the true ones
     (the right outer corner). The outer corner is the opening's end and the inner one is sought from the fit
     moved as the outer corner moved: measured at most 0.21 cm (animface) and 0.19 (animface_half). The mouth's
-    corners likewise stayed inside its slit, 0.79 cm off; taken at the slit's ends, at most 0.16."""
+    corners likewise stayed inside its slit, 0.79 cm off; taken at the slit's ends, at most 0.16. The cheeks'
+    proposed places (before each takes a skin vertex), left where the fit put the eyes, lay a mean 1.07 cm off;
+    moved between the found eyes and mouth, 0.81."""
     source = fit_kit_source(need_shared("ict-facekit"))
     names = tuple(source.control_names)
     for label, variant, _ in marker_variants(ict_character, marks, markers):
         face = find_face(variant)
-        proposed, _ = propose(source.arrays["control_positions"], names, variant.vertices, face)
-        true = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
+        proposed, fitted = propose(source.arrays["control_positions"], names, variant.vertices, face)
+        true = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant)).reorder(names)
         v = variant.vertices.astype(np.float64)
         for name in names:
             if name.startswith(("eye_", "lid_", "mouth_corner")):
                 assert np.linalg.norm(v[proposed.vertex(name)] - v[true.vertex(name)]) < 0.3, (label, name)
+        if label == "animface":
+            cheeks = [names.index(n) for n in names if n.startswith("cheek")]
+            assert np.linalg.norm(fitted[cheeks] - v[true.vertices[cheeks]], axis=1).mean() < 0.95

@@ -99,14 +99,16 @@ def test_the_cloned_blinks_close_the_lids_without_tearing_through(cloned, marks)
 
 
 def test_the_cheeks_keep_their_place_between_the_found_eyes_and_mouth(ict_character, marks, mediapipe):
-    """The coarse fit left the design head's cheekbones 0.40 cm from the true ones while its eyes and mouth were
-    found where they are; moved by their fraction of the way between the eyes' and the mouth's moves
-    (:mod:`~facepuppet.offline.perfect_sync.feature_span`) they land on them (measured 0.00)."""
+    """The coarse fit left the design head's cheeks (their proposed places, before each takes a skin vertex) a
+    mean 0.30 cm from the true ones while its eyes and mouth were found where they are; moved by their fraction
+    of the way between the eyes' and the mouth's moves (:mod:`~facepuppet.offline.perfect_sync.feature_span`),
+    0.20 (the actor head of test_marker_face: 1.07 -> 0.81)."""
     source = fit_kit_source(need_shared("ict-facekit"))
     names = tuple(source.control_names)
     [(_, variant, _)] = real_variants(ict_character, marks, mediapipe, ["mediapipe"])
-    proposed, _ = propose(source.arrays["control_positions"], names, variant.vertices, find_face(variant))
+    _, fitted = propose(source.arrays["control_positions"], names, variant.vertices, find_face(variant))
     true = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
     v = variant.vertices.astype(np.float64)
-    for name in ("cheekbone_L", "cheekbone_R", "cheek_R"):
-        assert np.linalg.norm(v[proposed.vertex(name)] - v[true.vertex(name)]) < 0.2, name
+    cheeks = [n for n in names if n.startswith("cheek")]
+    assert len(cheeks) == 4
+    assert np.mean([np.linalg.norm(fitted[names.index(n)] - v[true.vertex(n)]) for n in cheeks]) < 0.25
