@@ -10,7 +10,7 @@ from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.io.capture import read_trc
 from facepuppet.offline.perfect_sync import evaluate
-from facepuppet.offline.perfect_sync.bench import _marker_heads
+from facepuppet.offline.perfect_sync.bench import _marker_heads, _with_true_points
 from facepuppet.offline.perfect_sync.commands import perfect_sync
 from facepuppet.offline.perfect_sync.face import find_face
 from facepuppet.offline.perfect_sync.proposal import propose
@@ -149,3 +149,14 @@ def test_the_proposed_eye_points_sit_on_the_actor_heads_eyes(ict_character, mark
         if label == "animface":
             cheeks = [names.index(n) for n in names if n.startswith("cheek")]
             assert np.linalg.norm(fitted[cheeks] - v[true.vertices[cheeks]], axis=1).mean() < 0.95
+
+
+@pytest.mark.slow  # a clone of 26k vertices
+def test_given_its_true_points_the_actor_head_clones_within_the_goal(ict_character, marks, markers):
+    """The bench's split of a set's error (``true_points``): with the true control points the actor head's clone
+    meets the goal (measured median 13.7 %, worst eyeBlinkRight 24.4 %), so what it misses beyond is the
+    proposal's."""
+    [(_, variant, _)] = marker_variants(ict_character, marks, markers, ["animface"])
+    points = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
+    got = _with_true_points(variant, fit_kit_source(need_shared("ict-facekit")), points, find_face(variant))
+    assert got["median"] < 0.15 and got["worst"][1] < 0.40, got
