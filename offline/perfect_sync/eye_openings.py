@@ -9,8 +9,11 @@ lower one. The opening itself is a plain geometric fact, found here without the 
 the skin is drawn into a depth buffer in the face frame, looking along −z, in a window about each eye's
 fitted points. Where the eye opens, the front-most skin is either missing (a hole: the MediaPipe face)
 or far behind the skin both above and below it in the same column (the socket behind an eyeball: ICT), so
-the opening is the connected region of such pixels at the eye's fitted centre. Its extreme columns are
-the eye's corners; in each column its top is the upper lid's margin, its bottom the lower's. The
+the opening is the connected region of such pixels at the eye's fitted centre. Its outer end is the eye's
+outer corner (wherever the fit put it: a fit high or narrower than the eye would keep it inside the opening);
+the inner corner is the opening's pixel nearest the fit's, the fit first moved as the outer corner moved where
+it lies off the opening (a crease of the MediaPipe-like heads joins the opening's inner end and runs on towards
+the nose, so that end is not the corner); in each column its top is the upper lid's margin, its bottom the lower's. The
 eye's six points are put at the source's places along the eye (their fraction of the corner-to-corner
 width) on those margins, each on the skin vertex seen from the front that lies nearest.
 
@@ -39,7 +42,9 @@ DEEP = 0.15  # skin this many ES behind the front-most skin above or below it in
 COLUMN = 0.3  # ... within this many ES up or down
 WIDTH_RANGE = (0.4, 2.0)  # an eye opening's width (ES)
 MAX_HEIGHT = 0.8  # ... and its largest height (ES)
-CORNER_BEYOND = 0.12  # a fitted inner corner this many ES past the opening's end along the eye is kept
+CORNER_BEYOND = 0.12  # a fitted inner corner this many ES past the opening's end along the eye is kept; further
+# off the opening, it is first moved as the outer corner moved
+END_COLUMNS = 2  # an opening's outer end: the mean row of its columns this many pixels from its extreme one
 VISIBLE = 0.05  # a vertex within this many ES of the front-most skin at its pixel is seen from the front
 
 
@@ -114,16 +119,26 @@ def eye_points(source_positions: np.ndarray, names: Sequence[str], fitted: np.nd
         rr, cc = np.nonzero(opening)
         corner = {}
         middle = cc.mean()
-        for name in ("eye_inner", "eye_outer"):  # the opening's pixel nearest the fit's corner ...
-            f = (fit[idx[f"{name}_{side}"], :2] - (x0, y0)) / h
-            k = int(np.argmin((cc - f[0]) ** 2 + (rr - f[1]) ** 2))
-            corner[name] = np.array([cc[k], rr[k]], np.float64)
-            # ... unless, at the inner corner, the fit's lies just beyond the opening's end: there the lids meet
-            # over the caruncle in a shallow crease (ICT's inner corner lies 0.08 ES past its opening's end), so
-            # the end is only the least reach of the eye; the outer corner is a sharp meeting of the lids
-            beyond = (f[0] - cc[k]) * np.sign(cc[k] - middle)
-            if name == "eye_inner" and 0 < beyond * h <= CORNER_BEYOND * es:
-                corner[name] = f
+        # the outer corner: the opening's end on the fit's outer corner's side (the rows of its last columns), where
+        # the lids meet sharply; the fit's corner may lie anywhere about it (inside the opening when the eye is wider
+        # than the fit, above it when the fit is high), so the end is taken, not the pixel nearest the fit's
+        f_out = (fit[idx[f"eye_outer_{side}"], :2] - (x0, y0)) / h
+        toward = 1.0 if f_out[0] > middle else -1.0
+        end = cc.max() if toward > 0 else cc.min()
+        corner["eye_outer"] = np.array([end, rr[np.abs(cc - end) <= END_COLUMNS].mean()], np.float64)
+        # the inner corner: the opening's pixel nearest the fit's, the fit's eye first moved as its outer corner
+        # moved (a crease may join the opening's inner end and run on to the nose, so its end is not the corner)
+        f = (fit[idx[f"eye_inner_{side}"], :2] - (x0, y0)) / h
+        if np.sqrt(((cc - f[0]) ** 2 + (rr - f[1]) ** 2).min()) * h > CORNER_BEYOND * es:  # off the opening
+            f = f + corner["eye_outer"] - f_out
+        k = int(np.argmin((cc - f[0]) ** 2 + (rr - f[1]) ** 2))
+        corner["eye_inner"] = np.array([cc[k], rr[k]], np.float64)
+        # ... unless the fit's lies just beyond the opening's end: there the lids meet over the caruncle in a
+        # shallow crease (ICT's inner corner lies 0.08 ES past its opening's end), so the end is only the least
+        # reach of the eye
+        beyond = (f[0] - cc[k]) * np.sign(cc[k] - middle)
+        if 0 < beyond * h <= CORNER_BEYOND * es:
+            corner["eye_inner"] = f
         span = corner["eye_outer"] - corner["eye_inner"]
         if not WIDTH_RANGE[0] <= abs(span[0]) * h / es <= WIDTH_RANGE[1]:
             logger.info("eye %s: corners %.2f ES apart; the fit's points are kept", side, abs(span[0]) * h / es)

@@ -3,8 +3,10 @@
 The lips meet in a crease that is a valley of the skin's depth along the face's up axis
 (:mod:`.front_depth`), deeper than the lips on either side and, where the mouth is open or the skin has a
 slit, a hole. The slit is the connected region of the valley at the coarse fit's mouth centre; its ends
-are the mouth's corners (each the slit's pixel nearest the fit's corner: a slit that runs past the corner
-into a crease of the cheek does not move it), and in each column its deepest pixel is on the lip line.
+are the mouth's corners (wherever the fit's corners lie: on a mouth wider than the fit, the slit's pixel
+nearest the fit's corner kept it up to 0.8 cm inside the mouth; a crease of the cheek joining the slit's end
+would carry the corner with it, which none of the measured heads has), and in each column its deepest pixel is
+on the lip line.
 
 The slit's ends are where the crease fades, a little inside the corners (``CORNER_PAST``). The
 source's mouth points keep their place relative to the source's corners and line: along the mouth
@@ -40,7 +42,8 @@ CORNER_PAST = 0.02
 AGREE = 0.03  # a point found within this many ES of the fit's place keeps the fit's (about two pixels)
 
 
-def _is_mouth(name: str) -> bool:
+def is_mouth_point(name: str) -> bool:
+    """Whether ``name`` is one of the mouth's points this module places."""
     return any(name == p or name.startswith(p + "_") for p in MOUTH_PREFIXES)
 
 
@@ -77,9 +80,9 @@ def mouth_places(source_positions: np.ndarray, names: Sequence[str], fitted: np.
     deep = np.where(labels == pick, np.where(np.isfinite(depth), depth, 1e30), -np.inf)
     corner = {}
     middle = cc.mean()
-    for side in ("L", "R"):  # the column of the slit's pixel nearest the fit's corner, a little further out
+    for side in ("L", "R"):  # the column of the slit's end on the fit's corner's side, a little further out
         f = (fit[idx[f"mouth_corner_{side}"], :2] - (x0, y0)) / h  # (CORNER_PAST), on the deepest row there
-        k = int(np.argmin((cc - f[0]) ** 2 + (rr - f[1]) ** 2))
+        k = int(np.argmax(cc) if f[0] > middle else np.argmin(cc))
         corner[side] = np.array([cc[k] + np.sign(cc[k] - middle) * CORNER_PAST * es / h,
                                  np.argmax(deep[:, cc[k]])], np.float64)
     width = abs(corner["L"][0] - corner["R"][0]) * h / es
@@ -113,7 +116,7 @@ def mouth_places(source_positions: np.ndarray, names: Sequence[str], fitted: np.
     up_scale = f_tall / s_tall / h if s_tall > 0 and f_tall > 0 else scale
     out = {}
     for name in names:
-        if not _is_mouth(name):
+        if not is_mouth_point(name):
             continue
         p = src[idx[name]]
         if name in ("mouth_corner_L", "mouth_corner_R"):

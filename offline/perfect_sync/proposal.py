@@ -13,7 +13,9 @@ ICT head's 47) are fitted to the target's skin coarsely and non-rigidly:
 3. a few non-rigid steps: each point moves halfway to its nearest skin
    vertex by the Gaussian-smoothed offsets of its neighbours, so the set
    bends to the target's proportions without collapsing;
-4. each point takes its nearest free skin vertex; ``nose_tip`` the face's
+4. the eyes' and the mouth's points put where their openings are (:mod:`.eye_openings`, :mod:`.mouth_slit`)
+   and the points between them (cheekbones, cheeks) moved as they moved (:mod:`.feature_span`);
+5. each point takes its nearest free skin vertex; ``nose_tip`` the face's
    detected nose tip unless the fit's lies within 0.3 FAPU of it; the inner lips the nearest skin vertex facing down
    (upper) or up (lower), the mouth's inner corners where the lips touch
    (:mod:`.lip_contact`), then put in order (:func:`fix_inner_lips`).
@@ -54,11 +56,13 @@ from facepuppet.offline.elastic.control_points import ControlPoints, read_contro
 from facepuppet.offline.elastic.lip_line import CORNERS, LOWER, UPPER, boundary_loops, fix_inner_lips, mouth_slit
 from facepuppet.offline.perfect_sync.eye_openings import eye_points
 from facepuppet.offline.perfect_sync.face import Face
+from facepuppet.offline.perfect_sync.feature_span import MOUTH_CORNERS as CORNERS_OF_MOUTH
+from facepuppet.offline.perfect_sync.feature_span import between_features
 from facepuppet.offline.perfect_sync.landmark_field import EYE_NAMES, MOUTH_NAMES, feature_places
 from facepuppet.offline.perfect_sync.layout_checks import by_feature, decal_doubts, order_doubts
 from facepuppet.offline.perfect_sync.lip_contact import corner_doubts, inner_corners
 from facepuppet.offline.perfect_sync.local_fit import poor_fits
-from facepuppet.offline.perfect_sync.mouth_slit import mouth_places
+from facepuppet.offline.perfect_sync.mouth_slit import is_mouth_point, mouth_places
 from facepuppet.offline.perfect_sync.pieces import Pieces
 
 START_SCALES = (0.6, 0.8, 1.0, 1.25, 1.6)
@@ -212,8 +216,13 @@ def propose(source_positions: np.ndarray, source_names: Sequence[str], vertices:
     # by millimetres on a head of other proportions, and the blinks lean on them)
     on_lids = eye_points(source_positions, names, fitted, v, face, skin_triangles(face), cand)
     fitted = np.array(fitted)
-    for name, place in mouth_places(source_positions, names, fitted, v, face, skin_triangles(face)).items():
-        fitted[names.index(name)] = place  # about the lips' meeting line
+    mouth = mouth_places(source_positions, names, fitted, v, face, skin_triangles(face))
+    found = {**{n: fitted[names.index(n)] for n in CORNERS_OF_MOUTH if mouth and n in names}, **mouth,
+             **{n: v[k] for n, k in on_lids.items()}}  # a corner the slit agrees with stays the fit's
+    span = between_features(source_positions, names, fitted, found, face,
+                            {*(n for n in names if is_mouth_point(n) or n.startswith(("nose", "nostril")))})
+    for name, place in {**mouth, **span}.items():
+        fitted[names.index(name)] = place  # about the lips' meeting line; between the eyes and the mouth
     for name, vertex in on_lids.items():
         fitted[names.index(name)] = v[vertex]
     taken = {nose, *on_lids.values()}

@@ -25,7 +25,10 @@ landmarks: 23 of them sit near one (:data:`MULTIPIE_TO_MARKERS`), after a simila
 0.3–1.7 cm of ICT's, and all on the skin's surface, in front of recessed places such as the eye corners
 (1.4 cm in front of ICT's). So only their front-view places (across and up, in ICT's frame after the
 alignment) move the landmarks; the depth stays ICT's, and the landmarks without a marker are carried by
-the spline.
+the spline. Markers that sit around a feature, outside its ends (the eyes' corners, the nose wings:
+:data:`MARKER_PAIRS`), say where the feature is, not how wide: taken as its ends they made eyes 5 cm wide
+with their inner corners on a crumpled nose bridge, a head no face has. Each such pair moves its feature's
+landmarks (an eye's six) by the motion of the pair's centre.
 """
 
 from __future__ import annotations
@@ -125,6 +128,11 @@ MULTIPIE_TO_MARKERS = (
     (48, "Mouth_Rend"), (50, "Mouth_UpR1"), (51, "Mouth_Up"), (52, "Mouth_UpL1"), (54, "Mouth_Lend"),
     (56, "Mouth_DownL"), (57, "Mouth_Down"), (58, "Mouth_DownR"), (8, "Chin"),
 )
+#: landmarks whose markers sit on the skin around a feature, outside its ends (the eye's corners: its markers are
+#: 4.5-5.0 cm apart after the alignment, where an eye opening is about 3; the nose wings' on the alae, above and
+#: beside the nostrils' bases): each pair moves by the motion of its centre, with the feature's other landmarks
+#: (an eye's lids), so the feature moves, not resized or bent: (the pair, the feature's landmarks)
+MARKER_PAIRS = (((36, 39), tuple(range(36, 42))), ((42, 45), tuple(range(42, 48))), ((31, 35), (31, 35)))
 #: the variants of :func:`marker_variants`: (label, amount)
 MARKER_VARIANTS = (("animface", 1.0), ("animface_half", 0.5))
 
@@ -137,8 +145,17 @@ def marker_variants(ict: Character, ict_marks: np.ndarray, markers: dict,
     a = ict.vertices.astype(np.float64)[np.asarray(ict_marks, np.int64)]
     idx = [i for i, _ in MULTIPIE_TO_MARKERS]
     src = a[idx]
-    motion = similarity(np.asarray([markers[n] for _, n in MULTIPIE_TO_MARKERS], np.float64), src) - src
+    centred, moving = src.copy(), np.asarray([markers[n] for _, n in MULTIPIE_TO_MARKERS], np.float64)
+    for pair, _ in MARKER_PAIRS:  # markers around a feature tell where it is, not how wide: each pair by its centre
+        k = [idx.index(i) for i in pair]
+        centred[k], moving[k] = centred[k].mean(0), moving[k].mean(0)
+    motion = similarity(moving, centred) - centred
     motion[:, 2] = 0.0  # markers sit on the skin in front of recessed landmarks: their depth says nothing
+    for pair, whole in MARKER_PAIRS:  # the feature's other landmarks move with it (an eye's lids with its corners)
+        extra = [i for i in whole if i not in idx]
+        idx += extra
+        src = np.vstack([src, a[extra]])
+        motion = np.vstack([motion, np.repeat(motion[[idx.index(pair[0])]], len(extra), axis=0)])
     out = []
     for label, amount in MARKER_VARIANTS:
         if labels is not None and label not in labels:

@@ -10,9 +10,10 @@ from facepuppet.offline.elastic.commands import main_front
 from facepuppet.offline.elastic.control_points import ict_control_points
 from facepuppet.offline.io.capture import read_trc
 from facepuppet.offline.perfect_sync import evaluate
-from facepuppet.offline.perfect_sync.bench import _marker_heads
+from facepuppet.offline.perfect_sync.bench import _marker_heads, _with_true_points
 from facepuppet.offline.perfect_sync.commands import perfect_sync
 from facepuppet.offline.perfect_sync.face import find_face
+from facepuppet.offline.perfect_sync.proposal import propose
 from facepuppet.offline.perfect_sync.real_variants import MULTIPIE_TO_MARKERS, marker_variants, similarity
 from facepuppet.offline.perfect_sync.source import fit_kit_source
 from tests.conftest import need_shared
@@ -63,8 +64,10 @@ def test_the_variants_change_proportions_without_folding_and_keep_icts_depth_at_
 
 @pytest.mark.slow  # the kit source's fit (cached) and a clone of 26k vertices
 def test_the_held_out_actor_head_blinks_close_and_no_shape_is_over_40(ict_character, marks, markers):
-    """Measured: median 19.8 % (over the 15 % goal: said in the bench, not hidden), worst eyeLookInRight 33.1 %;
-    blink mid-lid gaps 0.09 / 0.17 cm of 1.08 / 1.06 (true 0.13 / 0.12; without the lid seal 0.00 / 0.31).
+    """Measured: median 13.1 %, worst eyeBlinkLeft 29.0 %; blink mid-lid gaps 0.14 / 0.05 cm of 1.03 / 1.01
+    (true 0.15 / 0.13). Before the eyes were moved by their markers' centre and the proposal took the eye's outer
+    corner and the mouth's corners at their openings' ends: median 19.8 %, worst 33.1 %, gaps 0.09 / 0.17 cm of
+    1.08 / 1.06 (without the lid seal 0.00 / 0.31).
     While the seal took its margins anywhere seen from the front, the socket behind the eyeball seen at the
     opening's edge was taken for one and the left blink was torn open to 0.29."""
     [(_, variant, _)] = marker_variants(ict_character, marks, markers, ["animface"])
@@ -103,3 +106,57 @@ def test_the_bench_says_when_the_take_is_missing_or_not_asked_for(ict_character,
     take = need_shared("markers", "animface_jaw.trc")
     [(label, _, folded)] = _marker_heads(take, ict_character, marks, ["animface_half"], out)
     assert label == "animface_half" and folded == 0.0 and out == {}
+
+
+def test_the_actor_variant_keeps_a_human_eye_and_nose(ict_character, marks, markers):
+    """The eye-corner markers sit on the skin outside the corners (4.5-5.0 cm apart after the alignment, where an
+    eye opening is about 3) and the nose-wing markers on the alae: taken as the corners they made 5 cm eyes
+    whose inner corners lay on the nose bridge. Each pair moves its feature by its centre, so the variant's eye
+    opening (corner to corner) stays within a human share of the inner-eye distance (ICT 0.73; measured 0.67
+    and 0.70 after; 1.9 before) and its nose as wide as ICT's within 10 %."""
+    for _, variant, _ in marker_variants(ict_character, marks, markers):
+        points = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
+        v = variant.vertices.astype(np.float64)
+
+        def gap(a, b, v=v, points=points):
+            return float(np.linalg.norm(v[points.vertex(a)] - v[points.vertex(b)]))
+
+        es = gap("eye_inner_L", "eye_inner_R")
+        for side in ("L", "R"):
+            assert 0.5 <= gap(f"eye_inner_{side}", f"eye_outer_{side}") / es <= 1.0, side
+        ict_nose = float(np.linalg.norm(np.subtract(*ict_character.vertices[marks[[31, 35]]].astype(np.float64))))
+        assert abs(float(np.linalg.norm(v[marks[31]] - v[marks[35]])) / ict_nose - 1.0) < 0.1
+
+
+def test_the_proposed_eye_points_sit_on_the_actor_heads_eyes(ict_character, marks, markers):
+    """The coarse fit lands the actor head's eyes 1 cm high and narrower than they are; snapped to the opening's
+    pixel nearest the fit's corner, the corners stayed inside the opening, up to 1.06 cm from the true ones
+    (the right outer corner). The outer corner is the opening's end and the inner one is sought from the fit
+    moved as the outer corner moved: measured at most 0.21 cm (animface) and 0.19 (animface_half). The mouth's
+    corners likewise stayed inside its slit, 0.79 cm off; taken at the slit's ends, at most 0.16. The cheeks'
+    proposed places (before each takes a skin vertex), left where the fit put the eyes, lay a mean 1.07 cm off;
+    moved between the found eyes and mouth, 0.81."""
+    source = fit_kit_source(need_shared("ict-facekit"))
+    names = tuple(source.control_names)
+    for label, variant, _ in marker_variants(ict_character, marks, markers):
+        face = find_face(variant)
+        proposed, fitted = propose(source.arrays["control_positions"], names, variant.vertices, face)
+        true = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant)).reorder(names)
+        v = variant.vertices.astype(np.float64)
+        for name in names:
+            if name.startswith(("eye_", "lid_", "mouth_corner")):
+                assert np.linalg.norm(v[proposed.vertex(name)] - v[true.vertex(name)]) < 0.3, (label, name)
+        if label == "animface":
+            cheeks = [names.index(n) for n in names if n.startswith("cheek")]
+            assert np.linalg.norm(fitted[cheeks] - v[true.vertices[cheeks]], axis=1).mean() < 0.95
+
+
+@pytest.mark.slow  # a clone of 26k vertices
+def test_given_its_true_points_the_actor_head_clones_within_the_goal(ict_character, marks, markers):
+    """The bench's split of a set's error (``true_points``): with the true control points the actor head's clone
+    meets the goal (measured median 13.7 %, worst eyeBlinkRight 24.4 %), so what it misses beyond is the
+    proposal's."""
+    [(_, variant, _)] = marker_variants(ict_character, marks, markers, ["animface"])
+    points = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
+    got = _with_true_points(variant, fit_kit_source(need_shared("ict-facekit")), points, find_face(variant))
+    assert got["median"] < 0.15 and got["worst"][1] < 0.40, got
