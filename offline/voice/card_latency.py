@@ -38,12 +38,13 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
 from facepuppet.runtime.commands.run import plan_from_argv, run_live
 from facepuppet.runtime.demo.head import build_demo_character
-from facepuppet.runtime.inputs.audio import AudioUnavailable
+from facepuppet.runtime.inputs.audio import AudioUnavailable, MicLevel
 
 from facepuppet.offline.voice.onset_player import LEAD_S, PERIOD_S
 from facepuppet.offline.voice.virtual_card import CardUnavailable, VirtualSoundCard, missing, visible
@@ -59,7 +60,7 @@ class ArrivalWatch:
     """Wraps a microphone's block hook: when each onset arrived (perf_counter s) and how far the samples
     received fell behind the wall clock since the first block (the capture's backlog, seconds)."""
 
-    def __init__(self, mic, rate: float) -> None:
+    def __init__(self, mic: MicLevel | _Hook, rate: float) -> None:
         self.inner = mic.on_block
         self.rate = float(rate)
         self.times: list[float] = []
@@ -167,7 +168,7 @@ class _Hook:
     on_block = None
 
 
-def card_alone(sd, card: VirtualSoundCard, onsets: int, log: Callable[[str], None]) -> dict:
+def card_alone(sd: ModuleType, card: VirtualSoundCard, onsets: int, log: Callable[[str], None]) -> dict:
     """The card's own delay, with nobody else in the listening process: the player's onsets to a capture
     stream's callback (the same device, rate and block as the run's microphone, PortAudio's default latency)."""
     info = sd.query_devices(card.name, "input")

@@ -17,6 +17,7 @@ import math
 import sys
 import threading
 import time
+from types import ModuleType
 
 import numpy as np
 
@@ -44,7 +45,7 @@ def burst_signal(rate: int, onsets: int) -> tuple[np.ndarray, list[int]]:
 class OnsetPlayer:
     """Plays :func:`burst_signal` from a PortAudio output stream, noting each onset's handed and played times."""
 
-    def __init__(self, sd, device: str, rate: int, onsets: int) -> None:
+    def __init__(self, sd: ModuleType, device: str, rate: int, onsets: int) -> None:
         self.signal, self.onsets = burst_signal(rate, onsets)
         self.rate = rate
         self.handed = [math.nan] * onsets
