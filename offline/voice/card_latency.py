@@ -142,12 +142,17 @@ def card_latency(table_path: Path, tmp: Path, onsets: int = 10, fps: float = 60.
                                 ("eyes", "brows", "mouth", "other", "head")) + "\n")
     try:
         with VirtualSoundCard(tmp / "vcard") as card, visible(card) as sd:
-            alone = card_alone(sd, card, onsets, log)
+            try:
+                alone = card_alone(sd, card, onsets, log)
+            except (ValueError, sd.PortAudioError) as exc:  # the card's device missing or refusing the stream
+                return {"available": False, "reason": f"{card.name}: {exc}"}
             result = _measure(card, table_path, char, jaw, config, onsets, fps, log)
             result["card_alone"] = alone
             return result
     except (CardUnavailable, AudioUnavailable) as exc:
         return {"available": False, "reason": str(exc)}
+    except (ImportError, OSError) as exc:  # OSError: the PortAudio library is missing
+        return {"available": False, "reason": f"no sounddevice/PortAudio ({exc})"}
 
 
 def _play(card: VirtualSoundCard, onsets: int) -> dict:
