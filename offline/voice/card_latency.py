@@ -135,6 +135,10 @@ def card_latency(table_path: Path, tmp: Path, onsets: int = 10, fps: float = 60.
     why = missing()
     if why is not None:
         return {"available": False, "reason": why}
+    try:
+        import sounddevice  # noqa: F401  (an optional extra: loaded where it is used)
+    except (ImportError, OSError) as exc:  # OSError: the PortAudio library is missing
+        return {"available": False, "reason": f"no sounddevice/PortAudio ({exc})"}
     char = build_demo_character().save(tmp / "demo.npz")
     jaw = build_demo_character().shape_names.index("jawOpen")
     config = tmp / "raw.toml"  # the filter's smoothing left out: the latency of the voice, not of the filter
@@ -151,8 +155,6 @@ def card_latency(table_path: Path, tmp: Path, onsets: int = 10, fps: float = 60.
             return result
     except (CardUnavailable, AudioUnavailable) as exc:
         return {"available": False, "reason": str(exc)}
-    except (ImportError, OSError) as exc:  # OSError: the PortAudio library is missing
-        return {"available": False, "reason": f"no sounddevice/PortAudio ({exc})"}
 
 
 def _play(card: VirtualSoundCard, onsets: int) -> dict:
