@@ -24,7 +24,7 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 # the module-scoped fixture ``db`` (a small synthetic gesture database) for the gesture tests; ``udp_receiver``
 # (a loopback socket for what a run or a replay sends)
-pytest_plugins = ["helpers.gesture_dbs", "helpers.udp_helpers"]
+pytest_plugins = ["helpers.gesture_dbs", "helpers.udp_helpers", "helpers.virtual_sound_card"]
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"

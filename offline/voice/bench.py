@@ -10,7 +10,9 @@ Goals (issue): jawOpen r >= 0.75, mouthFunnel r >= 0.6, every channel above the 
 JSON says per goal whether it is met. Cost: the runtime evaluator per hop (features + model, what the
 audio thread does per block of ``hop_s``) and the stage per tick, timed on this machine. Latency: a sound
 onset in ``--audio-file`` to the drawn weight through ``run`` itself (on the run's clock: the hop that holds
-the onset, then the next tick). Vowels: espeak-ng voices build a calibrated profile, others are recognised.
+the onset, then the next tick), and, where pulseaudio is installed, onsets played in real time into a virtual
+sound card that ``run --audio`` listens to (:mod:`~facepuppet.offline.voice.card_latency`). Vowels: espeak-ng
+voices build a calibrated profile, others are recognised.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from facepuppet.runtime.voice.vowels import VOWELS, build_profile, voiced_hops
 
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.gestures.speech_intensity import read_speech
+from facepuppet.offline.voice.card_latency import card_latency
 from facepuppet.offline.voice.fit import CURVE_FPS, MODEL_NAMES, cross_validate, fit_voice, read_pair, report_lines
 from facepuppet.offline.voice.limits import limits
 
@@ -240,11 +243,15 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     with tempfile.TemporaryDirectory() as d:
         table_path = table.save(Path(d) / "voice.npz")
         latency = run_latency(table_path, Path(d))
-    log(f"latency: sound onset in --audio-file -> drawn jawOpen {latency['latency_ms']:.1f} ms at "
-        f"{latency['fps']:g} fps (the run's clock; the filter's smoothing off)")
+        log(f"latency: sound onset in --audio-file -> drawn jawOpen {latency['latency_ms']:.1f} ms at "
+            f"{latency['fps']:g} fps (the run's clock; the filter's smoothing off)")
+        card = card_latency(table_path, Path(d), log=log)
+    if not card["available"]:
+        log(f"latency through a virtual sound card: not measured ({card['reason']})")
     vowels = vowel_recognition(log)
     return {"before": BEFORE, "goals_missed": missed, "limits": lim,
-            "latency": latency, "vowels": vowels, "channels": report["channels"], "frames": report["frames"],
+            "latency": latency, "latency_virtual_card": card, "vowels": vowels, "channels": report["channels"],
+            "frames": report["frames"],
             "kept": report["best"],
             "lookahead_ms": args.lookahead, "fit_s": fit_s,
             "cross_validated": {"r": report["held_out_r"], "mean_r": report["mean_r"],
