@@ -7,12 +7,14 @@ Two evaluations of the FACEGOOD speech pair (5 contiguous folds):
   before (the nearest this kit has to "other speech of the same speaker").
 
 Goals (issue): jawOpen r >= 0.75, mouthFunnel r >= 0.6, every channel above the level baseline; the
-JSON says per goal whether it is met. Cost: the runtime evaluator per hop (features + model, what the
-audio thread does per block of ``hop_s``) and the stage per tick, timed on this machine. Latency: a sound
-onset in ``--audio-file`` to the drawn weight through ``run`` itself (on the run's clock: the hop that holds
-the onset, then the next tick), and, where pulseaudio is installed, onsets played in real time into a virtual
-sound card that ``run --audio`` listens to (:mod:`~facepuppet.offline.voice.card_latency`). Vowels: espeak-ng
-voices build a calibrated profile, others are recognised.
+JSON says per goal whether it is met. The look-ahead trade-off: the same two evaluations of the level and
+ridge with the features hearing 0, 50, 100, 200 and 260 ms past each frame (:mod:`.lookahead`). Cost: the
+runtime evaluator per hop (features + model, what the audio thread does per block of ``hop_s``) and the
+stage per tick, timed on this machine. Latency: a sound onset in ``--audio-file`` to the drawn weight
+through ``run`` itself (on the run's clock: the hop that holds the onset, then the next tick), and, where
+pulseaudio is installed, onsets played in real time into a virtual sound card that ``run --audio`` listens
+to (:mod:`~facepuppet.offline.voice.card_latency`). Vowels: espeak-ng voices build a calibrated profile,
+others are recognised.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from facepuppet.offline.gestures.speech_intensity import read_speech
 from facepuppet.offline.voice.card_latency import card_latency
 from facepuppet.offline.voice.fit import CURVE_FPS, MODEL_NAMES, cross_validate, fit_voice, read_pair, report_lines
 from facepuppet.offline.voice.limits import limits
+from facepuppet.offline.voice.lookahead import curve_lines, lookahead_curve
 
 GOALS = {"jawOpen": 0.75, "mouthFunnel": 0.6}
 
@@ -239,6 +242,12 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     log("linear ceiling (ridge fitted on folds 4-5 themselves): " + ", ".join(
         f"{c} {ceil[c]:.3f}" for c in GOALS if c in ceil) + ": the most a linear reader of these features gives there; "
         "a goal above it needs other features, one under it held-out weights closer to these (more training speech)")
+    curve = lookahead_curve(read_speech(pair[0], rate=int(FeatureSpec().sample_rate)), FeatureSpec(), Y,
+                            report["channels"], CURVE_FPS)
+    for line in curve_lines(curve):
+        log(line)
+    curve["note"] = ("a trade-off, not the default: each ms of look-ahead is a ms of delay at run time, and the "
+                     "latency goal (<= 40 ms) is for the causal default (fit-voice --lookahead MS)")
     timing = _timing(table, log)
     with tempfile.TemporaryDirectory() as d:
         table_path = table.save(Path(d) / "voice.npz")
@@ -250,8 +259,8 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
         log(f"latency through a virtual sound card: not measured ({card['reason']})")
     vowels = vowel_recognition(log)
     return {"before": BEFORE, "goals_missed": missed, "limits": lim,
-            "latency": latency, "latency_virtual_card": card, "vowels": vowels, "channels": report["channels"],
-            "frames": report["frames"],
+            "latency": latency, "latency_virtual_card": card, "vowels": vowels, "lookahead_curve": curve,
+            "channels": report["channels"], "frames": report["frames"],
             "kept": report["best"],
             "lookahead_ms": args.lookahead, "fit_s": fit_s,
             "cross_validated": {"r": report["held_out_r"], "mean_r": report["mean_r"],
