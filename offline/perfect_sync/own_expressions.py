@@ -194,35 +194,25 @@ def compare(drawn: Drawn, mesh: np.ndarray, clone: np.ndarray, own: np.ndarray) 
     a, b = clone[mesh].ravel(), own[mesh].ravel()
     na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
     cosine = float(a @ b) / (na * nb) if na > 0 and nb > 0 else 0.0
-    hid_c, hid_o = drawn.vanishing(clone), drawn.vanishing(own)
-    more = {p: s - hid_o.get(p, 0.0) for p, s in hid_c.items()}
-    worse = []
-    if more and max(more.values()) > VANISH_MORE:
-        p = max(more, key=more.get)
-        worse.append(f"vanishing: {100 * hid_c[p]:.0f} % of {drawn.names[p]} goes behind the skin or hair (the "
-                     f"expression's {100 * hid_o.get(p, 0.0):.0f} %)")
-    fold_c, fold_o = drawn.folding(clone), drawn.folding(own)
-    more = {p: s - fold_o.get(p, 0.0) for p, s in fold_c.items()}
-    if more and max(more.values()) > VANISH_MORE:
-        p = max(more, key=more.get)
-        worse.append(f"folding: {100 * fold_c[p]:.0f} % of {drawn.names[p]} folds over (the expression's "
-                     f"{100 * fold_o.get(p, 0.0):.0f} %)")
-    poke_c, poke_o = drawn.poking(clone), drawn.poking(own)
-    more = {p: s - poke_o.get(p, 0.0) for p, s in poke_c.items()}
-    if more and max(more.values()) > VANISH_MORE:
-        p = max(more, key=more.get)
-        worse.append(f"poking through: the skin shows through {100 * poke_c[p]:.0f} % of a cross band of "
-                     f"{drawn.names[p]} (the expression's {100 * poke_o.get(p, 0.0):.0f} %)")
+    worse, figures = [], {}
+    checks = (("hidden", drawn.vanishing,
+               "vanishing: {c:.0f} % of {name} goes behind the skin or hair (the expression's {o:.0f} %)"),
+              ("folded", drawn.folding, "folding: {c:.0f} % of {name} folds over (the expression's {o:.0f} %)"),
+              ("poked", drawn.poking,
+               "poking through: the skin shows through {c:.0f} % of a cross band of {name} (the expression's "
+               "{o:.0f} %)"))
+    for key, measure, says in checks:
+        of_clone, of_own = measure(clone), measure(own)
+        figures[f"{key}_clone"] = round(max(of_clone.values(), default=0.0), 3)
+        figures[f"{key}_own"] = round(max(of_own.values(), default=0.0), 3)
+        more = {p: s - of_own.get(p, 0.0) for p, s in of_clone.items()}
+        if more and max(more.values()) > VANISH_MORE:
+            p = max(more, key=more.get)
+            worse.append(says.format(c=100 * of_clone[p], o=100 * of_own.get(p, 0.0), name=drawn.names[p]))
     if cosine < AGREE:
         worse.append(f"moves otherwise: cosine {cosine:.2f} to the expression (< {AGREE})")
     return {"cosine": round(cosine, 3), "magnitude_ratio": round(na / nb, 3) if nb > 0 else None,
-            "hidden_clone": round(max(hid_c.values(), default=0.0), 3),
-            "hidden_own": round(max(hid_o.values(), default=0.0), 3),
-            "folded_clone": round(max(fold_c.values(), default=0.0), 3),
-            "folded_own": round(max(fold_o.values(), default=0.0), 3),
-            "poked_clone": round(max(poke_c.values(), default=0.0), 3),
-            "poked_own": round(max(poke_o.values(), default=0.0), 3),
-            "worse": worse}
+            **figures, "worse": worse}
 
 
 def prefer_own(character: Character, face: Face, pieces: Pieces | None, keys: tuple[str, ...], dense: np.ndarray,

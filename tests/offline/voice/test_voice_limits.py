@@ -16,21 +16,11 @@ from facepuppet.offline.voice.limits import (
     one_pole,
     smoothing_choice,
 )
+from helpers.noise_bursts import bursts as noise_bursts
 
-RATE = 16000
 
-
-def bursts(seconds=20.0, seed=0):
-    """Noise bursts of random length and loudness: a level that jumps, with silences between."""
-    rng = np.random.default_rng(seed)
-    x = np.zeros(int(seconds * RATE))
-    i = 0
-    while i < len(x):
-        n = int(rng.uniform(0.08, 0.4) * RATE)
-        if rng.random() < 0.6:
-            x[i:i + n] = rng.uniform(0.02, 0.4) * rng.standard_normal(min(n, len(x) - i))
-        i += n
-    return x
+def bursts(seconds: float = 20.0, seed: int = 0) -> np.ndarray:
+    return noise_bursts(seconds, seed)
 
 
 def test_hop_features_at_frame_hops_are_the_fits_frame_features():

@@ -9,21 +9,11 @@ from facepuppet.runtime.voice.features import FeatureSpec
 
 from facepuppet.offline.voice.limits import frame_hops, hop_features
 from facepuppet.offline.voice.lookahead import curve_lines, lookahead_curve
+from helpers.noise_bursts import bursts as noise_bursts
 
-RATE = 16000
 
-
-def bursts(seconds=24.0, seed=3):
-    """Noise bursts of random length and loudness with silences between: a level that jumps."""
-    rng = np.random.default_rng(seed)
-    x = np.zeros(int(seconds * RATE))
-    i = 0
-    while i < len(x):
-        n = int(rng.uniform(0.08, 0.4) * RATE)
-        if rng.random() < 0.6:
-            x[i:i + n] = rng.uniform(0.02, 0.4) * rng.standard_normal(min(n, len(x) - i))
-        i += n
-    return x
+def bursts(seconds: float = 24.0, seed: int = 3) -> np.ndarray:
+    return noise_bursts(seconds, seed)
 
 
 def test_a_mouth_that_leads_its_sound_by_100_ms_is_read_better_with_100_ms_of_look_ahead():
