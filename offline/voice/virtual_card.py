@@ -29,6 +29,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from facepuppet.runtime.inputs.audio import AudioUnavailable
+
 logger = logging.getLogger(__name__)
 
 PROGRAMS = ("pulseaudio",)
@@ -47,8 +49,8 @@ def missing() -> str | None:
     return None
 
 
-class CardUnavailable(RuntimeError):
-    """The virtual card could not be started; the message says why."""
+class CardUnavailable(AudioUnavailable):
+    """The virtual card could not be started; the message says why (a missing device, as the microphone's)."""
 
 
 class VirtualSoundCard:
