@@ -12,7 +12,10 @@ On heads whose right landmark places are known:
   :data:`MEDIAPIPE`): the proposal's points further than 0.3 inner-eye
   distances from the vertex of their meaning, and whether each is doubted;
   the local fit of those known places (its largest residual; under
-  :data:`~.local_fit.POOR` when the measure raises no false alarm there).
+  :data:`~.local_fit.POOR` when the measure raises no false alarm there);
+* on any head whose true points are known (``bench perfect-sync``'s real-proportion sets), the proposal's
+  points further than :data:`WITHIN` inner-eye distances from the true ones and how many of them the doubt
+  report names (its recall), with the true points' own doubts (false alarms) beside it (:func:`named_far`).
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ MEDIAPIPE = {"eye_outer_R": 33, "eye_inner_R": 133, "eye_inner_L": 362, "eye_out
              "mouth_corner_L": 291, "lip_upper_inner": 13, "lip_lower_inner": 14, "lip_upper": 0, "lip_lower": 17,
              "chin": 152, "nose_tip": 1}
 FAR = 0.3  # a proposed point this many inner-eye distances from the vertex of its meaning is wrong
+WITHIN = 0.15  # a proposed point further than this many inner-eye distances from the true one is out of place
+#: (0.15 ES is 0.49 cm on the ICT head)
 
 
 def moved(points: ControlPoints, vertices: np.ndarray, free: np.ndarray, name: str, to: np.ndarray) -> ControlPoints:
@@ -57,6 +62,23 @@ def moved(points: ControlPoints, vertices: np.ndarray, free: np.ndarray, name: s
 
 def _named(found: list[dict]) -> set:
     return {n for d in found for n in d["points"]}
+
+
+def named_far(proposed: ControlPoints, true: ControlPoints, vertices: np.ndarray, found: list[dict],
+              false_alarms: list[dict], within: float = WITHIN) -> dict:
+    """The doubt report's recall on a head with known points: the ``proposed`` points further than ``within``
+    inner-eye distances (of the ``true`` points) from the true ones, those of them the doubts ``found`` name and
+    those they miss, the in-place points they name, and the points the true points' own doubts
+    (``false_alarms``) name."""
+    v = np.asarray(vertices, np.float64)
+    es = float(np.linalg.norm(v[true.vertex("eye_inner_L")] - v[true.vertex("eye_inner_R")]))
+    far = {n for n in proposed.names if n in true.names
+           and np.linalg.norm(v[proposed.vertex(n)] - v[true.vertex(n)]) > within * es}
+    named = _named(found)
+    return {"within_es": within, "within_units": round(within * es, 3), "n_far": len(far),
+            "far_named": sorted(far & named), "far_missed": sorted(far - named),
+            "recall": round(len(far & named) / len(far), 3) if far else None,
+            "named_in_place": sorted(named - far), "true_points_doubted": sorted(_named(false_alarms))}
 
 
 def doubt_figures(kit: Path) -> dict:
