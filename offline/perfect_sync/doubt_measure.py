@@ -6,7 +6,7 @@ On heads whose right landmark places are known:
   points are doubted (a false alarm each);
 * the same with one point moved out of place (:data:`DISPLACED`: a lid onto
   the brow, a mouth corner a third of the mouth inwards, an eye corner down,
-  the nose root up, the lower lip up to the nose): whether the moved point is
+  the nose root up, the lower lip up to the nose, the upper lip up off its outline): whether the moved point is
   named, and how many are;
 * the MediaPipe canonical face (its landmark indices have a known meaning,
   :data:`MEDIAPIPE`): the proposal's points further than 0.3 inner-eye
@@ -41,6 +41,8 @@ DISPLACED: dict[str, tuple[str, Callable[[dict, float], np.ndarray]]] = {
     "eye corner down": ("eye_outer_R", lambda p, es: p["eye_outer_R"] - np.array([0, 0.4 * es, 0])),
     "nose root up": ("nose_root", lambda p, es: p["nose_root"] + np.array([0, 0.6 * es, 0])),
     "lower lip up to the nose": ("lip_lower", lambda p, es: 0.5 * (p["lip_lower"] + p["nose_base"])),
+    "upper lip a third of the eyes' distance up": ("lip_upper", lambda p, es: p["lip_upper"]
+                                                    + np.array([0, es / 3, 0])),  # 1.1 cm on ICT: off its outline
 }
 #: MediaPipe canonical face: vertex indices of documented meaning (the subject's right is R)
 MEDIAPIPE = {"eye_outer_R": 33, "eye_inner_R": 133, "eye_inner_L": 362, "eye_outer_L": 263, "mouth_corner_R": 61,
