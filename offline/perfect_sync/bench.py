@@ -18,7 +18,9 @@
   lid closure: the mid-lid gap at rest, true and cloned (within ±25 % of the
   rest gap: neither left open nor driven through the lower lid), how far each proposed control point
   lies from the true one (the variant's own landmarks), and the errors of the clone given the true points
-  (``true_points``): the error a set has beyond those is the proposal's.
+  (``true_points``): the error a set has beyond those is the proposal's; and the doubt report's recall
+  (``doubt_recall``, :func:`.doubt_measure.named_far`): of the proposed points out of place, how many it
+  names, with its false alarms on the true points.
 * Godette (the data kit's VRM): cosine and magnitude ratio of each cloned
   shape against the artist's shape meaning the same (goal cosine >= 0.7 on
   the blinks and the open mouth), and the doubts of the proposal. Her decal
@@ -61,10 +63,11 @@ from facepuppet.offline.io.obj import read_vertices_only
 from facepuppet.offline.io.rig_import import import_rig, read_ict_landmarks
 from facepuppet.offline.kpls.targets import stylise
 from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
-from facepuppet.offline.perfect_sync.doubt_measure import doubt_figures
+from facepuppet.offline.perfect_sync.doubt_measure import doubt_figures, named_far
 from facepuppet.offline.perfect_sync.evaluate import LOOKAT, OWN, godette_pairs, lid_closure, truth_errors
 from facepuppet.offline.perfect_sync.face import Face, find_face
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
+from facepuppet.offline.perfect_sync.proposal import doubts
 from facepuppet.offline.perfect_sync.real_variants import (
     MARKER_VARIANTS,
     MULTIPIE_TO_MARKERS,
@@ -143,6 +146,7 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
     else:
         out["note"] = f"{face_obj} not in the data kit: its variants not measured"
     heads += _marker_heads(kit / "markers" / MARKER_TAKE, ict, marks, labels, out)
+    layout = np.asarray(source.arrays["control_positions"], np.float64)
     for label, variant, folded in heads:
         with Progress(f"perfect-sync {label}", total=None, unit="shapes") as bar:
             t = time.perf_counter()
@@ -156,7 +160,14 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
         s = out["variants"][label] = {"seconds": seconds, "folded_fraction": folded, "n_doubts": len(report["doubts"]),
                                       **_summary(errs), "lids": lids, "lids_close": _closes(lids),
                                       "point_error": point_error(used, points, variant.vertices),
-                                      "true_points": _with_true_points(variant, source, points, face)}
+                                      "true_points": _with_true_points(variant, source, points, face),
+                                      "doubt_recall": named_far(used, points, variant.vertices, report["doubts"],
+                                                                doubts(points.reorder(used.names), variant.vertices,
+                                                                       face, source_positions=layout))}
+        r = s["doubt_recall"]
+        print(f"bench perfect-sync: {label}: doubts name {len(r['far_named'])} of {r['n_far']} proposed points "
+              f"further than {r['within_units']:.2f} cm from the true ones (missed: {', '.join(r['far_missed'])}), "
+              f"{len(r['named_in_place'])} in place; the true points: {len(r['true_points_doubted'])} doubted")
         print(f"bench perfect-sync: {label}: median {100 * s['median']:.1f}%, worst {s['worst'][0]} "
               f"{100 * s['worst'][1]:.1f}%, {s['n_over_40']} over 40%; blink mid-lid gap " + ", ".join(
                   f"{v['cloned']:.2f} (true {v['true']:.2f}, rest {v['rest']:.2f})" for v in lids.values())

@@ -6,13 +6,16 @@ On heads whose right landmark places are known:
   points are doubted (a false alarm each);
 * the same with one point moved out of place (:data:`DISPLACED`: a lid onto
   the brow, a mouth corner a third of the mouth inwards, an eye corner down,
-  the nose root up, the lower lip up to the nose): whether the moved point is
+  the nose root up, the lower lip up to the nose, the upper lip up off its outline): whether the moved point is
   named, and how many are;
 * the MediaPipe canonical face (its landmark indices have a known meaning,
   :data:`MEDIAPIPE`): the proposal's points further than 0.3 inner-eye
   distances from the vertex of their meaning, and whether each is doubted;
   the local fit of those known places (its largest residual; under
-  :data:`~.local_fit.POOR` when the measure raises no false alarm there).
+  :data:`~.local_fit.POOR` when the measure raises no false alarm there);
+* on any head whose true points are known (``bench perfect-sync``'s real-proportion sets), the proposal's
+  points further than :data:`WITHIN` inner-eye distances from the true ones and how many of them the doubt
+  report names (its recall), with the true points' own doubts (false alarms) beside it (:func:`named_far`).
 """
 
 from __future__ import annotations
@@ -38,12 +41,16 @@ DISPLACED: dict[str, tuple[str, Callable[[dict, float], np.ndarray]]] = {
     "eye corner down": ("eye_outer_R", lambda p, es: p["eye_outer_R"] - np.array([0, 0.4 * es, 0])),
     "nose root up": ("nose_root", lambda p, es: p["nose_root"] + np.array([0, 0.6 * es, 0])),
     "lower lip up to the nose": ("lip_lower", lambda p, es: 0.5 * (p["lip_lower"] + p["nose_base"])),
+    "upper lip a third of the eyes' distance up": ("lip_upper", lambda p, es: p["lip_upper"]
+                                                    + np.array([0, es / 3, 0])),  # 1.1 cm on ICT: off its outline
 }
 #: MediaPipe canonical face: vertex indices of documented meaning (the subject's right is R)
 MEDIAPIPE = {"eye_outer_R": 33, "eye_inner_R": 133, "eye_inner_L": 362, "eye_outer_L": 263, "mouth_corner_R": 61,
              "mouth_corner_L": 291, "lip_upper_inner": 13, "lip_lower_inner": 14, "lip_upper": 0, "lip_lower": 17,
              "chin": 152, "nose_tip": 1}
 FAR = 0.3  # a proposed point this many inner-eye distances from the vertex of its meaning is wrong
+WITHIN = 0.15  # a proposed point further than this many inner-eye distances from the true one is out of place
+#: (0.15 ES is 0.49 cm on the ICT head)
 
 
 def moved(points: ControlPoints, vertices: np.ndarray, free: np.ndarray, name: str, to: np.ndarray) -> ControlPoints:
@@ -57,6 +64,23 @@ def moved(points: ControlPoints, vertices: np.ndarray, free: np.ndarray, name: s
 
 def _named(found: list[dict]) -> set:
     return {n for d in found for n in d["points"]}
+
+
+def named_far(proposed: ControlPoints, true: ControlPoints, vertices: np.ndarray, found: list[dict],
+              false_alarms: list[dict], within: float = WITHIN) -> dict:
+    """The doubt report's recall on a head with known points: the ``proposed`` points further than ``within``
+    inner-eye distances (of the ``true`` points) from the true ones, those of them the doubts ``found`` name and
+    those they miss, the in-place points they name, and the points the true points' own doubts
+    (``false_alarms``) name."""
+    v = np.asarray(vertices, np.float64)
+    es = float(np.linalg.norm(v[true.vertex("eye_inner_L")] - v[true.vertex("eye_inner_R")]))
+    far = {n for n in proposed.names if n in true.names
+           and np.linalg.norm(v[proposed.vertex(n)] - v[true.vertex(n)]) > within * es}
+    named = _named(found)
+    return {"within_es": within, "within_units": round(within * es, 3), "n_far": len(far),
+            "far_named": sorted(far & named), "far_missed": sorted(far - named),
+            "recall": round(len(far & named) / len(far), 3) if far else None,
+            "named_in_place": sorted(named - far), "true_points_doubted": sorted(_named(false_alarms))}
 
 
 def doubt_figures(kit: Path) -> dict:

@@ -32,6 +32,7 @@ plane or far from its mirrored partner (asymmetric), a point off the skin or
 facing away (off the surface), the inner lips in the wrong order, on one
 vertex, or with no opening between them (lips not separated), a closed
 mouth's inner corners not where its lips touch (:func:`~.lip_contact.corner_doubts`),
+an outer lip point off the lips' outline, which the lip's bulge in the skin gives (:mod:`.lip_outline`),
 a hole in the skin among the points that is not an eye or the mouth
 (:func:`holes`). The landmarks
 file is the control-point file of :mod:`facepuppet.offline.elastic.control_points`;
@@ -61,6 +62,7 @@ from facepuppet.offline.perfect_sync.feature_span import between_features
 from facepuppet.offline.perfect_sync.landmark_field import EYE_NAMES, MOUTH_NAMES, feature_places
 from facepuppet.offline.perfect_sync.layout_checks import by_feature, decal_doubts, order_doubts
 from facepuppet.offline.perfect_sync.lip_contact import corner_doubts, inner_corners
+from facepuppet.offline.perfect_sync.lip_outline import outline_doubts
 from facepuppet.offline.perfect_sync.local_fit import poor_fits
 from facepuppet.offline.perfect_sync.mouth_slit import is_mouth_point, mouth_places
 from facepuppet.offline.perfect_sync.pieces import Pieces
@@ -346,6 +348,7 @@ def doubts(points: ControlPoints, vertices: np.ndarray, face: Face,
         decal = pieces is not None and (bool(pieces.eyes) or pieces.mouth is not None)
         if not decal:  # decal points are placed by what is drawn, at its proportions, not fitted to the layout
             out += by_feature(poor_fits(src, local[:, :2], points.names), points.names)
+            out += outline_doubts(points.names, local, face.to_frame(v), skin_triangles(face))
         out += order_doubts(src, local[:, :2], points.names, es, proportions=not decal)
         if decal:
             out += decal_doubts(local[:, :2], points.names, pieces.eyes, pieces.mouth)
