@@ -132,6 +132,11 @@ def _run(args: argparse.Namespace) -> int:
     if report["doubts"] and not args.pictures:
         print("perfect-sync: the doubtful points are drawn and numbered by --pictures DIR (DIR/landmarks.png); correct "
               "them in DIR/landmarks.json and rerun with --landmarks DIR/landmarks.json")
+    if not report["doubts"]:
+        where = args.pictures / "landmarks.png" if args.pictures else "--pictures DIR (DIR/landmarks.png)"
+        print("perfect-sync: no point was found doubtful, which is not a proof: the checks find a point out of step "
+              "with its neighbours, the face's layout or the lips' outline, not a region placed off as a whole "
+              f"(bench perfect-sync measures how many they miss); look at the points in {where}")
     print(f"{args.output}: {len(report['added'])} ARKit shapes added, {len(report['kept'])} kept, "
           f"{len(report['replaced'])} replaced; {len(report['doubts'])} doubtful proposal(s)"
           + (f" (correct them in {args.pictures / 'landmarks.json'} and rerun with --landmarks)"

@@ -168,6 +168,9 @@ def test_command_writes_the_character_and_refuses_bad_landmarks_writing_nothing(
     ps = Character.load(out)
     assert ps.n_shapes == 57 + 2  # ICT's 57 kept (ARKit-named), browInnerUp and cheekPuff added (folded sides)
     assert (pics / "landmarks.png").stat().st_size > 1000 and (pics / "landmarks.json").exists()
+    said = capsys.readouterr().out
+    assert "0 doubtful proposal(s)" in said  # ICT's own head: its proposed points are its true ones
+    assert "which is not a proof" in said and str(pics / "landmarks.png") in said  # and what was not checked
     again = tmp_path / "again.npz"
     assert main(["perfect-sync", str(ict_character_path), "-o", str(again), "--source", str(source[1]),
                  "--landmarks", str(pics / "landmarks.json"), "--replace"]) == 0
