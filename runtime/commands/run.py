@@ -145,6 +145,12 @@ def run_command(args: argparse.Namespace) -> int:
     line = report_line(result.saturation, plan.outputs.stats)
     if line is not None:
         print(f"run: {line}")
+    mic = result.counters.get("microphone")
+    if mic is not None:
+        print(f"run: microphone: {mic['read']} of {mic['blocks']} blocks read, {mic['stale_dropped']} dropped as stale "
+              f"(behind the capture clock by more than {mic['bound_ms']} ms; the stalest "
+              f"{mic['max_stale_lag_ms']} ms), "
+              f"the most a block read lagged {mic['max_read_lag_ms']} ms, {mic['status_errors']} flagged by PortAudio")
     if plan.outputs.stats:
         print("\n".join(result.stats.final()))
     report_outputs("run", plan.outputs, result)

@@ -9,6 +9,13 @@ falling one with ``release_s`` (``level += (1 - exp(-block_s / tau)) * (new - le
 * :class:`MicLevel` opens an input stream with sounddevice; its callback
   (PortAudio's thread) writes the smoothed level into a preallocated slot and
   never allocates a Python object per block beyond NumPy scalars, never blocks.
+  A block older than :data:`MAX_LAG_S` behind the capture clock (PortAudio's
+  ``currentTime - inputBufferAdcTime``, beyond the latency the stream states)
+  is dropped unread and counted: a callback kept from running (a busy machine,
+  the main thread holding the GIL) leaves the samples queued in the audio
+  system rather than lost, and reading them late would move the mouth seconds
+  after the voice. The stream opens with PortAudio's low latency, and a run
+  starts it only when its loop is about to tick.
 * :class:`WavLevel` stands in for the microphone (``--audio-file``): the level
   at tick time ``t`` is computed from the samples between the previous tick and
   ``t``, so it plays on the frame clock and a replay gives the same levels.
@@ -22,7 +29,7 @@ from __future__ import annotations
 import logging
 import math
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -39,6 +46,32 @@ logger = logging.getLogger(__name__)
 
 class AudioUnavailable(FacepuppetError, RuntimeError):
     """No audio input could be opened; the message says why."""
+
+
+MAX_LAG_S = 0.06  # a block further behind the capture clock than this (past the stream's own latency) is stale
+# blocks the callback received, read, dropped as stale and PortAudio flagged (an overflow); the largest lag
+# (ms) of a block read and of one dropped; the bound (ms) in force. The last three are gauges, not counts.
+MIC_COUNTERS = ("blocks", "read", "stale_dropped", "status_errors", "max_read_lag_ms", "max_stale_lag_ms",
+                "bound_ms")
+MIC_GAUGES = frozenset(MIC_COUNTERS[4:])
+BLOCKS, READ, STALE, STATUS, READ_LAG, STALE_LAG, BOUND = range(len(MIC_COUNTERS))
+
+
+class MicCounters(Mapping):
+    """The microphone's counters as the stats read them (``--stats``, the run's summary): a live view of the
+    integers the callback writes in place, so the callback never builds a dict."""
+
+    def __init__(self, values: np.ndarray) -> None:
+        self._values = values
+
+    def __getitem__(self, key: str) -> int:
+        return int(self._values[MIC_COUNTERS.index(key)])
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(MIC_COUNTERS)
+
+    def __len__(self) -> int:
+        return len(MIC_COUNTERS)
 
 
 class LevelMeter:
@@ -211,6 +244,14 @@ class MicLevel:
     sample_rate : float or None, Hz (None: the device's default)
     block_s : float, seconds per callback block
     attack_s, release_s, floor_db : see :class:`LevelMeter`
+    max_lag_s : float, seconds a block may lie behind the capture clock beyond the stream's stated input
+        latency before it is dropped as stale (see the module docstring)
+    start : bool, start the stream now (False: the caller calls :meth:`start` when it is ready to read)
+
+    Attributes
+    ----------
+    counters : MicCounters, see :data:`MIC_COUNTERS`
+    bound_s : float, the lag beyond which a block is dropped: ``max_lag_s`` plus the stream's input latency
 
     Raises
     ------
@@ -220,35 +261,78 @@ class MicLevel:
     """
 
     def __init__(self, device: int | str | None = None, sample_rate: float | None = None, block_s: float = 0.01,
-                 attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0) -> None:
+                 attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0,
+                 max_lag_s: float = MAX_LAG_S, start: bool = True) -> None:
+        if not (math.isfinite(max_lag_s) and max_lag_s > 0):
+            raise ValueError(f"MicLevel max_lag_s: expected a positive number, got {max_lag_s!r}")
         try:
             import sounddevice as sd
         except (ImportError, OSError) as exc:  # OSError: the PortAudio library is missing
             raise AudioUnavailable(f"no audio: sounddevice/PortAudio is not available ({exc}); "
                                    "install PortAudio (apt-get install libportaudio2) or use --audio-file") from None
+        self._values = np.zeros(len(MIC_COUNTERS), np.int64)  # written in place by the callback
+        self.counters = MicCounters(self._values)
+        self._said_stale = False
+        self.device_name = "the default input device" if device is None else str(device)
+        self.max_lag_s = float(max_lag_s)
+        self.bound_s = self.max_lag_s
         try:
             info = sd.query_devices(device, "input")
             rate = float(sample_rate or info["default_samplerate"])
             self.meter = LevelMeter(rate, attack_s, release_s, floor_db)
             self._slot = np.full(1, floor_db)  # written by the callback, read by the frame loop
-            self.status_errors = 0
-            self.stream = sd.InputStream(device=device, channels=1, samplerate=rate,
+            self.stream = sd.InputStream(device=device, channels=1, samplerate=rate, latency="low",
                                          blocksize=max(1, int(rate * block_s)), callback=self._callback)
-            self.stream.start()
+            self.bound_s = self.max_lag_s + max(0.0, float(self.stream.latency))
+            self._values[BOUND] = int(round(self.bound_s * 1000.0))
+            if start:
+                self.stream.start()
         except (ValueError, sd.PortAudioError, OSError) as exc:
             name = "the default input device" if device is None else f"input device {device!r}"
             raise AudioUnavailable(f"no audio: could not open {name} ({exc}); "
                                    "list devices with `python -m sounddevice`, or use --audio-file") from None
-        self.device_name = str(info.get("name", device))
+        self.device_name = str(info.get("name", self.device_name))
 
     on_block = None  # callable taking each block's samples (n,) in the callback: the voice's features
 
+    @property
+    def status_errors(self) -> int:
+        return int(self._values[STATUS])
+
+    def start(self) -> None:
+        """Start the stream (once; a started stream is left as it is)."""
+        if not self.stream.active:
+            self.stream.start()
+
     def _callback(self, indata, frames, time_info, status) -> None:
+        values = self._values
+        values[BLOCKS] += 1
         if status:
-            self.status_errors += 1
+            values[STATUS] += 1
+        adc = time_info.inputBufferAdcTime
+        lag = time_info.currentTime - adc
+        if adc > 0.0:  # (a host API that gives no times reports 0: nothing is dropped)
+            if lag > self.bound_s:
+                self._drop(lag)
+                return
+            if lag * 1000.0 > values[READ_LAG]:
+                values[READ_LAG] = int(lag * 1000.0)
+        values[READ] += 1
         self._slot[0] = self.meter.process(indata[:, 0])
         if self.on_block is not None:
             self.on_block(indata[:, 0])
+
+    def _drop(self, lag: float) -> None:
+        """Count a stale block (its samples are not read); said once, in words, the first time."""
+        values = self._values
+        values[STALE] += 1
+        if lag * 1000.0 > values[STALE_LAG]:
+            values[STALE_LAG] = int(lag * 1000.0)
+        if not self._said_stale:
+            self._said_stale = True
+            logger.warning("microphone %s: a block arrived %.0f ms behind the capture clock (bound %.0f ms); "
+                           "stale blocks are dropped so the voice does not lag (counted as stale_dropped)",
+                           self.device_name, lag * 1000.0, self.bound_s * 1000.0)
 
     def level(self, t: float | None = None) -> float:
         """The latest smoothed level (dBFS); ``t`` is ignored (the microphone is live)."""
@@ -260,17 +344,19 @@ class MicLevel:
 
 
 def open_audio(device: int | str | None = None, wav: str | os.PathLike | None = None,
-               log: Callable[[str], None] = logger.info, **meter: float) -> WavLevel | MicLevel | None:
+               log: Callable[[str], None] = logger.info, start: bool = True,
+               **meter: float) -> WavLevel | MicLevel | None:
     """The audio level source the run asked for, or None (with a logged message) when none can be had.
 
-    ``wav`` (a path) wins over ``device``; ``device`` may be "" / None for the default input.
+    ``wav`` (a path) wins over ``device``; ``device`` may be "" / None for the default input. ``start=False``
+    opens a microphone without starting it (the caller starts it when its loop is about to tick).
     """
     if wav is not None:
         return WavLevel(wav, **meter)
     try:
         if isinstance(device, str) and device.strip().isdigit():
             device = int(device)
-        return MicLevel(device=device or None, **meter)
+        return MicLevel(device=device or None, start=start, **meter)
     except AudioUnavailable as exc:
         log(f"{exc}; the run goes on without audio")
         return None
