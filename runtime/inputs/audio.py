@@ -9,13 +9,11 @@ falling one with ``release_s`` (``level += (1 - exp(-block_s / tau)) * (new - le
 * :class:`MicLevel` opens an input stream with sounddevice; its callback
   (PortAudio's thread) writes the smoothed level into a preallocated slot and
   never allocates a Python object per block beyond NumPy scalars, never blocks.
-  A block older than :data:`MAX_LAG_S` behind the capture clock (PortAudio's
-  ``currentTime - inputBufferAdcTime``, beyond the latency the stream states)
-  is dropped unread and counted: a callback kept from running (a busy machine,
-  the main thread holding the GIL) leaves the samples queued in the audio
-  system rather than lost, and reading them late would move the mouth seconds
-  after the voice. The stream opens with PortAudio's low latency, and a run
-  starts it only when its loop is about to tick.
+  A block too far behind the capture clock is dropped unread and counted
+  (:mod:`~facepuppet.runtime.inputs.capture_lag` says how far, and why). The
+  stream opens with PortAudio's low latency, and a run starts it only when its
+  loop is about to tick (samples captured while the chain and the window are set
+  up would only be queued, stale, ahead of the first tick's).
 * :class:`WavLevel` stands in for the microphone (``--audio-file``): the level
   at tick time ``t`` is computed from the samples between the previous tick and
   ``t``, so it plays on the frame clock and a replay gives the same levels.
@@ -29,7 +27,7 @@ from __future__ import annotations
 import logging
 import math
 import warnings
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -37,6 +35,7 @@ import numpy as np
 
 from facepuppet.runtime.errors import FacepuppetError, InputFileError
 from facepuppet.runtime.files.input_files import regular_file
+from facepuppet.runtime.inputs.capture_lag import MAX_LAG_S, CaptureLag
 
 if TYPE_CHECKING:
     import os
@@ -47,31 +46,6 @@ logger = logging.getLogger(__name__)
 class AudioUnavailable(FacepuppetError, RuntimeError):
     """No audio input could be opened; the message says why."""
 
-
-MAX_LAG_S = 0.06  # a block further behind the capture clock than this (past the stream's own latency) is stale
-# blocks the callback received, read, dropped as stale and PortAudio flagged (an overflow); the largest lag
-# (ms) of a block read and of one dropped; the bound (ms) in force. The last three are gauges, not counts.
-MIC_COUNTERS = ("blocks", "read", "stale_dropped", "status_errors", "max_read_lag_ms", "max_stale_lag_ms",
-                "bound_ms")
-MIC_GAUGES = frozenset(MIC_COUNTERS[4:])
-BLOCKS, READ, STALE, STATUS, READ_LAG, STALE_LAG, BOUND = range(len(MIC_COUNTERS))
-
-
-class MicCounters(Mapping):
-    """The microphone's counters as the stats read them (``--stats``, the run's summary): a live view of the
-    integers the callback writes in place, so the callback never builds a dict."""
-
-    def __init__(self, values: np.ndarray) -> None:
-        self._values = values
-
-    def __getitem__(self, key: str) -> int:
-        return int(self._values[MIC_COUNTERS.index(key)])
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(MIC_COUNTERS)
-
-    def __len__(self) -> int:
-        return len(MIC_COUNTERS)
 
 
 class LevelMeter:
@@ -244,14 +218,13 @@ class MicLevel:
     sample_rate : float or None, Hz (None: the device's default)
     block_s : float, seconds per callback block
     attack_s, release_s, floor_db : see :class:`LevelMeter`
-    max_lag_s : float, seconds a block may lie behind the capture clock beyond the stream's stated input
-        latency before it is dropped as stale (see the module docstring)
+    max_lag_s : float, seconds a block may lie behind the standing latency before it is dropped as stale
+        (:class:`~facepuppet.runtime.inputs.capture_lag.CaptureLag`)
     start : bool, start the stream now (False: the caller calls :meth:`start` when it is ready to read)
 
     Attributes
     ----------
-    counters : MicCounters, see :data:`MIC_COUNTERS`
-    bound_s : float, the lag beyond which a block is dropped: ``max_lag_s`` plus the stream's input latency
+    lag : CaptureLag, the blocks' lag; ``lag.counters`` (also ``counters``): blocks read, dropped as stale, ...
 
     Raises
     ------
@@ -263,19 +236,14 @@ class MicLevel:
     def __init__(self, device: int | str | None = None, sample_rate: float | None = None, block_s: float = 0.01,
                  attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0,
                  max_lag_s: float = MAX_LAG_S, start: bool = True) -> None:
-        if not (math.isfinite(max_lag_s) and max_lag_s > 0):
-            raise ValueError(f"MicLevel max_lag_s: expected a positive number, got {max_lag_s!r}")
         try:
             import sounddevice as sd
         except (ImportError, OSError) as exc:  # OSError: the PortAudio library is missing
             raise AudioUnavailable(f"no audio: sounddevice/PortAudio is not available ({exc}); "
                                    "install PortAudio (apt-get install libportaudio2) or use --audio-file") from None
-        self._values = np.zeros(len(MIC_COUNTERS), np.int64)  # written in place by the callback
-        self.counters = MicCounters(self._values)
-        self._said_stale = False
         self.device_name = "the default input device" if device is None else str(device)
-        self.max_lag_s = float(max_lag_s)
-        self.bound_s = self.max_lag_s
+        self.lag = CaptureLag(1.0, max_lag_s)  # (replaced once the stream's rate and latency are known)
+        self.counters = self.lag.counters
         try:
             info = sd.query_devices(device, "input")
             rate = float(sample_rate or info["default_samplerate"])
@@ -283,8 +251,8 @@ class MicLevel:
             self._slot = np.full(1, floor_db)  # written by the callback, read by the frame loop
             self.stream = sd.InputStream(device=device, channels=1, samplerate=rate, latency="low",
                                          blocksize=max(1, int(rate * block_s)), callback=self._callback)
-            self.bound_s = self.max_lag_s + max(0.0, float(self.stream.latency))
-            self._values[BOUND] = int(round(self.bound_s * 1000.0))
+            self.lag = CaptureLag(rate, max_lag_s, float(self.stream.latency), f"microphone {info.get('name', device)}")
+            self.counters = self.lag.counters
             if start:
                 self.stream.start()
         except (ValueError, sd.PortAudioError, OSError) as exc:
@@ -297,7 +265,7 @@ class MicLevel:
 
     @property
     def status_errors(self) -> int:
-        return int(self._values[STATUS])
+        return self.counters["status_errors"]
 
     def start(self) -> None:
         """Start the stream (once; a started stream is left as it is)."""
@@ -305,34 +273,11 @@ class MicLevel:
             self.stream.start()
 
     def _callback(self, indata, frames, time_info, status) -> None:
-        values = self._values
-        values[BLOCKS] += 1
-        if status:
-            values[STATUS] += 1
-        adc = time_info.inputBufferAdcTime
-        lag = time_info.currentTime - adc
-        if adc > 0.0:  # (a host API that gives no times reports 0: nothing is dropped)
-            if lag > self.bound_s:
-                self._drop(lag)
-                return
-            if lag * 1000.0 > values[READ_LAG]:
-                values[READ_LAG] = int(lag * 1000.0)
-        values[READ] += 1
+        if not self.lag.fresh(time_info, frames, status):
+            return
         self._slot[0] = self.meter.process(indata[:, 0])
         if self.on_block is not None:
             self.on_block(indata[:, 0])
-
-    def _drop(self, lag: float) -> None:
-        """Count a stale block (its samples are not read); said once, in words, the first time."""
-        values = self._values
-        values[STALE] += 1
-        if lag * 1000.0 > values[STALE_LAG]:
-            values[STALE_LAG] = int(lag * 1000.0)
-        if not self._said_stale:
-            self._said_stale = True
-            logger.warning("microphone %s: a block arrived %.0f ms behind the capture clock (bound %.0f ms); "
-                           "stale blocks are dropped so the voice does not lag (counted as stale_dropped)",
-                           self.device_name, lag * 1000.0, self.bound_s * 1000.0)
 
     def level(self, t: float | None = None) -> float:
         """The latest smoothed level (dBFS); ``t`` is ignored (the microphone is live)."""

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.files.json_limits import dumps_strict
-from facepuppet.runtime.inputs.audio import MIC_GAUGES
+from facepuppet.runtime.inputs.capture_lag import MIC_GAUGES
 from facepuppet.runtime.live.timing import DurationSketch
 
 if TYPE_CHECKING:

@@ -16,7 +16,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from facepuppet.runtime.inputs.audio import MAX_LAG_S, MicLevel
+from facepuppet.runtime.inputs.audio import MicLevel
+from facepuppet.runtime.inputs.capture_lag import FLOOR_CAP_S, FLOOR_RISE, MAX_LAG_S
 from facepuppet.runtime.voice.source import MicVoice
 
 from facepuppet.offline.voice.virtual_card import visible
@@ -51,12 +52,11 @@ def mic(virtual_sound_card):
 
 def test_stale_blocks_are_dropped_unread_counted_and_said_once(mic, caplog):
     voice = MicVoice(mic, small_table("ridge"))
-    bound = mic.bound_s
-    assert MAX_LAG_S <= bound < MAX_LAG_S + 0.5  # the stated bound: the slack plus the stream's own latency
-    assert mic.counters["bound_ms"] == round(bound * 1000)
+    assert MAX_LAG_S <= mic.lag.bound_s <= MAX_LAG_S + FLOOR_CAP_S  # the stream's stated latency, within the cap
+    assert mic.counters["bound_ms"] == int(mic.lag.bound_s * 1000)
     loud = _block(mic, loud=True)
-    with caplog.at_level(logging.WARNING, logger="facepuppet.runtime.inputs.audio"):
-        for lag in (2.0, 5.0, bound + 0.001):  # a backlog: loud blocks seconds old
+    with caplog.at_level(logging.WARNING, logger="facepuppet.runtime.inputs.capture_lag"):
+        for lag in (2.0, 5.0, mic.lag.bound_s + 0.002):  # a backlog: loud blocks seconds old
             mic._callback(loud, len(loud), _times(lag), 0)
     assert mic.level() == mic.meter.floor_db  # none of them was read: the level is still silence's
     assert voice.voice.hops == 0  # nor reached the voice
@@ -66,16 +66,38 @@ def test_stale_blocks_are_dropped_unread_counted_and_said_once(mic, caplog):
     assert len(said) == 1 and "2000 ms" in said[0].getMessage(), [r.getMessage() for r in caplog.records]
 
     hop_blocks = 1 + voice.voice.features.hop_n // len(loud)
-    for _ in range(hop_blocks):  # fresh blocks, within the bound: read, a hop evaluated
-        mic._callback(loud, len(loud), _times(bound * 0.5), 0)
+    for _ in range(hop_blocks):  # fresh blocks: read, a hop evaluated
+        mic._callback(loud, len(loud), _times(0.005), 0)
     assert mic.level() > -20.0
     assert voice.voice.hops >= 1
     c = dict(mic.counters)
     assert c["read"] == hop_blocks and c["stale_dropped"] == 3
-    assert c["max_read_lag_ms"] == int(bound * 0.5 * 1000) and c["max_read_lag_ms"] <= c["bound_ms"]
+    assert c["max_read_lag_ms"] in (4, 5) and c["floor_ms"] <= 5  # (truncated ms) the floor follows a lower lag
     mic._callback(loud, len(loud), _times(3.0), 0)  # a later stale block: counted, not said again
     assert mic.counters["stale_dropped"] == 4
     assert len([r for r in caplog.records if "behind the capture clock" in r.getMessage()]) == 1
+
+
+def test_a_standing_latency_is_read_up_to_the_cap_and_a_backlog_on_top_of_it_is_dropped(mic):
+    quiet = _block(mic, loud=False)
+    block_s = len(quiet) / mic.meter.sample_rate
+    mic._callback(quiet, len(quiet), _times(0.0), 0)
+    for _ in range(int(3.0 / block_s)):  # 3 s of a device whose blocks all come 90 ms late
+        mic._callback(quiet, len(quiet), _times(0.09), 0)
+    c = dict(mic.counters)
+    rise_s = 0.09 - MAX_LAG_S  # dropped only until the floor has risen this far, at FLOOR_RISE s per s
+    assert c["stale_dropped"] <= rise_s / FLOOR_RISE / block_s + 1, c
+    assert c["floor_ms"] == 90 and c["max_read_lag_ms"] <= c["bound_ms"], c
+    for _ in range(50):  # a stall's backlog on top of it: 0.5 s old, dropped, and the floor stays
+        mic._callback(quiet, len(quiet), _times(0.5), 0)
+    c2 = dict(mic.counters)
+    assert c2["stale_dropped"] == c["stale_dropped"] + 50 and c2["max_read_lag_ms"] == c["max_read_lag_ms"]
+    assert c2["floor_ms"] <= 90 + 50 * block_s * FLOOR_RISE * 1000 + 1
+    for _ in range(int(20.0 / block_s)):  # a standing 0.5 s: never forgiven past the cap
+        mic._callback(quiet, len(quiet), _times(0.5), 0)
+    c3 = dict(mic.counters)
+    assert c3["read"] == c2["read"] and c3["floor_ms"] == int(FLOOR_CAP_S * 1000)
+    assert c3["bound_ms"] == int((FLOOR_CAP_S + MAX_LAG_S) * 1000) and c3["max_read_lag_ms"] <= c3["bound_ms"]
 
 
 def test_a_host_that_gives_no_times_drops_nothing(mic):
@@ -136,12 +158,13 @@ def test_a_run_on_the_card_reads_no_block_beyond_the_bound_and_reports_it(tmp_pa
     out = "".join(lines)
     assert players, out
     assert code == 0, out
-    summary = re.search(r"run: microphone: (\d+) of (\d+) blocks read, (\d+) dropped as stale \(behind the capture "
-                        r"clock by more than (\d+) ms; the stalest (\d+) ms\), the most a block read lagged (\d+) ms",
-                        out)
+    summary = re.search(r"run: microphone: (\d+) of (\d+) blocks read, (\d+) dropped as stale \(the stalest (\d+) ms "
+                        r"behind the capture clock\); the most a block read lagged (\d+) ms \(bound: 60 ms past the "
+                        r"standing latency, at most 160 ms; at the end (\d+) ms\)", out)
     assert summary, out
-    read, blocks, dropped, bound_ms, stalest, read_lag = map(int, summary.groups())
+    read, blocks, dropped, stalest, read_lag, bound_ms = map(int, summary.groups())
     assert read + dropped == blocks and read > 0, out
-    assert read_lag <= bound_ms, out  # no block read further behind the capture clock than the stated bound
-    assert dropped == 0 or stalest > bound_ms, out
-    assert f"bound_ms={bound_ms}" in out, out  # the --stats lines carry the same figures
+    assert read_lag <= (MAX_LAG_S + FLOOR_CAP_S) * 1000, out  # no block read further behind the capture clock
+    assert dropped == 0 or stalest > MAX_LAG_S * 1000, out
+    assert MAX_LAG_S * 1000 <= bound_ms <= (MAX_LAG_S + FLOOR_CAP_S) * 1000, out
+    assert re.search(r"microphone: blocks=\d+", out), out  # the --stats lines carry the group
