@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Iterator, Mapping
+from typing import Protocol
 
 import numpy as np
 
@@ -40,6 +41,13 @@ MIC_COUNTERS = ("blocks", "read", "stale_dropped", "status_errors", "max_read_la
                 "floor_ms", "bound_ms")
 MIC_GAUGES = frozenset(MIC_COUNTERS[4:])
 BLOCKS, READ, STALE, STATUS, READ_LAG, STALE_LAG, FLOOR, BOUND = range(len(MIC_COUNTERS))
+
+
+class StreamTimes(Protocol):
+    """The part of PortAudio's callback ``time_info`` read here (seconds on the stream's clock)."""
+
+    inputBufferAdcTime: float  # noqa: N815 (PortAudio's name)
+    currentTime: float  # noqa: N815
 
 
 class MicCounters(Mapping):
@@ -89,7 +97,7 @@ class CaptureLag:
         """The lag beyond which a block is dropped now: the standing latency plus ``max_lag_s``."""
         return self.floor_s + self.max_lag_s
 
-    def fresh(self, time_info, frames: int, status: object = None) -> bool:
+    def fresh(self, time_info: StreamTimes, frames: int, status: object = None) -> bool:
         """Count one block (``time_info`` as PortAudio's callback gets it) and say whether to read it."""
         values = self.values
         values[BLOCKS] += 1
