@@ -4,7 +4,10 @@ The ``--audio-file`` figure of ``bench voice`` lives on the run's own clock; thi
 (:mod:`~facepuppet.offline.voice.onset_player`) play tone bursts into
 :class:`~facepuppet.offline.voice.virtual_card.VirtualSoundCard` in real time while ``run --input audio
 --audio CARD --voice TABLE`` listens to it through PortAudio, and times every onset on one clock
-(``time.perf_counter``: CLOCK_MONOTONIC, the loop's stamps' clock, shared by the processes):
+(``time.perf_counter``: CLOCK_MONOTONIC, the loop's stamps' clock, shared by the processes); the player starts
+once the run ticks and its capture has read a first block (the run starts the stream when its loop is about
+to tick, and the card's monitor delivers its first block only about 2 s after a capture stream starts,
+measured even in an idle process):
 
 * ``handed``: the player's callback handed the block holding the onset to PortAudio (plus the onset's offset
   in the block);
@@ -230,6 +233,11 @@ def _measure(card: VirtualSoundCard, table_path: Path, char: Path, jaw: int, con
         try:
             if not first_tick.wait(60.0):
                 return
+            # and the capture's first block read: the card's monitor starts delivering about 2 s after a
+            # capture stream starts, which would hide the first onsets
+            heard = time.perf_counter() + 30.0
+            while not getattr(watch.get("arrivals"), "_n", 0) and time.perf_counter() < heard:
+                time.sleep(0.01)
             played.update(_play(card, onsets))
             time.sleep(0.5)  # the last burst's ticks
         finally:
