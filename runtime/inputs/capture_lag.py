@@ -7,8 +7,10 @@ machine, or the main thread holding the GIL through a long C call: the audio sys
 of dropping them, and reading them late moves the mouth seconds after the voice).
 
 :class:`CaptureLag` keeps a *floor*, the standing latency: it follows a lower lag at once and rises by at
-most :data:`FLOOR_RISE` seconds per second of audio (so a backlog, which grows faster, never becomes the
-floor), and never above :data:`FLOOR_CAP_S`. A block is stale when its lag exceeds the floor by more than
+most :data:`FLOOR_RISE` seconds per second of audio (a stall's backlog, which comes at once, does not become
+the floor; a latency that drifts up, as a loaded PulseAudio's does by ~100 ms over a second or so, does: a
+slower rise, 0.05 s per s, dropped about half the blocks of fresh runs under load for no gain), and never
+above :data:`FLOOR_CAP_S`. A block is stale when its lag exceeds the floor by more than
 ``max_lag_s`` (:data:`MAX_LAG_S`): the voice never reads a block more than ``max_lag_s`` behind the
 standing latency, nor more than ``FLOOR_CAP_S + max_lag_s`` behind the capture clock in all. A standing
 latency cannot be shortened by dropping (the samples arrive no sooner), so it is forgiven up to the cap; a
@@ -32,7 +34,7 @@ logger = logging.getLogger(__name__)
 
 MAX_LAG_S = 0.06  # a block further than this behind the standing latency is stale
 FLOOR_CAP_S = 0.1  # the most standing latency forgiven: no block is read further behind than cap + max lag
-FLOOR_RISE = 0.05  # the floor rises by at most this many seconds per second of audio
+FLOOR_RISE = 0.25  # the floor rises by at most this many seconds per second of audio
 
 # blocks the callback received, read, dropped as stale and PortAudio flagged (an overflow); the largest lag
 # (ms) of a block read and of one dropped; the standing latency and the bound (ms) now. The last four are

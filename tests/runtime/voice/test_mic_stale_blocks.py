@@ -56,8 +56,10 @@ def test_stale_blocks_are_dropped_unread_counted_and_said_once(mic, caplog):
     assert mic.counters["bound_ms"] == int(mic.lag.bound_s * 1000)
     loud = _block(mic, loud=True)
     with caplog.at_level(logging.WARNING, logger="facepuppet.runtime.inputs.capture_lag"):
-        for lag in (2.0, 5.0, mic.lag.bound_s + 0.002):  # a backlog: loud blocks seconds old
+        rise = FLOOR_RISE * len(loud) / mic.meter.sample_rate  # the most the bound moves in one block
+        for lag in (2.0, 5.0):  # a backlog: loud blocks seconds old
             mic._callback(loud, len(loud), _times(lag), 0)
+        mic._callback(loud, len(loud), _times(mic.lag.bound_s + rise + 0.001), 0)  # and one just past the bound
     assert mic.level() == mic.meter.floor_db  # none of them was read: the level is still silence's
     assert voice.voice.hops == 0  # nor reached the voice
     c = dict(mic.counters)
@@ -72,7 +74,7 @@ def test_stale_blocks_are_dropped_unread_counted_and_said_once(mic, caplog):
     assert voice.voice.hops >= 1
     c = dict(mic.counters)
     assert c["read"] == hop_blocks and c["stale_dropped"] == 3
-    assert c["max_read_lag_ms"] in (4, 5) and c["floor_ms"] <= 5  # (truncated ms) the floor follows a lower lag
+    assert c["max_read_lag_ms"] in (4, 5) and c["floor_ms"] <= 5 + rise * 1000  # the floor follows a lower lag
     mic._callback(loud, len(loud), _times(3.0), 0)  # a later stale block: counted, not said again
     assert mic.counters["stale_dropped"] == 4
     assert len([r for r in caplog.records if "behind the capture clock" in r.getMessage()]) == 1
