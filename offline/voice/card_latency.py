@@ -4,7 +4,10 @@ The ``--audio-file`` figure of ``bench voice`` lives on the run's own clock; thi
 (:mod:`~facepuppet.offline.voice.onset_player`) play tone bursts into
 :class:`~facepuppet.offline.voice.virtual_card.VirtualSoundCard` in real time while ``run --input audio
 --audio CARD --voice TABLE`` listens to it through PortAudio, and times every onset on one clock
-(``time.perf_counter``: CLOCK_MONOTONIC, the loop's stamps' clock, shared by the processes):
+(``time.perf_counter``: CLOCK_MONOTONIC, the loop's stamps' clock, shared by the processes); the player starts
+once the run ticks and its capture has read a first block (the run starts the stream when its loop is about
+to tick, and the card's monitor delivers its first block only about 2 s after a capture stream starts,
+measured even in an idle process):
 
 * ``handed``: the player's callback handed the block holding the onset to PortAudio (plus the onset's offset
   in the block);
@@ -14,14 +17,15 @@ The ``--audio-file`` figure of ``bench voice`` lives on the run's own clock; thi
   a quiet stretch, seen by wrapping the microphone's block hook);
 * ``drawn``: the GPU finished the first tick whose jawOpen left its silent value after a closed stretch.
 
-The k-th onset is matched with the k-th arrival (the card delivers every sample, so a backlog of the capture
-longer than the second between bursts still pairs them right), and each arrival with the first rise of the
-drawn jawOpen after it (the counts are reported). Reported as median
+Each onset played is matched with the first arrival after it and before the next onset (the microphone drops
+blocks further behind the capture clock than its bound, so an onset arrives within it or not at all), and each
+arrival with the first rise of the drawn jawOpen after it (the counts are reported). Reported as median
 and p99 over the onsets: ``played -> drawn`` (held against the goal of one audio block plus one frame),
 ``handed -> drawn``, and the split ``played -> arrived`` (PulseAudio between the sink and the capture, and
 any backlog of the capture callback) and ``arrived -> drawn`` (the runtime: the hop, the next tick, the
-draw). ``capture_backlog_ms``: how far the capture callback's samples fell behind the wall clock (a callback
-kept from running, e.g. by a busy machine, makes PulseAudio hold the samples back instead of dropping them).
+draw). ``capture_backlog_ms``: how far the capture callback's samples (read or dropped) fell behind the wall
+clock (a callback kept from running, e.g. by a busy machine, makes PulseAudio hold the samples back instead of
+dropping them); ``microphone``: the run's microphone counters (blocks read, dropped as stale, the bound).
 Not available, with the reason, where pulseaudio or ALSA's pulse plugin is absent.
 """
 
@@ -61,6 +65,7 @@ class ArrivalWatch:
     received fell behind the wall clock since the first block (the capture's backlog, seconds)."""
 
     def __init__(self, mic: MicLevel | _Hook, rate: float) -> None:
+        self.mic = mic
         self.inner = mic.on_block
         self.rate = float(rate)
         self.times: list[float] = []
@@ -68,14 +73,18 @@ class ArrivalWatch:
         self._quiet_n = math.inf
         self._first = math.nan
         self._n = 0
+        self._dropped0 = 0
         mic.on_block = self
 
     def __call__(self, samples: np.ndarray) -> None:
         now = time.perf_counter()
+        counters = getattr(self.mic, "counters", None)  # a MicLevel: the blocks it dropped as stale count too
+        dropped = counters["stale_dropped"] * len(samples) if counters is not None else 0
         if self._n == 0:
             self._first = now
+            self._dropped0 = dropped
         self._n += len(samples)
-        self.backlog_s.append(now - self._first - self._n / self.rate)
+        self.backlog_s.append(now - self._first - (self._n + dropped - self._dropped0) / self.rate)
         loud = bool(len(samples)) and float(np.max(np.abs(samples))) > LOUD
         if loud:
             if self._quiet_n >= QUIET_S * self.rate:
@@ -106,10 +115,11 @@ def rises(ticks: list[tuple[float, float, float]]) -> list[float]:
 
 
 def after(events: list[float], starts: list[float]) -> list[float]:
-    """For each start, the first event at or after it and before the next start (nan where none)."""
+    """For each start, the first event at or after it and before the next (finite) start (nan where none, and
+    for a nan start)."""
     out = []
     for k, s in enumerate(starts):
-        end = starts[k + 1] if k + 1 < len(starts) else math.inf
+        end = next((x for x in starts[k + 1:] if math.isfinite(x)), math.inf)
         hits = [e for e in events if s <= e < end] if math.isfinite(s) else []
         out.append(hits[0] if hits else math.nan)
     return out
@@ -223,6 +233,11 @@ def _measure(card: VirtualSoundCard, table_path: Path, char: Path, jaw: int, con
         try:
             if not first_tick.wait(60.0):
                 return
+            # and the capture's first block read: the card's monitor starts delivering about 2 s after a
+            # capture stream starts, which would hide the first onsets
+            heard = time.perf_counter() + 30.0
+            while not getattr(watch.get("arrivals"), "_n", 0) and time.perf_counter() < heard:
+                time.sleep(0.01)
             played.update(_play(card, onsets))
             time.sleep(0.5)  # the last burst's ticks
         finally:
@@ -247,12 +262,13 @@ def _measure(card: VirtualSoundCard, table_path: Path, char: Path, jaw: int, con
     if "error" in played:
         return {"available": False, "reason": f"{card.play_device}: {played['error']}"}
     handed, on_card = played["handed"], played["played"]
-    arrived = watch["arrivals"].times[:onsets]
+    arrived = after(watch["arrivals"].times, on_card)
     drawn = after(rises(ticks), arrived)
     backlog = np.array(watch["arrivals"].backlog_s) * 1e3
     result = {
         "available": True, "device": card.name, "onsets": onsets, "fps": fps,
-        "detected": {"arrived": len(arrived), "drawn": int(np.isfinite(drawn).sum())},
+        "detected": {"arrived": int(np.isfinite(arrived).sum()), "drawn": int(np.isfinite(drawn).sum())},
+        "microphone": dict(watch["arrivals"].mic.counters),
         "capture": {"rate_hz": watch["rate"], "block": watch["block"], "block_ms": watch["block"] / watch["rate"] * 1e3,
                     "portaudio_input_latency_ms": watch["input_latency_s"] * 1e3,
                     "capture_backlog_ms": {"median": float(np.median(backlog)), "max": float(backlog.max())}},
@@ -268,9 +284,11 @@ def _measure(card: VirtualSoundCard, table_path: Path, char: Path, jaw: int, con
     result["goal<=40ms"] = bool(pd["n"] == onsets and pd["median_ms"] <= 40.0)
     log(f"latency through a virtual sound card ({card.name}, a PulseAudio null sink): played onset -> drawn jawOpen "
         f"median {pd['median_ms']:.1f} ms, p99 {pd['p99_ms']:.1f} ms ({pd['n']}/{onsets} onsets drawn, "
-        f"{len(arrived)} arrived); of which sink -> capture callback median "
+        f"{result['detected']['arrived']} arrived); of which sink -> capture callback median "
         f"{result['played_to_arrived']['median_ms']:.1f} ms, callback -> drawn "
         f"{result['arrived_to_drawn']['median_ms']:.1f} ms; capture blocks of {result['capture']['block_ms']:.1f} ms, "
-        f"the capture's backlog median {np.median(backlog):.1f} ms, max {backlog.max():.1f} ms; PortAudio reports "
+        f"the capture's backlog median {np.median(backlog):.1f} ms, max {backlog.max():.1f} ms; "
+        f"{result['microphone']['stale_dropped']} of {result['microphone']['blocks']} blocks dropped as stale "
+        f"(bound {result['microphone']['bound_ms']} ms); PortAudio reports "
         f"{watch['input_latency_s'] * 1e3:.1f} ms in, {played['portaudio_output_latency_s'] * 1e3:.1f} ms out")
     return result

@@ -29,6 +29,7 @@ from facepuppet.runtime.actuation.saturation import report_line
 from facepuppet.runtime.control.options import ControlOptions
 from facepuppet.runtime.errors import RecordingFailed, UsageError
 from facepuppet.runtime.files.outputs import write_atomic
+from facepuppet.runtime.inputs.capture_lag import FLOOR_CAP_S, MAX_LAG_S
 from facepuppet.runtime.model.character import Character
 from facepuppet.runtime.session.assemble import SessionResult, open_session
 from facepuppet.runtime.session.input_options import LiveInputOptions, RecordOptions
@@ -145,6 +146,13 @@ def run_command(args: argparse.Namespace) -> int:
     line = report_line(result.saturation, plan.outputs.stats)
     if line is not None:
         print(f"run: {line}")
+    mic = result.counters.get("microphone")
+    if mic is not None:
+        print(f"run: microphone: {mic['read']} of {mic['blocks']} blocks read, {mic['stale_dropped']} dropped as stale "
+              f"(the stalest {mic['max_stale_lag_ms']} ms behind the capture clock); the most a block read lagged "
+              f"{mic['max_read_lag_ms']} ms (bound: {MAX_LAG_S * 1000:g} ms past the standing latency, at most "
+              f"{(MAX_LAG_S + FLOOR_CAP_S) * 1000:g} ms; at the end {mic['bound_ms']} ms); "
+              f"{mic['status_errors']} flagged by PortAudio")
     if plan.outputs.stats:
         print("\n".join(result.stats.final()))
     report_outputs("run", plan.outputs, result)

@@ -9,6 +9,11 @@ falling one with ``release_s`` (``level += (1 - exp(-block_s / tau)) * (new - le
 * :class:`MicLevel` opens an input stream with sounddevice; its callback
   (PortAudio's thread) writes the smoothed level into a preallocated slot and
   never allocates a Python object per block beyond NumPy scalars, never blocks.
+  A block too far behind the capture clock is dropped unread and counted
+  (:mod:`~facepuppet.runtime.inputs.capture_lag` says how far, and why). The
+  stream opens with PortAudio's low latency, and a run starts it only when its
+  loop is about to tick (samples captured while the chain and the window are set
+  up would only be queued, stale, ahead of the first tick's).
 * :class:`WavLevel` stands in for the microphone (``--audio-file``): the level
   at tick time ``t`` is computed from the samples between the previous tick and
   ``t``, so it plays on the frame clock and a replay gives the same levels.
@@ -30,6 +35,7 @@ import numpy as np
 
 from facepuppet.runtime.errors import FacepuppetError, InputFileError
 from facepuppet.runtime.files.input_files import regular_file
+from facepuppet.runtime.inputs.capture_lag import MAX_LAG_S, CaptureLag
 
 if TYPE_CHECKING:
     import os
@@ -39,6 +45,7 @@ logger = logging.getLogger(__name__)
 
 class AudioUnavailable(FacepuppetError, RuntimeError):
     """No audio input could be opened; the message says why."""
+
 
 
 class LevelMeter:
@@ -211,6 +218,13 @@ class MicLevel:
     sample_rate : float or None, Hz (None: the device's default)
     block_s : float, seconds per callback block
     attack_s, release_s, floor_db : see :class:`LevelMeter`
+    max_lag_s : float, seconds a block may lie behind the standing latency before it is dropped as stale
+        (:class:`~facepuppet.runtime.inputs.capture_lag.CaptureLag`)
+    start : bool, start the stream now (False: the caller calls :meth:`start` when it is ready to read)
+
+    Attributes
+    ----------
+    lag : CaptureLag, the blocks' lag; ``lag.counters`` (also ``counters``): blocks read, dropped as stale, ...
 
     Raises
     ------
@@ -220,32 +234,47 @@ class MicLevel:
     """
 
     def __init__(self, device: int | str | None = None, sample_rate: float | None = None, block_s: float = 0.01,
-                 attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0) -> None:
+                 attack_s: float = 0.01, release_s: float = 0.3, floor_db: float = -60.0,
+                 max_lag_s: float = MAX_LAG_S, start: bool = True) -> None:
         try:
             import sounddevice as sd
         except (ImportError, OSError) as exc:  # OSError: the PortAudio library is missing
             raise AudioUnavailable(f"no audio: sounddevice/PortAudio is not available ({exc}); "
                                    "install PortAudio (apt-get install libportaudio2) or use --audio-file") from None
+        self.device_name = "the default input device" if device is None else str(device)
+        self.lag = CaptureLag(1.0, max_lag_s)  # (replaced once the stream's rate and latency are known)
+        self.counters = self.lag.counters
         try:
             info = sd.query_devices(device, "input")
             rate = float(sample_rate or info["default_samplerate"])
             self.meter = LevelMeter(rate, attack_s, release_s, floor_db)
             self._slot = np.full(1, floor_db)  # written by the callback, read by the frame loop
-            self.status_errors = 0
-            self.stream = sd.InputStream(device=device, channels=1, samplerate=rate,
+            self.stream = sd.InputStream(device=device, channels=1, samplerate=rate, latency="low",
                                          blocksize=max(1, int(rate * block_s)), callback=self._callback)
-            self.stream.start()
+            self.lag = CaptureLag(rate, max_lag_s, float(self.stream.latency), f"microphone {info.get('name', device)}")
+            self.counters = self.lag.counters
+            if start:
+                self.stream.start()
         except (ValueError, sd.PortAudioError, OSError) as exc:
             name = "the default input device" if device is None else f"input device {device!r}"
             raise AudioUnavailable(f"no audio: could not open {name} ({exc}); "
                                    "list devices with `python -m sounddevice`, or use --audio-file") from None
-        self.device_name = str(info.get("name", device))
+        self.device_name = str(info.get("name", self.device_name))
 
     on_block = None  # callable taking each block's samples (n,) in the callback: the voice's features
 
+    @property
+    def status_errors(self) -> int:
+        return self.counters["status_errors"]
+
+    def start(self) -> None:
+        """Start the stream (once; a started stream is left as it is)."""
+        if not self.stream.active:
+            self.stream.start()
+
     def _callback(self, indata, frames, time_info, status) -> None:
-        if status:
-            self.status_errors += 1
+        if not self.lag.fresh(time_info, frames, status):
+            return
         self._slot[0] = self.meter.process(indata[:, 0])
         if self.on_block is not None:
             self.on_block(indata[:, 0])
@@ -260,17 +289,19 @@ class MicLevel:
 
 
 def open_audio(device: int | str | None = None, wav: str | os.PathLike | None = None,
-               log: Callable[[str], None] = logger.info, **meter: float) -> WavLevel | MicLevel | None:
+               log: Callable[[str], None] = logger.info, start: bool = True,
+               **meter: float) -> WavLevel | MicLevel | None:
     """The audio level source the run asked for, or None (with a logged message) when none can be had.
 
-    ``wav`` (a path) wins over ``device``; ``device`` may be "" / None for the default input.
+    ``wav`` (a path) wins over ``device``; ``device`` may be "" / None for the default input. ``start=False``
+    opens a microphone without starting it (the caller starts it when its loop is about to tick).
     """
     if wav is not None:
         return WavLevel(wav, **meter)
     try:
         if isinstance(device, str) and device.strip().isdigit():
             device = int(device)
-        return MicLevel(device=device or None, **meter)
+        return MicLevel(device=device or None, start=start, **meter)
     except AudioUnavailable as exc:
         log(f"{exc}; the run goes on without audio")
         return None

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from facepuppet.runtime.files.json_limits import dumps_strict
+from facepuppet.runtime.inputs.capture_lag import MIC_GAUGES
 from facepuppet.runtime.live.timing import DurationSketch
 
 if TYPE_CHECKING:
@@ -44,7 +45,7 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 #: values that are settings or levels, not counts: shown without a change
-GAUGES = frozenset({"rcvbuf_bytes"})
+GAUGES = frozenset({"rcvbuf_bytes"}) | MIC_GAUGES
 STAGES = ("receive_snap", "solve_map", "draw_submit", "gpu_finish", "end_to_end")
 
 

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.gestures.layer import VoiceOnlySource
 from facepuppet.runtime.inputs.arrival import ArrivalWaiter
-from facepuppet.runtime.inputs.audio import open_audio
+from facepuppet.runtime.inputs.audio import MicLevel, open_audio
 from facepuppet.runtime.inputs.osc import CALIBRATE_ADDRESS
 from facepuppet.runtime.inputs.phone import PhoneRequester
 from facepuppet.runtime.inputs.udp import UdpSource
@@ -114,7 +114,9 @@ class LiveFeed:
         if table is not None and inputs.audio is None and inputs.audio_file is None:
             raise UsageError(f"--voice {self.stages.voice}: needs --audio [DEVICE] or --audio-file WAV to listen to")
         if inputs.audio is not None or inputs.audio_file is not None:
-            self.audio = open_audio(device=inputs.audio, wav=inputs.audio_file, log=log)
+            # a microphone is started by run(), when the loop is about to tick: samples captured during the
+            # chain's and the window's set-up would only be queued, stale, ahead of the first tick's
+            self.audio = open_audio(device=inputs.audio, wav=inputs.audio_file, log=log, start=False)
             if self.audio is not None:
                 stack.callback(self.audio.close)
         voice = None
@@ -168,6 +170,8 @@ class LiveFeed:
         if requester is not None:
             stack.callback(requester.stop)
             counters["phone"] = requester.counters
+        if isinstance(self.audio, MicLevel):
+            counters["microphone"] = self.audio.counters
         if chain.filter is not None:
             counters["pipeline"] = chain.filter.counters
         if chain.mix is not None:
@@ -312,9 +316,13 @@ class LiveFeed:
         # A receive *thread* gives the GIL back on every recvfrom and must win it back from the busy frame
         # loop each time: a short switch interval keeps datagrams from waiting in the kernel (measured, 0.5 ms
         # vs the default 5 ms: arrival -> read p50 3 vs 7 ms, p99 16 vs 30 ms). A receive process needs none.
+        # The microphone's callback thread, too, must win the GIL back for every block.
+        mic = self.audio if isinstance(self.audio, MicLevel) else None
         switch = sys.getswitchinterval()
-        if isinstance(parts.source, UdpSource) or self.control:  # (``--web``: the control server's thread)
+        if isinstance(parts.source, UdpSource) or self.control or mic is not None:  # (``--web``: its thread)
             sys.setswitchinterval(min(switch, THREAD_SWITCH_INTERVAL_S))
+        if mic is not None:
+            mic.start()
         try:
             return loop.run(parts.source, duration=parts.duration)
         finally:
