@@ -22,6 +22,9 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from facepuppet.runtime.mapping.channels import canonical
+from facepuppet.runtime.model.character import Character
+
 from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.perfect_sync.eye_openings import EYE_POINTS, eye_opening
@@ -171,3 +174,17 @@ def open_blinks(cover: dict, allowed: float = ALLOWED) -> list[dict]:
                         "why": f"the closed lid leaves {100 * c['fraction']:.1f} % of the eye's opening showing at "
                                f"{c['places']} place(s) (pixels seen: {what})"})
     return out
+
+
+def cover_against_truth(truth: Character, cloned: Character, face: Face, points: ControlPoints) -> dict:
+    """{blink key: {"true", "cloned": fraction of the eye's opening showing}} of a character whose true blinks are
+    known (``cloned`` is ``truth``'s mesh with the cloned shapes after its own; ``points`` a known set, not the
+    proposal, so that the measure does not depend on what it measures)."""
+    cover = EyeCover(truth.vertices, face, points)
+    by = {canonical(n): s for s, n in enumerate(truth.shape_names)}
+    keys = [key for key, _ in BLINKS if key in by]
+    true = blink_cover(cover, keys, truth.dense_deltas()[[by[k] for k in keys]]) if keys else {}
+    mine = [canonical(n) for n in cloned.shape_names[truth.n_shapes:]]
+    got = blink_cover(cover, mine, cloned.dense_deltas()[truth.n_shapes:])
+    return {k: {"true": round(true[k]["fraction"], 4), "cloned": round(got[k]["fraction"], 4),
+                "cloned_places": got[k]["places"]} for k in true if k in got}
