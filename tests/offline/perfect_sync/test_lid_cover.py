@@ -1,8 +1,9 @@
 """A closed lid covers the eye over its whole length, measured from the front (:mod:`.lid_cover`).
 
-The measure must pass ICT's own true blinks (they close cleanly) and fail a blink that leaves the eye showing:
-the lids stopped half way, or the lid closed while the eye's tear film and shadow mesh stayed where they were
-(what a cloned ICT blink did: the pieces lying on the eyeball poked through the closed lid as dark pinholes).
+The measure must pass ICT's own true blinks (they close cleanly; their shadow mesh shows along the lid line)
+and fail a blink that leaves the eye showing: the lids stopped half way, or the lid closed while the eye's tear
+film and shadow mesh stayed where they were (what a cloned ICT blink did: the pieces lying on the eyeball poked
+through the closed lid as dark pinholes).
 """
 
 import json
