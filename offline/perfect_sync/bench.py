@@ -16,7 +16,9 @@
   cloning was designed on "mediapipe" (``DESIGN_VARIANT``); the figures of
   the set (``held_out``) are over the others. Besides the errors, the blinks'
   lid closure: the mid-lid gap at rest, true and cloned (within ±25 % of the
-  rest gap: neither left open nor driven through the lower lid), how far each proposed control point
+  rest gap: neither left open nor driven through the lower lid), how much of the eye shows through the
+  closed lid seen from the front, true and cloned (:mod:`.lid_cover`; ``lids_cover``: at most
+  :data:`~.lid_cover.ALLOWED` of the opening, also on the ICT variants), how far each proposed control point
   lies from the true one (the variant's own landmarks), and the errors of the clone given the true points
   (``true_points``): the error a set has beyond those is the proposal's.
 * Godette (the data kit's VRM): cosine and magnitude ratio of each cloned

@@ -66,6 +66,7 @@ JAW_OPENINGS = ("jawOpen", "mouthClose")
 # bulges a chord's sagitta (0.03 cm) and its cornea's more between their corners: at 0.03 of the radius (0.05 cm)
 # the ball came through the cloned ICT blink's closed lid (8 % of the eye's opening, :mod:`.lid_cover`).
 EYE_CLEARANCE = 0.1
+ROUND = 0.3  # an eyeball's vertices lie within this fraction of its radius from its least-squares sphere
 MOUTH_CLEARANCE = 0.25  # outer skin pushed towards the teeth or gums keeps this fraction of its rest gap to them
 # (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
 # turn about +y by + moves the front (+z) towards +x, one about +x by − moves it up.
@@ -106,8 +107,10 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 def eyeballs(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints) -> dict:
     """{"L"/"R": (vertex indices, centre (3,))} of the eyeball pieces found behind each eye's corners.
 
-    An eyeball is a piece without control points that is close to a sphere (every vertex within 15 %
-    of the radius from the least-squares sphere; ICT's sclera 8 %, its iris and cornea 14 %), of radius
+    An eyeball is a piece without control points that is close to a sphere (every vertex within 30 %
+    of the radius from the least-squares sphere; ICT's sclera 8 %, its iris and cornea 14 %; on a head
+    warped to other proportions, whose eyeballs the warp bends, up to 21 % and 29 %: missed, its lids had
+    nothing to pass over and the eye showed through the closed lid), of radius
     0.2–0.8 inner-eye distances, at least a radius deep (not a cap like ICT's tear film), centred
     behind the eye's corners, between them across the eye and within half an inner-eye distance of
     their mid-point. A character whose eyes are flat decals or part of the skin has none, and its eye
@@ -134,7 +137,7 @@ def eyeballs(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints)
         centre = sol[:3]
         radius = float(np.sqrt(max(sol[3] + centre @ centre, 0.0)))
         off_sphere = np.abs(np.linalg.norm(p - centre, axis=1) - radius).max()
-        if not 0.2 * es < radius < 0.8 * es or off_sphere > 0.15 * radius or np.ptp(p[:, 2]) < radius:
+        if not 0.2 * es < radius < 0.8 * es or off_sphere > ROUND * radius or np.ptp(p[:, 2]) < radius:
             continue  # not a ball: the wrong size, not round, or a thin cap (a tear film over the eye)
         for side in ("L", "R"):
             inner, outer = v[points.vertex(f"eye_inner_{side}")], v[points.vertex(f"eye_outer_{side}")]
