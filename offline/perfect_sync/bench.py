@@ -16,7 +16,9 @@
   cloning was designed on "mediapipe" (``DESIGN_VARIANT``); the figures of
   the set (``held_out``) are over the others. Besides the errors, the blinks'
   lid closure: the mid-lid gap at rest, true and cloned (within ±25 % of the
-  rest gap: neither left open nor driven through the lower lid), how far each proposed control point
+  rest gap: neither left open nor driven through the lower lid), how much of the eye shows through the
+  closed lid seen from the front, true and cloned (:mod:`.lid_cover`; ``lids_cover``: at most
+  :data:`~.lid_cover.ALLOWED` of the opening, also on the ICT variants), how far each proposed control point
   lies from the true one (the variant's own landmarks), and the errors of the clone given the true points
   (``true_points``): the error a set has beyond those is the proposal's; and the doubt report's recall
   (``doubt_recall``, :func:`.doubt_measure.named_far`): of the proposed points out of place, how many it
@@ -66,6 +68,7 @@ from facepuppet.offline.perfect_sync.commands import load_source, perfect_sync
 from facepuppet.offline.perfect_sync.doubt_measure import doubt_figures, named_far
 from facepuppet.offline.perfect_sync.evaluate import LOOKAT, OWN, godette_pairs, lid_closure, truth_errors
 from facepuppet.offline.perfect_sync.face import Face, find_face
+from facepuppet.offline.perfect_sync.lid_cover import ALLOWED, cover_against_truth
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
 from facepuppet.offline.perfect_sync.proposal import doubts
 from facepuppet.offline.perfect_sync.real_variants import (
@@ -115,6 +118,11 @@ def _summary(errs: dict) -> dict:
             "meets_goal": bool(np.median(list(errs.values())) < GOAL_MEDIAN and errs[worst] < GOAL_WORST)}
 
 
+def _covers(cover: dict) -> bool:
+    """Each cloned blink's closed lid covers the eye: at most :data:`~.lid_cover.ALLOWED` of its opening shows."""
+    return bool(cover) and all(v["cloned"] <= ALLOWED for v in cover.values())
+
+
 def _closes(lids: dict) -> bool:
     """Each cloned blink brings the lids together: neither left open nor driven through the lower lid."""
     return all(abs(v["cloned"]) <= GOAL_LID * v["rest"] for v in lids.values()) and bool(lids)
@@ -156,9 +164,11 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
         errs = truth_errors(variant, synced, face)
         points = ict_control_points(marks, variant.vertices, variant.triangles, main_front(variant))
         lids = lid_closure(variant, synced, face, points)
+        cover = cover_against_truth(variant, synced, face, points)
         _sheet(args, synced, report, f"real_{label}")
         s = out["variants"][label] = {"seconds": seconds, "folded_fraction": folded, "n_doubts": len(report["doubts"]),
                                       **_summary(errs), "lids": lids, "lids_close": _closes(lids),
+                                      "lid_cover": cover, "lids_cover": _covers(cover),
                                       "point_error": point_error(used, points, variant.vertices),
                                       "true_points": _with_true_points(variant, source, points, face),
                                       "doubt_recall": named_far(used, points, variant.vertices, report["doubts"],
@@ -173,6 +183,8 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
                   f"{v['cloned']:.2f} (true {v['true']:.2f}, rest {v['rest']:.2f})" for v in lids.values())
               + f"; proposed points from the true ones: median {s['point_error']['median']:.2f} cm, worst "
                 f"{s['point_error']['worst'][0]} {s['point_error']['worst'][1]:.2f} cm; {seconds:.1f} s; "
+                + "eye showing through the closed lid " + ", ".join(
+                    f"{100 * v['cloned']:.1f}% (true {100 * v['true']:.1f}%)" for v in cover.values()) + "; "
                 + (f"with the true points: median {100 * s['true_points']['median']:.1f}%, worst "
                    f"{s['true_points']['worst'][0]} {100 * s['true_points']['worst'][1]:.1f}%"
                    if "median" in s["true_points"] else f"with the true points: {s['true_points']['note']}"))
@@ -185,6 +197,7 @@ def _real_set(args: argparse.Namespace, kit: Path, ict: Character, source) -> di
                            "worst": [worst, *held[worst]["worst"]],
                            "n_over_40": sum(v["n_over_40"] for v in held.values()),
                            "lids_close": all(v["lids_close"] for v in held.values()),
+                           "lids_cover": all(v["lids_cover"] for v in held.values()),
                            "meets_goal": all(v["meets_goal"] and v["lids_close"] for v in held.values())}
     other = {k: v for k, v in held.items() if k in dict(MARKER_VARIANTS)}
     if other:  # the one set built from another face than the design variant's: its figures on their own
@@ -262,14 +275,18 @@ def run_bench(args: argparse.Namespace) -> dict:
             out, report, _ = perfect_sync(_renamed(variant), source, progress=bar)
             seconds = time.perf_counter() - t
         errs = truth_errors(variant, out, find_face(variant))
+        cover = cover_against_truth(variant, out, find_face(variant), ict_control_points(
+            read_ict_landmarks(kit / "ict-facekit" / "vertex_indices.json", ict.n_vertices), variant.vertices,
+            variant.triangles, main_front(variant)))
         _sheet(args, out, report, f"ict_{label}")
         result["ict_variants"][label] = {"n_vertices": variant.n_vertices, "seconds": seconds,
                                          "n_added": len(report["added"]), "n_doubts": len(report["doubts"]),
-                                         **_summary(errs)}
+                                         **_summary(errs), "lid_cover": cover, "lids_cover": _covers(cover)}
         s = result["ict_variants"][label]
         print(f"bench perfect-sync: {label}: median {100 * s['median']:.1f}% "
               f"({100 * s['median_without_eye_looks']:.1f}% without eye looks), "
-              f"worst {s['worst'][0]} {100 * s['worst'][1]:.1f}%, {seconds:.1f} s")
+              f"worst {s['worst'][0]} {100 * s['worst'][1]:.1f}%, {seconds:.1f} s; eye showing through the closed "
+              "lid " + ", ".join(f"{100 * v['cloned']:.1f}% (true {100 * v['true']:.1f}%)" for v in cover.values()))
     result["real_proportions"] = _real_set(args, kit, ict, source)
     godette_path = kit / "gltf" / "Godette_vrm_v4.vrm"
     if godette_path.exists():

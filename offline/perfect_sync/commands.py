@@ -22,6 +22,7 @@ from facepuppet.runtime.recording.replay_source import open_recording
 
 from facepuppet.offline.elastic.control_points import ControlPoints, write_control_points
 from facepuppet.offline.perfect_sync.face import FaceError, find_face
+from facepuppet.offline.perfect_sync.lid_cover import EyeCover, blink_cover, open_blinks
 from facepuppet.offline.perfect_sync.own_expressions import prefer_own as prefer_own_expressions
 from facepuppet.offline.perfect_sync.pictures import shape_sheet, take_side_by_side
 from facepuppet.offline.perfect_sync.pieces import find_pieces
@@ -70,6 +71,8 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
     keys, dense = clone_face(source, character, face, points, progress=None if progress is None else step, info=info)
     es = max(fapu_of(points, character.vertices), 1e-12)
     own, defective = prefer_own_expressions(character, face, pieces, keys, dense, es, points, apply=prefer_own)
+    # does each blink's closed lid cover the eye over its whole length? (the lid points meeting do not say)
+    lid_cover = blink_cover(EyeCover(character.vertices, face, points), keys, dense)
     out, added = add_shapes(character, keys, dense, replace)
     largest = np.linalg.norm(dense, axis=2).max(axis=1) / es
     implausible = [{"shape": k, "why": f"moves a vertex {r:.2f} inner-eye distances (> {IMPLAUSIBLE}): check the "
@@ -78,7 +81,8 @@ def perfect_sync(character: Character, source: ElasticModel, landmarks: Path | N
                        int(len(face.skin)), "symmetry_error": face.symmetry_error, "nose_tip": face.nose_tip},
               "pieces": info["pieces"], "doubts": doubtful, "own_expressions": own,
               "defective_shapes": [{"shape": k, "why": "; ".join(w)} for k, w in defective.items()],
-              "implausible_shapes": implausible, **added}
+              "implausible_shapes": implausible, "lid_cover": lid_cover, "open_blinks": open_blinks(lid_cover),
+              **added}
     return out, report, points
 
 
@@ -127,6 +131,8 @@ def _run(args: argparse.Namespace) -> int:
     for d in report["defective_shapes"]:
         print(f"defective: {d['shape']}: {d['why']} (no expression of the character's to fall back on; see it "
               "with --pictures DIR --sheet)")
+    for d in report["open_blinks"]:
+        print(f"defective: {d['shape']}: {d['why']} (see it with --pictures DIR --sheet)")
     for key, d in report["own_expressions"].items():
         print(f"{key}: {d['used']}: {d['why']} (cosine {d['cosine']:.2f}, x{d['magnitude_ratio']:.2f})")
     if report["doubts"] and not args.pictures:

@@ -41,6 +41,7 @@ from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.elastic.params import build_model
 from facepuppet.offline.perfect_sync.drawn_eyes import decal_blink, decal_narrow, lid_fractions
+from facepuppet.offline.perfect_sync.eye_caps import eye_caps, keep_on_ball
 from facepuppet.offline.perfect_sync.eye_looks import decal_look_slide, look_expressions, look_keys
 from facepuppet.offline.perfect_sync.face import Face
 from facepuppet.offline.perfect_sync.landmark_field import feature_field, lip_line_motion
@@ -60,7 +61,12 @@ EYE_LOOK_DEGREES = (25.0, 15.0)  # (about the up axis, about the across axis)
 # does not move, the drawn mouth shows only the lips' motion relative to each other in these, not the jaw's
 # translation (which would slide the mouth down its unmoving chin).
 JAW_OPENINGS = ("jawOpen", "mouthClose")
-EYE_CLEARANCE = 0.03  # a lid passing over an eyeball keeps at most this fraction of its radius clear of it
+# A lid passing over an eyeball keeps at most this fraction of its radius clear of it (at most its rest clearance:
+# ICT's lid 0.26-0.44 cm over a 1.67 cm ball). The lid's triangles span up to 0.6 cm across the ball, whose surface
+# bulges a chord's sagitta (0.03 cm) and its cornea's more between their corners: at 0.03 of the radius (0.05 cm)
+# the ball came through the cloned ICT blink's closed lid (8 % of the eye's opening, :mod:`.lid_cover`).
+EYE_CLEARANCE = 0.1
+ROUND = 0.3  # an eyeball's vertices lie within this fraction of its radius from its least-squares sphere
 MOUTH_CLEARANCE = 0.25  # outer skin pushed towards the teeth or gums keeps this fraction of its rest gap to them
 # (shape, eye) -> (axis of the face frame, sign): right-hand rotations; +x is the character's left, so a
 # turn about +y by + moves the front (+z) towards +x, one about +x by − moves it up.
@@ -101,8 +107,10 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 def eyeballs(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints) -> dict:
     """{"L"/"R": (vertex indices, centre (3,))} of the eyeball pieces found behind each eye's corners.
 
-    An eyeball is a piece without control points that is close to a sphere (every vertex within 15 %
-    of the radius from the least-squares sphere; ICT's sclera 8 %, its iris and cornea 14 %), of radius
+    An eyeball is a piece without control points that is close to a sphere (every vertex within 30 %
+    of the radius from the least-squares sphere; ICT's sclera 8 %, its iris and cornea 14 %; on a head
+    warped to other proportions, whose eyeballs the warp bends, up to 21 % and 29 %: missed, its lids had
+    nothing to pass over and the eye showed through the closed lid), of radius
     0.2–0.8 inner-eye distances, at least a radius deep (not a cap like ICT's tear film), centred
     behind the eye's corners, between them across the eye and within half an inner-eye distance of
     their mid-point. A character whose eyes are flat decals or part of the skin has none, and its eye
@@ -129,7 +137,7 @@ def eyeballs(vertices: np.ndarray, triangles: np.ndarray, points: ControlPoints)
         centre = sol[:3]
         radius = float(np.sqrt(max(sol[3] + centre @ centre, 0.0)))
         off_sphere = np.abs(np.linalg.norm(p - centre, axis=1) - radius).max()
-        if not 0.2 * es < radius < 0.8 * es or off_sphere > 0.15 * radius or np.ptp(p[:, 2]) < radius:
+        if not 0.2 * es < radius < 0.8 * es or off_sphere > ROUND * radius or np.ptp(p[:, 2]) < radius:
             continue  # not a ball: the wrong size, not round, or a thin cap (a tear film over the eye)
         for side in ("L", "R"):
             inner, outer = v[points.vertex(f"eye_inner_{side}")], v[points.vertex(f"eye_outer_{side}")]
@@ -270,6 +278,12 @@ def clone_face(source: ElasticModel, character: Character, face: Face, points: C
                  mouth=_mouth_ball(points, character.vertices),
                  looks=look_expressions(character.expressions, character.delta_offsets, character.delta_indices,
                                         character.delta_positions, character.n_vertices))
+    # what lies on the eyeballs (tear films, shadow meshes) slides over them, as carried, never off through a lid
+    balls = {side: (sub[members], centre) for side, (members, centre) in eyes.items()}
+    caps = eye_caps(character.vertices, face.triangles, balls, face.frame[2])
+    if keep_on_ball(dense, character.vertices, balls, caps) and face.weld is not None:
+        copies = face.mesh[np.isin(face.weld[face.mesh], np.concatenate(list(caps.values())))]
+        dense[:, copies] = dense[:, face.weld[copies]]
     if info is not None:
         info["pieces"] = carried
         info["lid_seal"] = sealed
