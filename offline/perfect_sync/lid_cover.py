@@ -30,6 +30,7 @@ from facepuppet.offline.elastic.control_points import ControlPoints
 from facepuppet.offline.elastic.laplacian import components
 from facepuppet.offline.perfect_sync.eye_openings import EYE_POINTS, eye_opening
 from facepuppet.offline.perfect_sync.face import Face
+from facepuppet.offline.perfect_sync.front_depth import front_buffers
 
 #: a closed blink may leave this fraction of its rest opening's area showing the eye: about twice the most a
 #: true blink shows (ICT's shadow mesh lies along the closed lid line, between the lashes: 2.7 % of the opening
@@ -44,33 +45,7 @@ def id_buffer(local: np.ndarray, triangles: np.ndarray, x0: float, y0: float, h:
               shape: tuple[int, int]) -> np.ndarray:
     """(rows, cols) index into ``triangles`` of the front-most triangle (largest z of ``local`` (n, 3), face
     frame) at each pixel centre (size ``h``, first centre (x0, y0), rows up), −1 where none is drawn."""
-    rows, cols = shape
-    zbuf = np.full(shape, -np.inf)
-    ids = np.full(shape, -1, np.int64)
-    p = local[triangles]
-    lo = np.floor((p[:, :, :2].min(1) - (x0, y0)) / h).astype(np.int64)
-    hi = np.ceil((p[:, :, :2].max(1) - (x0, y0)) / h).astype(np.int64)
-    keep = np.flatnonzero((hi[:, 0] >= 0) & (lo[:, 0] < cols) & (hi[:, 1] >= 0) & (lo[:, 1] < rows))
-    for t in keep:
-        c0, r0 = max(lo[t, 0], 0), max(lo[t, 1], 0)
-        c1, r1 = min(hi[t, 0], cols - 1), min(hi[t, 1], rows - 1)
-        if c1 < c0 or r1 < r0:
-            continue
-        xs, ys = np.meshgrid(x0 + h * np.arange(c0, c1 + 1), y0 + h * np.arange(r0, r1 + 1))
-        a, b, c = p[t]
-        det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])
-        if abs(det) < 1e-18:
-            continue
-        wb = ((xs - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (ys - a[1])) / det
-        wc = ((b[0] - a[0]) * (ys - a[1]) - (xs - a[0]) * (b[1] - a[1])) / det
-        wa = 1.0 - wb - wc
-        inside = (wa >= -1e-9) & (wb >= -1e-9) & (wc >= -1e-9)
-        z = np.where(inside, wa * a[2] + wb * b[2] + wc * c[2], -np.inf)
-        view, own = zbuf[r0:r1 + 1, c0:c1 + 1], ids[r0:r1 + 1, c0:c1 + 1]
-        nearer = z > view
-        view[nearer] = z[nearer]
-        own[nearer] = t
-    return ids
+    return front_buffers(local, triangles, x0, y0, h, shape)[1]
 
 
 def _facing(local: np.ndarray, triangles: np.ndarray) -> np.ndarray:
