@@ -47,7 +47,6 @@ class AudioUnavailable(FacepuppetError, RuntimeError):
     """No audio input could be opened; the message says why."""
 
 
-
 class LevelMeter:
     """RMS dBFS of sample blocks with a noise floor and attack/release smoothing.
 
@@ -242,8 +241,6 @@ class MicLevel:
             raise AudioUnavailable(f"no audio: sounddevice/PortAudio is not available ({exc}); "
                                    "install PortAudio (apt-get install libportaudio2) or use --audio-file") from None
         self.device_name = "the default input device" if device is None else str(device)
-        self.lag = CaptureLag(1.0, max_lag_s)  # (replaced once the stream's rate and latency are known)
-        self.counters = self.lag.counters
         try:
             info = sd.query_devices(device, "input")
             rate = float(sample_rate or info["default_samplerate"])

@@ -316,14 +316,12 @@ class LiveFeed:
         # A receive *thread* gives the GIL back on every recvfrom and must win it back from the busy frame
         # loop each time: a short switch interval keeps datagrams from waiting in the kernel (measured, 0.5 ms
         # vs the default 5 ms: arrival -> read p50 3 vs 7 ms, p99 16 vs 30 ms). A receive process needs none.
-        # The microphone's callback thread, too, must win the GIL back for every block (the same reasoning; for
-        # it no gain was measured on a virtual sound card under load).
-        mic = self.audio if isinstance(self.audio, MicLevel) else None
+        # (The microphone's callback thread is left out: a short interval gave it no measured gain.)
         switch = sys.getswitchinterval()
-        if isinstance(parts.source, UdpSource) or self.control or mic is not None:  # (``--web``: its thread)
+        if isinstance(parts.source, UdpSource) or self.control:  # (``--web``: the control server's thread)
             sys.setswitchinterval(min(switch, THREAD_SWITCH_INTERVAL_S))
-        if mic is not None:
-            mic.start()
+        if isinstance(self.audio, MicLevel):
+            self.audio.start()
         try:
             return loop.run(parts.source, duration=parts.duration)
         finally:
