@@ -2,7 +2,7 @@
 
 ``fit-voice`` (offline) writes it; the run-time voice stage reads it with NumPy alone. It holds the
 features it was fitted on (:class:`~facepuppet.runtime.voice.features.FeatureSpec`, so run time computes
-the same numbers), their standardisation, and one of three models, the one that won the fit's
+the same numbers), their standardisation, and one of four models, the one that won the fit's
 cross-validation:
 
 =====  ==========  ==================================================================================
@@ -12,13 +12,16 @@ code   model       evaluation of a standardised feature vector z (n_features,)
 1      ridge       ``y = z W + ȳ``
 2      kpls        Ouzounis et al. eq. 10 with an RBF kernel: ``k_i = exp(-γ ‖z - X_i‖²)``,
                    ``y = (k - mean(k)) B - k̄ B + k̿ ΣB + ȳ`` (the centring of eq. 8 folded into constants)
+3      blend       ``y = z W + ȳ + Σ_t tree_t(z)``: ridge and boosted trees, each weight already halved
+                   (:mod:`facepuppet.runtime.voice.trees`; ȳ holds both models' constants)
 =====  ==========  ==================================================================================
 
 Outputs are clamped to [0, 1], and a level under ``gate_db`` (dBFS) fades them to 0 over ``GATE_SPAN_DB``:
 silence is a closed mouth whatever the model makes of the noise floor.
 
 Symbols and names: W ``coef``; ȳ ``output_mean``; X ``train_inputs``; B ``dual_coef``; k̄
-``kernel_col_mean``; k̿ ``kernel_grand_mean``; γ ``model_params[1]``.
+``kernel_col_mean``; k̿ ``kernel_grand_mean``; γ ``model_params[1]``; the trees ``tree_feature``,
+``tree_threshold``, ``tree_value``.
 """
 
 from __future__ import annotations
@@ -43,11 +46,12 @@ from facepuppet.runtime.files.tables import (
     validate,
 )
 from facepuppet.runtime.voice.features import FeatureSpec
+from facepuppet.runtime.voice.trees import MAX_TREES, TreeEvaluator, depth_of
 
 if TYPE_CHECKING:
     from pathlib import Path
 
-MODELS = ("level", "ridge", "kpls")
+MODELS = ("level", "ridge", "kpls", "blend")
 GATE_SPAN_DB = 6.0  # the gate opens fully this far above gate_db
 MAX_TRAIN = 4096  # kernel rows evaluated per hop at most: bounds a hostile table's cost per block
 
@@ -58,10 +62,11 @@ VOICE_SCHEMA = register_schema(
             "feature_spec": Section("float64", (8,), "sample_rate, window_s, hop_s, n_mels, fmin, fmax, n_taps, step"),
             "feature_mean": Section("float32", ("n_features",), "feature means (standardisation)"),
             "feature_scale": Section("float32", ("n_features",), "feature standard deviations"),
-            "model_params": Section("float64", (4,), "model code (0 level, 1 ridge, 2 kpls), gamma, lookahead_s, "
-                                                     "gate_db"),
+            "model_params": Section("float64", (4,), "model code (0 level, 1 ridge, 2 kpls, 3 blend), gamma, "
+                                                     "lookahead_s, gate_db"),
             "output_mean": Section("float32", ("n_outputs",), "mean of the training outputs"),
-            "coef": Section("float32", ("n_features", "n_outputs"), "linear weights W (level, ridge)", optional=True),
+            "coef": Section("float32", ("n_features", "n_outputs"), "linear weights W (level, ridge, blend)",
+                            optional=True),
             "train_inputs": Section("float32", ("n_train", "n_features"), "kpls: standardised training inputs X",
                                     optional=True),
             "dual_coef": Section("float32", ("n_train", "n_outputs"), "kpls: dual coefficients B, eq. 10",
@@ -69,13 +74,20 @@ VOICE_SCHEMA = register_schema(
             "kernel_col_mean": Section("float32", ("n_train",), "kpls: column means of the Gram matrix",
                                        optional=True),
             "kernel_grand_mean": Section("float32", (1,), "kpls: grand mean of the Gram matrix", optional=True),
+            "tree_feature": Section("int32", ("n_trees", "n_internal"), "blend: feature of each tree node (heap order)",
+                                    optional=True),
+            "tree_threshold": Section("float64", ("n_trees", "n_internal"), "blend: threshold of each tree node",
+                                      optional=True),
+            "tree_value": Section("float32", ("n_trees", "n_leaves"), "blend: leaf values", optional=True),
         },
         channels=("outputs",),
         channel_dims={"outputs": "n_outputs"},
+        version=2,  # 2: the blend model (code 3) and its tree sections
     )
 )
 
 _KPLS = ("train_inputs", "dual_coef", "kernel_col_mean", "kernel_grand_mean")
+_TREES = ("tree_feature", "tree_threshold", "tree_value")
 
 
 def spec_from_array(a: np.ndarray, path: str | os.PathLike | None = None) -> FeatureSpec:
@@ -107,6 +119,8 @@ class VoiceTable:
     feature_mean, feature_scale : ndarray of shape (n_features,), float32
     output_mean : ndarray of shape (n_outputs,), float32
     coef : ndarray of shape (n_features, n_outputs), float32, or None (kpls)
+    tree_feature, tree_threshold : ndarray of shape (n_trees, n_internal), int32 / float64, and tree_value
+        (n_trees, n_leaves) float32: blend only (:mod:`facepuppet.runtime.voice.trees`)
     train_inputs : ndarray of shape (n_train, n_features), float32, or None; dual_coef (n_train, n_outputs),
         kernel_col_mean (n_train,), kernel_grand_mean float: kpls only
     gamma : float, the RBF width (kpls)
@@ -126,6 +140,9 @@ class VoiceTable:
     dual_coef: np.ndarray | None = None
     kernel_col_mean: np.ndarray | None = None
     kernel_grand_mean: float = 0.0
+    tree_feature: np.ndarray | None = None
+    tree_threshold: np.ndarray | None = None
+    tree_value: np.ndarray | None = None
     gamma: float = 1.0
     lookahead_s: float = 0.0
     gate_db: float = -55.0
@@ -156,6 +173,8 @@ class VoiceTable:
                 raise TablesError(None, "model_params", f"gamma must be a positive number, found {self.gamma!r}")
         elif self.coef is None:
             raise TablesError(None, "coef", f"the {self.model} model needs this section")
+        if self.model == "blend":
+            self._check_trees(arrays, n_features)
         if not (np.all(self.feature_scale > 0)):
             raise TablesError(None, "feature_scale", "every scale must be positive")
         for name, v in (("lookahead_s", self.lookahead_s), ("gate_db", self.gate_db)):
@@ -169,6 +188,20 @@ class VoiceTable:
             set_(self, "_coef_sum", s.astype(np.float32))
             set_(self, "_offset", c.astype(np.float32))
             set_(self, "_train_sq", (self.train_inputs.astype(np.float64) ** 2).sum(1).astype(np.float32))
+
+    def _check_trees(self, arrays: dict, n_features: int) -> None:
+        missing = [s for s in _TREES if arrays.get(s) is None]
+        if missing:
+            raise TablesError(None, missing[0], "the blend model needs this section")
+        n_trees, n_internal = self.tree_feature.shape
+        if depth_of(n_internal, self.tree_value.shape[1]) is None:
+            raise TablesError(None, "tree_value", f"{n_internal} nodes and {self.tree_value.shape[1]} leaves per tree "
+                                                  "are not complete trees of depth 1..6")
+        if not 0 < n_trees <= MAX_TREES or n_trees % len(self.outputs):
+            raise TablesError(None, "tree_feature", f"expected a multiple of {len(self.outputs)} trees (one run per "
+                                                    f"output), at most {MAX_TREES}, found {n_trees}")
+        if self.tree_feature.min() < 0 or self.tree_feature.max() >= n_features:
+            raise TablesError(None, "tree_feature", f"feature indices must lie in 0..{n_features - 1}")
 
     # -- tables ------------------------------------------------------------
     def _arrays(self) -> dict[str, np.ndarray]:
@@ -184,6 +217,8 @@ class VoiceTable:
         if self.model == "kpls":
             a.update(train_inputs=self.train_inputs, dual_coef=self.dual_coef, kernel_col_mean=self.kernel_col_mean,
                      kernel_grand_mean=np.array([self.kernel_grand_mean], np.float32))
+        if self.model == "blend":
+            a.update(tree_feature=self.tree_feature, tree_threshold=self.tree_threshold, tree_value=self.tree_value)
         return {k: v for k, v in a.items() if v is not None}
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -200,15 +235,17 @@ class VoiceTable:
         a = t.arrays
         spec = spec_from_array(a["feature_spec"], path)
         code, gamma, lookahead, gate = (float(v) for v in a["model_params"])
-        if code not in (0.0, 1.0, 2.0):
-            raise TablesError(path, "model_params", f"model code must be 0, 1 or 2, found {code:g}")
+        if code not in (0.0, 1.0, 2.0, 3.0):
+            raise TablesError(path, "model_params", f"model code must be 0, 1, 2 or 3, found {code:g}")
         kgm = a.get("kernel_grand_mean")
         with naming_file(path):
             return cls(outputs=tuple(t.channels["outputs"]), spec=spec, model=MODELS[int(code)],
                        feature_mean=a["feature_mean"], feature_scale=a["feature_scale"],
                        output_mean=a["output_mean"], coef=a.get("coef"), train_inputs=a.get("train_inputs"),
                        dual_coef=a.get("dual_coef"), kernel_col_mean=a.get("kernel_col_mean"),
-                       kernel_grand_mean=float(kgm[0]) if kgm is not None else 0.0, gamma=gamma,
+                       kernel_grand_mean=float(kgm[0]) if kgm is not None else 0.0,
+                       tree_feature=a.get("tree_feature"), tree_threshold=a.get("tree_threshold"),
+                       tree_value=a.get("tree_value"), gamma=gamma,
                        lookahead_s=lookahead, gate_db=gate, metadata=t.metadata)
 
     # -- evaluation --------------------------------------------------------
@@ -237,6 +274,8 @@ class VoiceEvaluator:
         self._mean_row = np.full(n_train, 1.0 / n_train, np.float32)  # mean(k) as a dot product
         self._one, self._zero = np.float32(1.0), np.float32(0.0)
         self._minus_two, self._minus_gamma = np.float32(-2.0), np.float32(-table.gamma)
+        self._trees = TreeEvaluator(table.tree_feature, table.tree_threshold, table.tree_value,
+                                    n_o) if table.model == "blend" else None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         t, z, y = self.table, self._z, self._y
@@ -260,6 +299,8 @@ class VoiceEvaluator:
         else:
             np.dot(z, t.coef, out=y)
             np.add(y, t.output_mean, out=y)
+            if self._trees is not None:
+                self._trees(z, y)
         np.minimum(y, self._one, out=y)
         np.maximum(y, self._zero, out=y)
         level = float(x[-1])

@@ -1,4 +1,4 @@
-"""Small voice tables built from arrays (no fit): a ridge-like and a kernel-PLS-like table of the real format."""
+"""Small voice tables built from arrays (no fit): ridge-, kernel-PLS- and blend-like tables of the real format."""
 
 from __future__ import annotations
 
@@ -25,6 +25,11 @@ def small_table(model: str = "ridge", seed: int = 0, outputs=OUTPUTS) -> VoiceTa
     coef[4:8, min(1, m - 1)] = 0.08
     common = dict(outputs=outputs, spec=spec, model=model, feature_mean=mean, feature_scale=scale,
                   output_mean=np.full(m, 0.1), gate_db=-60.0)
+    if model == "blend":  # 4 random trees of depth 2 per output, their leaves small
+        n_trees = 4 * m
+        return VoiceTable(coef=coef, tree_feature=rng.integers(0, nf, (n_trees, 3)),
+                          tree_threshold=rng.standard_normal((n_trees, 3)),
+                          tree_value=0.05 * rng.standard_normal((n_trees, 4)), **common)
     if model != "kpls":
         return VoiceTable(coef=coef, **common)
     n = 40

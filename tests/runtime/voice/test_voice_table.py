@@ -19,7 +19,7 @@ from facepuppet.runtime.voice.table import VoiceTable
 from helpers.voice_tables import small_table, vowel_buzz
 
 
-@pytest.mark.parametrize("model", ["level", "ridge", "kpls"])
+@pytest.mark.parametrize("model", ["level", "ridge", "kpls", "blend"])
 def test_a_saved_table_loads_and_predicts_the_same(tmp_path, model):
     table = small_table(model)
     loaded = VoiceTable.load(table.save(tmp_path / "v.npz"))
@@ -29,7 +29,7 @@ def test_a_saved_table_loads_and_predicts_the_same(tmp_path, model):
     assert (tmp_path / "v.npz").stat().st_size < 1_000_000
 
 
-@pytest.mark.parametrize("model", ["ridge", "kpls"])
+@pytest.mark.parametrize("model", ["ridge", "kpls", "blend"])
 def test_silence_is_a_closed_mouth_and_loud_sounds_stay_bounded(model):
     table = small_table(model)
     rate = int(table.spec.sample_rate)
@@ -46,8 +46,9 @@ def test_silence_is_a_closed_mouth_and_loud_sounds_stay_bounded(model):
     assert loud.max() > 0  # the gate opens for a sound
 
 
-def test_an_evaluation_allocates_nothing_that_grows_with_the_table():
-    table = small_table("kpls")
+@pytest.mark.parametrize("model", ["kpls", "blend"])
+def test_an_evaluation_allocates_nothing_that_grows_with_the_table(model):
+    table = small_table(model)
     ev = table.evaluator()
     x = features_of(vowel_buzz(0.5), table.spec, np.array([0.3]))[0]
     ev(x)
@@ -63,10 +64,13 @@ def test_an_evaluation_allocates_nothing_that_grows_with_the_table():
     assert peak < 512, peak
 
 
-def _rewrite(src, dst, change):
-    """Copy a tables file, changing its arrays or manifest through ``change(name, bytes) -> bytes``."""
+def _rewrite(src, dst, change, drop=None):
+    """Copy a tables file, changing its arrays or manifest through ``change(name, bytes) -> bytes``, leaving out
+    the member ``drop``."""
     with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
         for item in zin.infolist():
+            if item.filename == drop:
+                continue
             zout.writestr(item, change(item.filename, zin.read(item.filename)))
 
 
@@ -102,6 +106,39 @@ def test_a_kpls_table_without_its_kernel_rows_is_refused(tmp_path):
     _rewrite(good, bad, change)
     with pytest.raises(TablesError, match=rf"{bad}: train_inputs: the kpls model needs this section"):
         VoiceTable.load(bad)
+
+
+@pytest.mark.parametrize("section,value,message", [
+    ("tree_feature", np.full((8, 3), 25, np.int32), "feature indices must lie in 0..24"),
+    ("tree_feature", np.full((8, 3), -1, np.int32), "feature indices must lie in 0..24"),
+    ("tree_value", np.zeros((8, 5), np.float32), "are not complete trees"),
+    ("tree_threshold", np.full((8, 3), np.nan), "NaN or infinity"),
+    ("tree_value", None, "the blend model needs this section"),
+])
+def test_a_damaged_blend_table_is_refused_naming_the_tree_field(tmp_path, section, value, message):
+    good = small_table("blend").save(tmp_path / "good.npz")
+    bad = tmp_path / "bad.npz"
+    with zipfile.ZipFile(good) as z:
+        assert f"{section}.npy" in z.namelist()  # the section this case damages is one the table has
+    if value is None:  # the section left out, and the manifest with it
+        def change(name, data):
+            if name == "__manifest__.npy":
+                manifest = json.loads(np.load(__import__("io").BytesIO(data)).tobytes().decode())
+                del manifest["sections"][section]
+                return _npy(np.frombuffer(json.dumps(manifest).encode(), np.uint8))
+            return data
+    else:
+        def change(name, data):
+            if name == "__manifest__.npy":
+                manifest = json.loads(np.load(__import__("io").BytesIO(data)).tobytes().decode())
+                manifest["sections"][section]["shape"] = list(value.shape)
+                manifest["sections"][section].pop("sha256", None)
+                return _npy(np.frombuffer(json.dumps(manifest).encode(), np.uint8))
+            return _npy(value) if name == f"{section}.npy" else data
+    _rewrite(good, bad, change, drop=f"{section}.npy" if value is None else None)
+    with pytest.raises(TablesError, match=rf"{bad}: {section}") as err:
+        VoiceTable.load(bad)
+    assert message in str(err.value), err.value
 
 
 def test_run_refuses_a_damaged_voice_table_with_exit_2_naming_it(tmp_path):
