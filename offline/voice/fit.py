@@ -41,8 +41,8 @@ from facepuppet.runtime.voice.features import FeatureSpec, features_of
 from facepuppet.runtime.voice.table import MAX_TRAIN, VoiceTable
 
 from facepuppet.offline.gestures.speech_intensity import read_speech
-from facepuppet.offline.voice.boost import BoostSetting, fit_trees, predict_trees
 from facepuppet.offline.kpls.model import KernelPLS
+from facepuppet.offline.voice.boost import BoostSetting, fit_trees, predict_trees
 
 CURVE_FPS = 30.0
 MODEL_NAMES = ("level", "ridge", "kpls", "blend")
