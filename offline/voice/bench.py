@@ -8,7 +8,9 @@ Two evaluations of the FACEGOOD speech pair (5 contiguous folds):
 
 Goals (issue): jawOpen r >= 0.75, mouthFunnel r >= 0.6, every channel above the level baseline; the
 JSON says per goal whether it is met. The look-ahead trade-off: the same two evaluations of the level and
-ridge with the features hearing 0, 50, 100, 200 and 260 ms past each frame (:mod:`.lookahead`). Cost: the
+ridge with the features hearing 0, 50, 100, 200 and 260 ms past each frame (:mod:`.lookahead`). The learning
+curve: ridge and blend trained on the first 10, 20, 29 and 39 s, scored on the last 10 s (:mod:`.learning`):
+whether more paired speech would lift a channel. Cost: the
 runtime evaluator per hop (features + model, what the audio thread does per block of ``hop_s``) and the
 stage per tick, timed on this machine. Latency: a sound onset in ``--audio-file`` to the drawn weight
 through ``run`` itself (on the run's clock: the hop that holds the onset, then the next tick), and, where
@@ -46,6 +48,7 @@ from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.gestures.speech_intensity import read_speech
 from facepuppet.offline.voice.card_latency import card_latency
 from facepuppet.offline.voice.fit import CURVE_FPS, MODEL_NAMES, cross_validate, fit_voice, read_pair, report_lines
+from facepuppet.offline.voice.learning import learning_curve, learning_lines
 from facepuppet.offline.voice.limits import limits
 from facepuppet.offline.voice.lookahead import curve_lines, lookahead_curve
 
@@ -242,6 +245,9 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     log("linear ceiling (ridge fitted on folds 4-5 themselves): " + ", ".join(
         f"{c} {ceil[c]:.3f}" for c in GOALS if c in ceil) + ": the most a linear reader of these features gives there; "
         "a goal above it needs other features, one under it held-out weights closer to these (more training speech)")
+    learning = learning_curve(sp.X, Y, report["channels"], CURVE_FPS)
+    for line in learning_lines(learning):
+        log(line)
     curve = lookahead_curve(read_speech(pair[0], rate=int(FeatureSpec().sample_rate)), FeatureSpec(), Y,
                             report["channels"], CURVE_FPS)
     for line in curve_lines(curve):
@@ -260,6 +266,7 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     vowels = vowel_recognition(log)
     return {"before": BEFORE, "goals_missed": missed, "limits": lim,
             "latency": latency, "latency_virtual_card": card, "vowels": vowels, "lookahead_curve": curve,
+            "learning_curve": learning,
             "channels": report["channels"], "frames": report["frames"],
             "kept": report["best"],
             "lookahead_ms": args.lookahead, "fit_s": fit_s,
@@ -270,5 +277,6 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
 
 
 def register_benches(register_bench: Callable[..., None]) -> None:
-    register_bench("voice", run_bench, "voice -> mouth: held-out r of the level baseline, ridge and kernel PLS on "
-                   "the kit's speech; the voice stage's cost per hop and tick, onset latency", _add_arguments)
+    register_bench("voice", run_bench, "voice -> mouth: held-out r of the level baseline, ridge, kernel PLS and "
+                   "blend on the kit's speech, and r against the seconds of training speech; the voice stage's cost "
+                   "per hop and tick, onset latency", _add_arguments)

@@ -1,7 +1,8 @@
 """``facepuppet fit-voice`` (speech + mouth curves -> voice table) and ``voice-curves`` (table + WAV -> CSV).
 
 ``fit-voice SPEECH.wav CURVES.csv [SPEECH2.wav CURVES2.csv ...] --map MAP.csv -o voice.npz`` cross-validates
-the level baseline, ridge and kernel PLS (:mod:`facepuppet.offline.voice.fit`), prints the held-out r of
+the level baseline, ridge, kernel PLS and blend (ridge with boosted trees; :mod:`facepuppet.offline.voice.fit`),
+prints the held-out r of
 every channel, and writes the best as a ``voice`` tables file. ``voice-curves voice.npz SPEECH.wav -o
 curves.csv`` writes what the table predicts at 30 frames/s (header ``time_s`` + the ARKit names), evaluated
 by the runtime's own code, so the curves are what a run would draw.
@@ -46,9 +47,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "fit-voice",
         help="learn ARKit mouth channels from speech with paired mouth curves -> voice table",
-        description="Cross-validate (contiguous folds) the voice-level baseline, ridge regression and kernel "
-                    "PLS from causal log-mel features with their history to the mouth channels, print the "
-                    "held-out r per channel and keep the best as a voice tables file (run --voice).",
+        description="Cross-validate (contiguous folds) the voice-level baseline, ridge regression, kernel "
+                    "PLS and blend (the mean of ridge and gradient-boosted trees) from causal log-mel features "
+                    "with their history to the mouth channels, print the held-out r per channel and keep the best "
+                    "as a voice tables file (run --voice).",
     )
     p.add_argument("paths", type=Path, nargs="+", metavar="SPEECH.wav CURVES.csv",
                    help="speech WAV and its mouth curves CSV (time_s + controls at 30 fps); several pairs allowed")
