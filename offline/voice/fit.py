@@ -322,6 +322,7 @@ def report_lines(report: dict) -> list[str]:
         if weak:
             lines.append(f"warning: {', '.join(weak)}: held-out r of {best} not above the voice level's; on speech "
                          "this table never saw they follow the voice no better than the level does (more paired "
-                         "speech of this speaker is the way up; with --voice-mode loss, the default, a tracker "
-                         "drives them while it sees the face)")
+                         "speech may not help: on the kit's take, 10 to 39 s of training did not lift these two, "
+                         "bench voice's learning curve; with --voice-mode loss, the default, a tracker drives "
+                         "them while it sees the face)")
     return lines
