@@ -13,6 +13,7 @@ from facepuppet.runtime.voice.features import FeatureSpec, features_of
 from facepuppet.runtime.voice.table import VoiceTable
 
 from facepuppet.offline.kpls.model import KernelPLS
+from facepuppet.offline.voice.boost import BoostSetting
 from facepuppet.offline.voice.fit import (
     Standardise,
     contiguous_folds,
@@ -131,9 +132,14 @@ def test_on_the_kits_speech_every_model_is_scored_and_the_table_is_small(tmp_pat
 
     d = need_shared("speech")
     pair = (d / "facegood_1114_3_15.wav", d / "facegood_1114_3_15_blendshapes.csv", d / "facegood_to_arkit.csv")
-    table, report = fit_voice([pair], models=("level", "ridge"), folds=5)
-    r = report["held_out_r"]
+    table, report = fit_voice([pair], models=("level", "ridge", "blend"), folds=5)
+    r, mean = report["held_out_r"], report["mean_r"]
     assert r["ridge"]["jawOpen"] > r["level"]["jawOpen"]  # measured 0.70 vs 0.63
+    assert mean["blend"] > mean["ridge"]  # measured 0.300 vs 0.278
+    assert r["blend"]["jawOpen"] > r["ridge"]["jawOpen"]  # measured 0.728 vs 0.700
+    assert report["best"] == "blend" and table.model == "blend"
+    assert VoiceTable.load(table.save(tmp_path / "b.npz")).metadata["settings"]["trees"]["n_trees"] == \
+        BoostSetting().n_trees
     assert r["ridge"]["mouthFunnel"] > r["level"]["mouthFunnel"]  # measured 0.50 vs 0.35
     assert table.save(tmp_path / "v.npz").stat().st_size < 1_000_000
 
