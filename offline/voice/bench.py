@@ -39,7 +39,6 @@ from facepuppet.runtime.commands.run import plan_from_argv, run_live
 from facepuppet.runtime.demo.head import build_demo_character
 from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.inputs.audio import read_wav
-from facepuppet.runtime.voice.features import FeatureSpec
 from facepuppet.runtime.voice.source import VoiceChannels
 from facepuppet.runtime.voice.stage import VoiceStage
 from facepuppet.runtime.voice.vowels import VOWELS, build_profile, voiced_hops
@@ -47,7 +46,15 @@ from facepuppet.runtime.voice.vowels import VOWELS, build_profile, voiced_hops
 from facepuppet.offline.bench_data import add_data_argument, data_dir
 from facepuppet.offline.gestures.speech_intensity import read_speech
 from facepuppet.offline.voice.card_latency import card_latency
-from facepuppet.offline.voice.fit import CURVE_FPS, MODEL_NAMES, cross_validate, fit_voice, read_pair, report_lines
+from facepuppet.offline.voice.fit import (
+    CURVE_FPS,
+    MODEL_NAMES,
+    VOICE_SPEC,
+    cross_validate,
+    fit_voice,
+    read_pair,
+    report_lines,
+)
 from facepuppet.offline.voice.learning import learning_curve, learning_lines
 from facepuppet.offline.voice.limits import limits
 from facepuppet.offline.voice.lookahead import curve_lines, lookahead_curve
@@ -222,7 +229,7 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     for line in report_lines(report):
         log(line)
     fit_s = time.perf_counter() - t0
-    sp = read_pair(*pair, FeatureSpec(), args.lookahead / 1000.0)
+    sp = read_pair(*pair, VOICE_SPEC, args.lookahead / 1000.0)
     Y = sp.Y[:, [sp.channels.index(c) for c in report["channels"]]]
     held = cross_validate(sp.X, Y, 5, MODEL_NAMES, test_folds=(3, 4))
     held_r = {name: {c: float(r) for c, r in zip(report["channels"], v["r"])} for name, v in held.items()}
@@ -235,7 +242,7 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     for where, goals in missed.items():
         log(f"GOALS MISSED ({where}, {kept}): " + "; ".join(goals) if goals else f"all goals met ({where})")
     alpha = held["ridge"]["setting"][0]
-    lim = limits(read_speech(pair[0], rate=int(FeatureSpec().sample_rate)), FeatureSpec(), Y, report["channels"],
+    lim = limits(read_speech(pair[0], rate=int(VOICE_SPEC.sample_rate)), VOICE_SPEC, Y, report["channels"],
                  CURVE_FPS, alpha)
     al, sm, ceil = lim["alignment"], lim["output_smoothing"], lim["linear_ceiling_on_test_folds"]
     log(f"alignment: level vs {al['channel']} peaks at {al['lag_ms_training_folds']:+.0f} ms on folds 1-3 (r "
@@ -248,7 +255,7 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     learning = learning_curve(sp.X, Y, report["channels"], CURVE_FPS)
     for line in learning_lines(learning):
         log(line)
-    curve = lookahead_curve(read_speech(pair[0], rate=int(FeatureSpec().sample_rate)), FeatureSpec(), Y,
+    curve = lookahead_curve(read_speech(pair[0], rate=int(VOICE_SPEC.sample_rate)), VOICE_SPEC, Y,
                             report["channels"], CURVE_FPS)
     for line in curve_lines(curve):
         log(line)

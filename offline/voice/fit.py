@@ -51,6 +51,10 @@ MODEL_NAMES = ("level", "ridge", "kpls", "blend")
 Setting = float | tuple[int, float] | None
 RIDGE_ALPHAS = (10.0, 100.0, 1000.0)
 BOOST = BoostSetting()
+#: fit-voice's features: the runtime's log-mel layout, in dB relative to the speaker's running level (3 s), so
+#: a table fitted on one recording's loudness reads another microphone's the same (bench voice: blend's mean r
+#: on folds 4-5 moved 0.288 -> 0.250 with the test speech 6 dB louder in dBFS, and not at all relative)
+VOICE_SPEC = FeatureSpec(level_ref_s=3.0)
 KPLS_GRID = ((5, 0.1), (10, 0.1), (10, 0.3), (20, 0.1))  # (components, gamma x 1/n_features)
 MIN_STD = 1e-3  # a channel that moves less than this in the training speech is not learned
 
@@ -253,8 +257,8 @@ def to_table(name: str, setting: Setting, X: np.ndarray, Y: np.ndarray, channels
 
 
 def gate_of(X: np.ndarray) -> float:
-    """The level (dBFS) under which the mouth closes: 6 dB over the training speech's noise floor (its
-    10th-percentile window level), never below -70 dBFS."""
+    """The level under which the mouth closes: 6 dB over the training speech's noise floor (its 10th-percentile
+    window level), never below -70 dB (dBFS, or relative to the running level where the features are)."""
     return float(max(np.percentile(X[:, -1], 10.0) + 6.0, -70.0))
 
 
@@ -266,7 +270,7 @@ def fit_voice(pairs: Sequence[tuple[Path, Path, Path]], spec: FeatureSpec | None
     pairs : (WAV, curves CSV, mapping CSV) triples, concatenated in order
     Returns (table, report) where report holds per-model per-channel held-out r.
     """
-    spec = spec or FeatureSpec()
+    spec = spec or VOICE_SPEC
     if not 0.0 <= lookahead_s <= 0.5:
         raise UsageError(f"--lookahead: expected 0..500 ms, got {lookahead_s * 1000:g} ms")
     read = [read_pair(w, c, m, spec, lookahead_s) for w, c, m in pairs]
@@ -293,7 +297,8 @@ def fit_voice(pairs: Sequence[tuple[Path, Path, Path]], spec: FeatureSpec | None
                          **({"trees": dataclasses.asdict(BOOST)} if best == "blend" else {}),
                          "features": {"sample_rate": spec.sample_rate, "window_s": spec.window_s,
                                       "hop_s": spec.hop_s, "n_mels": spec.n_mels, "n_taps": spec.n_taps,
-                                      "step": spec.step, "fmin": spec.fmin, "fmax": spec.fmax}},
+                                      "step": spec.step, "fmin": spec.fmin, "fmax": spec.fmax,
+                                      "level_ref_s": spec.level_ref_s}},
             "metrics": {"held_out_r": report["held_out_r"], "mean_r": score},
             "input_hash": hash_inputs(*[p for triple in pairs for p in triple])}
     table = to_table(best, setting, X, Y, channels, spec, lookahead_s, gate, meta)

@@ -15,6 +15,14 @@ level (dBFS): ``n_features = n_taps * n_mels + 1``. Nothing after the newest hop
 so the features are causal; a table fitted with a look-ahead is evaluated ``lookahead``
 hops late (:mod:`facepuppet.runtime.voice.table`).
 
+With ``level_ref_s`` > 0 every value of the vector is in dB relative to the speaker's running
+level instead of full scale, and floored ``REL_FLOOR_DB`` under it: a microphone 10 dB quieter
+than the training speech's gives the same vector once the running level has followed it. The
+running level is the mean window level of the voiced hops, a plain running mean over the first
+``level_ref_s`` of them, then an exponential one with that time constant; a hop is voiced when
+its level is within ``VOICED_SPAN_DB`` of the running level (and over -80 dBFS), the first one
+when it is over -70 dBFS. Before any voiced hop the running level is ``REF_START_DB``.
+
 The same class computes the training features offline (the whole WAV pushed through it), so
 the features a table was fitted on and those it meets at run time are the same numbers.
 """
@@ -28,6 +36,9 @@ from dataclasses import dataclass
 import numpy as np
 
 FLOOR_DB = -100.0
+REL_FLOOR_DB = -60.0  # with a running level: values this far under it are all the same "nothing"
+VOICED_SPAN_DB = 25.0
+REF_START_DB = -25.0
 
 
 @dataclass(frozen=True)
@@ -38,6 +49,7 @@ class FeatureSpec:
     window_s, hop_s : float, seconds, analysis window and hop
     n_mels : int, mel bands between fmin and fmax (Hz)
     n_taps, step : int, how many past mel frames, every ``step`` hops
+    level_ref_s : float, seconds, time constant of the running level the features are relative to (0: dBFS)
     """
 
     sample_rate: float = 16000.0
@@ -48,6 +60,7 @@ class FeatureSpec:
     fmax: float = 7000.0
     n_taps: int = 6
     step: int = 3
+    level_ref_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("sample_rate", "window_s", "hop_s", "fmin", "fmax"):
@@ -63,6 +76,9 @@ class FeatureSpec:
         if not 0.002 <= self.window_s <= 0.2 or not 0.001 <= self.hop_s <= self.window_s:
             raise ValueError(f"FeatureSpec: window_s {self.window_s} must be within 2..200 ms and hop_s "
                              f"{self.hop_s} within 1 ms..window_s")
+        ref = self.level_ref_s
+        if not (isinstance(ref, (int, float)) and math.isfinite(ref) and (ref == 0 or 0.1 <= ref <= 600)):
+            raise ValueError(f"FeatureSpec level_ref_s: expected 0 or 0.1..600 s, got {ref!r}")
         if self.sample_rate < 2 * self.fmax:
             raise ValueError(f"FeatureSpec: sample rate {self.sample_rate:g} Hz cannot carry fmax {self.fmax:g} Hz")
 
@@ -78,7 +94,7 @@ class FeatureSpec:
     def at_rate(self, sample_rate: float) -> FeatureSpec:
         """The same features for another sample rate (a microphone at 48 kHz): windows in seconds, bands in Hz."""
         return FeatureSpec(float(sample_rate), self.window_s, self.hop_s, self.n_mels, self.fmin,
-                           min(self.fmax, 0.5 * float(sample_rate)), self.n_taps, self.step)
+                           min(self.fmax, 0.5 * float(sample_rate)), self.n_taps, self.step, self.level_ref_s)
 
 
 def mel_filters(n_mels: int, n_fft: int, sample_rate: float, fmin: float, fmax: float) -> np.ndarray:
@@ -137,6 +153,9 @@ class VoiceFeatures:
         self._taps = np.zeros(spec.n_taps, np.intp)
         self._vector = np.full(spec.n_features, FLOOR_DB)
         self.level_db = FLOOR_DB
+        self.ref_db = REF_START_DB
+        self._voiced = 0
+        self._ref_rate = spec.hop_s / spec.level_ref_s if spec.level_ref_s > 0 else 0.0
         self.hops = 0
         self.on_hop = on_hop
 
@@ -146,6 +165,8 @@ class VoiceFeatures:
         self._frames[:] = FLOOR_DB
         self._vector[:] = FLOOR_DB
         self.level_db = FLOOR_DB
+        self.ref_db = REF_START_DB
+        self._voiced = 0
         self.hops = 0
 
     def push(self, samples: np.ndarray) -> int:
@@ -182,6 +203,11 @@ class VoiceFeatures:
         np.maximum(row, FLOOR_DB, out=row)
         ms = float(np.dot(x, x)) / n
         self.level_db = max(10.0 * math.log10(ms), FLOOR_DB) if ms > 0.0 else FLOOR_DB
+        if self._ref_rate > 0.0:
+            level = self.level_db
+            if level > (-70.0 if self._voiced == 0 else max(self.ref_db - VOICED_SPAN_DB, -80.0)):
+                self._voiced += 1
+                self.ref_db += max(1.0 / self._voiced, self._ref_rate) * (level - self.ref_db)
         self.hops += 1
         if self.on_hop is not None:
             self.on_hop(self)
@@ -195,6 +221,9 @@ class VoiceFeatures:
         for j in range(spec.n_taps):
             self._vector[j * m:(j + 1) * m] = self._frames[self._taps[j]]
         self._vector[-1] = self.level_db
+        if self._ref_rate > 0.0:  # relative to the running level, floored under it
+            np.subtract(self._vector, self.ref_db, out=self._vector)
+            np.maximum(self._vector, REL_FLOOR_DB, out=self._vector)
         return self._vector
 
 

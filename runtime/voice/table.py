@@ -16,8 +16,9 @@ code   model       evaluation of a standardised feature vector z (n_features,)
                    (:mod:`facepuppet.runtime.voice.trees`; ȳ holds both models' constants)
 =====  ==========  ==================================================================================
 
-Outputs are clamped to [0, 1], and a level under ``gate_db`` (dBFS) fades them to 0 over ``GATE_SPAN_DB``:
-silence is a closed mouth whatever the model makes of the noise floor.
+Outputs are clamped to [0, 1], and a level under ``gate_db`` fades them to 0 over ``GATE_SPAN_DB``: silence
+is a closed mouth whatever the model makes of the noise floor. The level and ``gate_db`` are in the features'
+dB: dBFS, or relative to the speaker's running level where the features are (``feature_level_ref``).
 
 Symbols and names: W ``coef``; ȳ ``output_mean``; X ``train_inputs``; B ``dual_coef``; k̄
 ``kernel_col_mean``; k̿ ``kernel_grand_mean``; γ ``model_params[1]``; the trees ``tree_feature``,
@@ -60,6 +61,8 @@ VOICE_SCHEMA = register_schema(
         kind="voice",
         sections={
             "feature_spec": Section("float64", (8,), "sample_rate, window_s, hop_s, n_mels, fmin, fmax, n_taps, step"),
+            "feature_level_ref": Section("float64", (1,), "level_ref_s: the features are dB relative to a running "
+                                                          "level of this time constant (absent: dBFS)", optional=True),
             "feature_mean": Section("float32", ("n_features",), "feature means (standardisation)"),
             "feature_scale": Section("float32", ("n_features",), "feature standard deviations"),
             "model_params": Section("float64", (4,), "model code (0 level, 1 ridge, 2 kpls, 3 blend), gamma, "
@@ -90,14 +93,19 @@ _KPLS = ("train_inputs", "dual_coef", "kernel_col_mean", "kernel_grand_mean")
 _TREES = ("tree_feature", "tree_threshold", "tree_value")
 
 
-def spec_from_array(a: np.ndarray, path: str | os.PathLike | None = None) -> FeatureSpec:
-    """The FeatureSpec of a ``feature_spec`` section (TablesError naming the field when it is not one)."""
+def spec_from_array(a: np.ndarray, path: str | os.PathLike | None = None,
+                    level_ref: np.ndarray | None = None) -> FeatureSpec:
+    """The FeatureSpec of a ``feature_spec`` section and the optional ``feature_level_ref`` (TablesError naming
+    the field when they are not one)."""
     rate, window, hop, n_mels, fmin, fmax, n_taps, step = (float(v) for v in a)
+    ref = float(level_ref[0]) if level_ref is not None else 0.0
+    if not (math.isfinite(ref) and (ref == 0 or 0.1 <= ref <= 600)):
+        raise TablesError(path, "feature_level_ref", f"expected 0 or 0.1..600 s, found {ref!r}")
     ints = (n_mels, n_taps, step)
     if not all(math.isfinite(v) and v == int(v) for v in ints):
         raise TablesError(path, "feature_spec", f"n_mels, n_taps and step must be integers, found {ints}")
     try:
-        return FeatureSpec(rate, window, hop, int(n_mels), fmin, fmax, int(n_taps), int(step))
+        return FeatureSpec(rate, window, hop, int(n_mels), fmin, fmax, int(n_taps), int(step), ref)
     except ValueError as exc:
         raise TablesError(path, "feature_spec", str(exc)) from None
 
@@ -207,6 +215,7 @@ class VoiceTable:
     def _arrays(self) -> dict[str, np.ndarray]:
         a = {
             "feature_spec": spec_to_array(self.spec),
+            "feature_level_ref": np.array([self.spec.level_ref_s]) if self.spec.level_ref_s > 0 else None,
             "feature_mean": self.feature_mean, "feature_scale": self.feature_scale,
             "model_params": np.array([MODELS.index(self.model), self.gamma, self.lookahead_s, self.gate_db],
                                      np.float64),
@@ -233,7 +242,7 @@ class VoiceTable:
         """Load and validate a ``voice`` tables file (TablesError naming the file and the field)."""
         t = load_tables(path, kind="voice")
         a = t.arrays
-        spec = spec_from_array(a["feature_spec"], path)
+        spec = spec_from_array(a["feature_spec"], path, a.get("feature_level_ref"))
         code, gamma, lookahead, gate = (float(v) for v in a["model_params"])
         if code not in (0.0, 1.0, 2.0, 3.0):
             raise TablesError(path, "model_params", f"model code must be 0, 1, 2 or 3, found {code:g}")

@@ -12,9 +12,9 @@ from facepuppet.runtime.voice.table import VoiceTable
 OUTPUTS = ("jawOpen", "mouthFunnel")
 
 
-def small_table(model: str = "ridge", seed: int = 0, outputs=OUTPUTS) -> VoiceTable:
+def small_table(model: str = "ridge", seed: int = 0, outputs=OUTPUTS, level_ref_s: float = 0.0) -> VoiceTable:
     """A table whose jawOpen grows with the level and the low bands, mouthFunnel with the high bands."""
-    spec = FeatureSpec(n_mels=8, n_taps=3, step=2)
+    spec = FeatureSpec(n_mels=8, n_taps=3, step=2, level_ref_s=level_ref_s)
     nf, m = spec.n_features, len(outputs)
     rng = np.random.default_rng(seed)
     mean = np.full(nf, -60.0)

@@ -57,8 +57,9 @@ def test_silence_is_the_floor_and_features_are_causal():
     assert f[2][-1] > -10
 
 
-def test_a_block_allocates_nothing_that_grows_with_the_spectrum():
-    ex = VoiceFeatures(FeatureSpec())
+@pytest.mark.parametrize("level_ref_s", [0.0, 3.0])
+def test_a_block_allocates_nothing_that_grows_with_the_spectrum(level_ref_s):
+    ex = VoiceFeatures(FeatureSpec(level_ref_s=level_ref_s))
     block = np.random.default_rng(4).uniform(-0.3, 0.3, 480)
     for _ in range(5):
         ex.push(block)
@@ -77,7 +78,32 @@ def test_a_block_allocates_nothing_that_grows_with_the_spectrum():
     assert peak < 1024, peak
 
 
-@pytest.mark.parametrize("bad", [{"n_mels": 0}, {"hop_s": 0.5}, {"fmax": 9000.0}, {"window_s": float("nan")}])
+def _speechlike(seconds: float, rate: int = 16000) -> np.ndarray:
+    """Bursts of a buzzy vowel with pauses, its loudness wandering by +-6 dB."""
+    t = np.arange(int(seconds * rate)) / rate
+    buzz = np.sign(np.sin(2 * np.pi * 140 * t)) * np.sin(2 * np.pi * 700 * t) + 0.5 * np.sin(2 * np.pi * 2300 * t)
+    gain = 10 ** (6 * np.sin(2 * np.pi * 0.3 * t) / 20)
+    return 0.2 * gain * buzz * (np.sin(2 * np.pi * 2.1 * t) > -0.3)
+
+
+def test_with_a_running_level_a_quieter_microphone_gives_the_same_features():
+    x = _speechlike(8.0)
+    times = np.arange(60, 240) / 30  # from 2 s on: the running level has followed
+    relative = FeatureSpec(level_ref_s=3.0)
+    loud, quiet = features_of(x, relative, times), features_of(x * 10 ** (-10 / 20), relative, times)
+    np.testing.assert_allclose(quiet, loud, atol=1e-6)
+    # in dBFS the same two differ by the 10 dB
+    dbfs_loud = features_of(x, FeatureSpec(), times)
+    dbfs_quiet = features_of(x * 10 ** (-10 / 20), FeatureSpec(), times)
+    voiced = dbfs_loud[:, -1] > -40
+    np.testing.assert_allclose(dbfs_loud[voiced, -1] - dbfs_quiet[voiced, -1], 10.0, atol=1e-6)
+    # silence stays the floor under the running level
+    f = features_of(np.r_[x[:16000], np.zeros(16000)], relative, np.array([1.9]))
+    assert (f == -60.0).all()
+
+
+@pytest.mark.parametrize("bad", [{"n_mels": 0}, {"hop_s": 0.5}, {"fmax": 9000.0}, {"window_s": float("nan")},
+                                 {"level_ref_s": -1.0}, {"level_ref_s": 0.01}])
 def test_a_bad_spec_is_refused_naming_the_field(bad):
     with pytest.raises(ValueError, match="FeatureSpec"):
         FeatureSpec(**bad)

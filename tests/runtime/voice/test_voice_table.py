@@ -82,13 +82,24 @@ def _npy(arr) -> bytes:
     return buf.getvalue()
 
 
+def test_a_table_on_relative_features_keeps_their_time_constant(tmp_path):
+    table = small_table("ridge", level_ref_s=3.0)
+    loaded = VoiceTable.load(table.save(tmp_path / "r.npz"))
+    assert loaded.spec.level_ref_s == 3.0 and loaded.spec == table.spec
+    assert small_table("ridge").spec.level_ref_s == 0.0  # a table without the section reads dBFS
+    with zipfile.ZipFile(tmp_path / "r.npz") as z:
+        assert "feature_level_ref.npy" in z.namelist()
+
+
 @pytest.mark.parametrize("section,value,field", [
     ("model_params", np.array([7.0, 1.0, 0.0, -60.0]), "model_params"),
     ("feature_spec", np.array([16000, 0.032, 0.01, 8, 80, 7000, 3.5, 2]), "feature_spec"),
     ("feature_scale", np.zeros(25, np.float32), "feature_scale"),
+    ("feature_level_ref", np.array([0.01]), "feature_level_ref"),
+    ("feature_level_ref", np.array([np.inf]), "feature_level_ref"),
 ])
 def test_a_damaged_table_is_refused_naming_the_file_and_the_field(tmp_path, section, value, field):
-    good = small_table("ridge").save(tmp_path / "good.npz")
+    good = small_table("ridge", level_ref_s=3.0).save(tmp_path / "good.npz")
     bad = tmp_path / "bad.npz"
     _rewrite(good, bad, lambda name, data: _npy(value) if name == f"{section}.npy" else data)
     with pytest.raises(TablesError, match=rf"{bad}: {field}"):
