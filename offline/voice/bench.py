@@ -10,7 +10,9 @@ Goals (issue): jawOpen r >= 0.75, mouthFunnel r >= 0.6, every channel above the 
 JSON says per goal whether it is met. The look-ahead trade-off: the same two evaluations of the level and
 ridge with the features hearing 0, 50, 100, 200 and 260 ms past each frame (:mod:`.lookahead`). The learning
 curve: ridge and blend trained on the first 10, 20, 29 and 39 s, scored on the last 10 s (:mod:`.learning`):
-whether more paired speech would lift a channel. Cost: the
+whether more paired speech would lift a channel. Another microphone: ridge and blend fitted on folds 1-3 as
+recorded, scored on folds 4-5 scaled by -20, -10, 0, +6 dB or with the highs 6 dB up or down
+(:mod:`.robustness`). Cost: the
 runtime evaluator per hop (features + model, what the audio thread does per block of ``hop_s``) and the
 stage per tick, timed on this machine. Latency: a sound onset in ``--audio-file`` to the drawn weight
 through ``run`` itself (on the run's clock: the hop that holds the onset, then the next tick), and, where
@@ -58,6 +60,7 @@ from facepuppet.offline.voice.fit import (
 from facepuppet.offline.voice.learning import learning_curve, learning_lines
 from facepuppet.offline.voice.limits import limits
 from facepuppet.offline.voice.lookahead import curve_lines, lookahead_curve
+from facepuppet.offline.voice.robustness import changed_lines, changed_r
 
 GOALS = {"jawOpen": 0.75, "mouthFunnel": 0.6}
 
@@ -255,6 +258,10 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     learning = learning_curve(sp.X, Y, report["channels"], CURVE_FPS)
     for line in learning_lines(learning):
         log(line)
+    microphone = changed_r(read_speech(pair[0], rate=int(VOICE_SPEC.sample_rate)), VOICE_SPEC, Y, report["channels"],
+                           CURVE_FPS)
+    for line in changed_lines(microphone):
+        log(line)
     curve = lookahead_curve(read_speech(pair[0], rate=int(VOICE_SPEC.sample_rate)), VOICE_SPEC, Y,
                             report["channels"], CURVE_FPS)
     for line in curve_lines(curve):
@@ -273,7 +280,7 @@ def run_bench(args: argparse.Namespace, log: Callable[[str], None] = print) -> d
     vowels = vowel_recognition(log)
     return {"before": BEFORE, "goals_missed": missed, "limits": lim,
             "latency": latency, "latency_virtual_card": card, "vowels": vowels, "lookahead_curve": curve,
-            "learning_curve": learning,
+            "learning_curve": learning, "another_microphone": microphone,
             "channels": report["channels"], "frames": report["frames"],
             "kept": report["best"],
             "lookahead_ms": args.lookahead, "fit_s": fit_s,
