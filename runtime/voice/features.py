@@ -18,10 +18,12 @@ hops late (:mod:`facepuppet.runtime.voice.table`).
 With ``level_ref_s`` > 0 every value of the vector is in dB relative to the speaker's running
 level instead of full scale, and floored ``REL_FLOOR_DB`` under it: a microphone 10 dB quieter
 than the training speech's gives the same vector once the running level has followed it. The
-running level is the mean window level of the voiced hops, a plain running mean over the first
-``level_ref_s`` of them, then an exponential one with that time constant; a hop is voiced when
-its level is within ``VOICED_SPAN_DB`` of the running level (and over -80 dBFS), the first one
-when it is over -70 dBFS. Before any voiced hop the running level is ``REF_START_DB``.
+running level follows the loud part of speech: it starts at ``REF_START_DB``, rises toward a
+louder hop with a time constant of ``ATTACK_S``, falls toward a quieter one within
+``VOICED_SPAN_DB`` of it with ``level_ref_s``, and ignores hops further under it (pauses, a
+room's noise) or under -80 dBFS. So a pause does not drag it down to the noise floor, and a
+microphone of another gain is followed within a second or so when louder, a few ``level_ref_s``
+when quieter.
 
 The same class computes the training features offline (the whole WAV pushed through it), so
 the features a table was fitted on and those it meets at run time are the same numbers.
@@ -37,8 +39,9 @@ import numpy as np
 
 FLOOR_DB = -100.0
 REL_FLOOR_DB = -60.0  # with a running level: values this far under it are all the same "nothing"
-VOICED_SPAN_DB = 25.0
-REF_START_DB = -25.0
+VOICED_SPAN_DB = 20.0
+REF_START_DB = -30.0
+ATTACK_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -154,8 +157,8 @@ class VoiceFeatures:
         self._vector = np.full(spec.n_features, FLOOR_DB)
         self.level_db = FLOOR_DB
         self.ref_db = REF_START_DB
-        self._voiced = 0
         self._ref_rate = spec.hop_s / spec.level_ref_s if spec.level_ref_s > 0 else 0.0
+        self._attack = min(1.0, spec.hop_s / ATTACK_S)
         self.hops = 0
         self.on_hop = on_hop
 
@@ -166,7 +169,6 @@ class VoiceFeatures:
         self._vector[:] = FLOOR_DB
         self.level_db = FLOOR_DB
         self.ref_db = REF_START_DB
-        self._voiced = 0
         self.hops = 0
 
     def push(self, samples: np.ndarray) -> int:
@@ -205,9 +207,10 @@ class VoiceFeatures:
         self.level_db = max(10.0 * math.log10(ms), FLOOR_DB) if ms > 0.0 else FLOOR_DB
         if self._ref_rate > 0.0:
             level = self.level_db
-            if level > (-70.0 if self._voiced == 0 else max(self.ref_db - VOICED_SPAN_DB, -80.0)):
-                self._voiced += 1
-                self.ref_db += max(1.0 / self._voiced, self._ref_rate) * (level - self.ref_db)
+            if level > self.ref_db:
+                self.ref_db += self._attack * (level - self.ref_db)
+            elif level > max(self.ref_db - VOICED_SPAN_DB, -80.0):
+                self.ref_db += self._ref_rate * (level - self.ref_db)
         self.hops += 1
         if self.on_hop is not None:
             self.on_hop(self)

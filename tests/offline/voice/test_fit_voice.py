@@ -56,7 +56,9 @@ def test_folds_are_contiguous_blocks_covering_every_frame():
 
 def test_the_fit_learns_the_synthetic_mouth_and_the_table_predicts_like_the_fit(tmp_path):
     pair = synthetic_pair(tmp_path)
-    table, report = fit_voice([pair], models=("level", "ridge"), folds=4)
+    # dBFS features: this mouth follows a 1.4 s loudness cycle, which the default running level (3 s) partly
+    # absorbs as a change of microphone gain; speech's jaw moves with its syllables, far faster
+    table, report = fit_voice([pair], spec=FeatureSpec(), models=("level", "ridge"), folds=4)
     assert report["channels"] == ["jawOpen", "mouthFunnel"]
     r = report["held_out_r"]
     assert r["ridge"]["mouthFunnel"] > r["level"]["mouthFunnel"] + 0.2  # the timbre carries the funnel
@@ -143,11 +145,11 @@ def test_on_the_kits_speech_every_model_is_scored_and_the_table_is_small(tmp_pat
     # has followed it (the trees' thresholds would not forgive a shift in dBFS)
     assert table.spec.level_ref_s > 0
     speech = read_speech(pair[0])
-    times = np.arange(60, 1400) / 30
+    times = np.arange(300, 1400) / 30  # from 10 s: the running level has fallen to the quieter speech
     loud = table.predict(features_of(speech, table.spec, times))
     quiet = table.predict(features_of(speech * 10 ** (-10 / 20), table.spec, times))
     diff = np.abs(quiet - loud)
-    # measured: p99 0.0023, max 0.027 (bands near the -100 dBFS floor); a blend on dBFS features: p99 0.12, max 0.21
+    # measured: p99 0.0012, max 0.018 (bands near the -100 dBFS floor); a blend on dBFS features: p99 0.12, max 0.21
     assert np.percentile(diff, 99) < 0.01 and diff.max() < 0.06
     assert r["ridge"]["mouthFunnel"] > r["level"]["mouthFunnel"]  # measured 0.50 vs 0.35
     assert table.save(tmp_path / "v.npz").stat().st_size < 1_000_000
