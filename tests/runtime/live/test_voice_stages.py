@@ -13,6 +13,7 @@ import pytest
 from pythonosc.udp_client import SimpleUDPClient
 
 from facepuppet.runtime.commands import replay, run
+from facepuppet.runtime.errors import UsageError
 from facepuppet.runtime.recording.session import read_session
 
 from helpers.logs import logged
@@ -83,6 +84,10 @@ def test_the_voice_alone_moves_the_mouth_and_its_replay_is_the_run_tick_for_tick
         assert replay.run_replay(args) == 0
     assert "stages: replay(audio)→audio→voice→filter→map→draw" in logs
     np.testing.assert_array_equal(np.load(replay_w), w)
+    # without the run's --voice the replay says what to give, not the live run's --audio-file
+    args = parser().parse_args(["replay", str(record), "-c", str(char), "--headless", "--size", "48x40"])
+    with pytest.raises(UsageError, match=r"give its --voice .*no --audio or --audio-file"):
+        replay.run_replay(args)
 
 
 def test_a_silent_wav_keeps_the_mouth_closed(tmp_path):
