@@ -264,10 +264,6 @@ def build_chain(options: StageOptions, character: Character, input_kind: str | N
     kpls = _load_kpls(options.retarget, shapes, log) if options.retarget is not None else None
     voice_table = getattr(options, "voice", None)
     if voice_only and options.gestures is None and voice_table is None:
-        if (label or "").startswith("replay"):  # the sound is in the recording
-            raise UsageError("replay: this recording's run drove the face from the voice (--input audio); give its "
-                             "--voice VOICE.npz|PROFILE.toml or --gestures GESTURES.npz again (the sound and the "
-                             "voice's channels are in the recording: no --audio or --audio-file)")
         raise UsageError("--input audio: needs --gestures GESTURES.npz or --voice VOICE.npz, and --audio [DEVICE] "
                          "or --audio-file WAV")
     stages = []

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from facepuppet.runtime.cli.progress import Progress
-from facepuppet.runtime.errors import InputFileError
+from facepuppet.runtime.errors import InputFileError, UsageError
 from facepuppet.runtime.files.json_limits import JsonLimitError, loads_limited
 from facepuppet.runtime.frames import Frame
 from facepuppet.runtime.inputs.markers import UNIT_METRES
@@ -175,6 +175,10 @@ class RecordingFeed:
             if self.take is not None:
                 kind = self.take.kind
         self.kind = kind
+        if kind == "audio" and self.stages.voice is None and getattr(self.stages, "gestures", None) is None:
+            raise UsageError("replay: this recording's run drove the face from the voice (--input audio); give its "
+                             "--voice VOICE.npz|PROFILE.toml or --gestures GESTURES.npz again (the sound and the "
+                             "voice's channels are in the recording: no --audio or --audio-file)")
         self.filtered = filtered = self._filtered(info, log)
         levels = RecordedLevels(session.audio_levels) if session is not None and session.audio_levels else None
         config_text, schedule = self._recorded_config(info, filtered, log)

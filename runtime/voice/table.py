@@ -284,7 +284,7 @@ class VoiceEvaluator:
         self._one, self._zero = np.float32(1.0), np.float32(0.0)
         self._minus_two, self._minus_gamma = np.float32(-2.0), np.float32(-table.gamma)
         self._trees = TreeEvaluator(table.tree_feature, table.tree_threshold, table.tree_value,
-                                    n_o) if table.model == "blend" else None
+                                    n_o, n_f) if table.model == "blend" else None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         t, z, y = self.table, self._z, self._y

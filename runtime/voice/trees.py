@@ -56,9 +56,11 @@ def predict_rows(Z: np.ndarray, feature: np.ndarray, threshold: np.ndarray, valu
 
 
 class TreeEvaluator:
-    """``ev(z, out)`` adds each output's tree sum to ``out`` (float32, n_outputs); buffers made once."""
+    """``ev(z, out)`` adds each output's tree sum to ``out`` (float32, n_outputs) for z (n_features,); buffers
+    made once."""
 
-    def __init__(self, feature: np.ndarray, threshold: np.ndarray, value: np.ndarray, n_outputs: int) -> None:
+    def __init__(self, feature: np.ndarray, threshold: np.ndarray, value: np.ndarray, n_outputs: int,
+                 n_features: int) -> None:
         n_trees, n_internal = feature.shape
         self.depth = depth_of(n_internal, value.shape[1])
         self._feature = np.ascontiguousarray(feature, np.intp).ravel()
@@ -78,11 +80,9 @@ class TreeEvaluator:
         # each output's trees summed as one product (a reduction along an axis would buffer)
         self._owner = np.kron(np.eye(n_outputs, dtype=np.float32), np.ones(n_trees // n_outputs, np.float32))
         self._per_output = np.zeros(n_outputs, np.float32)
-        self._z64 = None
+        self._z64 = np.zeros(n_features, np.float64)
 
     def __call__(self, z: np.ndarray, out: np.ndarray) -> None:
-        if self._z64 is None or len(self._z64) != len(z):
-            self._z64 = np.zeros(len(z), np.float64)
         np.copyto(self._z64, z)
         node, flat = self._node, self._flat
         node.fill(0)

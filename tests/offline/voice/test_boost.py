@@ -45,7 +45,7 @@ def test_the_run_time_evaluator_gives_exactly_the_fits_tree_sums():
     Z, Y = _band_data(800, 3)
     base, feature, threshold, value = fit_trees(Z, Y, BoostSetting(n_trees=30, depth=3))
     P = predict_trees(Z[:100], base, feature, threshold, value)
-    ev = TreeEvaluator(feature, threshold, value, 2)
+    ev = TreeEvaluator(feature, threshold, value, 2, Z.shape[1])
     out = np.zeros(2, np.float32)
     for i in range(100):
         out[:] = base
